@@ -1,0 +1,33 @@
+#pragma once
+// The geometry stage as the commands run it: scene → patches → form factors, with progress.
+
+#include <filesystem>
+#include <optional>
+
+#include "geometry/form_factors.h"
+#include "geometry/patches.h"
+#include "geometry/scene.h"
+
+namespace procam {
+
+struct GeometryStage {
+  Scene scene;
+  PatchHierarchy patches;
+  Eigen::MatrixXd form_factors;  // fine level
+  FormFactorSummary form_factor_summary;
+  double subdivision_seconds = 0.0;
+};
+
+// Loads `scene_path` (patch count from the scene unless `patches` is given) and computes the
+// fine level's form factors, logging progress.
+GeometryStage RunGeometryStage(const std::filesystem::path& scene_path, std::optional<int> patches);
+// Same for a scene already in memory.
+GeometryStage RunGeometryStage(Scene scene, std::optional<int> patches);
+
+// Human-readable summary: surfaces, areas, patch counts, form-factor statistics.
+std::string DescribeGeometry(const GeometryStage& stage);
+
+// Writes an image of log10 F (one pixel per patch pair, at most 1024² by block maxima).
+void WriteFormFactorImage(const Eigen::MatrixXd& form_factors, const std::filesystem::path& path);
+
+}  // namespace procam

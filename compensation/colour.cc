@@ -1,0 +1,98 @@
+#include "compensation/colour.h"
+
+#include <Eigen/LU>
+
+namespace procam {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+double Degrees(double radians) { return radians * 180.0 / kPi; }
+double Radians(double degrees) { return degrees * kPi / 180.0; }
+
+Eigen::Vector3d XyzOfChromaticity(const Eigen::Vector2d& xy) {
+  return Eigen::Vector3d(xy[0] / xy[1], 1.0, (1.0 - xy[0] - xy[1]) / xy[1]);
+}
+
+double LabHInverse(double f) {
+  return f > kLabDelta ? f * f * f : 3.0 * kLabDelta * kLabDelta * (f - 4.0 / 29.0);
+}
+
+}  // namespace
+
+Eigen::Matrix3d RgbToXyzMatrix(const Eigen::Vector2d& red, const Eigen::Vector2d& green,
+                               const Eigen::Vector2d& blue, const Eigen::Vector2d& white) {
+  Eigen::Matrix3d primaries;
+  primaries << XyzOfChromaticity(red), XyzOfChromaticity(green), XyzOfChromaticity(blue);
+  // Scale each primary so that the three together make the white point with Y = 1.
+  const Eigen::Vector3d scale = primaries.lu().solve(XyzOfChromaticity(white));
+  return primaries * scale.asDiagonal();
+}
+
+Eigen::Matrix3d SrgbToXyzMatrix() {
+  return RgbToXyzMatrix({0.64, 0.33}, {0.30, 0.60}, {0.15, 0.06}, {0.3127, 0.3290});
+}
+
+Eigen::Vector3d LabToXyz(const Eigen::Vector3d& lab, const Eigen::Vector3d& white) {
+  const double fy = (lab[0] + 16.0) / 116.0;
+  const double fx = fy + lab[1] / 500.0;
+  const double fz = fy - lab[2] / 200.0;
+  return Eigen::Vector3d(white[0] * LabHInverse(fx), white[1] * LabHInverse(fy),
+                         white[2] * LabHInverse(fz));
+}
+
+double DeltaE2000(const Eigen::Vector3d& lab1, const Eigen::Vector3d& lab2) {
+  // Notation and steps of Sharma, Wu & Dalal (2005), Eqs. 1–20.
+  const double c1 = std::hypot(lab1[1], lab1[2]);
+  const double c2 = std::hypot(lab2[1], lab2[2]);
+  const double c_mean = 0.5 * (c1 + c2);
+  const double c_mean7 = std::pow(c_mean, 7.0);
+  const double g = 0.5 * (1.0 - std::sqrt(c_mean7 / (c_mean7 + std::pow(25.0, 7.0))));
+  const double a1 = (1.0 + g) * lab1[1], a2 = (1.0 + g) * lab2[1];
+  const double c1p = std::hypot(a1, lab1[2]), c2p = std::hypot(a2, lab2[2]);
+  auto hue = [](double b, double a) {
+    if (a == 0.0 && b == 0.0) return 0.0;
+    const double h = Degrees(std::atan2(b, a));
+    return h < 0.0 ? h + 360.0 : h;
+  };
+  const double h1p = hue(lab1[2], a1), h2p = hue(lab2[2], a2);
+
+  const double delta_l = lab2[0] - lab1[0];
+  const double delta_c = c2p - c1p;
+  double delta_h_angle = 0.0;
+  if (c1p * c2p != 0.0) {
+    delta_h_angle = h2p - h1p;
+    if (delta_h_angle > 180.0) delta_h_angle -= 360.0;
+    if (delta_h_angle < -180.0) delta_h_angle += 360.0;
+  }
+  const double delta_h = 2.0 * std::sqrt(c1p * c2p) * std::sin(Radians(delta_h_angle) / 2.0);
+
+  const double l_mean = 0.5 * (lab1[0] + lab2[0]);
+  const double cp_mean = 0.5 * (c1p + c2p);
+  double h_mean = h1p + h2p;
+  if (c1p * c2p != 0.0) {
+    if (std::abs(h1p - h2p) <= 180.0) {
+      h_mean = 0.5 * (h1p + h2p);
+    } else if (h1p + h2p < 360.0) {
+      h_mean = 0.5 * (h1p + h2p + 360.0);
+    } else {
+      h_mean = 0.5 * (h1p + h2p - 360.0);
+    }
+  }
+  const double t = 1.0 - 0.17 * std::cos(Radians(h_mean - 30.0)) +
+                   0.24 * std::cos(Radians(2.0 * h_mean)) +
+                   0.32 * std::cos(Radians(3.0 * h_mean + 6.0)) -
+                   0.20 * std::cos(Radians(4.0 * h_mean - 63.0));
+  const double delta_theta = 30.0 * std::exp(-std::pow((h_mean - 275.0) / 25.0, 2.0));
+  const double cp_mean7 = std::pow(cp_mean, 7.0);
+  const double r_c = 2.0 * std::sqrt(cp_mean7 / (cp_mean7 + std::pow(25.0, 7.0)));
+  const double l50 = (l_mean - 50.0) * (l_mean - 50.0);
+  const double s_l = 1.0 + 0.015 * l50 / std::sqrt(20.0 + l50);
+  const double s_c = 1.0 + 0.045 * cp_mean;
+  const double s_h = 1.0 + 0.015 * cp_mean * t;
+  const double r_t = -std::sin(Radians(2.0 * delta_theta)) * r_c;
+  const double term_l = delta_l / s_l, term_c = delta_c / s_c, term_h = delta_h / s_h;
+  return std::sqrt(term_l * term_l + term_c * term_c + term_h * term_h + r_t * term_c * term_h);
+}
+
+}  // namespace procam

@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# procam's one entry point for people and CI, on a fresh Debian 12 machine:
+#   scripts/run.sh demo [procam demo options]   install what is missing, build (Release), run the demo
+#   scripts/run.sh test                          install, build (Release), run the whole test suite
+#   scripts/run.sh asan                          install, build with ASan+UBSan, run the tests
+#   scripts/run.sh build                         install and build only
+# Packages come from scripts/packages.txt; apt-get runs as root or through sudo.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+install_packages() {
+  local wanted missing=()
+  wanted=$(grep -v '^\s*#' scripts/packages.txt | grep -v '^\s*$')
+  for package in $wanted; do
+    dpkg-query -W -f='${Status}' "$package" 2>/dev/null | grep -q 'install ok installed' || missing+=("$package")
+  done
+  [ ${#missing[@]} -eq 0 ] && return 0
+  echo "procam: installing ${missing[*]}"
+  local sudo=""
+  if [ "$(id -u)" -ne 0 ]; then
+    command -v sudo >/dev/null || { echo "procam: need root or sudo to install: ${missing[*]}" >&2; exit 1; }
+    sudo="sudo"
+  fi
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+}
+
+build() {
+  local preset=$1
+  cmake --preset "$preset" >/dev/null
+  cmake --build --preset "$preset"
+}
+
+command=${1:-}
+[ $# -gt 0 ] && shift
+case "$command" in
+  demo)
+    install_packages
+    build release
+    ./build/release/apps/procam demo "$@"
+    ;;
+  test)
+    install_packages
+    build release
+    ctest --preset release --parallel 2 "$@"
+    ;;
+  asan)
+    install_packages
+    build asan
+    ctest --preset asan --parallel 2 "$@"
+    ;;
+  build)
+    install_packages
+    build release
+    ;;
+  *)
+    echo "usage: scripts/run.sh demo|test|asan|build [args]" >&2
+    exit 2
+    ;;
+esac

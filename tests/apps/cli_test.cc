@@ -1,0 +1,86 @@
+// Runs the procam binary as a user would and checks exit codes, messages and outputs.
+#include <array>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+
+#include <gtest/gtest.h>
+
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+struct CommandRun {
+  int exit_code;
+  std::string output;  // stdout and stderr together
+};
+
+CommandRun Procam(const std::string& arguments) {
+  const char* binary = std::getenv("PROCAM_BINARY");
+  EXPECT_NE(binary, nullptr) << "PROCAM_BINARY not set by CTest";
+  const std::string command = std::string(binary ? binary : "procam") + " " + arguments + " 2>&1";
+  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(command.c_str(), "r"), pclose);
+  std::string output;
+  std::array<char, 4096> buffer;
+  size_t count;
+  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0) output.append(buffer.data(), count);
+  const int status = pclose(pipe.release());
+  return {WEXITSTATUS(status), output};
+}
+
+const char* kScene = R"({
+  "name": "two walls", "patches": 40,
+  "surfaces": [
+    {"name": "floor", "quad": [[0,0,0],[2,0,0],[2,2,0],[0,2,0]], "reflectance": 0.8, "desired": [0.9, 0.3, 0.2]},
+    {"name": "wall", "quad": [[0,0,0],[0,2,0],[0,2,2],[0,0,2]], "reflectance": [0.7, 0.8, 0.9], "desired": [0.1, 0.5, 0.9]}
+  ]
+})";
+
+TEST(Cli, HelpOnEverySubcommand) {
+  for (const char* command : {"--help", "demo --help", "scene --help", "scene info --help",
+                              "scene export --help", "bench formfactors --help"}) {
+    const CommandRun run = Procam(command);
+    EXPECT_EQ(run.exit_code, 0) << command;
+    EXPECT_NE(run.output.find("Usage"), std::string::npos) << command << ": " << run.output;
+  }
+}
+
+TEST(Cli, SceneInfoPrintsSurfacesAndRowSums) {
+  testing::TempDir dir;
+  const CommandRun run = Procam("scene info " + dir.Write("scene.json", kScene).string());
+  EXPECT_EQ(run.exit_code, 0) << run.output;
+  EXPECT_NE(run.output.find("floor"), std::string::npos);
+  EXPECT_NE(run.output.find("row sums"), std::string::npos);
+  EXPECT_NE(run.output.find("total area 8.000"), std::string::npos) << run.output;
+}
+
+TEST(Cli, SceneExportWritesTheProblem) {
+  testing::TempDir dir;
+  const CommandRun run = Procam("scene export " + dir.Write("scene.json", kScene).string() + " --out " +
+                         (dir / "out").string() + " --patches 64 --alpha 0.25");
+  EXPECT_EQ(run.exit_code, 0) << run.output;
+  for (const char* name : {"F.npy", "area.npy", "rho.npy", "adjacency.npy", "centroid.npy", "normal.npy",
+                           "surface.npy", "desired_lab.npy", "T.npy", "white_xyz.npy", "lower.npy",
+                           "upper.npy", "problem.json"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir / "out" / name)) << name;
+  }
+}
+
+TEST(Cli, BadInputGivesOneLineNamingTheFileAndWritesNothing) {
+  testing::TempDir dir;
+  std::string bad = kScene;
+  bad.replace(bad.find("0.8"), 3, "1.5");  // floor reflectance out of range
+  const auto path = dir.Write("bad.json", bad);
+  const CommandRun run = Procam("scene export " + path.string() + " --out " + (dir / "out").string());
+  EXPECT_NE(run.exit_code, 0);
+  EXPECT_NE(run.output.find(path.string() + ": surfaces[0].reflectance"), std::string::npos) << run.output;
+  EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << run.output;
+  EXPECT_FALSE(std::filesystem::exists(dir / "out"));
+  const CommandRun missing = Procam("scene info " + (dir / "absent.json").string());
+  EXPECT_NE(missing.exit_code, 0);
+  EXPECT_NE(missing.output.find("absent.json: file not found"), std::string::npos) << missing.output;
+}
+
+}  // namespace
+}  // namespace procam

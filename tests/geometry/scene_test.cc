@@ -1,0 +1,127 @@
+#include "geometry/scene.h"
+
+#include <opencv2/imgcodecs.hpp>
+#include <gtest/gtest.h>
+
+#include "geometry/io.h"
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+const char* kWall = R"({"name": "wall", "quad": [[0,0,0],[2,0,0],[2,0,1],[0,0,1]],
+                       "reflectance": 0.8, "desired": [1, 0.5, 0]})";
+
+std::string SceneText(const std::string& surfaces, const std::string& extra = "") {
+  return "{\n  \"patches\": 100,\n" + extra + "  \"surfaces\": [" + surfaces + "]\n}\n";
+}
+
+// Loads a scene that must fail; returns the error message.
+std::string LoadError(const testing::TempDir& dir, const std::string& text) {
+  const auto path = dir.Write("scene.json", text);
+  try {
+    LoadScene(path);
+  } catch (const IoError& error) {
+    return error.what();
+  }
+  ADD_FAILURE() << "scene loaded without error:\n" << text;
+  return "";
+}
+
+TEST(LoadScene, ReadsQuadsWithDefaults) {
+  testing::TempDir dir;
+  const Scene scene = LoadScene(dir.Write("scene.json", SceneText(kWall, "\"white\": 2,\n")));
+  ASSERT_EQ(scene.surfaces.size(), 1u);
+  EXPECT_EQ(scene.surfaces[0].name, "wall");
+  EXPECT_EQ(scene.target_patches, 100);
+  EXPECT_DOUBLE_EQ(scene.surfaces[0].Area(), 2.0);
+  EXPECT_EQ(scene.surfaces[0].reflectance, Vec3::Constant(0.8));
+  EXPECT_EQ(scene.bounds.upper, Vec3::Constant(2.0));  // defaults to the white radiosity
+  EXPECT_EQ(scene.bounds.lower, Vec3::Zero());
+}
+
+TEST(LoadScene, ReportsEachProblemWithFileAndKey) {
+  testing::TempDir dir;
+  struct Case {
+    std::string text, expected;
+  };
+  const std::vector<Case> cases = {
+      {"{\n \"patches\": 10,\n \"surfaces\": [,]\n}", "line 3"},
+      {SceneText(kWall, "\"colour\": 1,\n"), "colour: unknown key"},
+      {SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": 1.0, "desired": [1,1,1]})"),
+       "surfaces[0].reflectance: each value must be in [0,1)"},
+      {SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": [0.5, -0.1, 0.5], "desired": [1,1,1]})"),
+       "surfaces[0].reflectance"},
+      {SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0.5],[0,1,0]], "reflectance": 0.5, "desired": [1,1,1]})"),
+       "surfaces[0].quad: not planar"},
+      {SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,0,0],[0,1,0]], "reflectance": 0.5, "desired": [1,1,1]})"),
+       "surfaces[0].quad: degenerate"},
+      {SceneText(R"({"quad": [[0,0,0],[2,0,0],[0.5,0.5,0],[0,2,0]], "reflectance": 0.5, "desired": [1,1,1]})"),
+       "surfaces[0].quad: not convex"},
+      {SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": 0.5, "desired": [1,2,1]})"),
+       "surfaces[0].desired"},
+      {SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": 0.5, "desired": [1,1,1e999]})"),
+       "number overflow parsing '1e999'"},
+      {SceneText(R"({"mesh": "absent.obj", "reflectance": 0.5, "desired": [1,1,1]})"),
+       "surfaces[0].mesh: " + (dir / "absent.obj").string() + ": file not found"},
+      {SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": 0.5, "desired": {"texture": "none.png"}})"),
+       "surfaces[0].desired.texture"},
+      {SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "mesh": "x.obj", "reflectance": 0.5, "desired": [1,1,1]})"),
+       "exactly one of 'quad' and 'mesh'"},
+      {SceneText(kWall, "\"bounds\": {\"lower\": 0.5, \"upper\": 0.2},\n"), "bounds.lower: lower is greater"},
+      {SceneText(kWall, "\"projectors\": [],\n"), "projectors: projector and camera models are not supported"},
+      {"{\"surfaces\": [" + std::string(kWall) + "]}", "patches: required key is missing"},
+      {SceneText(""), "surfaces: must be a non-empty array"},
+  };
+  for (const Case& c : cases) {
+    const std::string message = LoadError(dir, c.text);
+    EXPECT_NE(message.find((dir / "scene.json").string()), std::string::npos) << message;
+    EXPECT_NE(message.find(c.expected), std::string::npos) << "expected '" << c.expected << "' in: " << message;
+  }
+}
+
+TEST(LoadScene, ReadsObjMeshesAndReportsBadFacesByLine) {
+  testing::TempDir dir;
+  dir.Write("quad.obj", "# a square\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n");
+  const Scene scene = LoadScene(dir.Write(
+      "scene.json", SceneText(R"({"mesh": "quad.obj", "reflectance": [0.5, 0.6, 0.7], "desired": [0.2, 0.4, 0.6]})")));
+  ASSERT_EQ(scene.surfaces[0].mesh_triangles.size(), 2u);
+  EXPECT_NEAR(scene.surfaces[0].Area(), 1.0, 1e-12);
+  EXPECT_EQ(scene.surfaces[0].mesh_triangles[0].uv[1], Vec2(1, 0));
+
+  dir.Write("bad.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n");
+  const std::string message =
+      LoadError(dir, SceneText(R"({"mesh": "bad.obj", "reflectance": 0.5, "desired": [1,1,1]})"));
+  EXPECT_NE(message.find("bad.obj:4: degenerate"), std::string::npos) << message;
+}
+
+TEST(LoadScene, TexturesAreDecodedToLinear) {
+  testing::TempDir dir;
+  cv::Mat image(2, 2, CV_8UC3, cv::Scalar(0, 0, 0));
+  image.at<cv::Vec3b>(0, 0) = cv::Vec3b(0, 0, 255);    // top-left red (BGR order on disk)
+  image.at<cv::Vec3b>(1, 1) = cv::Vec3b(188, 188, 188);
+  cv::imwrite((dir / "t.png").string(), image);
+  const Scene scene = LoadScene(dir.Write(
+      "scene.json",
+      SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": 0.5, "desired": {"texture": "t.png"}})")));
+  const DesiredAppearance& desired = scene.surfaces[0].desired;
+  ASSERT_TRUE(desired.HasTexture());
+  // UV (0,1) is the image's top-left texel; (1,0) its bottom-right one.
+  EXPECT_NEAR(desired.LinearAt(Vec2(0.0, 1.0))[0], 1.0, 1e-6);
+  EXPECT_NEAR(desired.LinearAt(Vec2(0.0, 1.0))[1], 0.0, 1e-6);
+  EXPECT_NEAR(desired.LinearAt(Vec2(1.0, 0.0))[2], 0.5029, 1e-3);  // sRGB 188/255 → 0.5029
+}
+
+TEST(ValidateScene, RejectsReflectanceOfOne) {
+  Scene scene;
+  Surface surface;
+  surface.quad = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)};
+  surface.reflectance = Vec3(0.5, 1.0, 0.5);
+  scene.surfaces.push_back(surface);
+  EXPECT_THROW(ValidateScene(scene), IoError);
+  scene.surfaces[0].reflectance = Vec3::Constant(0.5);
+  EXPECT_NO_THROW(ValidateScene(scene));
+}
+
+}  // namespace
+}  // namespace procam

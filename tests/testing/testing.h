@@ -1,0 +1,36 @@
+#pragma once
+// Shared test utilities: temporary directories, paths to test data, Eigen comparisons.
+
+#include <filesystem>
+#include <string>
+
+#include <Eigen/Core>
+#include <gtest/gtest.h>
+
+namespace procam::testing {
+
+// A fresh directory under the system temp dir, removed when the object goes away.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path operator/(const std::string& name) const { return path_ / name; }
+  // Writes `text` to a file in the directory and returns its path.
+  std::filesystem::path Write(const std::string& name, const std::string& text) const;
+
+ private:
+  std::filesystem::path path_;
+};
+
+// The repository root and the team's shared/ folder (from CTest's environment).
+std::filesystem::path SourceDir();
+std::filesystem::path SharedDir();
+
+// Max-norm distance of two matrices, for EXPECT_LT(MaxAbsDifference(a, b), tol).
+template <typename A, typename B>
+double MaxAbsDifference(const Eigen::MatrixBase<A>& a, const Eigen::MatrixBase<B>& b) {
+  return (a - b).cwiseAbs().maxCoeff();
+}
+
+}  // namespace procam::testing
