@@ -1,0 +1,146 @@
+#include "compensation/objective.h"
+
+#include <cmath>
+
+#include "compensation/colour.h"
+
+namespace procam {
+namespace {
+
+// Linear luma/chroma of Rec. 709 RGB (Y, Pb, Pr), scaled so that the white radiosity has Y = 100.
+Eigen::Matrix3d LinearColourMatrix(double white) {
+  const double kr = 0.2126, kg = 0.7152, kb = 0.0722;
+  Eigen::Matrix3d m;
+  m << kr, kg, kb,
+       -0.5 * kr / (1 - kb), -0.5 * kg / (1 - kb), 0.5,
+       0.5, -0.5 * kg / (1 - kr), -0.5 * kb / (1 - kr);
+  return (100.0 / white) * m;
+}
+
+}  // namespace
+
+Eigen::VectorXd Flatten(const Eigen::MatrixX3d& m) {
+  Eigen::VectorXd v(m.size());
+  for (int i = 0; i < m.rows(); ++i) v.segment<3>(3 * i) = m.row(i).transpose();
+  return v;
+}
+
+Eigen::MatrixX3d Unflatten(const Eigen::VectorXd& v) {
+  Eigen::MatrixX3d m(v.size() / 3, 3);
+  for (int i = 0; i < m.rows(); ++i) m.row(i) = v.segment<3>(3 * i).transpose();
+  return m;
+}
+
+CompensationObjective::CompensationObjective(const CompensationProblem& problem,
+                                             const RadiositySystem& radiosity, ColourModel model)
+    : problem_(problem), radiosity_(radiosity), model_(model) {
+  const int n = problem.size();
+  const double mean_area = problem.area.mean();
+  weight_diagonal_ = problem.alpha * problem.area / mean_area;
+  std::vector<Eigen::Triplet<double>> triplets;
+  Eigen::VectorXd diagonal = weight_diagonal_;
+  for (const auto& pair : problem.adjacency) {
+    const double w = 1.0 - problem.alpha;
+    if (w == 0.0) break;
+    diagonal[pair[0]] += w;
+    diagonal[pair[1]] += w;
+    triplets.emplace_back(pair[0], pair[1], -w);
+    triplets.emplace_back(pair[1], pair[0], -w);
+  }
+  for (int i = 0; i < n; ++i) triplets.emplace_back(i, i, diagonal[i]);
+  weights_.resize(n, n);
+  weights_.setFromTriplets(triplets.begin(), triplets.end());
+  desired_colour_.resize(n, 3);
+  for (int i = 0; i < n; ++i) desired_colour_.row(i) = Colour(problem.desired.row(i).transpose()).transpose();
+}
+
+Eigen::Vector3d CompensationObjective::Colour(const Eigen::Vector3d& rgb) const {
+  if (model_ == ColourModel::kLinear) {
+    return LinearColourMatrix(problem_.white_xyz[1] / problem_.rgb_to_xyz.row(1).sum()) * rgb;
+  }
+  return XyzToLab(problem_.rgb_to_xyz * rgb, problem_.white_xyz);
+}
+
+Eigen::Matrix3d CompensationObjective::ColourJacobian(const Eigen::Vector3d& rgb) const {
+  if (model_ == ColourModel::kLinear) {
+    return LinearColourMatrix(problem_.white_xyz[1] / problem_.rgb_to_xyz.row(1).sum());
+  }
+  return XyzToLabJacobian(problem_.rgb_to_xyz * rgb, problem_.white_xyz) * problem_.rgb_to_xyz;
+}
+
+double CompensationObjective::Evaluate(const Eigen::MatrixX3d& emittance, ObjectivePoint* point) const {
+  const int n = patches();
+  point->emittance = emittance;
+  point->radiosity = radiosity_.Solve(emittance);
+  point->residual.resize(n, 3);
+  point->colour_jacobian.resize(n);
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector3d rgb = point->radiosity.row(i).transpose();
+    point->residual.row(i) = (Colour(rgb) - desired_colour_.row(i).transpose()).transpose();
+    point->colour_jacobian[i] = ColourJacobian(rgb);
+  }
+  point->value = point->residual.cwiseProduct(weights_ * point->residual).sum();
+  return point->value;
+}
+
+double CompensationObjective::Value(const Eigen::MatrixX3d& emittance) const {
+  const Eigen::MatrixX3d radiosity = radiosity_.Solve(emittance);
+  Eigen::MatrixX3d residual(patches(), 3);
+  for (int i = 0; i < patches(); ++i) {
+    residual.row(i) = (Colour(radiosity.row(i).transpose()) - desired_colour_.row(i).transpose()).transpose();
+  }
+  return residual.cwiseProduct(weights_ * residual).sum();
+}
+
+Eigen::MatrixX3d CompensationObjective::Gradient(const ObjectivePoint& point) const {
+  const Eigen::MatrixX3d weighted = 2.0 * (weights_ * point.residual);
+  Eigen::MatrixX3d by_radiosity(patches(), 3);
+  for (int i = 0; i < patches(); ++i) {
+    by_radiosity.row(i) = weighted.row(i) * point.colour_jacobian[i];
+  }
+  return radiosity_.SolveTransposed(by_radiosity);
+}
+
+Eigen::MatrixX3d CompensationObjective::GaussNewtonProduct(const ObjectivePoint& point,
+                                                           const Eigen::MatrixX3d& v) const {
+  const Eigen::MatrixX3d u = radiosity_.Solve(v);
+  Eigen::MatrixX3d colour(patches(), 3);
+  for (int i = 0; i < patches(); ++i) colour.row(i) = u.row(i) * point.colour_jacobian[i].transpose();
+  const Eigen::MatrixX3d weighted = 2.0 * (weights_ * colour);
+  Eigen::MatrixX3d back(patches(), 3);
+  for (int i = 0; i < patches(); ++i) back.row(i) = weighted.row(i) * point.colour_jacobian[i];
+  return radiosity_.SolveTransposed(back);
+}
+
+Eigen::SparseMatrix<double> CompensationObjective::ColourHessian(const ObjectivePoint& point) const {
+  std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(9 * weights_.nonZeros());
+  for (int column = 0; column < weights_.outerSize(); ++column) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(weights_, column); it; ++it) {
+      const int i = static_cast<int>(it.row()), j = static_cast<int>(it.col());
+      const Eigen::Matrix3d block = 2.0 * it.value() * point.colour_jacobian[i].transpose() * point.colour_jacobian[j];
+      for (int a = 0; a < 3; ++a) {
+        for (int b = 0; b < 3; ++b) triplets.emplace_back(3 * i + a, 3 * j + b, block(a, b));
+      }
+    }
+  }
+  Eigen::SparseMatrix<double> m(variables(), variables());
+  m.setFromTriplets(triplets.begin(), triplets.end());
+  return m;
+}
+
+void CompensationObjective::DeltaE(const Eigen::MatrixX3d& radiosity, Eigen::VectorXd* delta_e76,
+                                   Eigen::VectorXd* delta_e2000) const {
+  const int n = patches();
+  delta_e76->resize(n);
+  delta_e2000->resize(n);
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector3d lab = XyzToLab(problem_.rgb_to_xyz * radiosity.row(i).transpose(), problem_.white_xyz);
+    const Eigen::Vector3d desired =
+        XyzToLab(problem_.rgb_to_xyz * problem_.desired.row(i).transpose(), problem_.white_xyz);
+    (*delta_e76)[i] = DeltaE76(lab, desired);
+    (*delta_e2000)[i] = DeltaE2000(lab, desired);
+  }
+}
+
+}  // namespace procam

@@ -1,0 +1,85 @@
+#pragma once
+// The compensation objective (paper Eq. 5–6) as a function of the emittance E (n×3):
+//   f(E) = Σ_k r_kᵀ W r_k,  W = α diag(A_i/A_avg) + (1−α) L,  r = C(B) − C(Bd),  B = K⁻¹ E,
+// where k runs over the three colour components, L is the adjacency graph's Laplacian (each
+// unordered pair once) and C maps linear RGB to the colour space: L*a*b* for the perceptual
+// method (nonlinear), Y'PbPr-like linear luma/chroma for the linear method of Sheng 2010.
+//
+// Variables are stored as n×3 matrices (row = patch, column = RGB channel); a flattened vector
+// is patch-major (index 3i + c).
+
+#include <array>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include "compensation/problem.h"
+#include "compensation/radiosity.h"
+
+namespace procam {
+
+enum class ColourModel {
+  kLab,    // CIE L*a*b* relative to the problem's white (perceptual)
+  kLinear  // Y, Pb, Pr of linear Rec. 709 RGB, scaled to L*-like units (linear; Sheng 2010)
+};
+
+// Everything the objective knows at one point E.
+struct ObjectivePoint {
+  Eigen::MatrixX3d emittance;   // E (n×3)
+  Eigen::MatrixX3d radiosity;   // B = K⁻¹E
+  Eigen::MatrixX3d residual;    // r (n×3 colour components)
+  std::vector<Eigen::Matrix3d> colour_jacobian;  // ∂C/∂B per patch
+  double value = 0.0;           // f
+};
+
+class CompensationObjective {
+ public:
+  // Keeps a reference to `problem` and `radiosity` (both must outlive the objective).
+  CompensationObjective(const CompensationProblem& problem, const RadiositySystem& radiosity,
+                        ColourModel model);
+
+  int patches() const { return static_cast<int>(weight_diagonal_.size()); }
+  int variables() const { return 3 * patches(); }
+  ColourModel model() const { return model_; }
+  const CompensationProblem& problem() const { return problem_; }
+  const RadiositySystem& radiosity() const { return radiosity_; }
+
+  // Colour of linear RGB radiosity in this objective's space, and its Jacobian.
+  Eigen::Vector3d Colour(const Eigen::Vector3d& rgb) const;
+  Eigen::Matrix3d ColourJacobian(const Eigen::Vector3d& rgb) const;
+
+  // Fills `point` at E; returns f. Non-finite input gives a non-finite value, never a crash.
+  double Evaluate(const Eigen::MatrixX3d& emittance, ObjectivePoint* point) const;
+  // f only.
+  double Value(const Eigen::MatrixX3d& emittance) const;
+  // ∂f/∂E at an evaluated point.
+  Eigen::MatrixX3d Gradient(const ObjectivePoint& point) const;
+  // Gauss–Newton Hessian product H v, H = 2 J_Eᵀ (W ⊗ I₃) J_E, J_E = blockdiag(∂C/∂B) K⁻¹.
+  Eigen::MatrixX3d GaussNewtonProduct(const ObjectivePoint& point, const Eigen::MatrixX3d& v) const;
+
+  // W as a sparse n×n matrix, and W·R for an n×3 R.
+  const Eigen::SparseMatrix<double>& weights() const { return weights_; }
+  // The colour-space Gauss–Newton matrix M = 2 Jᵀ (W ⊗ I₃) J in B (3n×3n, patch-major):
+  // H = K⁻ᵀ M K⁻¹, so H⁻¹ = K M⁻¹ Kᵀ (used as the preconditioner).
+  Eigen::SparseMatrix<double> ColourHessian(const ObjectivePoint& point) const;
+
+  // Per-patch colour differences between B and the desired radiosity in L*a*b*.
+  void DeltaE(const Eigen::MatrixX3d& radiosity, Eigen::VectorXd* delta_e76,
+              Eigen::VectorXd* delta_e2000) const;
+
+ private:
+  const CompensationProblem& problem_;
+  const RadiositySystem& radiosity_;
+  ColourModel model_;
+  Eigen::VectorXd weight_diagonal_;
+  Eigen::SparseMatrix<double> weights_;
+  Eigen::MatrixX3d desired_colour_;
+};
+
+// Flattening helpers (patch-major: index 3i + c).
+Eigen::VectorXd Flatten(const Eigen::MatrixX3d& m);
+Eigen::MatrixX3d Unflatten(const Eigen::VectorXd& v);
+
+}  // namespace procam

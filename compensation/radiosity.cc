@@ -1,0 +1,94 @@
+#include "compensation/radiosity.h"
+
+#include <cassert>
+
+namespace procam {
+
+RadiositySystem::RadiositySystem(const Eigen::MatrixXd& form_factors, const Eigen::VectorXd& area,
+                                 const Eigen::MatrixX3d& reflectance)
+    : form_factors_(form_factors), area_(area), reflectance_(reflectance) {
+  [[maybe_unused]] const int n = size();
+  assert(form_factors_.rows() == n && form_factors_.cols() == n && reflectance_.rows() == n);
+  const bool grey = (reflectance_.col(0) == reflectance_.col(1)) && (reflectance_.col(0) == reflectance_.col(2));
+  std::vector<std::vector<int>> groups = grey ? std::vector<std::vector<int>>{{0, 1, 2}}
+                                              : std::vector<std::vector<int>>{{0}, {1}, {2}};
+  const Eigen::VectorXd sqrt_area = area_.cwiseSqrt();
+  for (const std::vector<int>& channels : groups) {
+    Factor factor;
+    factor.channels = channels;
+    const Eigen::VectorXd rho = reflectance_.col(channels.front());
+    factor.cholesky = rho.minCoeff() > 0.0;
+    if (factor.cholesky) {
+      // M = I − D^½ A^½ F A^-½ D^½, symmetric because A F is.
+      const Eigen::VectorXd left = rho.cwiseSqrt().cwiseProduct(sqrt_area);
+      const Eigen::VectorXd right = rho.cwiseSqrt().cwiseQuotient(sqrt_area);
+      Eigen::MatrixXd m = -(left.asDiagonal() * form_factors_ * right.asDiagonal());
+      // Symmetrise against rounding, then add the identity.
+      m = 0.5 * (m + m.transpose()).eval();
+      m.diagonal().array() += 1.0;
+      factor.llt.compute(m);
+      factor.scale = rho.cwiseSqrt().cwiseQuotient(sqrt_area);
+      if (factor.llt.info() != Eigen::Success) factor.cholesky = false;
+    }
+    if (!factor.cholesky) {
+      Eigen::MatrixXd k = -(rho.asDiagonal() * form_factors_);
+      k.diagonal().array() += 1.0;
+      factor.lu.compute(k);
+    }
+    factors_.push_back(std::move(factor));
+  }
+}
+
+Eigen::MatrixX3d RadiositySystem::Solve(const Eigen::MatrixX3d& emittance) const {
+  Eigen::MatrixX3d radiosity(size(), 3);
+  for (const Factor& factor : factors_) {
+    Eigen::MatrixXd block(size(), factor.channels.size());
+    for (size_t k = 0; k < factor.channels.size(); ++k) block.col(k) = emittance.col(factor.channels[k]);
+    if (factor.cholesky) {
+      // F = A^-½ S A^½ gives K = I − D F = A^-½ D^½ M D^-½ A^½, so K⁻¹ = diag(s) M⁻¹ diag(1/s)
+      // with s = D^½ A^-½.
+      block = factor.scale.asDiagonal() * factor.llt.solve(factor.scale.cwiseInverse().asDiagonal() * block);
+    } else {
+      block = factor.lu.solve(block);
+    }
+    for (size_t k = 0; k < factor.channels.size(); ++k) radiosity.col(factor.channels[k]) = block.col(k);
+  }
+  return radiosity;
+}
+
+Eigen::MatrixX3d RadiositySystem::SolveTransposed(const Eigen::MatrixX3d& y) const {
+  Eigen::MatrixX3d x(size(), 3);
+  for (const Factor& factor : factors_) {
+    Eigen::MatrixXd block(size(), factor.channels.size());
+    for (size_t k = 0; k < factor.channels.size(); ++k) block.col(k) = y.col(factor.channels[k]);
+    if (factor.cholesky) {
+      // (diag(s) M⁻¹ diag(1/s))ᵀ = diag(1/s) M⁻¹ diag(s).
+      block = factor.scale.cwiseInverse().asDiagonal() * factor.llt.solve(factor.scale.asDiagonal() * block);
+    } else {
+      block = factor.lu.transpose().solve(block);
+    }
+    for (size_t k = 0; k < factor.channels.size(); ++k) x.col(factor.channels[k]) = block.col(k);
+  }
+  return x;
+}
+
+Eigen::MatrixX3d RadiositySystem::Multiply(const Eigen::MatrixX3d& radiosity) const {
+  return radiosity - reflectance_.cwiseProduct(form_factors_ * radiosity);
+}
+
+Eigen::MatrixX3d RadiositySystem::MultiplyTransposed(const Eigen::MatrixX3d& y) const {
+  return y - form_factors_.transpose() * reflectance_.cwiseProduct(y);
+}
+
+Eigen::MatrixXd RadiositySystem::InverseMatrix(int channel) const {
+  const int n = size();
+  Eigen::MatrixXd inverse(n, n);
+  for (int j = 0; j < n; ++j) {
+    Eigen::MatrixX3d unit = Eigen::MatrixX3d::Zero(n, 3);
+    unit(j, channel) = 1.0;
+    inverse.col(j) = Solve(unit).col(channel);
+  }
+  return inverse;
+}
+
+}  // namespace procam

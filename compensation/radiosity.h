@@ -1,0 +1,61 @@
+#pragma once
+// Radiosity B_c = K_c⁻¹ E_c with K_c = I − diag(rho_c) F (paper Eq. 1), factorised once.
+//
+// F is shared by the channels; when every patch has the same reflectance in all three
+// channels (grey rooms, the common case) one factorisation serves all three. Because
+// A_i F_ij = A_j F_ji, S = A^½ F A^-½ is symmetric and M_c = I − D_c^½ S D_c^½ (D_c = diag rho_c)
+// is symmetric positive definite (its eigenvalues lie in [1 − max rho, 1 + max rho]), so
+// K_c⁻¹ = A^-½ D_c^½ M_c⁻¹ D_c^-½ A^½ is applied with a Cholesky factor (n³/3 flops instead of
+// LU's 2n³/3). Reflectances of exactly 0 fall back to a pivoted LU of K_c.
+// Dense factors are n² doubles per distinct channel: about 20k patches on a 24 GB machine;
+// larger rooms need the matrix-free path of the GPU/scale issue.
+
+#include <memory>
+#include <vector>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <Eigen/LU>
+
+namespace procam {
+
+class RadiositySystem {
+ public:
+  // `form_factors` (n×n) and `area` (n) are copied; `reflectance` is (n,3) in [0,1).
+  RadiositySystem(const Eigen::MatrixXd& form_factors, const Eigen::VectorXd& area,
+                  const Eigen::MatrixX3d& reflectance);
+
+  int size() const { return static_cast<int>(area_.size()); }
+  // Channels sharing a factorisation (1 for grey reflectance, else 3).
+  int factorisations() const { return static_cast<int>(factors_.size()); }
+
+  // B = K⁻¹ E, per channel (columns).
+  Eigen::MatrixX3d Solve(const Eigen::MatrixX3d& emittance) const;
+  // X = K⁻ᵀ Y, per channel.
+  Eigen::MatrixX3d SolveTransposed(const Eigen::MatrixX3d& y) const;
+  // E = K B = B − rho ∘ (F B).
+  Eigen::MatrixX3d Multiply(const Eigen::MatrixX3d& radiosity) const;
+  // Kᵀ Y = Y − Fᵀ (rho ∘ Y).
+  Eigen::MatrixX3d MultiplyTransposed(const Eigen::MatrixX3d& y) const;
+
+  // Dense K_c⁻¹ (n×n) for one channel: for small problems, tests and peer solvers.
+  Eigen::MatrixXd InverseMatrix(int channel) const;
+
+  const Eigen::MatrixXd& form_factors() const { return form_factors_; }
+  const Eigen::MatrixX3d& reflectance() const { return reflectance_; }
+
+ private:
+  struct Factor {
+    std::vector<int> channels;
+    bool cholesky = true;
+    Eigen::VectorXd scale;  // D^½ A^-½ (left) — K⁻¹ = diag(scale) M⁻¹ diag(1/scale)
+    Eigen::LLT<Eigen::MatrixXd> llt;
+    Eigen::PartialPivLU<Eigen::MatrixXd> lu;
+  };
+  Eigen::MatrixXd form_factors_;
+  Eigen::VectorXd area_;
+  Eigen::MatrixX3d reflectance_;
+  std::vector<Factor> factors_;
+};
+
+}  // namespace procam

@@ -1,0 +1,127 @@
+#pragma once
+// Compensation solvers with a Ceres-like API: Solve(options, problem, &summary).
+//
+//   kNaive      E = clamp(Bd, l, u): show the desired picture and ignore the bounces.
+//   kReverse    E = clamp(K·Bd, l, u): reverse radiosity, exact when no bound is hit.
+//   kLinear     Sheng et al. 2010: the objective of Eq. 5–6 in a linear luma/chroma space;
+//               a convex bound-constrained QP, solved to optimality.
+//   kPerceptual Sheng et al. 2011: the objective in L*a*b*, active-set Gauss–Newton (Alg. 1)
+//               with the modified projected Newton inner solver (Alg. 2) and an Armijo line
+//               search; optionally warm-started from the coarse patch level (multires).
+//
+// Every Newton system H_FF d_F = −g_F (H = K⁻ᵀ M K⁻¹) is solved by preconditioned conjugate
+// gradients with (K M⁻¹ Kᵀ)_FF, M the sparse colour-space Gauss–Newton matrix: the exact
+// inverse when no bound is active, so CG needs few iterations, and no dense 3n×3n matrix is
+// ever formed.
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "compensation/objective.h"
+#include "compensation/problem.h"
+
+namespace procam {
+
+enum class CompensationMethod { kNaive, kReverse, kLinear, kPerceptual };
+const char* MethodName(CompensationMethod method);
+// Parses "naive", "reverse", "linear", "perceptual"; false if unknown.
+bool ParseMethod(const std::string& name, CompensationMethod* method);
+
+struct SolverOptions {
+  CompensationMethod method = CompensationMethod::kPerceptual;
+  // Solve the coarse level first and start the fine solve from it (needs a coarse level).
+  bool multires = false;
+  // Outer (Gauss–Newton) iterations, ≥ 1.
+  int max_iterations = 100;
+  // Inner projected-Newton iterations per outer iteration (Alg. 2), ≥ 1.
+  int max_inner_iterations = 20;
+  // Conjugate-gradient iterations per Newton system, ≥ 1.
+  int max_cg_iterations = 200;
+  // Relative CG residual at which a Newton system counts as solved, in (0, 1).
+  double cg_tolerance = 1e-6;
+  // Stop when ‖E − P(E − ∇f)‖∞ ≤ gradient_tolerance · (1 + f) (first-order optimality), ≥ 0.
+  double gradient_tolerance = 1e-9;
+  // Stop when an iteration lowers f by less than function_tolerance · f, ≥ 0.
+  double function_tolerance = 1e-12;
+  // Armijo sufficient-decrease constant, in (0, 0.5).
+  double armijo = 1e-4;
+  // Called after every outer iteration with (iteration, cost, seconds since start).
+  std::function<void(int, double, double)> progress;
+
+  bool Check(std::string* why) const;
+};
+
+enum class TerminationType {
+  // ‖E − P(E − ∇f(E))‖∞ ≤ gradient_tolerance·(1 + f): a first-order critical point.
+  kGradientTolerance,
+  // f(E_k) − f(E_k+1) ≤ function_tolerance · f(E_k).
+  kFunctionTolerance,
+  // The closed-form methods (naive, reverse) return after one evaluation.
+  kClosedForm,
+  // max_iterations outer iterations were done without meeting a tolerance.
+  kMaxIterations,
+  // No step along the Gauss–Newton direction satisfied the Armijo condition (f is then at a
+  // point where the model no longer predicts decrease; the result is still feasible).
+  kLineSearchFailure,
+  // The objective or a direction became non-finite; the last finite iterate is returned.
+  kNumericalFailure,
+};
+const char* TerminationName(TerminationType type);
+
+struct IterationRecord {
+  int iteration = 0;
+  double cost = 0.0;
+  double seconds = 0.0;          // since the solve started
+  double step = 0.0;             // line-search step length (0 for the start)
+  int free_variables = 0;
+  int cg_iterations = 0;
+  double projected_gradient = 0.0;  // ‖E − P(E − ∇f)‖∞
+};
+
+struct SolverSummary {
+  CompensationMethod method = CompensationMethod::kPerceptual;
+  TerminationType termination = TerminationType::kMaxIterations;
+  std::string message;
+  double initial_cost = 0.0;
+  double final_cost = 0.0;
+  int iterations = 0;             // outer iterations
+  int inner_iterations = 0;       // projected-Newton iterations, all outer iterations together
+  int cg_iterations = 0;
+  double setup_seconds = 0.0;     // factorising K (and the coarse level's K with multires)
+  double solve_seconds = 0.0;     // everything after the setup
+  double coarse_seconds = 0.0;    // part of solve_seconds spent on the coarse level
+  int coarse_iterations = 0;
+  std::vector<IterationRecord> trace;
+
+  // One line: method, termination, costs, iterations, times.
+  std::string BriefReport() const;
+};
+
+// A coarser patch level for multires: its problem and each fine patch's parent.
+struct CoarseLevel {
+  const CompensationProblem* problem = nullptr;
+  const std::vector<int>* coarse_of_fine = nullptr;
+};
+
+struct CompensationSolution {
+  Eigen::MatrixX3d emittance;  // E, n×3, within the bounds
+  Eigen::MatrixX3d radiosity;  // B = K⁻¹E
+};
+
+// Solves `problem` (validated first: throws std::invalid_argument naming the fault).
+CompensationSolution Solve(const SolverOptions& options, const CompensationProblem& problem,
+                           SolverSummary* summary, const CoarseLevel& coarse = {});
+
+// Alg. 1 on an objective, from `initial` (projected onto the bounds). Used by Solve for the
+// linear and perceptual methods; exposed for tests and benchmarks.
+Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const CompensationObjective& objective,
+                                 const Eigen::MatrixX3d& initial, SolverSummary* summary);
+
+// ‖E − P(E − ∇f)‖∞: zero exactly at first-order critical points of the bounded problem.
+double ProjectedGradientNorm(const Eigen::MatrixX3d& emittance, const Eigen::MatrixX3d& gradient,
+                             const Eigen::MatrixX3d& lower, const Eigen::MatrixX3d& upper);
+
+}  // namespace procam

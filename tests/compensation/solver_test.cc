@@ -1,0 +1,250 @@
+#include "compensation/solver.h"
+
+#include <cmath>
+
+#include <Eigen/LU>
+#include <gtest/gtest.h>
+
+#include "compensation/colour.h"
+#include "datasets_synthetic/rooms.h"
+#include "geometry/form_factors.h"
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+struct TestProblem {
+  Scene scene;
+  PatchHierarchy patches;
+  CompensationProblem fine, coarse;
+};
+
+// A box room with an occluder and saturated desired colours, so that bounds [0, white] bite.
+TestProblem MakeTestProblem(int target_patches, double alpha = 0.5) {
+  TestProblem test;
+  BoxRoomOptions room;
+  room.target_patches = target_patches;
+  test.scene = MakeBoxRoom(room);
+  SubdivisionOptions subdivision;
+  subdivision.target_patches = target_patches;
+  test.patches = SubdividePatches(test.scene, subdivision);
+  Eigen::MatrixXd f = ComputeFormFactors(test.scene, test.patches.fine, FormFactorOptions(), nullptr);
+  const Eigen::MatrixXd coarse_f = AggregateFormFactors(f, test.patches.fine.Areas(), test.patches.coarse_of_fine,
+                                                        test.patches.coarse.size());
+  test.fine = MakeProblem(test.scene, test.patches.fine, std::move(f), alpha);
+  test.coarse = MakeProblem(test.scene, test.patches.coarse, coarse_f, alpha);
+  return test;
+}
+
+SolverOptions WithMethod(CompensationMethod method) {
+  SolverOptions options;
+  options.method = method;
+  return options;
+}
+
+Eigen::MatrixXd DenseK(const CompensationProblem& problem, int channel) {
+  return Eigen::MatrixXd::Identity(problem.size(), problem.size()) -
+         problem.reflectance.col(channel).asDiagonal() * problem.form_factors;
+}
+
+TEST(RadiositySystem, MatchesADenseSolveForGreyColouredAndBlackPatches) {
+  const TestProblem test = MakeTestProblem(60);
+  CompensationProblem problem = test.fine;
+  for (int variant = 0; variant < 3; ++variant) {
+    if (variant == 1) problem.reflectance.col(1) *= 0.7;   // coloured: three factorisations
+    if (variant == 2) problem.reflectance(5, 2) = 0.0;     // a black patch: LU fallback
+    const RadiositySystem system(problem.form_factors, problem.area, problem.reflectance);
+    EXPECT_EQ(system.factorisations(), variant == 0 ? 1 : 3);
+    const Eigen::MatrixX3d e = Eigen::MatrixX3d::Random(problem.size(), 3).cwiseAbs();
+    const Eigen::MatrixX3d b = system.Solve(e);
+    const Eigen::MatrixX3d x = system.SolveTransposed(e);
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::MatrixXd k = DenseK(problem, c);
+      const Eigen::VectorXd expected = k.fullPivLu().solve(e.col(c));
+      EXPECT_LT((b.col(c) - expected).norm(), 1e-10 * expected.norm()) << "variant " << variant;
+      const Eigen::VectorXd expected_t = k.transpose().fullPivLu().solve(e.col(c));
+      EXPECT_LT((x.col(c) - expected_t).norm(), 1e-10 * expected_t.norm()) << "variant " << variant;
+    }
+    EXPECT_LT(testing::MaxAbsDifference(system.Multiply(b), e), 1e-12);
+    EXPECT_LT(testing::MaxAbsDifference(system.MultiplyTransposed(x), e), 1e-12);
+  }
+}
+
+// f written out patch by patch and pair by pair, as DESIGN.md states it.
+double ObjectiveByDefinition(const CompensationProblem& problem, const Eigen::MatrixX3d& emittance) {
+  const int n = problem.size();
+  Eigen::MatrixX3d lab(n, 3), desired(n, 3);
+  for (int c = 0; c < 3; ++c) {
+    const Eigen::VectorXd b = DenseK(problem, c).fullPivLu().solve(emittance.col(c));
+    lab.col(c) = b;
+  }
+  for (int i = 0; i < n; ++i) {
+    lab.row(i) = XyzToLab(problem.rgb_to_xyz * lab.row(i).transpose(), problem.white_xyz).transpose();
+    desired.row(i) = XyzToLab(problem.rgb_to_xyz * problem.desired.row(i).transpose(), problem.white_xyz).transpose();
+  }
+  const Eigen::MatrixX3d r = lab - desired;
+  const double mean_area = problem.area.mean();
+  double f = 0.0;
+  for (int i = 0; i < n; ++i) f += problem.alpha * problem.area[i] / mean_area * r.row(i).squaredNorm();
+  for (const auto& pair : problem.adjacency) f += (1 - problem.alpha) * (r.row(pair[0]) - r.row(pair[1])).squaredNorm();
+  return f;
+}
+
+TEST(CompensationObjective, ValueMatchesTheDefinition) {
+  const TestProblem test = MakeTestProblem(60, 0.3);
+  const RadiositySystem radiosity(test.fine.form_factors, test.fine.area, test.fine.reflectance);
+  const CompensationObjective objective(test.fine, radiosity, ColourModel::kLab);
+  const Eigen::MatrixX3d e = 0.5 * (Eigen::MatrixX3d::Random(test.fine.size(), 3).array() + 1.0);
+  const double expected = ObjectiveByDefinition(test.fine, e);
+  EXPECT_NEAR(objective.Value(e), expected, 1e-10 * expected);
+}
+
+TEST(CompensationObjective, GradientAndGaussNewtonMatchFiniteDifferences) {
+  const TestProblem test = MakeTestProblem(40);
+  const RadiositySystem radiosity(test.fine.form_factors, test.fine.area, test.fine.reflectance);
+  for (const ColourModel model : {ColourModel::kLab, ColourModel::kLinear}) {
+    const CompensationObjective objective(test.fine, radiosity, model);
+    // Mix bright patches with very dark ones (the linear branch of h).
+    Eigen::MatrixX3d e = 0.5 * (Eigen::MatrixX3d::Random(test.fine.size(), 3).array() + 1.0);
+    e.topRows(5) *= 1e-4;
+    ObjectivePoint point;
+    objective.Evaluate(e, &point);
+    const Eigen::MatrixX3d gradient = objective.Gradient(point);
+    const double step = 1e-6;
+    for (int i = 0; i < test.fine.size(); i += 7) {
+      for (int c = 0; c < 3; ++c) {
+        Eigen::MatrixX3d plus = e, minus = e;
+        plus(i, c) += step;
+        minus(i, c) -= step;
+        const double numeric = (objective.Value(plus) - objective.Value(minus)) / (2 * step);
+        EXPECT_NEAR(gradient(i, c), numeric, 1e-5 * (1.0 + std::abs(numeric)));
+      }
+    }
+    // Gauss–Newton product 2 J_Eᵀ W J_E v against J_E v from finite differences of the residual.
+    const Eigen::MatrixX3d v = Eigen::MatrixX3d::Random(test.fine.size(), 3);
+    ObjectivePoint plus_point, minus_point;
+    objective.Evaluate(e + step * v, &plus_point);
+    objective.Evaluate(e - step * v, &minus_point);
+    const Eigen::MatrixX3d jv = (plus_point.residual - minus_point.residual) / (2 * step);
+    const double expected = 2.0 * jv.cwiseProduct(objective.weights() * jv).sum();  // vᵀ H v
+    const double computed = v.cwiseProduct(objective.GaussNewtonProduct(point, v)).sum();
+    EXPECT_NEAR(computed, expected, 1e-5 * expected);
+  }
+}
+
+TEST(Solve, LooseBoundsGiveReverseRadiosityAndZeroObjective) {
+  TestProblem test = MakeTestProblem(100);
+  test.fine.lower.setConstant(-10.0);
+  test.fine.upper.setConstant(10.0);
+  SolverSummary summary;
+  const CompensationSolution solution = Solve(SolverOptions(), test.fine, &summary);
+  const RadiositySystem radiosity(test.fine.form_factors, test.fine.area, test.fine.reflectance);
+  const Eigen::MatrixX3d exact = radiosity.Multiply(test.fine.desired);  // E = K·Bd
+  EXPECT_LT(testing::MaxAbsDifference(solution.emittance, exact), 1e-8) << summary.BriefReport();
+  EXPECT_LT(summary.final_cost, 1e-12);
+  EXPECT_LT(testing::MaxAbsDifference(solution.radiosity, test.fine.desired), 1e-8);
+}
+
+class SolveBounded : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() { test_ = new TestProblem(MakeTestProblem(200)); }
+  static void TearDownTestSuite() { delete test_; }
+  static TestProblem* test_;
+};
+TestProblem* SolveBounded::test_ = nullptr;
+
+TEST_F(SolveBounded, SatisfiesBoundsFirstOrderOptimalityAndDescends) {
+  const CompensationProblem& problem = test_->fine;
+  for (const CompensationMethod method : {CompensationMethod::kPerceptual, CompensationMethod::kLinear}) {
+    SolverSummary summary;
+    const CompensationSolution solution = Solve(WithMethod(method), problem, &summary);
+    EXPECT_TRUE(summary.termination == TerminationType::kGradientTolerance ||
+                summary.termination == TerminationType::kFunctionTolerance)
+        << summary.BriefReport();
+    EXPECT_TRUE(((solution.emittance - problem.lower).array() >= 0.0).all());
+    EXPECT_TRUE(((problem.upper - solution.emittance).array() >= 0.0).all());
+    // Some bounds are active, or the test would not exercise the active set.
+    EXPECT_GT(((solution.emittance - problem.lower).array() == 0.0).count(), 0);
+    const RadiositySystem radiosity(problem.form_factors, problem.area, problem.reflectance);
+    const CompensationObjective objective(
+        problem, radiosity, method == CompensationMethod::kLinear ? ColourModel::kLinear : ColourModel::kLab);
+    ObjectivePoint point;
+    const double cost = objective.Evaluate(solution.emittance, &point);
+    const double projected = ProjectedGradientNorm(solution.emittance, objective.Gradient(point), problem.lower, problem.upper);
+    EXPECT_LT(projected, 1e-6 * (1.0 + cost)) << summary.BriefReport();
+    for (size_t k = 1; k < summary.trace.size(); ++k) {
+      EXPECT_LE(summary.trace[k].cost, summary.trace[k - 1].cost) << "iteration " << k;
+    }
+  }
+}
+
+TEST_F(SolveBounded, PerceptualBeatsLinearAndReverseInLab) {
+  const CompensationProblem& problem = test_->fine;
+  const RadiositySystem radiosity(problem.form_factors, problem.area, problem.reflectance);
+  const CompensationObjective lab(problem, radiosity, ColourModel::kLab);
+  std::map<CompensationMethod, double> cost;
+  for (const CompensationMethod method : {CompensationMethod::kNaive, CompensationMethod::kReverse,
+                                          CompensationMethod::kLinear, CompensationMethod::kPerceptual}) {
+    SolverSummary summary;
+    cost[method] = lab.Value(Solve(WithMethod(method), problem, &summary).emittance);
+  }
+  EXPECT_LT(cost[CompensationMethod::kPerceptual], cost[CompensationMethod::kLinear]);
+  EXPECT_LT(cost[CompensationMethod::kPerceptual], cost[CompensationMethod::kReverse]);
+  EXPECT_LT(cost[CompensationMethod::kPerceptual], cost[CompensationMethod::kNaive]);
+}
+
+TEST_F(SolveBounded, MultiresReachesTheSameObjective) {
+  SolverSummary single, multi;
+  Solve(SolverOptions(), test_->fine, &single);
+  const CoarseLevel coarse{&test_->coarse, &test_->patches.coarse_of_fine};
+  SolverOptions multires;
+  multires.multires = true;
+  Solve(multires, test_->fine, &multi, coarse);
+  EXPECT_GT(multi.coarse_iterations, 0);
+  EXPECT_NEAR(multi.final_cost, single.final_cost, 1e-6 * single.final_cost)
+      << single.BriefReport() << "\n" << multi.BriefReport();
+}
+
+TEST(Solve, RejectsBadInputWithAClearMessage) {
+  const TestProblem test = MakeTestProblem(40);
+  auto message = [](const CompensationProblem& problem, const SolverOptions& options = {}) -> std::string {
+    SolverSummary summary;
+    try {
+      Solve(options, problem, &summary);
+    } catch (const std::invalid_argument& error) {
+      return error.what();
+    }
+    return "";
+  };
+  CompensationProblem bad = test.fine;
+  bad.lower(2, 0) = 2.0;
+  EXPECT_NE(message(bad).find("lower > upper"), std::string::npos);
+  bad = test.fine;
+  bad.desired(1, 1) = std::nan("");
+  EXPECT_NE(message(bad).find("NaN"), std::string::npos);
+  bad = test.fine;
+  bad.alpha = 1.5;
+  EXPECT_NE(message(bad).find("alpha"), std::string::npos);
+  bad = test.fine;
+  bad.reflectance(0, 0) = 1.0;
+  EXPECT_NE(message(bad).find("reflectance"), std::string::npos);
+  SolverOptions options;
+  options.max_iterations = 0;
+  EXPECT_NE(message(test.fine, options).find("iteration"), std::string::npos);
+  options = SolverOptions();
+  options.multires = true;
+  EXPECT_NE(message(test.fine, options).find("coarse level"), std::string::npos);
+}
+
+TEST(Methods, NamesRoundTrip) {
+  for (const char* name : {"naive", "reverse", "linear", "perceptual"}) {
+    CompensationMethod method;
+    ASSERT_TRUE(ParseMethod(name, &method));
+    EXPECT_STREQ(MethodName(method), name);
+  }
+  CompensationMethod method;
+  EXPECT_FALSE(ParseMethod("magic", &method));
+}
+
+}  // namespace
+}  // namespace procam
