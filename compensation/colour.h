@@ -37,6 +37,26 @@ PROCAM_HOST_DEVICE inline double LabHDerivative(double t) {
   return 1.0 / (3.0 * kLabDelta * kLabDelta);
 }
 
+PROCAM_HOST_DEVICE inline double LabHSecondDerivative(double t) {
+  if (t > kLabDelta * kLabDelta * kLabDelta) {
+    const double root = std::cbrt(t);
+    return -2.0 / (9.0 * root * root * root * root * root);
+  }
+  return 0.0;
+}
+
+// Σ_k w_k ∇²Lab_k(XYZ): the curvature of w·Lab, which is diagonal in XYZ (each of h(X/Xn),
+// h(Y/Yn), h(Z/Zn) depends on one coordinate). `w` weighs (L*, a*, b*).
+PROCAM_HOST_DEVICE inline Eigen::Vector3d XyzToLabWeightedCurvature(const Eigen::Vector3d& xyz,
+                                                                    const Eigen::Vector3d& white,
+                                                                    const Eigen::Vector3d& w) {
+  const double hx = LabHSecondDerivative(xyz[0] / white[0]) / (white[0] * white[0]);
+  const double hy = LabHSecondDerivative(xyz[1] / white[1]) / (white[1] * white[1]);
+  const double hz = LabHSecondDerivative(xyz[2] / white[2]) / (white[2] * white[2]);
+  return Eigen::Vector3d(500.0 * w[1] * hx, (116.0 * w[0] - 500.0 * w[1] + 200.0 * w[2]) * hy,
+                         -200.0 * w[2] * hz);
+}
+
 // XYZ → L*a*b* relative to the reference white (Xn, Yn, Zn).
 PROCAM_HOST_DEVICE inline Eigen::Vector3d XyzToLab(const Eigen::Vector3d& xyz,
                                                    const Eigen::Vector3d& white) {

@@ -109,7 +109,23 @@ Eigen::MatrixX3d CompensationObjective::GaussNewtonProduct(const ObjectivePoint&
   const Eigen::MatrixX3d weighted = 2.0 * (weights_ * colour);
   Eigen::MatrixX3d back(patches(), 3);
   for (int i = 0; i < patches(); ++i) back.row(i) = weighted.row(i) * point.colour_jacobian[i];
+  if (!point.second_order.empty()) {
+    for (int i = 0; i < patches(); ++i) back.row(i) += u.row(i) * point.second_order[i];  // S symmetric
+  }
   return radiosity_.SolveTransposed(back);
+}
+
+void CompensationObjective::AddSecondOrder(ObjectivePoint* point) const {
+  point->second_order.assign(patches(), Eigen::Matrix3d::Zero());
+  if (model_ == ColourModel::kLinear) return;
+  const Eigen::MatrixX3d weighted = 2.0 * (weights_ * point->residual);
+  const Eigen::Matrix3d& t = problem_.rgb_to_xyz;
+  for (int i = 0; i < patches(); ++i) {
+    const Eigen::Vector3d xyz = t * point->radiosity.row(i).transpose();
+    const Eigen::Vector3d curvature =
+        XyzToLabWeightedCurvature(xyz, problem_.white_xyz, weighted.row(i).transpose());
+    point->second_order[i] = t.transpose() * curvature.asDiagonal() * t;
+  }
 }
 
 Eigen::SparseMatrix<double> CompensationObjective::ColourHessian(const ObjectivePoint& point) const {
@@ -118,7 +134,8 @@ Eigen::SparseMatrix<double> CompensationObjective::ColourHessian(const Objective
   for (int column = 0; column < weights_.outerSize(); ++column) {
     for (Eigen::SparseMatrix<double>::InnerIterator it(weights_, column); it; ++it) {
       const int i = static_cast<int>(it.row()), j = static_cast<int>(it.col());
-      const Eigen::Matrix3d block = 2.0 * it.value() * point.colour_jacobian[i].transpose() * point.colour_jacobian[j];
+      Eigen::Matrix3d block = 2.0 * it.value() * point.colour_jacobian[i].transpose() * point.colour_jacobian[j];
+      if (i == j && !point.second_order.empty()) block += point.second_order[i];
       for (int a = 0; a < 3; ++a) {
         for (int b = 0; b < 3; ++b) triplets.emplace_back(3 * i + a, 3 * j + b, block(a, b));
       }

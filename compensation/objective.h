@@ -31,6 +31,9 @@ struct ObjectivePoint {
   Eigen::MatrixX3d radiosity;   // B = K⁻¹E
   Eigen::MatrixX3d residual;    // r (n×3 colour components)
   std::vector<Eigen::Matrix3d> colour_jacobian;  // ∂C/∂B per patch
+  // Optional second-order term per patch, Σ_k (2WR)_ik ∇²C_k(B_i) (3×3 in B); empty for pure
+  // Gauss–Newton. Filled by AddSecondOrder.
+  std::vector<Eigen::Matrix3d> second_order;
   double value = 0.0;           // f
 };
 
@@ -56,13 +59,17 @@ class CompensationObjective {
   double Value(const Eigen::MatrixX3d& emittance) const;
   // ∂f/∂E at an evaluated point.
   Eigen::MatrixX3d Gradient(const ObjectivePoint& point) const;
-  // Gauss–Newton Hessian product H v, H = 2 J_Eᵀ (W ⊗ I₃) J_E, J_E = blockdiag(∂C/∂B) K⁻¹.
+  // Hessian product H v with H = K⁻ᵀ (M + S) K⁻¹: M = 2 Jᵀ (W ⊗ I₃) J the Gauss–Newton
+  // matrix (J = blockdiag ∂C/∂B), S the block-diagonal second-order term when
+  // point.second_order is filled (then H is the exact Hessian of f), else S = 0.
   Eigen::MatrixX3d GaussNewtonProduct(const ObjectivePoint& point, const Eigen::MatrixX3d& v) const;
+  // Fills point.second_order (all zero for the linear model, whose f is quadratic).
+  void AddSecondOrder(ObjectivePoint* point) const;
 
   // W as a sparse n×n matrix, and W·R for an n×3 R.
   const Eigen::SparseMatrix<double>& weights() const { return weights_; }
-  // The colour-space Gauss–Newton matrix M = 2 Jᵀ (W ⊗ I₃) J in B (3n×3n, patch-major):
-  // H = K⁻ᵀ M K⁻¹, so H⁻¹ = K M⁻¹ Kᵀ (used as the preconditioner).
+  // The colour-space matrix M + S in B (3n×3n, patch-major), S as in GaussNewtonProduct:
+  // H = K⁻ᵀ (M + S) K⁻¹, so H⁻¹ = K (M + S)⁻¹ Kᵀ (used as the preconditioner).
   Eigen::SparseMatrix<double> ColourHessian(const ObjectivePoint& point) const;
 
   // Per-patch colour differences between B and the desired radiosity in L*a*b*.

@@ -1,5 +1,6 @@
 #include "compensation/radiosity.h"
 
+#include <algorithm>
 #include <cassert>
 
 namespace procam {
@@ -81,14 +82,13 @@ Eigen::MatrixX3d RadiositySystem::MultiplyTransposed(const Eigen::MatrixX3d& y) 
 }
 
 Eigen::MatrixXd RadiositySystem::InverseMatrix(int channel) const {
-  const int n = size();
-  Eigen::MatrixXd inverse(n, n);
-  for (int j = 0; j < n; ++j) {
-    Eigen::MatrixX3d unit = Eigen::MatrixX3d::Zero(n, 3);
-    unit(j, channel) = 1.0;
-    inverse.col(j) = Solve(unit).col(channel);
+  for (const Factor& factor : factors_) {
+    if (std::find(factor.channels.begin(), factor.channels.end(), channel) == factor.channels.end()) continue;
+    const Eigen::MatrixXd identity = Eigen::MatrixXd::Identity(size(), size());
+    if (!factor.cholesky) return factor.lu.solve(identity);
+    return factor.scale.asDiagonal() * factor.llt.solve(factor.scale.cwiseInverse().asDiagonal() * identity);
   }
-  return inverse;
+  return Eigen::MatrixXd();
 }
 
 }  // namespace procam

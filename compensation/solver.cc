@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
 
@@ -29,7 +30,11 @@ class NewtonSystem {
  public:
   NewtonSystem(const CompensationObjective& objective, const ObjectivePoint& point)
       : objective_(objective), point_(point) {
-    colour_hessian_.compute(objective.ColourHessian(point));
+    // The preconditioner is always the Gauss–Newton inverse K M⁻¹ Kᵀ (M is positive definite);
+    // products may include the second-order term, whose negative curvature CG detects.
+    ObjectivePoint gauss_newton;
+    gauss_newton.colour_jacobian = point.colour_jacobian;
+    colour_hessian_.compute(objective.ColourHessian(gauss_newton));
     preconditioner_ok_ = colour_hessian_.info() == Eigen::Success;
   }
 
@@ -60,7 +65,11 @@ class NewtonSystem {
       ++iteration;
       const Eigen::MatrixX3d hp = Product(p).cwiseProduct(mask);
       const double curvature = Dot(p, hp);
-      if (!(curvature > 0.0)) break;
+      if (!(curvature > 0.0)) {
+        // Negative curvature (second-order term): stop with the descent direction so far.
+        if (iteration == 1) x = p;
+        break;
+      }
       const double step = rz / curvature;
       x += step * p;
       r -= step * hp;
@@ -243,10 +252,11 @@ Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const Compensatio
         free_variables += (at_lower || at_upper) ? 0 : 1;
       }
     }
-    const NewtonSystem system(objective, point);
+    if (options.second_order) objective.AddSecondOrder(&point);
+    std::unique_ptr<NewtonSystem> system = std::make_unique<NewtonSystem>(objective, point);
     int cg = 0;
     Eigen::MatrixX3d direction =
-        SolveInnerQp(options, system, gradient, lower - x, upper - x, fixed, summary, &cg);
+        SolveInnerQp(options, *system, gradient, lower - x, upper - x, fixed, summary, &cg);
     summary->cg_iterations += cg;
     double slope = Dot(gradient, direction);
     if (!direction.allFinite() || !(slope < 0.0)) {

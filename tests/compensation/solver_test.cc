@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "compensation/colour.h"
+#include "compensation/peers.h"
 #include "datasets_synthetic/rooms.h"
 #include "geometry/form_factors.h"
 #include "tests/testing/testing.h"
@@ -132,6 +133,27 @@ TEST(CompensationObjective, GradientAndGaussNewtonMatchFiniteDifferences) {
   }
 }
 
+TEST(CompensationObjective, SecondOrderTermGivesTheExactHessian) {
+  const TestProblem test = MakeTestProblem(40);
+  const RadiositySystem radiosity(test.fine.form_factors, test.fine.area, test.fine.reflectance);
+  const CompensationObjective objective(test.fine, radiosity, ColourModel::kLab);
+  Eigen::MatrixX3d e = 0.5 * (Eigen::MatrixX3d::Random(test.fine.size(), 3).array() + 1.0);
+  e.topRows(5) *= 1e-4;
+  ObjectivePoint point;
+  objective.Evaluate(e, &point);
+  objective.AddSecondOrder(&point);
+  const double step = 1e-6;
+  for (int trial = 0; trial < 3; ++trial) {
+    const Eigen::MatrixX3d v = Eigen::MatrixX3d::Random(test.fine.size(), 3);
+    ObjectivePoint plus, minus;
+    objective.Evaluate(e + step * v, &plus);
+    objective.Evaluate(e - step * v, &minus);
+    const Eigen::MatrixX3d hv_numeric = (objective.Gradient(plus) - objective.Gradient(minus)) / (2 * step);
+    const Eigen::MatrixX3d hv = objective.GaussNewtonProduct(point, v);
+    EXPECT_LT((hv - hv_numeric).norm(), 1e-5 * hv_numeric.norm());
+  }
+}
+
 TEST(Solve, LooseBoundsGiveReverseRadiosityAndZeroObjective) {
   TestProblem test = MakeTestProblem(100);
   test.fine.lower.setConstant(-10.0);
@@ -203,6 +225,21 @@ TEST_F(SolveBounded, MultiresReachesTheSameObjective) {
   EXPECT_GT(multi.coarse_iterations, 0);
   EXPECT_NEAR(multi.final_cost, single.final_cost, 1e-6 * single.final_cost)
       << single.BriefReport() << "\n" << multi.BriefReport();
+}
+
+TEST(Solve, PerceptualAgreesWithCeresLbfgsbAndProjectedGradient) {
+  const TestProblem test = MakeTestProblem(60);
+  SolverSummary summary;
+  const CompensationSolution ours = Solve(SolverOptions(), test.fine, &summary);
+  const RadiositySystem radiosity(test.fine.form_factors, test.fine.area, test.fine.reflectance);
+  const CompensationObjective objective(test.fine, radiosity, ColourModel::kLab);
+  const Eigen::MatrixX3d start = test.fine.lower;  // a common, deliberately poor start
+  const PeerOptions options;
+  for (const PeerResult& peer : {SolveWithCeres(objective, start, options), SolveWithLbfgsb(objective, start, options),
+                                 SolveWithProjectedGradient(objective, start, options)}) {
+    EXPECT_NEAR(peer.cost, summary.final_cost, 1e-6 * summary.final_cost) << peer.termination;
+  }
+  EXPECT_NEAR(objective.Value(ours.emittance), summary.final_cost, 1e-12 * summary.final_cost);
 }
 
 TEST(Solve, RejectsBadInputWithAClearMessage) {
