@@ -2,6 +2,7 @@
 #include <array>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <memory>
 
 #include <gtest/gtest.h>
@@ -29,6 +30,11 @@ CommandRun Procam(const std::string& arguments) {
   return {WEXITSTATUS(status), output};
 }
 
+std::string ReadText(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
 const char* kScene = R"({
   "name": "two walls", "patches": 40,
   "surfaces": [
@@ -38,8 +44,8 @@ const char* kScene = R"({
 })";
 
 TEST(Cli, HelpOnEverySubcommand) {
-  for (const char* command : {"--help", "demo --help", "scene --help", "scene info --help",
-                              "scene export --help", "bench formfactors --help"}) {
+  for (const char* command : {"--help", "demo --help", "scene --help", "scene info --help", "scene export --help",
+                              "compensate --help", "bench formfactors --help", "bench solver --help"}) {
     const CommandRun run = Procam(command);
     EXPECT_EQ(run.exit_code, 0) << command;
     EXPECT_NE(run.output.find("Usage"), std::string::npos) << command << ": " << run.output;
@@ -65,6 +71,38 @@ TEST(Cli, SceneExportWritesTheProblem) {
                            "upper.npy", "problem.json"}) {
     EXPECT_TRUE(std::filesystem::exists(dir / "out" / name)) << name;
   }
+}
+
+TEST(Cli, CompensateWritesTheSolutionAndItsColourErrors) {
+  testing::TempDir dir;
+  const auto scene = dir.Write("scene.json", kScene);
+  for (const char* method : {"naive", "reverse", "linear", "perceptual"}) {
+    const std::filesystem::path out = dir / method;
+    const CommandRun run = Procam("compensate " + scene.string() + " --method " + method + " --multires --export --out " +
+                                  out.string());
+    ASSERT_EQ(run.exit_code, 0) << run.output;
+    for (const char* name : {"result.json", "E.npy", "B.npy", "F.npy", "desired_lab.npy", "problem.json"}) {
+      EXPECT_TRUE(std::filesystem::exists(out / name)) << method << " " << name;
+    }
+    const std::string result = ReadText(out / "result.json");
+    for (const char* key : {"\"method\"", "\"patches\"", "\"variables\"", "\"iterations\"", "\"objective\"",
+                            "\"solve_seconds\"", "\"termination\"", "\"delta_e76\"", "\"delta_e2000\""}) {
+      EXPECT_NE(result.find(key), std::string::npos) << method << " " << key;
+    }
+  }
+  const CommandRun bad = Procam("compensate " + scene.string() + " --method magic --out " + (dir / "x").string());
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.output.find("magic"), std::string::npos) << bad.output;
+}
+
+TEST(Cli, DemoRunsEveryStageOnTheBundledScene) {
+  testing::TempDir dir;
+  const CommandRun run = Procam("demo --patches 120 --out " + (dir / "demo").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  for (const char* name : {"result.json", "form_factors.png", "problem/F.npy", "perceptual/E.npy", "linear/result.json"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir / "demo" / name)) << name;
+  }
+  EXPECT_NE(run.output.find("perceptual"), std::string::npos);
 }
 
 TEST(Cli, BadInputGivesOneLineNamingTheFileAndWritesNothing) {

@@ -1,0 +1,206 @@
+// procam bench formfactors / bench solver: timings on generated rooms, a table on screen and
+// JSON on disk.
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
+
+#include "apps/commands.h"
+#include "compensation/peers.h"
+#include "compensation/solver.h"
+#include "datasets_synthetic/rooms.h"
+#include "geometry/form_factors.h"
+#include "geometry/io.h"
+
+namespace procam {
+namespace {
+
+struct BenchArguments {
+  int patches = 4096;
+  int threads = 0;
+  std::string json;
+  std::vector<int> sizes = {100, 333, 1000, 3333};
+  int ceres_max_variables = 3000;
+  double alpha = 0.5;
+};
+
+void RunFormFactorBench(const BenchArguments& args) {
+  BoxRoomOptions room;
+  room.target_patches = args.patches;
+  const Scene scene = MakeBoxRoom(room);
+  SubdivisionOptions subdivision;
+  subdivision.target_patches = args.patches;
+  const PatchHierarchy hierarchy = SubdividePatches(scene, subdivision);
+  FormFactorOptions options;
+  options.threads = args.threads;
+  FormFactorSummary summary;
+  ComputeFormFactors(scene, hierarchy.fine, options, &summary);
+  std::printf("form factors, closed room with occluder: %d patches, %lld facing pairs, %lld shadow rays\n",
+              hierarchy.fine.size(), static_cast<long long>(summary.pairs_evaluated),
+              static_cast<long long>(summary.shadow_rays));
+  std::printf("  time %.3f s (threads: %s); row sums min %.5f mean %.5f max %.5f; largest row cut %.4f\n",
+              summary.seconds, args.threads > 0 ? std::to_string(args.threads).c_str() : "all cores",
+              summary.min_row_sum, summary.mean_row_sum, summary.max_row_sum, summary.max_row_correction);
+  if (!args.json.empty()) {
+    const nlohmann::json result = {{"benchmark", "form_factors"}, {"patches", hierarchy.fine.size()},
+                                   {"seconds", summary.seconds}, {"threads", args.threads},
+                                   {"pairs", summary.pairs_evaluated}, {"shadow_rays", summary.shadow_rays},
+                                   {"min_row_sum", summary.min_row_sum}, {"max_row_sum", summary.max_row_sum}};
+    WriteFileAtomically(args.json, result.dump(2) + "\n");
+  }
+}
+
+// One solver's row of the table.
+struct BenchRow {
+  std::string solver;
+  double seconds = 0.0;            // whole solve, excluding the shared factorisation of K
+  double seconds_to_target = -1.0; // first time the objective was within the target, -1 never
+  int iterations = 0;
+  double objective = 0.0;
+  std::string termination;
+  std::vector<std::pair<double, double>> trace;  // (seconds, objective)
+};
+
+double TimeToTarget(const std::vector<std::pair<double, double>>& trace, double target) {
+  for (const auto& [seconds, cost] : trace) {
+    if (cost <= target) return seconds;
+  }
+  return -1.0;
+}
+
+BenchRow OurSolver(const char* name, const SolverOptions& options, const CompensationProblem& problem,
+                   const CoarseLevel& coarse) {
+  SolverSummary summary;
+  Solve(options, problem, &summary, coarse);
+  BenchRow row;
+  row.solver = name;
+  row.seconds = summary.solve_seconds;
+  row.iterations = summary.iterations;
+  row.objective = summary.final_cost;
+  row.termination = TerminationName(summary.termination);
+  // The trace's clock starts at the fine level; the coarse solve came first.
+  for (const IterationRecord& record : summary.trace) {
+    row.trace.emplace_back(summary.coarse_seconds + record.seconds, record.cost);
+  }
+  return row;
+}
+
+BenchRow Peer(const char* name, const PeerResult& result) {
+  BenchRow row;
+  row.solver = name;
+  row.seconds = result.seconds;
+  row.iterations = result.iterations;
+  row.objective = result.cost;
+  row.termination = result.termination;
+  row.trace = result.trace;
+  return row;
+}
+
+void RunSolverBench(const BenchArguments& args) {
+  nlohmann::json sizes = nlohmann::json::array();
+  std::ostringstream table;
+  table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11} {:>6}  {:<16} {}\n", "variables", "patches", "solver",
+                       "to target s", "total s", "iters", "objective", "termination");
+  for (const int target_patches : args.sizes) {
+    BoxRoomOptions room;
+    room.target_patches = target_patches;
+    const Scene scene = MakeBoxRoom(room);
+    SubdivisionOptions subdivision;
+    subdivision.target_patches = target_patches;
+    const PatchHierarchy patches = SubdividePatches(scene, subdivision);
+    FormFactorSummary ff;
+    Eigen::MatrixXd f = ComputeFormFactors(scene, patches.fine, FormFactorOptions(), &ff);
+    const Eigen::MatrixXd coarse_f =
+        AggregateFormFactors(f, patches.fine.Areas(), patches.coarse_of_fine, patches.coarse.size());
+    const CompensationProblem problem = MakeProblem(scene, patches.fine, std::move(f), args.alpha);
+    const CompensationProblem coarse_problem = MakeProblem(scene, patches.coarse, coarse_f, args.alpha);
+    const CoarseLevel coarse{&coarse_problem, &patches.coarse_of_fine};
+    const int n = problem.size();
+    spdlog::info("bench solver: {} patches, {} variables (form factors {:.2f} s)", n, 3 * n, ff.seconds);
+
+    const auto setup_start = std::chrono::steady_clock::now();
+    const RadiositySystem radiosity(problem.form_factors, problem.area, problem.reflectance);
+    const double setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_start).count();
+    const CompensationObjective objective(problem, radiosity, ColourModel::kLab);
+    const Eigen::MatrixX3d start =
+        radiosity.Multiply(problem.desired).cwiseMax(problem.lower).cwiseMin(problem.upper);
+
+    std::vector<BenchRow> rows;
+    SolverOptions perceptual;
+    rows.push_back(OurSolver("perceptual", perceptual, problem, coarse));
+    perceptual.multires = true;
+    rows.push_back(OurSolver("perceptual --multires", perceptual, problem, coarse));
+    PeerOptions peer;
+    peer.max_iterations = 5000;
+    rows.push_back(Peer("L-BFGS-B (LBFGSpp)", SolveWithLbfgsb(objective, start, peer)));
+    if (3 * n <= args.ceres_max_variables) {
+      rows.push_back(Peer("Ceres LM", SolveWithCeres(objective, start, peer)));
+    }
+    double best = rows.front().objective;
+    for (const BenchRow& row : rows) best = std::min(best, row.objective);
+    const double target = best * (1.0 + 1e-6);
+    for (BenchRow& row : rows) row.seconds_to_target = TimeToTarget(row.trace, target);
+    SolverOptions linear_options;
+    linear_options.method = CompensationMethod::kLinear;
+    BenchRow linear = OurSolver("linear (own objective)", linear_options, problem, coarse);
+    linear.seconds_to_target = -1.0;
+    rows.push_back(linear);
+
+    nlohmann::json size_json = {{"patches", n}, {"variables", 3 * n}, {"factorisation_seconds", setup},
+                                {"form_factor_seconds", ff.seconds}, {"target_objective", target}};
+    table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16} {}\n", 3 * n, n,
+                         "(factorise K once)", "", setup, "", "", "");
+    for (const BenchRow& row : rows) {
+      const std::string to_target = row.seconds_to_target < 0 ? "-" : fmt::format("{:.4f}", row.seconds_to_target);
+      table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16.10g} {}\n", 3 * n, n, row.solver,
+                           to_target, row.seconds, row.iterations, row.objective, row.termination);
+      size_json["solvers"].push_back({{"solver", row.solver},
+                                      {"seconds", row.seconds},
+                                      {"seconds_to_target", row.seconds_to_target},
+                                      {"iterations", row.iterations},
+                                      {"objective", row.objective},
+                                      {"termination", row.termination}});
+    }
+    sizes.push_back(size_json);
+    std::fputs(table.str().c_str(), stdout);  // the table so far, so long runs show progress
+    std::fputs("\n", stdout);
+  }
+  if (!args.json.empty()) {
+    const nlohmann::json result = {{"benchmark", "solver"},
+                                   {"scene", "box room with occluder, bounds [0, 1], alpha " + std::to_string(args.alpha)},
+                                   {"target", "best final objective among perceptual solvers, +1e-6 relative"},
+                                   {"sizes", sizes}};
+    WriteFileAtomically(args.json, result.dump(2) + "\n");
+    std::printf("wrote %s\n", args.json.c_str());
+  }
+}
+
+}  // namespace
+
+void AddBenchCommands(CLI::App& app) {
+  CLI::App* bench = app.add_subcommand("bench", "Benchmarks on generated rooms");
+  bench->require_subcommand(1);
+  auto args = std::make_shared<BenchArguments>();
+  CLI::App* ff = bench->add_subcommand("formfactors", "Form factors of a closed room with an occluder");
+  ff->add_option("--patches", args->patches, "Target patch count")->capture_default_str();
+  ff->add_option("--threads", args->threads, "Worker threads (0: all cores)")->capture_default_str();
+  ff->add_option("--json", args->json, "Also write the result as JSON here");
+  ff->callback([args] { RunFormFactorBench(*args); });
+
+  CLI::App* solver = bench->add_subcommand(
+      "solver", "Perceptual solver (with and without multires), linear, L-BFGS-B and Ceres side by side");
+  solver->add_option("--sizes", args->sizes, "Target patch counts (3 variables each)")->delimiter(',')
+      ->capture_default_str();
+  solver->add_option("--ceres-max-variables", args->ceres_max_variables, "Skip Ceres above this many variables")
+      ->capture_default_str();
+  solver->add_option("--alpha", args->alpha, "Weight of the absolute term")->check(CLI::Range(1e-9, 1.0))
+      ->capture_default_str();
+  solver->add_option("--json", args->json, "Also write the results as JSON here");
+  solver->callback([args] { RunSolverBench(*args); });
+}
+
+}  // namespace procam

@@ -1,0 +1,50 @@
+// procam compensate.
+#include <iostream>
+#include <memory>
+
+#include "apps/commands.h"
+#include "apps/compensation_stage.h"
+#include "apps/geometry_stage.h"
+
+namespace procam {
+namespace {
+
+struct CompensateArguments {
+  std::string scene, out, method = "perceptual";
+  double alpha = 0.5;
+  int patches = 0;
+  bool multires = false, export_problem = false;
+};
+
+}  // namespace
+
+void AddCompensationCommands(CLI::App& app) {
+  auto args = std::make_shared<CompensateArguments>();
+  CLI::App* cmd = app.add_subcommand("compensate", "Compute the emittance that makes the room look as desired");
+  cmd->add_option("scene", args->scene, "Scene JSON")->required();
+  cmd->add_option("--method", args->method, "naive | reverse | linear | perceptual")
+      ->check(CLI::IsMember({"naive", "reverse", "linear", "perceptual"}))
+      ->capture_default_str();
+  cmd->add_option("--alpha", args->alpha, "Weight of the absolute term against the spatial term, in (0,1]")
+      ->check(CLI::Range(1e-9, 1.0))
+      ->capture_default_str();
+  cmd->add_option("--patches", args->patches, "Override the scene's target patch count");
+  cmd->add_flag("--multires", args->multires, "Solve the coarse patch level first and start from it");
+  cmd->add_flag("--export", args->export_problem, "Also write the whole problem (F.npy, ...) into --out");
+  cmd->add_option("--out", args->out, "Output directory")->required();
+  cmd->callback([args] {
+    const GeometryStage stage =
+        RunGeometryStage(args->scene, args->patches > 0 ? std::optional<int>(args->patches) : std::nullopt);
+    SolverOptions options;
+    ParseMethod(args->method, &options.method);
+    options.multires = args->multires;
+    const CompensationRun run = RunCompensation(stage, options, args->alpha);
+    WriteCompensation(stage, run, args->out, args->export_problem);
+    std::cout << run.summary.BriefReport() << "\n"
+              << "objective (L*a*b*) " << run.perceptual_objective << "; ΔE76 mean " << run.mean_delta_e76
+              << " max " << run.max_delta_e76 << "; ΔE2000 mean " << run.mean_delta_e2000 << " max "
+              << run.max_delta_e2000 << "\nwrote " << args->out << "/result.json, E.npy, B.npy\n";
+  });
+}
+
+}  // namespace procam

@@ -1,0 +1,82 @@
+#include "apps/compensation_stage.h"
+
+#include <spdlog/spdlog.h>
+
+#include "geometry/io.h"
+
+namespace procam {
+
+CompensationRun RunCompensation(const GeometryStage& geometry, const SolverOptions& options, double alpha) {
+  CompensationRun run;
+  const PatchHierarchy& patches = geometry.patches;
+  run.fine = MakeProblem(geometry.scene, patches.fine, geometry.form_factors, alpha);
+  run.coarse = MakeProblem(geometry.scene, patches.coarse,
+                           AggregateFormFactors(geometry.form_factors, patches.fine.Areas(),
+                                                patches.coarse_of_fine, patches.coarse.size()),
+                           alpha);
+  SolverOptions logged = options;
+  if (!logged.progress) {
+    logged.progress = [](int iteration, double cost, double seconds) {
+      spdlog::info("  iteration {:3d}  objective {:.6e}  {:.3f} s", iteration, cost, seconds);
+    };
+  }
+  spdlog::info("compensate: {} on {} patches ({} variables){}", MethodName(options.method), run.fine.size(),
+               3 * run.fine.size(), options.multires ? ", multires" : "");
+  run.solution = Solve(logged, run.fine, &run.summary, CoarseLevel{&run.coarse, &patches.coarse_of_fine});
+  spdlog::info("{}", run.summary.BriefReport());
+  const RadiositySystem radiosity(run.fine.form_factors, run.fine.area, run.fine.reflectance);
+  const CompensationObjective lab(run.fine, radiosity, ColourModel::kLab);
+  run.perceptual_objective = lab.Value(run.solution.emittance);
+  lab.DeltaE(run.solution.radiosity, &run.delta_e76, &run.delta_e2000);
+  const double total_area = run.fine.area.sum();
+  run.mean_delta_e76 = run.fine.area.dot(run.delta_e76) / total_area;
+  run.mean_delta_e2000 = run.fine.area.dot(run.delta_e2000) / total_area;
+  run.max_delta_e76 = run.delta_e76.maxCoeff();
+  run.max_delta_e2000 = run.delta_e2000.maxCoeff();
+  return run;
+}
+
+nlohmann::json CompensationResultJson(const GeometryStage& geometry, const CompensationRun& run) {
+  const SolverSummary& s = run.summary;
+  nlohmann::json trace = nlohmann::json::array();
+  for (const IterationRecord& record : s.trace) {
+    trace.push_back({{"iteration", record.iteration}, {"objective", record.cost}, {"seconds", record.seconds},
+                     {"step", record.step}, {"free_variables", record.free_variables},
+                     {"cg_iterations", record.cg_iterations}});
+  }
+  return {{"method", MethodName(s.method)},
+          {"scene", geometry.scene.path.string()},
+          {"patches", run.fine.size()},
+          {"variables", 3 * run.fine.size()},
+          {"alpha", run.fine.alpha},
+          {"iterations", s.iterations},
+          {"inner_iterations", s.inner_iterations},
+          {"cg_iterations", s.cg_iterations},
+          {"coarse_iterations", s.coarse_iterations},
+          {"objective", run.perceptual_objective},
+          {"method_objective", s.final_cost},
+          {"initial_method_objective", s.initial_cost},
+          {"setup_seconds", s.setup_seconds},
+          {"solve_seconds", s.solve_seconds},
+          {"termination", TerminationName(s.termination)},
+          {"message", s.message},
+          {"delta_e76", {{"mean", run.mean_delta_e76}, {"max", run.max_delta_e76}}},
+          {"delta_e2000", {{"mean", run.mean_delta_e2000}, {"max", run.max_delta_e2000}}},
+          {"trace", trace}};
+}
+
+void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run,
+                       const std::filesystem::path& out, bool export_problem) {
+  std::error_code error;
+  std::filesystem::create_directories(out, error);
+  if (error) throw IoError(out.string() + ": cannot create directory: " + error.message());
+  if (export_problem) {
+    nlohmann::json settings = {{"scene", geometry.scene.path.string()}, {"method", MethodName(run.summary.method)}};
+    ExportProblem(run.fine, geometry.patches.fine, geometry.patches.coarse_of_fine, out, settings.dump());
+  }
+  WriteNpy(out / "E.npy", RowMatrixXd(run.solution.emittance));
+  WriteNpy(out / "B.npy", RowMatrixXd(run.solution.radiosity));
+  WriteFileAtomically(out / "result.json", CompensationResultJson(geometry, run).dump(2) + "\n");
+}
+
+}  // namespace procam

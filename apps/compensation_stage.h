@@ -1,0 +1,36 @@
+#pragma once
+// The compensation stage as the commands run it: problem from the geometry stage, solve,
+// colour differences, result files.
+
+#include <filesystem>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "apps/geometry_stage.h"
+#include "compensation/problem.h"
+#include "compensation/solver.h"
+
+namespace procam {
+
+struct CompensationRun {
+  CompensationProblem fine, coarse;
+  CompensationSolution solution;
+  SolverSummary summary;
+  double perceptual_objective = 0.0;  // f in L*a*b* of the solution, whatever the method
+  Eigen::VectorXd delta_e76, delta_e2000;  // per fine patch
+  double mean_delta_e76 = 0.0, max_delta_e76 = 0.0;      // area-weighted mean, max
+  double mean_delta_e2000 = 0.0, max_delta_e2000 = 0.0;
+};
+
+// Builds the fine and coarse problems (coarse F aggregated from the fine one) and solves.
+CompensationRun RunCompensation(const GeometryStage& geometry, const SolverOptions& options, double alpha);
+
+// result.json content for a run.
+nlohmann::json CompensationResultJson(const GeometryStage& geometry, const CompensationRun& run);
+
+// Writes result.json, E.npy, B.npy (and with `export_problem` the whole problem) into `out`.
+void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run,
+                       const std::filesystem::path& out, bool export_problem);
+
+}  // namespace procam
