@@ -327,14 +327,8 @@ Scene LoadScene(const std::filesystem::path& path) {
   }
   const std::filesystem::path base = path.parent_path();
   JsonFields top(root, file, "");
-  for (const char* reserved : {"projectors", "cameras", "rig"}) {
-    if (top.Has(reserved)) {
-      throw top.Error(reserved, "projector and camera models are not supported by this version "
-                                "yet; give direct-light limits with 'bounds'");
-    }
-  }
   top.RejectUnknown({"name", "description", "patches", "white", "bounds", "surfaces",
-                     "weld_tolerance"});
+                     "weld_tolerance", "projectors", "cameras"});
   Scene scene;
   scene.path = path;
   scene.name = top.Has("name") ? top.String("name") : path.stem().string();
@@ -364,6 +358,11 @@ Scene LoadScene(const std::filesystem::path& path) {
         throw bounds.Error("lower", "lower is greater than upper");
       }
     }
+  }
+  for (const char* key : {"projectors", "cameras"}) {
+    if (!top.Has(key)) continue;
+    if (!top.At(key).is_array()) throw top.Error(key, "must be an array");
+    (std::string(key) == "projectors" ? scene.projectors_json : scene.cameras_json) = top.At(key).dump();
   }
   const json& surfaces = top.At("surfaces");
   if (!surfaces.is_array() || surfaces.empty()) {

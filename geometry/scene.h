@@ -66,6 +66,10 @@ struct Scene {
   double white = 1.0;          // reference white radiosity w, > 0
   LightBounds bounds;          // default: lower 0, upper = white
   double weld_tolerance = 1e-3;  // metres; points closer than this are the same point
+  // The scene's "projectors" and "cameras" arrays as JSON text ("" when absent), parsed by the
+  // projection and capture modules (geometry does not know their models).
+  std::string projectors_json;
+  std::string cameras_json;
 
   double Area() const;
 };

@@ -69,7 +69,7 @@ TEST(LoadScene, ReportsEachProblemWithFileAndKey) {
       {SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "mesh": "x.obj", "reflectance": 0.5, "desired": [1,1,1]})"),
        "exactly one of 'quad' and 'mesh'"},
       {SceneText(kWall, "\"bounds\": {\"lower\": 0.5, \"upper\": 0.2},\n"), "bounds.lower: lower is greater"},
-      {SceneText(kWall, "\"projectors\": [],\n"), "projectors: projector and camera models are not supported"},
+      {SceneText(kWall, "\"projectors\": {},\n"), "projectors: must be an array"},
       {"{\"surfaces\": [" + std::string(kWall) + "]}", "patches: required key is missing"},
       {SceneText(""), "surfaces: must be a non-empty array"},
   };
