@@ -102,10 +102,10 @@ BenchRow Peer(const char* name, const PeerResult& result) {
 
 void RunSolverBench(const BenchArguments& args) {
   nlohmann::json sizes = nlohmann::json::array();
-  std::ostringstream table;
-  table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11} {:>6}  {:<16} {}\n", "variables", "patches", "solver",
-                       "to target s", "total s", "iters", "objective", "termination");
+  std::printf("%s", fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11} {:>6}  {:<16} {}\n", "variables", "patches", "solver",
+                       "to target s", "total s", "iters", "objective", "termination").c_str());
   for (const int target_patches : args.sizes) {
+    std::ostringstream table;
     BoxRoomOptions room;
     room.target_patches = target_patches;
     const Scene scene = MakeBoxRoom(room);
@@ -166,8 +166,8 @@ void RunSolverBench(const BenchArguments& args) {
                                       {"termination", row.termination}});
     }
     sizes.push_back(size_json);
-    std::fputs(table.str().c_str(), stdout);  // the table so far, so long runs show progress
-    std::fputs("\n", stdout);
+    std::fputs(table.str().c_str(), stdout);  // each size as it finishes: long runs show progress
+    std::fflush(stdout);
   }
   if (!args.json.empty()) {
     const nlohmann::json result = {{"benchmark", "solver"},

@@ -102,8 +102,8 @@ Eigen::MatrixX3d CompensationObjective::Gradient(const ObjectivePoint& point) co
 }
 
 Eigen::MatrixX3d CompensationObjective::GaussNewtonProduct(const ObjectivePoint& point,
-                                                           const Eigen::MatrixX3d& v) const {
-  const Eigen::MatrixX3d u = radiosity_.Solve(v);
+                                                           const Eigen::MatrixX3d& v, bool fast) const {
+  const Eigen::MatrixX3d u = fast ? radiosity_.SolveFast(v) : radiosity_.Solve(v);
   Eigen::MatrixX3d colour(patches(), 3);
   for (int i = 0; i < patches(); ++i) colour.row(i) = u.row(i) * point.colour_jacobian[i].transpose();
   const Eigen::MatrixX3d weighted = 2.0 * (weights_ * colour);
@@ -112,7 +112,7 @@ Eigen::MatrixX3d CompensationObjective::GaussNewtonProduct(const ObjectivePoint&
   if (!point.second_order.empty()) {
     for (int i = 0; i < patches(); ++i) back.row(i) += u.row(i) * point.second_order[i];  // S symmetric
   }
-  return radiosity_.SolveTransposed(back);
+  return fast ? radiosity_.SolveTransposedFast(back) : radiosity_.SolveTransposed(back);
 }
 
 void CompensationObjective::AddSecondOrder(ObjectivePoint* point) const {

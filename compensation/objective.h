@@ -62,7 +62,9 @@ class CompensationObjective {
   // Hessian product H v with H = K⁻ᵀ (M + S) K⁻¹: M = 2 Jᵀ (W ⊗ I₃) J the Gauss–Newton
   // matrix (J = blockdiag ∂C/∂B), S the block-diagonal second-order term when
   // point.second_order is filled (then H is the exact Hessian of f), else S = 0.
-  Eigen::MatrixX3d GaussNewtonProduct(const ObjectivePoint& point, const Eigen::MatrixX3d& v) const;
+  // `fast`: K⁻¹ and K⁻ᵀ in float32 (RadiositySystem::SolveFast), for CG iterations.
+  Eigen::MatrixX3d GaussNewtonProduct(const ObjectivePoint& point, const Eigen::MatrixX3d& v,
+                                      bool fast = false) const;
   // Fills point.second_order (all zero for the linear model, whose f is quadratic).
   void AddSecondOrder(ObjectivePoint* point) const;
 

@@ -30,6 +30,9 @@ RadiositySystem::RadiositySystem(const Eigen::MatrixXd& form_factors, const Eige
       factor.llt.compute(m);
       factor.scale = rho.cwiseSqrt().cwiseQuotient(sqrt_area);
       if (factor.llt.info() != Eigen::Success) factor.cholesky = false;
+      if (factor.cholesky) {
+        factor.lower_float = Eigen::MatrixXd(factor.llt.matrixL()).cast<float>();
+      }
     }
     if (!factor.cholesky) {
       Eigen::MatrixXd k = -(rho.asDiagonal() * form_factors_);
@@ -38,6 +41,58 @@ RadiositySystem::RadiositySystem(const Eigen::MatrixXd& form_factors, const Eige
     }
     factors_.push_back(std::move(factor));
   }
+  form_factors_float_ = form_factors_.cast<float>();
+  reflectance_float_ = reflectance_.cast<float>();
+}
+
+Eigen::MatrixX3d RadiositySystem::SolveFast(const Eigen::MatrixX3d& emittance) const {
+  Eigen::MatrixX3d radiosity(size(), 3);
+  for (const Factor& factor : factors_) {
+    if (!factor.cholesky) {
+      for (int c : factor.channels) radiosity.col(c) = factor.lu.solve(emittance.col(c));
+      continue;
+    }
+    Eigen::MatrixXf block(size(), factor.channels.size());
+    for (size_t k = 0; k < factor.channels.size(); ++k) {
+      block.col(k) = (factor.scale.cwiseInverse().cwiseProduct(emittance.col(factor.channels[k]))).cast<float>();
+    }
+    factor.lower_float.triangularView<Eigen::Lower>().solveInPlace(block);
+    factor.lower_float.transpose().triangularView<Eigen::Upper>().solveInPlace(block);
+    for (size_t k = 0; k < factor.channels.size(); ++k) {
+      radiosity.col(factor.channels[k]) = factor.scale.cwiseProduct(block.col(k).cast<double>());
+    }
+  }
+  return radiosity;
+}
+
+Eigen::MatrixX3d RadiositySystem::SolveTransposedFast(const Eigen::MatrixX3d& y) const {
+  Eigen::MatrixX3d x(size(), 3);
+  for (const Factor& factor : factors_) {
+    if (!factor.cholesky) {
+      for (int c : factor.channels) x.col(c) = factor.lu.transpose().solve(y.col(c));
+      continue;
+    }
+    Eigen::MatrixXf block(size(), factor.channels.size());
+    for (size_t k = 0; k < factor.channels.size(); ++k) {
+      block.col(k) = (factor.scale.cwiseProduct(y.col(factor.channels[k]))).cast<float>();
+    }
+    factor.lower_float.triangularView<Eigen::Lower>().solveInPlace(block);
+    factor.lower_float.transpose().triangularView<Eigen::Upper>().solveInPlace(block);
+    for (size_t k = 0; k < factor.channels.size(); ++k) {
+      x.col(factor.channels[k]) = factor.scale.cwiseInverse().cwiseProduct(block.col(k).cast<double>());
+    }
+  }
+  return x;
+}
+
+Eigen::MatrixX3d RadiositySystem::MultiplyFast(const Eigen::MatrixX3d& radiosity) const {
+  const Eigen::MatrixX3f b = radiosity.cast<float>();
+  return radiosity - reflectance_.cwiseProduct((form_factors_float_ * b).cast<double>());
+}
+
+Eigen::MatrixX3d RadiositySystem::MultiplyTransposedFast(const Eigen::MatrixX3d& y) const {
+  const Eigen::MatrixX3f weighted = reflectance_float_.cwiseProduct(y.cast<float>());
+  return y - (form_factors_float_.transpose() * weighted).cast<double>();
 }
 
 Eigen::MatrixX3d RadiositySystem::Solve(const Eigen::MatrixX3d& emittance) const {

@@ -28,23 +28,30 @@ double Dot(const Eigen::MatrixX3d& a, const Eigen::MatrixX3d& b) { return a.cwis
 // preconditioned by (K M⁻¹ Kᵀ) restricted to the same set.
 class NewtonSystem {
  public:
-  NewtonSystem(const CompensationObjective& objective, const ObjectivePoint& point)
-      : objective_(objective), point_(point) {
+  // `colour_hessian` is reused across outer iterations: its symbolic analysis (fill-reducing
+  // ordering) is done on the first call only, since M's sparsity pattern never changes.
+  NewtonSystem(const CompensationObjective& objective, const ObjectivePoint& point,
+               Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>* colour_hessian, bool analysed)
+      : objective_(objective), point_(point), colour_hessian_(*colour_hessian) {
     // The preconditioner is always the Gauss–Newton inverse K M⁻¹ Kᵀ (M is positive definite);
     // products may include the second-order term, whose negative curvature CG detects.
     ObjectivePoint gauss_newton;
     gauss_newton.colour_jacobian = point.colour_jacobian;
-    colour_hessian_.compute(objective.ColourHessian(gauss_newton));
+    const Eigen::SparseMatrix<double> m = objective.ColourHessian(gauss_newton);
+    if (!analysed) colour_hessian_.analyzePattern(m);
+    colour_hessian_.factorize(m);
     preconditioner_ok_ = colour_hessian_.info() == Eigen::Success;
   }
 
-  Eigen::MatrixX3d Product(const Eigen::MatrixX3d& v) const { return objective_.GaussNewtonProduct(point_, v); }
+  Eigen::MatrixX3d Product(const Eigen::MatrixX3d& v) const {
+    return objective_.GaussNewtonProduct(point_, v, /*fast=*/true);
+  }
 
   Eigen::MatrixX3d Precondition(const Eigen::MatrixX3d& r) const {
     if (!preconditioner_ok_) return r;
-    const Eigen::MatrixX3d kt = objective_.radiosity().MultiplyTransposed(r);
+    const Eigen::MatrixX3d kt = objective_.radiosity().MultiplyTransposedFast(r);
     const Eigen::MatrixX3d solved = Unflatten(colour_hessian_.solve(Flatten(kt)));
-    return objective_.radiosity().Multiply(solved);
+    return objective_.radiosity().MultiplyFast(solved);
   }
 
   // Preconditioned CG on H_FF p = rhs_F (mask: 1 on free variables). Returns iterations used.
@@ -86,7 +93,7 @@ class NewtonSystem {
  private:
   const CompensationObjective& objective_;
   const ObjectivePoint& point_;
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> colour_hessian_;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>& colour_hessian_;
   bool preconditioner_ok_ = false;
 };
 
@@ -233,6 +240,7 @@ Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const Compensatio
     summary->final_cost = cost;
     return x;
   }
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> colour_hessian;
   for (int iteration = 1; iteration <= options.max_iterations; ++iteration) {
     const Eigen::MatrixX3d gradient = objective.Gradient(point);
     const double projected = ProjectedGradientNorm(x, gradient, lower, upper);
@@ -253,10 +261,10 @@ Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const Compensatio
       }
     }
     if (options.second_order) objective.AddSecondOrder(&point);
-    std::unique_ptr<NewtonSystem> system = std::make_unique<NewtonSystem>(objective, point);
+    const NewtonSystem system(objective, point, &colour_hessian, iteration > 1);
     int cg = 0;
     Eigen::MatrixX3d direction =
-        SolveInnerQp(options, *system, gradient, lower - x, upper - x, fixed, summary, &cg);
+        SolveInnerQp(options, system, gradient, lower - x, upper - x, fixed, summary, &cg);
     summary->cg_iterations += cg;
     double slope = Dot(gradient, direction);
     if (!direction.allFinite() || !(slope < 0.0)) {

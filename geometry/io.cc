@@ -12,8 +12,11 @@ namespace procam {
 namespace {
 
 std::string ShapeString(int64_t rows, int64_t cols, bool as_vector) {
-  if (as_vector) return "(" + std::to_string(rows) + ",)";
-  return "(" + std::to_string(rows) + ", " + std::to_string(cols) + ")";
+  std::ostringstream shape;
+  shape << '(' << rows << ',';
+  if (!as_vector) shape << ' ' << cols;
+  shape << ')';
+  return shape.str();
 }
 
 // NumPy format 1.0: magic, version, little-endian header length, a Python dict literal padded

@@ -22,7 +22,9 @@ TEST(SubdividePatches, HitsTheTargetWithSimilarAreas) {
     EXPECT_NEAR(areas.sum(), scene.Area(), 1e-9 * scene.Area());
     // Small surfaces (the occluder's faces) get at least one coarse patch; from 1000 patches
     // on, every patch is within a factor 3 of every other in area.
-    if (target >= 1000) EXPECT_LT(areas.maxCoeff() / areas.minCoeff(), 3.0) << target;
+    if (target >= 1000) {
+      EXPECT_LT(areas.maxCoeff() / areas.minCoeff(), 3.0) << target;
+    }
     for (const Patch& patch : h.fine.patches) {
       // Well shaped: no edge more than 3× another.
       double shortest = 1e9, longest = 0;
