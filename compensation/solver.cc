@@ -273,12 +273,11 @@ Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const Compensatio
       slope = Dot(gradient, direction);
     }
     // Armijo along the (feasible) segment x + a·d, a ∈ (0, 1].
-    double step = 1.0, trial_cost = std::numeric_limits<double>::infinity();
-    Eigen::MatrixX3d trial;
+    double step = 1.0;
+    ObjectivePoint trial;
     bool accepted = false;
     for (int halving = 0; halving < 40; ++halving, step *= 0.5) {
-      trial = Clamp(x + step * direction, lower, upper);
-      trial_cost = objective.Value(trial);
+      const double trial_cost = objective.Evaluate(Clamp(x + step * direction, lower, upper), &trial);
       if (std::isfinite(trial_cost) && trial_cost <= cost + options.armijo * step * slope) {
         accepted = true;
         break;
@@ -291,8 +290,9 @@ Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const Compensatio
       break;
     }
     const double previous = cost;
-    x = trial;
-    cost = objective.Evaluate(x, &point);
+    point = std::move(trial);
+    x = point.emittance;
+    cost = point.value;
     summary->trace.push_back({iteration, cost, SecondsSince(start), step, free_variables, cg, 0.0});
     if (options.progress) options.progress(iteration, cost, SecondsSince(start));
     if (previous - cost <= options.function_tolerance * previous) {
