@@ -9,7 +9,11 @@ namespace procam {
 
 void AddSceneCommands(CLI::App& app);         // scene info, scene export
 void AddCompensationCommands(CLI::App& app);  // compensate
+// project, bench projection (joins the bench group: call after AddBenchCommands)
+void AddProjectionCommands(CLI::App& app);
 void AddBenchCommands(CLI::App& app);         // bench formfactors, bench solver
 void AddDemoCommand(CLI::App& app);           // demo
+void AddEvaluationCommands(CLI::App& app);    // evaluate
+void AddCaptureCommands(CLI::App& app);       // cameras, capture
 
 }  // namespace procam

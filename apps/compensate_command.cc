@@ -5,6 +5,8 @@
 #include "apps/commands.h"
 #include "apps/compensation_stage.h"
 #include "apps/geometry_stage.h"
+#include "projection/projection_rig.h"
+#include "projection/projector.h"
 
 namespace procam {
 namespace {
@@ -38,7 +40,14 @@ void AddCompensationCommands(CLI::App& app) {
     SolverOptions options;
     ParseMethod(args->method, &options.method);
     options.multires = args->multires;
-    const CompensationRun run = RunCompensation(stage, options, args->alpha);
+    // With projectors in the scene, their light sets the bounds; otherwise the scene's "bounds".
+    std::unique_ptr<ProjectionRig> rig;
+    std::vector<Projector> projectors = ReadProjectors(stage.scene);
+    if (!projectors.empty()) {
+      rig = std::make_unique<ProjectionRig>(
+          BuildProjectionRig(stage.patches.fine, std::move(projectors), ProjectionRigOptions()));
+    }
+    const CompensationRun run = RunCompensation(stage, options, args->alpha, rig.get());
     WriteCompensation(stage, run, args->out, args->export_problem);
     std::cout << run.summary.BriefReport() << "\n"
               << "objective (L*a*b*) " << run.perceptual_objective << "; ΔE76 mean " << run.mean_delta_e76

@@ -6,7 +6,8 @@
 
 namespace procam {
 
-CompensationRun RunCompensation(const GeometryStage& geometry, const SolverOptions& options, double alpha) {
+CompensationRun RunCompensation(const GeometryStage& geometry, const SolverOptions& options, double alpha,
+                                const ProjectionRig* rig) {
   CompensationRun run;
   const PatchHierarchy& patches = geometry.patches;
   run.fine = MakeProblem(geometry.scene, patches.fine, geometry.form_factors, alpha);
@@ -14,6 +15,13 @@ CompensationRun RunCompensation(const GeometryStage& geometry, const SolverOptio
                            AggregateFormFactors(geometry.form_factors, patches.fine.Areas(),
                                                 patches.coarse_of_fine, patches.coarse.size()),
                            alpha);
+  if (rig != nullptr) {
+    run.fine.lower = rig->lower;
+    run.fine.upper = rig->upper;
+    const Eigen::VectorXd area = patches.fine.Areas();
+    run.coarse.lower = CoarsenBounds(rig->lower, area, patches.coarse_of_fine, patches.coarse.size());
+    run.coarse.upper = CoarsenBounds(rig->upper, area, patches.coarse_of_fine, patches.coarse.size());
+  }
   SolverOptions logged = options;
   if (!logged.progress) {
     logged.progress = [](int iteration, double cost, double seconds) {

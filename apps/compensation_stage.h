@@ -10,6 +10,7 @@
 #include "apps/geometry_stage.h"
 #include "compensation/problem.h"
 #include "compensation/solver.h"
+#include "projection/projection_rig.h"
 
 namespace procam {
 
@@ -23,8 +24,10 @@ struct CompensationRun {
   double mean_delta_e2000 = 0.0, max_delta_e2000 = 0.0;
 };
 
-// Builds the fine and coarse problems (coarse F aggregated from the fine one) and solves.
-CompensationRun RunCompensation(const GeometryStage& geometry, const SolverOptions& options, double alpha);
+// Builds the fine and coarse problems (coarse F aggregated from the fine one) and solves. The
+// bounds come from `rig` (the projectors) when given, else from the scene's "bounds".
+CompensationRun RunCompensation(const GeometryStage& geometry, const SolverOptions& options, double alpha,
+                                const ProjectionRig* rig = nullptr);
 
 // result.json content for a run.
 nlohmann::json CompensationResultJson(const GeometryStage& geometry, const CompensationRun& run);

@@ -17,7 +17,10 @@ int main(int argc, char** argv) {
   procam::AddDemoCommand(app);
   procam::AddSceneCommands(app);
   procam::AddCompensationCommands(app);
+  procam::AddEvaluationCommands(app);
   procam::AddBenchCommands(app);
+  procam::AddCaptureCommands(app);
+  procam::AddProjectionCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {

@@ -149,7 +149,7 @@ DevicePlacement Device(const char* name, const Vec3& centre, const Vec3& target,
   return device;
 }
 
-DevicePlacement Projector(const char* name, const Vec3& centre, const Vec3& target, double fov_deg = 55.0) {
+DevicePlacement Projector(const char* name, const Vec3& centre, const Vec3& target, double fov_deg = 72.0) {
   return Device(name, centre, target, fov_deg, 1280, 800);
 }
 

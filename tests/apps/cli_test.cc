@@ -95,14 +95,41 @@ TEST(Cli, CompensateWritesTheSolutionAndItsColourErrors) {
   EXPECT_NE(bad.output.find("magic"), std::string::npos) << bad.output;
 }
 
-TEST(Cli, DemoRunsEveryStageOnTheBundledScene) {
+TEST(Cli, DemoOnASceneFileRunsGeometryAndCompensation) {
   testing::TempDir dir;
-  const CommandRun run = Procam("demo --patches 120 --out " + (dir / "demo").string());
+  const std::string scene = (testing::SourceDir() / "data" / "scenes" / "room.json").string();
+  const CommandRun run = Procam("demo --scene " + scene + " --patches 120 --out " + (dir / "demo").string());
   ASSERT_EQ(run.exit_code, 0) << run.output;
   for (const char* name : {"result.json", "form_factors.png", "problem/F.npy", "perceptual/E.npy", "linear/result.json"}) {
     EXPECT_TRUE(std::filesystem::exists(dir / "demo" / name)) << name;
   }
   EXPECT_NE(run.output.find("perceptual"), std::string::npos);
+}
+
+TEST(Cli, DemoOnTheSyntheticRigWritesAReportThatRendersInChromium) {
+  testing::TempDir dir;
+  const CommandRun run = Procam("demo --scene tiny_box --patches 100 --out " + (dir / "demo").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  for (const char* name : {"report.html", "desired.png", "perceptual.png", "perceptual_delta_e76.png",
+                           "linear_delta_e2000.png", "perceptual/projector_0.png", "result.json"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir / "demo" / name)) << name;
+  }
+  // Headless Chromium (Debian's, installed by scripts/packages.txt), no network: the page's
+  // own script marks data-ready="yes" once every embedded picture has decoded.
+  const std::string chromium = std::filesystem::exists("/usr/bin/chromium") ? "/usr/bin/chromium" : "chromium";
+  const std::string command = chromium + " --headless --no-sandbox --disable-gpu --disable-quic --no-first-run "
+                              "--disable-background-networking --disable-component-update --disable-sync "
+                              "--user-data-dir=" + (dir / "chrome").string() + " --virtual-time-budget=5000 --dump-dom file://" +
+                              (dir / "demo" / "report.html").string() + " 2>/dev/null";
+  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(command.c_str(), "r"), pclose);
+  std::string dom;
+  std::array<char, 4096> buffer;
+  size_t count;
+  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0) dom.append(buffer.data(), count);
+  ASSERT_NE(dom.find("<body"), std::string::npos) << "chromium produced no DOM: is the 'chromium' package installed?";
+  EXPECT_NE(dom.find("data-ready=\"yes\""), std::string::npos) << dom.substr(0, 400);
+  EXPECT_NE(dom.find("<svg class=\"plot\""), std::string::npos);
+  EXPECT_NE(dom.find("data-images=\"1"), std::string::npos);  // 10+ pictures decoded
 }
 
 TEST(Cli, BadInputGivesOneLineNamingTheFileAndWritesNothing) {

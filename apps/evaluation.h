@@ -1,0 +1,75 @@
+#pragma once
+// The paper's Table 1 on the synthetic world: for each method, compensate → projector images →
+// what the simulated camera sees → per-pixel ΔE against the desired appearance as the camera
+// sees it. Pictures, a Markdown table and JSON.
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core/mat.hpp>
+
+#include "apps/compensation_stage.h"
+#include "apps/geometry_stage.h"
+#include "datasets_synthetic/simulated_rig.h"
+#include "projection/projector_images.h"
+
+namespace procam {
+
+struct MethodEvaluation {
+  CompensationMethod method = CompensationMethod::kPerceptual;
+  CompensationRun run;
+  RenderSummary render;
+  std::vector<ProjectorImage> images;
+  cv::Mat radiance;        // CV_32FC3 linear RGB, what the camera sees (noise-free)
+  cv::Mat delta_e76;       // CV_32FC1 per pixel (0 outside coverage)
+  cv::Mat delta_e2000;
+  double mean_delta_e76 = 0, max_delta_e76 = 0, mean_delta_e2000 = 0, max_delta_e2000 = 0;
+};
+
+struct SceneEvaluation {
+  std::string name;
+  GeometryStage geometry;
+  std::unique_ptr<ProjectionRig> rig;
+  std::unique_ptr<SimulatedRig> world;
+  cv::Mat desired;  // CV_32FC3 linear RGB as the camera sees it
+  std::vector<MethodEvaluation> methods;
+  double seconds = 0.0;
+};
+
+struct EvaluationOptions {
+  int patches = 600;  // solver patches per scene, ≥ 4
+  std::vector<CompensationMethod> methods = {CompensationMethod::kNaive, CompensationMethod::kReverse,
+                                             CompensationMethod::kLinear, CompensationMethod::kPerceptual};
+  double alpha = 0.5;
+  bool multires = true;  // for the perceptual method
+  int world_factor = 4;  // world mesh patches per solver patch
+  bool Check(std::string* why) const;
+};
+
+// Evaluates one synthetic scene (SyntheticSceneNames()). Logs progress. Throws
+// std::invalid_argument for an unknown scene or bad options.
+SceneEvaluation EvaluateSyntheticScene(const std::string& name, const EvaluationOptions& options);
+
+// Per-pixel ΔE76 and CIEDE2000 of two linear RGB images (CV_32FC3) in L*a*b* of `problem`'s
+// T and white, within `mask`; means and maxima over the mask.
+void PixelDeltaE(const cv::Mat& result, const cv::Mat& desired, const cv::Mat& mask, const Eigen::Matrix3d& rgb_to_xyz,
+                 const Eigen::Vector3d& white_xyz, MethodEvaluation* evaluation);
+
+// Linear RGB (CV_32FC3, RGB) → displayable 8-bit sRGB (CV_8UC3, BGR for OpenCV writers).
+cv::Mat LinearToDisplay(const cv::Mat& linear);
+// ΔE (CV_32FC1) → colour heat map 0..max_value with a labelled colour bar on the right (BGR).
+cv::Mat HeatMapWithColourBar(const cv::Mat& delta_e, double max_value, const std::string& label);
+
+// Writes desired.png, <method>.png, <method>_delta_e76.png, <method>_delta_e2000.png,
+// <method>/projector_<k>.png into `directory`; returns the file names by role.
+std::vector<std::pair<std::string, std::string>> WriteEvaluationPictures(const SceneEvaluation& evaluation,
+                                                                          const std::filesystem::path& directory);
+
+// Table 1 as Markdown: one row per scene, mean (max) ΔE76 and CIEDE2000 per method.
+std::string EvaluationMarkdown(const std::vector<const SceneEvaluation*>& evaluations);
+nlohmann::json EvaluationJson(const SceneEvaluation& evaluation);
+
+}  // namespace procam

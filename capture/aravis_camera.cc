@@ -1,0 +1,516 @@
+#include "capture/aravis_camera.h"
+
+#include <arv.h>
+
+#include <chrono>
+#include <cmath>
+#include <mutex>
+
+namespace procam {
+namespace {
+
+bool Fail(std::string* why, const std::string& message) {
+  if (why) *why = message;
+  return false;
+}
+
+// Aravis's pixel-format codes (PFNC) of the formats procam decodes.
+std::optional<PixelFormat> FromArv(ArvPixelFormat code) {
+  switch (code) {
+    case ARV_PIXEL_FORMAT_MONO_8:
+      return PixelFormat::kMono8;
+    case ARV_PIXEL_FORMAT_MONO_16:
+      return PixelFormat::kMono16;
+    case ARV_PIXEL_FORMAT_BAYER_RG_8:
+      return PixelFormat::kBayerRG8;
+    case ARV_PIXEL_FORMAT_BAYER_BG_8:
+      return PixelFormat::kBayerBG8;
+    case ARV_PIXEL_FORMAT_BAYER_GR_8:
+      return PixelFormat::kBayerGR8;
+    case ARV_PIXEL_FORMAT_BAYER_GB_8:
+      return PixelFormat::kBayerGB8;
+    case ARV_PIXEL_FORMAT_RGB_8_PACKED:
+      return PixelFormat::kRGB8;
+    case ARV_PIXEL_FORMAT_BGR_8_PACKED:
+      return PixelFormat::kBGR8;
+    case ARV_PIXEL_FORMAT_YUV_422_YUYV_PACKED:
+      return PixelFormat::kYUYV;
+    default:
+      return std::nullopt;
+  }
+}
+
+// The GenICam PixelFormat entry of a format ("YUV422_8" is the Y U Y V order).
+std::string GenicamName(PixelFormat format) {
+  return format == PixelFormat::kYUYV ? std::string("YUV422_8") : PixelFormatName(format);
+}
+
+// Nanoseconds between the real-time clock (Aravis's system timestamps) and the steady clock.
+int64_t RealtimeMinusSteadyNs() {
+  const int64_t real = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                           std::chrono::system_clock::now().time_since_epoch())
+                           .count();
+  return real - SteadyNowNs();
+}
+
+std::string StatusName(ArvBufferStatus status) {
+  switch (status) {
+    case ARV_BUFFER_STATUS_SUCCESS:
+      return "success";
+    case ARV_BUFFER_STATUS_CLEARED:
+      return "cleared";
+    case ARV_BUFFER_STATUS_TIMEOUT:
+      return "packet timeout";
+    case ARV_BUFFER_STATUS_MISSING_PACKETS:
+      return "missing packets";
+    case ARV_BUFFER_STATUS_WRONG_PACKET_ID:
+      return "wrong packet id";
+    case ARV_BUFFER_STATUS_SIZE_MISMATCH:
+      return "size mismatch";
+    case ARV_BUFFER_STATUS_FILLING:
+      return "filling";
+    case ARV_BUFFER_STATUS_ABORTED:
+      return "aborted";
+    default:
+      return "unknown";
+  }
+}
+
+// Aravis's interface switches are process-wide.
+std::mutex& InterfaceMutex() {
+  static std::mutex mutex;
+  return mutex;
+}
+
+}  // namespace
+
+bool AravisCameraOptions::Check(std::string* why) const {
+  if (device_id.empty())
+    return Fail(why, "no device id (aravis:<id>; `procam cameras` lists them)");
+  if (trigger != "auto" && trigger != "software" && trigger != "free") {
+    return Fail(why, "trigger must be auto, software or free, got '" + trigger + "'");
+  }
+  if (buffers < 2 || buffers > 64) return Fail(why, "buffers must be in [2, 64]");
+  return true;
+}
+
+AravisCameraOptions AravisCameraOptionsFromUri(const CameraUri& uri) {
+  AravisCameraOptions options;
+  options.device_id = uri.path();
+  options.trigger = uri.GetString("trigger", options.trigger);
+  options.buffers = uri.GetInt("buffers", options.buffers);
+  if (uri.Has("format")) {
+    const std::string name = uri.GetString("format", "");
+    options.format = ParsePixelFormat(name);
+    if (!options.format)
+      throw IoError("camera '" + uri.text() + "': unknown pixel format '" + name + "'");
+  }
+  uri.CheckAllRead();
+  std::string why;
+  if (!options.Check(&why)) throw IoError("camera '" + uri.text() + "': " + why);
+  return options;
+}
+
+struct AravisCamera::Impl {
+  AravisCameraOptions options;
+  ArvCamera* camera = nullptr;
+  ArvStream* stream = nullptr;
+  gulong control_lost_handler = 0;
+  std::atomic<bool> control_lost{false};
+  bool software_trigger = false;
+  PixelFormat format = PixelFormat::kMono8;
+
+  std::string Uri() const { return "aravis:" + options.device_id; }
+
+  // Throws for a failed call; lost connections become CameraDisconnected.
+  void Check(GError* error, const std::string& what) const {
+    if (error == nullptr) return;
+    const std::string message = "camera '" + Uri() + "': " + what + ": " + error->message;
+    const bool gone =
+        error->domain == ARV_DEVICE_ERROR &&
+        (error->code == ARV_DEVICE_ERROR_NOT_CONNECTED || error->code == ARV_DEVICE_ERROR_TIMEOUT ||
+         error->code == ARV_DEVICE_ERROR_TRANSFER_ERROR);
+    g_error_free(error);
+    if (gone || control_lost) throw CameraDisconnected(message);
+    throw IoError(message);
+  }
+
+  void CheckConnected() const {
+    if (control_lost) {
+      throw CameraDisconnected("camera '" + Uri() +
+                               "': lost the connection to the camera (control lost)");
+    }
+  }
+
+  static void OnControlLost(ArvDevice*, gpointer self) {
+    static_cast<Impl*>(self)->control_lost = true;
+  }
+
+  void Open() {
+    {
+      std::lock_guard<std::mutex> lock(InterfaceMutex());
+      if (options.device_id.rfind("Fake", 0) == 0) {  // never broadcast for the in-process camera
+        arv_disable_interface("GigEVision");
+        arv_enable_interface("Fake");
+      }
+    }
+    GError* error = nullptr;
+    camera = arv_camera_new(options.device_id.c_str(), &error);
+    if (camera == nullptr && error == nullptr) {
+      throw IoError("camera '" + Uri() + "': not found (see `procam cameras`)");
+    }
+    Check(error, "cannot open");
+    control_lost_handler = g_signal_connect(arv_camera_get_device(camera), "control-lost",
+                                            G_CALLBACK(&Impl::OnControlLost), this);
+
+    if (options.format) {
+      arv_camera_set_pixel_format_from_string(camera, GenicamName(*options.format).c_str(), &error);
+      Check(error, "setting PixelFormat " + GenicamName(*options.format));
+    }
+    const ArvPixelFormat code = arv_camera_get_pixel_format(camera, &error);
+    Check(error, "reading PixelFormat");
+    if (const auto decoded = FromArv(code)) {
+      format = *decoded;
+    } else {  // e.g. Mono12Packed: fall back to Mono8, which every GenICam camera offers
+      const char* name = arv_camera_get_pixel_format_as_string(camera, nullptr);
+      arv_camera_set_pixel_format(camera, ARV_PIXEL_FORMAT_MONO_8, &error);
+      if (error) {
+        g_error_free(error);
+        throw IoError("camera '" + Uri() + "': pixel format " + std::string(name ? name : "?") +
+                      " is not supported and Mono8 cannot be set; choose one with ?format=");
+      }
+      format = PixelFormat::kMono8;
+    }
+
+    arv_camera_set_acquisition_mode(camera, ARV_ACQUISITION_MODE_CONTINUOUS, &error);
+    Check(error, "setting continuous acquisition");
+    const bool supported = arv_camera_is_software_trigger_supported(camera, &error);
+    Check(error, "querying the software trigger");
+    if (options.trigger == "software" && !supported) {
+      throw IoError("camera '" + Uri() + "': no software trigger; use trigger=free");
+    }
+    software_trigger = options.trigger != "free" && supported;
+    if (software_trigger) {
+      arv_camera_set_trigger(camera, "Software", &error);
+      Check(error, "setting the software trigger");
+    } else {
+      arv_camera_clear_triggers(camera, &error);
+      Check(error, "switching triggers off");
+    }
+  }
+
+  void StartStreaming() {
+    CheckConnected();
+    if (stream != nullptr) return;
+    GError* error = nullptr;
+    stream = arv_camera_create_stream(camera, nullptr, nullptr, &error);
+    if (stream == nullptr && error == nullptr)
+      throw IoError("camera '" + Uri() + "': cannot create a stream");
+    Check(error, "creating the stream");
+    const guint payload = arv_camera_get_payload(camera, &error);
+    Check(error, "reading the payload size");
+    for (int i = 0; i < options.buffers; ++i)
+      arv_stream_push_buffer(stream, arv_buffer_new_allocate(payload));
+    arv_camera_start_acquisition(camera, &error);
+    Check(error, "starting acquisition");
+  }
+
+  // Never throws: used on error paths and in the destructor.
+  void StopStreaming() {
+    if (stream == nullptr) return;
+    GError* error = nullptr;
+    arv_camera_stop_acquisition(camera, &error);
+    if (error) g_error_free(error);
+    g_object_unref(stream);  // stops the stream thread and frees its buffers
+    stream = nullptr;
+  }
+};
+
+AravisCamera::AravisCamera(const AravisCameraOptions& options) : impl_(std::make_unique<Impl>()) {
+  std::string why;
+  if (!options.Check(&why)) throw IoError("camera 'aravis:" + options.device_id + "': " + why);
+  impl_->options = options;
+  try {
+    impl_->Open();
+  } catch (...) {
+    if (impl_->camera) {
+      if (impl_->control_lost_handler)
+        g_signal_handler_disconnect(arv_camera_get_device(impl_->camera),
+                                    impl_->control_lost_handler);
+      g_object_unref(impl_->camera);
+    }
+    throw;
+  }
+}
+
+AravisCamera::~AravisCamera() {
+  impl_->StopStreaming();
+  if (impl_->control_lost_handler)
+    g_signal_handler_disconnect(arv_camera_get_device(impl_->camera), impl_->control_lost_handler);
+  g_object_unref(impl_->camera);
+}
+
+ArvCamera* AravisCamera::handle() const { return impl_->camera; }
+
+CameraInfo AravisCamera::Info() const {
+  CameraInfo info;
+  info.uri = impl_->Uri();
+  info.backend = "aravis";
+  GError* error = nullptr;
+  const char* vendor = arv_camera_get_vendor_name(impl_->camera, &error);
+  if (error) g_clear_error(&error);
+  const char* model = arv_camera_get_model_name(impl_->camera, &error);
+  if (error) g_clear_error(&error);
+  const char* serial = arv_camera_get_device_serial_number(impl_->camera, &error);
+  if (error) g_clear_error(&error);
+  info.vendor = vendor ? vendor : "";
+  info.model = model ? model : "";
+  info.serial = serial ? serial : "";
+  info.description = info.vendor + " " + info.model + " (" + PixelFormatName(impl_->format) +
+                     (impl_->software_trigger ? ", software trigger)" : ", free-running)");
+  return info;
+}
+
+CameraSettings AravisCamera::Settings() const {
+  impl_->CheckConnected();
+  CameraSettings settings;
+  GError* error = nullptr;
+  int x = 0, y = 0;
+  arv_camera_get_region(impl_->camera, &x, &y, &settings.width, &settings.height, &error);
+  impl_->Check(error, "reading the region");
+  settings.pixel_format = impl_->format;
+  settings.trigger = impl_->software_trigger ? "software" : "free-running";
+  settings.gain_unit = "dB";
+  if (arv_camera_is_exposure_time_available(impl_->camera, nullptr)) {
+    settings.exposure_us = arv_camera_get_exposure_time(impl_->camera, &error);
+    impl_->Check(error, "reading ExposureTime");
+    settings.exposure_range_us.available = true;
+    arv_camera_get_exposure_time_bounds(impl_->camera, &settings.exposure_range_us.min,
+                                        &settings.exposure_range_us.max, &error);
+    impl_->Check(error, "reading ExposureTime bounds");
+    if (arv_camera_is_exposure_auto_available(impl_->camera, nullptr)) {
+      settings.auto_exposure =
+          arv_camera_get_exposure_time_auto(impl_->camera, nullptr) != ARV_AUTO_OFF;
+    }
+  }
+  if (arv_camera_is_gain_available(impl_->camera, nullptr)) {
+    settings.gain = arv_camera_get_gain(impl_->camera, &error);
+    impl_->Check(error, "reading Gain");
+    settings.gain_range.available = true;
+    arv_camera_get_gain_bounds(impl_->camera, &settings.gain_range.min, &settings.gain_range.max,
+                               &error);
+    impl_->Check(error, "reading Gain bounds");
+  }
+  return settings;
+}
+
+std::vector<PixelFormat> AravisCamera::SupportedPixelFormats() const {
+  std::vector<PixelFormat> formats;
+  guint count = 0;
+  GError* error = nullptr;
+  gint64* codes = arv_camera_dup_available_pixel_formats(impl_->camera, &count, &error);
+  impl_->Check(error, "listing pixel formats");
+  for (guint i = 0; i < count; ++i) {
+    if (const auto format = FromArv(static_cast<ArvPixelFormat>(codes[i])))
+      formats.push_back(*format);
+  }
+  g_free(codes);
+  return formats;
+}
+
+void AravisCamera::SetExposure(double exposure_us) {
+  impl_->CheckConnected();
+  GError* error = nullptr;
+  if (!arv_camera_is_exposure_time_available(impl_->camera, &error)) {
+    impl_->Check(error, "querying ExposureTime");
+    throw IoError("camera '" + impl_->Uri() + "': the camera has no ExposureTime feature");
+  }
+  double lowest = 0.0, highest = 0.0;
+  arv_camera_get_exposure_time_bounds(impl_->camera, &lowest, &highest, &error);
+  impl_->Check(error, "reading ExposureTime bounds");
+  if (!(exposure_us >= lowest && exposure_us <= highest)) {
+    throw IoError("camera '" + impl_->Uri() + "': exposure " + std::to_string(exposure_us) +
+                  " us outside [" + std::to_string(lowest) + ", " + std::to_string(highest) +
+                  "] us");
+  }
+  if (arv_camera_is_exposure_auto_available(impl_->camera, nullptr)) {
+    arv_camera_set_exposure_time_auto(impl_->camera, ARV_AUTO_OFF, &error);
+    impl_->Check(error, "switching ExposureAuto off");
+  }
+  arv_camera_set_exposure_time(impl_->camera, exposure_us, &error);
+  impl_->Check(error, "setting ExposureTime");
+}
+
+void AravisCamera::SetGain(double gain) {
+  impl_->CheckConnected();
+  GError* error = nullptr;
+  if (!arv_camera_is_gain_available(impl_->camera, &error)) {
+    impl_->Check(error, "querying Gain");
+    throw IoError("camera '" + impl_->Uri() + "': the camera has no Gain feature");
+  }
+  double lowest = 0.0, highest = 0.0;
+  arv_camera_get_gain_bounds(impl_->camera, &lowest, &highest, &error);
+  impl_->Check(error, "reading Gain bounds");
+  if (!(gain >= lowest && gain <= highest)) {
+    throw IoError("camera '" + impl_->Uri() + "': gain " + std::to_string(gain) + " outside [" +
+                  std::to_string(lowest) + ", " + std::to_string(highest) + "]");
+  }
+  if (arv_camera_is_gain_auto_available(impl_->camera, nullptr)) {
+    arv_camera_set_gain_auto(impl_->camera, ARV_AUTO_OFF, &error);
+    impl_->Check(error, "switching GainAuto off");
+  }
+  arv_camera_set_gain(impl_->camera, gain, &error);
+  impl_->Check(error, "setting Gain");
+}
+
+void AravisCamera::SetPixelFormat(PixelFormat format) {
+  impl_->CheckConnected();
+  const bool was_streaming = impl_->stream != nullptr;
+  impl_->StopStreaming();
+  GError* error = nullptr;
+  arv_camera_set_pixel_format_from_string(impl_->camera, GenicamName(format).c_str(), &error);
+  impl_->Check(error, "setting PixelFormat " + GenicamName(format));
+  impl_->format = format;
+  if (was_streaming) Start();
+}
+
+void AravisCamera::Start() {
+  try {
+    impl_->StartStreaming();
+  } catch (...) {
+    impl_->StopStreaming();
+    throw;
+  }
+}
+
+void AravisCamera::Stop() { impl_->StopStreaming(); }
+
+Frame AravisCamera::Grab(std::chrono::milliseconds timeout) {
+  Start();
+  GError* error = nullptr;
+  if (impl_->software_trigger) {
+    arv_camera_software_trigger(impl_->camera, &error);
+    impl_->Check(error, "software trigger");
+  }
+  const double exposure_us = arv_camera_get_exposure_time(impl_->camera, &error);
+  impl_->Check(error, "reading ExposureTime");
+  const double gain = arv_camera_is_gain_available(impl_->camera, nullptr)
+                          ? arv_camera_get_gain(impl_->camera, nullptr)
+                          : 0.0;
+  const int64_t deadline =
+      SteadyNowNs() + std::chrono::duration_cast<std::chrono::nanoseconds>(timeout).count();
+  int bad_buffers = 0;
+  ArvBufferStatus last_bad = ARV_BUFFER_STATUS_SUCCESS;
+  for (;;) {
+    impl_->CheckConnected();
+    const int64_t left_ns = deadline - SteadyNowNs();
+    ArvBuffer* buffer = left_ns > 0 ? arv_stream_timeout_pop_buffer(
+                                          impl_->stream, static_cast<guint64>(left_ns / 1000))
+                                    : nullptr;
+    if (buffer == nullptr) {
+      impl_->CheckConnected();
+      throw CameraTimeout("camera '" + impl_->Uri() + "': no frame within " +
+                          std::to_string(timeout.count()) + " ms" +
+                          (bad_buffers
+                               ? " (" + std::to_string(bad_buffers) +
+                                     " incomplete buffers, last: " + StatusName(last_bad) + ")"
+                               : ""));
+    }
+    const ArvBufferStatus status = arv_buffer_get_status(buffer);
+    if (status != ARV_BUFFER_STATUS_SUCCESS) {
+      ++bad_buffers;
+      last_bad = status;
+      arv_stream_push_buffer(impl_->stream, buffer);
+      continue;
+    }
+    const int64_t arrival_steady = SteadyNowNs();
+    Frame frame;
+    const auto format = FromArv(arv_buffer_get_image_pixel_format(buffer));
+    if (!format) {
+      arv_stream_push_buffer(impl_->stream, buffer);
+      throw IoError("camera '" + impl_->Uri() + "': frame in an undecodable pixel format");
+    }
+    try {
+      size_t size = 0;
+      RawImage raw;
+      raw.data = static_cast<const uint8_t*>(arv_buffer_get_image_data(buffer, &size));
+      raw.size = size;
+      raw.width = arv_buffer_get_image_width(buffer);
+      raw.height = arv_buffer_get_image_height(buffer);
+      raw.format = *format;
+      frame.image = DecodeImage(raw);
+    } catch (const IoError& decode_error) {
+      arv_stream_push_buffer(impl_->stream, buffer);
+      throw IoError("camera '" + impl_->Uri() + "': " + decode_error.what());
+    }
+    frame.source_format = *format;
+    frame.sequence = arv_buffer_get_frame_id(buffer);
+    frame.device_timestamp_ns = static_cast<int64_t>(arv_buffer_get_timestamp(buffer));
+    const int64_t system_ns = static_cast<int64_t>(arv_buffer_get_system_timestamp(buffer));
+    arv_stream_push_buffer(impl_->stream, buffer);
+    // The system timestamp (real-time clock) is when the frame began to arrive; map it onto the
+    // steady clock. Readout precedes arrival, so the exposure began at least `exposure` earlier.
+    frame.arrival_ns = system_ns > 0 ? system_ns - RealtimeMinusSteadyNs() : arrival_steady;
+    frame.exposure_us = exposure_us;
+    frame.gain = gain;
+    frame.exposure_start_ns =
+        frame.arrival_ns - static_cast<int64_t>(std::llround(exposure_us * 1e3));
+    return frame;
+  }
+}
+
+int AravisCamera::DropBufferedFrames() {
+  impl_->CheckConnected();
+  if (impl_->stream == nullptr) return 0;
+  int dropped = 0;
+  while (ArvBuffer* buffer = arv_stream_try_pop_buffer(impl_->stream)) {
+    arv_stream_push_buffer(impl_->stream, buffer);
+    ++dropped;
+  }
+  return dropped;
+}
+
+std::vector<CameraInfo> ListAravisCameras(const ListCamerasOptions& options) {
+  std::lock_guard<std::mutex> lock(InterfaceMutex());
+  if (options.gige_discovery) {
+    arv_enable_interface("GigEVision");
+  } else {
+    arv_disable_interface("GigEVision");
+  }
+  if (options.include_virtual) {
+    arv_enable_interface("Fake");
+  } else {
+    arv_disable_interface("Fake");
+  }
+  arv_update_device_list();
+  std::vector<CameraInfo> cameras;
+  for (unsigned int i = 0; i < arv_get_n_devices(); ++i) {
+    auto text = [](const char* value) { return std::string(value ? value : ""); };
+    CameraInfo info;
+    info.backend = "aravis";
+    info.uri = "aravis:" + text(arv_get_device_id(i));
+    info.vendor = text(arv_get_device_vendor(i));
+    info.model = text(arv_get_device_model(i));
+    info.serial = text(arv_get_device_serial_nbr(i));
+    info.description = info.vendor + " " + info.model + " (" + text(arv_get_device_protocol(i)) +
+                       (arv_get_device_address(i) ? std::string(", ") + arv_get_device_address(i)
+                                                  : std::string()) +
+                       ")";
+    cameras.push_back(info);
+  }
+  return cameras;
+}
+
+CameraBackend AravisCameraBackend() {
+  CameraBackend backend;
+  backend.scheme = "aravis";
+  backend.description =
+      "GenICam cameras (GigE Vision, USB3 Vision) and the Fake camera, through Aravis";
+  backend.open = [](const CameraUri& uri, const OpenCameraOptions&) -> std::unique_ptr<Camera> {
+    return std::make_unique<AravisCamera>(AravisCameraOptionsFromUri(uri));
+  };
+  backend.list = ListAravisCameras;
+  return backend;
+}
+
+}  // namespace procam

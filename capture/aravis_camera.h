@@ -1,0 +1,74 @@
+#pragma once
+// The Aravis backend ("aravis:" URIs): GenICam cameras over GigE Vision and USB3 Vision, and
+// Aravis's in-process Fake camera (device id Fake_1) for tests. Exposure, gain and pixel format
+// through the GenICam features ExposureTime (µs), Gain (dB by the SFNC) and PixelFormat; frames
+// through an ArvStream with `buffers` preallocated buffers; a software trigger per grab when the
+// camera supports it (trigger=software, the default where available), free-running otherwise.
+// A camera whose control channel is lost (Aravis's "control-lost" signal, e.g. a GigE camera
+// that stops answering heartbeats) raises CameraDisconnected from the next call.
+//
+// URI: aravis:<device id>?trigger=auto|software|free&buffers=8&format=Mono8. Device ids are
+// what `procam cameras` (or arv-tool-0.8) prints. Ids beginning with "Fake" open only the Fake
+// interface and switch GigE Vision discovery off for the process, so tests never broadcast.
+// Note that the in-process Fake camera free-runs at 25 Hz whatever its trigger settings.
+
+#include <atomic>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "capture/camera.h"
+
+typedef struct _ArvCamera ArvCamera;
+
+namespace procam {
+
+struct AravisCameraOptions {
+  std::string device_id;  // as Aravis lists it; required
+  std::string trigger =
+      "auto";       // "software", "free" (free-running), "auto" = software if supported
+  int buffers = 8;  // stream buffers, [2, 64]
+  std::optional<PixelFormat> format;  // nullopt: keep the camera's (Mono8 when it is not decodable)
+  bool Check(std::string* why) const;
+};
+
+// Reads the URI's keys. Throws IoError naming the URI and key.
+AravisCameraOptions AravisCameraOptionsFromUri(const CameraUri& uri);
+
+class AravisCamera : public Camera {
+ public:
+  // Opens the camera and configures acquisition and trigger. Throws IoError naming the device.
+  explicit AravisCamera(const AravisCameraOptions& options);
+  ~AravisCamera() override;
+  AravisCamera(const AravisCamera&) = delete;
+  AravisCamera& operator=(const AravisCamera&) = delete;
+
+  CameraInfo Info() const override;
+  CameraSettings Settings() const override;
+  std::vector<PixelFormat> SupportedPixelFormats() const override;
+  void SetExposure(double exposure_us) override;
+  void SetGain(double gain) override;
+  void SetPixelFormat(PixelFormat format) override;
+  void Start() override;
+  void Stop() override;
+  Frame Grab(std::chrono::milliseconds timeout) override;
+  int DropBufferedFrames() override;
+
+  // The underlying camera, owned by this object: for tests that drive the Fake camera's
+  // registers or emit its signals.
+  ArvCamera* handle() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Cameras Aravis finds: USB3 Vision always, GigE Vision when options.gige_discovery (a
+// broadcast on every interface), the Fake camera when options.include_virtual.
+std::vector<CameraInfo> ListAravisCameras(const ListCamerasOptions& options);
+
+// The "aravis" backend for the registry.
+CameraBackend AravisCameraBackend();
+
+}  // namespace procam

@@ -1,0 +1,394 @@
+#include "capture/session.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <opencv2/imgcodecs.hpp>
+
+#include "geometry/io.h"
+
+namespace procam {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr const char* kManifestName = "session.json";
+constexpr const char* kFormat = "procam capture session";
+constexpr int kVersion = 1;
+
+std::string UtcNow() {
+  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  std::tm utc{};
+  gmtime_r(&now, &utc);
+  char text[32];
+  std::strftime(text, sizeof(text), "%Y-%m-%dT%H:%M:%SZ", &utc);
+  return text;
+}
+
+std::string Padded(int value) {
+  char text[16];
+  std::snprintf(text, sizeof(text), "%03d", value);
+  return text;
+}
+
+std::string ExposureTag(double exposure_us) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.0f", exposure_us);
+  return text;
+}
+
+// The device part of a camera URI: "aravis:Fake_1" of "aravis:Fake_1?trigger=software".
+std::string DeviceOf(const std::string& uri) { return uri.substr(0, uri.find('?')); }
+
+nlohmann::json RangeJson(const ControlRange& range) {
+  if (!range.available) return nullptr;
+  return {{"min", range.min}, {"max", range.max}, {"step", range.step}};
+}
+
+nlohmann::json SettingsJson(const CameraSettings& settings) {
+  return {{"width", settings.width},
+          {"height", settings.height},
+          {"pixel_format", PixelFormatName(settings.pixel_format)},
+          {"exposure_us", settings.exposure_us},
+          {"gain", settings.gain},
+          {"gain_unit", settings.gain_unit},
+          {"auto_exposure", settings.auto_exposure},
+          {"trigger", settings.trigger},
+          {"exposure_range_us", RangeJson(settings.exposure_range_us)},
+          {"gain_range", RangeJson(settings.gain_range)}};
+}
+
+nlohmann::json CaptureJson(const SequencerOptions& options) {
+  return {{"frames_per_pattern", options.frames_per_pattern},
+          {"discard_frames", options.discard_frames},
+          {"exposures_us", options.exposures_us},
+          {"settle_ms", options.settle_ms}};
+}
+
+void WriteImage(const fs::path& path, const cv::Mat& image, const std::vector<int>& params = {}) {
+  std::vector<uint8_t> bytes;
+  bool encoded = false;
+  try {
+    encoded = cv::imencode(path.extension().string(), image, bytes, params);
+  } catch (const cv::Exception& error) {
+    throw IoError(path.string() + ": cannot encode image: " + error.what());
+  }
+  if (!encoded) throw IoError(path.string() + ": cannot encode image");
+  WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
+}
+
+void WriteManifest(const fs::path& directory, nlohmann::json& manifest) {
+  manifest["updated"] = UtcNow();
+  WriteFileAtomically(directory / kManifestName, manifest.dump(2) + "\n");
+}
+
+bool PatternComplete(const fs::path& directory, const nlohmann::json& entry) {
+  if (!entry.contains("captured") || entry["captured"].is_null()) return false;
+  const nlohmann::json& captured = entry["captured"];
+  for (const nlohmann::json& exposure : captured.at("exposures")) {
+    if (!fs::exists(directory / exposure.at("file").get<std::string>())) return false;
+  }
+  if (captured.contains("hdr") && !captured["hdr"].is_null() &&
+      !fs::exists(directory / captured["hdr"].get<std::string>())) {
+    return false;
+  }
+  return true;
+}
+
+// Why an existing session cannot be resumed with these settings; empty when it can.
+std::string Mismatch(const nlohmann::json& manifest, const CaptureSequence& sequence,
+                     const SequencerOptions& options, const CameraInfo& info,
+                     const CameraSettings& settings) {
+  if (manifest.value("format", "") != kFormat) return "not a procam capture session";
+  if (manifest.value("version", 0) != kVersion)
+    return "session version " + manifest.value("version", nlohmann::json()).dump() + " is not 1";
+  const nlohmann::json& stored_sequence = manifest.at("sequence");
+  if (stored_sequence.at("kind") != sequence.kind) {
+    return "it holds a '" + stored_sequence.at("kind").get<std::string>() + "' sequence, not '" +
+           sequence.kind + "'";
+  }
+  if (stored_sequence.at("parameters") != sequence.parameters) {
+    return "sequence parameters differ: stored " + stored_sequence.at("parameters").dump() +
+           ", now " + sequence.parameters.dump();
+  }
+  const nlohmann::json& patterns = manifest.at("patterns");
+  if (patterns.size() != sequence.patterns.size()) return "pattern count differs";
+  for (size_t i = 0; i < patterns.size(); ++i) {
+    if (patterns[i].at("name") != sequence.patterns[i].name ||
+        patterns[i].at("checksum") != PatternChecksum(sequence.patterns[i].image)) {
+      return "pattern " + std::to_string(i) + " (" + patterns[i].at("name").get<std::string>() +
+             ") differs";
+    }
+  }
+  nlohmann::json stored_capture = manifest.at("capture");
+  nlohmann::json capture = CaptureJson(options);
+  stored_capture.erase("settle_ms");  // timing may change between runs; what is averaged may not
+  capture.erase("settle_ms");
+  if (stored_capture != capture)
+    return "capture settings differ: stored " + stored_capture.dump() + ", now " + capture.dump();
+  const nlohmann::json& camera = manifest.at("camera");
+  if (camera.at("device") != DeviceOf(info.uri)) {
+    return "it was captured with camera '" + camera.at("device").get<std::string>() + "', not '" +
+           DeviceOf(info.uri) + "'";
+  }
+  const nlohmann::json& stored_settings = camera.at("settings");
+  if (stored_settings.at("width") != settings.width ||
+      stored_settings.at("height") != settings.height ||
+      stored_settings.at("pixel_format") != PixelFormatName(settings.pixel_format)) {
+    return "camera format differs: stored " + stored_settings.at("width").dump() + "x" +
+           stored_settings.at("height").dump() + " " +
+           stored_settings.at("pixel_format").get<std::string>() + ", now " +
+           std::to_string(settings.width) + "x" + std::to_string(settings.height) + " " +
+           PixelFormatName(settings.pixel_format);
+  }
+  return "";
+}
+
+nlohmann::json NewManifest(const CaptureSequence& sequence, const SequencerOptions& options,
+                           const CameraInfo& info, const CameraSettings& settings,
+                           const PatternDisplay& display) {
+  nlohmann::json manifest;
+  manifest["format"] = kFormat;
+  manifest["version"] = kVersion;
+  manifest["sequence"] = {{"kind", sequence.kind}, {"parameters", sequence.parameters}};
+  manifest["capture"] = CaptureJson(options);
+  manifest["camera"] = {{"device", DeviceOf(info.uri)},
+                        {"uri", info.uri},
+                        {"backend", info.backend},
+                        {"vendor", info.vendor},
+                        {"model", info.model},
+                        {"serial", info.serial},
+                        {"settings", SettingsJson(settings)}};
+  manifest["display"] = {{"name", display.Name()},
+                         {"width", display.Resolution().width},
+                         {"height", display.Resolution().height}};
+  manifest["complete"] = false;
+  manifest["created"] = UtcNow();
+  manifest["runs"] = nlohmann::json::array();
+  manifest["interruptions"] = nlohmann::json::array();
+  nlohmann::json patterns = nlohmann::json::array();
+  for (size_t i = 0; i < sequence.patterns.size(); ++i) {
+    const Pattern& pattern = sequence.patterns[i];
+    patterns.push_back(
+        {{"index", i},
+         {"name", pattern.name},
+         {"file", "patterns/" + Padded(static_cast<int>(i)) + "_" + pattern.name + ".png"},
+         {"checksum", PatternChecksum(pattern.image)},
+         {"info", pattern.info},
+         {"captured", nullptr}});
+  }
+  manifest["patterns"] = patterns;
+  return manifest;
+}
+
+// Writes a captured pattern's images and returns its manifest entry.
+nlohmann::json WriteCapture(const fs::path& directory, int index, const std::string& name,
+                            const PatternCapture& capture) {
+  const std::string stem = "frames/" + Padded(index) + "_" + name;
+  nlohmann::json exposures = nlohmann::json::array();
+  const double png_scale = 65535.0 / capture.full_scale;
+  for (const ExposureCapture& exposure : capture.exposures) {
+    const std::string file = stem + "_e" + ExposureTag(exposure.exposure_us) + "us.png";
+    cv::Mat png;
+    exposure.mean.convertTo(png, CV_16U, png_scale);  // rounds and saturates
+    WriteImage(directory / file, png);
+    exposures.push_back({{"exposure_us", exposure.exposure_us},
+                         {"gain", exposure.gain},
+                         {"file", file},
+                         {"png_scale", png_scale},
+                         {"frames", exposure.frames},
+                         {"sequences", exposure.sequences},
+                         {"buffered_dropped", exposure.buffered_dropped},
+                         {"stale_dropped", exposure.stale_dropped},
+                         {"discarded", exposure.discarded},
+                         {"first_exposure_start_ns", exposure.first_exposure_start_ns},
+                         {"last_arrival_ns", exposure.last_arrival_ns}});
+  }
+  nlohmann::json hdr = nullptr;
+  if (!capture.hdr.empty()) {
+    const std::string file = stem + "_hdr.tiff";
+    WriteImage(directory / file, capture.hdr, {cv::IMWRITE_TIFF_COMPRESSION, 1});  // lossless float
+    hdr = file;
+  }
+  return {{"time", UtcNow()},
+          {"shown_ns", capture.shown_ns},
+          {"settled_ns", capture.settled_ns},
+          {"retries", capture.retries},
+          {"retry_reasons", capture.retry_reasons},
+          {"full_scale", capture.full_scale},
+          {"exposures", exposures},
+          {"hdr", hdr}};
+}
+
+}  // namespace
+
+bool CaptureSessionOptions::Check(std::string* why) const {
+  if (directory.empty()) {
+    if (why) *why = "no session directory";
+    return false;
+  }
+  return sequencer.Check(why);
+}
+
+std::string CaptureSummary::BriefReport() const {
+  char text[256];
+  std::snprintf(text, sizeof(text),
+                "%d/%d patterns captured (%d this run, %d already there), %d retries, %d stale "
+                "frames dropped, %.1f s",
+                patterns_before + patterns_captured, patterns_total, patterns_captured,
+                patterns_before, retries, stale_dropped, seconds);
+  return text;
+}
+
+CaptureSummary RunCaptureSession(const CaptureSessionOptions& options,
+                                 const CaptureSequence& sequence, Camera& camera,
+                                 PatternDisplay& display) {
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument("CaptureSessionOptions: " + why);
+  if (sequence.patterns.empty()) throw std::invalid_argument("RunCaptureSession: empty sequence");
+  const auto start = std::chrono::steady_clock::now();
+  const fs::path& directory = options.directory;
+  const fs::path manifest_path = directory / kManifestName;
+  std::error_code error;
+  for (const char* sub : {"patterns", "frames"}) {
+    fs::create_directories(directory / sub, error);
+    if (error)
+      throw IoError((directory / sub).string() + ": cannot create directory: " + error.message());
+  }
+
+  const CameraInfo info = camera.Info();
+  const CameraSettings settings = camera.Settings();
+  nlohmann::json manifest;
+  if (fs::exists(manifest_path)) {
+    try {
+      manifest = nlohmann::json::parse(ReadFile(manifest_path));
+      const std::string mismatch = Mismatch(manifest, sequence, options.sequencer, info, settings);
+      if (!mismatch.empty()) {
+        throw IoError(manifest_path.string() + ": cannot resume: " + mismatch +
+                      " (use another --out directory, or the settings it was started with)");
+      }
+    } catch (const nlohmann::json::exception& parse_error) {
+      throw IoError(manifest_path.string() + ": malformed manifest: " + parse_error.what());
+    }
+  } else {
+    manifest = NewManifest(sequence, options.sequencer, info, settings, display);
+  }
+
+  CaptureSummary summary;
+  summary.manifest = manifest_path;
+  summary.patterns_total = static_cast<int>(sequence.patterns.size());
+  nlohmann::json& patterns = manifest["patterns"];
+  for (size_t i = 0; i < sequence.patterns.size(); ++i) {
+    const fs::path file = directory / patterns[i]["file"].get<std::string>();
+    if (!fs::exists(file)) WriteImage(file, sequence.patterns[i].image);
+    if (PatternComplete(directory, patterns[i])) {
+      ++summary.patterns_before;
+    } else {
+      patterns[i]["captured"] = nullptr;
+    }
+  }
+  manifest["runs"].push_back({{"started", UtcNow()},
+                              {"uri", info.uri},
+                              {"settings", SettingsJson(settings)},
+                              {"patterns_before", summary.patterns_before}});
+  WriteManifest(directory, manifest);
+
+  PatternSequencer sequencer(options.sequencer, &camera, &display);
+  for (size_t i = 0; i < sequence.patterns.size(); ++i) {
+    if (!patterns[i]["captured"].is_null()) continue;
+    PatternCapture capture;
+    try {
+      capture = sequencer.Capture(sequence.patterns[i].image);
+    } catch (const IoError& error) {  // camera or display: record where and why, keep the rest
+      const int kept = summary.patterns_before + summary.patterns_captured;
+      manifest["interruptions"].push_back({{"time", UtcNow()},
+                                           {"pattern", i},
+                                           {"name", sequence.patterns[i].name},
+                                           {"reason", error.what()}});
+      manifest["runs"].back()["patterns_captured"] = summary.patterns_captured;
+      WriteManifest(directory, manifest);
+      const std::string message =
+          std::string(error.what()) + " at pattern " + std::to_string(i + 1) + "/" +
+          std::to_string(sequence.patterns.size()) + " (" + sequence.patterns[i].name + "); " +
+          std::to_string(kept) + " captured patterns are kept in " + directory.string() +
+          "; run the same command again to resume";
+      if (dynamic_cast<const CaptureFault*>(&error)) throw CaptureFault(message);
+      throw IoError(message);
+    }
+    patterns[i]["captured"] =
+        WriteCapture(directory, static_cast<int>(i), sequence.patterns[i].name, capture);
+    ++summary.patterns_captured;
+    summary.retries += capture.retries;
+    for (const ExposureCapture& exposure : capture.exposures)
+      summary.stale_dropped += exposure.stale_dropped;
+    manifest["runs"].back()["patterns_captured"] = summary.patterns_captured;
+    WriteManifest(directory, manifest);
+  }
+  manifest["complete"] = true;
+  WriteManifest(directory, manifest);
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary;
+}
+
+CaptureSessionData CaptureSessionData::Load(const fs::path& directory) {
+  CaptureSessionData data;
+  data.directory_ = directory;
+  const fs::path path = directory / kManifestName;
+  try {
+    data.manifest_ = nlohmann::json::parse(ReadFile(path));
+  } catch (const nlohmann::json::exception& error) {
+    throw IoError(path.string() + ": malformed manifest: " + error.what());
+  }
+  if (data.manifest_.value("format", "") != kFormat || !data.manifest_.contains("patterns")) {
+    throw IoError(path.string() + ": not a procam capture session");
+  }
+  return data;
+}
+
+bool CaptureSessionData::complete() const { return manifest_.value("complete", false); }
+
+int CaptureSessionData::pattern_count() const {
+  return static_cast<int>(manifest_.at("patterns").size());
+}
+
+bool CaptureSessionData::captured(int pattern) const {
+  return pattern >= 0 && pattern < pattern_count() &&
+         !manifest_["patterns"][pattern]["captured"].is_null();
+}
+
+std::string CaptureSessionData::pattern_name(int pattern) const {
+  return manifest_.at("patterns").at(pattern).at("name").get<std::string>();
+}
+
+cv::Mat CaptureSessionData::Mean(int pattern, int exposure) const {
+  if (!captured(pattern)) {
+    throw IoError((directory_ / kManifestName).string() + ": pattern " + std::to_string(pattern) +
+                  " is not captured");
+  }
+  const nlohmann::json& entry =
+      manifest_["patterns"][pattern]["captured"]["exposures"].at(exposure);
+  const fs::path file = directory_ / entry.at("file").get<std::string>();
+  const cv::Mat png = cv::imread(file.string(), cv::IMREAD_UNCHANGED);
+  if (png.empty() || png.depth() != CV_16U)
+    throw IoError(file.string() + ": missing or not a 16-bit PNG");
+  cv::Mat mean;
+  png.convertTo(mean, CV_32F, 1.0 / entry.at("png_scale").get<double>());
+  return mean;
+}
+
+cv::Mat CaptureSessionData::Hdr(int pattern) const {
+  if (!captured(pattern)) {
+    throw IoError((directory_ / kManifestName).string() + ": pattern " + std::to_string(pattern) +
+                  " is not captured");
+  }
+  const nlohmann::json& hdr = manifest_["patterns"][pattern]["captured"]["hdr"];
+  if (hdr.is_null()) return cv::Mat();
+  const fs::path file = directory_ / hdr.get<std::string>();
+  const cv::Mat image = cv::imread(file.string(), cv::IMREAD_UNCHANGED);
+  if (image.empty() || image.depth() != CV_32F)
+    throw IoError(file.string() + ": missing or not a float TIFF");
+  return image;
+}
+
+}  // namespace procam

@@ -1,0 +1,87 @@
+#pragma once
+// Capture sessions: a directory that holds everything one capture run (or several, when it is
+// interrupted and resumed) produced, so nothing captured is ever lost.
+//
+//   DIR/session.json                       the manifest (below), rewritten atomically after
+//                                          every pattern
+//   DIR/patterns/NNN_<name>.png            each pattern exactly as shown (8-bit)
+//   DIR/frames/NNN_<name>_e<us>us.png      mean of the frames at one exposure, 16-bit PNG:
+//                                          digital number = png value / png_scale
+//   DIR/frames/NNN_<name>_hdr.tiff         with several exposures: the linear HDR merge
+//                                          (32-bit float TIFF, full scale per second)
+//
+// Manifest: {"format": "procam capture session", "version": 1, "sequence": {kind, parameters},
+// "capture": {frames_per_pattern, discard_frames, exposures_us, settle_ms}, "camera": {device,
+// uri, vendor, model, serial, settings}, "display": {name, width, height}, "complete",
+// "created", "updated", "runs": [...], "interruptions": [...], "patterns": [{index, name, file,
+// checksum, info, "captured": null | {time, shown_ns, settled_ns, retries, full_scale,
+// exposures: [{exposure_us, gain, file, png_scale, frames, sequences, buffered_dropped,
+// stale_dropped, discarded, first_exposure_start_ns, last_arrival_ns}], hdr}}]}.
+//
+// Every file is written through a temporary file and a rename (WriteFileAtomically), frames
+// before the manifest entry that names them, so a crash at any point leaves a consistent
+// session: a pattern is either recorded with all its files or captured again on resume.
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <string>
+
+#include "capture/camera.h"
+#include "capture/display.h"
+#include "capture/patterns.h"
+#include "capture/sequencer.h"
+
+namespace procam {
+
+struct CaptureSessionOptions {
+  std::filesystem::path directory;  // created when missing; resumed when it holds session.json
+  SequencerOptions sequencer;
+  bool Check(std::string* why) const;
+};
+
+struct CaptureSummary {
+  int patterns_total = 0;
+  int patterns_before = 0;    // already captured when this run started (a resumed session)
+  int patterns_captured = 0;  // captured by this run
+  int retries = 0;            // failed grabs retried successfully
+  int stale_dropped = 0;      // frames dropped because they were exposed before a pattern settled
+  double seconds = 0.0;
+  std::filesystem::path manifest;
+  std::string BriefReport() const;  // one line
+};
+
+// Captures every pattern of `sequence` that options.directory does not hold yet, showing it on
+// `display` and photographing it with `camera`.
+// Throws IoError when the directory holds a session of another sequence, another camera or other
+// capture settings (the message names what differs); CaptureFault when the camera keeps failing
+// — the patterns captured so far and the interruption are in the manifest, and running the same
+// call again resumes after the last captured pattern.
+CaptureSummary RunCaptureSession(const CaptureSessionOptions& options,
+                                 const CaptureSequence& sequence, Camera& camera,
+                                 PatternDisplay& display);
+
+// A session read back, for calibration and tests.
+class CaptureSessionData {
+ public:
+  // Throws IoError naming the file when session.json is missing or malformed.
+  static CaptureSessionData Load(const std::filesystem::path& directory);
+
+  const std::filesystem::path& directory() const { return directory_; }
+  const nlohmann::json& manifest() const { return manifest_; }
+  bool complete() const;
+  int pattern_count() const;
+  bool captured(int pattern) const;
+  std::string pattern_name(int pattern) const;
+  // Mean digital numbers (CV_32FC1 or CV_32FC3) of `pattern` at its `exposure`-th exposure.
+  // Throws IoError when the pattern is not captured or its file is unreadable.
+  cv::Mat Mean(int pattern, int exposure = 0) const;
+  // The HDR merge (full scale per second), or an empty matrix without bracketing.
+  cv::Mat Hdr(int pattern) const;
+
+ private:
+  std::filesystem::path directory_;
+  nlohmann::json manifest_;
+};
+
+}  // namespace procam

@@ -1,0 +1,108 @@
+#pragma once
+// The synthetic world: what a camera would photograph in a room lit by projectors, rendered so
+// that the solver's own model is NOT the world.
+//
+//   direct light   per camera pixel, exactly: the surface point x the pixel sees (Embree) is
+//                  projected into every projector; if x is inside the image and nothing occludes
+//                  it, the pixel it falls in lights it with output(drive) · Gain(x) (projector.h:
+//                  response, colour mixing, black level, distance and incidence falloff), times
+//                  the reflectance at x;
+//   indirect light a radiosity solution on a "world" mesh `world_factor` times finer than the
+//                  solver's, driven by the direct light the images deliver to each world patch;
+//                  the bounce light B − E of the world patch x lies on is added;
+//   camera         a lens model with distortion (the projector geometry class, used as a camera:
+//                  `proj_from_world` is then cam_from_world), exposure, vignetting
+//                  (1 − v·r², r = distance from the image centre / half diagonal), shot noise
+//                  (Gaussian, variance = shot_noise² · signal) and read noise, a power-law response
+//                  and 8-bit quantisation for photos.
+// Units: pixel values are exitance in the scene's radiosity units (so the desired appearance
+// Bd is directly comparable), times exposure.
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core/mat.hpp>
+
+#include "compensation/radiosity.h"
+#include "datasets_synthetic/paper_scenes.h"
+#include "geometry/patches.h"
+#include "geometry/ray_scene.h"
+#include "geometry/scene.h"
+#include "projection/projector.h"
+#include "projection/projector_images.h"
+
+namespace procam {
+
+using CameraGeometry = ProjectorGeometry;  // same lens and pose model; proj_from_world = cam_from_world
+
+struct SimulatedCameraOptions {
+  double exposure = 1.0;     // sensor value per unit exitance, > 0 (1: white radiosity w = 1 saturates)
+  double vignetting = 0.15;  // relative fall-off at the image corner, in [0, 1)
+  double shot_noise = 0.01;  // standard deviation at signal 1 (sensor units), ≥ 0
+  double read_noise = 0.002; // standard deviation (sensor units), ≥ 0
+  double gamma = 2.2;        // photo response: code = 255 · value^(1/gamma), > 0
+  uint32_t seed = 1;         // noise seed (photos are reproducible)
+  bool Check(std::string* why) const;
+};
+
+struct SimulatedRigOptions {
+  int world_factor = 4;            // world mesh patches per solver patch, ≥ 1
+  int solver_patches = 400;        // the solver's patch count the world is finer than
+  int direct_samples = 3;          // Gauss points per side when integrating direct light on world patches
+  double ray_margin = 1e-4;        // metres
+  SimulatedCameraOptions camera;
+  bool Check(std::string* why) const;
+};
+
+// A camera's lens (with distortion) from a placement: OpenCV4-model lens (k1 = −0.05,
+// k2 = 0.01) of the placement's field of view and size; pinhole when `distortion` is false.
+CameraGeometry CameraFromPlacement(const DevicePlacement& placement, bool distortion = true);
+// A projector from a placement: pinhole lens, black 0.002, max 1.5 (working RGB at 1 m on
+// axis), gamma 2.2, identity mixing, 8 bits.
+Projector ProjectorFromPlacement(const DevicePlacement& placement);
+
+class SimulatedRig {
+ public:
+  // Builds the world mesh, its form factors and ray scenes. Throws std::invalid_argument if the
+  // options fail Check().
+  SimulatedRig(const Scene& scene, std::vector<Projector> projectors, CameraGeometry camera,
+               const SimulatedRigOptions& options);
+
+  const Scene& scene() const { return scene_; }
+  const std::vector<Projector>& projectors() const { return projectors_; }
+  const CameraGeometry& camera() const { return camera_; }
+  const PatchLevel& world() const { return world_.fine; }
+
+  // Linear exitance image (CV_32FC3, RGB order, row 0 = top) the camera sees when the
+  // projectors show `images`, before the camera's exposure, vignetting and noise. Pixels that
+  // see nothing are 0.
+  cv::Mat RenderRadiance(const std::vector<ProjectorImage>& images) const;
+  // What the camera records: RenderRadiance × exposure × vignetting + noise (CV_32FC3).
+  cv::Mat PhotographLinear(const std::vector<ProjectorImage>& images, uint32_t seed_offset = 0) const;
+  // The linear photo through the response curve, quantised to 8 bits (CV_8UC3, RGB).
+  cv::Mat Photograph8(const std::vector<ProjectorImage>& images, uint32_t seed_offset = 0) const;
+  // The desired appearance as the camera would see it: desired sRGB (texture at the hit) →
+  // linear × white (CV_32FC3, RGB); 0 where the pixel sees nothing.
+  cv::Mat RenderDesired() const;
+  // Mask (CV_8UC1, 255) of pixels that see a surface.
+  const cv::Mat& coverage() const { return coverage_; }
+
+ private:
+  struct PixelHit {
+    int world_patch = -1;
+    Vec3 point = Vec3::Zero();
+  };
+  Scene scene_;
+  std::vector<Projector> projectors_;
+  CameraGeometry camera_;
+  SimulatedRigOptions options_;
+  PatchHierarchy world_;
+  std::unique_ptr<RadiositySystem> world_radiosity_;
+  std::unique_ptr<RayScene> surfaces_;   // the scene's surfaces, for shadow rays
+  std::vector<PixelHit> hits_;           // row-major, one per camera pixel
+  cv::Mat coverage_;
+};
+
+}  // namespace procam

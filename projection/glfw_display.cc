@@ -1,0 +1,208 @@
+#include "projection/glfw_display.h"
+
+#include <mutex>
+
+#include <GLFW/glfw3.h>
+#include <opencv2/imgproc.hpp>
+
+#include "geometry/io.h"
+
+namespace procam {
+namespace {
+
+// GLFW is initialised on first use and terminated when the last window closes (so that a
+// later use, possibly on another DISPLAY, starts afresh).
+std::mutex glfw_mutex;
+int open_windows = 0;
+
+std::string GlfwErrorText() {
+  const char* description = nullptr;
+  glfwGetError(&description);
+  return description ? description : "unknown error";
+}
+
+void InitGlfw() {
+  if (!glfwInit()) throw IoError("GLFW: cannot connect to a display: " + GlfwErrorText());
+}
+
+void ReleaseGlfwIfIdle() {
+  if (open_windows == 0) glfwTerminate();
+}
+
+std::vector<MonitorInfo> ListMonitorsLocked() {
+  InitGlfw();
+  int count = 0;
+  GLFWmonitor** monitors = glfwGetMonitors(&count);
+  std::vector<MonitorInfo> list;
+  for (int k = 0; k < count; ++k) {
+    MonitorInfo info;
+    info.index = k;
+    info.name = glfwGetMonitorName(monitors[k]) ? glfwGetMonitorName(monitors[k]) : "";
+    if (const GLFWvidmode* mode = glfwGetVideoMode(monitors[k])) {
+      info.width = mode->width;
+      info.height = mode->height;
+      info.refresh_hz = mode->refreshRate;
+    }
+    glfwGetMonitorPos(monitors[k], &info.x, &info.y);
+    list.push_back(info);
+  }
+  return list;
+}
+
+std::string Describe(const std::vector<MonitorInfo>& monitors) {
+  std::string text;
+  for (const MonitorInfo& m : monitors) {
+    text += (text.empty() ? "" : ", ") + std::to_string(m.index) + " '" + m.name + "' " + std::to_string(m.width) +
+            "x" + std::to_string(m.height);
+  }
+  return text.empty() ? "none" : text;
+}
+
+}  // namespace
+
+std::vector<MonitorInfo> ListMonitors() {
+  std::lock_guard<std::mutex> lock(glfw_mutex);
+  std::vector<MonitorInfo> list = ListMonitorsLocked();
+  ReleaseGlfwIfIdle();
+  return list;
+}
+
+MonitorInfo FindMonitor(const std::string& which) {
+  const std::vector<MonitorInfo> monitors = ListMonitors();
+  for (const MonitorInfo& monitor : monitors) {
+    if (monitor.name == which || std::to_string(monitor.index) == which) return monitor;
+  }
+  throw IoError("monitor '" + which + "' not found (monitors: " + Describe(monitors) + ")");
+}
+
+GlfwDisplay::GlfwDisplay(const MonitorInfo& monitor) : monitor_(monitor) {
+  std::lock_guard<std::mutex> lock(glfw_mutex);
+  InitGlfw();
+  int count = 0;
+  GLFWmonitor** monitors = glfwGetMonitors(&count);
+  if (monitor.index < 0 || monitor.index >= count) {
+    ReleaseGlfwIfIdle();
+    throw IoError("monitor " + std::to_string(monitor.index) + " '" + monitor.name + "' is not connected");
+  }
+  GLFWmonitor* target = monitors[monitor.index];
+  const GLFWvidmode* mode = glfwGetVideoMode(target);
+  monitor_.width = mode->width;
+  monitor_.height = mode->height;
+  monitor_.refresh_hz = mode->refreshRate;
+  // Keep the current mode (no mode switch), no decorations, stay up when focus moves to another
+  // projector's window.
+  glfwWindowHint(GLFW_RED_BITS, mode->redBits);
+  glfwWindowHint(GLFW_GREEN_BITS, mode->greenBits);
+  glfwWindowHint(GLFW_BLUE_BITS, mode->blueBits);
+  glfwWindowHint(GLFW_REFRESH_RATE, mode->refreshRate);
+  glfwWindowHint(GLFW_AUTO_ICONIFY, GLFW_FALSE);
+  glfwWindowHint(GLFW_CLIENT_API, GLFW_OPENGL_API);
+  GLFWwindow* window = glfwCreateWindow(mode->width, mode->height, ("procam " + monitor.name).c_str(), target, nullptr);
+  if (window == nullptr) {
+    const std::string error = GlfwErrorText();
+    ReleaseGlfwIfIdle();
+    throw IoError("monitor " + std::to_string(monitor.index) + " '" + monitor.name + "': cannot open a window: " + error);
+  }
+  ++open_windows;
+  window_ = window;
+  glfwMakeContextCurrent(window);
+  glfwSwapInterval(1);
+  glfwSetInputMode(window, GLFW_CURSOR, GLFW_CURSOR_HIDDEN);
+  shown_ = cv::Mat(mode->height, mode->width, CV_16UC3, cv::Scalar::all(0));
+  Draw();
+  glfwSwapBuffers(window);
+}
+
+GlfwDisplay::~GlfwDisplay() {
+  std::lock_guard<std::mutex> lock(glfw_mutex);
+  glfwDestroyWindow(static_cast<GLFWwindow*>(window_));
+  --open_windows;
+  ReleaseGlfwIfIdle();
+}
+
+cv::Size GlfwDisplay::Resolution() const { return {monitor_.width, monitor_.height}; }
+
+std::string GlfwDisplay::Name() const { return "glfw:" + monitor_.name; }
+
+void GlfwDisplay::Show(const cv::Mat& pattern) {
+  if (pattern.size() != Resolution()) {
+    throw IoError(Name() + ": image is " + std::to_string(pattern.cols) + "x" + std::to_string(pattern.rows) +
+                  ", the monitor runs at " + std::to_string(monitor_.width) + "x" + std::to_string(monitor_.height));
+  }
+  cv::Mat rgb;
+  if (pattern.channels() == 1) {
+    cv::cvtColor(pattern, rgb, cv::COLOR_GRAY2RGB);
+  } else if (pattern.channels() == 3) {
+    cv::cvtColor(pattern, rgb, cv::COLOR_BGR2RGB);
+  } else {
+    throw IoError(Name() + ": images must have 1 or 3 channels");
+  }
+  if (rgb.depth() == CV_8U) {
+    rgb.convertTo(shown_, CV_16UC3, 257.0);  // 8-bit v → 16-bit v · 257: the same fraction
+  } else if (rgb.depth() == CV_16U) {
+    shown_ = rgb;
+  } else {
+    throw IoError(Name() + ": images must be 8- or 16-bit");
+  }
+  Draw();
+  glfwSwapBuffers(static_cast<GLFWwindow*>(window_));
+}
+
+void GlfwDisplay::Show(const ProjectorImage& image) {
+  if (image.codes.size() != Resolution()) {
+    throw IoError(Name() + ": image is " + std::to_string(image.codes.cols) + "x" + std::to_string(image.codes.rows) +
+                  ", the monitor runs at " + std::to_string(monitor_.width) + "x" + std::to_string(monitor_.height));
+  }
+  image.codes.convertTo(shown_, CV_16UC3, 65535.0 / ((1 << image.bits) - 1));
+  Draw();
+  glfwSwapBuffers(static_cast<GLFWwindow*>(window_));
+}
+
+void GlfwDisplay::Draw() {
+  GLFWwindow* window = static_cast<GLFWwindow*>(window_);
+  glfwMakeContextCurrent(window);
+  int width = 0, height = 0;
+  glfwGetFramebufferSize(window, &width, &height);
+  glViewport(0, 0, width, height);
+  glMatrixMode(GL_PROJECTION);
+  glLoadIdentity();
+  glOrtho(0.0, width, 0.0, height, -1.0, 1.0);
+  glMatrixMode(GL_MODELVIEW);
+  glLoadIdentity();
+  glClearColor(0.0f, 0.0f, 0.0f, 1.0f);
+  glClear(GL_COLOR_BUFFER_BIT);
+  // Pixel for pixel, row 0 at the top: start just below the top edge and draw downwards.
+  glRasterPos2d(0.0, height - 1e-3);
+  glPixelZoom(1.0f, -1.0f);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, static_cast<GLint>(shown_.step1() / 3));
+  glDrawPixels(shown_.cols, shown_.rows, GL_RGB, GL_UNSIGNED_SHORT, shown_.data);
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+  glFinish();
+}
+
+cv::Mat GlfwDisplay::ReadBack() {
+  GLFWwindow* window = static_cast<GLFWwindow*>(window_);
+  glfwMakeContextCurrent(window);
+  int width = 0, height = 0;
+  glfwGetFramebufferSize(window, &width, &height);
+  cv::Mat bottom_up(height, width, CV_8UC3);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadBuffer(GL_FRONT);  // what was swapped onto the screen
+  glReadPixels(0, 0, width, height, GL_RGB, GL_UNSIGNED_BYTE, bottom_up.data);
+  cv::Mat top_down;
+  cv::flip(bottom_up, top_down, 0);
+  return top_down;
+}
+
+bool GlfwDisplay::PollEvents() {
+  GLFWwindow* window = static_cast<GLFWwindow*>(window_);
+  glfwPollEvents();
+  if (glfwWindowShouldClose(window) || glfwGetKey(window, GLFW_KEY_ESCAPE) == GLFW_PRESS ||
+      glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) {
+    return false;
+  }
+  return true;
+}
+
+}  // namespace procam

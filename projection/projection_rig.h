@@ -1,0 +1,125 @@
+#pragma once
+// What each projector pixel lights, and what the projectors together can deliver to each patch.
+//
+// Maps: every pixel's ray (projector.h conventions) is cast through Embree against the fine
+// patches themselves (each patch one geometry, so the first hit IS the patch: no inverse
+// bilinear map or barycentric lookup needed, and patches tile their surfaces exactly, so the
+// first hit is also the first surface hit: occlusion comes for free). A pixel whose ray misses
+// everything, or first meets a surface from its unlit side, lights nothing and stays black.
+//
+// Light bookkeeping is by flux: a pixel of projector k at drive d sends the flux
+// output_k(d) · Ω_k (Ω_k = 1 / AxisPixelDensity(), steradians · 1 m², so that output is the
+// on-axis irradiance at 1 m) onto the patch its ray hits. Its footprint there has area
+// a = Ω_k / g with g the geometric gain (cos θ / d² times the lens's off-axis pixel density
+// ratio, projector.h), so spread over the footprint that flux is the irradiance output · g:
+// incidence cosine and inverse-square falloff are in the gain, and summing flux over pixels
+// integrates irradiance over the patch. A patch's direct-light exitance is
+// E_i = ρ_i · (flux received) / A_i; the bounds below are what the images of
+// projector_images.h deliver with all lit pixels at drive 0, or at full white.
+//
+// Counting the pixels whose CENTRE falls on a patch misjudges its lit area by up to a row of
+// pixels along each edge (several % for patches 20–50 pixels across), although the light on
+// the surface is continuous across patch edges. So wherever a projector lights a patch wholly
+// (coverage_samples² Gauss points and the corners all in its image, facing it, unoccluded), its
+// pixels' footprints there are rescaled to sum to the patch's exact area (`coverage_scale`):
+// the bounds become the quadrature of g · output over the patch to second order, and uniform
+// light over neighbouring patches is delivered uniformly. Patches cut by an image border or a
+// shadow edge keep the pixel count (error about ½ pixel row along the cut).
+//
+// Blending: where projectors overlap, each pixel's share of the light above black is its
+// weight w = a_k / Σ_j a_j at the surface point, a_j = g_j · luminance(max_j − black_j) ·
+// feather_j, summed over the projectors j that reach the point unoccluded. feather_j ramps
+// smoothly (C¹) from 0 to 1 over `feather` of the image size, measured in projector j's image
+// from its border and from the far side of occluders' silhouettes (where j's shadow begins on
+// the surface behind): overlaps cross-fade without seams, also where one projector's shadow
+// falls inside another's light.
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "geometry/patches.h"
+#include "geometry/ray_scene.h"
+#include "geometry/scene.h"
+#include "projection/projector.h"
+
+namespace procam {
+
+struct ProjectionRigOptions {
+  // Width of the blending ramp at each image border, as a fraction of min(width, height), in
+  // [0, 0.5]; 0 gives hard edges (each overlapping projector then shares by gain only).
+  double feather = 0.1;
+  // Gauss points per side used to decide whether a projector lights a patch wholly, [1, 16].
+  int coverage_samples = 4;
+  // Shadow rays start and end this far from surfaces (metres, > 0): larger than Embree's
+  // single-precision error at room scale (~1e-6 m), smaller than any gap that matters.
+  double ray_margin = 1e-4;
+  bool Check(std::string* why) const;
+};
+
+// One projector's per-pixel map, row-major (index = row · width + column).
+struct ProjectorMap {
+  int width = 0, height = 0;
+  std::vector<int32_t> patch;  // fine patch the pixel lights, −1 for none
+  std::vector<float> gain;     // g at the hit (1/m²); 0 where patch is −1
+  std::vector<float> weight;   // blending weight in (0, 1]; 0 where patch is −1
+  std::vector<float> share;    // weight / gain (m²): the pixel's output per unit irradiance level
+  double pixel_solid_angle = 0.0;  // Ω_k = 1 / axis pixel density (sr; flux per unit output, m²)
+  // The lit pixels grouped by patch: those of patch i are pixels_by_patch[patch_begin[i] ..
+  // patch_begin[i + 1]), ascending.
+  std::vector<int> patch_begin;          // (n + 1)
+  std::vector<int32_t> pixels_by_patch;  // (lit_pixels)
+  int lit_pixels = 0;          // pixels with a patch
+  int patches_reached = 0;     // distinct patches lit
+};
+
+// Everything the renderer needs, for one patch level and a set of projectors.
+struct ProjectionRig {
+  std::vector<Projector> projectors;
+  std::vector<ProjectorMap> maps;   // one per projector
+  Eigen::VectorXd area;             // (n) A_i, m²
+  Eigen::MatrixX3d reflectance;     // (n,3) ρ
+  Eigen::MatrixX3d lower, upper;    // (n,3) direct-light exitance bounds (ρ · flux / A)
+  // (n) Σ over the pixels lighting the patch of w · a · coverage_scale (m²): the patch's lit
+  // area as the blending weights share it; 0 for a patch no projector reaches.
+  Eigen::VectorXd blended_area;
+  // (n, projectors) factor on the footprints of projector k's pixels on patch i: the patch's
+  // area over their counted footprint where k lights it wholly, else 1.
+  Eigen::MatrixXd coverage_scale;
+
+  int size() const { return static_cast<int>(area.size()); }
+};
+
+struct ProjectionRigSummary {
+  double seconds = 0.0;
+  int patches_reached = 0;  // by at least one projector
+};
+
+// Builds the maps and bounds. Throws IoError naming the projector (and its .cameramodel) if one
+// lights no patch, and std::invalid_argument if the options fail Check().
+ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector> projectors,
+                                 const ProjectionRigOptions& options,
+                                 ProjectionRigSummary* summary = nullptr);
+
+// Direct-light exitance bounds of every patch of `level` from the scene's projectors, for
+// CompensationProblem::lower/upper. Returns false (outputs untouched) if the scene lists no
+// projectors. Throws like ReadProjectors and BuildProjectionRig.
+bool SetBoundsFromProjectors(const Scene& scene, const PatchLevel& level, Eigen::MatrixX3d* lower,
+                             Eigen::MatrixX3d* upper, const ProjectionRigOptions& options = {});
+
+// Bounds of the coarse level from the fine one: a coarse patch receives the flux of its
+// children, so its exitance bound is the area-weighted mean of theirs (exact).
+Eigen::MatrixX3d CoarsenBounds(const Eigen::MatrixX3d& fine_bounds, const Eigen::VectorXd& fine_area,
+                               const std::vector<int>& coarse_of_fine, int coarse_count);
+
+// A ray scene whose surface k is patch k of `level` (quads as two triangles), so that
+// RayScene::Intersect reports the patch it hits.
+Scene PatchScene(const PatchLevel& level);
+
+// Smooth blending ramp of a pixel coordinate for an image border: 0 on the border, 1 at `ramp`
+// pixels inside (smoothstep); 1 everywhere inside when ramp is 0; 0 outside the image.
+double FeatherWeight(const Vec2& pixel, int width, int height, double ramp);
+
+}  // namespace procam

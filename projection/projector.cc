@@ -1,0 +1,556 @@
+#include "projection/projector.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <set>
+#include <stdexcept>
+
+#include <Eigen/LU>
+#include <nlohmann/json.hpp>
+
+#include "geometry/io.h"
+
+extern "C" {
+#include <mrcal/mrcal.h>
+}
+
+namespace procam {
+
+// ---------------------------------------------------------------------------------------------
+// The mrcal adapter: everything that touches libmrcal types or its rt_cam_ref convention.
+
+struct ProjectorGeometry::Lens {
+  mrcal_lensmodel_t model;
+};
+
+namespace {
+
+static_assert(sizeof(mrcal_point2_t) == sizeof(Vec2) && sizeof(mrcal_point3_t) == sizeof(Vec3),
+              "Eigen fixed vectors and mrcal points must share their layout");
+
+const mrcal_point3_t* AsMrcal(const Vec3* p) { return reinterpret_cast<const mrcal_point3_t*>(p); }
+mrcal_point3_t* AsMrcal(Vec3* p) { return reinterpret_cast<mrcal_point3_t*>(p); }
+const mrcal_point2_t* AsMrcal(const Vec2* q) { return reinterpret_cast<const mrcal_point2_t*>(q); }
+mrcal_point2_t* AsMrcal(Vec2* q) { return reinterpret_cast<mrcal_point2_t*>(q); }
+
+// mrcal's rt_cam_ref (Rodrigues rotation, then translation) with ref = world.
+std::array<double, 6> RtFromPose(const Eigen::Isometry3d& proj_from_world) {
+  const Eigen::AngleAxisd rotation(proj_from_world.rotation());
+  const Vec3 r = rotation.axis() * rotation.angle();
+  const Vec3& t = proj_from_world.translation();
+  return {r.x(), r.y(), r.z(), t.x(), t.y(), t.z()};
+}
+
+Eigen::Isometry3d PoseFromRt(const double* rt) {
+  const Vec3 r(rt[0], rt[1], rt[2]);
+  const double angle = r.norm();
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  if (angle > 0.0) pose.linear() = Eigen::AngleAxisd(angle, r / angle).toRotationMatrix();
+  pose.translation() = Vec3(rt[3], rt[4], rt[5]);
+  return pose;
+}
+
+// Pixels per steradian from the projection Jacobian at a unit direction v: dq/dp has rows a, b
+// with a·v = b·v = 0 (q is invariant to scaling p), so the Jacobian restricted to the tangent
+// plane has determinant (a × b)·v.
+double DensityFromJacobian(const mrcal_point3_t* dq_dp, const Vec3& v) {
+  const Vec3 a(dq_dp[0].x, dq_dp[0].y, dq_dp[0].z);
+  const Vec3 b(dq_dp[1].x, dq_dp[1].y, dq_dp[1].z);
+  return std::abs(a.cross(b).dot(v));
+}
+
+std::string FormatNumber(double value) {
+  char buffer[40];
+  std::snprintf(buffer, sizeof(buffer), "%.17g", value);
+  return buffer;
+}
+
+}  // namespace
+
+ProjectorGeometry::ProjectorGeometry(const std::string& lens_model, std::vector<double> intrinsics,
+                                     int width, int height, const Eigen::Isometry3d& proj_from_world)
+    : lens_model_(lens_model),
+      intrinsics_(std::move(intrinsics)),
+      width_(width),
+      height_(height),
+      proj_from_world_(proj_from_world) {
+  auto lens = std::make_shared<Lens>();
+  if (!mrcal_lensmodel_from_name(&lens->model, lens_model.c_str()) ||
+      !mrcal_lensmodel_type_is_valid(lens->model.type)) {
+    throw std::invalid_argument("unknown mrcal lens model '" + lens_model + "'");
+  }
+  if (lens->model.type == MRCAL_LENSMODEL_CAHVORE) {
+    throw std::invalid_argument("lens model " + lens_model + " cannot be unprojected by mrcal");
+  }
+  if (!mrcal_lensmodel_metadata(&lens->model).has_core) {
+    throw std::invalid_argument("lens model " + lens_model + " has no fx, fy, cx, cy core");
+  }
+  const int expected = mrcal_lensmodel_num_params(&lens->model);
+  if (static_cast<int>(intrinsics_.size()) != expected) {
+    throw std::invalid_argument(lens_model + " needs " + std::to_string(expected) +
+                                " intrinsics, got " + std::to_string(intrinsics_.size()));
+  }
+  for (const double value : intrinsics_) {
+    if (!std::isfinite(value)) throw std::invalid_argument("intrinsics must be finite");
+  }
+  if (!(intrinsics_[0] > 0.0 && intrinsics_[1] > 0.0)) {
+    throw std::invalid_argument("focal lengths fx, fy must be positive");
+  }
+  if (width < 1 || height < 1 || width > 65536 || height > 65536) {
+    throw std::invalid_argument("image size must be in [1, 65536], got " + std::to_string(width) +
+                                "x" + std::to_string(height));
+  }
+  if (!proj_from_world.matrix().allFinite()) throw std::invalid_argument("pose must be finite");
+  lens_ = std::move(lens);
+  axis_density_ = PixelDensity(Vec3::UnitZ());
+  if (!(axis_density_ > 0.0) || !std::isfinite(axis_density_)) {
+    throw std::invalid_argument("the lens has no finite pixel density on its optical axis");
+  }
+}
+
+ProjectorGeometry::ProjectorGeometry()
+    : ProjectorGeometry("LENSMODEL_PINHOLE", {1.0, 1.0, 0.0, 0.0}, 1, 1, Eigen::Isometry3d::Identity()) {}
+
+ProjectorGeometry ProjectorGeometry::Pinhole(double fx, double fy, double cx, double cy, int width,
+                                             int height, const Eigen::Isometry3d& proj_from_world) {
+  return ProjectorGeometry("LENSMODEL_PINHOLE", {fx, fy, cx, cy}, width, height, proj_from_world);
+}
+
+bool ProjectorGeometry::ProjectFromProj(const Vec3& p_in_proj, Vec2* pixel, double* density) const {
+  if (!(p_in_proj.z() > 0.0)) return false;
+  const Vec3 v = p_in_proj.normalized();
+  mrcal_point3_t dq_dp[2];
+  mrcal_project(AsMrcal(pixel), density ? dq_dp : nullptr, nullptr, AsMrcal(&v), 1, &lens_->model,
+                intrinsics_.data());
+  if (density) *density = DensityFromJacobian(dq_dp, v);
+  return pixel->allFinite();
+}
+
+bool ProjectorGeometry::Project(const Vec3& p_in_world, Vec2* pixel, double* density) const {
+  return ProjectFromProj(proj_from_world_ * p_in_world, pixel, density);
+}
+
+bool ProjectorGeometry::InImage(const Vec2& pixel) const {
+  return pixel.x() >= -0.5 && pixel.x() < width_ - 0.5 && pixel.y() >= -0.5 && pixel.y() < height_ - 0.5;
+}
+
+void ProjectorGeometry::Unproject(const Vec2* pixels, int count, Vec3* directions_in_proj) const {
+  if (count <= 0) return;
+  if (!mrcal_unproject(AsMrcal(directions_in_proj), AsMrcal(pixels), count, &lens_->model,
+                       intrinsics_.data())) {
+    for (int k = 0; k < count; ++k) directions_in_proj[k] = Vec3::Constant(std::nan(""));
+    return;
+  }
+  for (int k = 0; k < count; ++k) directions_in_proj[k].normalize();
+}
+
+Vec3 ProjectorGeometry::Unproject(const Vec2& pixel) const {
+  Vec3 direction;
+  Unproject(&pixel, 1, &direction);
+  return direction;
+}
+
+double ProjectorGeometry::PixelDensity(const Vec3& direction_in_proj) const {
+  const Vec3 v = direction_in_proj.normalized();
+  mrcal_point2_t q;
+  mrcal_point3_t dq_dp[2];
+  mrcal_project(&q, dq_dp, nullptr, AsMrcal(&v), 1, &lens_->model, intrinsics_.data());
+  return DensityFromJacobian(dq_dp, v);
+}
+
+void ProjectorGeometry::UnprojectImage(std::vector<Vec3>* directions_in_proj,
+                                       std::vector<double>* densities) const {
+  // Grid nodes every kStep pixels plus the last row/column, unprojected exactly.
+  constexpr int kStep = 16;
+  std::vector<int> node_x, node_y;
+  for (int x = 0; x < width_ - 1; x += kStep) node_x.push_back(x);
+  node_x.push_back(width_ - 1);
+  for (int y = 0; y < height_ - 1; y += kStep) node_y.push_back(y);
+  node_y.push_back(height_ - 1);
+  const int nx = static_cast<int>(node_x.size()), ny = static_cast<int>(node_y.size());
+  std::vector<Vec2> node_pixels;
+  node_pixels.reserve(nx * ny);
+  for (const int y : node_y) {
+    for (const int x : node_x) node_pixels.emplace_back(x, y);
+  }
+  std::vector<Vec3> node_directions(node_pixels.size());
+  Unproject(node_pixels.data(), static_cast<int>(node_pixels.size()), node_directions.data());
+
+  directions_in_proj->assign(static_cast<size_t>(width_) * height_, Vec3::Zero());
+  densities->assign(static_cast<size_t>(width_) * height_, 0.0);
+  const mrcal_lensmodel_t* model = &lens_->model;
+  const double* intrinsics = intrinsics_.data();
+#pragma omp parallel for schedule(dynamic, 8)
+  for (int y = 0; y < height_; ++y) {
+    const int gy = std::min(y / kStep, ny - 2 < 0 ? 0 : ny - 2);
+    const double fy = ny > 1 ? double(y - node_y[gy]) / (node_y[gy + 1] - node_y[gy]) : 0.0;
+    for (int x = 0; x < width_; ++x) {
+      const int gx = std::min(x / kStep, nx - 2 < 0 ? 0 : nx - 2);
+      const double fx = nx > 1 ? double(x - node_x[gx]) / (node_x[gx + 1] - node_x[gx]) : 0.0;
+      auto node = [&](int i, int j) -> const Vec3& {
+        return node_directions[std::min(j, ny - 1) * nx + std::min(i, nx - 1)];
+      };
+      Vec3 v = ((1 - fx) * (1 - fy)) * node(gx, gy) + (fx * (1 - fy)) * node(gx + 1, gy) +
+               ((1 - fx) * fy) * node(gx, gy + 1) + (fx * fy) * node(gx + 1, gy + 1);
+      v.normalize();
+      const Vec2 target(x, y);
+      double density = std::nan("");
+      for (int iteration = 0; iteration < 6 && v.allFinite(); ++iteration) {
+        mrcal_point2_t q;
+        mrcal_point3_t dq_dp[2];
+        mrcal_project(&q, dq_dp, nullptr, AsMrcal(&v), 1, model, intrinsics);
+        density = DensityFromJacobian(dq_dp, v);
+        const Vec2 error(q.x - target.x(), q.y - target.y());
+        if (error.norm() < 1e-9) break;
+        // Newton step in the tangent plane of the unit sphere at v.
+        const Vec3 t1 = v.unitOrthogonal(), t2 = v.cross(t1);
+        const Vec3 a(dq_dp[0].x, dq_dp[0].y, dq_dp[0].z), b(dq_dp[1].x, dq_dp[1].y, dq_dp[1].z);
+        Eigen::Matrix2d jacobian;
+        jacobian << a.dot(t1), a.dot(t2), b.dot(t1), b.dot(t2);
+        const Vec2 step = jacobian.partialPivLu().solve(-error);
+        v = (v + step.x() * t1 + step.y() * t2).normalized();
+      }
+      const size_t index = static_cast<size_t>(y) * width_ + x;
+      (*directions_in_proj)[index] = v;
+      (*densities)[index] = density;
+    }
+  }
+}
+
+double ProjectorGeometry::Gain(const Vec3& p_in_world, const Vec3& normal, Vec2* pixel) const {
+  const Vec3 p_in_proj = proj_from_world_ * p_in_world;
+  if (!(p_in_proj.z() > 0.0)) return 0.0;
+  const double distance = p_in_proj.norm();
+  const double cosine = normal.dot(CentreInWorld() - p_in_world) / distance;
+  if (!(cosine > 0.0)) return 0.0;
+  Vec2 q;
+  double density = 0.0;
+  if (!ProjectFromProj(p_in_proj, &q, &density)) return 0.0;
+  if (pixel) *pixel = q;
+  return density / axis_density_ * cosine / (distance * distance);
+}
+
+Eigen::Isometry3d ProjFromWorldLookingAt(const Vec3& centre, const Vec3& target, const Vec3& up) {
+  const Vec3 forward = target - centre;
+  if (!(forward.norm() > 0.0)) throw std::invalid_argument("look-at: centre and target coincide");
+  const Vec3 z = forward.normalized();
+  const Vec3 down = -up + up.dot(z) * z;  // −up without its component along the axis
+  if (!(down.norm() > 1e-9 * up.norm())) throw std::invalid_argument("look-at: axis parallel to up");
+  const Vec3 y = down.normalized();
+  const Vec3 x = y.cross(z);
+  Eigen::Isometry3d proj_from_world = Eigen::Isometry3d::Identity();
+  proj_from_world.linear().row(0) = x.transpose();
+  proj_from_world.linear().row(1) = y.transpose();
+  proj_from_world.linear().row(2) = z.transpose();
+  proj_from_world.translation() = -(proj_from_world.linear() * centre);
+  return proj_from_world;
+}
+
+std::string CameraModelText(const ProjectorGeometry& geometry) {
+  auto list = [](const auto& values) {
+    std::string text = "[";
+    for (size_t k = 0; k < values.size(); ++k) text += (k ? ", " : " ") + FormatNumber(values[k]);
+    return text + " ]";
+  };
+  const std::array<double, 6> rt = RtFromPose(geometry.proj_from_world());
+  return "# procam projector model; extrinsics = mrcal rt_cam_ref with ref = world\n{\n"
+         "  'lensmodel':  '" + geometry.lens_model() + "',\n"
+         "  'intrinsics': " + list(geometry.intrinsics()) + ",\n"
+         "  'imagersize': [ " + std::to_string(geometry.width()) + ", " +
+         std::to_string(geometry.height()) + " ],\n"
+         "  'extrinsics': " + list(rt) + "\n}\n";
+}
+
+namespace {
+
+ProjectorGeometry GeometryFromMrcal(const mrcal_cameramodel_t& model, const std::string& file) {
+  char name[1024];
+  if (!mrcal_lensmodel_name(name, sizeof(name), &model.lensmodel)) {
+    throw IoError(file + ": lens model name too long");
+  }
+  const int count = mrcal_lensmodel_num_params(&model.lensmodel);
+  std::vector<double> intrinsics(model.intrinsics, model.intrinsics + count);
+  try {
+    return ProjectorGeometry(name, std::move(intrinsics), static_cast<int>(model.imagersize[0]),
+                             static_cast<int>(model.imagersize[1]), PoseFromRt(model.rt_cam_ref));
+  } catch (const std::invalid_argument& error) {
+    throw IoError(file + ": " + error.what());
+  }
+}
+
+struct CameraModelDeleter {
+  void operator()(mrcal_cameramodel_t* model) const { mrcal_free_cameramodel(&model); }
+};
+
+}  // namespace
+
+ProjectorGeometry ReadCameraModel(const std::filesystem::path& path) {
+  const std::string file = path.string();
+  if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
+  const std::string text = ReadFile(path);
+  std::unique_ptr<mrcal_cameramodel_t, CameraModelDeleter> model(
+      mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
+  if (!model) throw IoError(file + ": not a valid mrcal .cameramodel (libmrcal could not parse it)");
+  return GeometryFromMrcal(*model, file);
+}
+
+void WriteCameraModel(const std::filesystem::path& path, const ProjectorGeometry& geometry) {
+  const std::string text = CameraModelText(geometry);
+  std::unique_ptr<mrcal_cameramodel_t, CameraModelDeleter> check(
+      mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
+  if (!check) throw IoError(path.string() + ": libmrcal cannot parse the model text procam made");
+  WriteFileAtomically(path, text);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Photometry.
+
+ResponseCurve ResponseCurve::Gamma(double gamma) {
+  if (!(gamma > 0.0) || !std::isfinite(gamma)) {
+    throw std::invalid_argument("gamma must be a positive number");
+  }
+  ResponseCurve curve;
+  curve.gamma_ = gamma;
+  return curve;
+}
+
+ResponseCurve ResponseCurve::Table(const std::vector<double>& light) {
+  if (light.size() < 2) throw std::invalid_argument("a response table needs at least 2 values");
+  for (size_t k = 0; k < light.size(); ++k) {
+    if (!std::isfinite(light[k])) throw std::invalid_argument("response values must be finite");
+    if (k > 0 && !(light[k] > light[k - 1])) {
+      throw std::invalid_argument("response values must increase strictly (index " +
+                                  std::to_string(k) + ")");
+    }
+  }
+  ResponseCurve curve;
+  curve.table_.resize(light.size());
+  const double range = light.back() - light.front();
+  for (size_t k = 0; k < light.size(); ++k) curve.table_[k] = (light[k] - light.front()) / range;
+  curve.table_.front() = 0.0;
+  curve.table_.back() = 1.0;
+  return curve;
+}
+
+double ResponseCurve::Light(double drive) const {
+  drive = std::clamp(drive, 0.0, 1.0);
+  if (table_.empty()) return std::pow(drive, gamma_);
+  const double position = drive * (table_.size() - 1);
+  const size_t k = std::min(static_cast<size_t>(position), table_.size() - 2);
+  const double f = position - k;
+  return (1 - f) * table_[k] + f * table_[k + 1];
+}
+
+double ResponseCurve::Drive(double light) const {
+  light = std::clamp(light, 0.0, 1.0);
+  if (table_.empty()) return std::pow(light, 1.0 / gamma_);
+  const auto upper = std::upper_bound(table_.begin(), table_.end(), light);
+  if (upper == table_.end()) return 1.0;
+  const size_t k = static_cast<size_t>(upper - table_.begin()) - 1;
+  const double f = (light - table_[k]) / (table_[k + 1] - table_[k]);
+  return (k + f) / (table_.size() - 1);
+}
+
+std::string ProjectorPhotometry::Validate() const {
+  for (int c = 0; c < 3; ++c) {
+    if (!(black[c] >= 0.0) || !std::isfinite(black[c])) return "black: each value must be >= 0";
+    if (!(max[c] > black[c]) || !std::isfinite(max[c])) return "max: each value must be greater than black";
+  }
+  if (!mixing.allFinite() || mixing.minCoeff() < 0.0) return "mixing: entries must be finite and >= 0";
+  for (int r = 0; r < 3; ++r) {
+    if (std::abs(mixing.row(r).sum() - 1.0) > 1e-6) {
+      return "mixing: row " + std::to_string(r) + " must sum to 1 (it sums to " +
+             FormatNumber(mixing.row(r).sum()) + ")";
+    }
+  }
+  // Rows of non-negative entries summing to 1 have norms in [1/√3, 1], so |det| is a fair
+  // measure of how close to singular the matrix is.
+  if (std::abs(mixing.determinant()) < 1e-6) return "mixing: matrix is singular (or nearly)";
+  if (bits != 8 && bits != 10) return "bits: must be 8 or 10";
+  return "";
+}
+
+Vec3 ProjectorPhotometry::Output(const Vec3& drive) const {
+  const Vec3 light(response[0].Light(drive[0]), response[1].Light(drive[1]), response[2].Light(drive[2]));
+  return black + (max - black).asDiagonal() * (mixing * light);
+}
+
+Vec3 ProjectorPhotometry::DriveFor(const Vec3& output, bool* clipped) const {
+  const Vec3 relative = (output - black).cwiseQuotient(max - black);
+  const Vec3 light = mixing.inverse() * relative;
+  const Vec3 inside = light.cwiseMax(0.0).cwiseMin(1.0);
+  if (clipped) *clipped = (inside - light).cwiseAbs().maxCoeff() > 1e-12;
+  return Vec3(response[0].Drive(inside[0]), response[1].Drive(inside[1]), response[2].Drive(inside[2]));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The scene's "projectors" array.
+
+namespace {
+
+using nlohmann::json;
+
+class Fields {
+ public:
+  Fields(const json& object, std::string file, std::string prefix)
+      : object_(object), file_(std::move(file)), prefix_(std::move(prefix)) {
+    if (!object_.is_object()) throw Error("", "must be an object");
+  }
+  IoError Error(const std::string& key, const std::string& what) const {
+    const std::string where = key.empty() ? prefix_ : prefix_ + "." + key;
+    return IoError(file_ + ": " + where + ": " + what);
+  }
+  bool Has(const std::string& key) const { return object_.contains(key); }
+  const json& At(const std::string& key) const {
+    if (!Has(key)) throw Error(key, "required key is missing");
+    return object_.at(key);
+  }
+  void RejectUnknown(const std::set<std::string>& known) const {
+    for (const auto& item : object_.items()) {
+      if (known.count(item.key()) == 0) {
+        std::string list;
+        for (const auto& name : known) list += (list.empty() ? "" : ", ") + name;
+        throw Error(item.key(), "unknown key (known keys: " + list + ")");
+      }
+    }
+  }
+  double Number(const std::string& key, const json& value) const {
+    if (!value.is_number()) throw Error(key, "must be a number");
+    const double number = value.get<double>();
+    if (!std::isfinite(number)) throw Error(key, "must be finite");
+    return number;
+  }
+  std::vector<double> Numbers(const std::string& key, const json& value) const {
+    if (!value.is_array()) throw Error(key, "must be an array of numbers");
+    std::vector<double> numbers;
+    for (const json& item : value) numbers.push_back(Number(key, item));
+    return numbers;
+  }
+  Vec3 NumberOrRgb(const std::string& key) const {
+    const json& value = At(key);
+    if (value.is_number()) return Vec3::Constant(Number(key, value));
+    const std::vector<double> numbers = Numbers(key, value);
+    if (numbers.size() != 3) throw Error(key, "must be a number or an RGB triplet");
+    return Vec3(numbers[0], numbers[1], numbers[2]);
+  }
+  const std::string& prefix() const { return prefix_; }
+
+ private:
+  const json& object_;
+  std::string file_, prefix_;
+};
+
+bool UsableAsFileName(const std::string& name) {
+  if (name.empty() || name == "." || name == ".." || name == "result") return false;
+  return std::all_of(name.begin(), name.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
+  });
+}
+
+Projector ParseProjector(const json& object, const std::string& file, const std::string& prefix,
+                         const std::filesystem::path& base, int index) {
+  const Fields fields(object, file, prefix);
+  fields.RejectUnknown({"name", "model", "black", "max", "gamma", "lut", "mixing", "bits"});
+  Projector projector;
+  projector.name = "projector" + std::to_string(index);
+  if (fields.Has("name")) {
+    if (!fields.At("name").is_string()) throw fields.Error("name", "must be a string");
+    projector.name = fields.At("name").get<std::string>();
+    if (!UsableAsFileName(projector.name)) {
+      throw fields.Error("name", "must be letters, digits, '_', '-' or '.' (it names the image file), not 'result'");
+    }
+  }
+  if (!fields.At("model").is_string()) throw fields.Error("model", "must be a path to an mrcal .cameramodel");
+  projector.model_path = base / fields.At("model").get<std::string>();
+  try {
+    projector.geometry = ReadCameraModel(projector.model_path);
+  } catch (const IoError& error) {
+    throw fields.Error("model", error.what());
+  }
+  ProjectorPhotometry& photometry = projector.photometry;
+  if (fields.Has("black")) photometry.black = fields.NumberOrRgb("black");
+  photometry.max = fields.NumberOrRgb("max");
+  for (int c = 0; c < 3; ++c) {
+    if (!(photometry.black[c] >= 0.0)) throw fields.Error("black", "each value must be >= 0");
+    if (!(photometry.max[c] > photometry.black[c])) throw fields.Error("max", "each value must be greater than black");
+  }
+  if (fields.Has("gamma") && fields.Has("lut")) throw fields.Error("lut", "give either 'gamma' or 'lut', not both");
+  try {
+    if (fields.Has("gamma")) {
+      const Vec3 gamma = fields.NumberOrRgb("gamma");
+      for (int c = 0; c < 3; ++c) {
+        if (!(gamma[c] > 0.0 && gamma[c] <= 10.0)) throw fields.Error("gamma", "each value must be in (0, 10]");
+        photometry.response[c] = ResponseCurve::Gamma(gamma[c]);
+      }
+    } else if (fields.Has("lut")) {
+      const json& lut = fields.At("lut");
+      if (!lut.is_array() || lut.empty()) throw fields.Error("lut", "must be an array of numbers or 3 arrays");
+      if (lut[0].is_array()) {
+        if (lut.size() != 3) throw fields.Error("lut", "per-channel tables must be exactly 3 arrays");
+        for (int c = 0; c < 3; ++c) {
+          const std::string key = "lut[" + std::to_string(c) + "]";
+          photometry.response[c] = ResponseCurve::Table(fields.Numbers(key, lut[c]));
+        }
+      } else {
+        const ResponseCurve curve = ResponseCurve::Table(fields.Numbers("lut", lut));
+        photometry.response = {curve, curve, curve};
+      }
+    }
+  } catch (const std::invalid_argument& error) {
+    throw fields.Error("lut", error.what());
+  }
+  if (fields.Has("mixing")) {
+    const json& mixing = fields.At("mixing");
+    if (!mixing.is_array() || mixing.size() != 3) throw fields.Error("mixing", "must be a 3x3 array (3 rows)");
+    for (int r = 0; r < 3; ++r) {
+      const std::vector<double> row = fields.Numbers("mixing", mixing[r]);
+      if (row.size() != 3) throw fields.Error("mixing", "row " + std::to_string(r) + " must have 3 numbers");
+      for (int c = 0; c < 3; ++c) photometry.mixing(r, c) = row[c];
+    }
+  }
+  if (fields.Has("bits")) {
+    const json& bits = fields.At("bits");
+    if (!bits.is_number_integer() || (bits.get<int>() != 8 && bits.get<int>() != 10)) {
+      throw fields.Error("bits", "must be 8 or 10");
+    }
+    photometry.bits = bits.get<int>();
+  }
+  const std::string why = photometry.Validate();
+  if (!why.empty()) {
+    const std::string key = why.substr(0, why.find(':'));
+    throw fields.Error(key, why.substr(why.find(':') + 2));
+  }
+  return projector;
+}
+
+}  // namespace
+
+std::vector<Projector> ParseProjectors(const std::string& projectors_json, const std::string& scene_file,
+                                       const std::filesystem::path& base) {
+  std::vector<Projector> projectors;
+  if (projectors_json.empty()) return projectors;
+  json array;
+  try {
+    array = json::parse(projectors_json);
+  } catch (const json::exception& error) {
+    throw IoError(scene_file + ": projectors: invalid JSON");
+  }
+  if (!array.is_array()) throw IoError(scene_file + ": projectors: must be an array");
+  std::set<std::string> names;
+  for (size_t k = 0; k < array.size(); ++k) {
+    const std::string prefix = "projectors[" + std::to_string(k) + "]";
+    projectors.push_back(ParseProjector(array[k], scene_file, prefix, base, static_cast<int>(k)));
+    if (!names.insert(projectors.back().name).second) {
+      throw IoError(scene_file + ": " + prefix + ".name: '" + projectors.back().name +
+                    "' is already the name of another projector");
+    }
+  }
+  return projectors;
+}
+
+std::vector<Projector> ReadProjectors(const Scene& scene) {
+  return ParseProjectors(scene.projectors_json, scene.path.string(), scene.path.parent_path());
+}
+
+}  // namespace procam

@@ -1,0 +1,433 @@
+#include "projection/projector_images.h"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include <Eigen/LU>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "geometry/io.h"
+#include "geometry/ray_scene.h"
+
+
+namespace procam {
+namespace {
+
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
+
+// 8×8 Bayer matrix: thresholds (b + ½)/64 spread evenly over (0, 1).
+constexpr std::array<uint8_t, 64> kBayer = {
+    0,  32, 8,  40, 2,  34, 10, 42, 48, 16, 56, 24, 50, 18, 58, 26, 12, 44, 4,  36, 14, 46,
+    6,  38, 60, 28, 52, 20, 62, 30, 54, 22, 3,  35, 11, 43, 1,  33, 9,  41, 51, 19, 59, 27,
+    49, 17, 57, 25, 15, 47, 7,  39, 13, 45, 5,  37, 63, 31, 55, 23, 61, 29, 53, 21};
+
+double BayerThreshold(int x, int y) { return (kBayer[(y & 7) * 8 + (x & 7)] + 0.5) / 64.0; }
+
+// Code values ↔ relative light for one channel of one projector.
+class CodeTable {
+ public:
+  CodeTable(const ResponseCurve& response, int max_code) : max_code_(max_code), light_(max_code + 2) {
+    for (int q = 0; q <= max_code; ++q) light_[q] = response.Light(double(q) / max_code);
+    light_[max_code + 1] = kInfinity;  // sentinel: never below any r
+    first_.resize(kBins + 1);
+    int q = 0;
+    for (int b = 0; b <= kBins; ++b) {
+      const double r = double(b) / kBins;
+      while (q < max_code && light_[q + 1] <= r) ++q;
+      first_[b] = static_cast<uint16_t>(q);
+    }
+  }
+  double Light(int code) const { return light_[code]; }
+  // Largest code whose light is ≤ r (r in [0,1]).
+  int Below(double r) const {
+    int q = first_[static_cast<int>(r * kBins)];
+    while (light_[q + 1] <= r) ++q;
+    return q;
+  }
+  // The code for light r: the upper of the bracketing pair when r's position between them
+  // exceeds `threshold` (½: nearest in linear light).
+  int Quantise(double r, double threshold) const {
+    const int q = Below(r);
+    if (q >= max_code_) return max_code_;
+    // (r − light_q) / (light_q+1 − light_q) > threshold, without the division.
+    return r - light_[q] > threshold * (light_[q + 1] - light_[q]) ? q + 1 : q;
+  }
+  int max_code() const { return max_code_; }
+
+ private:
+  static constexpr int kBins = 4096;  // 8 KB per channel: stays in L1
+  int max_code_;
+  std::vector<double> light_;
+  std::vector<uint16_t> first_;
+};
+
+struct ProjectorTables {
+  explicit ProjectorTables(const Projector& projector)
+      : photometry(projector.photometry),
+        delta(projector.photometry.max - projector.photometry.black),
+        inverse_delta(delta.cwiseInverse()),
+        mixing_inverse(projector.photometry.mixing.inverse()),
+        identity_mixing(projector.photometry.mixing.isIdentity(0.0)),
+        codes{CodeTable(photometry.response[0], photometry.MaxCode()),
+              CodeTable(photometry.response[1], photometry.MaxCode()),
+              CodeTable(photometry.response[2], photometry.MaxCode())} {}
+  const ProjectorPhotometry& photometry;
+  Vec3 delta, inverse_delta;
+  Eigen::Matrix3d mixing_inverse;
+  bool identity_mixing;
+  std::array<CodeTable, 3> codes;
+};
+
+// Relative light r ∈ [0,1]³ for relative above-black output s; true if r had to be clipped.
+inline bool LightFor(const ProjectorTables& tables, const Vec3& s, Vec3* r) {
+  if (tables.identity_mixing) {
+    *r = s;
+    return false;
+  }
+  const Vec3 raw = tables.mixing_inverse * s;
+  *r = raw.cwiseMax(0.0).cwiseMin(1.0);
+  return (*r - raw).cwiseAbs().maxCoeff() > 1e-9;
+}
+
+void QuantiseErrorDiffusion(const ProjectorMap& map, const ProjectorTables& tables,
+                            const std::vector<Vec3>& light, cv::Mat* codes) {
+  const int width = map.width, height = map.height;
+  std::vector<Vec3> current(width + 2, Vec3::Zero()), next(width + 2, Vec3::Zero());
+  for (int y = 0; y < height; ++y) {
+    const bool forward = (y % 2) == 0;
+    std::fill(next.begin(), next.end(), Vec3::Zero());
+    auto* row = codes->ptr<cv::Vec3w>(y);
+    for (int step = 0; step < width; ++step) {
+      const int x = forward ? step : width - 1 - step;
+      const size_t index = static_cast<size_t>(y) * width + x;
+      if (map.patch[index] < 0) continue;  // stays black; error is not carried through it
+      const int direction = forward ? 1 : -1;
+      for (int c = 0; c < 3; ++c) {
+        const double wanted = light[index][c] + current[x + 1][c];
+        const int code = tables.codes[c].Quantise(std::clamp(wanted, 0.0, 1.0), 0.5);
+        row[x][c] = static_cast<uint16_t>(code);
+        const double error = wanted - tables.codes[c].Light(code);
+        current[x + 1 + direction][c] += error * 7.0 / 16.0;
+        next[x + 1 - direction][c] += error * 3.0 / 16.0;
+        next[x + 1][c] += error * 5.0 / 16.0;
+        next[x + 1 + direction][c] += error * 1.0 / 16.0;
+      }
+    }
+    std::swap(current, next);
+  }
+}
+
+}  // namespace
+
+const char* DitherName(DitherMethod method) {
+  switch (method) {
+    case DitherMethod::kNone: return "none";
+    case DitherMethod::kOrdered: return "ordered";
+    case DitherMethod::kErrorDiffusion: return "error-diffusion";
+  }
+  return "?";
+}
+
+bool ParseDither(const std::string& name, DitherMethod* method) {
+  for (const DitherMethod m : {DitherMethod::kNone, DitherMethod::kOrdered, DitherMethod::kErrorDiffusion}) {
+    if (name == DitherName(m)) {
+      *method = m;
+      return true;
+    }
+  }
+  return false;
+}
+
+bool RenderOptions::Check(std::string* why) const {
+  if (max_level_passes < 1 || max_level_passes > 1000) {
+    *why = "max_level_passes must be in [1, 1000]";
+    return false;
+  }
+  return true;
+}
+
+std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, const Eigen::MatrixX3d& emittance,
+                                                  const RenderOptions& options, RenderSummary* summary) {
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument("RenderOptions: " + why);
+  const int n = rig.size();
+  if (emittance.rows() != n) {
+    throw std::invalid_argument("emittance has " + std::to_string(emittance.rows()) + " rows, the rig " +
+                                std::to_string(n) + " patches");
+  }
+  if (!emittance.allFinite()) throw std::invalid_argument("emittance has non-finite values");
+  const auto start = std::chrono::steady_clock::now();
+  const int projector_count = static_cast<int>(rig.projectors.size());
+  RenderSummary local;
+  RenderSummary& s = summary ? *summary : local;
+  s = RenderSummary();
+  s.saturated_pixels.assign(projector_count, 0);
+  s.clipped_pixels.assign(projector_count, 0);
+  std::vector<ProjectorTables> tables;
+  tables.reserve(projector_count);
+  for (const Projector& projector : rig.projectors) tables.emplace_back(projector);
+
+  // Step 1: the flux above black each patch needs, and the first guess of its level τ.
+  const Eigen::MatrixX3d target = emittance.cwiseMax(rig.lower).cwiseMin(rig.upper);
+  Eigen::MatrixX3d flux(n, 3), level(n, 3);
+  for (int i = 0; i < n; ++i) {
+    if ((emittance.row(i).array() < rig.lower.row(i).array() - 1e-12).any()) ++s.patches_below_lower;
+    if ((emittance.row(i).array() > rig.upper.row(i).array() + 1e-12).any()) ++s.patches_above_upper;
+    if (!(rig.blended_area[i] > 0.0)) ++s.patches_unreached;
+    for (int c = 0; c < 3; ++c) {
+      const double rho = rig.reflectance(i, c);
+      level(i, c) = 0.0;
+      flux(i, c) = 0.0;
+      if (!(rig.blended_area[i] > 0.0) || !(rho > 0.0)) continue;
+      flux(i, c) = rig.area[i] * (target(i, c) - rig.lower(i, c)) / rho;
+      const double capacity = rig.area[i] * (rig.upper(i, c) - rig.lower(i, c)) / rho;
+      level(i, c) = flux(i, c) >= capacity * (1.0 - 1e-12) ? kInfinity : flux(i, c) / rig.blended_area[i];
+    }
+  }
+
+  // Step 2, per patch: Newton from below on Σ_p min(w a τ, Ω Δ) = Φ (each evaluation one pass
+  // over the patch's pixels; the first one is all most patches need).
+  int most_passes = 0;
+#pragma omp parallel for schedule(dynamic, 16) reduction(max : most_passes)
+  for (int i = 0; i < n; ++i) {
+    for (int pass = 1; pass <= options.max_level_passes; ++pass) {
+      most_passes = std::max(most_passes, pass);
+      Vec3 free_area = Vec3::Zero(), clamped = Vec3::Zero();
+      for (int k = 0; k < projector_count; ++k) {
+        const ProjectorMap& map = rig.maps[k];
+        const ProjectorTables& table = tables[k];
+        const double scale = rig.coverage_scale(i, k);
+        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+          const double share = map.share[map.pixels_by_patch[position]];  // w a / Ω
+          for (int c = 0; c < 3; ++c) {
+            if (level(i, c) == kInfinity) continue;
+            if (share * level(i, c) * table.inverse_delta[c] >= 1.0) {
+              clamped[c] += scale * map.pixel_solid_angle * table.delta[c];
+            } else {
+              free_area[c] += scale * share * map.pixel_solid_angle;
+            }
+          }
+        }
+      }
+      bool changed = false;
+      for (int c = 0; c < 3; ++c) {
+        if (level(i, c) == kInfinity || clamped[c] <= 0.0) continue;
+        const double remaining = std::max(0.0, flux(i, c) - clamped[c]);
+        const double updated = free_area[c] > 0.0 ? remaining / free_area[c] : kInfinity;
+        if (updated > level(i, c) * (1.0 + 1e-12)) {
+          level(i, c) = updated;
+          changed = true;
+        }
+      }
+      if (!changed) break;
+    }
+  }
+  s.level_passes = most_passes;
+
+  // Step 3: per pixel relative output → light → dithered codes; the flux they deliver.
+  std::vector<ProjectorImage> images(projector_count);
+  const bool diffuse = options.dither == DitherMethod::kErrorDiffusion;
+  std::vector<std::vector<Vec3>> light(projector_count);
+  for (int k = 0; k < projector_count; ++k) {
+    images[k].bits = rig.projectors[k].photometry.bits;
+    images[k].codes = cv::Mat(rig.maps[k].height, rig.maps[k].width, CV_16UC3, cv::Scalar::all(0));
+    if (diffuse) light[k].assign(rig.maps[k].patch.size(), Vec3::Zero());
+  }
+  Eigen::MatrixX3d delivered_flux = Eigen::MatrixX3d::Zero(n, 3);
+  std::vector<long long> saturated(projector_count, 0), clipped(projector_count, 0);
+#pragma omp parallel
+  {
+    std::vector<long long> my_saturated(projector_count, 0), my_clipped(projector_count, 0);
+#pragma omp for schedule(dynamic, 16)
+    for (int i = 0; i < n; ++i) {
+      const Vec3 tau = level.row(i).transpose();
+      Vec3 patch_flux = Vec3::Zero();
+      for (int k = 0; k < projector_count; ++k) {
+        const ProjectorMap& map = rig.maps[k];
+        const ProjectorTables& table = tables[k];
+        auto* codes = reinterpret_cast<cv::Vec3w*>(images[k].codes.data);
+        Vec3 projector_light = Vec3::Zero();
+        int row = -1, row_begin = 0, row_end = 0;  // the row of the current pixel, found incrementally
+        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+          const int32_t index = map.pixels_by_patch[position];
+          if (index >= row_end) {
+            row = index / map.width;
+            row_begin = row * map.width;
+            row_end = row_begin + map.width;
+          }
+          const double share = map.share[index];
+          // Light is linear in the codes' light and mixing: the patch's delivered flux is summed
+          // in relative light and mixed once per patch and projector.
+          Vec3 relative;
+          for (int c = 0; c < 3; ++c) {
+            relative[c] = tau[c] == kInfinity ? 1.0 : std::min(1.0, share * tau[c] * table.inverse_delta[c]);
+          }
+          if (relative.maxCoeff() >= 1.0) ++my_saturated[k];
+          Vec3 r;
+          if (LightFor(table, relative, &r)) ++my_clipped[k];
+          if (diffuse) {
+            light[k][index] = r;
+            continue;
+          }
+          const double threshold =
+              options.dither == DitherMethod::kOrdered ? BayerThreshold(index - row_begin, row) : 0.5;
+          cv::Vec3w& code = codes[index];
+          for (int c = 0; c < 3; ++c) {
+            code[c] = static_cast<uint16_t>(table.codes[c].Quantise(r[c], threshold));
+            projector_light[c] += table.codes[c].Light(code[c]);
+          }
+        }
+        if (!diffuse) {
+          const Vec3 mixed = table.identity_mixing ? projector_light : Vec3(table.photometry.mixing * projector_light);
+          patch_flux += rig.coverage_scale(i, k) * map.pixel_solid_angle * table.delta.cwiseProduct(mixed);
+        }
+      }
+      delivered_flux.row(i) = patch_flux.transpose();
+    }
+#pragma omp critical
+    for (int k = 0; k < projector_count; ++k) {
+      saturated[k] += my_saturated[k];
+      clipped[k] += my_clipped[k];
+    }
+  }
+  if (diffuse) {
+    // Error diffusion runs in raster order per image; then the flux per patch from the codes.
+#pragma omp parallel for schedule(static, 1)
+    for (int k = 0; k < projector_count; ++k) QuantiseErrorDiffusion(rig.maps[k], tables[k], light[k], &images[k].codes);
+#pragma omp parallel for schedule(dynamic, 16)
+    for (int i = 0; i < n; ++i) {
+      Vec3 patch_flux = Vec3::Zero();
+      for (int k = 0; k < projector_count; ++k) {
+        const ProjectorMap& map = rig.maps[k];
+        const ProjectorTables& table = tables[k];
+        const auto* codes = reinterpret_cast<const cv::Vec3w*>(images[k].codes.data);
+        Vec3 projector_light = Vec3::Zero();
+        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+          const cv::Vec3w& code = codes[map.pixels_by_patch[position]];
+          for (int c = 0; c < 3; ++c) projector_light[c] += table.codes[c].Light(code[c]);
+        }
+        const Vec3 mixed = table.identity_mixing ? projector_light : Vec3(table.photometry.mixing * projector_light);
+        patch_flux += rig.coverage_scale(i, k) * map.pixel_solid_angle * table.delta.cwiseProduct(mixed);
+      }
+      delivered_flux.row(i) = patch_flux.transpose();
+    }
+  }
+  s.saturated_pixels = saturated;
+  s.clipped_pixels = clipped;
+  s.delivered = rig.lower;
+  for (int i = 0; i < n; ++i) {
+    s.delivered.row(i) += (rig.reflectance.row(i).array() * delivered_flux.row(i).array() / rig.area[i]).matrix();
+  }
+  const double scale = std::max(rig.upper.maxCoeff(), std::numeric_limits<double>::min());
+  s.max_relative_error = n > 0 ? (s.delivered - target).cwiseAbs().maxCoeff() / scale : 0.0;
+  s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return images;
+}
+
+Eigen::MatrixX3d SimulateDirectLight(const PatchLevel& level, const std::vector<Projector>& projectors,
+                                     const std::vector<ProjectorImage>& images, int samples_per_side,
+                                     double ray_margin) {
+  if (images.size() != projectors.size()) {
+    throw std::invalid_argument(std::to_string(images.size()) + " images for " +
+                                std::to_string(projectors.size()) + " projectors");
+  }
+  for (size_t k = 0; k < projectors.size(); ++k) {
+    const ProjectorGeometry& geometry = projectors[k].geometry;
+    const cv::Mat& codes = images[k].codes;
+    if (codes.cols != geometry.width() || codes.rows != geometry.height() || codes.type() != CV_16UC3) {
+      throw std::invalid_argument("projector '" + projectors[k].name + "': image is " + std::to_string(codes.cols) +
+                                  "x" + std::to_string(codes.rows) + ", the projector " +
+                                  std::to_string(geometry.width()) + "x" + std::to_string(geometry.height()));
+    }
+    if (images[k].bits != projectors[k].photometry.bits) {
+      throw std::invalid_argument("projector '" + projectors[k].name + "': image has " +
+                                  std::to_string(images[k].bits) + " bits, the projector " +
+                                  std::to_string(projectors[k].photometry.bits));
+    }
+  }
+  const RayScene rays(PatchScene(level));
+  const int n = level.size();
+  Eigen::MatrixX3d exitance = Eigen::MatrixX3d::Zero(n, 3);
+#pragma omp parallel for schedule(dynamic, 4)
+  for (int i = 0; i < n; ++i) {
+    const Patch& patch = level.patches[i];
+    std::vector<PatchSample> samples;
+    SamplePatch(patch, samples_per_side, &samples);
+    Vec3 irradiance_integral = Vec3::Zero();
+    double area = 0.0;
+    for (const PatchSample& sample : samples) {
+      area += sample.weight;
+      for (size_t k = 0; k < projectors.size(); ++k) {
+        const ProjectorGeometry& geometry = projectors[k].geometry;
+        Vec2 q;
+        const double gain = geometry.Gain(sample.point, patch.normal, &q);
+        if (!(gain > 0.0) || !geometry.InImage(q)) continue;
+        if (rays.Occluded(sample.point, geometry.CentreInWorld(), ray_margin)) continue;
+        const int column = std::clamp(static_cast<int>(std::lround(q.x())), 0, geometry.width() - 1);
+        const int row = std::clamp(static_cast<int>(std::lround(q.y())), 0, geometry.height() - 1);
+        const cv::Vec3w code = images[k].codes.at<cv::Vec3w>(row, column);
+        const double max_code = projectors[k].photometry.MaxCode();
+        const Vec3 drive(code[0] / max_code, code[1] / max_code, code[2] / max_code);
+        irradiance_integral += sample.weight * gain * projectors[k].photometry.Output(drive);
+      }
+    }
+    exitance.row(i) = (level.reflectance.row(i).array() * irradiance_integral.transpose().array() / area).matrix();
+  }
+  return exitance;
+}
+
+std::string EncodeProjectorImage(const ProjectorImage& image, int compression) {
+  cv::Mat bgr;
+  if (image.bits == 8) {
+    image.codes.convertTo(bgr, CV_8UC3);
+  } else {
+    image.codes.convertTo(bgr, CV_16UC3, 65535.0 / ((1 << image.bits) - 1));
+  }
+  cv::cvtColor(bgr, bgr, cv::COLOR_RGB2BGR);
+  std::vector<uchar> bytes;
+  if (!cv::imencode(".png", bgr, bytes, {cv::IMWRITE_PNG_COMPRESSION, compression})) {
+    throw IoError("cannot encode a PNG");
+  }
+  return std::string(bytes.begin(), bytes.end());
+}
+
+std::vector<std::string> EncodeProjectorImages(const std::vector<ProjectorImage>& images, int compression) {
+  std::vector<std::string> encoded(images.size());
+  const int count = static_cast<int>(images.size());
+#pragma omp parallel for schedule(static, 1)
+  for (int k = 0; k < count; ++k) encoded[k] = EncodeProjectorImage(images[k], compression);
+  return encoded;
+}
+
+void WriteProjectorImage(const std::filesystem::path& path, const ProjectorImage& image) {
+  WriteFileAtomically(path, EncodeProjectorImage(image));
+}
+
+ProjectorImage ReadProjectorImage(const std::filesystem::path& path, int bits) {
+  const std::string file = path.string();
+  if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
+  const cv::Mat raw = cv::imread(file, cv::IMREAD_UNCHANGED);
+  if (raw.empty()) throw IoError(file + ": not a readable image");
+  if (raw.channels() != 3) throw IoError(file + ": must be an RGB image, has " + std::to_string(raw.channels()) + " channels");
+  ProjectorImage image;
+  image.bits = bits;
+  const int max_code = (1 << bits) - 1;
+  cv::Mat rgb;
+  cv::cvtColor(raw, rgb, cv::COLOR_BGR2RGB);
+  if (raw.depth() == CV_8U) {
+    if (bits != 8) throw IoError(file + ": 8-bit image for a " + std::to_string(bits) + "-bit projector");
+    rgb.convertTo(image.codes, CV_16UC3);
+  } else if (raw.depth() == CV_16U) {
+    rgb.convertTo(image.codes, CV_16UC3, max_code / 65535.0);  // rounds to the nearest code
+  } else {
+    throw IoError(file + ": must be an 8- or 16-bit image");
+  }
+  return image;
+}
+
+}  // namespace procam

@@ -1,0 +1,154 @@
+// `procam cameras` and `procam capture` run as a user would: exit codes, one-line errors, the
+// session written, and an interrupted capture resumed by running the same command again.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "geometry/io.h"
+#include "procam/config.h"
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+struct CommandRun {
+  int exit_code;
+  std::string output;  // stdout and stderr together
+};
+
+CommandRun Procam(const std::string& arguments) {
+  const char* binary = std::getenv("PROCAM_BINARY");
+  EXPECT_NE(binary, nullptr) << "PROCAM_BINARY not set by CTest";
+  const std::string command = std::string(binary ? binary : "procam") + " " + arguments + " 2>&1";
+  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(command.c_str(), "r"), pclose);
+  std::string output;
+  std::array<char, 4096> buffer;
+  size_t count;
+  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0)
+    output.append(buffer.data(), count);
+  const int status = pclose(pipe.release());
+  return {WEXITSTATUS(status), output};
+}
+
+int Lines(const std::string& text) {
+  return static_cast<int>(std::count(text.begin(), text.end(), '\n'));
+}
+
+const std::string kTestCamera =
+    "'test:loopback?width=64&height=48&fps=500&exposure_us=1000&reference_exposure_us=1000";
+
+TEST(CaptureCli, HelpOnEverySubcommand) {
+  for (const char* command : {"cameras --help", "capture --help"}) {
+    const CommandRun run = Procam(command);
+    EXPECT_EQ(run.exit_code, 0) << command;
+    EXPECT_NE(run.output.find("Usage"), std::string::npos) << command << ": " << run.output;
+  }
+}
+
+TEST(CaptureCli, CamerasListsBackendsAndVirtualCamerasWithoutBroadcasting) {
+  const CommandRun run = Procam("cameras --no-gige --virtual");
+  EXPECT_EQ(run.exit_code, 0) << run.output;
+  EXPECT_NE(run.output.find("camera backends in this build:"), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("test:loopback"), std::string::npos) << run.output;
+  if (PROCAM_WITH_ARAVIS) {
+    EXPECT_NE(run.output.find("aravis:Fake_1"), std::string::npos) << run.output;
+  }
+}
+
+TEST(CaptureCli, GrayCodeCaptureWritesASession) {
+  testing::TempDir dir;
+  const CommandRun run = Procam("capture --camera " + kTestCamera +
+                                "' --sequence graycode --projector-size 128x96 "
+                                "--frames 1 --settle-ms 1 --out " +
+                                (dir / "gray").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  EXPECT_NE(run.output.find("30/30 patterns captured"), std::string::npos)
+      << run.output;  // 2 + 2·(7 + 7)
+  const nlohmann::json manifest = nlohmann::json::parse(ReadFile(dir / "gray" / "session.json"));
+  EXPECT_TRUE(manifest["complete"].get<bool>());
+  EXPECT_EQ(manifest["sequence"]["parameters"]["width"], 128);
+  const nlohmann::json result = nlohmann::json::parse(ReadFile(dir / "gray" / "result.json"));
+  EXPECT_EQ(result["patterns_captured"], 30);
+  // The white pattern's frame reads full scale everywhere (16-bit PNG, 255 · 257).
+  const cv::Mat white =
+      cv::imread((dir / "gray" /
+                  manifest["patterns"][0]["captured"]["exposures"][0]["file"].get<std::string>())
+                     .string(),
+                 cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(white.type(), CV_16UC1);
+  double low = 0;
+  cv::minMaxLoc(white, &low);
+  EXPECT_EQ(low, 65535.0);
+}
+
+TEST(CaptureCli, AnInterruptedCaptureResumesWhenRunAgain) {
+  testing::TempDir dir;
+  const std::string common =
+      " --sequence photometric --levels 0,128,255 --channels rgb --projector-size 32x24 "
+      "--frames 2 --settle-ms 1 --retries 1 --retry-delay-ms 1 --out " +
+      (dir / "flat").string();
+  const CommandRun failed =
+      Procam("capture --camera " + kTestCamera + "&fault=disconnect&fault_after=5'" + common);
+  EXPECT_EQ(failed.exit_code, 1) << failed.output;
+  EXPECT_EQ(Lines(failed.output), 1) << failed.output;
+  EXPECT_NE(failed.output.find("procam: error: camera 'test:loopback': device disappeared"),
+            std::string::npos)
+      << failed.output;
+  EXPECT_NE(failed.output.find("run the same command again to resume"), std::string::npos)
+      << failed.output;
+
+  const CommandRun resumed = Procam("capture --camera " + kTestCamera + "'" + common);
+  EXPECT_EQ(resumed.exit_code, 0) << resumed.output;
+  EXPECT_NE(resumed.output.find("7/7 patterns captured"), std::string::npos) << resumed.output;
+  EXPECT_EQ(resumed.output.find("0 already there"), std::string::npos) << resumed.output;
+}
+
+TEST(CaptureCli, MistakesGetOneLineNamingTheCulprit) {
+  testing::TempDir dir;
+  struct Case {
+    std::string arguments, expected;
+  };
+  ASSERT_TRUE(cv::imwrite((dir / "small.png").string(), cv::Mat(3, 4, CV_8UC3, cv::Scalar(0))));
+  const std::string out = " --out " + (dir / "out").string();
+  for (const Case& c :
+       {Case{"capture --camera synthetic:room.json --sequence graycode" + out,
+             "backend 'synthetic' is not available"},
+        Case{"capture --camera 'test:x?nosie=1' --sequence graycode" + out,
+             "unknown parameter 'nosie'"},
+        Case{"capture --camera test:x --sequence verify --projector-size 8x6 " +
+                 (dir / "small.png").string() + out,
+             "small.png: image is 4x3, the projector is 8x6"},
+        Case{"capture --camera test:x --sequence graycode --display glfw:1" + out,
+             "display 'glfw:1': not available"},
+        Case{"capture --camera test:x --sequence graycode --projector-size 12by8" + out,
+             "--projector-size: expected WIDTHxHEIGHT"}}) {
+    const CommandRun run = Procam(c.arguments);
+    EXPECT_EQ(run.exit_code, 1) << c.arguments << "\n" << run.output;
+    EXPECT_EQ(Lines(run.output), 1) << run.output;
+    EXPECT_NE(run.output.find(c.expected), std::string::npos) << c.arguments << "\n" << run.output;
+  }
+}
+
+TEST(CaptureCli, CapturesFromTheAravisFakeCamera) {
+  if (!PROCAM_WITH_ARAVIS) GTEST_SKIP() << "built without Aravis";
+  testing::TempDir dir;
+  const CommandRun run = Procam(
+      "capture --camera aravis:Fake_1?format=Mono8 --sequence photometric --levels 0,255 "
+      "--channels w --projector-size 16x8 --frames 1 --settle-ms 0 --exposure-us 20000 "
+      "--out " +
+      (dir / "fake").string());
+  EXPECT_EQ(run.exit_code, 0) << run.output;
+  EXPECT_NE(run.output.find("display 'memory' shows the patterns nowhere"), std::string::npos)
+      << run.output;
+  const nlohmann::json manifest = nlohmann::json::parse(ReadFile(dir / "fake" / "session.json"));
+  EXPECT_EQ(manifest["camera"]["model"], "Fake");
+  EXPECT_EQ(manifest["patterns"][1]["captured"]["exposures"][0]["exposure_us"], 20000.0);
+}
+
+}  // namespace
+}  // namespace procam

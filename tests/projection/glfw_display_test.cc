@@ -1,0 +1,233 @@
+// The GLFW output backend for real, under a virtual X server (Xvfb, started here on a free
+// display number): monitors are listed, a fullscreen window shows images and test patterns pixel
+// for pixel (read back from its framebuffer), sizes are checked, and `procam show` does the same
+// from the command line.
+#include "projection/glfw_display.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <random>
+#include <thread>
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "geometry/io.h"
+#include "projection/test_pattern.h"
+#include "tests/testing/testing.h"
+
+extern char** environ;
+
+namespace procam {
+namespace {
+
+constexpr int kWidth = 640, kHeight = 480;
+
+// Starts Xvfb on the first free display from :87 and points DISPLAY at it for the whole binary.
+class XvfbEnvironment : public ::testing::Environment {
+ public:
+  void SetUp() override {
+    for (int display = 87; display < 127; ++display) {
+      if (std::filesystem::exists("/tmp/.X" + std::to_string(display) + "-lock")) continue;
+      const std::string name = ":" + std::to_string(display);
+      const std::string screen = std::to_string(kWidth) + "x" + std::to_string(kHeight) + "x24";
+      std::array<const char*, 8> argv = {"Xvfb", name.c_str(), "-screen", "0", screen.c_str(), "-nolisten", "tcp", nullptr};
+      posix_spawn_file_actions_t actions;
+      posix_spawn_file_actions_init(&actions);
+      posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, "/dev/null", O_WRONLY, 0);
+      posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, "/dev/null", O_WRONLY, 0);
+      const int failed = posix_spawnp(&pid_, "Xvfb", &actions, nullptr, const_cast<char* const*>(argv.data()), environ);
+      posix_spawn_file_actions_destroy(&actions);
+      if (failed != 0) {
+        pid_ = 0;
+        why_ = "Xvfb could not be started (apt-get install xvfb)";
+        return;
+      }
+      const std::string socket = "/tmp/.X11-unix/X" + std::to_string(display);
+      for (int wait = 0; wait < 200 && !std::filesystem::exists(socket); ++wait) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(25));
+        int status = 0;
+        if (waitpid(pid_, &status, WNOHANG) == pid_) {  // exited: display taken meanwhile, try the next
+          pid_ = 0;
+          break;
+        }
+      }
+      if (pid_ != 0 && std::filesystem::exists(socket)) {
+        setenv("DISPLAY", name.c_str(), 1);
+        why_.clear();
+        return;
+      }
+      Stop();
+    }
+    why_ = "no free X display number for Xvfb";
+  }
+  void TearDown() override { Stop(); }
+  static const std::string& why() { return why_; }
+
+ private:
+  void Stop() {
+    if (pid_ == 0) return;
+    kill(pid_, SIGTERM);
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    pid_ = 0;
+  }
+  pid_t pid_ = 0;
+  static inline std::string why_ = "Xvfb not started";
+};
+
+::testing::Environment* const xvfb = ::testing::AddGlobalTestEnvironment(new XvfbEnvironment);
+
+#define SKIP_WITHOUT_XVFB()                                       \
+  if (!XvfbEnvironment::why().empty()) GTEST_SKIP() << XvfbEnvironment::why()
+
+ProjectorImage RandomImage(int bits, unsigned seed) {
+  ProjectorImage image;
+  image.bits = bits;
+  image.codes = cv::Mat(kHeight, kWidth, CV_16UC3);
+  cv::RNG random(seed);
+  random.fill(image.codes, cv::RNG::UNIFORM, cv::Scalar::all(0), cv::Scalar::all(1 << bits));
+  return image;
+}
+
+TEST(GlfwDisplay, ListsAndFindsMonitors) {
+  SKIP_WITHOUT_XVFB();
+  const std::vector<MonitorInfo> monitors = ListMonitors();
+  ASSERT_EQ(monitors.size(), 1u);
+  EXPECT_EQ(monitors[0].width, kWidth);
+  EXPECT_EQ(monitors[0].height, kHeight);
+  EXPECT_EQ(FindMonitor("0").name, monitors[0].name);
+  EXPECT_EQ(FindMonitor(monitors[0].name).index, 0);
+  try {
+    FindMonitor("HDMI-9");
+    FAIL() << "no error";
+  } catch (const IoError& error) {
+    EXPECT_EQ(std::string(error.what()),
+              "monitor 'HDMI-9' not found (monitors: 0 '" + monitors[0].name + "' 640x480)");
+  }
+}
+
+TEST(GlfwDisplay, ShowsImagesPixelForPixel) {
+  SKIP_WITHOUT_XVFB();
+  GlfwDisplay display(FindMonitor("0"));
+  EXPECT_EQ(display.Resolution(), cv::Size(kWidth, kHeight));
+  // 8-bit codes come back exactly (R, G, B, row 0 at the top).
+  const ProjectorImage image = RandomImage(8, 1);
+  display.Show(image);
+  cv::Mat expected;
+  image.codes.convertTo(expected, CV_8UC3);
+  EXPECT_EQ(cv::norm(display.ReadBack(), expected, cv::NORM_INF), 0.0);
+  // 10-bit codes on an 8-bit output: the nearest level.
+  const ProjectorImage deep = RandomImage(10, 2);
+  display.Show(deep);
+  deep.codes.convertTo(expected, CV_8UC3, 255.0 / 1023.0);
+  EXPECT_LE(cv::norm(display.ReadBack(), expected, cv::NORM_INF), 1.0);
+  // OpenCV images (B, G, R), as the capture module's sequencer shows patterns.
+  cv::Mat bgr(kHeight, kWidth, CV_8UC3);
+  cv::RNG(3).fill(bgr, cv::RNG::UNIFORM, cv::Scalar::all(0), cv::Scalar::all(256));
+  display.Show(bgr);
+  cv::Mat rgb;
+  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+  EXPECT_EQ(cv::norm(display.ReadBack(), rgb, cv::NORM_INF), 0.0);
+}
+
+TEST(GlfwDisplay, ShowsTestPatterns) {
+  SKIP_WITHOUT_XVFB();
+  GlfwDisplay display(FindMonitor("0"));
+  for (const TestPattern pattern : {TestPattern::kGrid, TestPattern::kBars, TestPattern::kWhite, TestPattern::kBlack}) {
+    const ProjectorImage image = MakeTestPattern(pattern, display.Resolution());
+    display.Show(image);
+    cv::Mat expected;
+    image.codes.convertTo(expected, CV_8UC3);
+    EXPECT_EQ(cv::norm(display.ReadBack(), expected, cv::NORM_INF), 0.0) << TestPatternName(pattern);
+  }
+}
+
+TEST(GlfwDisplay, ImageOfTheWrongSizeIsAnError) {
+  SKIP_WITHOUT_XVFB();
+  GlfwDisplay display(FindMonitor("0"));
+  ProjectorImage image;
+  image.codes = cv::Mat(240, 320, CV_16UC3, cv::Scalar::all(0));
+  try {
+    display.Show(image);
+    FAIL() << "no error";
+  } catch (const IoError& error) {
+    EXPECT_EQ(std::string(error.what()), display.Name() + ": image is 320x240, the monitor runs at 640x480");
+  }
+}
+
+TEST(TestPatterns, MarkTheCornersAndTheGrid) {
+  const ProjectorImage grid = MakeTestPattern(TestPattern::kGrid, cv::Size(200, 100));
+  EXPECT_EQ(grid.codes.at<cv::Vec3w>(0, 0), cv::Vec3w(255, 0, 0));
+  EXPECT_EQ(grid.codes.at<cv::Vec3w>(0, 199), cv::Vec3w(0, 255, 0));
+  EXPECT_EQ(grid.codes.at<cv::Vec3w>(99, 199), cv::Vec3w(0, 0, 255));
+  EXPECT_EQ(grid.codes.at<cv::Vec3w>(99, 0), cv::Vec3w(255, 255, 0));
+  EXPECT_EQ(grid.codes.at<cv::Vec3w>(30, 64), cv::Vec3w(255, 255, 255));
+  EXPECT_EQ(grid.codes.at<cv::Vec3w>(30, 63), cv::Vec3w(0, 0, 0));
+  const ProjectorImage bars = MakeTestPattern(TestPattern::kBars, cv::Size(80, 10));
+  EXPECT_EQ(bars.codes.at<cv::Vec3w>(5, 5), cv::Vec3w(255, 255, 255));
+  EXPECT_EQ(bars.codes.at<cv::Vec3w>(5, 55), cv::Vec3w(255, 0, 0));
+  EXPECT_EQ(bars.codes.at<cv::Vec3w>(5, 75), cv::Vec3w(0, 0, 0));
+}
+
+struct CommandRun {
+  int exit_code;
+  std::string output;
+};
+
+CommandRun Procam(const std::string& arguments) {
+  const char* binary = std::getenv("PROCAM_BINARY");
+  EXPECT_NE(binary, nullptr) << "PROCAM_BINARY not set by CTest";
+  const std::string command = std::string(binary ? binary : "procam") + " " + arguments + " 2>&1";
+  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(command.c_str(), "r"), pclose);
+  std::string output;
+  std::array<char, 4096> buffer;
+  size_t count;
+  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0) output.append(buffer.data(), count);
+  const int status = pclose(pipe.release());
+  return {WEXITSTATUS(status), output};
+}
+
+TEST(ShowCommand, ShowsAnImageAndReadsItBack) {
+  SKIP_WITHOUT_XVFB();
+  testing::TempDir dir;
+  const ProjectorImage image = RandomImage(8, 4);
+  WriteProjectorImage(dir / "p.png", image);
+  const CommandRun list = Procam("show --list");
+  ASSERT_EQ(list.exit_code, 0) << list.output;
+  EXPECT_NE(list.output.find("640x480"), std::string::npos) << list.output;
+  const CommandRun run = Procam("show " + (dir / "p.png").string() + " --seconds 0.1 --readback " + (dir / "rb").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  const cv::Mat shown = cv::imread((dir / "rb" / "monitor0.png").string(), cv::IMREAD_COLOR);  // B, G, R
+  cv::Mat expected;
+  image.codes.convertTo(expected, CV_8UC3);
+  cv::cvtColor(expected, expected, cv::COLOR_RGB2BGR);
+  EXPECT_EQ(cv::norm(shown, expected, cv::NORM_INF), 0.0);
+  // Test pattern mode.
+  const CommandRun pattern = Procam("show --pattern grid --seconds 0.1 --readback " + (dir / "grid").string());
+  ASSERT_EQ(pattern.exit_code, 0) << pattern.output;
+  // An image of another size than the monitor: one clear error, before any window opens.
+  ProjectorImage small;
+  small.codes = cv::Mat(100, 100, CV_16UC3, cv::Scalar::all(0));
+  WriteProjectorImage(dir / "small.png", small);
+  const CommandRun wrong = Procam("show " + (dir / "small.png").string() + " --seconds 0.1");
+  EXPECT_EQ(wrong.exit_code, 1);
+  EXPECT_NE(wrong.output.find("small.png: image is 100x100, but monitor 0"), std::string::npos) << wrong.output;
+  const CommandRun missing = Procam("show --monitor HDMI-9 --pattern white --seconds 0.1");
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.output.find("monitor 'HDMI-9' not found"), std::string::npos) << missing.output;
+}
+
+}  // namespace
+}  // namespace procam
