@@ -12,23 +12,9 @@
 namespace procam {
 namespace {
 
-struct CommandRun {
-  int exit_code;
-  std::string output;  // stdout and stderr together
-};
+using testing::CommandRun;
 
-CommandRun Procam(const std::string& arguments) {
-  const char* binary = std::getenv("PROCAM_BINARY");
-  EXPECT_NE(binary, nullptr) << "PROCAM_BINARY not set by CTest";
-  const std::string command = std::string(binary ? binary : "procam") + " " + arguments + " 2>&1";
-  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(command.c_str(), "r"), pclose);
-  std::string output;
-  std::array<char, 4096> buffer;
-  size_t count;
-  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0) output.append(buffer.data(), count);
-  const int status = pclose(pipe.release());
-  return {WEXITSTATUS(status), output};
-}
+CommandRun Procam(const std::string& arguments) { return testing::RunProcam(arguments); }
 
 std::string ReadText(const std::filesystem::path& path) {
   std::ifstream in(path);
@@ -120,12 +106,8 @@ TEST(Cli, DemoOnTheSyntheticRigWritesAReportThatRendersInChromium) {
   const std::string command = chromium + " --headless --no-sandbox --disable-gpu --disable-quic --no-first-run "
                               "--disable-background-networking --disable-component-update --disable-sync "
                               "--user-data-dir=" + (dir / "chrome").string() + " --virtual-time-budget=5000 --dump-dom file://" +
-                              (dir / "demo" / "report.html").string() + " 2>/dev/null";
-  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(command.c_str(), "r"), pclose);
-  std::string dom;
-  std::array<char, 4096> buffer;
-  size_t count;
-  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0) dom.append(buffer.data(), count);
+                              (dir / "demo" / "report.html").string();
+  const std::string dom = testing::RunShell(command).output;
   ASSERT_NE(dom.find("<body"), std::string::npos) << "chromium produced no DOM: is the 'chromium' package installed?";
   EXPECT_NE(dom.find("data-ready=\"yes\""), std::string::npos) << dom.substr(0, 400);
   EXPECT_NE(dom.find("<svg class=\"plot\""), std::string::npos);

@@ -1,6 +1,11 @@
 #include "tests/testing/testing.h"
 
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
 #include <cstdlib>
+#include <memory>
 #include <fstream>
 #include <random>
 
@@ -23,6 +28,24 @@ std::filesystem::path TempDir::Write(const std::string& name, const std::string&
   const std::filesystem::path file = path_ / name;
   std::ofstream(file) << text;
   return file;
+}
+
+CommandRun RunShell(const std::string& command) {
+  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen((command + " 2>&1").c_str(), "r"), pclose);
+  CommandRun run;
+  if (!pipe) return run;
+  std::array<char, 4096> buffer;
+  size_t count;
+  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0) run.output.append(buffer.data(), count);
+  const int status = pclose(pipe.release());
+  run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return run;
+}
+
+CommandRun RunProcam(const std::string& arguments) {
+  const char* binary = std::getenv("PROCAM_BINARY");
+  EXPECT_NE(binary, nullptr) << "PROCAM_BINARY is not set (run the test through CTest)";
+  return RunShell(std::string(binary ? binary : "procam") + " " + arguments);
 }
 
 std::filesystem::path SourceDir() {

@@ -27,6 +27,16 @@ class TempDir {
 std::filesystem::path SourceDir();
 std::filesystem::path SharedDir();
 
+// A shell command's exit code and its stdout and stderr together.
+struct CommandRun {
+  int exit_code = -1;
+  std::string output;
+};
+// Runs `command` through the shell (stderr joined to stdout).
+CommandRun RunShell(const std::string& command);
+// Runs the procam binary CTest names in PROCAM_BINARY with `arguments`, as a user would.
+CommandRun RunProcam(const std::string& arguments);
+
 // Max-norm distance of two matrices, for EXPECT_LT(MaxAbsDifference(a, b), tol).
 template <typename A, typename B>
 double MaxAbsDifference(const Eigen::MatrixBase<A>& a, const Eigen::MatrixBase<B>& b) {
