@@ -11,6 +11,7 @@
 #include "capture/display.h"
 #include "capture/patterns.h"
 #include "capture/session.h"
+#include "datasets_synthetic/synthetic_camera.h"
 #include "geometry/io.h"
 #include "procam/config.h"
 
@@ -27,7 +28,8 @@ struct CaptureArguments {
   std::string sequence;
   std::string out;
   std::string display = "memory";
-  std::string projector_size = "1024x768";
+  std::string projector_size;  // empty: 1024x768, or the synthetic projector's own
+  int projector = 0;           // synthetic cameras: the rig projector that shows the patterns
   SequencerOptions sequencer;
   double gain = -1.0;  // < 0: leave the camera's gain
   std::string axes = "both";
@@ -74,24 +76,63 @@ CaptureSequence MakeSequence(const CaptureArguments& args, cv::Size projector) {
   return MakeVerifySequence(images, projector);
 }
 
+// The display of projector `index` of the synthetic world a "synthetic:" camera URI names.
+std::shared_ptr<MemoryDisplay> SyntheticProjectorDisplay(const CaptureArguments& args,
+                                                         const SyntheticWorld& world) {
+  if (args.display != "memory") {
+    throw IoError("display '" + args.display + "': camera '" + args.camera +
+                  "' photographs the simulated room, whose projectors show the patterns "
+                  "(choose one with --projector)");
+  }
+  const int count = static_cast<int>(world.displays.size());
+  if (args.projector < 0 || args.projector >= count) {
+    std::string names;
+    for (const Projector& projector : world.rig->projectors())
+      names += (names.empty() ? "" : ", ") + projector.name;
+    throw IoError("--projector " + std::to_string(args.projector) + ": synthetic scene '" +
+                  world.scene + "' has " + std::to_string(count) + " projectors (0.." +
+                  std::to_string(count - 1) + ": " + names + ")");
+  }
+  const std::shared_ptr<MemoryDisplay>& display = world.displays[args.projector];
+  if (!args.projector_size.empty() && ParseSize(args.projector_size) != display->Resolution()) {
+    throw IoError("--projector-size " + args.projector_size + ": projector " +
+                  std::to_string(args.projector) + " of synthetic scene '" + world.scene + "' is " +
+                  std::to_string(display->Resolution().width) + "x" +
+                  std::to_string(display->Resolution().height));
+  }
+  return display;
+}
+
 void RunCapture(const CaptureArguments& args) {
   RegisterDeviceBackends();
+  RegisterSyntheticCameraBackend();
   std::string why;
   if (!args.sequencer.Check(&why)) throw std::invalid_argument("capture: " + why);
-  const cv::Size projector = ParseSize(args.projector_size);
+  const CameraUri camera_uri = CameraUri::Parse(args.camera);
+  // A synthetic camera photographs the simulated room: the patterns go to one of its
+  // projectors, whose display the camera (sharing the world) looks at.
+  std::shared_ptr<SyntheticWorld> world;
+  std::shared_ptr<MemoryDisplay> display;
+  if (camera_uri.scheme() == "synthetic") {
+    world = OpenSyntheticWorld(camera_uri);
+    display = SyntheticProjectorDisplay(args, *world);
+  }
+  const cv::Size projector =
+      display ? display->Resolution()
+              : ParseSize(args.projector_size.empty() ? "1024x768" : args.projector_size);
   if (args.display != "memory") {
     throw IoError("display '" + args.display +
                   "': not available in this build; projector output windows "
                   "(GLFW) come with the projection module; use --display memory");
   }
   // The memory display shows patterns nowhere but to test cameras, which look at it.
-  auto display = std::make_shared<MemoryDisplay>(projector, "memory");
+  if (!display) display = std::make_shared<MemoryDisplay>(projector, "memory");
   LoopbackOptions loopback;
   loopback.projector_gamma = args.projector_gamma;
   OpenCameraOptions open_options;
   open_options.scene_view = MakeLoopbackView(display, loopback);
   std::unique_ptr<Camera> camera = OpenCamera(args.camera, open_options);
-  if (camera->Info().backend != "test") {
+  if (camera->Info().backend != "test" && !world) {
     std::fprintf(
         stderr,
         "procam: warning: display 'memory' shows the patterns nowhere; camera %s photographs the "
@@ -138,6 +179,7 @@ void RunCapture(const CaptureArguments& args) {
 
 void RunCameras(const CamerasArguments& args) {
   RegisterDeviceBackends();
+  RegisterSyntheticCameraBackend();
   ListCamerasOptions options;
   options.gige_discovery = !args.no_gige;
   options.include_virtual = args.include_virtual;
@@ -167,7 +209,7 @@ void AddCaptureCommands(CLI::App& app) {
   cameras->add_flag("--no-gige", cameras_args->no_gige,
                     "Skip GigE Vision discovery (it broadcasts on every network interface)");
   cameras->add_flag("--virtual", cameras_args->include_virtual,
-                    "Also list virtual cameras (Aravis Fake_1, test:)");
+                    "Also list virtual cameras (Aravis Fake_1, test:, synthetic:<scene>)");
   cameras->callback([cameras_args] { RunCameras(*cameras_args); });
 
   auto args = std::make_shared<CaptureArguments>();
@@ -176,7 +218,8 @@ void AddCaptureCommands(CLI::App& app) {
       "Show a pattern sequence and capture it into a session directory; rerun to resume");
   capture
       ->add_option("--camera", args->camera,
-                   "Camera URI: v4l2:/dev/video0, aravis:<id>, test:loopback?noise=2 ...")
+                   "Camera URI: v4l2:/dev/video0, aravis:<id>, test:loopback?noise=2, "
+                   "synthetic:c_shaped ...")
       ->required();
   capture->add_option("--sequence", args->sequence, "graycode, photometric or verify")
       ->required()
@@ -189,7 +232,12 @@ void AddCaptureCommands(CLI::App& app) {
       ->add_option("--display", args->display,
                    "Where patterns are shown: memory (seen only by test cameras)")
       ->capture_default_str();
-  capture->add_option("--projector-size", args->projector_size, "Projector resolution WIDTHxHEIGHT")
+  capture->add_option("--projector-size", args->projector_size,
+                      "Projector resolution WIDTHxHEIGHT (default 1024x768; synthetic cameras: "
+                      "the projector's own)");
+  capture
+      ->add_option("--projector", args->projector,
+                   "synthetic cameras: the rig projector (0-based) that shows the patterns")
       ->capture_default_str();
   capture
       ->add_option("--frames", args->sequencer.frames_per_pattern,

@@ -9,7 +9,7 @@ namespace procam {
 
 void AddSceneCommands(CLI::App& app);         // scene info, scene export
 void AddCompensationCommands(CLI::App& app);  // compensate
-// project, bench projection (joins the bench group: call after AddBenchCommands)
+// project, show, bench projection (joins the bench group: call after AddBenchCommands)
 void AddProjectionCommands(CLI::App& app);
 void AddBenchCommands(CLI::App& app);         // bench formfactors, bench solver
 void AddDemoCommand(CLI::App& app);           // demo

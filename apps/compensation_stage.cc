@@ -55,6 +55,7 @@ nlohmann::json CompensationResultJson(const GeometryStage& geometry, const Compe
   return {{"method", MethodName(s.method)},
           {"scene", geometry.scene.path.string()},
           {"patches", run.fine.size()},
+          {"target_patches", geometry.scene.target_patches},
           {"variables", 3 * run.fine.size()},
           {"alpha", run.fine.alpha},
           {"iterations", s.iterations},

@@ -1,27 +1,27 @@
 // procam project (a compensation solution → one image per projector), procam show (images or
 // test patterns fullscreen on projector monitors) and procam bench projection (images for two
 // 1920×1080 projectors from a solution, timed).
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <thread>
-
-#include <nlohmann/json.hpp>
-#include <spdlog/spdlog.h>
 
 #include "apps/commands.h"
 #include "datasets_synthetic/rooms.h"
 #include "geometry/io.h"
 #include "geometry/patches.h"
 #include "geometry/scene.h"
+#include "procam/config.h"
 #include "projection/projection_rig.h"
 #include "projection/projector.h"
 #include "projection/projector_images.h"
 #include "projection/test_pattern.h"
-#include "procam/config.h"
 #if PROCAM_WITH_GLFW
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -51,7 +51,8 @@ struct Solution {
   Eigen::MatrixX3d emittance;
 };
 
-std::filesystem::path ResolveScenePath(const std::string& written, const std::filesystem::path& solution_dir) {
+std::filesystem::path ResolveScenePath(const std::string& written,
+                                       const std::filesystem::path& solution_dir) {
   const std::filesystem::path path(written);
   if (path.is_absolute() || std::filesystem::exists(path)) return path;
   // compensate records the path as it was given; try it relative to the solution too.
@@ -63,7 +64,9 @@ Solution LoadSolution(const std::filesystem::path& dir, int patches_override) {
   const std::filesystem::path result_path = dir / "result.json";
   const std::string file = result_path.string();
   if (!std::filesystem::exists(result_path)) {
-    throw IoError(file + ": file not found (SOLUTION_DIR must be what `procam compensate SCENE --out DIR` wrote)");
+    throw IoError(
+        file +
+        ": file not found (SOLUTION_DIR must be what `procam compensate SCENE --out DIR` wrote)");
   }
   nlohmann::json result;
   try {
@@ -74,7 +77,8 @@ Solution LoadSolution(const std::filesystem::path& dir, int patches_override) {
   if (!result.is_object() || !result.contains("scene") || !result["scene"].is_string()) {
     throw IoError(file + ": scene: required key is missing (a string: the scene file)");
   }
-  if (!result.contains("patches") || !result["patches"].is_number_integer() || result["patches"].get<int64_t>() < 1) {
+  if (!result.contains("patches") || !result["patches"].is_number_integer() ||
+      result["patches"].get<int64_t>() < 1) {
     throw IoError(file + ": patches: required key is missing (a positive integer)");
   }
   const int n = result["patches"].get<int>();
@@ -89,8 +93,8 @@ Solution LoadSolution(const std::filesystem::path& dir, int patches_override) {
       if (!shape.empty()) shape += ",";
       shape += std::to_string(extent);
     }
-    throw IoError(e_path.string() + ": shape (" + shape + "), but result.json says " + std::to_string(n) +
-                  " patches: expected (" + std::to_string(n) + ",3)");
+    throw IoError(e_path.string() + ": shape (" + shape + "), but result.json says " +
+                  std::to_string(n) + " patches: expected (" + std::to_string(n) + ",3)");
   }
   solution.emittance.resize(n, 3);
   for (int i = 0; i < n; ++i) {
@@ -118,23 +122,26 @@ Solution LoadSolution(const std::filesystem::path& dir, int patches_override) {
       solution.scene.target_patches = target;
       return solution;
     }
-    tried += (tried.empty() ? "" : ", ") + std::to_string(solution.patches.fine.size()) + " for target " +
-             std::to_string(target);
+    tried += (tried.empty() ? "" : ", ") + std::to_string(solution.patches.fine.size()) +
+             " for target " + std::to_string(target);
   }
-  throw IoError(file + ": the solution has " + std::to_string(n) + " patches but " + solution.scene.path.string() +
-                " subdivides into " + tried +
-                ": the scene changed since `procam compensate` ran (or give --patches as it was given to compensate)");
+  throw IoError(file + ": the solution has " + std::to_string(n) + " patches but " +
+                solution.scene.path.string() + " subdivides into " + tried +
+                ": the scene changed since `procam compensate` ran (or give --patches as it was "
+                "given to compensate)");
 }
 
 void RunProject(const ProjectArguments& args) {
   const auto start = Clock::now();
   DitherMethod dither;
-  if (!ParseDither(args.dither, &dither)) throw std::invalid_argument("--dither: unknown method " + args.dither);
+  if (!ParseDither(args.dither, &dither))
+    throw std::invalid_argument("--dither: unknown method " + args.dither);
   const Solution solution = LoadSolution(args.solution, args.patches);
   std::vector<Projector> projectors = ReadProjectors(solution.scene);
   if (projectors.empty()) {
     throw IoError(solution.scene.path.string() +
-                  ": projectors: the scene lists no projectors (add a \"projectors\" array: docs/scene_format.md)");
+                  ": projectors: the scene lists no projectors (add a \"projectors\" array: "
+                  "docs/scene_format.md)");
   }
   const double load_seconds = SecondsSince(start);
   ProjectionRigOptions rig_options;
@@ -142,11 +149,13 @@ void RunProject(const ProjectArguments& args) {
   ProjectionRigSummary rig_summary;
   spdlog::info("project: casting rays for {} projector(s) over {} patches", projectors.size(),
                solution.patches.fine.size());
-  const ProjectionRig rig = BuildProjectionRig(solution.patches.fine, std::move(projectors), rig_options, &rig_summary);
+  const ProjectionRig rig =
+      BuildProjectionRig(solution.patches.fine, std::move(projectors), rig_options, &rig_summary);
   RenderOptions render_options;
   render_options.dither = dither;
   RenderSummary summary;
-  const std::vector<ProjectorImage> images = RenderProjectorImages(rig, solution.emittance, render_options, &summary);
+  const std::vector<ProjectorImage> images =
+      RenderProjectorImages(rig, solution.emittance, render_options, &summary);
 
   const auto write_start = Clock::now();
   const std::filesystem::path out(args.out);
@@ -174,36 +183,46 @@ void RunProject(const ProjectArguments& args) {
   WriteNpy(out / "lower.npy", RowMatrixXd(rig.lower));
   WriteNpy(out / "upper.npy", RowMatrixXd(rig.upper));
   const double write_seconds = SecondsSince(write_start);
-  const nlohmann::json result = {
-      {"solution", args.solution},
-      {"scene", solution.scene.path.string()},
-      {"patches", rig.size()},
-      {"target_patches", solution.scene.target_patches},
-      {"projectors", projector_json},
-      {"dither", DitherName(dither)},
-      {"feather", args.feather},
-      {"patches_reached", rig_summary.patches_reached},
-      {"patches_unreached", summary.patches_unreached},
-      {"patches_below_lower", summary.patches_below_lower},
-      {"patches_above_upper", summary.patches_above_upper},
-      {"level_passes", summary.level_passes},
-      {"max_relative_error", summary.max_relative_error},
-      {"seconds", {{"load", load_seconds}, {"maps", rig_summary.seconds}, {"render", summary.seconds},
-                   {"write", write_seconds}, {"total", SecondsSince(start)}}}};
+  const nlohmann::json result = {{"solution", args.solution},
+                                 {"scene", solution.scene.path.string()},
+                                 {"patches", rig.size()},
+                                 {"target_patches", solution.scene.target_patches},
+                                 {"projectors", projector_json},
+                                 {"dither", DitherName(dither)},
+                                 {"feather", args.feather},
+                                 {"patches_reached", rig_summary.patches_reached},
+                                 {"patches_unreached", summary.patches_unreached},
+                                 {"patches_below_lower", summary.patches_below_lower},
+                                 {"patches_above_upper", summary.patches_above_upper},
+                                 {"level_passes", summary.level_passes},
+                                 {"max_relative_error", summary.max_relative_error},
+                                 {"seconds",
+                                  {{"load", load_seconds},
+                                   {"maps", rig_summary.seconds},
+                                   {"render", summary.seconds},
+                                   {"write", write_seconds},
+                                   {"total", SecondsSince(start)}}}};
   WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
 
   for (size_t k = 0; k < images.size(); ++k) {
-    std::printf("%-12s %dx%d, %d-bit: %d lit pixels, %d patches, %lld saturated\n", rig.projectors[k].name.c_str(),
-                rig.projectors[k].geometry.width(), rig.projectors[k].geometry.height(), images[k].bits,
-                rig.maps[k].lit_pixels, rig.maps[k].patches_reached, summary.saturated_pixels[k]);
+    std::printf("%-12s %dx%d, %d-bit: %d lit pixels, %d patches, %lld saturated\n",
+                rig.projectors[k].name.c_str(), rig.projectors[k].geometry.width(),
+                rig.projectors[k].geometry.height(), images[k].bits, rig.maps[k].lit_pixels,
+                rig.maps[k].patches_reached, summary.saturated_pixels[k]);
   }
-  std::printf("patches: %d, %d reached by no projector; E outside the projectors' bounds on %d (below) / %d (above)\n",
-              rig.size(), summary.patches_unreached, summary.patches_below_lower, summary.patches_above_upper);
+  std::printf(
+      "patches: %d, %d reached by no projector; E outside the projectors' bounds on %d (below) / "
+      "%d (above)\n",
+      rig.size(), summary.patches_unreached, summary.patches_below_lower,
+      summary.patches_above_upper);
   if (summary.patches_below_lower + summary.patches_above_upper > 0) {
-    std::printf("  (clipped: was the solution computed with the scene's `bounds` instead of its projectors?)\n");
+    std::printf(
+        "  (clipped: was the solution computed with the scene's `bounds` instead of its "
+        "projectors?)\n");
   }
-  std::printf("largest error of the delivered emittance %.2e (relative to the largest upper bound)\n",
-              summary.max_relative_error);
+  std::printf(
+      "largest error of the delivered emittance %.2e (relative to the largest upper bound)\n",
+      summary.max_relative_error);
   std::printf("maps %.3f s, images %.3f s, writing %.3f s\nwrote %s/result.json and %zu image(s)\n",
               rig_summary.seconds, summary.seconds, write_seconds, args.out.c_str(), images.size());
 }
@@ -215,7 +234,8 @@ struct BenchProjectionArguments {
 
 void RunProjectionBench(const BenchProjectionArguments& args) {
   DitherMethod dither;
-  if (!ParseDither(args.dither, &dither)) throw std::invalid_argument("--dither: unknown method " + args.dither);
+  if (!ParseDither(args.dither, &dither))
+    throw std::invalid_argument("--dither: unknown method " + args.dither);
   BoxRoomOptions room;
   room.target_patches = args.patches;
   const Scene scene = MakeBoxRoom(room);
@@ -228,8 +248,11 @@ void RunProjectionBench(const BenchProjectionArguments& args) {
     Projector projector;
     projector.name = x < 2.0 ? "left" : "right";
     projector.geometry = ProjectorGeometry(
-        "LENSMODEL_OPENCV4", {1.0 * args.width, 1.0 * args.width, 0.5 * (args.width - 1), 0.9 * args.height, -0.05, 0.01, 0.0, 0.0},
-        args.width, args.height, ProjFromWorldLookingAt(Vec3(x, 0.2, 2.2), Vec3(4.0 - x, 3.0, 0.8), Vec3::UnitZ()));
+        "LENSMODEL_OPENCV4",
+        {1.0 * args.width, 1.0 * args.width, 0.5 * (args.width - 1), 0.9 * args.height, -0.05, 0.01,
+         0.0, 0.0},
+        args.width, args.height,
+        ProjFromWorldLookingAt(Vec3(x, 0.2, 2.2), Vec3(4.0 - x, 3.0, 0.8), Vec3::UnitZ()));
     projector.photometry.black = Vec3::Constant(0.01);
     projector.photometry.max = Vec3(9.0, 10.0, 8.5);
     projectors.push_back(projector);
@@ -240,14 +263,16 @@ void RunProjectionBench(const BenchProjectionArguments& args) {
   std::uniform_real_distribution<double> unit(0.05, 0.95);
   Eigen::MatrixX3d emittance(rig.size(), 3);
   for (int i = 0; i < rig.size(); ++i) {
-    for (int c = 0; c < 3; ++c) emittance(i, c) = rig.lower(i, c) + unit(random) * (rig.upper(i, c) - rig.lower(i, c));
+    for (int c = 0; c < 3; ++c)
+      emittance(i, c) = rig.lower(i, c) + unit(random) * (rig.upper(i, c) - rig.lower(i, c));
   }
   RenderOptions options;
   options.dither = dither;
   std::vector<double> render_times, encode_times;
   RenderSummary summary;
   for (int r = 0; r < args.repeat; ++r) {
-    const std::vector<ProjectorImage> images = RenderProjectorImages(rig, emittance, options, &summary);
+    const std::vector<ProjectorImage> images =
+        RenderProjectorImages(rig, emittance, options, &summary);
     render_times.push_back(summary.seconds);
     const auto start = Clock::now();
     EncodeProjectorImages(images);
@@ -257,20 +282,30 @@ void RunProjectionBench(const BenchProjectionArguments& args) {
   std::sort(encode_times.begin(), encode_times.end());
   const double render_median = render_times[render_times.size() / 2];
   const double encode_median = encode_times[encode_times.size() / 2];
-  std::printf("projection: 2 projectors %dx%d (OpenCV4 lens), closed room with occluder, %d patches\n", args.width,
-              args.height, rig.size());
+  std::printf(
+      "projection: 2 projectors %dx%d (OpenCV4 lens), closed room with occluder, %d patches\n",
+      args.width, args.height, rig.size());
   std::printf("  maps (once per rig: unproject, %lld rays + blending shadow rays): %.3f s\n",
               2LL * args.width * args.height, rig_summary.seconds);
-  std::printf("  images from a solution (%s dither, %d level passes): median %.1f ms, min %.1f ms over %d runs\n",
-              DitherName(dither), summary.level_passes, 1e3 * render_median, 1e3 * render_times.front(), args.repeat);
+  std::printf(
+      "  images from a solution (%s dither, %d level passes): median %.1f ms, min %.1f ms over %d "
+      "runs\n",
+      DitherName(dither), summary.level_passes, 1e3 * render_median, 1e3 * render_times.front(),
+      args.repeat);
   std::printf("  PNG encoding of both: median %.1f ms\n", 1e3 * encode_median);
   std::printf("  largest delivered-emittance error %.2e (relative)\n", summary.max_relative_error);
   if (!args.json.empty()) {
-    const nlohmann::json result = {{"benchmark", "projection"}, {"width", args.width}, {"height", args.height},
-                                   {"projectors", 2}, {"patches", rig.size()}, {"dither", DitherName(dither)},
-                                   {"maps_seconds", rig_summary.seconds}, {"render_seconds_median", render_median},
+    const nlohmann::json result = {{"benchmark", "projection"},
+                                   {"width", args.width},
+                                   {"height", args.height},
+                                   {"projectors", 2},
+                                   {"patches", rig.size()},
+                                   {"dither", DitherName(dither)},
+                                   {"maps_seconds", rig_summary.seconds},
+                                   {"render_seconds_median", render_median},
                                    {"render_seconds_min", render_times.front()},
-                                   {"png_encode_seconds_median", encode_median}, {"repeat", args.repeat},
+                                   {"png_encode_seconds_median", encode_median},
+                                   {"repeat", args.repeat},
                                    {"max_relative_error", summary.max_relative_error}};
     WriteFileAtomically(args.json, result.dump(2) + "\n");
   }
@@ -287,8 +322,8 @@ struct ShowArguments {
 void RunShow(const ShowArguments& args) {
   if (args.list) {
     for (const MonitorInfo& m : ListMonitors()) {
-      std::printf("%d  %-16s %dx%d @ %d Hz at (%d, %d)\n", m.index, m.name.c_str(), m.width, m.height, m.refresh_hz,
-                  m.x, m.y);
+      std::printf("%d  %-16s %dx%d @ %d Hz at (%d, %d)\n", m.index, m.name.c_str(), m.width,
+                  m.height, m.refresh_hz, m.x, m.y);
     }
     return;
   }
@@ -304,16 +339,18 @@ void RunShow(const ShowArguments& args) {
   if (!args.monitors.empty()) {
     if (!args.images.empty() && args.monitors.size() != args.images.size()) {
       throw std::invalid_argument(std::to_string(args.images.size()) + " images but " +
-                                  std::to_string(args.monitors.size()) + " --monitor options (one per image)");
+                                  std::to_string(args.monitors.size()) +
+                                  " --monitor options (one per image)");
     }
     for (const std::string& which : args.monitors) monitors.push_back(FindMonitor(which));
   } else {
     const std::vector<MonitorInfo> all = ListMonitors();
     if (args.images.size() > all.size()) {
-      throw IoError(std::to_string(args.images.size()) + " images but only " + std::to_string(all.size()) +
-                    " monitor(s) connected");
+      throw IoError(std::to_string(args.images.size()) + " images but only " +
+                    std::to_string(all.size()) + " monitor(s) connected");
     }
-    monitors.assign(all.begin(), args.images.empty() ? all.end() : all.begin() + args.images.size());
+    monitors.assign(all.begin(),
+                    args.images.empty() ? all.end() : all.begin() + args.images.size());
   }
   // Read and check every image before any window opens.
   std::vector<cv::Mat> images;
@@ -324,8 +361,9 @@ void RunShow(const ShowArguments& args) {
     if (image.empty()) throw IoError(file + ": not a readable image");
     if (image.channels() == 4) cv::cvtColor(image, image, cv::COLOR_BGRA2BGR);
     if (image.cols != monitors[k].width || image.rows != monitors[k].height) {
-      throw IoError(file + ": image is " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +
-                    ", but monitor " + std::to_string(monitors[k].index) + " '" + monitors[k].name + "' runs at " +
+      throw IoError(file + ": image is " + std::to_string(image.cols) + "x" +
+                    std::to_string(image.rows) + ", but monitor " +
+                    std::to_string(monitors[k].index) + " '" + monitors[k].name + "' runs at " +
                     std::to_string(monitors[k].width) + "x" + std::to_string(monitors[k].height));
     }
     images.push_back(image);
@@ -338,8 +376,9 @@ void RunShow(const ShowArguments& args) {
     } else {
       displays.back()->Show(images[k]);
     }
-    std::printf("monitor %d '%s' %dx%d: %s\n", monitors[k].index, monitors[k].name.c_str(), monitors[k].width,
-                monitors[k].height, images.empty() ? TestPatternName(pattern) : args.images[k].c_str());
+    std::printf("monitor %d '%s' %dx%d: %s\n", monitors[k].index, monitors[k].name.c_str(),
+                monitors[k].width, monitors[k].height,
+                images.empty() ? TestPatternName(pattern) : args.images[k].c_str());
   }
   if (!args.readback.empty()) {
     std::filesystem::create_directories(args.readback);
@@ -348,7 +387,8 @@ void RunShow(const ShowArguments& args) {
       cv::cvtColor(displays[k]->ReadBack(), bgr, cv::COLOR_RGB2BGR);
       std::vector<uchar> bytes;
       cv::imencode(".png", bgr, bytes);
-      WriteFileAtomically(std::filesystem::path(args.readback) / ("monitor" + std::to_string(monitors[k].index) + ".png"),
+      WriteFileAtomically(std::filesystem::path(args.readback) /
+                              ("monitor" + std::to_string(monitors[k].index) + ".png"),
                           std::string(bytes.begin(), bytes.end()));
     }
   }
@@ -363,8 +403,9 @@ void RunShow(const ShowArguments& args) {
 }
 #else
 void RunShow(const ShowArguments&) {
-  throw IoError("procam show: this build has no GLFW output backend (reconfigure with -DPROCAM_WITH_GLFW=ON; "
-                "needs libglfw3-dev and libgl-dev)");
+  throw IoError(
+      "procam show: this build has no GLFW output backend (reconfigure with -DPROCAM_WITH_GLFW=ON; "
+      "needs libglfw3-dev and libgl-dev)");
 }
 #endif
 
@@ -372,43 +413,60 @@ void RunShow(const ShowArguments&) {
 
 void AddProjectionCommands(CLI::App& app) {
   auto args = std::make_shared<ProjectArguments>();
-  CLI::App* project = app.add_subcommand("project", "Turn a compensation solution into one image per projector");
-  project->add_option("solution", args->solution, "Directory written by `procam compensate SCENE --out DIR`")
+  CLI::App* project =
+      app.add_subcommand("project", "Turn a compensation solution into one image per projector");
+  project
+      ->add_option("solution", args->solution,
+                   "Directory written by `procam compensate SCENE --out DIR`")
       ->required();
-  project->add_option("--out", args->out, "Output directory (PNG per projector, result.json)")->required();
+  project->add_option("--out", args->out, "Output directory (PNG per projector, result.json)")
+      ->required();
   project->add_option("--dither", args->dither, "none | ordered | error-diffusion")
       ->check(CLI::IsMember({"none", "ordered", "error-diffusion"}))
       ->capture_default_str();
-  project->add_option("--feather", args->feather, "Blending ramp at image borders, fraction of the image size")
+  project
+      ->add_option("--feather", args->feather,
+                   "Blending ramp at image borders, fraction of the image size")
       ->check(CLI::Range(0.0, 0.5))
       ->capture_default_str();
-  project->add_option("--patches", args->patches, "Patch target given to compensate with --patches, if any");
+  project->add_option("--patches", args->patches,
+                      "Patch target given to compensate with --patches, if any");
   project->callback([args] { RunProject(*args); });
 
   auto show_args = std::make_shared<ShowArguments>();
-  CLI::App* show = app.add_subcommand("show", "Show images (or a test pattern) fullscreen on projector monitors");
+  CLI::App* show = app.add_subcommand(
+      "show", "Show images (or a test pattern) fullscreen on projector monitors");
   show->add_option("images", show_args->images, "PNG per projector, in the monitor's resolution");
   show->add_option("--monitor", show_args->monitors,
                    "Monitor index or name, once per image (default: image k on monitor k)");
   show->add_flag("--list", show_args->list, "List the connected monitors and exit");
-  show->add_option("--pattern", show_args->pattern, "Test pattern instead of images: grid | bars | white | black")
+  show->add_option("--pattern", show_args->pattern,
+                   "Test pattern instead of images: grid | bars | white | black")
       ->check(CLI::IsMember({"grid", "bars", "white", "black"}));
-  show->add_option("--seconds", show_args->seconds, "Close after this long (default: until Esc or Q)")
+  show->add_option("--seconds", show_args->seconds,
+                   "Close after this long (default: until Esc or Q)")
       ->check(CLI::Range(0.0, 1e6));
-  show->add_option("--readback", show_args->readback, "Write what each window shows (monitorN.png) into this directory");
+  show->add_option("--readback", show_args->readback,
+                   "Write what each window shows (monitorN.png) into this directory");
   show->callback([show_args] { RunShow(*show_args); });
 
   // `procam bench projection` joins the bench group when it exists (AddBenchCommands ran).
   CLI::App* bench = nullptr;
-  for (CLI::App* sub : app.get_subcommands([](CLI::App* s) { return s->get_name() == "bench"; })) bench = sub;
+  for (CLI::App* sub : app.get_subcommands([](CLI::App* s) { return s->get_name() == "bench"; }))
+    bench = sub;
   if (bench == nullptr) bench = app.add_subcommand("bench", "Benchmarks on generated rooms");
   auto bench_args = std::make_shared<BenchProjectionArguments>();
-  CLI::App* bench_projection =
-      bench->add_subcommand("projection", "Images for two projectors from a solution (default 1920x1080)");
-  bench_projection->add_option("--width", bench_args->width, "Projector width, pixels")->capture_default_str();
-  bench_projection->add_option("--height", bench_args->height, "Projector height, pixels")->capture_default_str();
-  bench_projection->add_option("--patches", bench_args->patches, "Target patch count")->capture_default_str();
-  bench_projection->add_option("--repeat", bench_args->repeat, "Timed runs")->check(CLI::Range(1, 1000))->capture_default_str();
+  CLI::App* bench_projection = bench->add_subcommand(
+      "projection", "Images for two projectors from a solution (default 1920x1080)");
+  bench_projection->add_option("--width", bench_args->width, "Projector width, pixels")
+      ->capture_default_str();
+  bench_projection->add_option("--height", bench_args->height, "Projector height, pixels")
+      ->capture_default_str();
+  bench_projection->add_option("--patches", bench_args->patches, "Target patch count")
+      ->capture_default_str();
+  bench_projection->add_option("--repeat", bench_args->repeat, "Timed runs")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
   bench_projection->add_option("--dither", bench_args->dither, "none | ordered | error-diffusion")
       ->check(CLI::IsMember({"none", "ordered", "error-diffusion"}))
       ->capture_default_str();

@@ -49,9 +49,9 @@ std::string MissingBackendMessage(const std::string& scheme, const std::string& 
   }
   if (scheme == "synthetic") {
     return head +
-           "the simulated camera backend 'synthetic' is not available in this build "
-           "(it comes with the simulated rig of datasets_synthetic); use 'test:' for the "
-           "software test camera";
+           "the simulated camera backend 'synthetic' is not available in this program "
+           "(RegisterSyntheticCameraBackend() of datasets_synthetic/synthetic_camera.h registers "
+           "it; procam does); use 'test:' for the software test camera";
   }
   std::string known;
   for (const std::string& name : RegisteredCameraBackends())

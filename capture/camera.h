@@ -6,7 +6,9 @@
 //   aravis:Fake_1?trigger=software                        a GenICam camera (procam_capture_aravis);
 //                                                         Fake_1 is Aravis's in-process fake camera
 //   test:loopback?format=Mono8&noise=2                    the software test camera (test_camera.h)
-//   synthetic:<scene>                                     reserved for the simulated rig's camera
+//   synthetic:c_shaped?patches=300                        the simulated rig's camera in a
+//                                                         synthetic room (registered by
+//                                                         datasets_synthetic/synthetic_camera.h)
 // Backends are registered at run time (RegisterCameraBackend); RegisterDeviceBackends() in
 // capture/devices.h registers every device backend this build contains. Opening a URI whose
 // backend is missing throws IoError with one line naming the backend and why it is missing.
@@ -94,9 +96,9 @@ struct Frame {
   double gain = 0.0;                // gain in effect, camera units
 };
 
-// A camera. Implementations: V4l2Camera, AravisCamera, TestCamera; the simulated camera of
-// datasets_synthetic later. Device failures throw IoError or its subclasses above, with a
-// message that names the URI.
+// A camera. Implementations: V4l2Camera, AravisCamera, TestCamera, and SyntheticCamera of
+// datasets_synthetic (a TestCamera looking at the simulated rig). Device failures throw IoError
+// or its subclasses above, with a message that names the URI.
 class Camera {
  public:
   virtual ~Camera() = default;

@@ -111,6 +111,15 @@ SimulatedRig::SimulatedRig(const Scene& scene, std::vector<Projector> projectors
   }
 }
 
+bool SimulatedRig::PointSeenByPixel(int row, int col, Vec3* point_in_world, Vec3* normal) const {
+  if (row < 0 || row >= camera_.height() || col < 0 || col >= camera_.width()) return false;
+  const PixelHit& hit = hits_[static_cast<size_t>(row) * camera_.width() + col];
+  if (hit.world_patch < 0) return false;
+  if (point_in_world) *point_in_world = hit.point;
+  if (normal) *normal = world_.fine.patches[hit.world_patch].normal;
+  return true;
+}
+
 cv::Mat SimulatedRig::RenderRadiance(const std::vector<ProjectorImage>& images) const {
   if (images.size() != projectors_.size()) {
     throw std::invalid_argument("simulated rig: " + std::to_string(images.size()) + " images for " +

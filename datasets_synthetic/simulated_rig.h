@@ -88,6 +88,9 @@ class SimulatedRig {
   cv::Mat RenderDesired() const;
   // Mask (CV_8UC1, 255) of pixels that see a surface.
   const cv::Mat& coverage() const { return coverage_; }
+  // The surface point (world, metres) camera pixel (row, col) sees and the unit normal of its
+  // lit side; false when the pixel sees nothing (coverage() is 0 there) or is outside the image.
+  bool PointSeenByPixel(int row, int col, Vec3* point_in_world, Vec3* normal = nullptr) const;
 
  private:
   struct PixelHit {

@@ -1,8 +1,8 @@
 #include "projection/glfw_display.h"
 
-#include <mutex>
-
 #include <GLFW/glfw3.h>
+
+#include <mutex>
 #include <opencv2/imgproc.hpp>
 
 #include "geometry/io.h"
@@ -52,8 +52,8 @@ std::vector<MonitorInfo> ListMonitorsLocked() {
 std::string Describe(const std::vector<MonitorInfo>& monitors) {
   std::string text;
   for (const MonitorInfo& m : monitors) {
-    text += (text.empty() ? "" : ", ") + std::to_string(m.index) + " '" + m.name + "' " + std::to_string(m.width) +
-            "x" + std::to_string(m.height);
+    text += (text.empty() ? "" : ", ") + std::to_string(m.index) + " '" + m.name + "' " +
+            std::to_string(m.width) + "x" + std::to_string(m.height);
   }
   return text.empty() ? "none" : text;
 }
@@ -82,7 +82,8 @@ GlfwDisplay::GlfwDisplay(const MonitorInfo& monitor) : monitor_(monitor) {
   GLFWmonitor** monitors = glfwGetMonitors(&count);
   if (monitor.index < 0 || monitor.index >= count) {
     ReleaseGlfwIfIdle();
-    throw IoError("monitor " + std::to_string(monitor.index) + " '" + monitor.name + "' is not connected");
+    throw IoError("monitor " + std::to_string(monitor.index) + " '" + monitor.name +
+                  "' is not connected");
   }
   GLFWmonitor* target = monitors[monitor.index];
   const GLFWvidmode* mode = glfwGetVideoMode(target);
@@ -97,11 +98,13 @@ GlfwDisplay::GlfwDisplay(const MonitorInfo& monitor) : monitor_(monitor) {
   glfwWindowHint(GLFW_REFRESH_RATE, mode->refreshRate);
   glfwWindowHint(GLFW_AUTO_ICONIFY, GLFW_FALSE);
   glfwWindowHint(GLFW_CLIENT_API, GLFW_OPENGL_API);
-  GLFWwindow* window = glfwCreateWindow(mode->width, mode->height, ("procam " + monitor.name).c_str(), target, nullptr);
+  GLFWwindow* window = glfwCreateWindow(mode->width, mode->height,
+                                        ("procam " + monitor.name).c_str(), target, nullptr);
   if (window == nullptr) {
     const std::string error = GlfwErrorText();
     ReleaseGlfwIfIdle();
-    throw IoError("monitor " + std::to_string(monitor.index) + " '" + monitor.name + "': cannot open a window: " + error);
+    throw IoError("monitor " + std::to_string(monitor.index) + " '" + monitor.name +
+                  "': cannot open a window: " + error);
   }
   ++open_windows;
   window_ = window;
@@ -126,8 +129,9 @@ std::string GlfwDisplay::Name() const { return "glfw:" + monitor_.name; }
 
 void GlfwDisplay::Show(const cv::Mat& pattern) {
   if (pattern.size() != Resolution()) {
-    throw IoError(Name() + ": image is " + std::to_string(pattern.cols) + "x" + std::to_string(pattern.rows) +
-                  ", the monitor runs at " + std::to_string(monitor_.width) + "x" + std::to_string(monitor_.height));
+    throw IoError(Name() + ": image is " + std::to_string(pattern.cols) + "x" +
+                  std::to_string(pattern.rows) + ", the monitor runs at " +
+                  std::to_string(monitor_.width) + "x" + std::to_string(monitor_.height));
   }
   cv::Mat rgb;
   if (pattern.channels() == 1) {
@@ -150,8 +154,9 @@ void GlfwDisplay::Show(const cv::Mat& pattern) {
 
 void GlfwDisplay::Show(const ProjectorImage& image) {
   if (image.codes.size() != Resolution()) {
-    throw IoError(Name() + ": image is " + std::to_string(image.codes.cols) + "x" + std::to_string(image.codes.rows) +
-                  ", the monitor runs at " + std::to_string(monitor_.width) + "x" + std::to_string(monitor_.height));
+    throw IoError(Name() + ": image is " + std::to_string(image.codes.cols) + "x" +
+                  std::to_string(image.codes.rows) + ", the monitor runs at " +
+                  std::to_string(monitor_.width) + "x" + std::to_string(monitor_.height));
   }
   image.codes.convertTo(shown_, CV_16UC3, 65535.0 / ((1 << image.bits) - 1));
   Draw();
@@ -186,9 +191,12 @@ cv::Mat GlfwDisplay::ReadBack() {
   glfwMakeContextCurrent(window);
   int width = 0, height = 0;
   glfwGetFramebufferSize(window, &width, &height);
+  // The front buffer cannot be read on every driver (Mesa under Xvfb returns black): draw the
+  // shown image into the back buffer again, exactly as Show() did, and read that.
+  Draw();
   cv::Mat bottom_up(height, width, CV_8UC3);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
-  glReadBuffer(GL_FRONT);  // what was swapped onto the screen
+  glReadBuffer(GL_BACK);
   glReadPixels(0, 0, width, height, GL_RGB, GL_UNSIGNED_BYTE, bottom_up.data);
   cv::Mat top_down;
   cv::flip(bottom_up, top_down, 0);

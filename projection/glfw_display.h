@@ -7,10 +7,9 @@
 //
 // GLFW's threading rules apply: make, show on and destroy windows on the process's main thread.
 
+#include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core/mat.hpp>
 
 #include "capture/display.h"
 #include "projection/projector_images.h"
@@ -18,10 +17,10 @@
 namespace procam {
 
 struct MonitorInfo {
-  int index = 0;          // position in GLFW's list; 0 is the primary monitor
-  std::string name;       // as the system names it (X11/RandR output, e.g. "HDMI-1")
+  int index = 0;     // position in GLFW's list; 0 is the primary monitor
+  std::string name;  // as the system names it (X11/RandR output, e.g. "HDMI-1")
   int width = 0, height = 0, refresh_hz = 0;  // current video mode
-  int x = 0, y = 0;       // position on the virtual desktop, pixels
+  int x = 0, y = 0;                           // position on the virtual desktop, pixels
 };
 
 // Monitors connected now. Throws IoError when no display server can be reached.
@@ -47,7 +46,8 @@ class GlfwDisplay : public PatternDisplay {
   void Show(const cv::Mat& pattern) override;
   // Shows a projector image (codes in R, G, B; 10-bit codes scaled to the output's depth).
   void Show(const ProjectorImage& image);
-  // What the window shows now, read back from the framebuffer: CV_8UC3, R, G, B, row 0 = top.
+  // What the window shows, read back from its framebuffer (the last image drawn again into the
+  // back buffer through the same path, then read): CV_8UC3, R, G, B, row 0 = top.
   cv::Mat ReadBack();
   // Handles window events; false once Esc or Q was pressed or the window was closed.
   bool PollEvents();

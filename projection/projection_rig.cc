@@ -4,9 +4,8 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
-#include <stdexcept>
-
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 
 #include "geometry/io.h"
 
@@ -41,18 +40,21 @@ struct Caster {
   // occluders both fade the projector out.
   double Feather(const Vec2& pixel) const {
     const int width = map.width, height = map.height;
-    double inside = std::min({pixel.x() + 0.5, width - 0.5 - pixel.x(), pixel.y() + 0.5, height - 0.5 - pixel.y()});
+    double inside = std::min(
+        {pixel.x() + 0.5, width - 0.5 - pixel.x(), pixel.y() + 0.5, height - 0.5 - pixel.y()});
     if (!(inside > 0.0)) return 0.0;
     if (ramp <= 0.0) return 1.0;
     // Bilinear in the edge-distance field, so the weight varies continuously with the point.
-    const double x = std::clamp(pixel.x(), 0.0, width - 1.0), y = std::clamp(pixel.y(), 0.0, height - 1.0);
+    const double x = std::clamp(pixel.x(), 0.0, width - 1.0),
+                 y = std::clamp(pixel.y(), 0.0, height - 1.0);
     const int x0 = std::min(static_cast<int>(x), width - 2 < 0 ? 0 : width - 2);
     const int y0 = std::min(static_cast<int>(y), height - 2 < 0 ? 0 : height - 2);
     const int x1 = std::min(x0 + 1, width - 1), y1 = std::min(y0 + 1, height - 1);
     const double fx = x - x0, fy = y - y0;
     const double edge = (1 - fx) * (1 - fy) * edge_distance.at<float>(y0, x0) +
                         fx * (1 - fy) * edge_distance.at<float>(y0, x1) +
-                        (1 - fx) * fy * edge_distance.at<float>(y1, x0) + fx * fy * edge_distance.at<float>(y1, x1);
+                        (1 - fx) * fy * edge_distance.at<float>(y1, x0) +
+                        fx * fy * edge_distance.at<float>(y1, x1);
     // The field is 0 at the first pixels beyond a silhouette; the silhouette itself (where this
     // projector's visibility ends) is about ½ pixel further, so the ramp starts from there.
     return Ramp(std::min(inside, edge - 0.5), ramp);
@@ -184,7 +186,8 @@ bool ProjectionRigOptions::Check(std::string* why) const {
 }
 
 double FeatherWeight(const Vec2& pixel, int width, int height, double ramp) {
-  return Ramp(std::min({pixel.x() + 0.5, width - 0.5 - pixel.x(), pixel.y() + 0.5, height - 0.5 - pixel.y()}),
+  return Ramp(std::min({pixel.x() + 0.5, width - 0.5 - pixel.x(), pixel.y() + 0.5,
+                        height - 0.5 - pixel.y()}),
               ramp);
 }
 
@@ -212,7 +215,8 @@ Scene PatchScene(const PatchLevel& level) {
 }
 
 ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector> projectors,
-                                 const ProjectionRigOptions& options, ProjectionRigSummary* summary) {
+                                 const ProjectionRigOptions& options,
+                                 ProjectionRigSummary* summary) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("ProjectionRigOptions: " + why);
   const auto start = std::chrono::steady_clock::now();
@@ -234,7 +238,8 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
     caster.projector = &projector;
     caster.centre = projector.geometry.CentreInWorld();
     caster.luminance = Luminance(projector.photometry.max - projector.photometry.black);
-    caster.ramp = options.feather * std::min(projector.geometry.width(), projector.geometry.height());
+    caster.ramp =
+        options.feather * std::min(projector.geometry.width(), projector.geometry.height());
     CastRays(level, rays, &caster);
     int lit = 0;
     std::vector<char> reached(n, 0);
@@ -246,12 +251,14 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
     caster.map.lit_pixels = lit;
     caster.map.patches_reached = static_cast<int>(std::count(reached.begin(), reached.end(), 1));
     if (lit == 0) {
-      throw IoError((projector.model_path.empty() ? std::string() : projector.model_path.string() + ": ") +
-                    "projector '" + projector.name + "' lights no patch of the scene (check its pose)");
+      throw IoError(
+          (projector.model_path.empty() ? std::string() : projector.model_path.string() + ": ") +
+          "projector '" + projector.name + "' lights no patch of the scene (check its pose)");
     }
     EdgeDistance(&caster);
   }
-  for (int k = 0; k < projector_count; ++k) Blend(k, casters, level, rays, options, &casters[k].map);
+  for (int k = 0; k < projector_count; ++k)
+    Blend(k, casters, level, rays, options, &casters[k].map);
   for (int k = 0; k < projector_count; ++k) {
     const Projector& projector = rig.projectors[k];
     rig.maps.push_back(std::move(casters[k].map));
@@ -269,18 +276,20 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
     map.pixels_by_patch.assign(map.lit_pixels, 0);
     std::vector<int> next(map.patch_begin.begin(), map.patch_begin.end() - 1);
     for (size_t index = 0; index < map.patch.size(); ++index) {
-      if (map.patch[index] >= 0) map.pixels_by_patch[next[map.patch[index]]++] = static_cast<int32_t>(index);
+      if (map.patch[index] >= 0)
+        map.pixels_by_patch[next[map.patch[index]]++] = static_cast<int32_t>(index);
     }
     // Footprints of the pixels counted per patch; a patch this projector lights wholly gets its
     // pixels' footprints rescaled to its exact area (coverage scale, header comment).
-    Eigen::VectorXd solid_angle_sum = Eigen::VectorXd::Zero(n), footprint = Eigen::VectorXd::Zero(n),
-                    blended = Eigen::VectorXd::Zero(n);
+    Eigen::VectorXd solid_angle_sum = Eigen::VectorXd::Zero(n),
+                    footprint = Eigen::VectorXd::Zero(n), blended = Eigen::VectorXd::Zero(n);
     for (size_t index = 0; index < map.patch.size(); ++index) {
       const int patch = map.patch[index];
       if (patch < 0) continue;
       solid_angle_sum[patch] += map.pixel_solid_angle;
       footprint[patch] += map.pixel_solid_angle / map.gain[index];
-      blended[patch] += double(map.weight[index] / map.gain[index]) * map.pixel_solid_angle;  // = share · Ω
+      blended[patch] +=
+          double(map.weight[index] / map.gain[index]) * map.pixel_solid_angle;  // = share · Ω
     }
     const Vec3 centre = projector.geometry.CentreInWorld();
 #pragma omp parallel for schedule(dynamic, 8)
@@ -289,14 +298,15 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
       const Patch& patch = level.patches[i];
       std::vector<PatchSample> samples;
       SamplePatch(patch, options.coverage_samples, &samples);
-      for (int c = 0; c < patch.corner_count; ++c) samples.push_back({patch.corners[c], Vec2::Zero(), 0.0});
+      for (int c = 0; c < patch.corner_count; ++c)
+        samples.push_back({patch.corners[c], Vec2::Zero(), 0.0});
       bool whole = true;
       for (const PatchSample& sample : samples) {
         Vec2 q;
         // Corners sit on the patch's edges: test them a hair inside, towards the centroid.
         const Vec3 point = sample.point + 1e-6 * (patch.centroid - sample.point);
-        if (!(projector.geometry.Gain(point, patch.normal, &q) > 0.0) || !projector.geometry.InImage(q) ||
-            rays.Occluded(point, centre, options.ray_margin)) {
+        if (!(projector.geometry.Gain(point, patch.normal, &q) > 0.0) ||
+            !projector.geometry.InImage(q) || rays.Occluded(point, centre, options.ray_margin)) {
           whole = false;
           break;
         }
@@ -314,7 +324,8 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
     }
   }
   if (summary) {
-    summary->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    summary->seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     summary->patches_reached = static_cast<int>((rig.blended_area.array() > 0.0).count());
   }
   return rig;
@@ -330,7 +341,8 @@ bool SetBoundsFromProjectors(const Scene& scene, const PatchLevel& level, Eigen:
   return true;
 }
 
-Eigen::MatrixX3d CoarsenBounds(const Eigen::MatrixX3d& fine_bounds, const Eigen::VectorXd& fine_area,
+Eigen::MatrixX3d CoarsenBounds(const Eigen::MatrixX3d& fine_bounds,
+                               const Eigen::VectorXd& fine_area,
                                const std::vector<int>& coarse_of_fine, int coarse_count) {
   Eigen::MatrixX3d flux = Eigen::MatrixX3d::Zero(coarse_count, 3);
   Eigen::VectorXd area = Eigen::VectorXd::Zero(coarse_count);

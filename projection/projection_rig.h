@@ -34,11 +34,10 @@
 // the surface behind): overlaps cross-fade without seams, also where one projector's shadow
 // falls inside another's light.
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "geometry/patches.h"
 #include "geometry/ray_scene.h"
@@ -71,17 +70,17 @@ struct ProjectorMap {
   // patch_begin[i + 1]), ascending.
   std::vector<int> patch_begin;          // (n + 1)
   std::vector<int32_t> pixels_by_patch;  // (lit_pixels)
-  int lit_pixels = 0;          // pixels with a patch
-  int patches_reached = 0;     // distinct patches lit
+  int lit_pixels = 0;                    // pixels with a patch
+  int patches_reached = 0;               // distinct patches lit
 };
 
 // Everything the renderer needs, for one patch level and a set of projectors.
 struct ProjectionRig {
   std::vector<Projector> projectors;
-  std::vector<ProjectorMap> maps;   // one per projector
-  Eigen::VectorXd area;             // (n) A_i, m²
-  Eigen::MatrixX3d reflectance;     // (n,3) ρ
-  Eigen::MatrixX3d lower, upper;    // (n,3) direct-light exitance bounds (ρ · flux / A)
+  std::vector<ProjectorMap> maps;  // one per projector
+  Eigen::VectorXd area;            // (n) A_i, m²
+  Eigen::MatrixX3d reflectance;    // (n,3) ρ
+  Eigen::MatrixX3d lower, upper;   // (n,3) direct-light exitance bounds (ρ · flux / A)
   // (n) Σ over the pixels lighting the patch of w · a · coverage_scale (m²): the patch's lit
   // area as the blending weights share it; 0 for a patch no projector reaches.
   Eigen::VectorXd blended_area;
@@ -111,7 +110,8 @@ bool SetBoundsFromProjectors(const Scene& scene, const PatchLevel& level, Eigen:
 
 // Bounds of the coarse level from the fine one: a coarse patch receives the flux of its
 // children, so its exitance bound is the area-weighted mean of theirs (exact).
-Eigen::MatrixX3d CoarsenBounds(const Eigen::MatrixX3d& fine_bounds, const Eigen::VectorXd& fine_area,
+Eigen::MatrixX3d CoarsenBounds(const Eigen::MatrixX3d& fine_bounds,
+                               const Eigen::VectorXd& fine_area,
                                const std::vector<int>& coarse_of_fine, int coarse_count);
 
 // A ray scene whose surface k is patch k of `level` (quads as two triangles), so that

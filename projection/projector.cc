@@ -1,13 +1,12 @@
 #include "projection/projector.h"
 
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <stdexcept>
-
-#include <Eigen/LU>
-#include <nlohmann/json.hpp>
 
 #include "geometry/io.h"
 
@@ -69,7 +68,8 @@ std::string FormatNumber(double value) {
 }  // namespace
 
 ProjectorGeometry::ProjectorGeometry(const std::string& lens_model, std::vector<double> intrinsics,
-                                     int width, int height, const Eigen::Isometry3d& proj_from_world)
+                                     int width, int height,
+                                     const Eigen::Isometry3d& proj_from_world)
     : lens_model_(lens_model),
       intrinsics_(std::move(intrinsics)),
       width_(width),
@@ -110,7 +110,8 @@ ProjectorGeometry::ProjectorGeometry(const std::string& lens_model, std::vector<
 }
 
 ProjectorGeometry::ProjectorGeometry()
-    : ProjectorGeometry("LENSMODEL_PINHOLE", {1.0, 1.0, 0.0, 0.0}, 1, 1, Eigen::Isometry3d::Identity()) {}
+    : ProjectorGeometry("LENSMODEL_PINHOLE", {1.0, 1.0, 0.0, 0.0}, 1, 1,
+                        Eigen::Isometry3d::Identity()) {}
 
 ProjectorGeometry ProjectorGeometry::Pinhole(double fx, double fy, double cx, double cy, int width,
                                              int height, const Eigen::Isometry3d& proj_from_world) {
@@ -132,7 +133,8 @@ bool ProjectorGeometry::Project(const Vec3& p_in_world, Vec2* pixel, double* den
 }
 
 bool ProjectorGeometry::InImage(const Vec2& pixel) const {
-  return pixel.x() >= -0.5 && pixel.x() < width_ - 0.5 && pixel.y() >= -0.5 && pixel.y() < height_ - 0.5;
+  return pixel.x() >= -0.5 && pixel.x() < width_ - 0.5 && pixel.y() >= -0.5 &&
+         pixel.y() < height_ - 0.5;
 }
 
 void ProjectorGeometry::Unproject(const Vec2* pixels, int count, Vec3* directions_in_proj) const {
@@ -236,7 +238,8 @@ Eigen::Isometry3d ProjFromWorldLookingAt(const Vec3& centre, const Vec3& target,
   if (!(forward.norm() > 0.0)) throw std::invalid_argument("look-at: centre and target coincide");
   const Vec3 z = forward.normalized();
   const Vec3 down = -up + up.dot(z) * z;  // −up without its component along the axis
-  if (!(down.norm() > 1e-9 * up.norm())) throw std::invalid_argument("look-at: axis parallel to up");
+  if (!(down.norm() > 1e-9 * up.norm()))
+    throw std::invalid_argument("look-at: axis parallel to up");
   const Vec3 y = down.normalized();
   const Vec3 x = y.cross(z);
   Eigen::Isometry3d proj_from_world = Eigen::Isometry3d::Identity();
@@ -255,11 +258,17 @@ std::string CameraModelText(const ProjectorGeometry& geometry) {
   };
   const std::array<double, 6> rt = RtFromPose(geometry.proj_from_world());
   return "# procam projector model; extrinsics = mrcal rt_cam_ref with ref = world\n{\n"
-         "  'lensmodel':  '" + geometry.lens_model() + "',\n"
-         "  'intrinsics': " + list(geometry.intrinsics()) + ",\n"
-         "  'imagersize': [ " + std::to_string(geometry.width()) + ", " +
-         std::to_string(geometry.height()) + " ],\n"
-         "  'extrinsics': " + list(rt) + "\n}\n";
+         "  'lensmodel':  '" +
+         geometry.lens_model() +
+         "',\n"
+         "  'intrinsics': " +
+         list(geometry.intrinsics()) +
+         ",\n"
+         "  'imagersize': [ " +
+         std::to_string(geometry.width()) + ", " + std::to_string(geometry.height()) +
+         " ],\n"
+         "  'extrinsics': " +
+         list(rt) + "\n}\n";
 }
 
 namespace {
@@ -291,7 +300,8 @@ ProjectorGeometry ReadCameraModel(const std::filesystem::path& path) {
   const std::string text = ReadFile(path);
   std::unique_ptr<mrcal_cameramodel_t, CameraModelDeleter> model(
       mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
-  if (!model) throw IoError(file + ": not a valid mrcal .cameramodel (libmrcal could not parse it)");
+  if (!model)
+    throw IoError(file + ": not a valid mrcal .cameramodel (libmrcal could not parse it)");
   return GeometryFromMrcal(*model, file);
 }
 
@@ -355,9 +365,11 @@ double ResponseCurve::Drive(double light) const {
 std::string ProjectorPhotometry::Validate() const {
   for (int c = 0; c < 3; ++c) {
     if (!(black[c] >= 0.0) || !std::isfinite(black[c])) return "black: each value must be >= 0";
-    if (!(max[c] > black[c]) || !std::isfinite(max[c])) return "max: each value must be greater than black";
+    if (!(max[c] > black[c]) || !std::isfinite(max[c]))
+      return "max: each value must be greater than black";
   }
-  if (!mixing.allFinite() || mixing.minCoeff() < 0.0) return "mixing: entries must be finite and >= 0";
+  if (!mixing.allFinite() || mixing.minCoeff() < 0.0)
+    return "mixing: entries must be finite and >= 0";
   for (int r = 0; r < 3; ++r) {
     if (std::abs(mixing.row(r).sum() - 1.0) > 1e-6) {
       return "mixing: row " + std::to_string(r) + " must sum to 1 (it sums to " +
@@ -372,7 +384,8 @@ std::string ProjectorPhotometry::Validate() const {
 }
 
 Vec3 ProjectorPhotometry::Output(const Vec3& drive) const {
-  const Vec3 light(response[0].Light(drive[0]), response[1].Light(drive[1]), response[2].Light(drive[2]));
+  const Vec3 light(response[0].Light(drive[0]), response[1].Light(drive[1]),
+                   response[2].Light(drive[2]));
   return black + (max - black).asDiagonal() * (mixing * light);
 }
 
@@ -381,7 +394,8 @@ Vec3 ProjectorPhotometry::DriveFor(const Vec3& output, bool* clipped) const {
   const Vec3 light = mixing.inverse() * relative;
   const Vec3 inside = light.cwiseMax(0.0).cwiseMin(1.0);
   if (clipped) *clipped = (inside - light).cwiseAbs().maxCoeff() > 1e-12;
-  return Vec3(response[0].Drive(inside[0]), response[1].Drive(inside[1]), response[2].Drive(inside[2]));
+  return Vec3(response[0].Drive(inside[0]), response[1].Drive(inside[1]),
+              response[2].Drive(inside[2]));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -458,10 +472,13 @@ Projector ParseProjector(const json& object, const std::string& file, const std:
     if (!fields.At("name").is_string()) throw fields.Error("name", "must be a string");
     projector.name = fields.At("name").get<std::string>();
     if (!UsableAsFileName(projector.name)) {
-      throw fields.Error("name", "must be letters, digits, '_', '-' or '.' (it names the image file), not 'result'");
+      throw fields.Error(
+          "name",
+          "must be letters, digits, '_', '-' or '.' (it names the image file), not 'result'");
     }
   }
-  if (!fields.At("model").is_string()) throw fields.Error("model", "must be a path to an mrcal .cameramodel");
+  if (!fields.At("model").is_string())
+    throw fields.Error("model", "must be a path to an mrcal .cameramodel");
   projector.model_path = base / fields.At("model").get<std::string>();
   try {
     projector.geometry = ReadCameraModel(projector.model_path);
@@ -473,21 +490,26 @@ Projector ParseProjector(const json& object, const std::string& file, const std:
   photometry.max = fields.NumberOrRgb("max");
   for (int c = 0; c < 3; ++c) {
     if (!(photometry.black[c] >= 0.0)) throw fields.Error("black", "each value must be >= 0");
-    if (!(photometry.max[c] > photometry.black[c])) throw fields.Error("max", "each value must be greater than black");
+    if (!(photometry.max[c] > photometry.black[c]))
+      throw fields.Error("max", "each value must be greater than black");
   }
-  if (fields.Has("gamma") && fields.Has("lut")) throw fields.Error("lut", "give either 'gamma' or 'lut', not both");
+  if (fields.Has("gamma") && fields.Has("lut"))
+    throw fields.Error("lut", "give either 'gamma' or 'lut', not both");
   try {
     if (fields.Has("gamma")) {
       const Vec3 gamma = fields.NumberOrRgb("gamma");
       for (int c = 0; c < 3; ++c) {
-        if (!(gamma[c] > 0.0 && gamma[c] <= 10.0)) throw fields.Error("gamma", "each value must be in (0, 10]");
+        if (!(gamma[c] > 0.0 && gamma[c] <= 10.0))
+          throw fields.Error("gamma", "each value must be in (0, 10]");
         photometry.response[c] = ResponseCurve::Gamma(gamma[c]);
       }
     } else if (fields.Has("lut")) {
       const json& lut = fields.At("lut");
-      if (!lut.is_array() || lut.empty()) throw fields.Error("lut", "must be an array of numbers or 3 arrays");
+      if (!lut.is_array() || lut.empty())
+        throw fields.Error("lut", "must be an array of numbers or 3 arrays");
       if (lut[0].is_array()) {
-        if (lut.size() != 3) throw fields.Error("lut", "per-channel tables must be exactly 3 arrays");
+        if (lut.size() != 3)
+          throw fields.Error("lut", "per-channel tables must be exactly 3 arrays");
         for (int c = 0; c < 3; ++c) {
           const std::string key = "lut[" + std::to_string(c) + "]";
           photometry.response[c] = ResponseCurve::Table(fields.Numbers(key, lut[c]));
@@ -502,10 +524,12 @@ Projector ParseProjector(const json& object, const std::string& file, const std:
   }
   if (fields.Has("mixing")) {
     const json& mixing = fields.At("mixing");
-    if (!mixing.is_array() || mixing.size() != 3) throw fields.Error("mixing", "must be a 3x3 array (3 rows)");
+    if (!mixing.is_array() || mixing.size() != 3)
+      throw fields.Error("mixing", "must be a 3x3 array (3 rows)");
     for (int r = 0; r < 3; ++r) {
       const std::vector<double> row = fields.Numbers("mixing", mixing[r]);
-      if (row.size() != 3) throw fields.Error("mixing", "row " + std::to_string(r) + " must have 3 numbers");
+      if (row.size() != 3)
+        throw fields.Error("mixing", "row " + std::to_string(r) + " must have 3 numbers");
       for (int c = 0; c < 3; ++c) photometry.mixing(r, c) = row[c];
     }
   }
@@ -526,7 +550,8 @@ Projector ParseProjector(const json& object, const std::string& file, const std:
 
 }  // namespace
 
-std::vector<Projector> ParseProjectors(const std::string& projectors_json, const std::string& scene_file,
+std::vector<Projector> ParseProjectors(const std::string& projectors_json,
+                                       const std::string& scene_file,
                                        const std::filesystem::path& base) {
   std::vector<Projector> projectors;
   if (projectors_json.empty()) return projectors;

@@ -18,14 +18,13 @@
 //   g(x) = (density(x) / density(axis)) · cos θ / d² (1/m²), density = pixels per steradian
 //   of the lens in x's direction, θ the incidence angle, d the distance (see Gain()).
 
+#include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <array>
 #include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <Eigen/Geometry>
 
 #include "geometry/scene.h"
 

@@ -1,19 +1,17 @@
 #include "projection/projector_images.h"
 
+#include <Eigen/LU>
 #include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
-#include <stdexcept>
-
-#include <Eigen/LU>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 
 #include "geometry/io.h"
 #include "geometry/ray_scene.h"
-
 
 namespace procam {
 namespace {
@@ -31,7 +29,8 @@ double BayerThreshold(int x, int y) { return (kBayer[(y & 7) * 8 + (x & 7)] + 0.
 // Code values ↔ relative light for one channel of one projector.
 class CodeTable {
  public:
-  CodeTable(const ResponseCurve& response, int max_code) : max_code_(max_code), light_(max_code + 2) {
+  CodeTable(const ResponseCurve& response, int max_code)
+      : max_code_(max_code), light_(max_code + 2) {
     for (int q = 0; q <= max_code; ++q) light_[q] = response.Light(double(q) / max_code);
     light_[max_code + 1] = kInfinity;  // sentinel: never below any r
     first_.resize(kBins + 1);
@@ -126,15 +125,19 @@ void QuantiseErrorDiffusion(const ProjectorMap& map, const ProjectorTables& tabl
 
 const char* DitherName(DitherMethod method) {
   switch (method) {
-    case DitherMethod::kNone: return "none";
-    case DitherMethod::kOrdered: return "ordered";
-    case DitherMethod::kErrorDiffusion: return "error-diffusion";
+    case DitherMethod::kNone:
+      return "none";
+    case DitherMethod::kOrdered:
+      return "ordered";
+    case DitherMethod::kErrorDiffusion:
+      return "error-diffusion";
   }
   return "?";
 }
 
 bool ParseDither(const std::string& name, DitherMethod* method) {
-  for (const DitherMethod m : {DitherMethod::kNone, DitherMethod::kOrdered, DitherMethod::kErrorDiffusion}) {
+  for (const DitherMethod m :
+       {DitherMethod::kNone, DitherMethod::kOrdered, DitherMethod::kErrorDiffusion}) {
     if (name == DitherName(m)) {
       *method = m;
       return true;
@@ -151,14 +154,16 @@ bool RenderOptions::Check(std::string* why) const {
   return true;
 }
 
-std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, const Eigen::MatrixX3d& emittance,
-                                                  const RenderOptions& options, RenderSummary* summary) {
+std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
+                                                  const Eigen::MatrixX3d& emittance,
+                                                  const RenderOptions& options,
+                                                  RenderSummary* summary) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("RenderOptions: " + why);
   const int n = rig.size();
   if (emittance.rows() != n) {
-    throw std::invalid_argument("emittance has " + std::to_string(emittance.rows()) + " rows, the rig " +
-                                std::to_string(n) + " patches");
+    throw std::invalid_argument("emittance has " + std::to_string(emittance.rows()) +
+                                " rows, the rig " + std::to_string(n) + " patches");
   }
   if (!emittance.allFinite()) throw std::invalid_argument("emittance has non-finite values");
   const auto start = std::chrono::steady_clock::now();
@@ -176,8 +181,10 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
   const Eigen::MatrixX3d target = emittance.cwiseMax(rig.lower).cwiseMin(rig.upper);
   Eigen::MatrixX3d flux(n, 3), level(n, 3);
   for (int i = 0; i < n; ++i) {
-    if ((emittance.row(i).array() < rig.lower.row(i).array() - 1e-12).any()) ++s.patches_below_lower;
-    if ((emittance.row(i).array() > rig.upper.row(i).array() + 1e-12).any()) ++s.patches_above_upper;
+    if ((emittance.row(i).array() < rig.lower.row(i).array() - 1e-12).any())
+      ++s.patches_below_lower;
+    if ((emittance.row(i).array() > rig.upper.row(i).array() + 1e-12).any())
+      ++s.patches_above_upper;
     if (!(rig.blended_area[i] > 0.0)) ++s.patches_unreached;
     for (int c = 0; c < 3; ++c) {
       const double rho = rig.reflectance(i, c);
@@ -186,7 +193,8 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
       if (!(rig.blended_area[i] > 0.0) || !(rho > 0.0)) continue;
       flux(i, c) = rig.area[i] * (target(i, c) - rig.lower(i, c)) / rho;
       const double capacity = rig.area[i] * (rig.upper(i, c) - rig.lower(i, c)) / rho;
-      level(i, c) = flux(i, c) >= capacity * (1.0 - 1e-12) ? kInfinity : flux(i, c) / rig.blended_area[i];
+      level(i, c) =
+          flux(i, c) >= capacity * (1.0 - 1e-12) ? kInfinity : flux(i, c) / rig.blended_area[i];
     }
   }
 
@@ -252,7 +260,8 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
         const ProjectorTables& table = tables[k];
         auto* codes = reinterpret_cast<cv::Vec3w*>(images[k].codes.data);
         Vec3 projector_light = Vec3::Zero();
-        int row = -1, row_begin = 0, row_end = 0;  // the row of the current pixel, found incrementally
+        int row = -1, row_begin = 0,
+            row_end = 0;  // the row of the current pixel, found incrementally
         for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
           const int32_t index = map.pixels_by_patch[position];
           if (index >= row_end) {
@@ -265,7 +274,8 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
           // in relative light and mixed once per patch and projector.
           Vec3 relative;
           for (int c = 0; c < 3; ++c) {
-            relative[c] = tau[c] == kInfinity ? 1.0 : std::min(1.0, share * tau[c] * table.inverse_delta[c]);
+            relative[c] =
+                tau[c] == kInfinity ? 1.0 : std::min(1.0, share * tau[c] * table.inverse_delta[c]);
           }
           if (relative.maxCoeff() >= 1.0) ++my_saturated[k];
           Vec3 r;
@@ -274,8 +284,9 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
             light[k][index] = r;
             continue;
           }
-          const double threshold =
-              options.dither == DitherMethod::kOrdered ? BayerThreshold(index - row_begin, row) : 0.5;
+          const double threshold = options.dither == DitherMethod::kOrdered
+                                       ? BayerThreshold(index - row_begin, row)
+                                       : 0.5;
           cv::Vec3w& code = codes[index];
           for (int c = 0; c < 3; ++c) {
             code[c] = static_cast<uint16_t>(table.codes[c].Quantise(r[c], threshold));
@@ -283,8 +294,11 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
           }
         }
         if (!diffuse) {
-          const Vec3 mixed = table.identity_mixing ? projector_light : Vec3(table.photometry.mixing * projector_light);
-          patch_flux += rig.coverage_scale(i, k) * map.pixel_solid_angle * table.delta.cwiseProduct(mixed);
+          const Vec3 mixed = table.identity_mixing
+                                 ? projector_light
+                                 : Vec3(table.photometry.mixing * projector_light);
+          patch_flux +=
+              rig.coverage_scale(i, k) * map.pixel_solid_angle * table.delta.cwiseProduct(mixed);
         }
       }
       delivered_flux.row(i) = patch_flux.transpose();
@@ -298,7 +312,8 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
   if (diffuse) {
     // Error diffusion runs in raster order per image; then the flux per patch from the codes.
 #pragma omp parallel for schedule(static, 1)
-    for (int k = 0; k < projector_count; ++k) QuantiseErrorDiffusion(rig.maps[k], tables[k], light[k], &images[k].codes);
+    for (int k = 0; k < projector_count; ++k)
+      QuantiseErrorDiffusion(rig.maps[k], tables[k], light[k], &images[k].codes);
 #pragma omp parallel for schedule(dynamic, 16)
     for (int i = 0; i < n; ++i) {
       Vec3 patch_flux = Vec3::Zero();
@@ -311,8 +326,10 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
           const cv::Vec3w& code = codes[map.pixels_by_patch[position]];
           for (int c = 0; c < 3; ++c) projector_light[c] += table.codes[c].Light(code[c]);
         }
-        const Vec3 mixed = table.identity_mixing ? projector_light : Vec3(table.photometry.mixing * projector_light);
-        patch_flux += rig.coverage_scale(i, k) * map.pixel_solid_angle * table.delta.cwiseProduct(mixed);
+        const Vec3 mixed = table.identity_mixing ? projector_light
+                                                 : Vec3(table.photometry.mixing * projector_light);
+        patch_flux +=
+            rig.coverage_scale(i, k) * map.pixel_solid_angle * table.delta.cwiseProduct(mixed);
       }
       delivered_flux.row(i) = patch_flux.transpose();
     }
@@ -321,7 +338,8 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
   s.clipped_pixels = clipped;
   s.delivered = rig.lower;
   for (int i = 0; i < n; ++i) {
-    s.delivered.row(i) += (rig.reflectance.row(i).array() * delivered_flux.row(i).array() / rig.area[i]).matrix();
+    s.delivered.row(i) +=
+        (rig.reflectance.row(i).array() * delivered_flux.row(i).array() / rig.area[i]).matrix();
   }
   const double scale = std::max(rig.upper.maxCoeff(), std::numeric_limits<double>::min());
   s.max_relative_error = n > 0 ? (s.delivered - target).cwiseAbs().maxCoeff() / scale : 0.0;
@@ -329,9 +347,10 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
   return images;
 }
 
-Eigen::MatrixX3d SimulateDirectLight(const PatchLevel& level, const std::vector<Projector>& projectors,
-                                     const std::vector<ProjectorImage>& images, int samples_per_side,
-                                     double ray_margin) {
+Eigen::MatrixX3d SimulateDirectLight(const PatchLevel& level,
+                                     const std::vector<Projector>& projectors,
+                                     const std::vector<ProjectorImage>& images,
+                                     int samples_per_side, double ray_margin) {
   if (images.size() != projectors.size()) {
     throw std::invalid_argument(std::to_string(images.size()) + " images for " +
                                 std::to_string(projectors.size()) + " projectors");
@@ -339,10 +358,12 @@ Eigen::MatrixX3d SimulateDirectLight(const PatchLevel& level, const std::vector<
   for (size_t k = 0; k < projectors.size(); ++k) {
     const ProjectorGeometry& geometry = projectors[k].geometry;
     const cv::Mat& codes = images[k].codes;
-    if (codes.cols != geometry.width() || codes.rows != geometry.height() || codes.type() != CV_16UC3) {
-      throw std::invalid_argument("projector '" + projectors[k].name + "': image is " + std::to_string(codes.cols) +
-                                  "x" + std::to_string(codes.rows) + ", the projector " +
-                                  std::to_string(geometry.width()) + "x" + std::to_string(geometry.height()));
+    if (codes.cols != geometry.width() || codes.rows != geometry.height() ||
+        codes.type() != CV_16UC3) {
+      throw std::invalid_argument("projector '" + projectors[k].name + "': image is " +
+                                  std::to_string(codes.cols) + "x" + std::to_string(codes.rows) +
+                                  ", the projector " + std::to_string(geometry.width()) + "x" +
+                                  std::to_string(geometry.height()));
     }
     if (images[k].bits != projectors[k].photometry.bits) {
       throw std::invalid_argument("projector '" + projectors[k].name + "': image has " +
@@ -368,7 +389,8 @@ Eigen::MatrixX3d SimulateDirectLight(const PatchLevel& level, const std::vector<
         const double gain = geometry.Gain(sample.point, patch.normal, &q);
         if (!(gain > 0.0) || !geometry.InImage(q)) continue;
         if (rays.Occluded(sample.point, geometry.CentreInWorld(), ray_margin)) continue;
-        const int column = std::clamp(static_cast<int>(std::lround(q.x())), 0, geometry.width() - 1);
+        const int column =
+            std::clamp(static_cast<int>(std::lround(q.x())), 0, geometry.width() - 1);
         const int row = std::clamp(static_cast<int>(std::lround(q.y())), 0, geometry.height() - 1);
         const cv::Vec3w code = images[k].codes.at<cv::Vec3w>(row, column);
         const double max_code = projectors[k].photometry.MaxCode();
@@ -376,7 +398,9 @@ Eigen::MatrixX3d SimulateDirectLight(const PatchLevel& level, const std::vector<
         irradiance_integral += sample.weight * gain * projectors[k].photometry.Output(drive);
       }
     }
-    exitance.row(i) = (level.reflectance.row(i).array() * irradiance_integral.transpose().array() / area).matrix();
+    exitance.row(i) =
+        (level.reflectance.row(i).array() * irradiance_integral.transpose().array() / area)
+            .matrix();
   }
   return exitance;
 }
@@ -396,7 +420,8 @@ std::string EncodeProjectorImage(const ProjectorImage& image, int compression) {
   return std::string(bytes.begin(), bytes.end());
 }
 
-std::vector<std::string> EncodeProjectorImages(const std::vector<ProjectorImage>& images, int compression) {
+std::vector<std::string> EncodeProjectorImages(const std::vector<ProjectorImage>& images,
+                                               int compression) {
   std::vector<std::string> encoded(images.size());
   const int count = static_cast<int>(images.size());
 #pragma omp parallel for schedule(static, 1)
@@ -413,14 +438,17 @@ ProjectorImage ReadProjectorImage(const std::filesystem::path& path, int bits) {
   if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
   const cv::Mat raw = cv::imread(file, cv::IMREAD_UNCHANGED);
   if (raw.empty()) throw IoError(file + ": not a readable image");
-  if (raw.channels() != 3) throw IoError(file + ": must be an RGB image, has " + std::to_string(raw.channels()) + " channels");
+  if (raw.channels() != 3)
+    throw IoError(file + ": must be an RGB image, has " + std::to_string(raw.channels()) +
+                  " channels");
   ProjectorImage image;
   image.bits = bits;
   const int max_code = (1 << bits) - 1;
   cv::Mat rgb;
   cv::cvtColor(raw, rgb, cv::COLOR_BGR2RGB);
   if (raw.depth() == CV_8U) {
-    if (bits != 8) throw IoError(file + ": 8-bit image for a " + std::to_string(bits) + "-bit projector");
+    if (bits != 8)
+      throw IoError(file + ": 8-bit image for a " + std::to_string(bits) + "-bit projector");
     rgb.convertTo(image.codes, CV_16UC3);
   } else if (raw.depth() == CV_16U) {
     rgb.convertTo(image.codes, CV_16UC3, max_code / 65535.0);  // rounds to the nearest code

@@ -7,10 +7,11 @@
 // 2. It is spread as a uniform irradiance τ above black over the patch's lit area, shared among
 //    the projectors by the blending weights: pixel p (projector k, weight w, gain g) shows the
 //    relative level s = w τ / (g (max_k − black_k)), which sends flux w a τ (a = Ω_k / g its
-//    footprint). τ solves Σ_p min(w a τ, Ω_k (max_k − black_k)) = Φ: where a pixel saturates,
-//    the rest of the patch rises to make up for it (Newton from below on this concave
-//    piecewise-linear function: exact after finitely many passes, usually one or two), so every
-//    E in [lower, upper] is delivered exactly before quantisation.
+//    footprint, rescaled where the projector lights the patch wholly: projection_rig.h).
+//    τ solves Σ_p min(w a τ, Ω_k (max_k − black_k)) = Φ: where a pixel saturates, the rest of
+//    the patch rises to make up for it (Newton from below on this concave piecewise-linear
+//    function, each step one pass over the patch's pixels: exact after finitely many, one for
+//    most patches), so every E in [lower, upper] is delivered exactly before quantisation.
 // 3. Colour mixing and the response are inverted per pixel: relative light r = mixing⁻¹ s,
 //    clipped to [0,1]³ (colours outside the projector's gamut), then quantised to the
 //    projector's bits with dithering in linear light: between the two code values whose light
@@ -18,12 +19,11 @@
 //    them, so the expected light of every pixel is exactly r.
 // Pixels that light nothing show code 0 (the projector's black level).
 
+#include <Eigen/Core>
 #include <filesystem>
+#include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <opencv2/core/mat.hpp>
 
 #include "geometry/patches.h"
 #include "projection/projection_rig.h"
@@ -31,8 +31,8 @@
 namespace procam {
 
 enum class DitherMethod {
-  kNone,     // round to the nearest code value in linear light
-  kOrdered,  // 8×8 Bayer threshold matrix: parallel, pattern fixed in the image
+  kNone,            // round to the nearest code value in linear light
+  kOrdered,         // 8×8 Bayer threshold matrix: parallel, pattern fixed in the image
   kErrorDiffusion,  // Floyd–Steinberg (serpentine) in linear light, per channel; sequential
 };
 const char* DitherName(DitherMethod method);
@@ -40,12 +40,13 @@ bool ParseDither(const std::string& name, DitherMethod* method);
 
 struct RenderOptions {
   DitherMethod dither = DitherMethod::kOrdered;
-  // Passes of the per-patch level solve (step 2) at most, ≥ 1; one more pass writes the images.
+  // Evaluations of each patch's level solve (step 2) at most, in [1, 1000].
   int max_level_passes = 16;
   bool Check(std::string* why) const;
 };
 
-// One projector's image: code values, row 0 = top, RGB order (not OpenCV's BGR).
+// One projector's image: code values, row 0 = top, RGB order (not OpenCV's BGR). Copies share
+// pixels (cv::Mat): clone `codes` before changing a copy.
 struct ProjectorImage {
   cv::Mat codes;  // CV_16UC3, each in [0, 2^bits − 1]
   int bits = 8;
@@ -53,10 +54,10 @@ struct ProjectorImage {
 
 struct RenderSummary {
   double seconds = 0.0;
-  int level_passes = 0;           // passes of step 2 (1 when nothing saturates)
-  int patches_below_lower = 0;    // E below the projectors' black on some channel (clipped)
-  int patches_above_upper = 0;    // E above full white on some channel (clipped)
-  int patches_unreached = 0;      // patches no projector lights
+  int level_passes = 0;         // most evaluations of step 2 a patch needed (1: none saturated)
+  int patches_below_lower = 0;  // E below the projectors' black on some channel (clipped)
+  int patches_above_upper = 0;  // E above full white on some channel (clipped)
+  int patches_unreached = 0;    // patches no projector lights
   std::vector<long long> saturated_pixels;  // per projector: some channel at full drive
   std::vector<long long> clipped_pixels;    // per projector: outside the gamut (mixing)
   // (n,3) exitance the quantised images deliver, by the rig's flux bookkeeping.
@@ -68,17 +69,20 @@ struct RenderSummary {
 // Images for every projector of the rig that make each patch's direct-light exitance E (n,3).
 // Throws std::invalid_argument if E has the wrong shape or non-finite values, or the options
 // fail Check().
-std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, const Eigen::MatrixX3d& emittance,
-                                                  const RenderOptions& options, RenderSummary* summary);
+std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
+                                                  const Eigen::MatrixX3d& emittance,
+                                                  const RenderOptions& options,
+                                                  RenderSummary* summary);
 
 // Direct-light exitance (n,3) the images deliver to each patch, integrated independently of the
 // rig's maps: samples_per_side² Gauss points per patch (SamplePatch), each projected forward
 // into every projector, checked for occlusion by a shadow ray, lit by the pixel it falls in
 // (irradiance = output(drive) · Gain), then ρ × the patch average. Throws std::invalid_argument
 // naming the projector if an image's size or bit depth does not match it.
-Eigen::MatrixX3d SimulateDirectLight(const PatchLevel& level, const std::vector<Projector>& projectors,
-                                     const std::vector<ProjectorImage>& images, int samples_per_side,
-                                     double ray_margin = 1e-4);
+Eigen::MatrixX3d SimulateDirectLight(const PatchLevel& level,
+                                     const std::vector<Projector>& projectors,
+                                     const std::vector<ProjectorImage>& images,
+                                     int samples_per_side, double ray_margin = 1e-4);
 
 // PNG: 8-bit for 8-bit projectors, 16-bit for 10-bit ones (codes scaled by 65535/1023, which
 // ReadProjectorImage undoes exactly). Written atomically. Throws IoError.
@@ -86,7 +90,8 @@ void WriteProjectorImage(const std::filesystem::path& path, const ProjectorImage
 // The PNG as bytes (what WriteProjectorImage writes); `compression` 0–9.
 std::string EncodeProjectorImage(const ProjectorImage& image, int compression = 1);
 // Several at once, one image per thread (PNG encoding is the slow part of writing images).
-std::vector<std::string> EncodeProjectorImages(const std::vector<ProjectorImage>& images, int compression = 1);
+std::vector<std::string> EncodeProjectorImages(const std::vector<ProjectorImage>& images,
+                                               int compression = 1);
 // Reads an 8- or 16-bit RGB PNG as codes of a `bits`-bit projector. Throws IoError naming the
 // file if it cannot be read or its depth does not fit.
 ProjectorImage ReadProjectorImage(const std::filesystem::path& path, int bits);

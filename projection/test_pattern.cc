@@ -6,16 +6,21 @@ namespace procam {
 
 const char* TestPatternName(TestPattern pattern) {
   switch (pattern) {
-    case TestPattern::kGrid: return "grid";
-    case TestPattern::kBars: return "bars";
-    case TestPattern::kWhite: return "white";
-    case TestPattern::kBlack: return "black";
+    case TestPattern::kGrid:
+      return "grid";
+    case TestPattern::kBars:
+      return "bars";
+    case TestPattern::kWhite:
+      return "white";
+    case TestPattern::kBlack:
+      return "black";
   }
   return "?";
 }
 
 bool ParseTestPattern(const std::string& name, TestPattern* pattern) {
-  for (const TestPattern p : {TestPattern::kGrid, TestPattern::kBars, TestPattern::kWhite, TestPattern::kBlack}) {
+  for (const TestPattern p :
+       {TestPattern::kGrid, TestPattern::kBars, TestPattern::kWhite, TestPattern::kBlack}) {
     if (name == TestPatternName(p)) {
       *pattern = p;
       return true;
@@ -37,8 +42,9 @@ ProjectorImage MakeTestPattern(TestPattern pattern, cv::Size size) {
       image.codes.setTo(cv::Scalar::all(255));
       break;
     case TestPattern::kBars: {
-      const std::array<cv::Vec3w, 8> bars = {cv::Vec3w(255, 255, 255), cv::Vec3w(255, 255, 0), cv::Vec3w(0, 255, 255),
-                                             cv::Vec3w(0, 255, 0),     cv::Vec3w(255, 0, 255), cv::Vec3w(255, 0, 0),
+      const std::array<cv::Vec3w, 8> bars = {cv::Vec3w(255, 255, 255), cv::Vec3w(255, 255, 0),
+                                             cv::Vec3w(0, 255, 255),   cv::Vec3w(0, 255, 0),
+                                             cv::Vec3w(255, 0, 255),   cv::Vec3w(255, 0, 0),
                                              cv::Vec3w(0, 0, 255),     cv::Vec3w(0, 0, 0)};
       for (int y = 0; y < height; ++y) {
         for (int x = 0; x < width; ++x) image.codes.at<cv::Vec3w>(y, x) = bars[(8 * x) / width];

@@ -2,9 +2,8 @@
 // Test patterns for aligning projectors (procam show --pattern): generated in code, so a test
 // states exactly what the window must show.
 
-#include <string>
-
 #include <opencv2/core/mat.hpp>
+#include <string>
 
 #include "projection/projector_images.h"
 

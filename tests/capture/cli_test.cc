@@ -55,6 +55,7 @@ TEST(CaptureCli, CamerasListsBackendsAndVirtualCamerasWithoutBroadcasting) {
   EXPECT_EQ(run.exit_code, 0) << run.output;
   EXPECT_NE(run.output.find("camera backends in this build:"), std::string::npos) << run.output;
   EXPECT_NE(run.output.find("test:loopback"), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("synthetic:c_shaped"), std::string::npos) << run.output;
   if (PROCAM_WITH_ARAVIS) {
     EXPECT_NE(run.output.find("aravis:Fake_1"), std::string::npos) << run.output;
   }
@@ -84,6 +85,33 @@ TEST(CaptureCli, GrayCodeCaptureWritesASession) {
   double low = 0;
   cv::minMaxLoc(white, &low);
   EXPECT_EQ(low, 65535.0);
+}
+
+TEST(CaptureCli, SyntheticCameraCapturesTheSimulatedRoomThroughOneOfItsProjectors) {
+  testing::TempDir dir;
+  const CommandRun run = Procam(
+      "capture --camera "
+      "'synthetic:tiny_box?patches=20&fps=500&exposure_us=1000&reference_exposure_us=1000' "
+      "--projector 1 --sequence photometric --levels 0,255 --channels w --frames 1 "
+      "--settle-ms 1 --out " +
+      (dir / "flat").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  EXPECT_EQ(run.output.find("warning"), std::string::npos) << run.output;
+  const nlohmann::json manifest = nlohmann::json::parse(ReadFile(dir / "flat" / "session.json"));
+  EXPECT_EQ(manifest["camera"]["device"], "synthetic:tiny_box");
+  EXPECT_EQ(manifest["display"]["name"], "synthetic:tiny_box/right");
+  EXPECT_EQ(manifest["display"]["width"], 320);  // the projector's own size
+  // Full white on the right projector brightens the room it lights (BGR frames, 16-bit PNG).
+  auto frame = [&](int pattern) {
+    return cv::imread(
+        (dir / "flat" /
+         manifest["patterns"][pattern]["captured"]["exposures"][0]["file"].get<std::string>())
+            .string(),
+        cv::IMREAD_UNCHANGED);
+  };
+  const cv::Mat black = frame(0), white = frame(1);
+  ASSERT_EQ(white.type(), CV_16UC3);
+  EXPECT_GT(cv::mean(white)[1], 2 * cv::mean(black)[1] + 1000);
 }
 
 TEST(CaptureCli, AnInterruptedCaptureResumesWhenRunAgain) {
@@ -117,7 +145,10 @@ TEST(CaptureCli, MistakesGetOneLineNamingTheCulprit) {
   const std::string out = " --out " + (dir / "out").string();
   for (const Case& c :
        {Case{"capture --camera synthetic:room.json --sequence graycode" + out,
-             "backend 'synthetic' is not available"},
+             "camera 'synthetic:room.json': unknown synthetic scene 'room.json' (scenes: "},
+        Case{"capture --camera synthetic:tiny_box?patches=20 --projector 2 --sequence graycode" +
+                 out,
+             "--projector 2: synthetic scene 'tiny_box' has 2 projectors (0..1: left, right)"},
         Case{"capture --camera 'test:x?nosie=1' --sequence graycode" + out,
              "unknown parameter 'nosie'"},
         Case{"capture --camera test:x --sequence verify --projector-size 8x6 " +

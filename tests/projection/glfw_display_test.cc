@@ -5,6 +5,7 @@
 #include "projection/glfw_display.h"
 
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
@@ -16,12 +17,11 @@
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
-#include <random>
-#include <thread>
-
-#include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <random>
+#include <thread>
 
 #include "geometry/io.h"
 #include "projection/test_pattern.h"
@@ -40,14 +40,20 @@ class XvfbEnvironment : public ::testing::Environment {
   void SetUp() override {
     for (int display = 87; display < 127; ++display) {
       if (std::filesystem::exists("/tmp/.X" + std::to_string(display) + "-lock")) continue;
-      const std::string name = ":" + std::to_string(display);
+      std::string name = ":";
+      name += std::to_string(display);
       const std::string screen = std::to_string(kWidth) + "x" + std::to_string(kHeight) + "x24";
-      std::array<const char*, 8> argv = {"Xvfb", name.c_str(), "-screen", "0", screen.c_str(), "-nolisten", "tcp", nullptr};
+      // -noreset: the server would otherwise restart (and refuse connections for a moment)
+      // each time the last client leaves.
+      std::array<const char*, 9> argv = {"Xvfb", name.c_str(),   "-screen",
+                                         "0",    screen.c_str(), "-nolisten",
+                                         "tcp",  "-noreset",     nullptr};
       posix_spawn_file_actions_t actions;
       posix_spawn_file_actions_init(&actions);
       posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, "/dev/null", O_WRONLY, 0);
       posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, "/dev/null", O_WRONLY, 0);
-      const int failed = posix_spawnp(&pid_, "Xvfb", &actions, nullptr, const_cast<char* const*>(argv.data()), environ);
+      const int failed = posix_spawnp(&pid_, "Xvfb", &actions, nullptr,
+                                      const_cast<char* const*>(argv.data()), environ);
       posix_spawn_file_actions_destroy(&actions);
       if (failed != 0) {
         pid_ = 0;
@@ -58,7 +64,8 @@ class XvfbEnvironment : public ::testing::Environment {
       for (int wait = 0; wait < 200 && !std::filesystem::exists(socket); ++wait) {
         std::this_thread::sleep_for(std::chrono::milliseconds(25));
         int status = 0;
-        if (waitpid(pid_, &status, WNOHANG) == pid_) {  // exited: display taken meanwhile, try the next
+        if (waitpid(pid_, &status, WNOHANG) ==
+            pid_) {  // exited: display taken meanwhile, try the next
           pid_ = 0;
           break;
         }
@@ -89,7 +96,7 @@ class XvfbEnvironment : public ::testing::Environment {
 
 ::testing::Environment* const xvfb = ::testing::AddGlobalTestEnvironment(new XvfbEnvironment);
 
-#define SKIP_WITHOUT_XVFB()                                       \
+#define SKIP_WITHOUT_XVFB() \
   if (!XvfbEnvironment::why().empty()) GTEST_SKIP() << XvfbEnvironment::why()
 
 ProjectorImage RandomImage(int bits, unsigned seed) {
@@ -145,12 +152,14 @@ TEST(GlfwDisplay, ShowsImagesPixelForPixel) {
 TEST(GlfwDisplay, ShowsTestPatterns) {
   SKIP_WITHOUT_XVFB();
   GlfwDisplay display(FindMonitor("0"));
-  for (const TestPattern pattern : {TestPattern::kGrid, TestPattern::kBars, TestPattern::kWhite, TestPattern::kBlack}) {
+  for (const TestPattern pattern :
+       {TestPattern::kGrid, TestPattern::kBars, TestPattern::kWhite, TestPattern::kBlack}) {
     const ProjectorImage image = MakeTestPattern(pattern, display.Resolution());
     display.Show(image);
     cv::Mat expected;
     image.codes.convertTo(expected, CV_8UC3);
-    EXPECT_EQ(cv::norm(display.ReadBack(), expected, cv::NORM_INF), 0.0) << TestPatternName(pattern);
+    EXPECT_EQ(cv::norm(display.ReadBack(), expected, cv::NORM_INF), 0.0)
+        << TestPatternName(pattern);
   }
 }
 
@@ -163,7 +172,8 @@ TEST(GlfwDisplay, ImageOfTheWrongSizeIsAnError) {
     display.Show(image);
     FAIL() << "no error";
   } catch (const IoError& error) {
-    EXPECT_EQ(std::string(error.what()), display.Name() + ": image is 320x240, the monitor runs at 640x480");
+    EXPECT_EQ(std::string(error.what()),
+              display.Name() + ": image is 320x240, the monitor runs at 640x480");
   }
 }
 
@@ -194,7 +204,8 @@ CommandRun Procam(const std::string& arguments) {
   std::string output;
   std::array<char, 4096> buffer;
   size_t count;
-  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0) output.append(buffer.data(), count);
+  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0)
+    output.append(buffer.data(), count);
   const int status = pclose(pipe.release());
   return {WEXITSTATUS(status), output};
 }
@@ -207,15 +218,18 @@ TEST(ShowCommand, ShowsAnImageAndReadsItBack) {
   const CommandRun list = Procam("show --list");
   ASSERT_EQ(list.exit_code, 0) << list.output;
   EXPECT_NE(list.output.find("640x480"), std::string::npos) << list.output;
-  const CommandRun run = Procam("show " + (dir / "p.png").string() + " --seconds 0.1 --readback " + (dir / "rb").string());
+  const CommandRun run = Procam("show " + (dir / "p.png").string() + " --seconds 0.1 --readback " +
+                                (dir / "rb").string());
   ASSERT_EQ(run.exit_code, 0) << run.output;
-  const cv::Mat shown = cv::imread((dir / "rb" / "monitor0.png").string(), cv::IMREAD_COLOR);  // B, G, R
+  const cv::Mat shown =
+      cv::imread((dir / "rb" / "monitor0.png").string(), cv::IMREAD_COLOR);  // B, G, R
   cv::Mat expected;
   image.codes.convertTo(expected, CV_8UC3);
   cv::cvtColor(expected, expected, cv::COLOR_RGB2BGR);
   EXPECT_EQ(cv::norm(shown, expected, cv::NORM_INF), 0.0);
   // Test pattern mode.
-  const CommandRun pattern = Procam("show --pattern grid --seconds 0.1 --readback " + (dir / "grid").string());
+  const CommandRun pattern =
+      Procam("show --pattern grid --seconds 0.1 --readback " + (dir / "grid").string());
   ASSERT_EQ(pattern.exit_code, 0) << pattern.output;
   // An image of another size than the monitor: one clear error, before any window opens.
   ProjectorImage small;
@@ -223,7 +237,8 @@ TEST(ShowCommand, ShowsAnImageAndReadsItBack) {
   WriteProjectorImage(dir / "small.png", small);
   const CommandRun wrong = Procam("show " + (dir / "small.png").string() + " --seconds 0.1");
   EXPECT_EQ(wrong.exit_code, 1);
-  EXPECT_NE(wrong.output.find("small.png: image is 100x100, but monitor 0"), std::string::npos) << wrong.output;
+  EXPECT_NE(wrong.output.find("small.png: image is 100x100, but monitor 0"), std::string::npos)
+      << wrong.output;
   const CommandRun missing = Procam("show --monitor HDMI-9 --pattern white --seconds 0.1");
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.output.find("monitor 'HDMI-9' not found"), std::string::npos) << missing.output;

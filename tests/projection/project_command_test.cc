@@ -1,14 +1,14 @@
 // procam project and procam bench projection, run as a user would: a solution directory made
 // here (result.json + E.npy for a stage with two projectors), the images and result.json it
 // writes, and one clear error for each kind of bad input.
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <array>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <memory>
-
-#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
@@ -33,7 +33,8 @@ CommandRun Procam(const std::string& arguments) {
   std::string output;
   std::array<char, 4096> buffer;
   size_t count;
-  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0) output.append(buffer.data(), count);
+  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0)
+    output.append(buffer.data(), count);
   const int status = pclose(pipe.release());
   return {WEXITSTATUS(status), output};
 }
@@ -71,12 +72,15 @@ class ProjectCommand : public ::testing::Test {
 
   void WriteSolution(int patches, const Eigen::MatrixX3d& emittance) {
     std::filesystem::create_directories(dir_ / "solution");
-    const nlohmann::json result = {{"method", "naive"}, {"scene", scene_path_.string()}, {"patches", patches}};
+    const nlohmann::json result = {
+        {"method", "naive"}, {"scene", scene_path_.string()}, {"patches", patches}};
     WriteFileAtomically(dir_ / "solution" / "result.json", result.dump(2));
     WriteNpy(dir_ / "solution" / "E.npy", RowMatrixXd(emittance));
   }
 
-  std::string Project() { return (dir_ / "solution").string() + " --out " + (dir_ / "images").string(); }
+  std::string Project() {
+    return (dir_ / "solution").string() + " --out " + (dir_ / "images").string();
+  }
 
   testing::TempDir dir_;
   std::filesystem::path scene_path_;
@@ -125,34 +129,43 @@ TEST_F(ProjectCommand, BadInputGivesOneClearError) {
             std::string::npos);
   // E.npy of another size than result.json says.
   WriteNpy(dir_ / "solution" / "E.npy", RowMatrixXd(emittance_.topRows(10)));
-  EXPECT_NE(error_of("project " + Project()).find("E.npy: shape (10,3), but result.json says"), std::string::npos);
+  EXPECT_NE(error_of("project " + Project()).find("E.npy: shape (10,3), but result.json says"),
+            std::string::npos);
   // A solution of another patch count than the scene subdivides into (the scene changed).
   Eigen::MatrixX3d more(level_.size() + 4, 3);
   more.setConstant(0.1);
   WriteSolution(level_.size() + 4, more);
-  EXPECT_NE(error_of("project " + Project()).find("the scene changed since `procam compensate` ran"),
-            std::string::npos);
+  EXPECT_NE(
+      error_of("project " + Project()).find("the scene changed since `procam compensate` ran"),
+      std::string::npos);
   WriteSolution(level_.size(), emittance_);
   // A projector that looks away from the room.
-  WriteCameraModel(dir_ / "away.cameramodel",
-                   ProjectorGeometry::Pinhole(300, 300, 160, 120, 320, 240,
-                                              ProjFromWorldLookingAt(Vec3(2, -1.5, 1.5), Vec3(2, -5, 1.5), Vec3::UnitZ())));
+  WriteCameraModel(
+      dir_ / "away.cameramodel",
+      ProjectorGeometry::Pinhole(
+          300, 300, 160, 120, 320, 240,
+          ProjFromWorldLookingAt(Vec3(2, -1.5, 1.5), Vec3(2, -5, 1.5), Vec3::UnitZ())));
   WriteScene(R"([{"name": "left", "model": "left.cameramodel", "max": 12},
                  {"name": "away", "model": "away.cameramodel", "max": 12}])");
-  EXPECT_NE(error_of("project " + Project()).find("projector 'away' lights no patch"), std::string::npos);
+  EXPECT_NE(error_of("project " + Project()).find("projector 'away' lights no patch"),
+            std::string::npos);
   // A projector key that is wrong.
   WriteScene(R"([{"name": "left", "model": "left.cameramodel", "max": 12, "bits": 9}])");
-  EXPECT_NE(error_of("project " + Project()).find("stage.json: projectors[0].bits: must be 8 or 10"), std::string::npos);
+  EXPECT_NE(
+      error_of("project " + Project()).find("stage.json: projectors[0].bits: must be 8 or 10"),
+      std::string::npos);
   // No projectors at all.
   WriteScene("[]");
-  EXPECT_NE(error_of("project " + Project()).find("the scene lists no projectors"), std::string::npos);
+  EXPECT_NE(error_of("project " + Project()).find("the scene lists no projectors"),
+            std::string::npos);
   EXPECT_FALSE(std::filesystem::exists(dir_ / "images" / "result.json"));
 }
 
 TEST(BenchProjection, RunsOnSmallImages) {
   testing::TempDir dir;
   const CommandRun run =
-      Procam("bench projection --width 160 --height 96 --patches 100 --repeat 2 --json " + (dir / "bench.json").string());
+      Procam("bench projection --width 160 --height 96 --patches 100 --repeat 2 --json " +
+             (dir / "bench.json").string());
   ASSERT_EQ(run.exit_code, 0) << run.output;
   const nlohmann::json result = nlohmann::json::parse(ReadFile(dir / "bench.json"));
   EXPECT_EQ(result["benchmark"], "projection");

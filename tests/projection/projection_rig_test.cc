@@ -3,9 +3,9 @@
 // by ray–rectangle tests written here, exact coarsening, and seam-free blending weights.
 #include "projection/projection_rig.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "geometry/io.h"
 #include "tests/projection/stage.h"
@@ -37,7 +37,8 @@ bool SegmentCrossesRectangle(const Vec3& from, const Vec3& to, const Surface& su
   const double a = normal.dot(from - origin), b = normal.dot(to - origin);
   if (a * b >= 0.0) return false;
   const Vec3 hit = from + a / (a - b) * (to - from);
-  const double s = (hit - origin).dot(u) / u.squaredNorm(), t = (hit - origin).dot(v) / v.squaredNorm();
+  const double s = (hit - origin).dot(u) / u.squaredNorm(),
+               t = (hit - origin).dot(v) / v.squaredNorm();
   return s > 0.0 && s < 1.0 && t > 0.0 && t < 1.0;
 }
 
@@ -45,7 +46,9 @@ bool FullyInImage(const ProjectorGeometry& geometry, const Patch& patch) {
   for (int k = 0; k < patch.corner_count; ++k) {
     Vec2 q;
     if (!geometry.Project(patch.corners[k], &q)) return false;
-    if (q.x() < 1.0 || q.y() < 1.0 || q.x() > geometry.width() - 2.0 || q.y() > geometry.height() - 2.0) return false;
+    if (q.x() < 1.0 || q.y() < 1.0 || q.x() > geometry.width() - 2.0 ||
+        q.y() > geometry.height() - 2.0)
+      return false;
   }
   return true;
 }
@@ -68,20 +71,23 @@ TEST(ProjectionRig, BoundsMatchThePinholeIrradianceIntegral) {
     SamplePatch(level.patches[i], 8, &samples);
     double integral = 0.0;
     for (const PatchSample& sample : samples) {
-      integral += sample.weight * PinholeIrradiance(projector.geometry, sample.point, level.patches[i].normal);
+      integral += sample.weight *
+                  PinholeIrradiance(projector.geometry, sample.point, level.patches[i].normal);
     }
-    const double exact = level.reflectance(i, 1) * projector.photometry.max[1] * integral / level.patches[i].area;
+    const double exact =
+        level.reflectance(i, 1) * projector.photometry.max[1] * integral / level.patches[i].area;
     worst = std::max(worst, std::abs(rig.upper(i, 1) / exact - 1.0));
     flux_rig += rig.upper(i, 1) * level.patches[i].area;
     flux_exact += exact * level.patches[i].area;
-    EXPECT_NEAR(rig.lower(i, 1) / rig.upper(i, 1), projector.photometry.black[1] / projector.photometry.max[1], 1e-12);
+    EXPECT_NEAR(rig.lower(i, 1) / rig.upper(i, 1),
+                projector.photometry.black[1] / projector.photometry.max[1], 1e-12);
     ++compared;
   }
   EXPECT_GT(compared, 40);
-  // Per patch the count of pixel centres landing in it is off by up to about a row or column
-  // of pixels (~50 px patches here: up to ~2-4%); summed over patches those errors cancel.
-  EXPECT_LT(worst, 0.05);
-  EXPECT_NEAR(flux_rig / flux_exact, 1.0, 2e-3);
+  // Patches wholly in the image have their pixel footprints rescaled to their exact area
+  // (projection_rig.h), which leaves a second-order error (measured 8e-4 worst).
+  EXPECT_LT(worst, 2e-3);
+  EXPECT_NEAR(flux_rig / flux_exact, 1.0, 1e-4);
 }
 
 TEST(ProjectionRig, OccludedPointsGetNoLightAndPixelsStopAtThePlate) {
@@ -213,12 +219,15 @@ TEST(ProjectionRig, BlendWeightsSumToOneAndFeatherRemovesSeams) {
 TEST(ProjectionRig, ProjectorThatLightsNothingIsAnError) {
   Stage stage = MakeStage({});
   stage.projectors[1].geometry = ProjectorGeometry::Pinhole(
-      300, 300, 160, 120, 320, 240, ProjFromWorldLookingAt(Vec3(2, -1.5, 1.5), Vec3(2, -5, 1.5), Vec3::UnitZ()));
+      300, 300, 160, 120, 320, 240,
+      ProjFromWorldLookingAt(Vec3(2, -1.5, 1.5), Vec3(2, -5, 1.5), Vec3::UnitZ()));
   try {
     BuildProjectionRig(stage.patches.fine, stage.projectors, {});
     FAIL() << "no error";
   } catch (const IoError& error) {
-    EXPECT_NE(std::string(error.what()).find("projector 'right' lights no patch"), std::string::npos) << error.what();
+    EXPECT_NE(std::string(error.what()).find("projector 'right' lights no patch"),
+              std::string::npos)
+        << error.what();
   }
 }
 

@@ -4,12 +4,12 @@
 // exactly; PNG round trips.
 #include "projection/projector_images.h"
 
-#include <cmath>
-#include <algorithm>
-#include <random>
-
 #include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
 #include <opencv2/core.hpp>
+#include <random>
 
 #include "geometry/io.h"
 #include "tests/projection/stage.h"
@@ -28,7 +28,8 @@ Eigen::MatrixX3d RandomEmittance(const ProjectionRig& rig, unsigned seed) {
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   Eigen::MatrixX3d emittance(rig.size(), 3);
   for (int i = 0; i < rig.size(); ++i) {
-    for (int c = 0; c < 3; ++c) emittance(i, c) = rig.lower(i, c) + unit(random) * (rig.upper(i, c) - rig.lower(i, c));
+    for (int c = 0; c < 3; ++c)
+      emittance(i, c) = rig.lower(i, c) + unit(random) * (rig.upper(i, c) - rig.lower(i, c));
   }
   return emittance;
 }
@@ -48,7 +49,8 @@ Eigen::VectorXd QuantisationBound(const ProjectionRig& rig) {
     }
     const double light_step = step * (photometry.max - photometry.black).maxCoeff();
     for (const int32_t patch : rig.maps[k].patch) {
-      if (patch >= 0) bound[patch] += rig.coverage_scale(patch, k) * rig.maps[k].pixel_solid_angle * light_step;
+      if (patch >= 0)
+        bound[patch] += rig.coverage_scale(patch, k) * rig.maps[k].pixel_solid_angle * light_step;
     }
   }
   for (int i = 0; i < rig.size(); ++i) bound[i] *= rig.reflectance.row(i).maxCoeff() / rig.area[i];
@@ -60,11 +62,13 @@ TEST(ProjectorImages, EmittanceComesBackThroughTheImages) {
   const ProjectionRig rig = BuildProjectionRig(stage.patches.fine, stage.projectors, {});
   const Eigen::MatrixX3d emittance = RandomEmittance(rig, 11);
   const Eigen::VectorXd quantisation = QuantisationBound(rig);
-  for (const DitherMethod dither : {DitherMethod::kOrdered, DitherMethod::kErrorDiffusion, DitherMethod::kNone}) {
+  for (const DitherMethod dither :
+       {DitherMethod::kOrdered, DitherMethod::kErrorDiffusion, DitherMethod::kNone}) {
     RenderOptions options;
     options.dither = dither;
     RenderSummary summary;
-    const std::vector<ProjectorImage> images = RenderProjectorImages(rig, emittance, options, &summary);
+    const std::vector<ProjectorImage> images =
+        RenderProjectorImages(rig, emittance, options, &summary);
     ASSERT_EQ(images.size(), 2u);
     EXPECT_EQ(summary.patches_below_lower + summary.patches_above_upper, 0);
     // The flux bookkeeping of the quantised codes: within one code step per pixel, and much
@@ -85,7 +89,8 @@ TEST(ProjectorImages, EmittanceComesBackThroughTheImages) {
 bool WhollyLit(const ProjectionRig& rig, int i) {
   bool any = false;
   for (size_t k = 0; k < rig.maps.size(); ++k) {
-    if (std::find(rig.maps[k].patch.begin(), rig.maps[k].patch.end(), i) == rig.maps[k].patch.end()) continue;
+    if (std::find(rig.maps[k].patch.begin(), rig.maps[k].patch.end(), i) == rig.maps[k].patch.end())
+      continue;
     any = true;
     if (rig.coverage_scale(i, k) == 1.0) return false;
   }
@@ -114,9 +119,11 @@ TEST(ProjectorImages, SimulatedDirectLightMatchesTheEmittance) {
     Eigen::MatrixX3d emittance;
     double wholly_worst, all_worst, all_mean;
   };
-  for (const Case& test : {Case{smooth, 0.008, 0.025, 0.003}, Case{RandomEmittance(rig, 5), 0.03, 0.04, 0.01}}) {
+  for (const Case& test :
+       {Case{smooth, 0.008, 0.025, 0.003}, Case{RandomEmittance(rig, 5), 0.03, 0.04, 0.01}}) {
     RenderSummary summary;
-    const std::vector<ProjectorImage> images = RenderProjectorImages(rig, test.emittance, {}, &summary);
+    const std::vector<ProjectorImage> images =
+        RenderProjectorImages(rig, test.emittance, {}, &summary);
     EXPECT_LT(summary.max_relative_error, 1e-3);
     const Eigen::MatrixX3d simulated = SimulateDirectLight(level, stage.projectors, images, 24);
     double wholly_worst = 0.0, all_worst = 0.0, all_mean = 0.0;
@@ -149,11 +156,14 @@ TEST(ProjectorImages, OverlappingProjectorsAddUpToTheTarget) {
   const Eigen::MatrixX3d emittance = rig.lower + 0.6 * (rig.upper - rig.lower);
   const std::vector<ProjectorImage> images = RenderProjectorImages(rig, emittance, {}, nullptr);
   std::vector<ProjectorImage> black = images;  // cv::Mat copies share pixels: make new ones
-  for (ProjectorImage& image : black) image.codes = cv::Mat(image.codes.size(), CV_16UC3, cv::Scalar::all(0));
+  for (ProjectorImage& image : black)
+    image.codes = cv::Mat(image.codes.size(), CV_16UC3, cv::Scalar::all(0));
   const Eigen::MatrixX3d both = SimulateDirectLight(level, stage.projectors, images, 8);
   const Eigen::MatrixX3d dark = SimulateDirectLight(level, stage.projectors, black, 8);
-  const Eigen::MatrixX3d left = SimulateDirectLight(level, stage.projectors, {images[0], black[1]}, 8) - dark;
-  const Eigen::MatrixX3d right = SimulateDirectLight(level, stage.projectors, {black[0], images[1]}, 8) - dark;
+  const Eigen::MatrixX3d left =
+      SimulateDirectLight(level, stage.projectors, {images[0], black[1]}, 8) - dark;
+  const Eigen::MatrixX3d right =
+      SimulateDirectLight(level, stage.projectors, {black[0], images[1]}, 8) - dark;
   int shared = 0;
   for (int i = 0; i < rig.size(); ++i) {
     const double wanted = emittance(i, 1) - rig.lower(i, 1);
@@ -184,7 +194,8 @@ TEST(ProjectorImages, UnlitPixelsStayBlackAndShadowsAreFilledByTheOtherProjector
         // Could the ray meet any surface of the stage (rectangles grown by 2 cm)?
         bool may_hit = false;
         for (const Surface& surface : stage.scene.surfaces) {
-          const Vec3 origin = surface.quad[0], u = surface.quad[1] - origin, v = surface.quad[3] - origin;
+          const Vec3 origin = surface.quad[0], u = surface.quad[1] - origin,
+                     v = surface.quad[3] - origin;
           const Vec3 normal = u.cross(v).normalized();
           const double t = normal.dot(origin - centre) / normal.dot(d);
           if (!(t > 0.0)) continue;
@@ -194,7 +205,8 @@ TEST(ProjectorImages, UnlitPixelsStayBlackAndShadowsAreFilledByTheOtherProjector
         }
         if (may_hit) continue;
         ++unlit;
-        EXPECT_EQ(images[k].codes.at<cv::Vec3w>(y, x), cv::Vec3w(0, 0, 0)) << "projector " << k << " pixel " << x << "," << y;
+        EXPECT_EQ(images[k].codes.at<cv::Vec3w>(y, x), cv::Vec3w(0, 0, 0))
+            << "projector " << k << " pixel " << x << "," << y;
       }
     }
     EXPECT_GT(unlit, 100) << "the stage should leave some pixels of projector " << k << " unlit";
@@ -202,9 +214,11 @@ TEST(ProjectorImages, UnlitPixelsStayBlackAndShadowsAreFilledByTheOtherProjector
   // Wall patches the plate hides from the left projector: it sends them nothing, not even its
   // black; the right projector alone delivers their emittance.
   std::vector<ProjectorImage> black = images;  // cv::Mat copies share pixels: make new ones
-  for (ProjectorImage& image : black) image.codes = cv::Mat(image.codes.size(), CV_16UC3, cv::Scalar::all(0));
-  const Eigen::MatrixX3d from_left = SimulateDirectLight(level, stage.projectors, {images[0], black[1]}, 8) -
-                                     SimulateDirectLight(level, stage.projectors, black, 8);
+  for (ProjectorImage& image : black)
+    image.codes = cv::Mat(image.codes.size(), CV_16UC3, cv::Scalar::all(0));
+  const Eigen::MatrixX3d from_left =
+      SimulateDirectLight(level, stage.projectors, {images[0], black[1]}, 8) -
+      SimulateDirectLight(level, stage.projectors, black, 8);
   const Eigen::MatrixX3d both = SimulateDirectLight(level, stage.projectors, images, 24);
   int filled = 0;
   const Vec3 left_centre = stage.projectors[0].geometry.CentreInWorld();
@@ -217,7 +231,8 @@ TEST(ProjectorImages, UnlitPixelsStayBlackAndShadowsAreFilledByTheOtherProjector
       const Vec3 a = patch.corners[k], b = left_centre;
       const double s = (2.0 - a.y()) / (b.y() - a.y());
       const Vec3 crossing = a + s * (b - a);
-      behind_plate &= crossing.x() > 1.6 && crossing.x() < 2.4 && crossing.z() > 0.9 && crossing.z() < 1.6;
+      behind_plate &=
+          crossing.x() > 1.6 && crossing.x() < 2.4 && crossing.z() > 0.9 && crossing.z() < 1.6;
     }
     if (!behind_plate) continue;
     ++hidden;
@@ -242,7 +257,8 @@ TEST(ProjectorImages, BoundsAreDeliveredExactly) {
   for (size_t k = 0; k < images.size(); ++k) {
     for (size_t index = 0; index < rig.maps[k].patch.size(); ++index) {
       if (rig.maps[k].patch[index] < 0) continue;
-      ASSERT_EQ(images[k].codes.at<cv::Vec3w>(int(index) / images[k].codes.cols, int(index) % images[k].codes.cols),
+      ASSERT_EQ(images[k].codes.at<cv::Vec3w>(int(index) / images[k].codes.cols,
+                                              int(index) % images[k].codes.cols),
                 cv::Vec3w(255, 255, 255));
     }
   }
@@ -250,7 +266,8 @@ TEST(ProjectorImages, BoundsAreDeliveredExactly) {
   EXPECT_LT((summary.delivered - rig.lower).cwiseAbs().maxCoeff(), 1e-12);
   EXPECT_EQ(cv::countNonZero(images[0].codes.reshape(1)), 0);
   // Outside the bounds: clipped and counted.
-  RenderProjectorImages(rig, 2.0 * rig.upper + Eigen::MatrixX3d::Constant(rig.size(), 3, 1.0), {}, &summary);
+  RenderProjectorImages(rig, 2.0 * rig.upper + Eigen::MatrixX3d::Constant(rig.size(), 3, 1.0), {},
+                        &summary);
   EXPECT_EQ(summary.patches_above_upper, rig.size());
   EXPECT_LT((summary.delivered - rig.upper).cwiseAbs().maxCoeff(), 1e-9 * rig.upper.maxCoeff());
   // Near the top, pixels saturate and the rest of the patch makes up for them.
@@ -265,7 +282,8 @@ TEST(ProjectorImages, MixingAndMeasuredResponseAreInverted) {
   Stage stage = MakeStage({});
   for (Projector& projector : stage.projectors) {
     projector.photometry.mixing << 0.92, 0.06, 0.02, 0.04, 0.9, 0.06, 0.01, 0.07, 0.92;
-    projector.photometry.response.fill(ResponseCurve::Table({0.0, 0.01, 0.05, 0.13, 0.26, 0.42, 0.62, 0.8, 1.0}));
+    projector.photometry.response.fill(
+        ResponseCurve::Table({0.0, 0.01, 0.05, 0.13, 0.26, 0.42, 0.62, 0.8, 1.0}));
     projector.photometry.black = Vec3(0.02, 0.03, 0.04);
     projector.photometry.max = Vec3(11.0, 12.0, 10.0);
   }
@@ -277,7 +295,8 @@ TEST(ProjectorImages, MixingAndMeasuredResponseAreInverted) {
   for (int i = 0; i < rig.size(); ++i) {
     const double level = unit(random);
     for (int c = 0; c < 3; ++c) {
-      emittance(i, c) = rig.lower(i, c) + (level + tint(random)) * (rig.upper(i, c) - rig.lower(i, c));
+      emittance(i, c) =
+          rig.lower(i, c) + (level + tint(random)) * (rig.upper(i, c) - rig.lower(i, c));
     }
   }
   RenderSummary summary;
@@ -288,11 +307,14 @@ TEST(ProjectorImages, MixingAndMeasuredResponseAreInverted) {
   EXPECT_LT(summary.clipped_pixels[0] + summary.clipped_pixels[1], lit / 50);
   const Eigen::VectorXd quantisation = QuantisationBound(rig);
   for (int i = 0; i < rig.size(); ++i) {
-    EXPECT_LE((summary.delivered.row(i) - emittance.row(i)).cwiseAbs().maxCoeff(), quantisation[i] + 1e-12);
+    EXPECT_LE((summary.delivered.row(i) - emittance.row(i)).cwiseAbs().maxCoeff(),
+              quantisation[i] + 1e-12);
   }
-  const Eigen::MatrixX3d simulated = SimulateDirectLight(stage.patches.fine, stage.projectors, images, 8);
+  const Eigen::MatrixX3d simulated =
+      SimulateDirectLight(stage.patches.fine, stage.projectors, images, 8);
   double mean = 0.0;
-  for (int i = 0; i < rig.size(); ++i) mean += (simulated.row(i) - emittance.row(i)).cwiseAbs().maxCoeff() / rig.size();
+  for (int i = 0; i < rig.size(); ++i)
+    mean += (simulated.row(i) - emittance.row(i)).cwiseAbs().maxCoeff() / rig.size();
   EXPECT_LT(mean, 1e-2 * rig.upper.maxCoeff());
 }
 
@@ -320,7 +342,8 @@ TEST(ProjectorImages, PngRoundTripsAndSizesAreChecked) {
     SimulateDirectLight(stage.patches.fine, stage.projectors, {right, wrong}, 4);
     FAIL() << "no error";
   } catch (const std::invalid_argument& error) {
-    EXPECT_EQ(std::string(error.what()), "projector 'right': image is 10x10, the projector 320x240");
+    EXPECT_EQ(std::string(error.what()),
+              "projector 'right': image is 10x10, the projector 320x240");
   }
 }
 

@@ -3,10 +3,10 @@
 // array with its errors.
 #include "projection/projector.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <random>
-
-#include <gtest/gtest.h>
 
 #include "geometry/io.h"
 #include "tests/testing/testing.h"
@@ -23,9 +23,10 @@ Eigen::Isometry3d SomePose() {
 ProjectorGeometry DistortedProjector() {
   // OpenCV8 with strong radial and tangential terms, principal point shifted like a projector's
   // lens shift (image above the axis).
-  return ProjectorGeometry("LENSMODEL_OPENCV8",
-                           {1480.5, 1475.25, 955.3, 1020.7, -0.12, 0.05, 0.0012, -0.0008, -0.01, 0.002, 0.001, 0.0005},
-                           1920, 1080, SomePose());
+  return ProjectorGeometry(
+      "LENSMODEL_OPENCV8",
+      {1480.5, 1475.25, 955.3, 1020.7, -0.12, 0.05, 0.0012, -0.0008, -0.01, 0.002, 0.001, 0.0005},
+      1920, 1080, SomePose());
 }
 
 std::vector<double> SplinedIntrinsics() {
@@ -41,7 +42,8 @@ std::vector<double> SplinedIntrinsics() {
 TEST(ProjectorGeometry, CameraModelRoundTripIsLossless) {
   testing::TempDir dir;
   for (const ProjectorGeometry& geometry :
-       {DistortedProjector(), ProjectorGeometry::Pinhole(1000.0 / 3.0, 1000.0 / 7.0, 319.5, 239.5, 640, 480, SomePose()),
+       {DistortedProjector(),
+        ProjectorGeometry::Pinhole(1000.0 / 3.0, 1000.0 / 7.0, 319.5, 239.5, 640, 480, SomePose()),
         ProjectorGeometry("LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=8_Ny=6_fov_x_deg=60",
                           SplinedIntrinsics(), 800, 600, SomePose())}) {
     const std::filesystem::path path = dir / "p.cameramodel";
@@ -51,9 +53,12 @@ TEST(ProjectorGeometry, CameraModelRoundTripIsLossless) {
     EXPECT_EQ(read.width(), geometry.width());
     EXPECT_EQ(read.height(), geometry.height());
     ASSERT_EQ(read.intrinsics().size(), geometry.intrinsics().size());
-    for (size_t k = 0; k < read.intrinsics().size(); ++k) EXPECT_EQ(read.intrinsics()[k], geometry.intrinsics()[k]);
+    for (size_t k = 0; k < read.intrinsics().size(); ++k)
+      EXPECT_EQ(read.intrinsics()[k], geometry.intrinsics()[k]);
     // The pose goes through a rotation vector: equal to rounding.
-    EXPECT_LT(MaxAbsDifference(read.proj_from_world().matrix(), geometry.proj_from_world().matrix()), 1e-15);
+    EXPECT_LT(
+        MaxAbsDifference(read.proj_from_world().matrix(), geometry.proj_from_world().matrix()),
+        1e-15);
   }
 }
 
@@ -72,18 +77,21 @@ TEST(ProjectorGeometry, ReadsMrcalTextAndFollowsRtCamRef) {
 )");
   const ProjectorGeometry geometry = ReadCameraModel(path);
   const Vec3 p_in_world(0.5, 0.25, 1.0);
-  const Vec3 p_in_proj(-0.25 + 0.1, 0.5 - 0.2, 1.0 + 3.0);  // R·p + t with R = rotation by 90° about z
+  const Vec3 p_in_proj(-0.25 + 0.1, 0.5 - 0.2,
+                       1.0 + 3.0);  // R·p + t with R = rotation by 90° about z
   Vec2 pixel;
   ASSERT_TRUE(geometry.Project(p_in_world, &pixel));
   EXPECT_NEAR(pixel.x(), 1000.0 * p_in_proj.x() / p_in_proj.z() + 320.0, 1e-9);
   EXPECT_NEAR(pixel.y(), 900.0 * p_in_proj.y() / p_in_proj.z() + 240.0, 1e-9);
-  EXPECT_LT((geometry.CentreInWorld() - geometry.proj_from_world().inverse() * Vec3::Zero()).norm(), 1e-12);
+  EXPECT_LT((geometry.CentreInWorld() - geometry.proj_from_world().inverse() * Vec3::Zero()).norm(),
+            1e-12);
 }
 
 TEST(ProjectorGeometry, UnprojectThenProjectReturnsThePixel) {
   const ProjectorGeometry geometry = DistortedProjector();
   std::mt19937 random(4);
-  std::uniform_real_distribution<double> x(-0.5, geometry.width() - 0.5), y(-0.5, geometry.height() - 0.5);
+  std::uniform_real_distribution<double> x(-0.5, geometry.width() - 0.5),
+      y(-0.5, geometry.height() - 0.5);
   double worst = 0.0;
   for (int k = 0; k < 2000; ++k) {
     const Vec2 pixel(x(random), y(random));
@@ -99,9 +107,10 @@ TEST(ProjectorGeometry, UnprojectThenProjectReturnsThePixel) {
 }
 
 TEST(ProjectorGeometry, UnprojectImageMatchesMrcalUnproject) {
-  const ProjectorGeometry geometry("LENSMODEL_OPENCV8",
-                                   {380.0, 378.0, 150.0, 190.0, -0.15, 0.06, 0.002, -0.001, -0.01, 0.0, 0.0, 0.0},
-                                   301, 213, Eigen::Isometry3d::Identity());
+  const ProjectorGeometry geometry(
+      "LENSMODEL_OPENCV8",
+      {380.0, 378.0, 150.0, 190.0, -0.15, 0.06, 0.002, -0.001, -0.01, 0.0, 0.0, 0.0}, 301, 213,
+      Eigen::Isometry3d::Identity());
   std::vector<Vec3> directions;
   std::vector<double> densities;
   geometry.UnprojectImage(&directions, &densities);
@@ -112,7 +121,8 @@ TEST(ProjectorGeometry, UnprojectImageMatchesMrcalUnproject) {
       const size_t index = size_t(y) * geometry.width() + x;
       const Vec3 exact = geometry.Unproject(Vec2(x, y));
       worst_angle = std::max(worst_angle, (directions[index] - exact).norm());
-      worst_density = std::max(worst_density, std::abs(densities[index] / geometry.PixelDensity(exact) - 1.0));
+      worst_density =
+          std::max(worst_density, std::abs(densities[index] / geometry.PixelDensity(exact) - 1.0));
     }
   }
   EXPECT_LT(worst_angle, 1e-10);  // radians; 1e-10 rad × 380 px ≈ 4e-8 px
@@ -120,19 +130,23 @@ TEST(ProjectorGeometry, UnprojectImageMatchesMrcalUnproject) {
 }
 
 TEST(ProjectorGeometry, PinholePixelDensityIsFocalProductOverCosineCubed) {
-  const ProjectorGeometry geometry = ProjectorGeometry::Pinhole(1200.0, 1100.0, 640.0, 700.0, 1280, 800, SomePose());
+  const ProjectorGeometry geometry =
+      ProjectorGeometry::Pinhole(1200.0, 1100.0, 640.0, 700.0, 1280, 800, SomePose());
   EXPECT_NEAR(geometry.AxisPixelDensity(), 1200.0 * 1100.0, 1e-6);
   for (const Vec3& v : {Vec3(0.3, -0.2, 1.0), Vec3(-0.5, 0.4, 0.8), Vec3(0.0, 0.0, 1.0)}) {
     const Vec3 unit = v.normalized();
-    EXPECT_NEAR(geometry.PixelDensity(unit) / (1200.0 * 1100.0 / std::pow(unit.z(), 3)), 1.0, 1e-12);
+    EXPECT_NEAR(geometry.PixelDensity(unit) / (1200.0 * 1100.0 / std::pow(unit.z(), 3)), 1.0,
+                1e-12);
   }
 }
 
 TEST(ProjectorGeometry, GainOnAPlaneFacingAPinholeIsInverseSquareOfItsDistance) {
   // Equal flux per pixel on a pinhole: a plane perpendicular to the axis at distance z is lit
   // uniformly with irradiance output / z², wherever in the image.
-  const Eigen::Isometry3d pose = ProjFromWorldLookingAt(Vec3(0, 0, 0), Vec3(0, 5, 0), Vec3::UnitZ());
-  const ProjectorGeometry geometry = ProjectorGeometry::Pinhole(800.0, 800.0, 400.0, 500.0, 800, 600, pose);
+  const Eigen::Isometry3d pose =
+      ProjFromWorldLookingAt(Vec3(0, 0, 0), Vec3(0, 5, 0), Vec3::UnitZ());
+  const ProjectorGeometry geometry =
+      ProjectorGeometry::Pinhole(800.0, 800.0, 400.0, 500.0, 800, 600, pose);
   const Vec3 normal(0, -1, 0);
   for (const Vec3& point : {Vec3(0, 2.5, 0), Vec3(1.0, 2.5, 0.3), Vec3(-1.2, 2.5, -0.6)}) {
     EXPECT_NEAR(geometry.Gain(point, normal), 1.0 / (2.5 * 2.5), 1e-12);
@@ -142,11 +156,14 @@ TEST(ProjectorGeometry, GainOnAPlaneFacingAPinholeIsInverseSquareOfItsDistance) 
 }
 
 TEST(ProjectorGeometry, RejectsBadModels) {
-  EXPECT_THROW(ProjectorGeometry("LENSMODEL_NOPE", {1, 1, 0, 0}, 10, 10, Eigen::Isometry3d::Identity()),
+  EXPECT_THROW(
+      ProjectorGeometry("LENSMODEL_NOPE", {1, 1, 0, 0}, 10, 10, Eigen::Isometry3d::Identity()),
+      std::invalid_argument);
+  EXPECT_THROW(
+      ProjectorGeometry("LENSMODEL_OPENCV4", {1, 1, 0, 0}, 10, 10, Eigen::Isometry3d::Identity()),
+      std::invalid_argument);
+  EXPECT_THROW(ProjectorGeometry::Pinhole(100, 100, 0, 0, 0, 10, Eigen::Isometry3d::Identity()),
                std::invalid_argument);
-  EXPECT_THROW(ProjectorGeometry("LENSMODEL_OPENCV4", {1, 1, 0, 0}, 10, 10, Eigen::Isometry3d::Identity()),
-               std::invalid_argument);
-  EXPECT_THROW(ProjectorGeometry::Pinhole(100, 100, 0, 0, 0, 10, Eigen::Isometry3d::Identity()), std::invalid_argument);
   testing::TempDir dir;
   try {
     ReadCameraModel(dir.Write("bad.cameramodel", "{ 'lensmodel': 'LENSMODEL_PINHOLE' }"));
@@ -201,9 +218,7 @@ TEST(ProjectorPhotometry, DriveForInvertsOutputInsideTheGamut) {
 // A scene with a projector array, for ParseProjectors' errors.
 class ProjectorsJson : public ::testing::Test {
  protected:
-  void SetUp() override {
-    WriteCameraModel(dir_ / "p0.cameramodel", DistortedProjector());
-  }
+  void SetUp() override { WriteCameraModel(dir_ / "p0.cameramodel", DistortedProjector()); }
   std::string Error(const std::string& array) {
     try {
       ParseProjectors(array, "room.json", dir_.path());
@@ -220,7 +235,8 @@ TEST_F(ProjectorsJson, ReadsEveryKey) {
     {"name": "left", "model": "p0.cameramodel", "black": [0.01, 0.02, 0.03], "max": 12, "gamma": [2.2, 2.3, 2.4],
      "mixing": [[0.9, 0.1, 0], [0, 1, 0], [0, 0.2, 0.8]], "bits": 10},
     {"model": "p0.cameramodel", "max": [5, 6, 7], "lut": [0, 0.2, 0.5, 1]}
-  ])", "room.json", dir_.path());
+  ])",
+                                                            "room.json", dir_.path());
   ASSERT_EQ(projectors.size(), 2u);
   EXPECT_EQ(projectors[0].name, "left");
   EXPECT_EQ(projectors[1].name, "projector1");
@@ -236,22 +252,30 @@ TEST_F(ProjectorsJson, ReadsEveryKey) {
 
 TEST_F(ProjectorsJson, ErrorsNameTheFileAndKey) {
   EXPECT_EQ(Error(R"([{"max": 1}])"), "room.json: projectors[0].model: required key is missing");
-  EXPECT_EQ(Error(R"([{"model": "p0.cameramodel"}])"), "room.json: projectors[0].max: required key is missing");
+  EXPECT_EQ(Error(R"([{"model": "p0.cameramodel"}])"),
+            "room.json: projectors[0].max: required key is missing");
   EXPECT_EQ(Error(R"([{"model": "p0.cameramodel", "max": 1, "black": 2}])"),
             "room.json: projectors[0].max: each value must be greater than black");
   EXPECT_EQ(Error(R"([{"model": "p0.cameramodel", "max": 1, "gamma": 2, "lut": [0, 1]}])"),
             "room.json: projectors[0].lut: give either 'gamma' or 'lut', not both");
   EXPECT_EQ(Error(R"([{"model": "p0.cameramodel", "max": 1, "lut": [0, 0.5, 0.4, 1]}])"),
             "room.json: projectors[0].lut: response values must increase strictly (index 2)");
-  EXPECT_EQ(Error(R"([{"model": "p0.cameramodel", "max": 1, "mixing": [[1, 0, 0], [0, 1, 0], [0, 0.5, 0]]}])"),
-            "room.json: projectors[0].mixing: row 2 must sum to 1 (it sums to 0.5)");
+  EXPECT_EQ(
+      Error(
+          R"([{"model": "p0.cameramodel", "max": 1, "mixing": [[1, 0, 0], [0, 1, 0], [0, 0.5, 0]]}])"),
+      "room.json: projectors[0].mixing: row 2 must sum to 1 (it sums to 0.5)");
   EXPECT_EQ(Error(R"([{"model": "p0.cameramodel", "max": 1, "bits": 12}])"),
             "room.json: projectors[0].bits: must be 8 or 10");
   EXPECT_EQ(Error(R"([{"model": "p0.cameramodel", "max": 1, "colour": 1}])"),
-            "room.json: projectors[0].colour: unknown key (known keys: bits, black, gamma, lut, max, mixing, model, name)");
-  EXPECT_EQ(Error(R"([{"name": "a", "model": "p0.cameramodel", "max": 1}, {"name": "a", "model": "p0.cameramodel", "max": 1}])"),
-            "room.json: projectors[1].name: 'a' is already the name of another projector");
-  EXPECT_EQ(Error(R"([{"name": "a/b", "model": "p0.cameramodel", "max": 1}])").rfind("room.json: projectors[0].name: ", 0), 0u);
+            "room.json: projectors[0].colour: unknown key (known keys: bits, black, gamma, lut, "
+            "max, mixing, model, name)");
+  EXPECT_EQ(
+      Error(
+          R"([{"name": "a", "model": "p0.cameramodel", "max": 1}, {"name": "a", "model": "p0.cameramodel", "max": 1}])"),
+      "room.json: projectors[1].name: 'a' is already the name of another projector");
+  EXPECT_EQ(Error(R"([{"name": "a/b", "model": "p0.cameramodel", "max": 1}])")
+                .rfind("room.json: projectors[0].name: ", 0),
+            0u);
   const std::string missing = Error(R"([{"model": "nope.cameramodel", "max": 1}])");
   EXPECT_EQ(missing.rfind("room.json: projectors[0].model: ", 0), 0u) << missing;
   EXPECT_NE(missing.find("nope.cameramodel: file not found"), std::string::npos) << missing;

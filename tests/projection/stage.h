@@ -13,7 +13,7 @@
 namespace procam::testing {
 
 struct StageOptions {
-  bool plate = true;         // a 0.8 × 0.7 m plate 1 m in front of the wall, facing the projectors
+  bool plate = true;  // a 0.8 × 0.7 m plate 1 m in front of the wall, facing the projectors
   int target_patches = 300;
   int width = 320, height = 240;  // projector images
   int bits = 8;
@@ -33,9 +33,9 @@ inline Projector MakeStageProjector(const std::string& name, const Vec3& centre,
   Projector projector;
   projector.name = name;
   const double focal = 1.1 * options.width;  // about 49° across
-  projector.geometry = ProjectorGeometry::Pinhole(focal, focal, 0.5 * (options.width - 1), 0.5 * (options.height - 1),
-                                                  options.width, options.height,
-                                                  ProjFromWorldLookingAt(centre, target, Vec3::UnitZ()));
+  projector.geometry = ProjectorGeometry::Pinhole(
+      focal, focal, 0.5 * (options.width - 1), 0.5 * (options.height - 1), options.width,
+      options.height, ProjFromWorldLookingAt(centre, target, Vec3::UnitZ()));
   projector.photometry.black = Vec3::Constant(options.black);
   projector.photometry.max = Vec3::Constant(options.max);
   projector.photometry.bits = options.bits;
@@ -52,8 +52,8 @@ inline Stage MakeStage(const StageOptions& options) {
   stage.scene.surfaces.push_back(
       MakeRectangle(Vec3(0, 0, 0), Vec3(4, 0, 0), Vec3(0, 3, 0), 0.6, Vec3(0.5, 0.5, 0.5)));
   if (options.plate) {
-    stage.scene.surfaces.push_back(
-        MakeRectangle(Vec3(1.6, 2.0, 0.9), Vec3(0.8, 0, 0), Vec3(0, 0, 0.7), 0.7, Vec3(0.5, 0.5, 0.5)));
+    stage.scene.surfaces.push_back(MakeRectangle(Vec3(1.6, 2.0, 0.9), Vec3(0.8, 0, 0),
+                                                 Vec3(0, 0, 0.7), 0.7, Vec3(0.5, 0.5, 0.5)));
   }
   stage.scene.surfaces[0].name = "wall";
   stage.scene.surfaces[1].name = "floor";
@@ -61,8 +61,10 @@ inline Stage MakeStage(const StageOptions& options) {
   SubdivisionOptions subdivision;
   subdivision.target_patches = options.target_patches;
   stage.patches = SubdividePatches(stage.scene, subdivision);
-  stage.projectors.push_back(MakeStageProjector("left", Vec3(1.4, -1.5, 1.4), Vec3(2.2, 3.0, 1.1), options));
-  stage.projectors.push_back(MakeStageProjector("right", Vec3(2.6, -1.5, 1.5), Vec3(1.9, 3.0, 1.2), options));
+  stage.projectors.push_back(
+      MakeStageProjector("left", Vec3(1.4, -1.5, 1.4), Vec3(2.2, 3.0, 1.1), options));
+  stage.projectors.push_back(
+      MakeStageProjector("right", Vec3(2.6, -1.5, 1.5), Vec3(1.9, 3.0, 1.2), options));
   return stage;
 }
 

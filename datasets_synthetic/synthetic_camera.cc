@@ -1,0 +1,249 @@
+#include "datasets_synthetic/synthetic_camera.h"
+
+#include <algorithm>
+#include <map>
+#include <mutex>
+#include <stdexcept>
+#include <utility>
+
+#include "datasets_synthetic/paper_scenes.h"
+
+namespace procam {
+namespace {
+
+constexpr int kDefaultPatches = 300;
+constexpr int kMinPatches = 20;
+constexpr int kMaxPatches = 5000;  // the world mesh is 4× finer and its dense F is n²
+
+std::string SceneList() {
+  std::string list;
+  for (const std::string& name : SyntheticSceneNames()) list += (list.empty() ? "" : ", ") + name;
+  return list;
+}
+
+bool IsSceneName(const std::string& name) {
+  const std::vector<std::string> names = SyntheticSceneNames();
+  return std::find(names.begin(), names.end(), name) != names.end();
+}
+
+// A display's 8-bit pattern (grey or B, G, R) as a projector's codes (R, G, B, its bits).
+ProjectorImage CodesFromPattern(const cv::Mat& pattern, const Projector& projector) {
+  const int width = projector.geometry.width(), height = projector.geometry.height();
+  if (pattern.cols != width || pattern.rows != height ||
+      (pattern.type() != CV_8UC1 && pattern.type() != CV_8UC3)) {
+    throw std::invalid_argument(
+        "synthetic view: projector '" + projector.name + "' is " + std::to_string(width) + "x" +
+        std::to_string(height) + ", its display shows a " + std::to_string(pattern.cols) + "x" +
+        std::to_string(pattern.rows) + " pattern of type " + std::to_string(pattern.type()));
+  }
+  ProjectorImage image;
+  image.bits = projector.photometry.bits;
+  image.codes.create(height, width, CV_16UC3);
+  const int max_code = projector.photometry.MaxCode();
+  uint16_t table[256];  // 8-bit value → code, rounded
+  for (int value = 0; value < 256; ++value)
+    table[value] = static_cast<uint16_t>((value * max_code + 127) / 255);
+  const bool grey = pattern.channels() == 1;
+  for (int row = 0; row < height; ++row) {
+    const uint8_t* in = pattern.ptr<uint8_t>(row);
+    cv::Vec3w* out = image.codes.ptr<cv::Vec3w>(row);
+    for (int col = 0; col < width; ++col) {
+      if (grey) {
+        const uint16_t code = table[in[col]];
+        out[col] = cv::Vec3w(code, code, code);
+      } else {
+        const uint8_t* bgr = in + 3 * col;
+        out[col] = cv::Vec3w(table[bgr[2]], table[bgr[1]], table[bgr[0]]);
+      }
+    }
+  }
+  return image;
+}
+
+// RenderRadiance (R, G, B) → the SceneView's B, G, R, scaled.
+cv::Mat ViewFromRadiance(const cv::Mat& radiance_rgb, double scale) {
+  cv::Mat view(radiance_rgb.size(), CV_32FC3);
+  const float s = static_cast<float>(scale);
+  for (int row = 0; row < view.rows; ++row) {
+    const cv::Vec3f* in = radiance_rgb.ptr<cv::Vec3f>(row);
+    cv::Vec3f* out = view.ptr<cv::Vec3f>(row);
+    for (int col = 0; col < view.cols; ++col)
+      out[col] = cv::Vec3f(s * in[col][2], s * in[col][1], s * in[col][0]);
+  }
+  return view;
+}
+
+bool SamePattern(const cv::Mat& a, const cv::Mat& b) {
+  if (a.size() != b.size() || a.type() != b.type()) return false;
+  if (a.data == b.data) return true;  // the display hands out the buffer it keeps
+  return cv::norm(a, b, cv::NORM_INF) == 0.0;
+}
+
+// Scene name and patch count of a synthetic URI (reads `patches`). Throws IoError.
+std::pair<std::string, int> ParseSyntheticUri(const CameraUri& uri) {
+  if (uri.scheme() != "synthetic")
+    throw IoError("camera '" + uri.text() + "': not a synthetic: camera URI");
+  if (!IsSceneName(uri.path())) {
+    throw IoError("camera '" + uri.text() + "': unknown synthetic scene '" + uri.path() +
+                  "' (scenes: " + SceneList() + ")");
+  }
+  const int patches = uri.GetInt("patches", kDefaultPatches);
+  if (patches < kMinPatches || patches > kMaxPatches) {
+    throw IoError("camera '" + uri.text() + "': patches must be in [" +
+                  std::to_string(kMinPatches) + ", " + std::to_string(kMaxPatches) + "], got " +
+                  std::to_string(patches));
+  }
+  return {uri.path(), patches};
+}
+
+}  // namespace
+
+std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int patches) {
+  if (!IsSceneName(scene)) {
+    throw std::invalid_argument("unknown synthetic scene '" + scene + "' (scenes: " + SceneList() +
+                                ")");
+  }
+  if (patches < kMinPatches || patches > kMaxPatches) {
+    throw std::invalid_argument("synthetic scene '" + scene + "': patches must be in [" +
+                                std::to_string(kMinPatches) + ", " + std::to_string(kMaxPatches) +
+                                "], got " + std::to_string(patches));
+  }
+  const SyntheticScene synthetic = MakeSyntheticScene(scene, patches);
+  std::vector<Projector> projectors;
+  for (const DevicePlacement& placement : synthetic.projectors)
+    projectors.push_back(ProjectorFromPlacement(placement));
+  SimulatedRigOptions options;
+  options.solver_patches = patches;
+
+  auto world = std::make_shared<SyntheticWorld>();
+  world->scene = scene;
+  world->patches = patches;
+  auto rig = std::make_shared<SimulatedRig>(synthetic.scene, std::move(projectors),
+                                            CameraFromPlacement(synthetic.camera), options);
+  std::vector<ProjectorImage> white;
+  for (const Projector& projector : rig->projectors()) {
+    world->displays.push_back(std::make_shared<MemoryDisplay>(
+        cv::Size(projector.geometry.width(), projector.geometry.height()),
+        "synthetic:" + scene + "/" + projector.name));
+    ProjectorImage image;
+    image.bits = projector.photometry.bits;
+    image.codes = cv::Mat(projector.geometry.height(), projector.geometry.width(), CV_16UC3,
+                          cv::Scalar::all(projector.photometry.MaxCode()));
+    white.push_back(std::move(image));
+  }
+  double brightest = 0.0;
+  cv::minMaxLoc(rig->RenderRadiance(white).reshape(1), nullptr, &brightest);
+  world->radiance_scale = brightest > 0.0 ? 1.0 / brightest : 1.0;
+  world->rig = std::move(rig);
+  return world;
+}
+
+SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world) {
+  if (!world || !world->rig) throw std::invalid_argument("MakeSyntheticView: no world");
+  if (world->displays.size() != world->rig->projectors().size()) {
+    throw std::invalid_argument("MakeSyntheticView: " + std::to_string(world->displays.size()) +
+                                " displays for " + std::to_string(world->rig->projectors().size()) +
+                                " projectors");
+  }
+  struct Cache {
+    std::mutex mutex;
+    std::vector<cv::Mat> shown;  // the patterns of the last render (held: their buffers stay)
+    cv::Mat view;                // its SceneView image
+  };
+  auto cache = std::make_shared<Cache>();
+  return [world, cache](int64_t exposure_start_ns) -> cv::Mat {
+    std::vector<cv::Mat> shown;
+    for (const auto& display : world->displays)
+      shown.push_back(display->ShownAt(exposure_start_ns));
+    std::lock_guard<std::mutex> lock(cache->mutex);
+    bool same = !cache->view.empty();
+    for (size_t k = 0; same && k < shown.size(); ++k) same = SamePattern(shown[k], cache->shown[k]);
+    if (!same) {
+      const SimulatedRig& rig = *world->rig;
+      std::vector<ProjectorImage> images;
+      for (size_t k = 0; k < shown.size(); ++k)
+        images.push_back(CodesFromPattern(shown[k], rig.projectors()[k]));
+      cache->view = ViewFromRadiance(rig.RenderRadiance(images), world->radiance_scale);
+      cache->shown = std::move(shown);
+      ++world->renders;
+    }
+    return cache->view.clone();  // the camera may scale it in place
+  };
+}
+
+std::shared_ptr<SyntheticWorld> OpenSyntheticWorld(const CameraUri& uri) {
+  const auto [scene, patches] = ParseSyntheticUri(uri);
+  // Alive worlds by scene and patch count; a world goes when its last holder lets it go, so a
+  // camera opened later starts with dark displays rather than an earlier run's patterns.
+  static std::mutex mutex;
+  static std::map<std::pair<std::string, int>, std::weak_ptr<SyntheticWorld>> worlds;
+  std::lock_guard<std::mutex> lock(mutex);
+  std::weak_ptr<SyntheticWorld>& slot = worlds[{scene, patches}];
+  if (std::shared_ptr<SyntheticWorld> alive = slot.lock()) return alive;
+  std::shared_ptr<SyntheticWorld> world = MakeSyntheticWorld(scene, patches);
+  slot = world;
+  return world;
+}
+
+SyntheticCamera::SyntheticCamera(const TestCameraOptions& options,
+                                 std::shared_ptr<SyntheticWorld> world)
+    : TestCamera(options, MakeSyntheticView(world)), world_(std::move(world)) {}
+
+CameraInfo SyntheticCamera::Info() const {
+  CameraInfo info = TestCamera::Info();
+  const CameraSettings settings = Settings();
+  info.uri = "synthetic:" + world_->scene;
+  info.backend = "synthetic";
+  info.model = "simulated rig camera";
+  info.serial = world_->scene;
+  info.description = "simulated camera of synthetic scene " + world_->scene + " (" +
+                     std::to_string(world_->displays.size()) + " projectors), " +
+                     std::to_string(settings.width) + "x" + std::to_string(settings.height) + " " +
+                     PixelFormatName(settings.pixel_format);
+  return info;
+}
+
+CameraBackend SyntheticCameraBackend() {
+  CameraBackend backend;
+  backend.scheme = "synthetic";
+  backend.description = "the simulated rig's camera in a synthetic scene (datasets_synthetic)";
+  backend.open = [](const CameraUri& uri, const OpenCameraOptions&) -> std::unique_ptr<Camera> {
+    ParseSyntheticUri(uri);  // scene and patches first, so CheckAllRead below knows `patches`
+    TestCameraOptions options = TestCameraOptionsFromUri(uri);  // rejects unknown keys
+    const std::shared_ptr<SyntheticWorld> world = OpenSyntheticWorld(uri);
+    if (!uri.Has("width")) options.width = world->rig->camera().width();
+    if (!uri.Has("height")) options.height = world->rig->camera().height();
+    if (!uri.Has("format")) options.pixel_format = PixelFormat::kBGR8;
+    std::string why;
+    if (!options.Check(&why)) throw IoError("camera '" + uri.text() + "': " + why);
+    return std::make_unique<SyntheticCamera>(options, world);
+  };
+  backend.list = [](const ListCamerasOptions& options) {
+    std::vector<CameraInfo> cameras;
+    if (!options.include_virtual) return cameras;
+    for (const std::string& name : SyntheticSceneNames()) {
+      const SyntheticScene scene = MakeSyntheticScene(name, kMinPatches);
+      CameraInfo info;
+      info.uri = "synthetic:" + name;
+      info.backend = "synthetic";
+      info.vendor = "procam";
+      info.model = "simulated rig camera";
+      info.serial = name;
+      info.description = "simulated room, " + std::to_string(scene.projectors.size()) +
+                         " projectors (" + std::to_string(scene.projectors[0].width) + "x" +
+                         std::to_string(scene.projectors[0].height) + "), camera " +
+                         std::to_string(scene.camera.width) + "x" +
+                         std::to_string(scene.camera.height) + " BGR8";
+      cameras.push_back(std::move(info));
+    }
+    return cameras;
+  };
+  return backend;
+}
+
+void RegisterSyntheticCameraBackend() {
+  static std::once_flag once;
+  std::call_once(once, [] { RegisterCameraBackend(SyntheticCameraBackend()); });
+}
+
+}  // namespace procam

@@ -1,0 +1,104 @@
+#pragma once
+// The simulated rig's camera behind the capture module's Camera interface: a
+// "synthetic:<scene>" URI opens a camera that photographs the synthetic room (paper_scenes.h)
+// lit by whatever each of its projectors' in-memory displays shows, so `procam capture` and the
+// capture tests run real structured-light sessions without hardware.
+//
+//   synthetic:c_shaped?patches=300&format=BGR8&noise=1
+//
+// Keys: `patches` (the solver patch count the scene and the rig's world mesh are built for,
+// [20, 5000], default 300; the world mesh is SimulatedRigOptions::world_factor = 4 times finer)
+// and every key of the test camera (test_camera.h: format, width, height, fps, buffers,
+// exposure_us, reference_exposure_us, gain_db, black, noise, latency_ms, seed, fault, ...), with
+// these defaults changed: width and height = the rig camera's, format BGR8 (the rig's camera
+// sees colour). A width or height other than the rig camera's resamples its image (nearest
+// neighbour, as the test camera does).
+//
+// The frame model is the test camera's (timing, buffering, read noise, quantisation, faults);
+// what it photographs is SimulatedRig::RenderRadiance of the patterns on the projectors'
+// displays at the frame's exposure start: exact direct light per camera pixel, bounces from the
+// finer radiosity mesh. The rig's own exposure, vignetting and shot noise (PhotographLinear) are
+// not applied: the test camera's exposure, gain and read noise take their place.
+//
+// Dependency: datasets_synthetic uses capture, never the other way round; the capture module
+// only reserves the scheme until RegisterSyntheticCameraBackend() is called.
+
+#include <atomic>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "capture/camera.h"
+#include "capture/display.h"
+#include "capture/test_camera.h"
+#include "datasets_synthetic/simulated_rig.h"
+
+namespace procam {
+
+// A synthetic room with its projectors and camera, and one in-memory display per projector:
+// showing a pattern on displays[k] is projector k of the rig showing it.
+struct SyntheticWorld {
+  std::string scene;  // a name of SyntheticSceneNames()
+  int patches = 0;    // solver patch count the scene and the rig were built for
+  std::shared_ptr<const SimulatedRig> rig;
+  // One per rig projector, same order; resolution = the projector's width × height, named
+  // "synthetic:<scene>/<projector name>".
+  std::vector<std::shared_ptr<MemoryDisplay>> displays;
+  // Radiance scale of the camera's SceneView: view = RenderRadiance × radiance_scale, with
+  // radiance_scale = 1 / (the largest channel value of RenderRadiance when every projector shows
+  // full white), computed once when the world is built. So 1.0 is the brightest any pixel gets
+  // (no hot spot sets it: in tiny_box and c_shaped the 99.9th percentile is within 2% of it); no
+  // pattern clips at the test camera's reference exposure; one projector's full white reads
+  // well below 1 (tiny_box: about 0.4 where it lights the walls, nearly half of it bounce light).
+  double radiance_scale = 1.0;
+  // RenderRadiance calls made by the SceneViews of this world (frames of one pattern share one
+  // render; see MakeSyntheticView).
+  mutable std::atomic<int> renders{0};
+};
+
+// Builds the world of a synthetic scene: MakeSyntheticScene(scene, patches), projectors and
+// camera from its placements (ProjectorFromPlacement, CameraFromPlacement with distortion), the
+// rig (SimulatedRigOptions with solver_patches = patches), one display per projector and the
+// radiance scale (one full-white render). At 300 patches this takes about 1 s for tiny_box and
+// 1.4 s for c_shaped on two cores. Throws std::invalid_argument naming the scene when it is
+// unknown or patches is outside [20, 5000].
+std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int patches = 300);
+
+// The SceneView (camera.h) of the world's camera: for an exposure start time, the radiance of
+// what every display shows at that time (MemoryDisplay::ShownAt; 8-bit grey or B, G, R
+// patterns become projector codes, R, G, B, scaled to the projector's bits; a display that has
+// shown nothing shows black), as CV_32FC3 B, G, R scaled by world->radiance_scale, at the rig
+// camera's resolution. The last render is cached, keyed by the patterns shown (same buffer or
+// same pixels), so the frames of one pattern render once. Thread-safe. Throws
+// std::invalid_argument when `world` is empty or its displays do not match its projectors.
+SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world);
+
+// The world a "synthetic:" URI names (its path and `patches` key; other keys are left unread).
+// Worlds are shared while alive: opening the same scene and patch count again, while a camera
+// or caller still holds the world, returns the same world — so the capture command shows its
+// patterns on the displays the camera looks at. Throws IoError naming the URI: not a synthetic
+// URI, unknown scene (the message lists the scenes), or a bad `patches`.
+std::shared_ptr<SyntheticWorld> OpenSyntheticWorld(const CameraUri& uri);
+
+// The test camera looking at a synthetic world; reports itself as "synthetic:<scene>" (backend
+// "synthetic") so capture sessions name the scene they photographed.
+class SyntheticCamera : public TestCamera {
+ public:
+  // Throws std::invalid_argument when options.Check() fails or world is empty.
+  SyntheticCamera(const TestCameraOptions& options, std::shared_ptr<SyntheticWorld> world);
+
+  CameraInfo Info() const override;
+  const std::shared_ptr<SyntheticWorld>& world() const { return world_; }
+
+ private:
+  std::shared_ptr<SyntheticWorld> world_;
+};
+
+// The "synthetic" backend: opens SyntheticCameras (OpenCameraOptions::scene_view is ignored:
+// the world is the view) and, with ListCamerasOptions::include_virtual, lists one camera per
+// synthetic scene.
+CameraBackend SyntheticCameraBackend();
+// Registers SyntheticCameraBackend() with the camera registry. Further calls do nothing.
+void RegisterSyntheticCameraBackend();
+
+}  // namespace procam

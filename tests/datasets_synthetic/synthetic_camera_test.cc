@@ -1,0 +1,234 @@
+// The synthetic camera ("synthetic:<scene>") photographs the simulated room through the capture
+// module: the truth it is checked against is the geometry — which surface point each camera
+// pixel sees, whether projector 0 reaches it unoccluded, and where that point projects into the
+// projector — not the renderer.
+#include "datasets_synthetic/synthetic_camera.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include "capture/patterns.h"
+#include "capture/sequencer.h"
+#include "geometry/ray_scene.h"
+
+namespace procam {
+namespace {
+
+// Fast frames; 1 ms exposure at the reference exposure, so radiance 1 reads 255.
+const std::string kTinyBox =
+    "synthetic:tiny_box?patches=100&fps=500&exposure_us=1000&reference_exposure_us=1000";
+
+SequencerOptions FastSequencer(int frames) {
+  SequencerOptions options;
+  options.settle_ms = 2;
+  options.frames_per_pattern = frames;
+  options.grab_timeout_ms = 5000;  // a render takes a while on a small machine
+  return options;
+}
+
+// What projector `k` does to the point camera pixel (row, col) sees, from the geometry alone.
+struct DirectLight {
+  bool lit = false;  // in front of the projector, inside its image, nothing in between
+  double cos_incidence = 0.0;
+  Vec2 projector_pixel = Vec2::Zero();
+  Vec3 full_white = Vec3::Zero();  // reflected direct light of full white over black, R, G, B
+};
+
+class Geometry {
+ public:
+  explicit Geometry(const SimulatedRig& rig) : rig_(rig), surfaces_(rig.scene()) {}
+
+  DirectLight Direct(int k, int row, int col) const {
+    DirectLight direct;
+    const Projector& projector = rig_.projectors()[k];
+    Vec3 point, normal;
+    if (!rig_.PointSeenByPixel(row, col, &point, &normal)) return direct;
+    const double gain = projector.geometry.Gain(point, normal, &direct.projector_pixel);
+    if (gain <= 0.0 || !projector.geometry.InImage(direct.projector_pixel)) return direct;
+    if (surfaces_.Occluded(point, projector.geometry.CentreInWorld(), 1e-4)) return direct;
+    direct.lit = true;
+    direct.cos_incidence = (projector.geometry.CentreInWorld() - point).normalized().dot(normal);
+    // The surface the camera ray meets there gives the reflectance.
+    const Vec3 camera_centre = rig_.camera().CentreInWorld();
+    double t = 0.0;
+    int surface = -1;
+    EXPECT_TRUE(surfaces_.Intersect(camera_centre, point - camera_centre, 0.0, 2.0, &t, &surface));
+    const Vec3 reflectance = rig_.scene().surfaces[std::max(surface, 0)].reflectance;
+    direct.full_white =
+        reflectance.cwiseProduct(gain * (projector.photometry.max - projector.photometry.black));
+    return direct;
+  }
+
+ private:
+  const SimulatedRig& rig_;
+  RayScene surfaces_;
+};
+
+TEST(SyntheticCamera, WhiteOnOneProjectorBrightensExactlyWhereItLightsTheRoom) {
+  RegisterSyntheticCameraBackend();
+  const std::unique_ptr<Camera> camera = OpenCamera(kTinyBox);
+  const std::shared_ptr<SyntheticWorld> world = OpenSyntheticWorld(CameraUri::Parse(kTinyBox));
+  ASSERT_EQ(world.get(), dynamic_cast<SyntheticCamera&>(*camera).world().get())
+      << "the camera and the caller share one world";
+  ASSERT_EQ(world->displays.size(), 2u);
+  EXPECT_EQ(world->displays[0]->Name(), "synthetic:tiny_box/left");
+  EXPECT_EQ(world->displays[0]->Resolution(), cv::Size(320, 200));
+  EXPECT_EQ(camera->Info().uri, "synthetic:tiny_box");
+  EXPECT_EQ(camera->Info().backend, "synthetic");
+  const CameraSettings settings = camera->Settings();
+  const SimulatedRig& rig = *world->rig;
+  EXPECT_EQ(settings.width, rig.camera().width());
+  EXPECT_EQ(settings.height, rig.camera().height());
+  EXPECT_EQ(settings.pixel_format, PixelFormat::kBGR8);
+
+  // Projector 1's display never shows anything: it stays black.
+  PatternSequencer sequencer(FastSequencer(4), camera.get(), world->displays[0].get());
+  const cv::Size projector = world->displays[0]->Resolution();
+  const cv::Mat black =
+      sequencer.Capture(cv::Mat(projector, CV_8UC3, cv::Scalar::all(0))).exposures[0].mean;
+  const int renders_before = world->renders;
+  const PatternCapture white_capture =
+      sequencer.Capture(cv::Mat(projector, CV_8UC1, cv::Scalar(255)));  // grey patterns too
+  EXPECT_EQ(world->renders - renders_before, 1) << "four frames of one pattern, one render";
+  const cv::Mat brighter = white_capture.exposures[0].mean - black;  // B, G, R digital numbers
+
+  // Lit pixels brighten by at least the direct light the geometry predicts (radiance 1 = 255
+  // at the reference exposure; each frame is rounded, hence 1 DN); the bounce light adds to it
+  // everywhere, lit or not, but less than the direct light adds: one threshold separates lit
+  // from unlit.
+  const Geometry geometry(rig);
+  int lit_count = 0, below_direct = 0;
+  float lit_min = 1e9f, unlit_max = 0.0f;
+  double direct_sum = 0.0, bounce_sum = 0.0;
+  for (int row = 0; row < brighter.rows; ++row) {
+    for (int col = 0; col < brighter.cols; ++col) {
+      const cv::Vec3f measured = brighter.at<cv::Vec3f>(row, col);
+      const float grey = (measured[0] + measured[1] + measured[2]) / 3;
+      const DirectLight direct = geometry.Direct(0, row, col);
+      if (!direct.lit) {
+        unlit_max = std::max(unlit_max, grey);
+        continue;
+      }
+      ++lit_count;
+      lit_min = std::min(lit_min, grey);
+      const Vec3 expected = 255.0 * world->radiance_scale * direct.full_white;  // R, G, B
+      for (int c = 0; c < 3; ++c) below_direct += measured[2 - c] < expected[c] - 1.0;
+      direct_sum += expected.mean();
+      bounce_sum += grey - expected.mean();
+    }
+  }
+  ASSERT_GT(lit_count, static_cast<int>(brighter.total() / 4))
+      << "projector 0 lights much of the view";
+  std::printf(
+      "white on projector 0: %d lit pixels brighten by >= %.1f DN (direct %.1f + bounce "
+      "%.1f DN on average), the %d unlit ones by <= %.1f DN\n",
+      lit_count, lit_min, direct_sum / lit_count, bounce_sum / lit_count,
+      static_cast<int>(brighter.total()) - lit_count, unlit_max);
+  EXPECT_EQ(below_direct, 0);
+  EXPECT_GT(lit_min, unlit_max) << "every lit pixel is brighter than every unlit one";
+}
+
+TEST(SyntheticCamera, GrayCodeThroughTheSequencerDecodesWhereTheGeometryProjects) {
+  RegisterSyntheticCameraBackend();
+  const std::unique_ptr<Camera> camera = OpenCamera(kTinyBox);
+  const std::shared_ptr<SyntheticWorld> world = dynamic_cast<SyntheticCamera&>(*camera).world();
+  MemoryDisplay& display = *world->displays[0];
+  GrayCodeOptions options;
+  options.width = display.Resolution().width;  // 320 × 200: 9 + 8 bits
+  options.height = display.Resolution().height;
+  const CaptureSequence sequence = MakeGrayCodeSequence(options);
+  PatternSequencer sequencer(FastSequencer(1), camera.get(), &display);
+  const int renders_before = world->renders;
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<cv::Mat> captured;
+  for (const Pattern& pattern : sequence.patterns)
+    captured.push_back(sequencer.Capture(pattern.image).exposures[0].mean);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const GrayCodeMap map = DecodeGrayCode(options, captured);
+
+  // Agreement: the decoded column and row within 1 projector pixel of where the point the camera
+  // pixel sees projects into projector 0.
+  const Geometry geometry(*world->rig);
+  int lit = 0, decoded = 0, agree = 0, steep = 0, steep_agree = 0;
+  for (int row = 0; row < map.column.rows; ++row) {
+    for (int col = 0; col < map.column.cols; ++col) {
+      const DirectLight direct = geometry.Direct(0, row, col);
+      if (!direct.lit) continue;
+      const int u = map.column.at<int32_t>(row, col), v = map.row.at<int32_t>(row, col);
+      const bool is_decoded = u >= 0 && v >= 0;
+      const bool agrees = is_decoded && std::abs(u - direct.projector_pixel.x()) <= 1.0 &&
+                          std::abs(v - direct.projector_pixel.y()) <= 1.0;
+      ++lit;
+      decoded += is_decoded;
+      agree += agrees;
+      if (direct.cos_incidence >= 0.2) {  // light arriving less than 78° from the normal
+        ++steep;
+        steep_agree += agrees;
+      }
+    }
+  }
+  ASSERT_GT(lit, 0);
+  std::printf(
+      "gray code on tiny_box projector 0 (%dx%d, %zu patterns, %.2f s, %d renders): of "
+      "%d lit camera pixels %.2f%% decoded, %.2f%% within 1 projector pixel (%.2f%% of the "
+      "decoded; %.2f%% of the %d lit at incidence < 78 deg)\n",
+      options.width, options.height, sequence.patterns.size(), seconds,
+      world->renders - renders_before, lit, 100.0 * decoded / lit, 100.0 * agree / lit,
+      100.0 * agree / std::max(decoded, 1), 100.0 * steep_agree / std::max(steep, 1), steep);
+  EXPECT_EQ(world->renders - renders_before, static_cast<int>(sequence.patterns.size()));
+  // Where the decoder answers, it is right.
+  EXPECT_GE(agree, 0.995 * decoded);
+  // Where projector 0 lights the walls squarely enough, ≥ 95% decode right.
+  EXPECT_GT(steep, lit * 3 / 4);
+  EXPECT_GE(steep_agree, 0.95 * steep);
+  // The rest: projector 0 grazes the left wall (cos θ ≈ 0.1) next to the box's corners, where
+  // the bounce light of the wide stripes rivals the direct light and the decoder's bit-contrast
+  // test (min_bit_contrast 0.1) refuses the pixel — as it would in a real box.
+  EXPECT_GE(agree, 0.88 * lit);
+}
+
+TEST(SyntheticCamera, BadUrisNameTheUriAndTheKey) {
+  RegisterSyntheticCameraBackend();
+  struct Case {
+    std::string uri, expected;
+  };
+  for (const Case& c :
+       {Case{"synthetic:room.json",
+             "camera 'synthetic:room.json': unknown synthetic scene "
+             "'room.json' (scenes: l_shaped,"},
+        Case{"synthetic:tiny_box?pathces=100", "unknown parameter 'pathces'"},
+        Case{"synthetic:tiny_box?patches=5", "patches must be in [20, 5000], got 5"},
+        Case{"synthetic:tiny_box?patches=many", "patches"},
+        Case{"synthetic:tiny_box?format=YUYV", "cannot be simulated"}}) {
+    try {
+      OpenCamera(c.uri);
+      ADD_FAILURE() << c.uri << " opened";
+    } catch (const IoError& error) {
+      EXPECT_NE(std::string(error.what()).find(c.expected), std::string::npos)
+          << c.uri << ": " << error.what();
+      EXPECT_NE(std::string(error.what()).find(c.uri), std::string::npos) << error.what();
+    }
+  }
+  EXPECT_THROW(OpenSyntheticWorld(CameraUri::Parse("test:tiny_box")), IoError);
+  EXPECT_THROW(MakeSyntheticWorld("nowhere"), std::invalid_argument);
+}
+
+TEST(SyntheticCamera, ListsOneVirtualCameraPerScene) {
+  RegisterSyntheticCameraBackend();
+  ListCamerasOptions options;
+  options.gige_discovery = false;
+  options.include_virtual = true;
+  int synthetic = 0;
+  for (const CameraInfo& info : ListCameras(options)) synthetic += info.backend == "synthetic";
+  EXPECT_EQ(synthetic, static_cast<int>(SyntheticSceneNames().size()));
+  options.include_virtual = false;
+  for (const CameraInfo& info : ListCameras(options)) EXPECT_NE(info.backend, "synthetic");
+}
+
+}  // namespace
+}  // namespace procam
