@@ -9,11 +9,14 @@
 #include "capture/camera.h"
 #include "capture/devices.h"
 #include "capture/display.h"
+#include "procam/config.h"
+#if PROCAM_WITH_GLFW
+#include "projection/glfw_display.h"
+#endif
 #include "capture/patterns.h"
 #include "capture/session.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "geometry/io.h"
-#include "procam/config.h"
 
 namespace procam {
 namespace {
@@ -117,26 +120,41 @@ void RunCapture(const CaptureArguments& args) {
     world = OpenSyntheticWorld(camera_uri);
     display = SyntheticProjectorDisplay(args, *world);
   }
+  // A real projector: a fullscreen GLFW window on the monitor "glfw:N|NAME" names.
+  std::shared_ptr<PatternDisplay> output;
+  if (args.display.rfind("glfw:", 0) == 0) {
+    if (world) throw IoError("display '" + args.display + "': a synthetic camera looks at its own projectors");
+#if PROCAM_WITH_GLFW
+    try {
+      output = std::make_shared<GlfwDisplay>(FindMonitor(args.display.substr(5)));
+    } catch (const IoError& error) {
+      throw IoError("display '" + args.display + "': " + error.what());
+    }
+#else
+    throw IoError("display '" + args.display +
+                  "': this build has no GLFW output backend (reconfigure with -DPROCAM_WITH_GLFW=ON; "
+                  "apt-get install libglfw3-dev libgl-dev)");
+#endif
+  } else if (args.display != "memory") {
+    throw IoError("display '" + args.display + "': unknown; use memory or glfw:N|NAME (procam show --list)");
+  }
   const cv::Size projector =
       display ? display->Resolution()
-              : ParseSize(args.projector_size.empty() ? "1024x768" : args.projector_size);
-  if (args.display != "memory") {
-    throw IoError("display '" + args.display +
-                  "': not available in this build; projector output windows "
-                  "(GLFW) come with the projection module; use --display memory");
-  }
+              : output ? output->Resolution()
+                       : ParseSize(args.projector_size.empty() ? "1024x768" : args.projector_size);
   // The memory display shows patterns nowhere but to test cameras, which look at it.
   if (!display) display = std::make_shared<MemoryDisplay>(projector, "memory");
+  if (!output) output = display;
   LoopbackOptions loopback;
   loopback.projector_gamma = args.projector_gamma;
   OpenCameraOptions open_options;
   open_options.scene_view = MakeLoopbackView(display, loopback);
   std::unique_ptr<Camera> camera = OpenCamera(args.camera, open_options);
-  if (camera->Info().backend != "test" && !world) {
+  if (camera->Info().backend != "test" && !world && output == display) {
     std::fprintf(
         stderr,
         "procam: warning: display 'memory' shows the patterns nowhere; camera %s photographs the "
-        "room as it is\n",
+        "room as it is (use --display glfw:N to show them on a projector)\n",
         camera->Info().uri.c_str());
   }
   if (args.gain >= 0) camera->SetGain(args.gain);
@@ -148,7 +166,7 @@ void RunCapture(const CaptureArguments& args) {
   const std::filesystem::path result_path = std::filesystem::path(args.out) / "result.json";
   CaptureSummary summary;
   try {
-    summary = RunCaptureSession(options, sequence, *camera, *display);
+    summary = RunCaptureSession(options, sequence, *camera, *output);
   } catch (const CaptureFault& fault) {  // the session keeps what was captured: say so, then fail
     const nlohmann::json result = {
         {"command", "capture"},
@@ -230,7 +248,8 @@ void AddCaptureCommands(CLI::App& app) {
       ->required();
   capture
       ->add_option("--display", args->display,
-                   "Where patterns are shown: memory (seen only by test cameras)")
+                   "Where patterns are shown: memory (seen only by test and synthetic cameras) or glfw:N|NAME, a "
+                   "fullscreen window on a projector's monitor (procam show --list)")
       ->capture_default_str();
   capture->add_option("--projector-size", args->projector_size,
                       "Projector resolution WIDTHxHEIGHT (default 1024x768; synthetic cameras: "

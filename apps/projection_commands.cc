@@ -5,10 +5,12 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
 #include <random>
 #include <thread>
 
@@ -42,6 +44,7 @@ struct ProjectArguments {
   std::string solution, out, dither = "ordered";
   double feather = 0.1;
   int patches = 0;
+  bool detail = false;
 };
 
 // What `procam compensate SCENE --out DIR` left in DIR, checked against the scene it names.
@@ -146,6 +149,7 @@ void RunProject(const ProjectArguments& args) {
   const double load_seconds = SecondsSince(start);
   ProjectionRigOptions rig_options;
   rig_options.feather = args.feather;
+  rig_options.texture_coordinates = args.detail;
   ProjectionRigSummary rig_summary;
   spdlog::info("project: casting rays for {} projector(s) over {} patches", projectors.size(),
                solution.patches.fine.size());
@@ -153,9 +157,10 @@ void RunProject(const ProjectArguments& args) {
       BuildProjectionRig(solution.patches.fine, std::move(projectors), rig_options, &rig_summary);
   RenderOptions render_options;
   render_options.dither = dither;
+  render_options.detail = args.detail;
   RenderSummary summary;
   const std::vector<ProjectorImage> images =
-      RenderProjectorImages(rig, solution.emittance, render_options, &summary);
+      RenderProjectorImages(rig, solution.scene, solution.emittance, render_options, &summary);
 
   const auto write_start = Clock::now();
   const std::filesystem::path out(args.out);
@@ -177,6 +182,7 @@ void RunProject(const ProjectArguments& args) {
                               {"lit_pixels", rig.maps[k].lit_pixels},
                               {"patches_reached", rig.maps[k].patches_reached},
                               {"saturated_pixels", summary.saturated_pixels[k]},
+                              {"detail_saturated_pixels", summary.detail_saturated_pixels[k]},
                               {"clipped_pixels", summary.clipped_pixels[k]}});
   }
   WriteNpy(out / "E_delivered.npy", RowMatrixXd(summary.delivered));
@@ -190,6 +196,8 @@ void RunProject(const ProjectArguments& args) {
                                  {"projectors", projector_json},
                                  {"dither", DitherName(dither)},
                                  {"feather", args.feather},
+                                 {"detail", args.detail},
+                                 {"detail_pixels", summary.detail_pixels},
                                  {"patches_reached", rig_summary.patches_reached},
                                  {"patches_unreached", summary.patches_unreached},
                                  {"patches_below_lower", summary.patches_below_lower},
@@ -220,6 +228,16 @@ void RunProject(const ProjectArguments& args) {
         "  (clipped: was the solution computed with the scene's `bounds` instead of its "
         "projectors?)\n");
   }
+  if (args.detail) {
+    long long clipped = 0;
+    for (const long long count : summary.detail_saturated_pixels) clipped += count;
+    std::printf(
+        "detail: %lld lit pixels on textured surfaces, %lld with highlights clipped at full "
+        "drive\n",
+        summary.detail_pixels, clipped);
+    if (summary.detail_pixels == 0)
+      std::printf("  (no surface the projectors light has a texture)\n");
+  }
   std::printf(
       "largest error of the delivered emittance %.2e (relative to the largest upper bound)\n",
       summary.max_relative_error);
@@ -230,7 +248,26 @@ void RunProject(const ProjectArguments& args) {
 struct BenchProjectionArguments {
   int width = 1920, height = 1080, patches = 1000, repeat = 10;
   std::string dither = "ordered", json;
+  bool detail = false;
 };
+
+// A 1024×1024 texture of crossed sinusoidal stripes (linear RGB), ~40 periods across: detail
+// finer than the bench's patches, for timing RenderOptions::detail.
+cv::Mat BenchTexture() {
+  constexpr int kSize = 1024;
+  constexpr double kTwoPi = 6.283185307179586;
+  cv::Mat texture(kSize, kSize, CV_32FC3);
+  for (int y = 0; y < kSize; ++y) {
+    for (int x = 0; x < kSize; ++x) {
+      const double u = (x + 0.5) / kSize, v = (y + 0.5) / kSize;
+      texture.at<cv::Vec3f>(y, x) =
+          cv::Vec3f(static_cast<float>(0.5 + 0.3 * std::sin(kTwoPi * 40 * u)),
+                    static_cast<float>(0.5 + 0.3 * std::sin(kTwoPi * 40 * v)),
+                    static_cast<float>(0.5 + 0.3 * std::sin(kTwoPi * 28 * (u + v))));
+    }
+  }
+  return texture;
+}
 
 void RunProjectionBench(const BenchProjectionArguments& args) {
   DitherMethod dither;
@@ -238,7 +275,11 @@ void RunProjectionBench(const BenchProjectionArguments& args) {
     throw std::invalid_argument("--dither: unknown method " + args.dither);
   BoxRoomOptions room;
   room.target_patches = args.patches;
-  const Scene scene = MakeBoxRoom(room);
+  Scene scene = MakeBoxRoom(room);
+  if (args.detail) {
+    const cv::Mat texture = BenchTexture();
+    for (Surface& surface : scene.surfaces) surface.desired.texture_linear = texture;
+  }
   SubdivisionOptions subdivision;
   subdivision.target_patches = args.patches;
   const PatchHierarchy hierarchy = SubdividePatches(scene, subdivision);
@@ -258,7 +299,10 @@ void RunProjectionBench(const BenchProjectionArguments& args) {
     projectors.push_back(projector);
   }
   ProjectionRigSummary rig_summary;
-  const ProjectionRig rig = BuildProjectionRig(hierarchy.fine, projectors, {}, &rig_summary);
+  ProjectionRigOptions rig_options;
+  rig_options.texture_coordinates = args.detail;
+  const ProjectionRig rig =
+      BuildProjectionRig(hierarchy.fine, projectors, rig_options, &rig_summary);
   std::mt19937 random(1);
   std::uniform_real_distribution<double> unit(0.05, 0.95);
   Eigen::MatrixX3d emittance(rig.size(), 3);
@@ -268,11 +312,12 @@ void RunProjectionBench(const BenchProjectionArguments& args) {
   }
   RenderOptions options;
   options.dither = dither;
+  options.detail = args.detail;
   std::vector<double> render_times, encode_times;
   RenderSummary summary;
   for (int r = 0; r < args.repeat; ++r) {
     const std::vector<ProjectorImage> images =
-        RenderProjectorImages(rig, emittance, options, &summary);
+        RenderProjectorImages(rig, scene, emittance, options, &summary);
     render_times.push_back(summary.seconds);
     const auto start = Clock::now();
     EncodeProjectorImages(images);
@@ -288,10 +333,10 @@ void RunProjectionBench(const BenchProjectionArguments& args) {
   std::printf("  maps (once per rig: unproject, %lld rays + blending shadow rays): %.3f s\n",
               2LL * args.width * args.height, rig_summary.seconds);
   std::printf(
-      "  images from a solution (%s dither, %d level passes): median %.1f ms, min %.1f ms over %d "
-      "runs\n",
-      DitherName(dither), summary.level_passes, 1e3 * render_median, 1e3 * render_times.front(),
-      args.repeat);
+      "  images from a solution (%s dither%s, %d level passes): median %.1f ms, min %.1f ms over "
+      "%d runs\n",
+      DitherName(dither), args.detail ? ", textures' detail" : "", summary.level_passes,
+      1e3 * render_median, 1e3 * render_times.front(), args.repeat);
   std::printf("  PNG encoding of both: median %.1f ms\n", 1e3 * encode_median);
   std::printf("  largest delivered-emittance error %.2e (relative)\n", summary.max_relative_error);
   if (!args.json.empty()) {
@@ -301,6 +346,7 @@ void RunProjectionBench(const BenchProjectionArguments& args) {
                                    {"projectors", 2},
                                    {"patches", rig.size()},
                                    {"dither", DitherName(dither)},
+                                   {"detail", args.detail},
                                    {"maps_seconds", rig_summary.seconds},
                                    {"render_seconds_median", render_median},
                                    {"render_seconds_min", render_times.front()},
@@ -431,6 +477,9 @@ void AddProjectionCommands(CLI::App& app) {
       ->capture_default_str();
   project->add_option("--patches", args->patches,
                       "Patch target given to compensate with --patches, if any");
+  project->add_flag("--detail", args->detail,
+                    "Modulate the light within each patch by the desired texture's detail "
+                    "(patch totals unchanged; untextured surfaces as without)");
   project->callback([args] { RunProject(*args); });
 
   auto show_args = std::make_shared<ShowArguments>();
@@ -470,6 +519,8 @@ void AddProjectionCommands(CLI::App& app) {
   bench_projection->add_option("--dither", bench_args->dither, "none | ordered | error-diffusion")
       ->check(CLI::IsMember({"none", "ordered", "error-diffusion"}))
       ->capture_default_str();
+  bench_projection->add_flag("--detail", bench_args->detail,
+                             "Give every surface a striped texture and render with its detail");
   bench_projection->add_option("--json", bench_args->json, "Also write the timings as JSON");
   bench_projection->callback([bench_args] { RunProjectionBench(*bench_args); });
 }

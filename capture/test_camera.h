@@ -2,7 +2,8 @@
 // The software test camera ("test:" URIs): photographs whatever a SceneView returns (normally
 // what an in-memory display last showed, see display.h), with exact frame timing, buffering
 // like a V4L2 driver, Gaussian read noise and injectable faults. It lets the sequencer and
-// capture sessions be tested without hardware; a later physically-based simulated camera
+// capture sessions be tested without hardware; the physically-based simulated camera
+// (datasets_synthetic/synthetic_camera.h, "synthetic:" URIs) is built on it
 // implements the same Camera interface.
 //
 // Its model, which tests use as ground truth:

@@ -61,8 +61,21 @@ struct Caster {
   }
 };
 
-// Step 1: every pixel's ray, first hit, gain.
-void CastRays(const PatchLevel& level, const RayScene& rays, Caster* caster) {
+// Barycentric coordinates of p's projection onto the plane of the triangle (a, b, c).
+Vec3 Barycentric(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& p) {
+  const Vec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d00 = ab.dot(ab), d01 = ab.dot(ac), d11 = ac.dot(ac);
+  const double d20 = ap.dot(ab), d21 = ap.dot(ac);
+  const double denominator = d00 * d11 - d01 * d01;
+  if (!(denominator > 0.0)) return Vec3(1.0, 0.0, 0.0);  // degenerate: the first corner
+  const double beta = (d11 * d20 - d01 * d21) / denominator;
+  const double gamma = (d00 * d21 - d01 * d20) / denominator;
+  return Vec3(1.0 - beta - gamma, beta, gamma);
+}
+
+// Step 1: every pixel's ray, first hit, gain (and the hit's texture coordinate if asked for).
+void CastRays(const PatchLevel& level, const RayScene& rays, bool texture_coordinates,
+              Caster* caster) {
   const ProjectorGeometry& geometry = caster->geometry();
   const int width = geometry.width(), height = geometry.height();
   ProjectorMap& map = caster->map;
@@ -73,6 +86,7 @@ void CastRays(const PatchLevel& level, const RayScene& rays, Caster* caster) {
   map.patch.assign(pixels, -1);
   map.gain.assign(pixels, 0.0f);
   map.weight.assign(pixels, 0.0f);
+  if (texture_coordinates) map.uv.assign(pixels, Eigen::Vector2f::Zero());
   caster->point.assign(pixels, Eigen::Vector3f::Zero());
   caster->distance.assign(pixels, 0.0f);
   std::vector<Vec3> directions;
@@ -98,7 +112,10 @@ void CastRays(const PatchLevel& level, const RayScene& rays, Caster* caster) {
       if (!(gain > 0.0) || !std::isfinite(gain)) continue;
       map.patch[index] = patch;
       map.gain[index] = static_cast<float>(gain);
-      caster->point[index] = (centre + distance * direction).cast<float>();
+      const Vec3 point = centre + distance * direction;
+      caster->point[index] = point.cast<float>();
+      if (texture_coordinates)
+        map.uv[index] = PatchTextureCoordinate(level.patches[patch], point).cast<float>();
     }
   }
 }
@@ -191,6 +208,20 @@ double FeatherWeight(const Vec2& pixel, int width, int height, double ramp) {
               ramp);
 }
 
+Vec2 PatchTextureCoordinate(const Patch& patch, const Vec3& point) {
+  const auto& c = patch.corners;
+  const auto& t = patch.uv;
+  const Vec3 first = Barycentric(c[0], c[1], c[2], point);
+  if (patch.corner_count == 4) {
+    // The triangle that contains the point is the one where its least coordinate is largest
+    // (≥ 0 inside; near the diagonal both agree, since the map is continuous across it).
+    const Vec3 second = Barycentric(c[0], c[2], c[3], point);
+    if (second.minCoeff() > first.minCoeff())
+      return second[0] * t[0] + second[1] * t[2] + second[2] * t[3];
+  }
+  return first[0] * t[0] + first[1] * t[1] + first[2] * t[2];
+}
+
 Scene PatchScene(const PatchLevel& level) {
   Scene scene;
   scene.name = "patches";
@@ -225,6 +256,8 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
   const int n = level.size();
   rig.area = level.Areas();
   rig.reflectance = level.reflectance;
+  rig.surface.resize(n);
+  for (int i = 0; i < n; ++i) rig.surface[i] = level.patches[i].surface;
   rig.lower = Eigen::MatrixX3d::Zero(n, 3);
   rig.upper = Eigen::MatrixX3d::Zero(n, 3);
   rig.blended_area = Eigen::VectorXd::Zero(n);
@@ -240,7 +273,7 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
     caster.luminance = Luminance(projector.photometry.max - projector.photometry.black);
     caster.ramp =
         options.feather * std::min(projector.geometry.width(), projector.geometry.height());
-    CastRays(level, rays, &caster);
+    CastRays(level, rays, options.texture_coordinates, &caster);
     int lit = 0;
     std::vector<char> reached(n, 0);
     for (const int32_t patch : caster.map.patch) {

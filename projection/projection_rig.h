@@ -55,6 +55,9 @@ struct ProjectionRigOptions {
   // Shadow rays start and end this far from surfaces (metres, > 0): larger than Embree's
   // single-precision error at room scale (~1e-6 m), smaller than any gap that matters.
   double ray_margin = 1e-4;
+  // Also record the texture coordinate of every lit pixel's hit (ProjectorMap::uv), which the
+  // detail modulation of projector_images.h needs; off by default (8 bytes per pixel).
+  bool texture_coordinates = false;
   bool Check(std::string* why) const;
 };
 
@@ -65,6 +68,9 @@ struct ProjectorMap {
   std::vector<float> gain;     // g at the hit (1/m²); 0 where patch is −1
   std::vector<float> weight;   // blending weight in (0, 1]; 0 where patch is −1
   std::vector<float> share;    // weight / gain (m²): the pixel's output per unit irradiance level
+  // Texture coordinate (Patch::uv interpolated, PatchTextureCoordinate) of the point the pixel
+  // lights; (0, 0) where patch is −1. Empty unless ProjectionRigOptions::texture_coordinates.
+  std::vector<Eigen::Vector2f> uv;
   double pixel_solid_angle = 0.0;  // Ω_k = 1 / axis pixel density (sr; flux per unit output, m²)
   // The lit pixels grouped by patch: those of patch i are pixels_by_patch[patch_begin[i] ..
   // patch_begin[i + 1]), ascending.
@@ -80,6 +86,7 @@ struct ProjectionRig {
   std::vector<ProjectorMap> maps;  // one per projector
   Eigen::VectorXd area;            // (n) A_i, m²
   Eigen::MatrixX3d reflectance;    // (n,3) ρ
+  std::vector<int> surface;        // (n) the scene surface each patch belongs to (Patch::surface)
   Eigen::MatrixX3d lower, upper;   // (n,3) direct-light exitance bounds (ρ · flux / A)
   // (n) Σ over the pixels lighting the patch of w · a · coverage_scale (m²): the patch's lit
   // area as the blending weights share it; 0 for a patch no projector reaches.
@@ -113,6 +120,13 @@ bool SetBoundsFromProjectors(const Scene& scene, const PatchLevel& level, Eigen:
 Eigen::MatrixX3d CoarsenBounds(const Eigen::MatrixX3d& fine_bounds,
                                const Eigen::VectorXd& fine_area,
                                const std::vector<int>& coarse_of_fine, int coarse_count);
+
+// Texture coordinate of a point on (or within single precision of) a patch: the corners' uv
+// interpolated barycentrically in the corner triangle that contains the point, a quad being the
+// triangles (0, 1, 2) and (0, 2, 3). Exact for triangles and parallelogram quads (the affine
+// map); for other quads the piecewise-linear map differs from SamplePatch's bilinear one by
+// second order in the patch size.
+Vec2 PatchTextureCoordinate(const Patch& patch, const Vec3& point);
 
 // A ray scene whose surface k is patch k of `level` (quads as two triangles), so that
 // RayScene::Intersect reports the patch it hits.

@@ -121,6 +121,69 @@ void QuantiseErrorDiffusion(const ProjectorMap& map, const ProjectorTables& tabl
   }
 }
 
+// Detail factor d per lit pixel and channel (header comment), in the order of each map's
+// pixels_by_patch; exactly 1 on patches of surfaces without a texture. Adds the pixels on
+// textured surfaces to *textured_pixels.
+std::vector<std::vector<Eigen::Vector3f>> DetailFactors(const ProjectionRig& rig,
+                                                        const Scene& scene,
+                                                        const RenderOptions& options,
+                                                        long long* textured_pixels) {
+  const int n = rig.size();
+  const int projector_count = static_cast<int>(rig.maps.size());
+  std::vector<std::vector<Eigen::Vector3f>> detail(projector_count);
+  for (int k = 0; k < projector_count; ++k)
+    detail[k].assign(rig.maps[k].lit_pixels, Eigen::Vector3f::Ones());
+  long long textured = 0;
+#pragma omp parallel for schedule(dynamic, 16) reduction(+ : textured)
+  for (int i = 0; i < n; ++i) {
+    const DesiredAppearance& desired = scene.surfaces[rig.surface[i]].desired;
+    if (!desired.HasTexture()) continue;
+    // The texture at every pixel's point, and its mean over the patch as the pixels light it
+    // (weights w a, the same as the flux bookkeeping's, so that renormalising conserves flux).
+    Vec3 texture_sum = Vec3::Zero();
+    double weight_sum = 0.0;
+    for (int k = 0; k < projector_count; ++k) {
+      const ProjectorMap& map = rig.maps[k];
+      const double scale = rig.coverage_scale(i, k) * map.pixel_solid_angle;
+      for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+        const int32_t index = map.pixels_by_patch[position];
+        const Vec3 texture = desired.LinearAt(map.uv[index].cast<double>());
+        detail[k][position] = texture.cast<float>();
+        const double weight = scale * map.share[index];
+        texture_sum += weight * texture;
+        weight_sum += weight;
+        ++textured;
+      }
+    }
+    if (!(weight_sum > 0.0)) continue;
+    const Vec3 mean = texture_sum / weight_sum;
+    // Ratios, clamped; then divided by their own weighted mean (≥ detail_min > 0).
+    Vec3 ratio_sum = Vec3::Zero();
+    for (int k = 0; k < projector_count; ++k) {
+      const ProjectorMap& map = rig.maps[k];
+      const double scale = rig.coverage_scale(i, k) * map.pixel_solid_angle;
+      for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+        Eigen::Vector3f& d = detail[k][position];
+        for (int c = 0; c < 3; ++c) {
+          // A channel the texture leaves black over the whole patch has no detail to show.
+          d[c] = mean[c] > 0.0 ? static_cast<float>(std::clamp(d[c] / mean[c], options.detail_min,
+                                                               options.detail_max))
+                               : 1.0f;
+        }
+        ratio_sum += scale * map.share[map.pixels_by_patch[position]] * d.cast<double>();
+      }
+    }
+    const Eigen::Vector3f normaliser = (weight_sum * ratio_sum.cwiseInverse()).cast<float>();
+    for (int k = 0; k < projector_count; ++k) {
+      for (int position = rig.maps[k].patch_begin[i]; position < rig.maps[k].patch_begin[i + 1];
+           ++position)
+        detail[k][position] = detail[k][position].cwiseProduct(normaliser);
+    }
+  }
+  *textured_pixels += textured;
+  return detail;
+}
+
 }  // namespace
 
 const char* DitherName(DitherMethod method) {
@@ -151,10 +214,30 @@ bool RenderOptions::Check(std::string* why) const {
     *why = "max_level_passes must be in [1, 1000]";
     return false;
   }
+  if (!(detail_min > 0.0 && detail_min <= 1.0)) {
+    *why = "detail_min must be in (0, 1]";
+    return false;
+  }
+  if (!(detail_max >= 1.0 && detail_max <= 1000.0)) {
+    *why = "detail_max must be in [1, 1000]";
+    return false;
+  }
   return true;
 }
 
 std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
+                                                  const Eigen::MatrixX3d& emittance,
+                                                  const RenderOptions& options,
+                                                  RenderSummary* summary) {
+  if (options.detail) {
+    throw std::invalid_argument(
+        "RenderOptions::detail needs the scene's textures: call RenderProjectorImages with the "
+        "scene");
+  }
+  return RenderProjectorImages(rig, Scene(), emittance, options, summary);
+}
+
+std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, const Scene& scene,
                                                   const Eigen::MatrixX3d& emittance,
                                                   const RenderOptions& options,
                                                   RenderSummary* summary) {
@@ -166,6 +249,23 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
                                 " rows, the rig " + std::to_string(n) + " patches");
   }
   if (!emittance.allFinite()) throw std::invalid_argument("emittance has non-finite values");
+  if (options.detail) {
+    for (const ProjectorMap& map : rig.maps) {
+      if (map.uv.size() != map.patch.size()) {
+        throw std::invalid_argument(
+            "RenderOptions::detail: the rig has no texture coordinates (build it with "
+            "ProjectionRigOptions::texture_coordinates)");
+      }
+    }
+    const int surfaces = static_cast<int>(scene.surfaces.size());
+    for (const int surface : rig.surface) {
+      if (surface < 0 || surface >= surfaces) {
+        throw std::invalid_argument("RenderOptions::detail: the rig's patches name surface " +
+                                    std::to_string(surface) + ", the scene has " +
+                                    std::to_string(surfaces));
+      }
+    }
+  }
   const auto start = std::chrono::steady_clock::now();
   const int projector_count = static_cast<int>(rig.projectors.size());
   RenderSummary local;
@@ -173,6 +273,10 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
   s = RenderSummary();
   s.saturated_pixels.assign(projector_count, 0);
   s.clipped_pixels.assign(projector_count, 0);
+  s.detail_saturated_pixels.assign(projector_count, 0);
+  // d per lit pixel (in pixels_by_patch order) and channel; none without detail (d = 1).
+  std::vector<std::vector<Eigen::Vector3f>> detail;
+  if (options.detail) detail = DetailFactors(rig, scene, options, &s.detail_pixels);
   std::vector<ProjectorTables> tables;
   tables.reserve(projector_count);
   for (const Projector& projector : rig.projectors) tables.emplace_back(projector);
@@ -210,10 +314,13 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
         const ProjectorMap& map = rig.maps[k];
         const ProjectorTables& table = tables[k];
         const double scale = rig.coverage_scale(i, k);
+        const Eigen::Vector3f* pixel_detail = detail.empty() ? nullptr : detail[k].data();
         for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
-          const double share = map.share[map.pixels_by_patch[position]];  // w a / Ω
+          const double plain_share = map.share[map.pixels_by_patch[position]];  // w a / Ω
           for (int c = 0; c < 3; ++c) {
             if (level(i, c) == kInfinity) continue;
+            const double share =
+                pixel_detail ? plain_share * pixel_detail[position][c] : plain_share;
             if (share * level(i, c) * table.inverse_delta[c] >= 1.0) {
               clamped[c] += scale * map.pixel_solid_angle * table.delta[c];
             } else {
@@ -247,10 +354,12 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
     if (diffuse) light[k].assign(rig.maps[k].patch.size(), Vec3::Zero());
   }
   Eigen::MatrixX3d delivered_flux = Eigen::MatrixX3d::Zero(n, 3);
-  std::vector<long long> saturated(projector_count, 0), clipped(projector_count, 0);
+  std::vector<long long> saturated(projector_count, 0), clipped(projector_count, 0),
+      detail_saturated(projector_count, 0);
 #pragma omp parallel
   {
-    std::vector<long long> my_saturated(projector_count, 0), my_clipped(projector_count, 0);
+    std::vector<long long> my_saturated(projector_count, 0), my_clipped(projector_count, 0),
+        my_detail_saturated(projector_count, 0);
 #pragma omp for schedule(dynamic, 16)
     for (int i = 0; i < n; ++i) {
       const Vec3 tau = level.row(i).transpose();
@@ -259,6 +368,7 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
         const ProjectorMap& map = rig.maps[k];
         const ProjectorTables& table = tables[k];
         auto* codes = reinterpret_cast<cv::Vec3w*>(images[k].codes.data);
+        const Eigen::Vector3f* pixel_detail = detail.empty() ? nullptr : detail[k].data();
         Vec3 projector_light = Vec3::Zero();
         int row = -1, row_begin = 0,
             row_end = 0;  // the row of the current pixel, found incrementally
@@ -273,11 +383,21 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
           // Light is linear in the codes' light and mixing: the patch's delivered flux is summed
           // in relative light and mixed once per patch and projector.
           Vec3 relative;
+          bool saturated_by_detail = false;
           for (int c = 0; c < 3; ++c) {
-            relative[c] =
-                tau[c] == kInfinity ? 1.0 : std::min(1.0, share * tau[c] * table.inverse_delta[c]);
+            if (tau[c] == kInfinity) {
+              relative[c] = 1.0;
+              continue;
+            }
+            relative[c] = share * tau[c] * table.inverse_delta[c];
+            if (pixel_detail) {
+              relative[c] *= pixel_detail[position][c];
+              saturated_by_detail |= relative[c] >= 1.0 && pixel_detail[position][c] > 1.0f;
+            }
+            relative[c] = std::min(1.0, relative[c]);
           }
           if (relative.maxCoeff() >= 1.0) ++my_saturated[k];
+          if (saturated_by_detail) ++my_detail_saturated[k];
           Vec3 r;
           if (LightFor(table, relative, &r)) ++my_clipped[k];
           if (diffuse) {
@@ -307,6 +427,7 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
     for (int k = 0; k < projector_count; ++k) {
       saturated[k] += my_saturated[k];
       clipped[k] += my_clipped[k];
+      detail_saturated[k] += my_detail_saturated[k];
     }
   }
   if (diffuse) {
@@ -336,6 +457,7 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
   }
   s.saturated_pixels = saturated;
   s.clipped_pixels = clipped;
+  s.detail_saturated_pixels = detail_saturated;
   s.delivered = rig.lower;
   for (int i = 0; i < n; ++i) {
     s.delivered.row(i) +=

@@ -18,6 +18,17 @@
 //    brackets r, the upper one is chosen with probability proportional to r's position between
 //    them, so the expected light of every pixel is exactly r.
 // Pixels that light nothing show code 0 (the projector's black level).
+//
+// Detail (RenderOptions::detail, the paper's Fig. 2): E is constant per patch, but a surface's
+// desired appearance may be a texture with detail finer than the patches. With detail on, the
+// uniform level τ of step 2 becomes τ · d_p per pixel and channel, d_p the texture's detail at
+// the point the pixel lights: T(uv_p) / T̄_i, clamped to [detail_min, detail_max], T̄_i the
+// texture's mean over the patch as its pixels light it (weights w a), and the clamped ratios
+// divided by their own weighted mean so they average 1 over the patch. Σ_p w a d_p τ is then
+// what Σ_p w a τ was: the patch still receives Φ, and its light varies within it like the
+// texture. Pixels that d pushes beyond full drive saturate and the rest of the patch makes up
+// for them (step 2 with w a d in place of w a); the summary counts them. Surfaces without a
+// texture get d = 1: the same images as without detail.
 
 #include <Eigen/Core>
 #include <filesystem>
@@ -26,6 +37,7 @@
 #include <vector>
 
 #include "geometry/patches.h"
+#include "geometry/scene.h"
 #include "projection/projection_rig.h"
 
 namespace procam {
@@ -42,6 +54,14 @@ struct RenderOptions {
   DitherMethod dither = DitherMethod::kOrdered;
   // Evaluations of each patch's level solve (step 2) at most, in [1, 1000].
   int max_level_passes = 16;
+  // Modulate each pixel's light by the desired texture's detail at the point it lights (header
+  // comment). Needs the overload of RenderProjectorImages that takes the scene, and a rig built
+  // with ProjectionRigOptions::texture_coordinates.
+  bool detail = false;
+  // Range of the detail ratio T / T̄ per channel before it is renormalised: 0 < detail_min ≤ 1 ≤
+  // detail_max ≤ 1000. Bounds the contrast one patch's light may take on (dark texels still get
+  // detail_min of the patch's mean level, bright ones at most detail_max).
+  double detail_min = 0.2, detail_max = 5.0;
   bool Check(std::string* why) const;
 };
 
@@ -60,6 +80,11 @@ struct RenderSummary {
   int patches_unreached = 0;    // patches no projector lights
   std::vector<long long> saturated_pixels;  // per projector: some channel at full drive
   std::vector<long long> clipped_pixels;    // per projector: outside the gamut (mixing)
+  // Per projector: pixels at full drive on a channel the detail raises (d > 1): where the
+  // texture's highlights are clipped (included in saturated_pixels). Zeros without detail.
+  std::vector<long long> detail_saturated_pixels;
+  // Lit pixels whose patch's surface has a texture (all projectors); 0 without detail.
+  long long detail_pixels = 0;
   // (n,3) exitance the quantised images deliver, by the rig's flux bookkeeping.
   Eigen::MatrixX3d delivered;
   // Largest |delivered − clip(E)| relative to max(upper), over patches and channels.
@@ -68,8 +93,17 @@ struct RenderSummary {
 
 // Images for every projector of the rig that make each patch's direct-light exitance E (n,3).
 // Throws std::invalid_argument if E has the wrong shape or non-finite values, or the options
-// fail Check().
+// fail Check(), or ask for detail (which needs the scene: the overload below).
 std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
+                                                  const Eigen::MatrixX3d& emittance,
+                                                  const RenderOptions& options,
+                                                  RenderSummary* summary);
+
+// The same, with the scene whose subdivision the rig was built on: with RenderOptions::detail
+// its surfaces' desired textures modulate the light within each patch. Throws
+// std::invalid_argument also if detail is on and the rig has no texture coordinates, or the
+// scene has fewer surfaces than the rig's patches name.
+std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, const Scene& scene,
                                                   const Eigen::MatrixX3d& emittance,
                                                   const RenderOptions& options,
                                                   RenderSummary* summary);

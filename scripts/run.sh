@@ -27,6 +27,8 @@ install_packages() {
 
 build() {
   local preset=$1
+  # ccache keys on paths relative to the checkout, so fresh clones (CI) reuse earlier builds.
+  export CCACHE_BASEDIR="$PWD" CCACHE_NOHASHDIR=1
   cmake --preset "$preset" >/dev/null
   cmake --build --preset "$preset"
 }

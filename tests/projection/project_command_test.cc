@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -110,6 +111,57 @@ TEST_F(ProjectCommand, WritesOneImagePerProjectorAndResultJson) {
   for (int i = 0; i < level_.size(); ++i) {
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(delivered.values[3 * i + c], emittance_(i, c), 1e-3);
   }
+}
+
+TEST_F(ProjectCommand, DetailModulatesTexturedSurfacesOnly) {
+  // The same stage with a striped texture on the wall (sRGB PNG, 8 periods across).
+  cv::Mat stripes(64, 256, CV_8UC3);
+  for (int x = 0; x < stripes.cols; ++x) {
+    const double value = 0.5 + 0.35 * std::sin(6.283185307179586 * 8.0 * (x + 0.5) / stripes.cols);
+    stripes.col(x).setTo(cv::Scalar::all(std::lround(255.0 * value)));
+  }
+  ASSERT_TRUE(cv::imwrite((dir_ / "stripes.png").string(), stripes));
+  scene_path_ = dir_.Write("textured.json", R"({
+      "patches": 300,
+      "projectors": [
+        {"name": "left", "model": "left.cameramodel", "black": 0.02, "max": 12},
+        {"name": "right", "model": "right.cameramodel", "black": 0.02, "max": 12, "bits": 10}],
+      "surfaces": [
+        {"name": "wall", "quad": [[0,3,0],[4,3,0],[4,3,2.5],[0,3,2.5]], "reflectance": 0.8, "desired": {"texture": "stripes.png"}},
+        {"name": "floor", "quad": [[0,0,0],[4,0,0],[4,3,0],[0,3,0]], "reflectance": 0.6, "desired": [0.5,0.5,0.5]},
+        {"name": "plate", "quad": [[1.6,2,0.9],[2.4,2,0.9],[2.4,2,1.6],[1.6,2,1.6]], "reflectance": 0.7, "desired": [0.5,0.5,0.5]}
+      ]})");
+  WriteSolution(level_.size(), emittance_);
+  const CommandRun plain = Procam("project " + Project());
+  ASSERT_EQ(plain.exit_code, 0) << plain.output;
+  const cv::Mat plain_left =
+      cv::imread((dir_ / "images" / "left.png").string(), cv::IMREAD_UNCHANGED);
+  const CommandRun detail = Procam("project " + Project() + " --detail");
+  ASSERT_EQ(detail.exit_code, 0) << detail.output;
+  EXPECT_NE(detail.output.find("detail: "), std::string::npos) << detail.output;
+  const cv::Mat detail_left =
+      cv::imread((dir_ / "images" / "left.png").string(), cv::IMREAD_UNCHANGED);
+  const nlohmann::json result = nlohmann::json::parse(ReadFile(dir_ / "images" / "result.json"));
+  EXPECT_EQ(result["detail"], true);
+  EXPECT_GT(result["detail_pixels"].get<int64_t>(), 20000);
+  EXPECT_LT(result["max_relative_error"].get<double>(), 1e-3);
+  // Patch totals as without detail.
+  const NpyArray delivered = ReadNpy(dir_ / "images" / "E_delivered.npy");
+  for (int i = 0; i < level_.size(); ++i) {
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(delivered.values[3 * i + c], emittance_(i, c), 1e-3);
+  }
+  // The wall's pixels change, the floor's and the plate's do not.
+  const ProjectionRig rig = BuildProjectionRig(level_, testing::MakeStage({}).projectors, {});
+  int wall_changed = 0, others_changed = 0;
+  for (int y = 0; y < plain_left.rows; ++y) {
+    for (int x = 0; x < plain_left.cols; ++x) {
+      const int patch = rig.maps[0].patch[size_t(y) * plain_left.cols + x];
+      if (patch < 0 || plain_left.at<cv::Vec3b>(y, x) == detail_left.at<cv::Vec3b>(y, x)) continue;
+      ++(level_.patches[patch].surface == 0 ? wall_changed : others_changed);
+    }
+  }
+  EXPECT_GT(wall_changed, 10000);
+  EXPECT_EQ(others_changed, 0);
 }
 
 TEST_F(ProjectCommand, BadInputGivesOneClearError) {

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "geometry/io.h"
@@ -214,6 +215,76 @@ TEST(ProjectionRig, BlendWeightsSumToOneAndFeatherRemovesSeams) {
   // also between a pixel and the other projector's nearest pixel (≤ ½ pixel away).
   EXPECT_LT(worst_sum, 0.05);
   EXPECT_GT(largest_jump(0.0).first, 0.3);  // without the ramp the right image's border is a step
+}
+
+TEST(ProjectionRig, TextureCoordinatesInterpolateThePatchCorners) {
+  // A parallelogram quad and a mesh triangle: on both the corners' uv map affinely, so the
+  // barycentric interpolation gives SamplePatch's uv at its points exactly.
+  Scene scene;
+  Surface parallelogram =
+      MakeRectangle(Vec3(0, 0, 0), Vec3(2, 0, 0), Vec3(0.7, 0, 1.5), 0.5, Vec3::Constant(0.5));
+  std::swap(parallelogram.quad[1], parallelogram.quad[3]);  // lit side −y (order does not matter)
+  Surface triangle;
+  triangle.kind = Surface::Kind::kMesh;
+  triangle.mesh_vertices = {Vec3(3, 0, 0), Vec3(5, 0.5, 0), Vec3(3.5, 0.2, 2)};
+  MeshTriangle corners;
+  corners.vertex = {0, 1, 2};
+  corners.uv = {Vec2(0.1, 0.2), Vec2(0.9, 0.3), Vec2(0.4, 0.95)};
+  triangle.mesh_triangles = {corners};
+  // A trapezoid: its bilinear map is not affine; the two-triangle map differs at second order.
+  Surface trapezoid =
+      MakeRectangle(Vec3(0, 2, 0), Vec3(2, 0, 0), Vec3(0, 0, 1), 0.5, Vec3::Constant(0.5));
+  trapezoid.quad[2] = Vec3(1.4, 2, 1);
+  scene.surfaces = {parallelogram, triangle, trapezoid};
+  SubdivisionOptions subdivision;
+  subdivision.target_patches = 64;
+  const PatchLevel level = SubdividePatches(scene, subdivision).fine;
+  std::vector<PatchSample> samples;
+  double affine_worst = 0.0, trapezoid_worst = 0.0, trapezoid_corner_worst = 0.0;
+  for (const Patch& patch : level.patches) {
+    SamplePatch(patch, 5, &samples);
+    for (const PatchSample& sample : samples) {
+      double& worst = patch.surface == 2 ? trapezoid_worst : affine_worst;
+      worst = std::max(worst, (PatchTextureCoordinate(patch, sample.point) - sample.uv).norm());
+    }
+    for (int k = 0; k < patch.corner_count; ++k) {
+      const double error = (PatchTextureCoordinate(patch, patch.corners[k]) - patch.uv[k]).norm();
+      if (patch.surface == 2) trapezoid_corner_worst = std::max(trapezoid_corner_worst, error);
+    }
+  }
+  EXPECT_LT(affine_worst, 1e-12);
+  EXPECT_LT(trapezoid_corner_worst, 1e-12);
+  EXPECT_LT(trapezoid_worst, 5e-3);  // cells 1/8 of the surface across: a few 1e-3 of its uv
+
+  // The rig records each lit pixel's uv when asked: on the stage's wall (uv = (x/4, z/2.5)),
+  // checked against the ray–plane intersection of the pixel's ray.
+  const Stage stage = MakeStage({});
+  EXPECT_TRUE(BuildProjectionRig(stage.patches.fine, stage.projectors, {}).maps[0].uv.empty());
+  ProjectionRigOptions options;
+  options.texture_coordinates = true;
+  const ProjectionRig rig = BuildProjectionRig(stage.patches.fine, stage.projectors, options);
+  const ProjectorGeometry& geometry = stage.projectors[0].geometry;
+  const ProjectorMap& map = rig.maps[0];
+  ASSERT_EQ(map.uv.size(), map.patch.size());
+  const Eigen::Isometry3d world_from_proj = geometry.proj_from_world().inverse();
+  const Vec3 centre = geometry.CentreInWorld();
+  double worst = 0.0;
+  int wall_pixels = 0;
+  for (int y = 0; y < map.height; ++y) {
+    for (int x = 0; x < map.width; ++x) {
+      const size_t index = size_t(y) * map.width + x;
+      const int patch = map.patch[index];
+      if (patch < 0 || stage.patches.fine.patches[patch].surface != Stage::kWall) continue;
+      const Vec3 direction = world_from_proj.rotation() * geometry.Unproject(Vec2(x, y));
+      const Vec3 point = centre + (3.0 - centre.y()) / direction.y() * direction;
+      worst = std::max(
+          worst, (map.uv[index].cast<double>() - Vec2(point.x() / 4, point.z() / 2.5)).norm());
+      ++wall_pixels;
+    }
+  }
+  EXPECT_GT(wall_pixels, 20000);
+  EXPECT_LT(worst, 2e-6);  // single precision
+  EXPECT_EQ(rig.surface.size(), size_t(rig.size()));
 }
 
 TEST(ProjectionRig, ProjectorThatLightsNothingIsAnError) {
