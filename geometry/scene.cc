@@ -13,6 +13,7 @@
 #include <tiny_obj_loader.h>
 
 #include "geometry/io.h"
+#include "geometry/json_fields.h"
 #include "geometry/polygon.h"
 #include "geometry/srgb.h"
 
@@ -20,74 +21,6 @@ namespace procam {
 namespace {
 
 using nlohmann::json;
-
-// Reads values out of one JSON object, reporting every problem as "file: key.path: what".
-class JsonFields {
- public:
-  JsonFields(const json& object, std::string file, std::string prefix)
-      : object_(object), file_(std::move(file)), prefix_(std::move(prefix)) {
-    if (!object_.is_object()) throw Error("", "must be an object");
-  }
-
-  IoError Error(const std::string& key, const std::string& what) const {
-    std::string where = prefix_;
-    if (!key.empty()) where += (where.empty() ? "" : ".") + key;
-    return IoError(file_ + ": " + (where.empty() ? "" : where + ": ") + what);
-  }
-
-  std::string Path(const std::string& key) const {
-    return prefix_.empty() ? key : prefix_ + "." + key;
-  }
-
-  bool Has(const std::string& key) const { return object_.contains(key); }
-  const json& At(const std::string& key) const {
-    if (!object_.contains(key)) throw Error(key, "required key is missing");
-    return object_.at(key);
-  }
-
-  void RejectUnknown(const std::set<std::string>& known) const {
-    for (const auto& item : object_.items()) {
-      if (known.count(item.key()) == 0) {
-        std::string list;
-        for (const auto& name : known) list += (list.empty() ? "" : ", ") + name;
-        throw Error(item.key(), "unknown key (known keys: " + list + ")");
-      }
-    }
-  }
-
-  double Number(const std::string& key, const json& value) const {
-    if (!value.is_number()) throw Error(key, "must be a number");
-    const double number = value.get<double>();
-    if (!std::isfinite(number)) throw Error(key, "must be finite");
-    return number;
-  }
-  double Number(const std::string& key) const { return Number(key, At(key)); }
-
-  // A number (all channels equal) or an array of three numbers.
-  Vec3 NumberOrRgb(const std::string& key) const {
-    const json& value = At(key);
-    if (value.is_number()) return Vec3::Constant(Number(key, value));
-    return Triple(key, value);
-  }
-
-  Vec3 Triple(const std::string& key, const json& value) const {
-    if (!value.is_array() || value.size() != 3) throw Error(key, "must be an array of 3 numbers");
-    Vec3 triple;
-    for (int c = 0; c < 3; ++c) triple[c] = Number(key + "[" + std::to_string(c) + "]", value[c]);
-    return triple;
-  }
-
-  std::string String(const std::string& key) const {
-    const json& value = At(key);
-    if (!value.is_string()) throw Error(key, "must be a string");
-    return value.get<std::string>();
-  }
-
- private:
-  const json& object_;
-  std::string file_;
-  std::string prefix_;
-};
 
 std::string SyntaxErrorWithLine(const std::string& text, const json::parse_error& error) {
   size_t line = 1, column = 1;
@@ -121,7 +54,6 @@ DesiredAppearance ReadDesired(const JsonFields& fields, const std::filesystem::p
   DesiredAppearance desired;
   const json& value = fields.At("desired");
   if (value.is_object()) {
-    JsonFields texture(value, "", "");
     for (const auto& item : value.items()) {
       if (item.key() != "texture") throw fields.Error("desired." + item.key(), "unknown key (known keys: texture)");
     }

@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "geometry/io.h"
+#include "geometry/json_fields.h"
 
 extern "C" {
 #include <mrcal/mrcal.h>
@@ -405,55 +406,7 @@ namespace {
 
 using nlohmann::json;
 
-class Fields {
- public:
-  Fields(const json& object, std::string file, std::string prefix)
-      : object_(object), file_(std::move(file)), prefix_(std::move(prefix)) {
-    if (!object_.is_object()) throw Error("", "must be an object");
-  }
-  IoError Error(const std::string& key, const std::string& what) const {
-    const std::string where = key.empty() ? prefix_ : prefix_ + "." + key;
-    return IoError(file_ + ": " + where + ": " + what);
-  }
-  bool Has(const std::string& key) const { return object_.contains(key); }
-  const json& At(const std::string& key) const {
-    if (!Has(key)) throw Error(key, "required key is missing");
-    return object_.at(key);
-  }
-  void RejectUnknown(const std::set<std::string>& known) const {
-    for (const auto& item : object_.items()) {
-      if (known.count(item.key()) == 0) {
-        std::string list;
-        for (const auto& name : known) list += (list.empty() ? "" : ", ") + name;
-        throw Error(item.key(), "unknown key (known keys: " + list + ")");
-      }
-    }
-  }
-  double Number(const std::string& key, const json& value) const {
-    if (!value.is_number()) throw Error(key, "must be a number");
-    const double number = value.get<double>();
-    if (!std::isfinite(number)) throw Error(key, "must be finite");
-    return number;
-  }
-  std::vector<double> Numbers(const std::string& key, const json& value) const {
-    if (!value.is_array()) throw Error(key, "must be an array of numbers");
-    std::vector<double> numbers;
-    for (const json& item : value) numbers.push_back(Number(key, item));
-    return numbers;
-  }
-  Vec3 NumberOrRgb(const std::string& key) const {
-    const json& value = At(key);
-    if (value.is_number()) return Vec3::Constant(Number(key, value));
-    const std::vector<double> numbers = Numbers(key, value);
-    if (numbers.size() != 3) throw Error(key, "must be a number or an RGB triplet");
-    return Vec3(numbers[0], numbers[1], numbers[2]);
-  }
-  const std::string& prefix() const { return prefix_; }
-
- private:
-  const json& object_;
-  std::string file_, prefix_;
-};
+using Fields = JsonFields;
 
 bool UsableAsFileName(const std::string& name) {
   if (name.empty() || name == "." || name == ".." || name == "result") return false;

@@ -21,24 +21,9 @@
 namespace procam {
 namespace {
 
-struct CommandRun {
-  int exit_code;
-  std::string output;  // stdout and stderr together
-};
+using testing::CommandRun;
 
-CommandRun Procam(const std::string& arguments) {
-  const char* binary = std::getenv("PROCAM_BINARY");
-  EXPECT_NE(binary, nullptr) << "PROCAM_BINARY not set by CTest";
-  const std::string command = std::string(binary ? binary : "procam") + " " + arguments + " 2>&1";
-  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(command.c_str(), "r"), pclose);
-  std::string output;
-  std::array<char, 4096> buffer;
-  size_t count;
-  while ((count = fread(buffer.data(), 1, buffer.size(), pipe.get())) > 0)
-    output.append(buffer.data(), count);
-  const int status = pclose(pipe.release());
-  return {WEXITSTATUS(status), output};
-}
+CommandRun Procam(const std::string& arguments) { return testing::RunProcam(arguments); }
 
 // The stage of tests/projection/stage.h as files: two .cameramodel files and a scene.
 class ProjectCommand : public ::testing::Test {
