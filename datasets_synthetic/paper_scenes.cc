@@ -1,6 +1,7 @@
 #include "datasets_synthetic/paper_scenes.h"
 
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <vector>
 
@@ -56,6 +57,23 @@ cv::Mat GradientTexture(const Vec3& left_srgb, const Vec3& right_srgb, int width
     }
   }
   return texture;
+}
+
+// A rectangular stage w × d (x, y) with walls h high: the floor, the back wall (y = d) and,
+// when their colours are given, the left (x = 0) and right (x = w) walls, all lit from inside.
+struct StageColours {
+  Vec3 floor, back;
+  std::optional<Vec3> left, right;
+};
+void AddStage(Scene* scene, double w, double d, double h, const StageColours& colours) {
+  scene->surfaces.push_back(Quad("floor", Vec3::Zero(), w * Vec3::UnitX(), d * Vec3::UnitY(), 0.8, colours.floor));
+  scene->surfaces.push_back(Quad("back wall", Vec3(w, d, 0), h * Vec3::UnitZ(), -w * Vec3::UnitX(), 0.9, colours.back));
+  if (colours.left) {
+    scene->surfaces.push_back(Quad("left wall", Vec3::Zero(), d * Vec3::UnitY(), h * Vec3::UnitZ(), 0.9, *colours.left));
+  }
+  if (colours.right) {
+    scene->surfaces.push_back(Quad("right wall", Vec3(w, d, 0), -d * Vec3::UnitY(), h * Vec3::UnitZ(), 0.9, *colours.right));
+  }
 }
 
 // A vertical box column standing on the floor: four outward faces (no top or bottom).
@@ -161,11 +179,8 @@ SyntheticScene LShaped() {
   SyntheticScene s;
   s.scene.name = "l_shaped";
   const double w = 3.0, d = 3.0, h = 2.4;
-  s.scene.surfaces.push_back(Quad("floor", Vec3::Zero(), w * Vec3::UnitX(), d * Vec3::UnitY(), 0.8, Srgb(0.55, 0.5, 0.42)));
-  Surface back = Quad("back wall", Vec3(w, d, 0), h * Vec3::UnitZ(), -w * Vec3::UnitX(), 0.9, Srgb(0.9, 0.45, 0.15));
-  back.desired.texture_linear = DetailTexture(Srgb(0.92, 0.45, 0.12), Srgb(0.98, 0.85, 0.55), 256, 8);
-  s.scene.surfaces.push_back(back);
-  s.scene.surfaces.push_back(Quad("side wall", Vec3::Zero(), d * Vec3::UnitY(), h * Vec3::UnitZ(), 0.9, Srgb(0.1, 0.55, 0.6)));
+  AddStage(&s.scene, w, d, h, {Srgb(0.55, 0.5, 0.42), Srgb(0.9, 0.45, 0.15), Srgb(0.1, 0.55, 0.6), std::nullopt});
+  s.scene.surfaces[1].desired.texture_linear = DetailTexture(Srgb(0.92, 0.45, 0.12), Srgb(0.98, 0.85, 0.55), 256, 8);
   s.projectors = {Projector("left", Vec3(2.6, -1.6, 2.3), Vec3(0.6, 2.0, 0.9)),
                   Projector("right", Vec3(0.4, -1.8, 2.4), Vec3(2.2, 2.4, 1.0))};
   s.camera = Camera(Vec3(1.6, -2.2, 1.6), Vec3(1.2, 1.8, 0.8));
@@ -176,10 +191,8 @@ SyntheticScene Columns() {
   SyntheticScene s;
   s.scene.name = "columns";
   const double w = 4.0, d = 3.0, h = 2.5;
-  s.scene.surfaces.push_back(Quad("floor", Vec3::Zero(), w * Vec3::UnitX(), d * Vec3::UnitY(), 0.8, Srgb(0.15, 0.2, 0.45)));
-  Surface back = Quad("back wall", Vec3(w, d, 0), h * Vec3::UnitZ(), -w * Vec3::UnitX(), 0.9, Srgb(0.5, 0.2, 0.6));
-  back.desired.texture_linear = DetailTexture(Srgb(0.45, 0.15, 0.55), Srgb(0.95, 0.75, 0.95), 256, 6);
-  s.scene.surfaces.push_back(back);
+  AddStage(&s.scene, w, d, h, {Srgb(0.15, 0.2, 0.45), Srgb(0.5, 0.2, 0.6), std::nullopt, std::nullopt});
+  s.scene.surfaces[1].desired.texture_linear = DetailTexture(Srgb(0.45, 0.15, 0.55), Srgb(0.95, 0.75, 0.95), 256, 6);
   AddColumn(&s.scene, "column 1", Vec3(1.0, 1.6, 0), 0.4, 0.4, h, 0.9, Srgb(0.95, 0.8, 0.15));
   AddColumn(&s.scene, "column 2", Vec3(2.6, 1.6, 0), 0.4, 0.4, h, 0.9, Srgb(0.85, 0.15, 0.15));
   s.projectors = {Projector("left", Vec3(0.8, -1.8, 2.4), Vec3(2.0, 2.2, 1.0)),
@@ -214,10 +227,7 @@ SyntheticScene InteriorPartitions() {
   SyntheticScene s;
   s.scene.name = "interior_partitions";
   const double w = 5.0, d = 4.0, h = 2.5;
-  s.scene.surfaces.push_back(Quad("floor", Vec3::Zero(), w * Vec3::UnitX(), d * Vec3::UnitY(), 0.8, Srgb(0.6, 0.58, 0.55)));
-  s.scene.surfaces.push_back(Quad("back wall", Vec3(w, d, 0), h * Vec3::UnitZ(), -w * Vec3::UnitX(), 0.9, Srgb(0.2, 0.35, 0.75)));
-  s.scene.surfaces.push_back(Quad("left wall", Vec3::Zero(), d * Vec3::UnitY(), h * Vec3::UnitZ(), 0.9, Srgb(0.85, 0.75, 0.3)));
-  s.scene.surfaces.push_back(Quad("right wall", Vec3(w, d, 0), -d * Vec3::UnitY(), h * Vec3::UnitZ(), 0.9, Srgb(0.75, 0.3, 0.35)));
+  AddStage(&s.scene, w, d, h, {Srgb(0.6, 0.58, 0.55), Srgb(0.2, 0.35, 0.75), Srgb(0.85, 0.75, 0.3), Srgb(0.75, 0.3, 0.35)});
   // Two partitions facing the audience (front faces toward −y), 1.6 m tall.
   AddPartition(&s.scene, "partition 1", Vec3(2.3, 2.0, 0), -1.4 * Vec3::UnitX(), 1.6, 0.05, 0.9,
                Srgb(0.3, 0.7, 0.45), Srgb(0.9, 0.9, 0.9));
@@ -235,10 +245,7 @@ SyntheticScene CShaped() {
   SyntheticScene s;
   s.scene.name = "c_shaped";
   const double w = 4.0, d = 3.0, h = 2.5;
-  s.scene.surfaces.push_back(Quad("floor", Vec3::Zero(), w * Vec3::UnitX(), d * Vec3::UnitY(), 0.8, Srgb(0.5, 0.4, 0.3)));
-  s.scene.surfaces.push_back(Quad("back wall", Vec3(w, d, 0), h * Vec3::UnitZ(), -w * Vec3::UnitX(), 0.9, Srgb(0.85, 0.2, 0.25)));
-  s.scene.surfaces.push_back(Quad("left wall", Vec3::Zero(), d * Vec3::UnitY(), h * Vec3::UnitZ(), 0.9, Srgb(0.95, 0.8, 0.2)));
-  s.scene.surfaces.push_back(Quad("right wall", Vec3(w, d, 0), -d * Vec3::UnitY(), h * Vec3::UnitZ(), 0.9, Srgb(0.2, 0.45, 0.85)));
+  AddStage(&s.scene, w, d, h, {Srgb(0.5, 0.4, 0.3), Srgb(0.85, 0.2, 0.25), Srgb(0.95, 0.8, 0.2), Srgb(0.2, 0.45, 0.85)});
   s.projectors = {Projector("left", Vec3(1.0, -1.6, 2.4), Vec3(3.2, 2.0, 1.0)),
                   Projector("centre", Vec3(2.0, -2.0, 2.6), Vec3(2.0, 2.6, 0.9)),
                   Projector("right", Vec3(3.0, -1.6, 2.4), Vec3(0.8, 2.0, 1.0))};
@@ -266,10 +273,7 @@ SyntheticScene BlueCurves() {
 SyntheticScene TinyBox() {
   SyntheticScene s;
   s.scene.name = "tiny_box";
-  s.scene.surfaces.push_back(Quad("floor", Vec3::Zero(), Vec3::UnitX(), Vec3::UnitY(), 0.8, Srgb(0.6, 0.5, 0.4)));
-  s.scene.surfaces.push_back(Quad("back", Vec3(1, 1, 0), Vec3::UnitZ(), -Vec3::UnitX(), 0.9, Srgb(0.8, 0.3, 0.3)));
-  s.scene.surfaces.push_back(Quad("left", Vec3::Zero(), Vec3::UnitY(), Vec3::UnitZ(), 0.9, Srgb(0.3, 0.6, 0.8)));
-  s.scene.surfaces.push_back(Quad("right", Vec3(1, 1, 0), -Vec3::UnitY(), Vec3::UnitZ(), 0.9, Srgb(0.5, 0.8, 0.3)));
+  AddStage(&s.scene, 1.0, 1.0, 1.0, {Srgb(0.6, 0.5, 0.4), Srgb(0.8, 0.3, 0.3), Srgb(0.3, 0.6, 0.8), Srgb(0.5, 0.8, 0.3)});
   s.projectors = {Projector("left", Vec3(0.25, -1.2, 1.1), Vec3(0.6, 0.7, 0.4), 50.0),
                   Projector("right", Vec3(0.75, -1.2, 1.1), Vec3(0.4, 0.7, 0.4), 50.0)};
   for (DevicePlacement& projector : s.projectors) {

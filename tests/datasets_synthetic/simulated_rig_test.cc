@@ -68,7 +68,7 @@ TEST(SimulatedRig, OneLitPatchPhotographsAsTheRadiosityModelPredicts) {
   }
   int lit = -1;
   for (int i = 0; i < level.size(); ++i) {
-    if (world.synthetic.scene.surfaces[level.patches[i].surface].name == "back" && rig.upper(i, 0) > 0.0 &&
+    if (world.synthetic.scene.surfaces[level.patches[i].surface].name == "back wall" && rig.upper(i, 0) > 0.0 &&
         (lit < 0 || pixel_count[i] > pixel_count[lit])) {
       lit = i;
     }
