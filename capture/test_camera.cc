@@ -115,11 +115,13 @@ TestCamera::TestCamera(const TestCameraOptions& options, SceneView view)
   if (!options_.Check(&why)) throw std::invalid_argument("TestCameraOptions: " + why);
 }
 
-std::string TestCamera::Uri() const { return "test:" + options_.name; }
+// Errors name the camera as Info() does, so a camera built on this one (the synthetic rig's)
+// is named by its own URI.
+std::string TestCamera::Uri() const { return Info().uri; }
 
 CameraInfo TestCamera::Info() const {
   CameraInfo info;
-  info.uri = Uri();
+  info.uri = "test:" + options_.name;
   info.backend = "test";
   info.vendor = "procam";
   info.model = "test camera";

@@ -121,6 +121,28 @@ TEST(CaptureCli, AnInterruptedCaptureResumesWhenRunAgain) {
   EXPECT_EQ(resumed.output.find("0 already there"), std::string::npos) << resumed.output;
 }
 
+TEST(CaptureCli, ASyntheticCameraThatTimesOutMidSessionKeepsItsFramesAndResumes) {
+  testing::TempDir dir;
+  const std::string camera =
+      "'synthetic:tiny_box?patches=20&fps=500&exposure_us=1000&reference_exposure_us=1000";
+  const std::string common = " --projector 1 --sequence photometric --levels 0,255 --channels rgb --frames 2 "
+                             "--settle-ms 1 --retries 2 --retry-delay-ms 1 --timeout-ms 50 --out " +
+                             (dir / "flat").string();
+  const CommandRun failed = Procam("capture --camera " + camera + "&fault=timeout&fault_after=5'" + common);
+  EXPECT_EQ(failed.exit_code, 1) << failed.output;
+  EXPECT_EQ(Lines(failed.output), 1) << failed.output;
+  EXPECT_NE(failed.output.find("synthetic:tiny_box"), std::string::npos) << failed.output;
+  EXPECT_NE(failed.output.find("run the same command again to resume"), std::string::npos) << failed.output;
+  int kept = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir / "flat" / "frames")) kept += entry.is_regular_file();
+  EXPECT_GT(kept, 0);  // what was captured before the fault stays
+
+  const CommandRun resumed = Procam("capture --camera " + camera + "'" + common);
+  EXPECT_EQ(resumed.exit_code, 0) << resumed.output;
+  EXPECT_NE(resumed.output.find("patterns captured"), std::string::npos) << resumed.output;
+  EXPECT_EQ(resumed.output.find(" 0 already there"), std::string::npos) << resumed.output;
+}
+
 TEST(CaptureCli, MistakesGetOneLineNamingTheCulprit) {
   testing::TempDir dir;
   struct Case {
