@@ -1,0 +1,114 @@
+#pragma once
+// Structured light for projector-camera correspondences: Gray code with inverse patterns plus
+// phase shifting, decoded per camera pixel into a sub-pixel projector (column, row) and a
+// reliability mask.
+//
+// Sequence (MakeStructuredLightSequence), for each encoded axis (columns, then rows):
+//   white, black                         once, first: the shadow / contrast test
+//   Gray bit b and its inverse           b = the most significant bit down to `finest_bit`
+//   N phase-shifted sinusoids            only with phase_period > 0
+// Projector pixel (u, v) is column u, row v (capture/patterns.h); a decoded coordinate is in the
+// projector's pixel-centre convention (projection/projector.h): the centre of pixel u is u.
+//
+// Global illumination. In a room, a camera pixel receives the projector's light directly and,
+// through interreflections, from everything else the projector lights. For a pattern with wide
+// stripes (the coarse Gray bits) that bounce light depends on the pattern: a pixel in an unlit
+// stripe beside a brightly lit wall can be brighter than the direct light of a lit pixel on a
+// grazed surface, so any fixed threshold misreads it. For a high-frequency pattern the bounce
+// light is nearly the same for the pattern and its inverse (each lights half of every region;
+// Nayar et al. 2006), so comparing the two per pixel decides the bit by the direct light alone.
+// Three measures, each switchable so their effect can be measured:
+//   - complementary binarization: bit = [pattern > inverse], refused where |pattern − inverse|
+//     is a small fraction of white − black (StructuredLightDecodeOptions);
+//   - XOR codes (Gupta, Agrawal, Veeraraghavan & Narasimhan, "Structured light 3D scanning in the
+//     presence of global illumination", CVPR 2011): every coarse Gray plane is shown XORed with
+//     the finest Gray plane, so all planes have stripes no wider than the finest one; the decoder
+//     XORs them back;
+//   - phase shifting: the bits finer than a quarter of the sinusoid's period are not shown at all;
+//     the position within a period comes from the phase of N sinusoids of period P (high
+//     frequency, so their bounce light is nearly constant and drops out of the phase), and the
+//     Gray code only has to be right to within P/2 to unwrap it.
+
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "capture/patterns.h"
+
+namespace procam {
+
+struct StructuredLightOptions {
+  int width = 1024;     // projector pixels, [4, 16384]
+  int height = 768;     // projector pixels, [4, 16384]
+  bool columns = true;  // encode the column u
+  bool rows = true;     // encode the row v
+  // Period of the phase-shifted sinusoids in projector pixels: a power of two in [4, 1024] and
+  // no larger than the encoded sizes; 0 = no phase shifting (the Gray code goes down to single
+  // pixels and decoded coordinates are integers).
+  int phase_period = 16;
+  int phase_steps = 4;  // sinusoids per axis, [3, 64]
+  // Show the coarse Gray planes XORed with the finest shown plane (Gupta et al. 2011).
+  bool xor_codes = true;
+  // The sinusoids are encoded as value^(1/pattern_gamma) so that a projector with this response
+  // gamma emits a sinusoid in light (from photometric calibration), (0, 10]. 1 = encode the
+  // sinusoid itself; a projector's gamma then distorts it into harmonics that 4-step phase
+  // shifting partly mistakes for phase.
+  double pattern_gamma = 1.0;
+  bool Check(std::string* why) const;
+};
+
+// The finest Gray bit shown: log2(phase_period) − 2 with phase shifting (the Gray code then
+// resolves P/4 pixels, enough to unwrap the phase with a margin of P/4), else 0.
+int StructuredLightFinestBit(const StructuredLightOptions& options);
+
+// The sequence above, kind "structured_light", patterns CV_8UC3 (grey), named "white", "black",
+// "sl_col_b08", "sl_col_b08_inv", ..., "sl_col_phase0", ... (rows: "sl_row_..."). Throws
+// std::invalid_argument when options.Check() fails.
+CaptureSequence MakeStructuredLightSequence(const StructuredLightOptions& options);
+
+enum class Binarization {
+  // One threshold for the whole image: the mean of (white + black)/2 over the pixels that pass
+  // the contrast test. The textbook baseline; inverse patterns are ignored.
+  kGlobalThreshold,
+  // Per pixel: (white + black)/2 of that pixel. Inverse patterns are ignored.
+  kPixelThreshold,
+  // Per pixel: the pattern against its inverse.
+  kComplementary,
+};
+const char* BinarizationName(Binarization binarization);
+
+struct StructuredLightDecodeOptions {
+  Binarization binarization = Binarization::kComplementary;
+  // Shadow test: a pixel is decoded only where white − black ≥ min_contrast × the 99th
+  // percentile of white − black over the image, [0, 1).
+  double min_contrast = 0.05;
+  // A bit is accepted only where |pattern − inverse| (complementary) or 2 |pattern − threshold|
+  // (thresholds) is at least this fraction of white − black, [0, 1).
+  double min_bit_contrast = 0.1;
+  // The phase is accepted only where the sinusoids' amplitude is at least this fraction of
+  // (white − black)/2, [0, 1).
+  double min_modulation = 0.2;
+  bool Check(std::string* why) const;
+};
+
+// Per camera pixel, what it sees of the projector.
+struct StructuredLightMap {
+  cv::Mat column;  // CV_32FC1 projector column (pixel centres at integers); NaN where not decoded
+  cv::Mat row;     // CV_32FC1 projector row; NaN where not decoded (or rows not encoded)
+  cv::Mat mask;    // CV_8UC1, 255 where every encoded axis decoded
+  // Why pixels were refused (a pixel counts once, for the first test it fails).
+  long long shadowed = 0;      // white − black under the contrast threshold
+  long long ambiguous = 0;     // some bit under the bit-contrast threshold
+  long long weak_phase = 0;    // sinusoid amplitude under the modulation threshold
+  long long out_of_range = 0;  // decoded coordinate outside the projector image
+};
+
+// Decodes `captured`: one camera image per pattern of MakeStructuredLightSequence(options), in
+// order, same size, any depth, one or three channels (three are averaged), linear in light
+// (subtract the camera's black level first if it has one). Throws std::invalid_argument when the
+// options fail Check() or the count or sizes do not match.
+StructuredLightMap DecodeStructuredLight(const StructuredLightOptions& options,
+                                         const std::vector<cv::Mat>& captured,
+                                         const StructuredLightDecodeOptions& decode_options = {});
+
+}  // namespace procam
