@@ -46,6 +46,7 @@ struct EvaluationOptions {
   double alpha = 0.5;
   bool multires = true;  // for the perceptual method
   int world_factor = 4;  // world mesh patches per solver patch
+  double albedo_variation = 0.05;  // the simulated room's uneven paint (SimulatedRigOptions)
   bool Check(std::string* why) const;
 };
 

@@ -12,26 +12,6 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// Texture coordinate of a point on a planar patch (barycentric in the triangle containing it).
-Vec2 PatchUv(const Patch& patch, const Vec3& x) {
-  auto barycentric = [&](int a, int b, int c, Vec3* weights) {
-    const Vec3 e1 = patch.corners[b] - patch.corners[a], e2 = patch.corners[c] - patch.corners[a];
-    const Vec3 p = x - patch.corners[a];
-    const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2), p1 = p.dot(e1), p2 = p.dot(e2);
-    const double det = d11 * d22 - d12 * d12;
-    const double v = (d22 * p1 - d12 * p2) / det, w = (d11 * p2 - d12 * p1) / det;
-    *weights = Vec3(1 - v - w, v, w);
-    return weights->minCoeff() >= -1e-9;
-  };
-  Vec3 weights;
-  if (patch.corner_count == 3 || barycentric(0, 1, 2, &weights)) {
-    barycentric(0, 1, 2, &weights);
-    return weights[0] * patch.uv[0] + weights[1] * patch.uv[1] + weights[2] * patch.uv[2];
-  }
-  barycentric(0, 2, 3, &weights);
-  return weights[0] * patch.uv[0] + weights[1] * patch.uv[2] + weights[2] * patch.uv[3];
-}
-
 }  // namespace
 
 bool SimulatedCameraOptions::Check(std::string* why) const {
@@ -44,8 +24,9 @@ bool SimulatedCameraOptions::Check(std::string* why) const {
 }
 
 bool SimulatedRigOptions::Check(std::string* why) const {
-  if (world_factor < 1 || solver_patches < 1 || direct_samples < 1 || !(ray_margin > 0.0)) {
-    *why = "need world_factor, solver_patches, direct_samples >= 1 and ray_margin > 0";
+  if (world_factor < 1 || solver_patches < 1 || direct_samples < 1 || !(ray_margin > 0.0) ||
+      !(albedo_variation >= 0.0 && albedo_variation < 0.5)) {
+    *why = "need world_factor, solver_patches, direct_samples >= 1, ray_margin > 0, albedo_variation in [0, 0.5)";
     return false;
   }
   return camera.Check(why);
@@ -82,6 +63,12 @@ SimulatedRig::SimulatedRig(const Scene& scene, std::vector<Projector> projectors
   SubdivisionOptions subdivision;
   subdivision.target_patches = options.solver_patches * options.world_factor;
   world_ = SubdividePatches(scene_, subdivision);
+  // Textured albedo: each world patch reflects with the albedo at its centre.
+  for (int i = 0; i < world_.fine.size(); ++i) {
+    const Patch& patch = world_.fine.patches[i];
+    const double factor = AlbedoFactor(patch.surface, PatchTextureCoordinate(patch, patch.centroid));
+    world_.fine.reflectance.row(i) = (factor * world_.fine.reflectance.row(i)).cwiseMin(0.99);
+  }
   const Eigen::MatrixXd f = ComputeFormFactors(scene_, world_.fine, FormFactorOptions(), nullptr);
   world_radiosity_ = std::make_unique<RadiositySystem>(f, world_.fine.Areas(), world_.fine.reflectance);
   surfaces_ = std::make_unique<RayScene>(scene_);
@@ -105,10 +92,22 @@ SimulatedRig::SimulatedRig(const Scene& scene, std::vector<Projector> projectors
       if (!patches.Intersect(origin, direction, 0.0, std::numeric_limits<double>::infinity(), &t, &patch)) continue;
       const Vec3 point = origin + t * direction;
       if (world_.fine.patches[patch].normal.dot(origin - point) <= 0.0) continue;  // the unlit side
-      hits_[index] = {patch, point};
+      const Patch& seen = world_.fine.patches[patch];
+      const Vec3 reflectance =
+          (AlbedoFactor(seen.surface, PatchTextureCoordinate(seen, point)) * scene_.surfaces[seen.surface].reflectance).cwiseMin(0.99);
+      hits_[index] = {patch, point, reflectance};
       coverage_.at<uchar>(row, col) = 255;
     }
   }
+}
+
+double SimulatedRig::AlbedoFactor(int surface, const Vec2& uv) const {
+  if (options_.albedo_variation == 0.0) return 1.0;
+  // A smooth, deterministic pattern in [−1, 1]: a few incommensurate waves, different per surface.
+  const double s = 0.61803398875 * (surface + 1);
+  const double pattern = 0.5 * std::sin(2 * kPi * (3.0 * uv.x() + s)) * std::cos(2 * kPi * (4.0 * uv.y() + 0.5 * s)) +
+                         0.5 * std::sin(2 * kPi * (7.0 * uv.x() + 5.0 * uv.y()) + 3.0 * s);
+  return 1.0 + options_.albedo_variation * pattern;
 }
 
 bool SimulatedRig::PointSeenByPixel(int row, int col, Vec3* point_in_world, Vec3* normal) const {
@@ -150,7 +149,7 @@ cv::Mat SimulatedRig::RenderRadiance(const std::vector<ProjectorImage>& images) 
         const double scale = 1.0 / projector.photometry.MaxCode();
         irradiance += gain * projector.photometry.Output(Vec3(code[0], code[1], code[2]) * scale);
       }
-      const Vec3 exitance = world_.fine.reflectance.row(hit.world_patch).transpose().cwiseProduct(irradiance) +
+      const Vec3 exitance = hit.reflectance.cwiseProduct(irradiance) +
                             indirect.row(hit.world_patch).transpose();
       radiance.at<cv::Vec3f>(row, col) = cv::Vec3f(exitance[0], exitance[1], exitance[2]);
     }
@@ -205,7 +204,7 @@ cv::Mat SimulatedRig::RenderDesired() const {
       const PixelHit& hit = hits_[static_cast<size_t>(row) * width + col];
       if (hit.world_patch < 0) continue;
       const Patch& patch = world_.fine.patches[hit.world_patch];
-      const Vec3 linear = scene_.white * scene_.surfaces[patch.surface].desired.LinearAt(PatchUv(patch, hit.point));
+      const Vec3 linear = scene_.white * scene_.surfaces[patch.surface].desired.LinearAt(PatchTextureCoordinate(patch, hit.point));
       desired.at<cv::Vec3f>(row, col) = cv::Vec3f(linear[0], linear[1], linear[2]);
     }
   }

@@ -52,6 +52,10 @@ struct SimulatedRigOptions {
   int solver_patches = 400;        // the solver's patch count the world is finer than
   int direct_samples = 3;          // Gauss points per side when integrating direct light on world patches
   double ray_margin = 1e-4;        // metres
+  // Textured albedo: the world's reflectance varies over each surface as a smooth pattern of
+  // this relative amplitude (like uneven paint), which the solver's uniform reflectance does
+  // not know, in [0, 0.5). 0: uniform.
+  double albedo_variation = 0.0;
   SimulatedCameraOptions camera;
   bool Check(std::string* why) const;
 };
@@ -86,6 +90,9 @@ class SimulatedRig {
   // The desired appearance as the camera would see it: desired sRGB (texture at the hit) →
   // linear × white (CV_32FC3, RGB); 0 where the pixel sees nothing.
   cv::Mat RenderDesired() const;
+  // The world's albedo relative to the surface's nominal reflectance at a texture coordinate
+  // (1 + albedo_variation · pattern(uv), pattern in [−1, 1]).
+  double AlbedoFactor(int surface, const Vec2& uv) const;
   // Mask (CV_8UC1, 255) of pixels that see a surface.
   const cv::Mat& coverage() const { return coverage_; }
   // The surface point (world, metres) camera pixel (row, col) sees and the unit normal of its
@@ -96,6 +103,7 @@ class SimulatedRig {
   struct PixelHit {
     int world_patch = -1;
     Vec3 point = Vec3::Zero();
+    Vec3 reflectance = Vec3::Zero();  // the world's, at this point (textured albedo)
   };
   Scene scene_;
   std::vector<Projector> projectors_;

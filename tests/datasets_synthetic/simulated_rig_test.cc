@@ -17,7 +17,7 @@ struct World {
   std::unique_ptr<SimulatedRig> rig;
 };
 
-World MakeWorld(int solver_patches, const SimulatedCameraOptions& camera) {
+World MakeWorld(int solver_patches, const SimulatedCameraOptions& camera, double albedo_variation = 0.0) {
   World world;
   world.synthetic = MakeSyntheticScene("tiny_box", solver_patches);
   SubdivisionOptions subdivision;
@@ -29,6 +29,7 @@ World MakeWorld(int solver_patches, const SimulatedCameraOptions& camera) {
   SimulatedRigOptions options;
   options.solver_patches = solver_patches;
   options.camera = camera;
+  options.albedo_variation = albedo_variation;
   world.rig = std::make_unique<SimulatedRig>(world.synthetic.scene, world.projectors,
                                              CameraFromPlacement(world.synthetic.camera), options);
   return world;
@@ -151,6 +152,43 @@ TEST(SimulatedRig, KnownPointsLandWhereTheCameraModelProjectsThem) {
     ++tested;
   }
   EXPECT_EQ(tested, 3);
+}
+
+TEST(SimulatedRig, TexturedAlbedoModulatesWhatTheCameraSees) {
+  SimulatedCameraOptions camera;
+  camera.shot_noise = camera.read_noise = 0.0;
+  const World plain = MakeWorld(100, camera, 0.0);
+  const World textured = MakeWorld(100, camera, 0.2);
+  const ProjectionRig rig = BuildProjectionRig(plain.patches.fine, plain.projectors, ProjectionRigOptions());
+  RenderSummary render;
+  const auto images = RenderProjectorImages(rig, 0.5 * (rig.lower + rig.upper), RenderOptions(), &render);
+  const cv::Mat a = plain.rig->RenderRadiance(images), b = textured.rig->RenderRadiance(images);
+  // On the back wall (surface 1: corner 0 at (1, 1, 0), u up along z, v along −x), the ratio of
+  // the two renders follows the albedo pattern at the point's texture coordinate.
+  double sum_xy = 0, sum_xx = 0, sum_yy = 0, sum_x = 0, sum_y = 0, abs_difference = 0;
+  int count = 0;
+  for (int row = 0; row < a.rows; row += 2) {
+    for (int col = 0; col < a.cols; col += 2) {
+      Vec3 point, normal;
+      if (!plain.rig->PointSeenByPixel(row, col, &point, &normal) || std::abs(point.y() - 1.0) > 1e-6) continue;
+      const double ratio = b.at<cv::Vec3f>(row, col)[1] / a.at<cv::Vec3f>(row, col)[1];
+      const double albedo = textured.rig->AlbedoFactor(1, Vec2(point.z(), 1.0 - point.x()));
+      abs_difference += std::abs(ratio - albedo);
+      sum_x += albedo, sum_y += ratio, sum_xy += albedo * ratio, sum_xx += albedo * albedo, sum_yy += ratio * ratio;
+      ++count;
+    }
+  }
+  ASSERT_GT(count, 200);
+  const double cov = sum_xy / count - sum_x * sum_y / count / count;
+  const double correlation = cov / std::sqrt((sum_xx / count - sum_x * sum_x / count / count) *
+                                             (sum_yy / count - sum_y * sum_y / count / count));
+  // The direct light follows the albedo exactly; the bounces change too (the world's patches
+  // reflect with their own albedo), smoothly, which blurs the relation a little.
+  EXPECT_GT(correlation, 0.8);
+  EXPECT_LT(abs_difference / count, 0.05);  // the pattern's amplitude is 0.2
+  std::printf("albedo: correlation %.3f, mean |ratio - albedo| %.4f over %d pixels\n", correlation,
+              abs_difference / count, count);
+  EXPECT_EQ(plain.rig->AlbedoFactor(1, Vec2(0.3, 0.7)), 1.0);
 }
 
 TEST(SimulatedRig, PhotosAreQuantisedThroughTheResponseAndRejectWrongInput) {
