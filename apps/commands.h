@@ -15,5 +15,6 @@ void AddBenchCommands(CLI::App& app);         // bench formfactors, bench solver
 void AddDemoCommand(CLI::App& app);           // demo
 void AddEvaluationCommands(CLI::App& app);    // evaluate
 void AddCaptureCommands(CLI::App& app);       // cameras, capture
+void AddCalibrateCommands(CLI::App& app);     // calibrate camera
 
 }  // namespace procam

@@ -1,0 +1,313 @@
+#include "calibration/camera_calibration.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <stdexcept>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "geometry/io.h"
+
+extern "C" {
+#include <mrcal/mrcal.h>
+}
+
+namespace procam {
+
+bool ChessboardSpec::Check(std::string* why) const {
+  if (corners_x < 2 || corners_y < 2) {
+    *why = "chessboard: corners_x and corners_y must be at least 2";
+    return false;
+  }
+  if (!(square_size > 0.0) || !std::isfinite(square_size)) {
+    *why = "chessboard: square_size must be a positive number of metres";
+    return false;
+  }
+  return true;
+}
+
+Vec3 ChessboardSpec::Corner(int k) const {
+  return Vec3((k % corners_x) * square_size, (k / corners_x) * square_size, 0.0);
+}
+
+bool DetectChessboard(const cv::Mat& image, const ChessboardSpec& board,
+                      std::vector<Vec2>* corners) {
+  cv::Mat grey = image;
+  if (grey.channels() == 3) cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  if (grey.channels() == 4) cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
+  if (grey.depth() != CV_8U) {
+    // Scale to the full 8-bit range; the detector works on 8-bit images.
+    double low = 0.0, high = 0.0;
+    cv::minMaxLoc(grey, &low, &high);
+    cv::Mat eight;
+    grey.convertTo(eight, CV_8U, high > low ? 255.0 / (high - low) : 1.0,
+                   high > low ? -255.0 * low / (high - low) : 0.0);
+    grey = eight;
+  }
+  const cv::Size pattern(board.corners_x, board.corners_y);
+  std::vector<cv::Point2f> found;
+  if (!cv::findChessboardCorners(grey, pattern, found,
+                                 cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE)) {
+    return false;
+  }
+  // Half a square in pixels bounds the search window, so it never reaches the next corner.
+  double spacing = 1e9;
+  for (int k = 0; k + 1 < static_cast<int>(found.size()); ++k) {
+    if ((k + 1) % board.corners_x == 0) continue;
+    spacing = std::min(spacing, static_cast<double>(cv::norm(found[k + 1] - found[k])));
+  }
+  const int half = std::clamp(static_cast<int>(spacing * 0.4), 2, 11);
+  cv::cornerSubPix(grey, found, cv::Size(half, half), cv::Size(-1, -1),
+                   cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-4));
+  corners->resize(found.size());
+  for (size_t k = 0; k < found.size(); ++k) (*corners)[k] = Vec2(found[k].x, found[k].y);
+  return true;
+}
+
+bool CameraCalibrationOptions::Check(std::string* why) const {
+  if (lens_model != "LENSMODEL_OPENCV4" && lens_model != "LENSMODEL_OPENCV5" &&
+      lens_model != "LENSMODEL_OPENCV8") {
+    *why = "lens_model must be LENSMODEL_OPENCV4, LENSMODEL_OPENCV5 or LENSMODEL_OPENCV8, not '" +
+           lens_model + "'";
+    return false;
+  }
+  if (min_views < 3) {
+    *why = "min_views must be at least 3";
+    return false;
+  }
+  return true;
+}
+
+std::string CameraCalibrationSummary::BriefReport() const {
+  static const char* kNames[] = {"converged", "too few views", "seed failed", "solver failed"};
+  char line[512];
+  std::snprintf(line, sizeof(line),
+                "camera calibration: %s; %d views, %d corners, %d outliers; rms %.4f px per "
+                "coordinate (seed %.4f), median |r| %.4f px, max |r| %.4f px; %.2f s%s%s",
+                kNames[termination], views, corners, outliers, rms, seed_rms, median_norm, max_norm,
+                time_s, message.empty() ? "" : "; ", message.c_str());
+  return line;
+}
+
+namespace {
+
+// A pose from mrcal's rt (Rodrigues rotation, then translation).
+Eigen::Isometry3d PoseFromRt(const mrcal_pose_t& rt) {
+  const Vec3 r(rt.r.x, rt.r.y, rt.r.z);
+  const double angle = r.norm();
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  if (angle > 0.0) pose.linear() = Eigen::AngleAxisd(angle, r / angle).toRotationMatrix();
+  pose.translation() = Vec3(rt.t.x, rt.t.y, rt.t.z);
+  return pose;
+}
+
+bool ParseLens(const std::string& name, mrcal_lensmodel_t* lens) {
+  return mrcal_lensmodel_from_name(lens, name.c_str()) && mrcal_lensmodel_type_is_valid(lens->type);
+}
+
+std::string Number(double value) {
+  char text[40];
+  std::snprintf(text, sizeof(text), "%.17g", value);
+  return text;
+}
+
+// OpenCV's flags for the distortion terms of an mrcal OpenCV lens model.
+int SeedFlags(const std::string& lens_model) {
+  if (lens_model == "LENSMODEL_OPENCV4") return cv::CALIB_FIX_K3;
+  if (lens_model == "LENSMODEL_OPENCV8") return cv::CALIB_RATIONAL_MODEL;
+  return 0;  // OPENCV5: k1, k2, p1, p2, k3
+}
+
+}  // namespace
+
+bool ProjectWithLens(const std::string& lens_model, const std::vector<double>& intrinsics,
+                     const Vec3& p_in_cam, Vec2* pixel) {
+  mrcal_lensmodel_t lens;
+  if (!ParseLens(lens_model, &lens)) throw std::invalid_argument("unknown lens " + lens_model);
+  if (!(p_in_cam.z() > 0.0)) return false;
+  const mrcal_point3_t p{{p_in_cam.x(), p_in_cam.y(), p_in_cam.z()}};
+  mrcal_point2_t q;
+  mrcal_project(&q, nullptr, nullptr, &p, 1, &lens, intrinsics.data());
+  *pixel = Vec2(q.x, q.y);
+  return true;
+}
+
+bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSpec& board,
+                     const std::vector<ChessboardView>& views, int width, int height,
+                     CameraCalibration* calibration, CameraCalibrationSummary* summary) {
+  const auto start = std::chrono::steady_clock::now();
+  std::string why;
+  if (!options.Check(&why) || !board.Check(&why)) throw std::invalid_argument(why);
+  if (width < 1 || height < 1) throw std::invalid_argument("image size must be at least 1×1");
+  const int per_board = board.CornerCount();
+  for (const ChessboardView& view : views) {
+    if (static_cast<int>(view.corners.size()) != per_board) {
+      throw std::invalid_argument("view " + view.name + ": " + std::to_string(view.corners.size()) +
+                                  " corners, the board has " + std::to_string(per_board));
+    }
+  }
+  *summary = CameraCalibrationSummary();
+  auto finish = [&](CameraCalibrationSummary::Termination termination, std::string message) {
+    summary->termination = termination;
+    summary->message = std::move(message);
+    summary->time_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return termination == CameraCalibrationSummary::kConverged;
+  };
+  const int view_count = static_cast<int>(views.size());
+  summary->views = view_count;
+  summary->corners = view_count * per_board;
+  if (view_count < options.min_views) {
+    return finish(CameraCalibrationSummary::kTooFewViews,
+                  std::to_string(view_count) + " views, need " + std::to_string(options.min_views));
+  }
+
+  // 1. Seed with OpenCV (Zhang's method and Levenberg–Marquardt on the same model).
+  std::vector<std::vector<cv::Point3f>> object_points(view_count);
+  std::vector<std::vector<cv::Point2f>> image_points(view_count);
+  for (int v = 0; v < view_count; ++v) {
+    for (int k = 0; k < per_board; ++k) {
+      const Vec3 corner = board.Corner(k);
+      object_points[v].emplace_back(corner.x(), corner.y(), 0.0f);
+      image_points[v].emplace_back(views[v].corners[k].x(), views[v].corners[k].y());
+    }
+  }
+  cv::Mat camera_matrix, distortion;
+  std::vector<cv::Mat> rvecs, tvecs;
+  try {
+    summary->seed_rms =
+        cv::calibrateCamera(object_points, image_points, cv::Size(width, height), camera_matrix,
+                            distortion, rvecs, tvecs, SeedFlags(options.lens_model));
+  } catch (const cv::Exception& error) {
+    return finish(CameraCalibrationSummary::kSeedFailed, error.what());
+  }
+  if (!std::isfinite(summary->seed_rms)) {
+    return finish(CameraCalibrationSummary::kSeedFailed, "OpenCV's seed error is not finite");
+  }
+
+  // 2. Refine with mrcal: one camera at the reference, the board poses are mrcal's frames.
+  mrcal_lensmodel_t lens;
+  if (!ParseLens(options.lens_model, &lens)) throw std::invalid_argument("unknown lens");
+  const int parameter_count = mrcal_lensmodel_num_params(&lens);
+  std::vector<double> intrinsics(parameter_count, 0.0);
+  intrinsics[0] = camera_matrix.at<double>(0, 0);
+  intrinsics[1] = camera_matrix.at<double>(1, 1);
+  intrinsics[2] = camera_matrix.at<double>(0, 2);
+  intrinsics[3] = camera_matrix.at<double>(1, 2);
+  for (int k = 4; k < parameter_count && k - 4 < static_cast<int>(distortion.total()); ++k) {
+    intrinsics[k] = distortion.at<double>(k - 4);
+  }
+  std::vector<mrcal_pose_t> frames(view_count);
+  for (int v = 0; v < view_count; ++v) {
+    frames[v] = mrcal_pose_t{{{rvecs[v].at<double>(0), rvecs[v].at<double>(1),
+                               rvecs[v].at<double>(2)}},
+                             {{tvecs[v].at<double>(0), tvecs[v].at<double>(1),
+                               tvecs[v].at<double>(2)}}};
+  }
+  std::vector<mrcal_observation_board_t> observations(view_count);
+  // Pool of shape (views, corners_y, corners_x): x, y, weight (< 0 marks an outlier).
+  std::vector<mrcal_point3_t> pool(static_cast<size_t>(view_count) * per_board);
+  for (int v = 0; v < view_count; ++v) {
+    observations[v].icam.intrinsics = 0;
+    observations[v].icam.extrinsics = -1;  // the camera is the reference frame
+    observations[v].iframe = v;
+    for (int k = 0; k < per_board; ++k) {
+      pool[v * per_board + k] =
+          mrcal_point3_t{{views[v].corners[k].x(), views[v].corners[k].y(), 1.0}};
+    }
+  }
+  mrcal_problem_selections_t selections{};
+  selections.do_optimize_intrinsics_core = true;
+  selections.do_optimize_intrinsics_distortions = true;
+  selections.do_optimize_extrinsics = false;
+  selections.do_optimize_frames = true;
+  selections.do_optimize_calobject_warp = false;
+  selections.do_apply_regularization = options.regularization;
+  selections.do_apply_outlier_rejection = options.reject_outliers;
+  const mrcal_problem_constants_t constants{0.0, 1e6};
+  const int imager_size[2] = {width, height};
+  const mrcal_stats_t stats = mrcal_optimize(
+      nullptr, 0, nullptr, 0, intrinsics.data(), nullptr, frames.data(), nullptr, nullptr,
+      /*Ncameras_intrinsics=*/1, /*Ncameras_extrinsics=*/0, view_count, /*Npoints=*/0,
+      /*Npoints_fixed=*/0, observations.data(), nullptr, view_count, 0, pool.data(), &lens,
+      imager_size, selections, &constants, board.square_size, board.corners_x, board.corners_y,
+      options.verbose, false);
+  if (!(stats.rms_reproj_error__pixels >= 0.0) || !std::isfinite(stats.rms_reproj_error__pixels)) {
+    return finish(CameraCalibrationSummary::kSolverFailed, "mrcal_optimize failed");
+  }
+  for (double value : intrinsics) {
+    if (!std::isfinite(value)) {
+      return finish(CameraCalibrationSummary::kSolverFailed, "mrcal_optimize gave non-finite intrinsics");
+    }
+  }
+
+  // 3. Residual statistics over the inliers, by projecting the board with the result.
+  calibration->lens_model = options.lens_model;
+  calibration->intrinsics = intrinsics;
+  calibration->width = width;
+  calibration->height = height;
+  calibration->cam_from_board.resize(view_count);
+  std::vector<double> norms;
+  double sum_squares = 0.0;
+  summary->view_rms.assign(view_count, 0.0);
+  for (int v = 0; v < view_count; ++v) {
+    const Eigen::Isometry3d cam_from_board = PoseFromRt(frames[v]);
+    calibration->cam_from_board[v] = cam_from_board;
+    double view_squares = 0.0;
+    int view_inliers = 0;
+    for (int k = 0; k < per_board; ++k) {
+      const mrcal_point3_t& observed = pool[v * per_board + k];
+      if (observed.z < 0.0) {
+        ++summary->outliers;
+        continue;
+      }
+      Vec2 pixel;
+      if (!ProjectWithLens(options.lens_model, intrinsics, cam_from_board * board.Corner(k), &pixel)) {
+        ++summary->outliers;
+        continue;
+      }
+      const double squared = (pixel - Vec2(observed.x, observed.y)).squaredNorm();
+      norms.push_back(std::sqrt(squared));
+      sum_squares += squared;
+      view_squares += squared;
+      ++view_inliers;
+    }
+    summary->view_rms[v] = view_inliers ? std::sqrt(view_squares / (2.0 * view_inliers)) : 0.0;
+  }
+  if (norms.empty()) return finish(CameraCalibrationSummary::kSolverFailed, "every corner is an outlier");
+  summary->rms_norm = std::sqrt(sum_squares / norms.size());
+  summary->rms = summary->rms_norm / std::sqrt(2.0);
+  std::sort(norms.begin(), norms.end());
+  summary->median_norm = norms[norms.size() / 2];
+  summary->max_norm = norms.back();
+  return finish(CameraCalibrationSummary::kConverged, "");
+}
+
+std::string CalibrationModelText(const CameraCalibration& calibration) {
+  std::string intrinsics = "[";
+  for (size_t k = 0; k < calibration.intrinsics.size(); ++k) {
+    intrinsics += (k ? ", " : " ") + Number(calibration.intrinsics[k]);
+  }
+  intrinsics += " ]";
+  return "# procam camera model (procam calibrate camera; mrcal_optimize); the camera is the "
+         "reference frame\n{\n  'lensmodel':  '" +
+         calibration.lens_model + "',\n  'intrinsics': " + intrinsics +
+         ",\n  'imagersize': [ " + std::to_string(calibration.width) + ", " +
+         std::to_string(calibration.height) + " ],\n  'extrinsics': [ 0, 0, 0, 0, 0, 0 ]\n}\n";
+}
+
+void WriteCalibrationModel(const std::filesystem::path& path,
+                           const CameraCalibration& calibration) {
+  const std::string text = CalibrationModelText(calibration);
+  mrcal_cameramodel_t* parsed =
+      mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size()));
+  if (!parsed) throw IoError(path.string() + ": libmrcal cannot parse the model text procam made");
+  mrcal_free_cameramodel(&parsed);
+  WriteFileAtomically(path, text);
+}
+
+}  // namespace procam
