@@ -26,39 +26,6 @@ bool IsSceneName(const std::string& name) {
   return std::find(names.begin(), names.end(), name) != names.end();
 }
 
-// A display's 8-bit pattern (grey or B, G, R) as a projector's codes (R, G, B, its bits).
-ProjectorImage CodesFromPattern(const cv::Mat& pattern, const Projector& projector) {
-  const int width = projector.geometry.width(), height = projector.geometry.height();
-  if (pattern.cols != width || pattern.rows != height ||
-      (pattern.type() != CV_8UC1 && pattern.type() != CV_8UC3)) {
-    throw std::invalid_argument(
-        "synthetic view: projector '" + projector.name + "' is " + std::to_string(width) + "x" +
-        std::to_string(height) + ", its display shows a " + std::to_string(pattern.cols) + "x" +
-        std::to_string(pattern.rows) + " pattern of type " + std::to_string(pattern.type()));
-  }
-  ProjectorImage image;
-  image.bits = projector.photometry.bits;
-  image.codes.create(height, width, CV_16UC3);
-  const int max_code = projector.photometry.MaxCode();
-  uint16_t table[256];  // 8-bit value → code, rounded
-  for (int value = 0; value < 256; ++value)
-    table[value] = static_cast<uint16_t>((value * max_code + 127) / 255);
-  const bool grey = pattern.channels() == 1;
-  for (int row = 0; row < height; ++row) {
-    const uint8_t* in = pattern.ptr<uint8_t>(row);
-    cv::Vec3w* out = image.codes.ptr<cv::Vec3w>(row);
-    for (int col = 0; col < width; ++col) {
-      if (grey) {
-        const uint16_t code = table[in[col]];
-        out[col] = cv::Vec3w(code, code, code);
-      } else {
-        const uint8_t* bgr = in + 3 * col;
-        out[col] = cv::Vec3w(table[bgr[2]], table[bgr[1]], table[bgr[0]]);
-      }
-    }
-  }
-  return image;
-}
 
 // RenderRadiance (R, G, B) → the SceneView's B, G, R, scaled.
 cv::Mat ViewFromRadiance(const cv::Mat& radiance_rgb, double scale) {
@@ -97,6 +64,39 @@ std::pair<std::string, int> ParseSyntheticUri(const CameraUri& uri) {
 }
 
 }  // namespace
+
+ProjectorImage CodesFromPattern(const cv::Mat& pattern, const Projector& projector) {
+  const int width = projector.geometry.width(), height = projector.geometry.height();
+  if (pattern.cols != width || pattern.rows != height ||
+      (pattern.type() != CV_8UC1 && pattern.type() != CV_8UC3)) {
+    throw std::invalid_argument(
+        "synthetic view: projector '" + projector.name + "' is " + std::to_string(width) + "x" +
+        std::to_string(height) + ", its display shows a " + std::to_string(pattern.cols) + "x" +
+        std::to_string(pattern.rows) + " pattern of type " + std::to_string(pattern.type()));
+  }
+  ProjectorImage image;
+  image.bits = projector.photometry.bits;
+  image.codes.create(height, width, CV_16UC3);
+  const int max_code = projector.photometry.MaxCode();
+  uint16_t table[256];  // 8-bit value → code, rounded
+  for (int value = 0; value < 256; ++value)
+    table[value] = static_cast<uint16_t>((value * max_code + 127) / 255);
+  const bool grey = pattern.channels() == 1;
+  for (int row = 0; row < height; ++row) {
+    const uint8_t* in = pattern.ptr<uint8_t>(row);
+    cv::Vec3w* out = image.codes.ptr<cv::Vec3w>(row);
+    for (int col = 0; col < width; ++col) {
+      if (grey) {
+        const uint16_t code = table[in[col]];
+        out[col] = cv::Vec3w(code, code, code);
+      } else {
+        const uint8_t* bgr = in + 3 * col;
+        out[col] = cv::Vec3w(table[bgr[2]], table[bgr[1]], table[bgr[0]]);
+      }
+    }
+  }
+  return image;
+}
 
 std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int patches) {
   if (!IsSceneName(scene)) {

@@ -82,6 +82,11 @@ std::shared_ptr<SyntheticWorld> OpenSyntheticWorld(const CameraUri& uri);
 
 // The test camera looking at a synthetic world; reports itself as "synthetic:<scene>" (backend
 // "synthetic") so capture sessions name the scene they photographed.
+// A display's 8-bit pattern (CV_8UC1 grey or CV_8UC3 B, G, R) as the codes the projector
+// shows (R, G, B at the projector's bit depth, rounded). Throws std::invalid_argument naming
+// the projector when the size or type does not fit.
+ProjectorImage CodesFromPattern(const cv::Mat& pattern, const Projector& projector);
+
 class SyntheticCamera : public TestCamera {
  public:
   // Throws std::invalid_argument when options.Check() fails or world is empty.

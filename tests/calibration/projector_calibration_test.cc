@@ -15,6 +15,7 @@
 
 #include "calibration/structured_light.h"
 #include "datasets_synthetic/simulated_rig.h"
+#include "datasets_synthetic/synthetic_camera.h"
 #include "geometry/ray_scene.h"
 
 namespace procam {
@@ -259,18 +260,6 @@ TEST(ProjectorCalibration, SensitivityToCameraAndPlaneErrors) {
   }
 }
 
-// A grey 8-bit pattern as the codes of an 8-bit projector.
-ProjectorImage Codes(const cv::Mat& pattern) {
-  ProjectorImage image;
-  image.bits = 8;
-  image.codes.create(pattern.size(), CV_16UC3);
-  for (int row = 0; row < pattern.rows; ++row)
-    for (int col = 0; col < pattern.cols; ++col) {
-      const uint16_t v = pattern.at<cv::Vec3b>(row, col)[0];
-      image.codes.at<cv::Vec3w>(row, col) = cv::Vec3w(v, v, v);
-    }
-  return image;
-}
 
 // The whole chain: projector 0 of the tiny box shows XOR Gray + phase patterns, the rig
 // photographs them (bounces, lens distortion, vignetting, noise), the decoder gives each camera
@@ -290,7 +279,7 @@ TEST(ProjectorCalibration, TinyBoxFromDecodedStructuredLight) {
   std::vector<cv::Mat> captured;
   uint32_t seed = 0;
   for (const Pattern& pattern : sequence.patterns)
-    captured.push_back(rig->PhotographLinear({Codes(pattern.image), dark}, ++seed));
+    captured.push_back(rig->PhotographLinear({CodesFromPattern(pattern.image, rig->projectors()[0]), dark}, ++seed));
   const StructuredLightMap map = DecodeStructuredLight(options, captured);
 
   // Decoded pixels with a plane (where the geometry says the projector lights them).

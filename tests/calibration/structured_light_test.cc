@@ -10,6 +10,7 @@
 #include <cstdio>
 
 #include "datasets_synthetic/simulated_rig.h"
+#include "datasets_synthetic/synthetic_camera.h"
 #include "geometry/ray_scene.h"
 
 namespace procam {
@@ -60,18 +61,6 @@ TEST(StructuredLight, OptionsAreChecked) {
   EXPECT_THROW(DecodeStructuredLight(options, {cv::Mat(4, 4, CV_8UC1)}), std::invalid_argument);
 }
 
-// A grey 8-bit pattern as the codes of an 8-bit projector.
-ProjectorImage Codes(const cv::Mat& pattern) {
-  ProjectorImage image;
-  image.bits = 8;
-  image.codes.create(pattern.size(), CV_16UC3);
-  for (int row = 0; row < pattern.rows; ++row)
-    for (int col = 0; col < pattern.cols; ++col) {
-      const uint16_t v = pattern.at<cv::Vec3b>(row, col)[0];
-      image.codes.at<cv::Vec3w>(row, col) = cv::Vec3w(v, v, v);
-    }
-  return image;
-}
 
 struct Accuracy {
   int lit = 0;        // camera pixels the projector lights (geometry)
@@ -116,7 +105,7 @@ class TinyBox : public ::testing::Test {
     std::vector<cv::Mat> captured;
     uint32_t seed = 0;
     for (const Pattern& pattern : sequence.patterns)
-      captured.push_back(rig_->PhotographLinear({Codes(pattern.image), dark}, ++seed));
+      captured.push_back(rig_->PhotographLinear({CodesFromPattern(pattern.image, rig_->projectors()[0]), dark}, ++seed));
     return captured;
   }
 
