@@ -1,15 +1,22 @@
 // procam calibrate camera SESSION_DIR --out RIG_DIR: camera intrinsics from chessboard images
 // (issue 7). Writes RIG_DIR/camera.cameramodel (mrcal) and RIG_DIR/result.json.
+// procam calibrate photometric SESSION_DIR --out RIG_DIR: one projector's black, max, response
+// and mixing from a photometric capture session, in camera units. Writes
+// RIG_DIR/photometric.json and RIG_DIR/result.json.
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <stdexcept>
 
+#include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "apps/commands.h"
 #include "calibration/camera_calibration.h"
+#include "calibration/photometric.h"
+#include "capture/session.h"
 #include "geometry/io.h"
 
 namespace procam {
@@ -119,6 +126,200 @@ void RunCalibrateCamera(const CalibrateCameraArguments& args) {
               (out / "result.json").c_str());
 }
 
+struct CalibratePhotometricArguments {
+  std::string session;
+  std::string out;
+  PhotometricCalibrationOptions options;
+  double clip = 0.99;  // fraction of the camera's full scale at which a pixel counts as clipped
+};
+
+nlohmann::json Json(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
+
+// The flat fields of a photometric capture session, drives from each pattern's channel and level.
+// Throws IoError naming session.json (or the frame file) when the session is of another kind,
+// lacks levels or channels the fit needs, or is not fully captured.
+struct PhotometricSession {
+  std::vector<FlatField> fields;
+  std::vector<std::string> names;
+  nlohmann::json levels, channels;
+  double full_scale = 0.0;  // camera full scale in the fields' units; 0 for HDR merges
+  bool hdr = false;
+};
+
+PhotometricSession ReadPhotometricSession(const std::filesystem::path& directory) {
+  if (!std::filesystem::is_directory(directory)) {
+    throw IoError(directory.string() + ": not a directory");
+  }
+  const CaptureSessionData data = CaptureSessionData::Load(directory);
+  const std::string manifest = (directory / "session.json").string();
+  const nlohmann::json& sequence = data.manifest().value("sequence", nlohmann::json::object());
+  const std::string kind = sequence.value("kind", "");
+  if (kind != "photometric") {
+    throw IoError(manifest + ": a '" + kind +
+                  "' session; photometric calibration needs one captured with --sequence "
+                  "photometric");
+  }
+  PhotometricSession session;
+  const nlohmann::json& parameters = sequence.value("parameters", nlohmann::json::object());
+  session.levels = parameters.value("levels", nlohmann::json::array());
+  session.channels = parameters.value("channels", nlohmann::json(""));
+  std::set<int> levels;
+  for (const nlohmann::json& level : session.levels) {
+    if (level.is_number_integer()) levels.insert(level.get<int>());
+  }
+  if (levels.count(255) == 0) {
+    throw IoError(manifest + ": levels " + session.levels.dump() +
+                  " lack 255 (each channel must be captured at full drive)");
+  }
+  const std::string channels =
+      session.channels.is_string() ? session.channels.get<std::string>() : "";
+  for (char c : std::string("rgb")) {
+    if (channels.find(c) == std::string::npos) {
+      throw IoError(manifest + ": channels '" + channels + "' lack '" + c +
+                    "' (capture with --channels rgb or rgbw)");
+    }
+  }
+  if (std::none_of(levels.begin(), levels.end(), [](int l) { return l > 0 && l < 255; })) {
+    throw IoError(manifest + ": levels " + session.levels.dump() +
+                  " give no response between black and full drive (capture several levels, "
+                  "e.g. 0,32,64,...,255)");
+  }
+
+  for (int p = 0; p < data.pattern_count(); ++p) {
+    const nlohmann::json& info = data.manifest()["patterns"][p].value("info", nlohmann::json());
+    if (!info.is_object() || info.value("kind", "") != "flat") continue;
+    if (!data.captured(p)) {
+      throw IoError(manifest + ": pattern " + data.pattern_name(p) +
+                    " is not captured (run the same capture command again to resume)");
+    }
+    const std::string channel = info.value("channel", "");
+    const double drive = info.value("level", 0) / 255.0;
+    FlatField field;
+    if (channel == "w") {
+      field.drive = Eigen::Vector3d::Constant(drive);
+    } else if (channel == "r" || channel == "g" || channel == "b") {
+      field.drive[channel == "r" ? 0 : channel == "g" ? 1 : 2] = drive;
+    } else {
+      throw IoError(manifest + ": pattern " + data.pattern_name(p) + " has channel '" + channel +
+                    "'");
+    }
+    const nlohmann::json& captured = data.manifest()["patterns"][p]["captured"];
+    field.image = data.Hdr(p);
+    session.hdr = !field.image.empty();
+    if (field.image.empty()) {
+      field.image = data.Mean(p, 0);
+      session.full_scale = captured.value("full_scale", 0.0);
+    }
+    if (field.image.channels() != 3) {
+      throw IoError(manifest + ": pattern " + data.pattern_name(p) +
+                    " was captured in grey; photometric calibration needs a colour camera");
+    }
+    session.fields.push_back(std::move(field));
+    session.names.push_back(data.pattern_name(p));
+  }
+  return session;
+}
+
+void RunCalibratePhotometric(const CalibratePhotometricArguments& args) {
+  std::string why;
+  if (!args.options.Check(&why)) throw std::invalid_argument(why);
+  const std::filesystem::path session_dir(args.session);
+  const PhotometricSession session = ReadPhotometricSession(session_dir);
+
+  // Pixels: those that brighten enough (PhotometricCalibrationOptions::mask's default rule)
+  // among those no field clips (a clipped pixel bends the response).
+  PhotometricCalibrationOptions options = args.options;
+  const cv::Size size = session.fields[0].image.size();
+  cv::Mat unclipped(size, CV_8UC1, cv::Scalar(255));
+  int black = -1, brightest = -1;
+  for (size_t f = 0; f < session.fields.size(); ++f) {
+    const cv::Mat& image = session.fields[f].image;
+    if (image.size() != size) {
+      throw IoError((session_dir / "session.json").string() + ": pattern " + session.names[f] +
+                    " differs in size from " + session.names[0]);
+    }
+    if (session.full_scale > 0.0) {
+      cv::Mat low;
+      cv::inRange(image, cv::Scalar::all(-1e30), cv::Scalar::all(args.clip * session.full_scale),
+                  low);
+      unclipped &= low;
+    }
+    const Eigen::Vector3d& d = session.fields[f].drive;
+    if (d.isZero()) black = static_cast<int>(f);
+    if ((d.array() == 1.0).all() || (brightest < 0 && d == Eigen::Vector3d(0, 1, 0))) {
+      brightest = static_cast<int>(f);
+    }
+  }
+  const int clipped = size.area() - cv::countNonZero(unclipped);
+  if (black >= 0 && brightest >= 0) {
+    cv::Mat increase;
+    cv::transform(session.fields[brightest].image - session.fields[black].image, increase,
+                  cv::Matx13f(1, 1, 1));
+    double largest = 0.0;
+    cv::minMaxLoc(increase, nullptr, &largest, nullptr, nullptr, unclipped);
+    options.mask = (increase > options.min_contrast * largest) & unclipped;
+  }
+  PhotometricModel model;
+  try {
+    model = CalibratePhotometry(session.fields, options);
+  } catch (const std::invalid_argument& error) {
+    throw IoError((session_dir / "session.json").string() + ": " + error.what());
+  }
+  std::printf("%zu flat fields, %d camera pixels used (%d clipped left out)\n",
+              session.fields.size(), model.pixels, clipped);
+  std::printf("%s\n", model.BriefReport().c_str());
+
+  const std::string units =
+      session.hdr ? "camera units: the HDR merge's full scale per second"
+                  : "camera units: mean digital numbers at the session's exposure";
+  const std::string note =
+      "no camera-to-output factor (transfer) was applied: black and max are in camera units, "
+      "relative to this camera, its exposure and where it looks; gamma, lut, mixing and the "
+      "ratio black/max are absolute";
+  nlohmann::json photometric;
+  photometric["units"] = units;
+  photometric["note"] = note;
+  photometric["black"] = Json(model.black);
+  photometric["max"] = Json(model.max);
+  photometric["gamma"] = Json(model.gamma);
+  photometric["gamma_rms"] = Json(model.gamma_rms);
+  photometric["lut"] = {model.table[0], model.table[1], model.table[2]};
+  photometric["mixing"] = nlohmann::json::array();
+  for (int i = 0; i < 3; ++i) {
+    photometric["mixing"].push_back({model.mixing(i, 0), model.mixing(i, 1), model.mixing(i, 2)});
+  }
+
+  nlohmann::json result;
+  result["session"] = session_dir.string();
+  result["units"] = units;
+  result["note"] = note;
+  result["levels"] = session.levels;
+  result["channels"] = session.channels;
+  result["fields"] = session.names;
+  result["pixels_used"] = model.pixels;
+  result["pixels_clipped"] = clipped;
+  result["min_contrast"] = options.min_contrast;
+  result["black_over_max"] = Json(model.black.cwiseQuotient(model.max));
+  nlohmann::json channels = nlohmann::json::array();
+  for (int c = 0; c < 3; ++c) {
+    nlohmann::json samples = nlohmann::json::array();
+    for (const Eigen::Vector2d& s : model.samples[c]) samples.push_back({s[0], s[1]});
+    channels.push_back({{"channel", std::string(1, "rgb"[c])},
+                        {"gamma", model.gamma[c]},
+                        {"gamma_rms", model.gamma_rms[c]},
+                        {"samples_drive_light", samples}});
+  }
+  result["channels_fit"] = channels;
+  result["photometric"] = photometric;
+
+  const std::filesystem::path out(args.out);
+  std::filesystem::create_directories(out);
+  WriteFileAtomically(out / "photometric.json", photometric.dump(2) + "\n");
+  WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
+  std::printf("wrote %s and %s\n", (out / "photometric.json").c_str(),
+              (out / "result.json").c_str());
+}
+
 }  // namespace
 
 void AddCalibrateCommands(CLI::App& app) {
@@ -141,6 +342,28 @@ void AddCalibrateCommands(CLI::App& app) {
   camera->add_flag("!--no-outlier-rejection", args->options.reject_outliers,
                    "Keep every corner");
   camera->callback([args] { RunCalibrateCamera(*args); });
+
+  auto photometric_args = std::make_shared<CalibratePhotometricArguments>();
+  CLI::App* photometric = calibrate->add_subcommand(
+      "photometric",
+      "Projector black, max, gamma, response table and mixing from a photometric capture "
+      "session (camera units)");
+  photometric
+      ->add_option("session", photometric_args->session,
+                   "Capture session of `procam capture --sequence photometric --channels rgb`")
+      ->required();
+  photometric
+      ->add_option("--out", photometric_args->out, "Rig directory: photometric.json, result.json")
+      ->required();
+  photometric
+      ->add_option("--min-contrast", photometric_args->options.min_contrast,
+                   "Pixels used: brightening from black by at least this fraction of the largest")
+      ->capture_default_str();
+  photometric
+      ->add_option("--table-size", photometric_args->options.table_size,
+                   "Entries of the response table (lut)")
+      ->capture_default_str();
+  photometric->callback([photometric_args] { RunCalibratePhotometric(*photometric_args); });
 }
 
 }  // namespace procam
