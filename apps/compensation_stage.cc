@@ -32,8 +32,7 @@ CompensationRun RunCompensation(const GeometryStage& geometry, const SolverOptio
                3 * run.fine.size(), options.multires ? ", multires" : "");
   run.solution = Solve(logged, run.fine, &run.summary, CoarseLevel{&run.coarse, &patches.coarse_of_fine});
   spdlog::info("{}", run.summary.BriefReport());
-  const RadiositySystem radiosity(run.fine.form_factors, run.fine.area, run.fine.reflectance);
-  const CompensationObjective lab(run.fine, radiosity, ColourModel::kLab);
+  const CompensationObjective lab(run.fine, *run.solution.radiosity_system, ColourModel::kLab);
   run.perceptual_objective = lab.Value(run.solution.emittance);
   lab.DeltaE(run.solution.radiosity, &run.delta_e76, &run.delta_e2000);
   const double total_area = run.fine.area.sum();

@@ -318,7 +318,9 @@ CompensationSolution Solve(const SolverOptions& options, const CompensationProbl
   *summary = SolverSummary();
   summary->method = options.method;
   auto setup_start = Clock::now();
-  const RadiositySystem radiosity(problem.form_factors, problem.area, problem.reflectance);
+  auto radiosity_system =
+      std::make_shared<const RadiositySystem>(problem.form_factors, problem.area, problem.reflectance);
+  const RadiositySystem& radiosity = *radiosity_system;
   summary->setup_seconds = SecondsSince(setup_start);
   const auto solve_start = Clock::now();
   CompensationSolution solution;
@@ -366,6 +368,7 @@ CompensationSolution Solve(const SolverOptions& options, const CompensationProbl
     }
   }
   solution.radiosity = radiosity.Solve(solution.emittance);
+  solution.radiosity_system = std::move(radiosity_system);
   summary->solve_seconds = SecondsSince(solve_start) - coarse_setup_seconds;
   return solution;
 }

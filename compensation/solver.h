@@ -15,6 +15,7 @@
 // ever formed.
 
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -117,6 +118,9 @@ struct CoarseLevel {
 struct CompensationSolution {
   Eigen::MatrixX3d emittance;  // E, n×3, within the bounds
   Eigen::MatrixX3d radiosity;  // B = K⁻¹E
+  // The factorised K the solve used, for callers that evaluate more (objectives, ΔE) without
+  // factorising it again.
+  std::shared_ptr<const RadiositySystem> radiosity_system;
 };
 
 // Solves `problem` (validated first: throws std::invalid_argument naming the fault).
