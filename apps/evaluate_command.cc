@@ -59,7 +59,7 @@ void AddEvaluationCommands(CLI::App& app) {
     options.alpha = args->alpha;
     std::vector<std::unique_ptr<SceneEvaluation>> evaluations;
     nlohmann::json all = nlohmann::json::array();
-    HtmlReport report("procam evaluate: perceptual vs linear compensation (Sheng et al. 2011, Table 1)");
+    std::vector<std::vector<std::pair<std::string, cv::Mat>>> figures;  // per scene
     for (const std::string& scene : scenes) {
       evaluations.push_back(std::make_unique<SceneEvaluation>(EvaluateSyntheticScene(scene, options)));
       const SceneEvaluation& e = *evaluations.back();
@@ -67,8 +67,7 @@ void AddEvaluationCommands(CLI::App& app) {
       nlohmann::json result = EvaluationJson(e);
       WriteFileAtomically(out / scene / "result.json", result.dump(2) + "\n");
       all.push_back(result);
-      report.Heading(scene);
-      report.Figures(ReadFigures(out / scene, files));
+      figures.push_back(ReadFigures(out / scene, files));
     }
     std::vector<const SceneEvaluation*> pointers;
     for (const auto& e : evaluations) pointers.push_back(e.get());
@@ -94,17 +93,16 @@ void AddEvaluationCommands(CLI::App& app) {
     std::vector<std::string> header = {"scene"};
     for (const MethodEvaluation& m : pointers.front()->methods) header.push_back(std::string(MethodName(m.method)) + " ΔE76 mean (max)");
     header.push_back("perceptual / linear");
-    // The table goes first: put it before the pictures.
     HtmlReport page("procam evaluate: perceptual vs linear compensation (Sheng et al. 2011, Table 1)");
     page.Paragraph(fmt::format("{} solver patches per scene, world mesh {}× finer; per-pixel ΔE between the desired "
                                "appearance and the simulated camera's view of each method's result.",
                                args->patches, args->world_factor));
     page.Table(header, rows);
-    std::string html = page.Html();
-    const std::string figures = report.Html();
-    const size_t body = figures.find("</h1>\n") + 6, end = figures.find("<script>");
-    html.insert(html.find("<script>"), figures.substr(body, end - body));
-    WriteFileAtomically(out / "report.html", html);
+    for (size_t k = 0; k < scenes.size(); ++k) {
+      page.Heading(scenes[k]);
+      page.Figures(figures[k]);
+    }
+    page.Write(out / "report.html");
     std::cout << table << "\nperceptual mean ΔE76 ≤ 0.75 × linear on every scene: " << (all_met ? "yes" : "NO")
               << "\nwrote " << out.string() << "/table.md, result.json, report.html and pictures per scene\n";
   });
