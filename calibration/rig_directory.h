@@ -1,0 +1,38 @@
+#pragma once
+// The rig directory (issue 7): what calibration writes and `compensate`/`project` consume
+// instead of the scene's ground truth.
+//
+//   RIG_DIR/rig.json            {"camera": {"model": "camera.cameramodel"},
+//                                "projectors": [ {name, model, black, max, gamma|lut, mixing,
+//                                                 bits}, ... ],   (scene-file projector keys,
+//                                                                  docs/scene_format.md; paths
+//                                                                  relative to RIG_DIR)
+//                                "registration": {...}}          (room_from_camera, residuals)
+//   RIG_DIR/camera.cameramodel  mrcal; extrinsics = rt_cam_room once registered (zero before)
+//   RIG_DIR/NAME.cameramodel    mrcal; extrinsics = rt_proj_room (ref = the scene's frame)
+//
+// Several commands each fill their part of rig.json (`calibrate camera`, `calibrate projectors`,
+// `calibrate photometric`), so it is updated by read-modify-write, written atomically.
+
+#include <filesystem>
+#include <functional>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+namespace procam {
+
+// rig.json of `rig_dir` as JSON; an empty object when the file does not exist. Throws IoError
+// naming the file when it exists but is not a JSON object.
+nlohmann::json ReadRigJson(const std::filesystem::path& rig_dir);
+
+// Reads rig.json (or {}), lets `update` change it, writes it back atomically (creating
+// `rig_dir`). Nothing is written when `update` throws.
+void UpdateRigJson(const std::filesystem::path& rig_dir,
+                   const std::function<void(nlohmann::json&)>& update);
+
+// The entry of projectors[] named `name` in `rig`, created (with "name") at the end of the array
+// when missing.
+nlohmann::json& RigProjectorEntry(nlohmann::json& rig, const std::string& name);
+
+}  // namespace procam
