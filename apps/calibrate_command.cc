@@ -14,6 +14,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "apps/commands.h"
+#include "apps/photometric_rig.h"
 #include "calibration/camera_calibration.h"
 #include "calibration/photometric.h"
 #include "capture/session.h"
@@ -131,6 +132,7 @@ struct CalibratePhotometricArguments {
   std::string out;
   PhotometricCalibrationOptions options;
   double clip = 0.99;  // fraction of the camera's full scale at which a pixel counts as clipped
+  PhotometricRigArguments rig;  // --projector, --scene, ... (apps/photometric_rig.h)
 };
 
 nlohmann::json Json(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
@@ -225,6 +227,9 @@ void RunCalibratePhotometric(const CalibratePhotometricArguments& args) {
   if (!args.options.Check(&why)) throw std::invalid_argument(why);
   const std::filesystem::path session_dir(args.session);
   const PhotometricSession session = ReadPhotometricSession(session_dir);
+  // rig.json and scene units (apps/photometric_rig.h), checked before anything is fitted.
+  PhotometricRigStage rig_stage(args.rig, args.out, session_dir, session.fields[0].image.size(),
+                                session.hdr, session.full_scale);
 
   // Pixels: those that brighten enough (PhotometricCalibrationOptions::mask's default rule)
   // among those no field clips (a clipped pixel bends the response).
@@ -259,6 +264,7 @@ void RunCalibratePhotometric(const CalibratePhotometricArguments& args) {
     cv::minMaxLoc(increase, nullptr, &largest, nullptr, nullptr, unclipped);
     options.mask = (increase > options.min_contrast * largest) & unclipped;
   }
+  rig_stage.Configure(&options);
   PhotometricModel model;
   try {
     model = CalibratePhotometry(session.fields, options);
@@ -311,11 +317,14 @@ void RunCalibratePhotometric(const CalibratePhotometricArguments& args) {
   }
   result["channels_fit"] = channels;
   result["photometric"] = photometric;
+  rig_stage.Prepare(model, session.fields, options.mask, &photometric, &result);
+  result["photometric"] = photometric;
 
   const std::filesystem::path out(args.out);
   std::filesystem::create_directories(out);
   WriteFileAtomically(out / "photometric.json", photometric.dump(2) + "\n");
   WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
+  rig_stage.Commit();
   std::printf("wrote %s and %s\n", (out / "photometric.json").c_str(),
               (out / "result.json").c_str());
 }
@@ -363,7 +372,11 @@ void AddCalibrateCommands(CLI::App& app) {
       ->add_option("--table-size", photometric_args->options.table_size,
                    "Entries of the response table (lut)")
       ->capture_default_str();
+  AddPhotometricRigOptions(photometric, &photometric_args->rig);
   photometric->callback([photometric_args] { RunCalibratePhotometric(*photometric_args); });
+
+  AddCalibrateResponseCommand(*calibrate);
+  AddCalibrateProjectorsCommand(*calibrate);
 }
 
 }  // namespace procam

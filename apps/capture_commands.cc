@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "apps/commands.h"
+#include "calibration/camera_response.h"
 #include "capture/camera.h"
 #include "capture/devices.h"
 #include "capture/display.h"
@@ -15,6 +16,7 @@
 #endif
 #include "capture/patterns.h"
 #include "capture/session.h"
+#include "calibration/structured_light.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "geometry/io.h"
 
@@ -40,6 +42,8 @@ struct CaptureArguments {
   std::string channels = PhotometricOptions().channels;
   std::vector<std::string> images;
   double projector_gamma = 1.0;
+  double pattern_gamma = 1.0;  // structured_light: sinusoids pre-distorted for this gamma
+  std::string camera_response;  // camera_response.json: linearise before the HDR merge
 };
 
 cv::Size ParseSize(const std::string& text) {
@@ -61,6 +65,17 @@ CaptureSequence MakeSequence(const CaptureArguments& args, cv::Size projector) {
     options.columns = args.axes != "rows";
     options.rows = args.axes != "columns";
     return MakeGrayCodeSequence(options);
+  }
+  if (args.sequence == "structured_light") {  // XOR Gray + phase, the robust default
+    StructuredLightOptions options;
+    options.width = projector.width;
+    options.height = projector.height;
+    options.columns = args.axes != "rows";
+    options.rows = args.axes != "columns";
+    options.pattern_gamma = args.pattern_gamma;
+    std::string why;
+    if (!options.Check(&why)) throw std::invalid_argument("structured_light sequence: " + why);
+    return MakeStructuredLightSequence(options);
   }
   if (args.sequence == "photometric") {
     PhotometricOptions options;
@@ -163,6 +178,10 @@ void RunCapture(const CaptureArguments& args) {
   CaptureSessionOptions options;
   options.directory = args.out;
   options.sequencer = args.sequencer;
+  if (!args.camera_response.empty()) {  // a camera that is not linear (procam calibrate response)
+    options.sequencer.hdr.inverse_response = ReadInverseResponse(
+        args.camera_response, IsColour(camera->Settings().pixel_format) ? 3 : 1);
+  }
   const std::filesystem::path result_path = std::filesystem::path(args.out) / "result.json";
   CaptureSummary summary;
   try {
@@ -239,9 +258,9 @@ void AddCaptureCommands(CLI::App& app) {
                    "Camera URI: v4l2:/dev/video0, aravis:<id>, test:loopback?noise=2, "
                    "synthetic:c_shaped ...")
       ->required();
-  capture->add_option("--sequence", args->sequence, "graycode, photometric or verify")
+  capture->add_option("--sequence", args->sequence, "graycode, structured_light, photometric or verify")
       ->required()
-      ->check(CLI::IsMember({"graycode", "photometric", "verify"}));
+      ->check(CLI::IsMember({"graycode", "structured_light", "photometric", "verify"}));
   capture
       ->add_option("--out", args->out,
                    "Session directory (created, or resumed when it holds session.json)")
@@ -275,6 +294,9 @@ void AddCaptureCommands(CLI::App& app) {
           "--exposure-us", args->sequencer.exposures_us,
           "Exposure(s) in microseconds; several (comma-separated) bracket and merge to HDR")
       ->delimiter(',');
+  capture->add_option("--camera-response", args->camera_response,
+                      "camera_response.json (procam calibrate response): linearise a camera that "
+                      "is not linear before the HDR merge");
   capture->add_option("--gain", args->gain,
                       "Camera gain (dB for Aravis/test cameras, driver units for V4L2)");
   capture
@@ -289,7 +311,11 @@ void AddCaptureCommands(CLI::App& app) {
       ->add_option("--retry-delay-ms", args->sequencer.retry_delay_ms,
                    "Pause before a retry, milliseconds")
       ->capture_default_str();
-  capture->add_option("--axes", args->axes, "graycode: columns, rows or both")
+  capture
+      ->add_option("--pattern-gamma", args->pattern_gamma,
+                   "structured_light: the projector's gamma, so its sinusoids are sinusoids in light")
+      ->capture_default_str();
+  capture->add_option("--axes", args->axes, "graycode, structured_light: columns, rows or both")
       ->check(CLI::IsMember({"both", "columns", "rows"}))
       ->capture_default_str();
   capture->add_option("--levels", args->levels, "photometric: 8-bit levels, comma-separated")

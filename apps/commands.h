@@ -15,6 +15,8 @@ void AddBenchCommands(CLI::App& app);         // bench formfactors, bench solver
 void AddDemoCommand(CLI::App& app);           // demo
 void AddEvaluationCommands(CLI::App& app);    // evaluate
 void AddCaptureCommands(CLI::App& app);       // cameras, capture
-void AddCalibrateCommands(CLI::App& app);     // calibrate camera
+void AddCalibrateCommands(CLI::App& app);     // calibrate camera, photometric, ...
+void AddCalibrateResponseCommand(CLI::App& calibrate);  // calibrate response (the group)
+void AddCalibrateProjectorsCommand(CLI::App& calibrate);  // calibrate projectors (the group)
 
 }  // namespace procam

@@ -1,10 +1,12 @@
 // procam compensate.
 #include <iostream>
 #include <memory>
+#include <optional>
 
 #include "apps/commands.h"
 #include "apps/compensation_stage.h"
 #include "apps/geometry_stage.h"
+#include "apps/rig_stage.h"
 #include "projection/projection_rig.h"
 #include "projection/projector.h"
 
@@ -12,7 +14,7 @@ namespace procam {
 namespace {
 
 struct CompensateArguments {
-  std::string scene, out, method = "perceptual";
+  std::string scene, out, rig, method = "perceptual";
   double alpha = 0.5;
   int patches = 0;
   bool multires = false, export_problem = false;
@@ -33,22 +35,31 @@ void AddCompensationCommands(CLI::App& app) {
   cmd->add_option("--patches", args->patches, "Override the scene's target patch count");
   cmd->add_flag("--multires", args->multires, "Solve the coarse patch level first and start from it");
   cmd->add_flag("--export", args->export_problem, "Also write the whole problem (F.npy, ...) into --out");
+  cmd->add_option("--rig", args->rig,
+                  "Rig directory (rig.json from procam calibrate): its projectors replace the "
+                  "scene's, its reflectance.npy the scene's reflectance");
   cmd->add_option("--out", args->out, "Output directory")->required();
   cmd->callback([args] {
-    const GeometryStage stage =
+    // The rig is read first: a bad rig.json fails before the form factors are computed.
+    std::optional<RigDirectory> rig_dir;
+    if (!args->rig.empty()) rig_dir = ReadRigDirectory(args->rig);
+    GeometryStage stage =
         RunGeometryStage(args->scene, args->patches > 0 ? std::optional<int>(args->patches) : std::nullopt);
+    if (rig_dir) ApplyRigReflectance(*rig_dir, &stage.patches);
     SolverOptions options;
     ParseMethod(args->method, &options.method);
     options.multires = args->multires;
     // With projectors in the scene, their light sets the bounds; otherwise the scene's "bounds".
     std::unique_ptr<ProjectionRig> rig;
-    std::vector<Projector> projectors = ReadProjectors(stage.scene);
+    std::vector<Projector> projectors = rig_dir ? rig_dir->projectors : ReadProjectors(stage.scene);
     if (!projectors.empty()) {
       rig = std::make_unique<ProjectionRig>(
           BuildProjectionRig(stage.patches.fine, std::move(projectors), ProjectionRigOptions()));
     }
     const CompensationRun run = RunCompensation(stage, options, args->alpha, rig.get());
-    WriteCompensation(stage, run, args->out, args->export_problem);
+    nlohmann::json extra = nlohmann::json::object();
+    if (rig_dir) extra["rig"] = rig_dir->Describe();
+    WriteCompensation(stage, run, args->out, args->export_problem, extra);
     std::cout << run.summary.BriefReport() << "\n"
               << "objective (L*a*b*) " << run.perceptual_objective << "; ΔE76 mean " << run.mean_delta_e76
               << " max " << run.max_delta_e76 << "; ΔE2000 mean " << run.mean_delta_e2000 << " max "

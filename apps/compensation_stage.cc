@@ -74,7 +74,8 @@ nlohmann::json CompensationResultJson(const GeometryStage& geometry, const Compe
 }
 
 void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run,
-                       const std::filesystem::path& out, bool export_problem) {
+                       const std::filesystem::path& out, bool export_problem,
+                       const nlohmann::json& extra) {
   std::error_code error;
   std::filesystem::create_directories(out, error);
   if (error) throw IoError(out.string() + ": cannot create directory: " + error.message());
@@ -84,7 +85,9 @@ void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run
   }
   WriteNpy(out / "E.npy", RowMatrixXd(run.solution.emittance));
   WriteNpy(out / "B.npy", RowMatrixXd(run.solution.radiosity));
-  WriteFileAtomically(out / "result.json", CompensationResultJson(geometry, run).dump(2) + "\n");
+  nlohmann::json result = CompensationResultJson(geometry, run);
+  if (extra.is_object()) result.update(extra);
+  WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
 }
 
 }  // namespace procam

@@ -33,7 +33,9 @@ CompensationRun RunCompensation(const GeometryStage& geometry, const SolverOptio
 nlohmann::json CompensationResultJson(const GeometryStage& geometry, const CompensationRun& run);
 
 // Writes result.json, E.npy, B.npy (and with `export_problem` the whole problem) into `out`.
+// `extra` keys (e.g. "rig") are added to result.json.
 void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run,
-                       const std::filesystem::path& out, bool export_problem);
+                       const std::filesystem::path& out, bool export_problem,
+                       const nlohmann::json& extra = nlohmann::json::object());
 
 }  // namespace procam

@@ -9,12 +9,14 @@
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <random>
 #include <thread>
 
 #include "apps/commands.h"
+#include "apps/rig_stage.h"
 #include "datasets_synthetic/rooms.h"
 #include "geometry/io.h"
 #include "geometry/patches.h"
@@ -41,7 +43,7 @@ double SecondsSince(Clock::time_point start) {
 }
 
 struct ProjectArguments {
-  std::string solution, out, dither = "ordered";
+  std::string solution, out, rig, dither = "ordered";
   double feather = 0.1;
   int patches = 0;
   bool detail = false;
@@ -139,8 +141,23 @@ void RunProject(const ProjectArguments& args) {
   DitherMethod dither;
   if (!ParseDither(args.dither, &dither))
     throw std::invalid_argument("--dither: unknown method " + args.dither);
-  const Solution solution = LoadSolution(args.solution, args.patches);
-  std::vector<Projector> projectors = ReadProjectors(solution.scene);
+  Solution solution = LoadSolution(args.solution, args.patches);
+  // The projectors: --rig, else the rig the solution was computed with, else the scene's.
+  std::string rig_path = args.rig;
+  if (rig_path.empty()) {
+    const nlohmann::json result = nlohmann::json::parse(
+        ReadFile(std::filesystem::path(args.solution) / "result.json"));
+    if (result.contains("rig") && result["rig"].is_object() && result["rig"].contains("dir") &&
+        result["rig"]["dir"].is_string()) {
+      rig_path = ResolveScenePath(result["rig"]["dir"].get<std::string>(), args.solution).string();
+    }
+  }
+  std::optional<RigDirectory> rig_dir;
+  if (!rig_path.empty()) {
+    rig_dir = ReadRigDirectory(rig_path);
+    ApplyRigReflectance(*rig_dir, &solution.patches);
+  }
+  std::vector<Projector> projectors = rig_dir ? rig_dir->projectors : ReadProjectors(solution.scene);
   if (projectors.empty()) {
     throw IoError(solution.scene.path.string() +
                   ": projectors: the scene lists no projectors (add a \"projectors\" array: "
@@ -189,7 +206,7 @@ void RunProject(const ProjectArguments& args) {
   WriteNpy(out / "lower.npy", RowMatrixXd(rig.lower));
   WriteNpy(out / "upper.npy", RowMatrixXd(rig.upper));
   const double write_seconds = SecondsSince(write_start);
-  const nlohmann::json result = {{"solution", args.solution},
+  nlohmann::json result = {{"solution", args.solution},
                                  {"scene", solution.scene.path.string()},
                                  {"patches", rig.size()},
                                  {"target_patches", solution.scene.target_patches},
@@ -210,6 +227,7 @@ void RunProject(const ProjectArguments& args) {
                                    {"render", summary.seconds},
                                    {"write", write_seconds},
                                    {"total", SecondsSince(start)}}}};
+  if (rig_dir) result["rig"] = rig_dir->Describe();
   WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
 
   for (size_t k = 0; k < images.size(); ++k) {
@@ -467,6 +485,10 @@ void AddProjectionCommands(CLI::App& app) {
       ->required();
   project->add_option("--out", args->out, "Output directory (PNG per projector, result.json)")
       ->required();
+  project
+      ->add_option("--rig", args->rig,
+                   "Rig directory whose projectors (and reflectance) to use; default: the rig "
+                   "the solution was computed with (compensate --rig), else the scene's");
   project->add_option("--dither", args->dither, "none | ordered | error-diffusion")
       ->check(CLI::IsMember({"none", "ordered", "error-diffusion"}))
       ->capture_default_str();

@@ -27,8 +27,30 @@ bool HdrMergeOptions::Check(std::string* why) const {
   if (!(saturation > 0 && saturation <= 1)) return Fail(why, "hdr.saturation must be in (0, 1]");
   if (!(min_signal >= 0 && min_signal < saturation))
     return Fail(why, "hdr.min_signal must be in [0, saturation)");
+  if (inverse_response.size() != 0 && inverse_response.size() != 1 && inverse_response.size() != 3)
+    return Fail(why, "hdr.inverse_response must hold 0, 1 or 3 tables");
+  for (const std::vector<double>& table : inverse_response) {
+    if (table.size() < 2) return Fail(why, "hdr.inverse_response tables need at least 2 entries");
+    for (size_t k = 1; k < table.size(); ++k) {
+      if (!(table[k] >= table[k - 1]))
+        return Fail(why, "hdr.inverse_response tables must be non-decreasing");
+    }
+  }
   return true;
 }
+
+namespace {
+
+// Linear signal at normalised value z through `table` (evenly spaced over [0, 1]), linear
+// interpolation, extrapolated flat outside.
+double Linearise(const std::vector<double>& table, double z) {
+  const double position = std::clamp(z, 0.0, 1.0) * static_cast<double>(table.size() - 1);
+  const size_t below = std::min(static_cast<size_t>(position), table.size() - 2);
+  const double t = position - static_cast<double>(below);
+  return table[below] + t * (table[below + 1] - table[below]);
+}
+
+}  // namespace
 
 cv::Mat MergeExposures(const std::vector<cv::Mat>& means, const std::vector<double>& exposures_us,
                        double full_scale, const HdrMergeOptions& options) {
@@ -54,7 +76,16 @@ cv::Mat MergeExposures(const std::vector<cv::Mat>& means, const std::vector<doub
   const size_t longest =
       std::max_element(exposures_us.begin(), exposures_us.end()) - exposures_us.begin();
   const double range = full_scale - options.black_level;
-  const int values = means[0].cols * means[0].channels();
+  const int channels = means[0].channels();
+  const int values = means[0].cols * channels;
+  if (options.inverse_response.size() == 3 && channels != 3) {
+    throw std::invalid_argument("MergeExposures: 3 response tables for a 1-channel image");
+  }
+  // The linear signal of normalised value z in channel c.
+  const auto linear = [&](double z, int c) {
+    if (options.inverse_response.empty()) return z;
+    return Linearise(options.inverse_response[options.inverse_response.size() == 3 ? c : 0], z);
+  };
 
   cv::Mat merged(means[0].size(), type);
   std::vector<const float*> rows(means.size());
@@ -70,15 +101,16 @@ cv::Mat MergeExposures(const std::vector<cv::Mat>& means, const std::vector<doub
         if (z < options.saturation) saturated_everywhere = false;
         if (z < options.min_signal || z > options.saturation) continue;
         const double seconds = exposures_us[i] * 1e-6;
-        weighted += seconds * (z / seconds);
+        weighted += seconds * (linear(z, v % channels) / seconds);
         weights += seconds;
       }
       if (weights > 0) {
         out[v] = static_cast<float>(weighted / weights);
       } else {
         const size_t pick = saturated_everywhere ? shortest : longest;
-        out[v] = static_cast<float>((rows[pick][v] - options.black_level) / range /
-                                    (exposures_us[pick] * 1e-6));
+        out[v] = static_cast<float>(
+            linear((rows[pick][v] - options.black_level) / range, v % channels) /
+            (exposures_us[pick] * 1e-6));
       }
     }
   }

@@ -30,6 +30,12 @@ struct HdrMergeOptions {
   double saturation = 0.95;  // normalised value from which a pixel counts as clipped, (0, 1]
   double min_signal =
       0.01;  // normalised value under which a pixel is too dark to trust, [0, saturation)
+  // A camera that is not linear (calibration/camera_response.h): per channel of the images (one
+  // table for all, or one per channel in the images' order, e.g. B, G, R), the linear signal at
+  // evenly spaced normalised values z = (DN − black)/(full scale − black) from 0 to 1, each
+  // table ≥ 2 entries, non-decreasing, from 0 to 1. Empty: the sensor is linear. The
+  // saturation and min_signal tests stay on z; the merge averages the linearised values.
+  std::vector<std::vector<double>> inverse_response;
   bool Check(std::string* why) const;
 };
 

@@ -64,6 +64,8 @@ bool TestCameraOptions::Check(std::string* why) const {
     return Fail(why, "black must be in [0, full scale)");
   if (!(noise_sigma >= 0 && noise_sigma <= full_scale))
     return Fail(why, "noise must be in [0, full scale]");
+  if (!(response_gamma > 0 && response_gamma <= 10))
+    return Fail(why, "response_gamma must be in (0, 10]");
   if (!(display_latency_ms >= 0 && display_latency_ms <= 10000))
     return Fail(why, "latency_ms must be in [0, 10000]");
   if (fault_after_frames < 0 || fault_grabs < 0)
@@ -88,6 +90,7 @@ TestCameraOptions TestCameraOptionsFromUri(const CameraUri& uri) {
   options.gain_db = uri.GetDouble("gain_db", options.gain_db);
   options.black_level = uri.GetDouble("black", options.black_level);
   options.noise_sigma = uri.GetDouble("noise", options.noise_sigma);
+  options.response_gamma = uri.GetDouble("response_gamma", options.response_gamma);
   options.display_latency_ms = uri.GetDouble("latency_ms", options.display_latency_ms);
   options.seed = static_cast<uint32_t>(uri.GetInt("seed", static_cast<int>(options.seed)));
   const std::string fault = uri.GetString("fault", "none");
@@ -319,6 +322,14 @@ Frame TestCamera::Render(const PendingFrame& pending) {
     cv::Mat noise(digital.size(), digital.type());
     rng_.fill(noise, cv::RNG::NORMAL, 0.0, options_.noise_sigma);
     digital += noise;
+  }
+  if (options_.response_gamma != 1.0) {  // the output curve of a camera that is not linear
+    const double range = full_scale - options_.black_level;
+    const double exponent = 1.0 / options_.response_gamma;
+    digital.reshape(1).forEach<float>([&](float& value, const int*) {
+      const double u = std::clamp((value - options_.black_level) / range, 0.0, 1.0);
+      value = static_cast<float>(options_.black_level + range * std::pow(u, exponent));
+    });
   }
   cv::Mat image;  // convertTo rounds and saturates to [0, full scale]
   digital.convertTo(image, options_.pixel_format == PixelFormat::kMono16 ? CV_16U : CV_8U);

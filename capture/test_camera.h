@@ -15,11 +15,15 @@
 //     takes the view's pixel (⌊x·W_view/W⌋, ⌊y·H_view/H⌋) (nearest neighbour).
 //   - Digital number = black_level + radiance · full_scale · (exposure / reference_exposure)
 //     · 10^(gain_dB/20) + N(0, noise_sigma²), rounded and clipped to [0, full_scale].
+//     With response_gamma γ ≠ 1 (a camera that is not linear, e.g. a webcam's sRGB-like
+//     output): DN = black + (full − black) · clip((DN_linear − black)/(full − black), 0, 1)^(1/γ)
+//     before rounding.
 //     Colour views seen by a mono camera use Rec. 709 luma (0.2126 R + 0.7152 G + 0.0722 B).
 //   - Bayer formats mosaic the colour image and go through the same demosaicing as devices.
 //
 // URI: test:<name>?key=value&..., keys (defaults in TestCameraOptions): format, width, height,
-// fps, buffers, exposure_us, reference_exposure_us, gain_db, black, noise, latency_ms, seed,
+// fps, buffers, exposure_us, reference_exposure_us, gain_db, black, noise, response_gamma,
+// latency_ms, seed,
 // fault (none|timeout|disconnect), fault_after (frames delivered first), fault_grabs (failing
 // grabs for fault=timeout; 0 = for ever).
 
@@ -50,6 +54,7 @@ struct TestCameraOptions {
   double gain_db = 0.0;                    // initial gain, dB, [0, 24]
   double black_level = 0.0;                // digital numbers added to every pixel, [0, full scale)
   double noise_sigma = 0.0;                // read noise, digital numbers, [0, full scale]
+  double response_gamma = 1.0;             // output response exponent (1 = linear), (0, 10]
   double display_latency_ms = 0.0;         // the scene lags by this much, milliseconds, [0, 10000]
   uint32_t seed = 1;                       // noise generator seed
   Fault fault = Fault::kNone;

@@ -14,6 +14,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "datasets_synthetic/chessboard_views.h"
 #include "projection/projector.h"
 #include "tests/testing/testing.h"
 
@@ -141,67 +142,23 @@ TEST(CameraCalibration, TooFewViewsIsAStatus) {
   EXPECT_NE(why.find("lens_model"), std::string::npos);
 }
 
-// Renders the board through the true lens: every pixel is the mean of 4×4 sub-pixel rays
-// (a camera 4× finer with the same lens), intersected with the board plane.
-class BoardRenderer {
- public:
-  static constexpr int kSuper = 4;
-  BoardRenderer() {
-    std::vector<double> fine = kTrueIntrinsics;
-    for (int k = 0; k < 2; ++k) fine[k] *= kSuper;
-    for (int k = 2; k < 4; ++k) fine[k] = kSuper * fine[k] + (kSuper - 1) / 2.0;
-    const ProjectorGeometry fine_camera("LENSMODEL_OPENCV4", fine, kWidth * kSuper,
-                                        kHeight * kSuper, Eigen::Isometry3d::Identity());
-    std::vector<double> densities;
-    fine_camera.UnprojectImage(&rays_, &densities);
-  }
-
-  cv::Mat Render(const ChessboardSpec& board, const Eigen::Isometry3d& cam_from_board,
-                 double noise_sigma, uint32_t seed) const {
-    const Eigen::Isometry3d board_from_cam = cam_from_board.inverse();
-    const Vec3 origin = board_from_cam.translation();
-    const double s = board.square_size;
-    cv::Mat fine(kHeight * kSuper, kWidth * kSuper, CV_32F);
-    for (int row = 0; row < fine.rows; ++row) {
-      for (int col = 0; col < fine.cols; ++col) {
-        const Vec3 ray = board_from_cam.linear() * rays_[row * fine.cols + col];
-        float value = 0.35f;  // background
-        const double t = -origin.z() / ray.z();
-        if (t > 0.0) {
-          const Vec3 p = origin + t * ray;
-          const double u = p.x() / s + 1.0, v = p.y() / s + 1.0;  // squares from the board edge
-          if (u >= -0.7 && u < board.corners_x + 1.7 && v >= -0.7 && v < board.corners_y + 1.7) {
-            const bool inside = u >= 0 && u < board.corners_x + 1 && v >= 0 && v < board.corners_y + 1;
-            const bool dark = inside && ((static_cast<int>(u) + static_cast<int>(v)) % 2 == 0);
-            value = dark ? 0.08f : 0.85f;  // white margin around the squares
-          }
-        }
-        fine.at<float>(row, col) = value;
-      }
-    }
-    cv::Mat image;
-    cv::resize(fine, image, cv::Size(kWidth, kHeight), 0, 0, cv::INTER_AREA);
-    std::mt19937 random(seed);
-    std::normal_distribution<float> noise(0.0f, static_cast<float>(noise_sigma));
-    for (float& value : cv::Mat_<float>(image)) value += noise(random);
-    cv::Mat eight;
-    image.convertTo(eight, CV_8U, 255.0);
-    return eight;
-  }
-
- private:
-  std::vector<Vec3> rays_;
-};
+// Renders the board through the true lens (datasets_synthetic/chessboard_views.h: 4×4
+// supersampled rays met with the board plane).
+cv::Mat RenderBoard(const ChessboardSpec& board, const Eigen::Isometry3d& cam_from_board,
+                    uint32_t seed) {
+  const CameraGeometry camera("LENSMODEL_OPENCV4", kTrueIntrinsics, kWidth, kHeight,
+                              Eigen::Isometry3d::Identity());
+  return RenderChessboard(camera, board, cam_from_board, 0.01, seed);
+}
 
 TEST(CameraCalibration, RenderedImagesDetectedAndRefined) {
   const ChessboardSpec board = Board();
-  const BoardRenderer renderer;
   const std::vector<Eigen::Isometry3d> poses = BoardPoses(board);
   std::vector<ChessboardView> views;
   double detection_squares = 0.0;
   int detection_count = 0;
   for (size_t v = 0; v < poses.size(); ++v) {
-    const cv::Mat image = renderer.Render(board, poses[v], 0.01, static_cast<uint32_t>(v));
+    const cv::Mat image = RenderBoard(board, poses[v], static_cast<uint32_t>(v));
     ChessboardView view;
     view.name = "image" + std::to_string(v);
     ASSERT_TRUE(DetectChessboard(image, board, &view.corners)) << view.name;
@@ -253,12 +210,11 @@ TEST(CameraCalibration, RenderedImagesDetectedAndRefined) {
 // them without a board), as a user would run it.
 TEST(CalibrateCommand, WritesModelAndResiduals) {
   const ChessboardSpec board = Board();
-  const BoardRenderer renderer;
   testing::TempDir dir;
   std::filesystem::create_directories(dir / "session/frames");
   const std::vector<Eigen::Isometry3d> poses = BoardPoses(board);
   for (size_t v = 0; v < poses.size(); ++v) {
-    cv::Mat image = renderer.Render(board, poses[v], 0.01, static_cast<uint32_t>(v)), wide;
+    cv::Mat image = RenderBoard(board, poses[v], static_cast<uint32_t>(v)), wide;
     image.convertTo(wide, CV_16U, 257.0);
     char name[32];
     std::snprintf(name, sizeof(name), "%03zu_board.png", v);

@@ -1,0 +1,117 @@
+#pragma once
+// The rig directory (calibration/rig_directory.h) as the commands consume it, and the
+// photometry in the scene's units (issue 7):
+//
+// - `--rig RIG_DIR` for compensate and project: rig.json's projectors[] replace the scene's
+//   (parsed by the projection module exactly as scene projectors, model paths relative to
+//   RIG_DIR), and RIG_DIR/reflectance.npy, when rig.json names it, replaces the scene's
+//   per-patch reflectance.
+// - Absolute photometry: a flat field photographed by a camera registered in the room frame is,
+//   per camera pixel p (channel c) seeing a point x of fine patch i,
+//
+//       m_p,c = k_c · ρ_i,c · (G(x) · o_c + H_i,c) + camera black + ambient,
+//
+//   with o the projector's output for the field's drive (scene units: irradiance at 1 m on
+//   axis), G(x) the projector's geometric gain at x (0 where it does not light x: outside its
+//   image, facing away, occluded), H = F·B the bounce irradiance of the radiosity model
+//   (B = K⁻¹(ρ ⊙ Ḡ) o, Ḡ_i the patch's mean gain, exactly the projection rig's upper bound at
+//   max 1), and k_c the camera's value per unit exitance. So m is linear in o with the known
+//   per-pixel transfer t_p,c = k_c ρ_i,c (G(x) + (F b)_i,c), b = K⁻¹(ρ ⊙ Ḡ): given to
+//   CalibratePhotometry (calibration/photometric.h) it yields black and max in scene units.
+// - Per-patch reflectance: with o known, each seen patch's ρ_i = Σ_p m_p / Σ_p k (G(x_p) o +
+//   H_i) from the white-minus-black field (the radiosity equation B = ρ (E_irr + F B) solved for
+//   ρ with the measured B), H = F B where B is measured on the patches the camera sees and
+//   modelled with the scene's reflectance on the others.
+// The transfer uses the scene's nominal reflectance, so the absolute scale is tied to it: a
+// surface whose paint is 5% darker than the scene says makes max 5% low there, and the
+// reflectances found afterwards are relative to that scale (their area-weighted mean follows
+// the nominal one).
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include "geometry/patches.h"
+#include "geometry/scene.h"
+#include "projection/projector.h"
+
+namespace procam {
+
+// RIG_DIR/rig.json read for compensate and project.
+struct RigDirectory {
+  std::filesystem::path dir;
+  nlohmann::json json;                // rig.json as read
+  std::vector<Projector> projectors;  // rig.json's projectors[], paths relative to dir
+  // RIG_DIR/reflectance.npy (n,3) when rig.json has "reflectance", with the patch target it was
+  // estimated for; empty otherwise.
+  Eigen::MatrixX3d reflectance;
+  int reflectance_target_patches = 0;
+  // What result.json records about the rig.
+  nlohmann::json Describe() const;
+};
+
+// Reads RIG_DIR/rig.json. Throws IoError naming RIG_DIR/rig.json and the key: no file, no
+// non-empty "projectors", a projector whose photometry is in camera units ("photometric"
+// NAME.units, written by `calibrate photometric` without --scene), and every error of a scene
+// file's projectors (missing model file, no `max`, bad mixing, ...).
+RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir);
+
+// Replaces the fine level's reflectance by the rig's (and the coarse level's by the area-weighted
+// mean of its children). Throws IoError naming RIG_DIR/rig.json when the rig's reflectance was
+// estimated for another patch count. Does nothing when the rig has none.
+void ApplyRigReflectance(const RigDirectory& rig, PatchHierarchy* patches);
+
+// What a camera pixel sees and how one projector lights it.
+struct CameraPixelLighting {
+  int width = 0, height = 0;
+  std::vector<int> patch;    // fine patch seen (row-major), −1 for none (or its unlit side)
+  std::vector<double> gain;  // the projector's geometric gain G at the point (1/m²), 0 if unlit
+};
+
+// Casts every camera pixel's ray (camera = a ProjectorGeometry whose proj_from_world is
+// cam_from_room) against the fine patches, and lights the hit from the projector: in its image,
+// facing it and unoccluded (shadow ray against the scene's surfaces, `ray_margin` metres).
+CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& level,
+                                      const ProjectorGeometry& projector,
+                                      const ProjectorGeometry& camera, double ray_margin = 1e-4);
+
+// The radiosity model of one projector at unit output (black 0, max 1 on every channel):
+// Ḡ (n,3, mean direct irradiance per patch, = the projection rig's upper bound / ρ) and
+// bounce = F·b (n,3, bounce irradiance per patch), b = K⁻¹(ρ ⊙ Ḡ).
+struct UnitLightModel {
+  Eigen::MatrixX3d direct_irradiance;
+  Eigen::MatrixX3d bounce_irradiance;
+};
+UnitLightModel ModelUnitLight(const PatchLevel& level, const Eigen::MatrixXd& form_factors,
+                              const Projector& projector);
+
+// Per-pixel transfer (CV_32FC3, camera B, G, R: camera value per unit projector output) for
+// PhotometricCalibrationOptions::transfer: k_c ρ_i,c (G_p + bounce_i,c); 0 where the pixel sees
+// no patch. `camera_scale` is k (R, G, B): camera value per unit exitance.
+cv::Mat PhotometricTransfer(const CameraPixelLighting& lighting, const PatchLevel& level,
+                            const UnitLightModel& model, const Eigen::Vector3d& camera_scale);
+
+struct ReflectanceEstimate {
+  Eigen::MatrixX3d reflectance;  // (n,3): estimated where seen, the level's nominal elsewhere
+  std::vector<int> pixels;       // camera pixels used per patch
+  int patches_seen = 0;          // with at least min_pixels pixels
+};
+
+// Per-patch reflectance from a white-minus-black field `difference` (camera B, G, R, camera
+// values, CV_32FC3; ambient and camera black cancel in the difference) and the projector's
+// output difference `output` = max − black (R, G, B, scene units). Patches with fewer than
+// `min_pixels` usable pixels (`mask`, CV_8UC1, empty = all) keep the nominal reflectance.
+// Estimates are clamped to [0, 0.99].
+ReflectanceEstimate EstimatePatchReflectance(const CameraPixelLighting& lighting,
+                                             const PatchLevel& level,
+                                             const Eigen::MatrixXd& form_factors,
+                                             const UnitLightModel& model, const cv::Mat& difference,
+                                             const cv::Mat& mask, const Eigen::Vector3d& output,
+                                             const Eigen::Vector3d& camera_scale,
+                                             int min_pixels = 4);
+
+}  // namespace procam

@@ -1,0 +1,873 @@
+#include "calibration/registration.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <numeric>
+#include <random>
+#include <stdexcept>
+
+#include <Eigen/Eigenvalues>
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+extern "C" {
+#include <mrcal/mrcal.h>
+}
+
+#include "geometry/io.h"
+#include "geometry/ray_scene.h"
+
+namespace procam {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+Vec3 AngleAxisOf(const Eigen::Matrix3d& rotation) {
+  const Eigen::AngleAxisd angle_axis(rotation);
+  return angle_axis.angle() * angle_axis.axis();
+}
+
+Eigen::Matrix3d RotationOf(const Vec3& angle_axis) {
+  const double angle = angle_axis.norm();
+  return angle > 0.0 ? Eigen::AngleAxisd(angle, angle_axis / angle).toRotationMatrix()
+                     : Eigen::Matrix3d::Identity();
+}
+
+// A rigid transform as Ceres parameter blocks: angle-axis rotation, then translation.
+struct PoseBlock {
+  double rotation[3] = {0, 0, 0};
+  double translation[3] = {0, 0, 0};
+  explicit PoseBlock(const Eigen::Isometry3d& pose = Eigen::Isometry3d::Identity()) {
+    const Vec3 r = AngleAxisOf(pose.linear());
+    for (int i = 0; i < 3; ++i) {
+      rotation[i] = r(i);
+      translation[i] = pose.translation()(i);
+    }
+  }
+  Eigen::Isometry3d Pose() const {
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.linear() = RotationOf(Vec3(rotation[0], rotation[1], rotation[2]));
+    pose.translation() = Vec3(translation[0], translation[1], translation[2]);
+    return pose;
+  }
+  bool Finite() const {
+    for (int i = 0; i < 3; ++i)
+      if (!std::isfinite(rotation[i]) || !std::isfinite(translation[i])) return false;
+    return true;
+  }
+};
+
+double TurnDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
+  return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / kPi;
+}
+
+ceres::Solver::Options SolverOptions(int max_iterations) {
+  ceres::Solver::Options options;
+  options.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
+  options.max_num_iterations = max_iterations;
+  options.function_tolerance = 1e-12;
+  options.gradient_tolerance = 1e-12;
+  options.parameter_tolerance = 1e-12;
+  options.num_threads = 2;
+  return options;
+}
+
+// Closest point of a convex planar polygon to p.
+Vec3 ClosestOnFacet(const ModelFacet& facet, const Vec3& p) {
+  const Vec3 in_plane = p - (facet.normal.dot(p) + facet.offset) * facet.normal;
+  const size_t n = facet.corners.size();
+  bool inside = true;
+  for (size_t i = 0; i < n && inside; ++i) {
+    const Vec3& a = facet.corners[i];
+    const Vec3& b = facet.corners[(i + 1) % n];
+    if ((b - a).cross(in_plane - a).dot(facet.normal) < 0.0) inside = false;
+  }
+  if (inside) return in_plane;
+  Vec3 best = facet.corners[0];
+  double best_sq = std::numeric_limits<double>::infinity();
+  for (size_t i = 0; i < n; ++i) {
+    const Vec3& a = facet.corners[i];
+    const Vec3& b = facet.corners[(i + 1) % n];
+    const Vec3 ab = b - a;
+    const double s = std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0);
+    const Vec3 q = a + s * ab;
+    if ((q - p).squaredNorm() < best_sq) {
+      best_sq = (q - p).squaredNorm();
+      best = q;
+    }
+  }
+  return best;
+}
+
+ModelFacet MakeFacet(int surface, const std::vector<Vec3>& corners) {
+  ModelFacet facet;
+  facet.surface = surface;
+  facet.corners = corners;
+  Vec3 normal = Vec3::Zero();  // Newell's method: robust for any planar polygon
+  Vec3 centre = Vec3::Zero();
+  for (size_t i = 0; i < corners.size(); ++i) {
+    const Vec3& a = corners[i];
+    const Vec3& b = corners[(i + 1) % corners.size()];
+    normal += a.cross(b);
+    centre += a;
+  }
+  facet.normal = normal.normalized();
+  facet.offset = -facet.normal.dot(centre / static_cast<double>(corners.size()));
+  return facet;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// RoomModel
+
+RoomModel::RoomModel(const Scene& scene) : scene_(scene) {
+  if (scene.surfaces.empty()) throw std::invalid_argument("RoomModel: the scene has no surface");
+  facets_of_surface_.resize(scene.surfaces.size());
+  for (size_t s = 0; s < scene.surfaces.size(); ++s) {
+    const Surface& surface = scene.surfaces[s];
+    if (surface.kind == Surface::Kind::kQuad) {
+      facets_of_surface_[s].push_back(static_cast<int>(facets_.size()));
+      facets_.push_back(MakeFacet(static_cast<int>(s), {surface.quad.begin(), surface.quad.end()}));
+    } else {
+      for (const MeshTriangle& triangle : surface.mesh_triangles) {
+        facets_of_surface_[s].push_back(static_cast<int>(facets_.size()));
+        facets_.push_back(MakeFacet(static_cast<int>(s), {surface.mesh_vertices[triangle.vertex[0]],
+                                                          surface.mesh_vertices[triangle.vertex[1]],
+                                                          surface.mesh_vertices[triangle.vertex[2]]}));
+      }
+    }
+  }
+  rays_ = std::make_unique<RayScene>(scene_);
+}
+
+RoomModel::~RoomModel() = default;
+
+int RoomModel::Intersect(const Vec3& origin, const Vec3& direction, double* t) const {
+  double t_hit = 0.0;
+  int surface = -1;
+  if (!rays_->Intersect(origin, direction, 0.0, std::numeric_limits<double>::infinity(), &t_hit,
+                        &surface) ||
+      surface < 0 || surface >= static_cast<int>(facets_of_surface_.size()))
+    return -1;
+  const std::vector<int>& candidates = facets_of_surface_[surface];
+  int best = candidates.empty() ? -1 : candidates[0];
+  if (candidates.size() > 1) {
+    // Which triangle of the mesh: the one nearest to the hit point.
+    const Vec3 hit = origin + t_hit * direction;
+    double best_distance = std::numeric_limits<double>::infinity();
+    for (const int f : candidates) {
+      const double distance = (ClosestOnFacet(facets_[f], hit) - hit).squaredNorm();
+      if (distance < best_distance) {
+        best_distance = distance;
+        best = f;
+      }
+    }
+  }
+  if (best >= 0 && t) {
+    // The hit on the facet's exact plane (Embree works in single precision).
+    const ModelFacet& facet = facets_[best];
+    *t = -(facet.normal.dot(origin) + facet.offset) / facet.normal.dot(direction);
+  }
+  return best;
+}
+
+int RoomModel::Closest(const Vec3& p, Vec3* nearest, double* distance) const {
+  int best = -1;
+  double best_sq = std::numeric_limits<double>::infinity();
+  for (size_t f = 0; f < facets_.size(); ++f) {
+    const ModelFacet& facet = facets_[f];
+    // The plane distance is a lower bound of the facet distance.
+    const double plane = facet.normal.dot(p) + facet.offset;
+    if (plane * plane >= best_sq) continue;
+    const Vec3 q = ClosestOnFacet(facet, p);
+    const double sq = (q - p).squaredNorm();
+    if (sq < best_sq) {
+      best_sq = sq;
+      best = static_cast<int>(f);
+      if (nearest) *nearest = q;
+    }
+  }
+  if (distance) *distance = std::sqrt(best_sq);
+  return best;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Joint refinement
+
+bool RoomCalibrationOptions::Check(std::string* why) const {
+  auto fail = [why](const char* message) {
+    if (why) *why = message;
+    return false;
+  };
+  if (!(loss_scale > 0.0) || !std::isfinite(loss_scale)) return fail("loss_scale must be > 0");
+  if (!(outlier_threshold > 0.0) || !std::isfinite(outlier_threshold))
+    return fail("outlier_threshold must be > 0");
+  if (min_correspondences < 12) return fail("min_correspondences must be at least 12");
+  if (max_correspondences < min_correspondences)
+    return fail("max_correspondences must be at least min_correspondences");
+  if (max_rounds < 1) return fail("max_rounds must be at least 1");
+  if (max_iterations < 1) return fail("max_iterations must be at least 1");
+  return true;
+}
+
+std::string RoomCalibrationSummary::BriefReport() const {
+  static const char* const kNames[] = {"converged", "facets not settled", "seed failed",
+                                       "too few points", "solver failed"};
+  std::string text = std::string("Room calibration: ") + kNames[termination];
+  char line[320];
+  std::snprintf(line, sizeof(line),
+                "; %d rounds; cost %.4g -> %.4g; camera moved %.1f mm, turned %.3f deg from the "
+                "guess; %.2f s",
+                rounds, initial_cost, final_cost, camera_moved_mm, camera_turned_deg, time_s);
+  text += line;
+  for (size_t k = 0; k < projectors.size(); ++k) {
+    const RoomProjectorSummary& p = projectors[k];
+    std::snprintf(line, sizeof(line),
+                  "\n  projector %zu: %d correspondences, %d used, %d on the model, %d outliers; "
+                  "seed RMS %.3g px, RMS %.4g px per coordinate, max %.3g px",
+                  k, p.correspondences, p.used, p.points, p.outliers, p.seed_rms, p.rms, p.max_norm);
+    text += line;
+  }
+  if (!message.empty()) text += "\n  " + message;
+  return text;
+}
+
+namespace {
+
+// Camera ray (fixed lens) → through room_from_camera into the room → meets a fixed facet plane
+// → the point projected by the projector (proj_from_room, fx fy cx cy k1 k2) → minus the
+// decoded projector pixel.
+struct RoomReprojection {
+  RoomReprojection(const Vec3& ray_in_cam, const Vec3& normal, double offset, const Vec2& observed)
+      : ray_in_cam(ray_in_cam), normal(normal), offset(offset), observed(observed) {}
+  template <typename T>
+  bool operator()(const T* camera_rotation, const T* camera_translation, const T* intrinsics,
+                  const T* projector_rotation, const T* projector_translation,
+                  T* residual) const {
+    const T ray[3] = {T(ray_in_cam.x()), T(ray_in_cam.y()), T(ray_in_cam.z())};
+    T direction[3];
+    ceres::AngleAxisRotatePoint(camera_rotation, ray, direction);
+    const T along_normal = T(normal.x()) * direction[0] + T(normal.y()) * direction[1] +
+                           T(normal.z()) * direction[2];
+    const T origin_height = T(normal.x()) * camera_translation[0] +
+                            T(normal.y()) * camera_translation[1] +
+                            T(normal.z()) * camera_translation[2] + T(offset);
+    const T s = -origin_height / along_normal;
+    T p_in_room[3];
+    for (int i = 0; i < 3; ++i) p_in_room[i] = camera_translation[i] + s * direction[i];
+    T p_in_proj[3];
+    ceres::AngleAxisRotatePoint(projector_rotation, p_in_room, p_in_proj);
+    for (int i = 0; i < 3; ++i) p_in_proj[i] += projector_translation[i];
+    const T x = p_in_proj[0] / p_in_proj[2], y = p_in_proj[1] / p_in_proj[2];
+    const T r2 = x * x + y * y;
+    const T radial = T(1.0) + intrinsics[4] * r2 + intrinsics[5] * r2 * r2;
+    residual[0] = intrinsics[0] * x * radial + intrinsics[2] - T(observed.x());
+    residual[1] = intrinsics[1] * y * radial + intrinsics[3] - T(observed.y());
+    return true;
+  }
+  Vec3 ray_in_cam;
+  Vec3 normal;
+  double offset;
+  Vec2 observed;
+};
+
+struct ProjectorState {
+  double intrinsics[6] = {0, 0, 0, 0, 0, 0};
+  PoseBlock proj_from_room;
+};
+
+// Per correspondence: its camera ray (fixed) and the facet it meets under the current pose.
+struct Correspondence {
+  Vec2 camera_pixel;
+  Vec3 ray_in_cam;
+  Vec2 observed;
+  int facet = -1;
+  bool inlier = true;
+};
+
+Vec2 Residual(const Correspondence& c, const ModelFacet& facet, const PoseBlock& camera,
+              const ProjectorState& projector) {
+  Vec2 r;
+  RoomReprojection(c.ray_in_cam, facet.normal, facet.offset, c.observed)(
+      camera.rotation, camera.translation, projector.intrinsics, projector.proj_from_room.rotation,
+      projector.proj_from_room.translation, r.data());
+  return r;
+}
+
+// Re-chooses each correspondence's facet from the camera pose; returns how many changed.
+int Associate(const RoomModel& model, const PoseBlock& camera,
+              std::vector<std::vector<Correspondence>>* correspondences) {
+  const Eigen::Isometry3d room_from_camera = camera.Pose();
+  int changed = 0;
+  for (std::vector<Correspondence>& list : *correspondences)
+    for (Correspondence& c : list) {
+      double t = 0.0;
+      int facet = model.Intersect(room_from_camera.translation(),
+                                  room_from_camera.linear() * c.ray_in_cam, &t);
+      if (facet >= 0 && !(t > 0.0)) facet = -1;
+      if (facet != c.facet) ++changed;
+      c.facet = facet;
+    }
+  return changed;
+}
+
+}  // namespace
+
+bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model,
+                   const RoomCalibrationProblem& problem,
+                   const Eigen::Isometry3d& room_from_camera_guess, RoomCalibration* calibration,
+                   RoomCalibrationSummary* summary) {
+  const auto start = std::chrono::steady_clock::now();
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument("RoomCalibrationOptions: " + why);
+  Vec3 probe;
+  if (!UnprojectCameraPixel(problem.camera_lens_model, problem.camera_intrinsics, Vec2::Zero(),
+                            &probe))
+    throw std::invalid_argument("CalibrateRoom: camera lens must be LENSMODEL_PINHOLE (4 "
+                                "intrinsics) or LENSMODEL_OPENCV4 (8), got " +
+                                problem.camera_lens_model);
+  if (problem.projectors.empty()) throw std::invalid_argument("CalibrateRoom: no projector");
+  for (const ProjectorObservations& p : problem.projectors) {
+    if (p.width < 1 || p.height < 1)
+      throw std::invalid_argument("CalibrateRoom: projector '" + p.name +
+                                  "': size must be at least 1x1");
+    if (p.camera_pixels.size() != p.projector_pixels.size())
+      throw std::invalid_argument("CalibrateRoom: projector '" + p.name +
+                                  "': camera and projector pixel counts differ");
+  }
+  const int projector_count = static_cast<int>(problem.projectors.size());
+  *summary = RoomCalibrationSummary();
+  summary->projectors.resize(projector_count);
+  auto finish = [&](RoomCalibrationSummary::Termination termination, std::string message) {
+    summary->termination = termination;
+    if (!message.empty())
+      summary->message = summary->message.empty() ? message : summary->message + "; " + message;
+    summary->time_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return termination == RoomCalibrationSummary::kConverged ||
+           termination == RoomCalibrationSummary::kNotSettled;
+  };
+
+  // Camera rays, once: the lens is fixed.
+  std::vector<std::vector<Correspondence>> correspondences(projector_count);
+  for (int k = 0; k < projector_count; ++k) {
+    const ProjectorObservations& p = problem.projectors[k];
+    summary->projectors[k].correspondences = static_cast<int>(p.camera_pixels.size());
+    const size_t stride = std::max<size_t>(
+        1, (p.camera_pixels.size() + options.max_correspondences - 1) / options.max_correspondences);
+    for (size_t i = 0; i < p.camera_pixels.size(); i += stride) {
+      Correspondence c;
+      if (!p.camera_pixels[i].allFinite() || !p.projector_pixels[i].allFinite() ||
+          !UnprojectCameraPixel(problem.camera_lens_model, problem.camera_intrinsics,
+                                p.camera_pixels[i], &c.ray_in_cam))
+        continue;
+      c.camera_pixel = p.camera_pixels[i];
+      c.observed = p.projector_pixels[i];
+      correspondences[k].push_back(c);
+    }
+    summary->projectors[k].used = static_cast<int>(correspondences[k].size());
+  }
+  PoseBlock camera(room_from_camera_guess);
+  Associate(model, camera, &correspondences);
+
+  // Seed: each projector alone against the model's planes as the guess puts them in the camera.
+  const Eigen::Isometry3d cam_from_room_guess = room_from_camera_guess.inverse();
+  std::vector<ProjectorState> projectors(projector_count);
+  for (int k = 0; k < projector_count; ++k) {
+    ProjectorCalibrationProblem seed_problem;
+    seed_problem.camera_lens_model = problem.camera_lens_model;
+    seed_problem.camera_intrinsics = problem.camera_intrinsics;
+    seed_problem.projector_width = problem.projectors[k].width;
+    seed_problem.projector_height = problem.projectors[k].height;
+    for (const ModelFacet& facet : model.facets()) {
+      PlaneInCam plane;
+      plane.normal = cam_from_room_guess.linear() * facet.normal;
+      plane.offset = facet.offset + facet.normal.dot(room_from_camera_guess.translation());
+      seed_problem.planes.push_back(plane);
+    }
+    const ProjectorObservations& p = problem.projectors[k];
+    for (const Correspondence& c : correspondences[k])
+      if (c.facet >= 0) seed_problem.correspondences.push_back({c.camera_pixel, c.observed, c.facet});
+    ProjectorCalibrationOptions seed_options;
+    seed_options.refine_distortion = options.refine_distortion;
+    seed_options.loss_scale = options.loss_scale;
+    seed_options.outlier_threshold = options.outlier_threshold;
+    seed_options.max_iterations = options.max_iterations;
+    seed_options.min_correspondences = options.min_correspondences;
+    ProjectorCalibration seed;
+    ProjectorCalibrationSummary seed_summary;
+    if (!CalibrateProjector(seed_options, seed_problem, &seed, &seed_summary))
+      return finish(RoomCalibrationSummary::kSeedFailed,
+                    "projector '" + p.name + "': " + seed_summary.BriefReport());
+    summary->projectors[k].seed_rms = seed_summary.rms;
+    for (int i = 0; i < 4; ++i) projectors[k].intrinsics[i] = seed.intrinsics[i];
+    if (seed.intrinsics.size() >= 6) {
+      projectors[k].intrinsics[4] = seed.intrinsics[4];
+      projectors[k].intrinsics[5] = seed.intrinsics[5];
+    }
+    projectors[k].proj_from_room = PoseBlock(seed.proj_from_cam * cam_from_room_guess);
+  }
+
+  // Joint solves: robust until the facets settle, then least squares on the inliers.
+  auto solve = [&](bool robust, ceres::Solver::Summary* ceres_summary) {
+    ceres::Problem ceres_problem;
+    for (int k = 0; k < projector_count; ++k) {
+      ProjectorState& state = projectors[k];
+      for (const Correspondence& c : correspondences[k]) {
+        if (c.facet < 0 || (!robust && !c.inlier)) continue;
+        const ModelFacet& facet = model.facets()[c.facet];
+        ceres_problem.AddResidualBlock(
+            new ceres::AutoDiffCostFunction<RoomReprojection, 2, 3, 3, 6, 3, 3>(
+                new RoomReprojection(c.ray_in_cam, facet.normal, facet.offset, c.observed)),
+            robust ? new ceres::CauchyLoss(options.loss_scale) : nullptr, camera.rotation,
+            camera.translation, state.intrinsics, state.proj_from_room.rotation,
+            state.proj_from_room.translation);
+      }
+      if (!options.refine_distortion && ceres_problem.HasParameterBlock(state.intrinsics))
+        ceres_problem.SetManifold(state.intrinsics, new ceres::SubsetManifold(6, {4, 5}));
+    }
+    ceres::Solve(SolverOptions(options.max_iterations), &ceres_problem, ceres_summary);
+    if (summary->rounds == 0) summary->initial_cost = ceres_summary->initial_cost;
+    summary->final_cost = ceres_summary->final_cost;
+    ++summary->rounds;
+    return ceres_summary->IsSolutionUsable() && camera.Finite();
+  };
+  auto count_points = [&](int k, bool inliers_only) {
+    int n = 0;
+    for (const Correspondence& c : correspondences[k])
+      if (c.facet >= 0 && (!inliers_only || c.inlier)) ++n;
+    return n;
+  };
+  auto check_counts = [&](bool inliers_only) {
+    for (int k = 0; k < projector_count; ++k)
+      if (count_points(k, inliers_only) < options.min_correspondences) return k;
+    return -1;
+  };
+
+  ceres::Solver::Summary ceres_summary;
+  bool settled = false;
+  for (int round = 0; round < options.max_rounds && !settled; ++round) {
+    const int short_of = check_counts(false);
+    if (short_of >= 0)
+      return finish(RoomCalibrationSummary::kTooFewPoints,
+                    "projector '" + problem.projectors[short_of].name + "'");
+    if (!solve(true, &ceres_summary))
+      return finish(RoomCalibrationSummary::kSolverFailed, ceres_summary.message);
+    settled = Associate(model, camera, &correspondences) == 0;
+  }
+  // Inliers of the robust fit, then least squares on them; re-associate and repeat while any
+  // facet changes (a point near an edge can cross it as the camera moves).
+  bool changed = true;
+  for (int round = 0; round < options.max_rounds && changed; ++round) {
+    for (int k = 0; k < projector_count; ++k)
+      for (Correspondence& c : correspondences[k])
+        c.inlier = c.facet >= 0 &&
+                   Residual(c, model.facets()[c.facet], camera, projectors[k]).norm() <=
+                       options.outlier_threshold;
+    const int short_of = check_counts(true);
+    if (short_of >= 0)
+      return finish(RoomCalibrationSummary::kTooFewPoints,
+                    "too few inliers for projector '" + problem.projectors[short_of].name + "'");
+    if (!solve(false, &ceres_summary))
+      return finish(RoomCalibrationSummary::kSolverFailed, ceres_summary.message);
+    changed = Associate(model, camera, &correspondences) > 0;
+  }
+  settled = settled && !changed;
+
+  *calibration = RoomCalibration();
+  calibration->room_from_camera = camera.Pose();
+  for (int k = 0; k < projector_count; ++k) {
+    const ProjectorState& state = projectors[k];
+    RoomProjector out;
+    out.name = problem.projectors[k].name;
+    out.width = problem.projectors[k].width;
+    out.height = problem.projectors[k].height;
+    out.intrinsics.assign(state.intrinsics, state.intrinsics + 4);
+    if (options.refine_distortion) {
+      out.lens_model = "LENSMODEL_OPENCV4";
+      out.intrinsics.insert(out.intrinsics.end(),
+                            {state.intrinsics[4], state.intrinsics[5], 0.0, 0.0});
+    } else {
+      out.lens_model = "LENSMODEL_PINHOLE";
+    }
+    out.proj_from_room = state.proj_from_room.Pose();
+    for (const double value : out.intrinsics)
+      if (!std::isfinite(value)) return finish(RoomCalibrationSummary::kSolverFailed, "NaN");
+    if (!state.proj_from_room.Finite())
+      return finish(RoomCalibrationSummary::kSolverFailed, "non-finite pose");
+    calibration->projectors.push_back(out);
+
+    RoomProjectorSummary& s = summary->projectors[k];
+    s.points = count_points(k, false);
+    s.outliers = s.points - count_points(k, true);
+    double sq = 0.0;
+    int n = 0;
+    for (const Correspondence& c : correspondences[k]) {
+      if (c.facet < 0 || !c.inlier) continue;
+      const double norm = Residual(c, model.facets()[c.facet], camera, state).norm();
+      sq += norm * norm;
+      ++n;
+      s.max_norm = std::max(s.max_norm, norm);
+    }
+    s.rms = n ? std::sqrt(sq / (2.0 * n)) : 0.0;
+  }
+  summary->camera_moved_mm =
+      1e3 * (calibration->room_from_camera.translation() - room_from_camera_guess.translation())
+                .norm();
+  summary->camera_turned_deg =
+      TurnDeg(calibration->room_from_camera.linear(), room_from_camera_guess.linear());
+  return finish(settled ? RoomCalibrationSummary::kConverged : RoomCalibrationSummary::kNotSettled,
+                ceres_summary.message);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Triangulation
+
+std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem,
+                                           const RoomCalibration& calibration, double max_gap) {
+  std::vector<TriangulatedPoint> points;
+  for (size_t k = 0; k < problem.projectors.size() && k < calibration.projectors.size(); ++k) {
+    const RoomProjector& projector = calibration.projectors[k];
+    const Eigen::Isometry3d cam_from_proj =
+        (projector.proj_from_room * calibration.room_from_camera).inverse();
+    const Vec3 centre = cam_from_proj.translation();
+    const ProjectorObservations& p = problem.projectors[k];
+    for (size_t i = 0; i < p.camera_pixels.size(); ++i) {
+      Vec3 ray_cam, ray_proj;
+      if (!p.camera_pixels[i].allFinite() || !p.projector_pixels[i].allFinite() ||
+          !UnprojectCameraPixel(problem.camera_lens_model, problem.camera_intrinsics,
+                                p.camera_pixels[i], &ray_cam) ||
+          !UnprojectCameraPixel(projector.lens_model, projector.intrinsics,
+                                p.projector_pixels[i], &ray_proj))
+        continue;
+      // Closest points of x = a·d1 and x = c + b·d2.
+      const Vec3 d1 = ray_cam.normalized();
+      const Vec3 d2 = (cam_from_proj.linear() * ray_proj).normalized();
+      const double d12 = d1.dot(d2);
+      const double denominator = 1.0 - d12 * d12;
+      if (denominator < 1e-12) continue;
+      const double e1 = d1.dot(centre), e2 = d2.dot(centre);
+      const double a = (e1 - d12 * e2) / denominator;
+      const double b = (d12 * e1 - e2) / denominator;
+      if (!(a > 0.0) || !(b > 0.0)) continue;
+      const Vec3 on_camera_ray = a * d1, on_projector_ray = centre + b * d2;
+      TriangulatedPoint point;
+      point.p_in_cam = 0.5 * (on_camera_ray + on_projector_ray);
+      point.gap = (on_camera_ray - on_projector_ray).norm();
+      point.projector = static_cast<int>(k);
+      if (point.gap <= max_gap && point.p_in_cam.allFinite()) points.push_back(point);
+    }
+  }
+  return points;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Registration
+
+DistanceStats ComputeDistanceStats(std::vector<double> distances_m) {
+  DistanceStats stats;
+  stats.points = static_cast<int>(distances_m.size());
+  if (distances_m.empty()) return stats;
+  std::sort(distances_m.begin(), distances_m.end());
+  double sq = 0.0;
+  for (const double d : distances_m) sq += d * d;
+  const size_t n = distances_m.size();
+  stats.rms_mm = 1e3 * std::sqrt(sq / n);
+  stats.median_mm = 1e3 * distances_m[n / 2];
+  stats.p95_mm = 1e3 * distances_m[std::min(n - 1, static_cast<size_t>(0.95 * n))];
+  stats.max_mm = 1e3 * distances_m.back();
+  return stats;
+}
+
+bool RegistrationOptions::Check(std::string* why) const {
+  auto fail = [why](const char* message) {
+    if (why) *why = message;
+    return false;
+  };
+  for (const double value : {initial_gate, min_gate, huber_scale, inlier_distance, tolerance})
+    if (!(value > 0.0) || !std::isfinite(value))
+      return fail("gates, huber_scale, inlier_distance and tolerance must be > 0");
+  if (max_points < 10) return fail("max_points must be at least 10");
+  if (max_iterations < 1) return fail("max_iterations must be at least 1");
+  return true;
+}
+
+std::string RegistrationSummary::BriefReport() const {
+  static const char* const kNames[] = {"converged", "max iterations", "too few points",
+                                       "solver failed"};
+  char line[400];
+  std::snprintf(line, sizeof(line),
+                "Registration (ICP): %s after %d iterations; %d points, %.1f%% inliers; distance "
+                "to the model over inliers: RMS %.2f mm, median %.2f mm, 95%% %.2f mm (at the "
+                "guess: RMS %.1f mm); %.2f s",
+                kNames[termination], iterations, points, 100.0 * inlier_fraction, inliers.rms_mm,
+                inliers.median_mm, inliers.p95_mm, initial_rms_mm, time_s);
+  return line;
+}
+
+namespace {
+
+struct PointToPlane {
+  PointToPlane(const Vec3& p_in_cam, const Vec3& normal, double offset)
+      : p_in_cam(p_in_cam), normal(normal), offset(offset) {}
+  template <typename T>
+  bool operator()(const T* rotation, const T* translation, T* residual) const {
+    const T p[3] = {T(p_in_cam.x()), T(p_in_cam.y()), T(p_in_cam.z())};
+    T q[3];
+    ceres::AngleAxisRotatePoint(rotation, p, q);
+    residual[0] = T(offset);
+    for (int i = 0; i < 3; ++i) residual[0] += T(normal(i)) * (q[i] + translation[i]);
+    return true;
+  }
+  Vec3 p_in_cam, normal;
+  double offset;
+};
+
+}  // namespace
+
+bool RegisterModelToCloud(const RegistrationOptions& options, const RoomModel& model,
+                          const std::vector<Vec3>& points_in_cam,
+                          const Eigen::Isometry3d& guess, Eigen::Isometry3d* room_from_camera,
+                          RegistrationSummary* summary) {
+  const auto start = std::chrono::steady_clock::now();
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument("RegistrationOptions: " + why);
+  *summary = RegistrationSummary();
+  *room_from_camera = guess;
+  auto finish = [&](RegistrationSummary::Termination termination) {
+    summary->termination = termination;
+    summary->time_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return termination == RegistrationSummary::kConverged ||
+           termination == RegistrationSummary::kMaxIterations;
+  };
+  // Thin evenly.
+  std::vector<Vec3> points;
+  const size_t stride =
+      std::max<size_t>(1, (points_in_cam.size() + options.max_points - 1) / options.max_points);
+  for (size_t i = 0; i < points_in_cam.size(); i += stride) points.push_back(points_in_cam[i]);
+  summary->points = static_cast<int>(points.size());
+
+  PoseBlock pose(guess);
+  double gate = options.initial_gate;
+  auto termination = RegistrationSummary::kMaxIterations;
+  for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
+    const Eigen::Isometry3d current = pose.Pose();
+    std::vector<int> facets(points.size());
+    std::vector<double> distances(points.size());
+    for (size_t i = 0; i < points.size(); ++i)
+      facets[i] = model.Closest(current * points[i], nullptr, &distances[i]);
+    std::vector<double> matched;
+    for (size_t i = 0; i < points.size(); ++i)
+      if (facets[i] >= 0 && distances[i] <= gate) matched.push_back(distances[i]);
+    if (matched.size() < 6) return finish(RegistrationSummary::kTooFewPoints);
+    if (iteration == 0) summary->initial_rms_mm = ComputeDistanceStats(matched).rms_mm;
+
+    ceres::Problem problem;
+    for (size_t i = 0; i < points.size(); ++i) {
+      if (facets[i] < 0 || distances[i] > gate) continue;
+      const ModelFacet& facet = model.facets()[facets[i]];
+      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<PointToPlane, 1, 3, 3>(
+                                   new PointToPlane(points[i], facet.normal, facet.offset)),
+                               new ceres::HuberLoss(options.huber_scale), pose.rotation,
+                               pose.translation);
+    }
+    ceres::Solver::Options solver_options = SolverOptions(50);
+    solver_options.linear_solver_type = ceres::DENSE_QR;
+    ceres::Solver::Summary ceres_summary;
+    ceres::Solve(solver_options, &problem, &ceres_summary);
+    if (!ceres_summary.IsSolutionUsable() || !pose.Finite())
+      return finish(RegistrationSummary::kSolverFailed);
+    summary->iterations = iteration + 1;
+
+    // The gate shrinks to a robust multiple of the typical distance.
+    std::nth_element(matched.begin(), matched.begin() + matched.size() / 2, matched.end());
+    const double previous_gate = gate;
+    gate = std::max(options.min_gate, std::min(gate, 3.0 * 1.4826 * matched[matched.size() / 2]));
+    const Eigen::Isometry3d moved = pose.Pose();
+    const double step = (moved.translation() - current.translation()).norm() +
+                        TurnDeg(moved.linear(), current.linear()) * kPi / 180.0;
+    if (step < options.tolerance && gate > 0.99 * previous_gate) {
+      termination = RegistrationSummary::kConverged;
+      break;
+    }
+  }
+  *room_from_camera = pose.Pose();
+
+  std::vector<double> all, inliers;
+  std::vector<std::vector<double>> per_surface(model.scene().surfaces.size());
+  for (const Vec3& p : points) {
+    double distance = 0.0;
+    const int facet = model.Closest(*room_from_camera * p, nullptr, &distance);
+    if (facet < 0) continue;
+    all.push_back(distance);
+    if (distance <= options.inlier_distance) {
+      inliers.push_back(distance);
+      per_surface[model.facets()[facet].surface].push_back(distance);
+    }
+  }
+  summary->all = ComputeDistanceStats(all);
+  summary->inliers = ComputeDistanceStats(inliers);
+  summary->inlier_fraction = all.empty() ? 0.0 : static_cast<double>(inliers.size()) / all.size();
+  for (std::vector<double>& d : per_surface) summary->per_surface.push_back(ComputeDistanceStats(d));
+  return finish(termination);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Planes by RANSAC
+
+bool PlaneFitOptions::Check(std::string* why) const {
+  auto fail = [why](const char* message) {
+    if (why) *why = message;
+    return false;
+  };
+  if (!(distance > 0.0) || !std::isfinite(distance)) return fail("distance must be > 0");
+  if (min_inliers < 3) return fail("min_inliers must be at least 3");
+  if (!(min_fraction >= 0.0 && min_fraction < 1.0)) return fail("min_fraction must be in [0, 1)");
+  if (max_planes < 1) return fail("max_planes must be at least 1");
+  if (iterations < 1) return fail("iterations must be at least 1");
+  return true;
+}
+
+std::vector<FittedPlane> FitPlanes(const PlaneFitOptions& options, const std::vector<Vec3>& points) {
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument("PlaneFitOptions: " + why);
+  std::vector<FittedPlane> planes;
+  std::vector<int> remaining(points.size());
+  std::iota(remaining.begin(), remaining.end(), 0);
+  std::mt19937 random(options.seed);
+  const int min_inliers = std::max(
+      options.min_inliers, static_cast<int>(std::ceil(options.min_fraction * points.size())));
+  while (static_cast<int>(planes.size()) < options.max_planes &&
+         static_cast<int>(remaining.size()) >= min_inliers) {
+    std::uniform_int_distribution<size_t> pick(0, remaining.size() - 1);
+    Vec3 best_normal = Vec3::UnitZ();
+    double best_offset = 0.0;
+    int best_count = 0;
+    for (int iteration = 0; iteration < options.iterations; ++iteration) {
+      const Vec3& a = points[remaining[pick(random)]];
+      const Vec3& b = points[remaining[pick(random)]];
+      const Vec3& c = points[remaining[pick(random)]];
+      const Vec3 cross = (b - a).cross(c - a);
+      if (cross.norm() < 1e-9) continue;
+      const Vec3 normal = cross.normalized();
+      const double offset = -normal.dot(a);
+      int count = 0;
+      for (const int i : remaining)
+        if (std::abs(normal.dot(points[i]) + offset) <= options.distance) ++count;
+      if (count > best_count) {
+        best_count = count;
+        best_normal = normal;
+        best_offset = offset;
+      }
+    }
+    if (best_count < min_inliers) break;
+    // Least squares on the inliers (twice: the refit plane may take in a few more).
+    std::vector<int> inliers;
+    FittedPlane plane;
+    for (int pass = 0; pass < 2; ++pass) {
+      inliers.clear();
+      for (const int i : remaining)
+        if (std::abs(best_normal.dot(points[i]) + best_offset) <= options.distance)
+          inliers.push_back(i);
+      Vec3 centroid = Vec3::Zero();
+      for (const int i : inliers) centroid += points[i];
+      centroid /= static_cast<double>(inliers.size());
+      Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+      for (const int i : inliers)
+        covariance += (points[i] - centroid) * (points[i] - centroid).transpose();
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(covariance);
+      best_normal = eigen.eigenvectors().col(0);
+      best_offset = -best_normal.dot(centroid);
+      plane.centroid = centroid;
+      // Extent along the two in-plane principal axes.
+      const Vec3 u = eigen.eigenvectors().col(2), v = eigen.eigenvectors().col(1);
+      double u_min = 1e30, u_max = -1e30, v_min = 1e30, v_max = -1e30;
+      for (const int i : inliers) {
+        const Vec3 d = points[i] - centroid;
+        u_min = std::min(u_min, d.dot(u));
+        u_max = std::max(u_max, d.dot(u));
+        v_min = std::min(v_min, d.dot(v));
+        v_max = std::max(v_max, d.dot(v));
+      }
+      plane.extent = Vec2(u_max - u_min, v_max - v_min);
+    }
+    if (best_offset < 0.0) {  // normal towards the cloud's origin (the camera)
+      best_normal = -best_normal;
+      best_offset = -best_offset;
+    }
+    plane.normal = best_normal;
+    plane.offset = best_offset;
+    plane.inliers = static_cast<int>(inliers.size());
+    double sq = 0.0;
+    for (const int i : inliers) sq += std::pow(best_normal.dot(points[i]) + best_offset, 2);
+    plane.rms_mm = 1e3 * std::sqrt(sq / std::max<size_t>(1, inliers.size()));
+    if (plane.inliers < min_inliers) break;
+    planes.push_back(plane);
+    std::vector<int> rest;
+    std::vector<char> taken(points.size(), 0);
+    for (const int i : inliers) taken[i] = 1;
+    for (const int i : remaining)
+      if (!taken[i]) rest.push_back(i);
+    remaining.swap(rest);
+  }
+  return planes;
+}
+
+// ---------------------------------------------------------------------------------------------
+// .cameramodel files
+
+CameraModelFile ReadCameraModelFile(const std::filesystem::path& path) {
+  if (!std::filesystem::exists(path)) throw IoError(path.string() + ": file not found");
+  mrcal_cameramodel_t* parsed = mrcal_read_cameramodel_file(path.c_str());
+  if (!parsed) throw IoError(path.string() + ": not a valid mrcal .cameramodel");
+  CameraModelFile model;
+  char name[256];
+  if (!mrcal_lensmodel_name(name, sizeof(name), &parsed->lensmodel)) {
+    mrcal_free_cameramodel(&parsed);
+    throw IoError(path.string() + ": lensmodel: cannot be named");
+  }
+  model.lens_model = name;
+  const int count = mrcal_lensmodel_num_params(&parsed->lensmodel);
+  model.intrinsics.assign(parsed->intrinsics, parsed->intrinsics + count);
+  model.width = static_cast<int>(parsed->imagersize[0]);
+  model.height = static_cast<int>(parsed->imagersize[1]);
+  const Vec3 r(parsed->rt_cam_ref[0], parsed->rt_cam_ref[1], parsed->rt_cam_ref[2]);
+  model.cam_from_ref.linear() = RotationOf(r);
+  model.cam_from_ref.translation() =
+      Vec3(parsed->rt_cam_ref[3], parsed->rt_cam_ref[4], parsed->rt_cam_ref[5]);
+  mrcal_free_cameramodel(&parsed);
+  return model;
+}
+
+void WriteCameraModelFile(const std::filesystem::path& path, const CameraModelFile& model,
+                          const std::string& comment) {
+  auto number = [](double value) {
+    char text[40];
+    std::snprintf(text, sizeof(text), "%.17g", value);
+    return std::string(text);
+  };
+  auto list = [&](const std::vector<double>& values) {
+    std::string text = "[";
+    for (size_t k = 0; k < values.size(); ++k) text += (k ? ", " : " ") + number(values[k]);
+    return text + " ]";
+  };
+  const Vec3 r = AngleAxisOf(model.cam_from_ref.linear());
+  const Vec3& t = model.cam_from_ref.translation();
+  const std::string text = "# " + comment + "\n{\n  'lensmodel':  '" + model.lens_model +
+                           "',\n  'intrinsics': " + list(model.intrinsics) +
+                           ",\n  'imagersize': [ " + std::to_string(model.width) + ", " +
+                           std::to_string(model.height) + " ],\n  'extrinsics': " +
+                           list({r.x(), r.y(), r.z(), t.x(), t.y(), t.z()}) + "\n}\n";
+  mrcal_cameramodel_t* parsed =
+      mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size()));
+  if (!parsed) throw IoError(path.string() + ": libmrcal cannot parse the model text procam made");
+  mrcal_free_cameramodel(&parsed);
+  WriteFileAtomically(path, text);
+}
+
+}  // namespace procam

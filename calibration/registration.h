@@ -1,0 +1,269 @@
+#pragma once
+// Room registration and joint refinement (issue 7, "Geometry"): the camera's pose in the room
+// and every projector's intrinsics and pose, all in the room (scene) frame, from structured-light
+// correspondences on the room's surfaces and the scene model; then an independent check by
+// triangulation and ICP, and planes fitted to the scan.
+//
+//   CalibrateRoom (joint refinement, Ceres)
+//     unknowns  room_from_camera (6 dof) and, per projector, fx, fy, cx, cy (optionally k1, k2)
+//               and proj_from_room (6 dof); the camera's lens is held FIXED (from
+//               `procam calibrate camera`): it is not observable well enough from projector
+//               correspondences on a few planes to be refined here
+//     data      per projector, camera pixel ↔ projector pixel (decoded structured light)
+//     model     each camera ray, through the current room_from_camera, meets the model's first
+//               facet (a quad's plane, or one triangle of a mesh); the point is projected into
+//               the projector; residual = projected − decoded projector pixel. The facet is
+//               chosen from the current pose and re-chosen between solves until no
+//               correspondence changes facet.
+//     robust    a Cauchy pass on everything, then least squares on the inliers (residual ≤
+//               outlier_threshold), as CalibrateProjector does
+//     seed      a rough room_from_camera (a guess a few cm and degrees off) → the model's planes
+//               in the camera frame → CalibrateProjector per projector (DLT + Ceres)
+//   The camera pose is observable when the projectors light three or more surfaces with
+//   linearly independent normals (e.g. floor and two walls); with two walls, sliding along their
+//   common line is not.
+//
+//   Triangulate: each correspondence's camera ray and projector ray (midpoint of their common
+//   perpendicular, the gap between them reported) → a point cloud in the camera frame.
+//   RegisterModelToCloud: robust point-to-plane ICP (closest model point, a shrinking gate,
+//   Huber loss) moves the model onto the cloud from a guess: room_from_camera and the residual
+//   statistics of the cloud against the model (RMS, median, 95th percentile, per surface).
+//   FitPlanes: sequential RANSAC planes in the cloud (a scene model from the scan alone starts
+//   here).
+//
+// Frames and conventions: camera and projector frames x right, y down, z forward, metres;
+// pixel centres at integers (calibration/projector_calibration.h). `room_from_camera` maps
+// camera-frame points into the room (the scene file's frame); its translation is the camera's
+// centre in the room. `proj_from_room` is what a scene file's projector `extrinsics` hold
+// (mrcal rt_cam_ref with ref = the room).
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "calibration/projector_calibration.h"
+#include "geometry/scene.h"
+
+namespace procam {
+
+class RayScene;
+
+// A planar piece of the room model in the room frame: a quad, or one triangle of a mesh.
+struct ModelFacet {
+  int surface = 0;            // index into Scene::surfaces
+  Vec3 normal = Vec3::UnitZ();  // unit, towards the lit side
+  double offset = 0.0;        // normal · p + offset = 0, metres
+  std::vector<Vec3> corners;  // counter-clockwise seen from the lit side (convex)
+};
+
+// The scene's surfaces as facets, for ray casting (Embree) and closest-point queries.
+class RoomModel {
+ public:
+  // Throws std::invalid_argument when the scene has no surface.
+  explicit RoomModel(const Scene& scene);
+  ~RoomModel();
+  RoomModel(const RoomModel&) = delete;
+  RoomModel& operator=(const RoomModel&) = delete;
+
+  const Scene& scene() const { return scene_; }
+  const std::vector<ModelFacet>& facets() const { return facets_; }
+  // The first facet the ray (room frame; direction need not be unit) meets at t > 0; −1 when
+  // none. `t` (optional) gets the ray parameter.
+  int Intersect(const Vec3& origin, const Vec3& direction, double* t = nullptr) const;
+  // The facet nearest to `p` (room frame), the nearest point on it and its distance, metres.
+  int Closest(const Vec3& p, Vec3* nearest, double* distance) const;
+
+ private:
+  Scene scene_;
+  std::vector<ModelFacet> facets_;
+  std::vector<std::vector<int>> facets_of_surface_;
+  std::unique_ptr<RayScene> rays_;
+};
+
+// What one projector showed, as the camera decoded it.
+struct ProjectorObservations {
+  std::string name;                 // for reports
+  int width = 0, height = 0;        // projector pixels, ≥ 1
+  std::vector<Vec2> camera_pixels;  // camera pixel of each correspondence
+  std::vector<Vec2> projector_pixels;  // decoded projector pixel (same order)
+};
+
+struct RoomCalibrationProblem {
+  // The camera's lens, held fixed: "LENSMODEL_PINHOLE" (4 intrinsics) or "LENSMODEL_OPENCV4" (8).
+  std::string camera_lens_model = "LENSMODEL_PINHOLE";
+  std::vector<double> camera_intrinsics;
+  std::vector<ProjectorObservations> projectors;
+};
+
+struct RoomCalibrationOptions {
+  // Refine the projectors' radial distortion k1, k2 (LENSMODEL_OPENCV4, p1 = p2 = 0).
+  bool refine_distortion = false;
+  double loss_scale = 1.0;         // Cauchy scale of the robust pass, projector pixels, > 0
+  double outlier_threshold = 2.0;  // inlier residual norm, projector pixels, > 0
+  int min_correspondences = 50;    // per projector, fewest usable ones, ≥ 12
+  // Per projector, at most this many correspondences are used, thinned evenly (decoded
+  // structured light gives one per camera pixel; a few thousand already average the decoding
+  // noise down far below the targets), ≥ min_correspondences.
+  int max_correspondences = 10000;
+  int max_rounds = 6;              // facet re-association rounds, ≥ 1
+  int max_iterations = 100;        // per Ceres solve, ≥ 1
+  bool Check(std::string* why) const;
+};
+
+// A projector in the room frame.
+struct RoomProjector {
+  std::string name;
+  std::string lens_model;          // "LENSMODEL_PINHOLE" or "LENSMODEL_OPENCV4"
+  std::vector<double> intrinsics;  // mrcal order
+  int width = 0, height = 0;
+  Eigen::Isometry3d proj_from_room = Eigen::Isometry3d::Identity();
+};
+
+struct RoomCalibration {
+  Eigen::Isometry3d room_from_camera = Eigen::Isometry3d::Identity();
+  std::vector<RoomProjector> projectors;  // same order as the problem's
+};
+
+struct RoomProjectorSummary {
+  int correspondences = 0;  // given
+  int used = 0;             // after thinning to max_correspondences
+  int points = 0;           // whose camera ray meets the model (final pose)
+  int outliers = 0;         // residual norm > outlier_threshold after the robust pass
+  double seed_rms = 0.0;    // CalibrateProjector's RMS per coordinate on the guessed planes, px
+  double rms = 0.0;         // RMS per coordinate over inliers, px
+  double max_norm = 0.0;    // largest inlier residual norm, px
+};
+
+struct RoomCalibrationSummary {
+  enum Termination {
+    kConverged,     // the last Ceres solve converged (or gave a usable solution) and no
+                    // correspondence changed facet in the last round
+    kNotSettled,    // usable, but facets still changed after max_rounds rounds
+    kSeedFailed,    // CalibrateProjector failed for a projector (message names it)
+    kTooFewPoints,  // a projector has fewer than min_correspondences points (or inliers)
+    kSolverFailed,  // Ceres failed or the result is not finite
+  };
+  Termination termination = kSolverFailed;
+  std::vector<RoomProjectorSummary> projectors;
+  int rounds = 0;
+  double initial_cost = 0.0, final_cost = 0.0;  // of the first and last Ceres solve
+  // How far the result moved from the guess: the camera's centre (mm) and orientation (deg).
+  double camera_moved_mm = 0.0, camera_turned_deg = 0.0;
+  double time_s = 0.0;
+  std::string message;
+  std::string BriefReport() const;
+};
+
+// Calibrates the room: seeds every projector with CalibrateProjector on the model's planes as
+// seen from `room_from_camera_guess`, then refines everything jointly. Throws
+// std::invalid_argument when the options fail Check(), the camera lens is unsupported, there is
+// no projector, or a projector's sizes are wrong. Returns true for kConverged and kNotSettled.
+bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model,
+                   const RoomCalibrationProblem& problem,
+                   const Eigen::Isometry3d& room_from_camera_guess, RoomCalibration* calibration,
+                   RoomCalibrationSummary* summary);
+
+// One triangulated correspondence.
+struct TriangulatedPoint {
+  Vec3 p_in_cam = Vec3::Zero();
+  double gap = 0.0;  // distance between the camera ray and the projector ray, metres
+  int projector = 0;
+};
+
+// Triangulates every correspondence of `problem` by the midpoint of the camera ray and the ray
+// of projector k, whose pose in the camera frame is proj_from_room · room_from_camera of
+// `calibration`. Points behind either device, or with a gap above `max_gap` metres, are left
+// out.
+std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem,
+                                           const RoomCalibration& calibration,
+                                           double max_gap = 0.05);
+
+// Distances of points to the model, in millimetres.
+struct DistanceStats {
+  int points = 0;
+  double rms_mm = 0.0, median_mm = 0.0, p95_mm = 0.0, max_mm = 0.0;
+};
+DistanceStats ComputeDistanceStats(std::vector<double> distances_m);
+
+struct RegistrationOptions {
+  // Gate of the first iteration: model points farther than this are not matched, metres, > 0.
+  double initial_gate = 0.2;
+  // The gate then shrinks to max(min_gate, 3 × 1.4826 × the median distance), metres, > 0.
+  double min_gate = 0.01;
+  double huber_scale = 0.003;     // metres, > 0
+  double inlier_distance = 0.01;  // a point within this of the model is an inlier, metres, > 0
+  int max_points = 20000;         // the cloud is thinned evenly to at most this, ≥ 10
+  int max_iterations = 50;        // ICP iterations, ≥ 1
+  double tolerance = 1e-7;        // stop when the pose moves less (metres, radians), > 0
+  bool Check(std::string* why) const;
+};
+
+struct RegistrationSummary {
+  enum Termination {
+    kConverged,     // the pose moved less than `tolerance` in the last iteration
+    kMaxIterations, // still moving after max_iterations
+    kTooFewPoints,  // fewer than 6 points matched
+    kSolverFailed,  // Ceres failed
+  };
+  Termination termination = kSolverFailed;
+  int iterations = 0;
+  int points = 0;              // used (after thinning)
+  double initial_rms_mm = 0.0; // RMS distance of the matched points at the guess
+  double inlier_fraction = 0.0;
+  DistanceStats inliers;       // over points within inlier_distance of the model
+  DistanceStats all;           // over every point used
+  std::vector<DistanceStats> per_surface;  // inliers, by the surface of the nearest facet
+  double time_s = 0.0;
+  std::string BriefReport() const;
+};
+
+// Moves the model onto `points_in_cam`: finds room_from_camera (from `guess`) minimising the
+// robust point-to-plane distances of the cloud (in the room frame) to the model. Throws
+// std::invalid_argument when the options fail Check(). True for kConverged and kMaxIterations.
+bool RegisterModelToCloud(const RegistrationOptions& options, const RoomModel& model,
+                          const std::vector<Vec3>& points_in_cam,
+                          const Eigen::Isometry3d& guess, Eigen::Isometry3d* room_from_camera,
+                          RegistrationSummary* summary);
+
+// Planes found in a cloud by sequential RANSAC, each refined by least squares on its inliers.
+struct FittedPlane {
+  Vec3 normal = Vec3::UnitZ();  // unit, in the cloud's frame (towards the cloud's origin)
+  double offset = 0.0;          // normal · p + offset = 0
+  int inliers = 0;
+  double rms_mm = 0.0;          // of the inliers' distances to the plane
+  Vec3 centroid = Vec3::Zero();
+  Vec2 extent = Vec2::Zero();   // sides of the inliers' bounding rectangle in the plane (PCA axes), m
+};
+
+struct PlaneFitOptions {
+  // Inlier distance, metres, > 0: about 3 × the triangulation noise (the back wall of c_shaped,
+  // 5.5 m away, triangulates with 5 mm RMS); too small splits one wall into parallel slabs.
+  double distance = 0.02;
+  int min_inliers = 200;   // a plane needs at least this many, ≥ 3,
+  double min_fraction = 0.01;  // and at least this fraction of the cloud, [0, 1)
+  int max_planes = 12;     // ≥ 1
+  int iterations = 500;    // RANSAC samples per plane, ≥ 1
+  unsigned seed = 1;
+  bool Check(std::string* why) const;
+};
+std::vector<FittedPlane> FitPlanes(const PlaneFitOptions& options, const std::vector<Vec3>& points);
+
+// An mrcal .cameramodel as procam reads and writes it: lens, image size and pose
+// (`cam_from_ref` = mrcal's rt_cam_ref, ref = the room once registered).
+struct CameraModelFile {
+  std::string lens_model;
+  std::vector<double> intrinsics;
+  int width = 0, height = 0;
+  Eigen::Isometry3d cam_from_ref = Eigen::Isometry3d::Identity();
+};
+// Reads through libmrcal. Throws IoError naming the file.
+CameraModelFile ReadCameraModelFile(const std::filesystem::path& path);
+// Writes atomically (17 significant digits), after libmrcal has parsed the text back. Throws
+// IoError naming the file.
+void WriteCameraModelFile(const std::filesystem::path& path, const CameraModelFile& model,
+                          const std::string& comment);
+
+}  // namespace procam

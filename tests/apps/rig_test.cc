@@ -1,0 +1,411 @@
+// The rig directory as compensate and project consume it (--rig), and photometry in the
+// scene's units (apps/rig_stage.h, `calibrate photometric --scene`), against the synthetic
+// tiny box's ground truth:
+//   - closed loop: a rig directory written from the scene's TRUE projectors gives the same
+//     compensation and projector images as the scene's own projectors;
+//   - bad rig.json: one line naming RIG_DIR/rig.json and the key, exit 1, nothing written;
+//   - black and max in scene units from flat fields the simulated rig renders (bounces, textured
+//     albedo), against the simulated projector's;
+//   - per-patch reflectance against the simulated world's textured albedo;
+//   - the command end to end on a synthetic-camera capture session.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "apps/rig_stage.h"
+#include "calibration/photometric.h"
+#include "datasets_synthetic/paper_scenes.h"
+#include "datasets_synthetic/simulated_rig.h"
+#include "datasets_synthetic/synthetic_camera.h"
+#include "geometry/form_factors.h"
+#include "geometry/io.h"
+#include "projection/projection_rig.h"
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+using testing::CommandRun;
+using testing::RunProcam;
+
+constexpr int kPatches = 150;
+// Finer for the reflectance: patches small against the albedo texture's waves.
+constexpr int kPhotometryPatches = 600;
+
+nlohmann::json ReadJson(const std::filesystem::path& path) {
+  std::ifstream file(path);
+  return nlohmann::json::parse(file);
+}
+
+nlohmann::json Triplet(const Vec3& v) { return {v[0], v[1], v[2]}; }
+
+// The synthetic tiny box as a scene file (its surfaces are quads), projectors as given.
+std::filesystem::path WriteTinyBoxScene(const testing::TempDir& dir, const std::string& name,
+                                        const nlohmann::json& projectors) {
+  const SyntheticScene synthetic = MakeSyntheticScene("tiny_box", kPatches);
+  nlohmann::json surfaces = nlohmann::json::array();
+  for (const Surface& surface : synthetic.scene.surfaces) {
+    EXPECT_EQ(surface.kind, Surface::Kind::kQuad);
+    nlohmann::json quad = nlohmann::json::array();
+    for (const Vec3& corner : surface.quad) quad.push_back(Triplet(corner));
+    surfaces.push_back({{"name", surface.name},
+                        {"quad", quad},
+                        {"reflectance", Triplet(surface.reflectance)},
+                        {"desired", Triplet(surface.desired.srgb)}});
+  }
+  nlohmann::json scene = {{"patches", kPatches}, {"surfaces", surfaces}};
+  if (!projectors.is_null()) scene["projectors"] = projectors;
+  return dir.Write(name, scene.dump(2));
+}
+
+// The true projectors with photometry that exercises every key: black, RGB max, per-channel
+// gamma, a non-identity mixing.
+std::vector<Projector> TrueProjectors() {
+  const SyntheticScene synthetic = MakeSyntheticScene("tiny_box", kPatches);
+  std::vector<Projector> projectors;
+  for (size_t k = 0; k < synthetic.projectors.size(); ++k) {
+    Projector projector = ProjectorFromPlacement(synthetic.projectors[k]);
+    projector.photometry.black = Vec3(0.004, 0.005, 0.003) * (k + 1);
+    projector.photometry.max = Vec3(1.4, 1.6, 1.2) * (1.0 + 0.1 * k);
+    projector.photometry.response = {ResponseCurve::Gamma(2.4), ResponseCurve::Gamma(2.0),
+                                     ResponseCurve::Gamma(2.2)};
+    projector.photometry.mixing << 0.92, 0.06, 0.02, 0.04, 0.9, 0.06, 0.01, 0.07, 0.92;
+    projectors.push_back(projector);
+  }
+  return projectors;
+}
+
+// Projector JSON entries (scene-file format) for `projectors`, models written into `dir`.
+nlohmann::json ProjectorEntries(const std::vector<Projector>& projectors,
+                                const std::filesystem::path& dir) {
+  nlohmann::json entries = nlohmann::json::array();
+  for (const Projector& projector : projectors) {
+    WriteCameraModel(dir / (projector.name + ".cameramodel"), projector.geometry);
+    const ProjectorPhotometry& p = projector.photometry;
+    nlohmann::json mixing = nlohmann::json::array();
+    for (int r = 0; r < 3; ++r) mixing.push_back({p.mixing(r, 0), p.mixing(r, 1), p.mixing(r, 2)});
+    entries.push_back({{"name", projector.name},
+                       {"model", projector.name + ".cameramodel"},
+                       {"black", Triplet(p.black)},
+                       {"max", Triplet(p.max)},
+                       {"gamma", {p.response[0].gamma(), p.response[1].gamma(),
+                                  p.response[2].gamma()}},
+                       {"mixing", mixing}});
+  }
+  return entries;
+}
+
+Eigen::MatrixXd ReadMatrix(const std::filesystem::path& path) {
+  const NpyArray array = ReadNpy(path);
+  Eigen::MatrixXd matrix(array.shape[0], array.shape.size() > 1 ? array.shape[1] : 1);
+  for (int i = 0; i < matrix.rows(); ++i) {
+    for (int j = 0; j < matrix.cols(); ++j) matrix(i, j) = array.values[i * matrix.cols() + j];
+  }
+  return matrix;
+}
+
+// Closed loop: the rig's projectors (written from the truth, in another directory than the
+// scene) replace the scene's; compensate and project give what the scene's projectors give.
+TEST(RigDirectory, TrueProjectorsInARigGiveTheScenesResults) {
+  testing::TempDir dir;
+  const std::vector<Projector> projectors = TrueProjectors();
+  const nlohmann::json scene_entries = ProjectorEntries(projectors, dir.path());
+  const std::filesystem::path with = WriteTinyBoxScene(dir, "with.json", scene_entries);
+  const std::filesystem::path without = WriteTinyBoxScene(dir, "without.json", nullptr);
+  std::filesystem::create_directories(dir / "rig");
+  const nlohmann::json rig = {{"camera", {{"model", "camera.cameramodel"}}},
+                              {"projectors", ProjectorEntries(projectors, dir / "rig")},
+                              {"registration", nlohmann::json::object()}};
+  dir.Write("rig/rig.json", rig.dump(2));
+
+  for (const std::string method : {"perceptual", "naive"}) {
+    const std::string common = " --method " + method + " --out ";
+    const CommandRun a = RunProcam("compensate " + with.string() + common + (dir / "a").string());
+    ASSERT_EQ(a.exit_code, 0) << a.output;
+    const CommandRun b = RunProcam("compensate " + without.string() + " --rig " +
+                                   (dir / "rig").string() + common + (dir / "b").string());
+    ASSERT_EQ(b.exit_code, 0) << b.output;
+    const Eigen::MatrixXd e_scene = ReadMatrix(dir / "a/E.npy");
+    const Eigen::MatrixXd e_rig = ReadMatrix(dir / "b/E.npy");
+    ASSERT_EQ(e_scene.rows(), e_rig.rows());
+    const double difference = testing::MaxAbsDifference(e_scene, e_rig);
+    std::printf("%s: %d patches, E differs by %.3g (max E %.3g)\n", method.c_str(),
+                static_cast<int>(e_scene.rows()), difference, e_scene.maxCoeff());
+    EXPECT_LE(difference, 1e-9);
+    EXPECT_GT(e_scene.maxCoeff(), 0.0);
+    const nlohmann::json result = ReadJson(dir / "b/result.json");
+    EXPECT_EQ(result["rig"]["dir"], (dir / "rig").string());
+    EXPECT_EQ(result["rig"]["projectors"], nlohmann::json({"left", "right"}));
+
+    // project: the solution remembers its rig; the images and delivered light are the same.
+    const CommandRun pa = RunProcam("project " + (dir / "a").string() + " --out " +
+                                    (dir / "pa").string());
+    ASSERT_EQ(pa.exit_code, 0) << pa.output;
+    const CommandRun pb = RunProcam("project " + (dir / "b").string() + " --out " +
+                                    (dir / "pb").string());
+    ASSERT_EQ(pb.exit_code, 0) << pb.output;
+    EXPECT_EQ(ReadJson(dir / "pb/result.json")["rig"]["dir"], (dir / "rig").string());
+    EXPECT_LE(testing::MaxAbsDifference(ReadMatrix(dir / "pa/E_delivered.npy"),
+                                        ReadMatrix(dir / "pb/E_delivered.npy")),
+              1e-9);
+    for (const Projector& projector : projectors) {
+      const cv::Mat ia = cv::imread((dir / "pa" / (projector.name + ".png")).string(),
+                                    cv::IMREAD_UNCHANGED);
+      const cv::Mat ib = cv::imread((dir / "pb" / (projector.name + ".png")).string(),
+                                    cv::IMREAD_UNCHANGED);
+      ASSERT_FALSE(ia.empty());
+      EXPECT_EQ(cv::norm(ia, ib, cv::NORM_INF), 0.0) << projector.name;
+    }
+  }
+
+  // The rig really is used: half the max halves the upper bounds and changes the solution.
+  nlohmann::json dimmer = rig;
+  for (nlohmann::json& entry : dimmer["projectors"]) {
+    for (nlohmann::json& value : entry["max"]) value = 0.5 * value.get<double>();
+  }
+  std::filesystem::create_directories(dir / "dim");
+  for (const Projector& projector : projectors) {
+    std::filesystem::copy_file(dir / "rig" / (projector.name + ".cameramodel"),
+                               dir / "dim" / (projector.name + ".cameramodel"));
+  }
+  dir.Write("dim/rig.json", dimmer.dump(2));
+  const CommandRun c = RunProcam("compensate " + with.string() + " --method naive --rig " +
+                                 (dir / "dim").string() + " --out " + (dir / "c").string());
+  ASSERT_EQ(c.exit_code, 0) << c.output;
+  EXPECT_GT(testing::MaxAbsDifference(ReadMatrix(dir / "a/E.npy"), ReadMatrix(dir / "c/E.npy")),
+            1e-3);
+}
+
+TEST(RigDirectory, BadRigJsonGetsOneLineNamingTheFileAndKey) {
+  testing::TempDir dir;
+  const std::filesystem::path scene = WriteTinyBoxScene(dir, "scene.json", nullptr);
+  const std::vector<Projector> projectors = TrueProjectors();
+  std::filesystem::create_directories(dir / "rig");
+  const nlohmann::json good = {{"projectors", ProjectorEntries(projectors, dir / "rig")}};
+  struct Case {
+    std::string name;
+    nlohmann::json rig;  // null: no rig.json
+    std::string expected;
+  };
+  nlohmann::json no_max = good, missing_model = good, camera_units = good, bad_mixing = good;
+  no_max["projectors"][1].erase("max");
+  missing_model["projectors"][0]["model"] = "nowhere.cameramodel";
+  camera_units["projectors"][0].erase("max");
+  camera_units["projectors"][0].erase("black");
+  camera_units["photometric"] = {{"left", {{"units", "camera"}}}};
+  bad_mixing["projectors"][0]["mixing"][0] = {0.5, 0.2, 0.2};
+  const Case cases[] = {
+      {"none", nullptr, "rig.json: file not found"},
+      {"empty", nlohmann::json::object(), "rig.json: projectors: required key is missing"},
+      {"no_max", no_max, "rig.json: projectors[1].max"},
+      {"missing_model", missing_model, "rig.json: projectors[0].model"},
+      {"camera_units", camera_units, "rig.json: projectors[0].max: the photometry of 'left' is in camera units"},
+      {"bad_mixing", bad_mixing, "rig.json: projectors[0].mixing: row 0"},
+  };
+  for (const Case& c : cases) {
+    const std::filesystem::path rig = dir / ("rig_" + c.name);
+    std::filesystem::create_directories(rig);
+    for (const Projector& projector : projectors) {
+      std::filesystem::copy_file(dir / "rig" / (projector.name + ".cameramodel"),
+                                 rig / (projector.name + ".cameramodel"));
+    }
+    if (!c.rig.is_null()) dir.Write("rig_" + c.name + "/rig.json", c.rig.dump(2));
+    const CommandRun run = RunProcam("compensate " + scene.string() + " --rig " + rig.string() +
+                                     " --out " + (dir / "out").string());
+    EXPECT_EQ(run.exit_code, 1) << c.name << ": " << run.output;
+    EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << run.output;
+    EXPECT_NE(run.output.find((rig / c.expected).string()), std::string::npos)
+        << c.name << ": " << run.output;
+    EXPECT_FALSE(std::filesystem::exists(dir / "out")) << c.name;
+  }
+}
+
+// A flat-field capture rendered by the simulated rig (exact camera scale 1, no noise): projector
+// "left" of the tiny box alone, with the photometry of TrueProjectors(), the world's albedo
+// varying ±5% (which the scene's nominal reflectance does not know).
+class ScenePhotometry : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    const SyntheticScene synthetic = MakeSyntheticScene("tiny_box", kPhotometryPatches);
+    truth_ = new Projector(TrueProjectors()[0]);
+    SimulatedRigOptions options;
+    options.solver_patches = kPhotometryPatches;
+    options.albedo_variation = 0.05;
+    rig_ = new SimulatedRig(synthetic.scene, {*truth_}, CameraFromPlacement(synthetic.camera),
+                            options);
+    scene_ = new Scene(synthetic.scene);
+    SubdivisionOptions subdivision;
+    subdivision.target_patches = kPhotometryPatches;
+    level_ = new PatchLevel(SubdividePatches(*scene_, subdivision).fine);
+    form_factors_ = new Eigen::MatrixXd(ComputeFormFactors(*scene_, *level_, {}, nullptr));
+  }
+  static void TearDownTestSuite() {
+    delete truth_;
+    delete rig_;
+    delete scene_;
+    delete level_;
+    delete form_factors_;
+  }
+
+  static FlatField Field(const Vec3& drive) {
+    ProjectorImage image;
+    image.bits = truth_->photometry.bits;
+    const int code_max = truth_->photometry.MaxCode();
+    image.codes = cv::Mat(truth_->geometry.height(), truth_->geometry.width(), CV_16UC3,
+                          cv::Scalar(std::lround(drive[0] * code_max),
+                                     std::lround(drive[1] * code_max),
+                                     std::lround(drive[2] * code_max)));
+    FlatField field;
+    field.drive = drive;
+    cv::cvtColor(rig_->RenderRadiance({image}), field.image, cv::COLOR_RGB2BGR);
+    return field;
+  }
+
+  static Projector* truth_;
+  static SimulatedRig* rig_;
+  static Scene* scene_;
+  static PatchLevel* level_;
+  static Eigen::MatrixXd* form_factors_;
+};
+Projector* ScenePhotometry::truth_ = nullptr;
+SimulatedRig* ScenePhotometry::rig_ = nullptr;
+Scene* ScenePhotometry::scene_ = nullptr;
+PatchLevel* ScenePhotometry::level_ = nullptr;
+Eigen::MatrixXd* ScenePhotometry::form_factors_ = nullptr;
+
+TEST_F(ScenePhotometry, BlackAndMaxInSceneUnitsAndPerPatchReflectance) {
+  std::vector<FlatField> fields = {Field(Vec3::Zero()), Field(Vec3::Ones())};
+  for (int c = 0; c < 3; ++c) {
+    for (const double level : {0.25, 0.5, 0.75, 1.0}) fields.push_back(Field(level * Vec3::Unit(c)));
+  }
+  const CameraPixelLighting lighting =
+      LightCameraPixels(*scene_, *level_, truth_->geometry, rig_->camera());
+  const UnitLightModel model = ModelUnitLight(*level_, *form_factors_, *truth_);
+  PhotometricCalibrationOptions options;
+  options.transfer = PhotometricTransfer(lighting, *level_, model, Eigen::Vector3d::Ones());
+  const PhotometricModel fit = CalibratePhotometry(fields, options);
+  const ProjectorPhotometry& p = truth_->photometry;
+  for (int c = 0; c < 3; ++c) {
+    const double max_error = fit.max[c] / p.max[c] - 1.0;
+    const double black_error = fit.black[c] / p.black[c] - 1.0;
+    std::printf("channel %c: max %.4f (true %.4f, %+.2f%%), black %.5f (true %.5f, %+.2f%%)\n",
+                "RGB"[c], fit.max[c], p.max[c], 100 * max_error, fit.black[c], p.black[c],
+                100 * black_error);
+    EXPECT_LT(std::abs(max_error), 0.02);
+    EXPECT_LT(std::abs(black_error), 0.02);
+  }
+  std::printf("%d camera pixels\n", fit.pixels);
+
+  // Reflectance from white − black, against the world's albedo averaged over each patch.
+  const cv::Mat difference = fields[1].image - fields[0].image;
+  const ReflectanceEstimate estimate =
+      EstimatePatchReflectance(lighting, *level_, *form_factors_, model, difference, cv::Mat(),
+                               fit.max - fit.black, Eigen::Vector3d::Ones(), 20);
+  double worst = 0.0, sum_squares = 0.0, nominal_worst = 0.0, nominal_squares = 0.0;
+  int count = 0;
+  for (int i = 0; i < level_->size(); ++i) {
+    if (estimate.pixels[i] < 20) continue;
+    const Patch& patch = level_->patches[i];
+    // Truth: the albedo factor averaged over the pixels' points is what the camera saw; over
+    // the patch, 8×8 points of its bilinear parametrisation (patches are parallelograms here).
+    double factor = 0.0;
+    for (int a = 0; a < 8; ++a) {
+      for (int b = 0; b < 8; ++b) {
+        const double s = (a + 0.5) / 8, t = (b + 0.5) / 8;
+        const Vec2 uv = (1 - s) * (1 - t) * patch.uv[0] + s * (1 - t) * patch.uv[1] +
+                        s * t * patch.uv[2] + (1 - s) * t * patch.uv[3];
+        factor += rig_->AlbedoFactor(patch.surface, uv) / 64.0;
+      }
+    }
+    for (int c = 0; c < 3; ++c) {
+      const double truth = factor * scene_->surfaces[patch.surface].reflectance[c];
+      const double error = estimate.reflectance(i, c) / truth - 1.0;
+      worst = std::max(worst, std::abs(error));
+      const double nominal_error = level_->reflectance(i, c) / truth - 1.0;
+      nominal_worst = std::max(nominal_worst, std::abs(nominal_error));
+      nominal_squares += nominal_error * nominal_error;
+      sum_squares += error * error;
+      ++count;
+    }
+  }
+  const double rms = std::sqrt(sum_squares / count);
+  const double nominal_rms = std::sqrt(nominal_squares / count);
+  std::printf("reflectance: %d patch-channels seen, rms error %.2f%%, worst %.2f%% (nominal "
+              "reflectance: rms %.2f%%, worst %.2f%%)\n",
+              count, 100 * rms, 100 * worst, 100 * nominal_rms, 100 * nominal_worst);
+  ASSERT_GT(count, 60);
+  EXPECT_LT(rms, 0.02);
+  EXPECT_LT(worst, 0.05);
+  EXPECT_LT(rms, 0.5 * nominal_rms);  // it finds the texture the nominal reflectance lacks
+}
+
+// The command end to end: a photometric session captured with the synthetic camera (projector
+// "left" of the tiny box, gamma 2.2, black 0.002, max 1.5: ProjectorFromPlacement), a rig
+// directory holding the true geometry (camera registered in the room, the projector's model),
+// then `calibrate photometric --scene --projector left --camera-scale URI`: rig.json gets max in
+// scene units, and compensate --rig runs on it.
+TEST(ScenePhotometryCommand, FillsTheRigInSceneUnits) {
+  testing::TempDir dir;
+  const std::string uri =
+      "synthetic:tiny_box?patches=150&fps=500&exposure_us=1000&reference_exposure_us=1000"
+      "&black=8&noise=1";
+  const CommandRun capture = RunProcam(
+      "capture --camera '" + uri +
+      "' --projector 0 --sequence photometric --levels 0,64,128,192,255 --channels rgbw"
+      " --frames 4 --settle-ms 1 --out " + (dir / "flat").string());
+  ASSERT_EQ(capture.exit_code, 0) << capture.output;
+  const std::shared_ptr<SyntheticWorld> world = MakeSyntheticWorld("tiny_box", 150);
+  const Projector& truth = world->rig->projectors()[0];
+  const std::filesystem::path scene = WriteTinyBoxScene(dir, "scene.json", nullptr);
+  const std::filesystem::path rig = dir / "rig";
+  std::filesystem::create_directories(rig);
+  WriteCameraModel(rig / "camera.cameramodel", world->rig->camera());
+  WriteCameraModel(rig / "left.cameramodel", truth.geometry);
+  const nlohmann::json rig_json = {
+      {"camera", {{"model", "camera.cameramodel"}}},
+      {"projectors", {{{"name", "left"}, {"model", "left.cameramodel"}}}},
+      {"registration", {{"note", "the true pose (test)"}}}};
+  dir.Write("rig/rig.json", rig_json.dump(2));
+
+  // Without the camera scale: one line, nothing written.
+  const std::string calibrate = "calibrate photometric " + (dir / "flat").string() + " --out " +
+                                rig.string() + " --projector left --scene " + scene.string();
+  const CommandRun no_scale = RunProcam(calibrate);
+  EXPECT_EQ(no_scale.exit_code, 1);
+  EXPECT_NE(no_scale.output.find("--camera-scale: required with --scene"), std::string::npos)
+      << no_scale.output;
+  EXPECT_FALSE(std::filesystem::exists(rig / "photometric.json"));
+
+  const CommandRun run = RunProcam(calibrate + " --camera-scale '" + uri + "'");
+  std::printf("%s", run.output.c_str());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  const nlohmann::json filled = ReadJson(rig / "rig.json");
+  const nlohmann::json& entry = filled["projectors"][0];
+  EXPECT_EQ(entry["model"], "left.cameramodel");  // the geometry is kept
+  EXPECT_EQ(filled["photometric"]["left"]["units"], "scene");
+  for (int c = 0; c < 3; ++c) {
+    const double max = entry["max"][c].get<double>(), black = entry["black"][c].get<double>();
+    std::printf("channel %c: max %.4f (true %.4f, %+.2f%%), black %.5f (true %.5f: the other "
+                "projector's black light adds to it), gamma %.4f\n",
+                "RGB"[c], max, truth.photometry.max[c], 100 * (max / truth.photometry.max[c] - 1),
+                black, truth.photometry.black[c], entry["gamma"][c].get<double>());
+    EXPECT_LT(std::abs(max / truth.photometry.max[c] - 1.0), 0.02);
+    EXPECT_NEAR(entry["gamma"][c].get<double>(), 2.2, 0.02 * 2.2);
+  }
+  EXPECT_TRUE(std::filesystem::exists(rig / "reflectance.npy"));
+  EXPECT_EQ(filled["reflectance"]["target_patches"], kPatches);
+
+  // compensate consumes it (projector "left" alone; reflectance from the rig).
+  const CommandRun compensate = RunProcam("compensate " + scene.string() + " --rig " +
+                                          rig.string() + " --out " + (dir / "solution").string());
+  ASSERT_EQ(compensate.exit_code, 0) << compensate.output;
+  EXPECT_EQ(ReadJson(dir / "solution/result.json")["rig"]["reflectance"], true);
+}
+
+}  // namespace
+}  // namespace procam

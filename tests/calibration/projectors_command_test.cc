@@ -1,0 +1,193 @@
+// procam calibrate projectors, end to end without hardware: `procam capture --sequence
+// structured_light` with the synthetic camera photographing the tiny box lit by each of its two
+// projectors, then the command on the two sessions with a camera guess 5 cm and about 2° off,
+// compared with the simulated rig. `procam calibrate camera` is skipped: the test writes the
+// synthetic camera's true lens as RIG_DIR/camera.cameramodel (extrinsics zero, as `calibrate
+// camera` writes it), so only the projectors and the camera's pose are estimated.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "calibration/registration.h"
+#include "datasets_synthetic/synthetic_camera.h"
+#include "geometry/io.h"
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+using testing::CommandRun;
+using testing::RunProcam;
+
+constexpr double kPi = 3.14159265358979323846;
+
+nlohmann::json ReadJson(const std::filesystem::path& path) {
+  std::ifstream file(path);
+  return nlohmann::json::parse(file);
+}
+
+const std::string kSyntheticCamera =
+    "'synthetic:tiny_box?patches=20&fps=500&exposure_us=1000&reference_exposure_us=1000"
+    "&noise=1'";
+// The true camera is at (0.5, −1.4, 0.8) looking at (0.5, 0.6, 0.45): the guess is 5.4 cm and
+// about 2° off.
+const std::string kGuess = "0.54,-1.37,0.82,0.55,0.6,0.5";
+
+// Two sessions (projectors 0 and 1) and a rig directory with the true camera lens, shared by
+// the tests of this file.
+class CalibrateProjectorsCommand : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new testing::TempDir();
+    for (int k = 0; k < 2; ++k) {
+      const CommandRun capture =
+          RunProcam("capture --camera " + kSyntheticCamera + " --projector " + std::to_string(k) +
+                    " --sequence structured_light --pattern-gamma 2.2 --frames 1 --settle-ms 1 "
+                    "--out " + Session(k));
+      ASSERT_EQ(capture.exit_code, 0) << capture.output;
+    }
+    world_ = MakeSyntheticWorld("tiny_box", 20);
+  }
+  static void TearDownTestSuite() {
+    world_.reset();
+    delete dir_;
+  }
+  static std::string Session(int k) { return (*dir_ / ("sl" + std::to_string(k))).string(); }
+  static void WriteTrueCamera(const std::filesystem::path& rig) {
+    std::filesystem::create_directories(rig);
+    const CameraGeometry& camera = world_->rig->camera();
+    CameraModelFile model;
+    model.lens_model = camera.lens_model();
+    model.intrinsics = camera.intrinsics();
+    model.width = camera.width();
+    model.height = camera.height();
+    WriteCameraModelFile(rig / "camera.cameramodel", model, "true synthetic camera (test)");
+  }
+  static testing::TempDir* dir_;
+  static std::shared_ptr<SyntheticWorld> world_;
+};
+testing::TempDir* CalibrateProjectorsCommand::dir_ = nullptr;
+std::shared_ptr<SyntheticWorld> CalibrateProjectorsCommand::world_;
+
+TEST_F(CalibrateProjectorsCommand, RecoversTheSyntheticRig) {
+  const std::filesystem::path rig = *dir_ / "rig";
+  WriteTrueCamera(rig);
+  // Keys other commands wrote survive.
+  {
+    std::ofstream file(rig / "rig.json");
+    file << R"({"projectors": [{"name": "right", "black": 0.01}], "other": 1})";
+  }
+  const CommandRun run = RunProcam("calibrate projectors " + Session(0) + " " + Session(1) +
+                                   " --scene synthetic:tiny_box --out " + rig.string() +
+                                   " --camera-guess " + kGuess);
+  std::printf("%s", run.output.c_str());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+
+  const SimulatedRig& truth = *world_->rig;
+  const Eigen::Isometry3d room_from_camera = truth.camera().proj_from_world().inverse();
+  const CameraModelFile camera = ReadCameraModelFile(rig / "camera.cameramodel");
+  EXPECT_EQ(camera.intrinsics, truth.camera().intrinsics());  // held fixed
+  const Eigen::Isometry3d estimate = camera.cam_from_ref.inverse();
+  const double camera_mm = 1e3 * (estimate.translation() - room_from_camera.translation()).norm();
+  const double camera_deg =
+      Eigen::AngleAxisd(estimate.linear() * room_from_camera.linear().transpose()).angle() * 180 /
+      kPi;
+  std::printf("camera: position %.3f mm, orientation %.4f deg\n", camera_mm, camera_deg);
+  EXPECT_LT(camera_mm, 5.0);
+  EXPECT_LT(camera_deg, 0.2);  // see the projectors' orientation below
+
+  const nlohmann::json rig_json = ReadJson(rig / "rig.json");
+  EXPECT_EQ(rig_json["other"], 1);
+  EXPECT_EQ(rig_json["camera"]["model"], "camera.cameramodel");
+  ASSERT_EQ(rig_json["projectors"].size(), 2u);
+  for (int k = 0; k < 2; ++k) {
+    const Projector& projector = truth.projectors()[k];
+    const nlohmann::json* entry = nullptr;
+    for (const nlohmann::json& e : rig_json["projectors"])
+      if (e["name"] == projector.name) entry = &e;
+    ASSERT_NE(entry, nullptr) << projector.name;
+    ASSERT_EQ((*entry)["model"], projector.name + ".cameramodel");
+    const CameraModelFile model = ReadCameraModelFile(rig / (projector.name + ".cameramodel"));
+    const ProjectorGeometry& g = projector.geometry;
+    const double fx = std::abs(model.intrinsics[0] / g.intrinsics()[0] - 1.0);
+    const double fy = std::abs(model.intrinsics[1] / g.intrinsics()[1] - 1.0);
+    const double position_mm = 1e3 * (model.cam_from_ref.inverse().translation() -
+                                      g.proj_from_world().inverse().translation())
+                                         .norm();
+    const double orientation_deg =
+        Eigen::AngleAxisd(model.cam_from_ref.linear() * g.proj_from_world().linear().transpose())
+            .angle() * 180 / kPi;
+    std::printf("%s: fx %.4f%%, fy %.4f%%, position %.3f mm, orientation %.4f deg\n",
+                projector.name.c_str(), 100 * fx, 100 * fy, position_mm, orientation_deg);
+    EXPECT_EQ(model.width, g.width());
+    EXPECT_LT(fx, 0.005);
+    EXPECT_LT(fy, 0.005);
+    EXPECT_LT(position_mm, 5.0);
+    // The issue's 0.1° is stated for a room (c_shaped: 0.007°, registration_test); in this 1 m
+    // box with 320 × 200 projectors the decoded rows carry a bias of about 0.2 px that the free
+    // camera pose turns into 0.07–0.13° (the same with the library path, CalibrateRoom.
+    // TinyBoxDecoded), so the bound here is 0.2°.
+    EXPECT_LT(orientation_deg, 0.2);
+  }
+  EXPECT_EQ(rig_json["projectors"][0]["black"], 0.01);  // "right", written before
+
+  const nlohmann::json& registration = rig_json["registration"];
+  EXPECT_EQ(registration["projectors"].size(), 2u);
+  EXPECT_LT(registration["projectors"][0]["rms_px_per_coordinate"].get<double>(), 0.5);
+  const nlohmann::json& residual = registration["residual"];
+  // Triangulation noise sets these: 320-pixel projectors (f = 343 px) 0.45 m from the camera
+  // put 0.34 px of decoding error at about 9 mm in depth 2 m away; the guess was 41 mm RMS off.
+  EXPECT_GT(residual["inlier_fraction"].get<double>(), 0.7);
+  EXPECT_LT(residual["inliers"]["median_mm"].get<double>(), 4.0);
+  EXPECT_LT(residual["icp_vs_joint_mm"].get<double>(), 5.0);
+  EXPECT_LT(residual["icp_vs_joint_deg"].get<double>(), 0.2);
+  const nlohmann::json result = ReadJson(rig / "result.json");
+  EXPECT_GE(result["projectors"]["planes_from_scan"]["planes"].size(), 3u);
+}
+
+// Bad input: one line naming the file or option, exit code 1, nothing written.
+TEST_F(CalibrateProjectorsCommand, BadInputIsRefusedAndNothingIsWritten) {
+  const std::filesystem::path rig = *dir_ / "bad_rig";
+  const std::string sessions = Session(0) + " " + Session(1);
+  // No camera.cameramodel.
+  CommandRun run = RunProcam("calibrate projectors " + sessions +
+                             " --scene synthetic:tiny_box --out " + rig.string() +
+                             " --camera-guess " + kGuess);
+  EXPECT_EQ(run.exit_code, 1);
+  EXPECT_NE(run.output.find("camera.cameramodel: file not found"), std::string::npos)
+      << run.output;
+  WriteTrueCamera(rig);
+  const auto files_before = std::distance(std::filesystem::directory_iterator(rig),
+                                          std::filesystem::directory_iterator());
+  struct Case {
+    std::string arguments, expected;
+  };
+  for (const Case& c : {
+           Case{sessions + " --scene synthetic:tiny_box", "--camera-guess: required"},
+           Case{sessions + " --scene synthetic:tiny_box --camera-guess 1,2,3", "--camera-guess"},
+           Case{sessions + " --scene nowhere.json --camera-guess " + kGuess, "--scene nowhere.json"},
+           Case{Session(0) + " " + (*dir_ / "missing").string() +
+                    " --scene synthetic:tiny_box --camera-guess " + kGuess,
+                "missing: not a directory"},
+           Case{Session(0) + " " + Session(0) + " --scene synthetic:tiny_box --camera-guess " +
+                    kGuess,
+                "used twice"},
+       }) {
+    run = RunProcam("calibrate projectors " + c.arguments + " --out " + rig.string());
+    EXPECT_EQ(run.exit_code, 1) << c.arguments;
+    EXPECT_NE(run.output.find(c.expected), std::string::npos) << c.arguments << "\n"
+                                                              << run.output;
+  }
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(rig),
+                          std::filesystem::directory_iterator()),
+            files_before);
+  EXPECT_FALSE(std::filesystem::exists(rig / "rig.json"));
+}
+
+}  // namespace
+}  // namespace procam

@@ -1,0 +1,532 @@
+// Room registration and joint refinement against the synthetic rig's ground truth. The camera's
+// pose in the room is NOT given: only a guess 5 cm and about 2° off. Correspondences come from
+// simulated structured-light captures (XOR Gray + phase, bounces, camera distortion and noise)
+// decoded by DecodeStructuredLight, as projector_calibration_test does, or, for the exactness
+// check, from the geometry itself. Targets of issue 7: projectors' focal length within 0.5%,
+// position within 5 mm, orientation within 0.1° (the c_shaped stage: devices 3–5 m from the
+// walls).
+#include "calibration/registration.h"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <random>
+
+#include "calibration/structured_light.h"
+#include "datasets_synthetic/simulated_rig.h"
+#include "datasets_synthetic/synthetic_camera.h"
+#include "geometry/io.h"
+#include "geometry/ray_scene.h"
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// `camera_scale` < 1 shrinks the camera's image (same field of view): fewer pixels to render.
+std::unique_ptr<SimulatedRig> MakeRig(const std::string& name, double camera_scale = 1.0) {
+  SyntheticScene synthetic = MakeSyntheticScene(name, 60);
+  synthetic.camera.width = static_cast<int>(std::lround(synthetic.camera.width * camera_scale));
+  synthetic.camera.height = static_cast<int>(std::lround(synthetic.camera.height * camera_scale));
+  std::vector<Projector> projectors;
+  for (const DevicePlacement& placement : synthetic.projectors)
+    projectors.push_back(ProjectorFromPlacement(placement));
+  SimulatedRigOptions options;
+  options.solver_patches = 60;
+  options.world_factor = 1;
+  return std::make_unique<SimulatedRig>(synthetic.scene, projectors,
+                                        CameraFromPlacement(synthetic.camera), options);
+}
+
+Eigen::Isometry3d TrueRoomFromCamera(const SimulatedRig& rig) {
+  return rig.camera().proj_from_world().inverse();
+}
+
+// The truth moved by 5 cm and turned by 2° (about an axis off every coordinate axis).
+Eigen::Isometry3d PerturbedGuess(const Eigen::Isometry3d& truth) {
+  Eigen::Isometry3d guess = truth;
+  guess.translation() += 0.05 * Vec3(0.6, -0.64, 0.48);
+  guess.linear() =
+      Eigen::AngleAxisd(2.0 * kPi / 180.0, Vec3(0.3, 1.0, -0.5).normalized()).toRotationMatrix() *
+      truth.linear();
+  return guess;
+}
+
+double TurnDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
+  return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / kPi;
+}
+
+RoomCalibrationProblem EmptyProblem(const SimulatedRig& rig) {
+  RoomCalibrationProblem problem;
+  problem.camera_lens_model = rig.camera().lens_model();
+  problem.camera_intrinsics = rig.camera().intrinsics();
+  return problem;
+}
+
+// Exact correspondences of projector k: every `step`-th camera pixel whose point it lights
+// unoccluded, the projector pixel of that point.
+ProjectorObservations ExactObservations(const SimulatedRig& rig, int k, int step) {
+  const ProjectorGeometry& projector = rig.projectors()[k].geometry;
+  const RayScene surfaces(rig.scene());
+  ProjectorObservations out;
+  out.name = rig.projectors()[k].name;
+  out.width = projector.width();
+  out.height = projector.height();
+  for (int row = 0; row < rig.camera().height(); row += step)
+    for (int col = 0; col < rig.camera().width(); col += step) {
+      Vec3 point, normal;
+      Vec2 pixel;
+      if (!rig.PointSeenByPixel(row, col, &point, &normal)) continue;
+      if (projector.Gain(point, normal, &pixel) <= 0.0 || !projector.InImage(pixel)) continue;
+      if (surfaces.Occluded(point, projector.CentreInWorld(), 1e-4)) continue;
+      out.camera_pixels.push_back(Vec2(col, row));
+      out.projector_pixels.push_back(pixel);
+    }
+  return out;
+}
+
+// Decoded correspondences of projector k: the rig photographs XOR Gray + phase patterns on it
+// (the other projectors black), DecodeStructuredLight decodes them.
+ProjectorObservations DecodedObservations(const SimulatedRig& rig, int k) {
+  const ProjectorGeometry& geometry = rig.projectors()[k].geometry;
+  StructuredLightOptions options;
+  options.width = geometry.width();
+  options.height = geometry.height();
+  options.pattern_gamma = rig.projectors()[k].photometry.response[0].gamma();
+  const CaptureSequence sequence = MakeStructuredLightSequence(options);
+  std::vector<ProjectorImage> images;
+  for (const Projector& p : rig.projectors())
+    images.push_back({cv::Mat(p.geometry.height(), p.geometry.width(), CV_16UC3,
+                              cv::Scalar::all(0)),
+                      8});
+  std::vector<cv::Mat> captured;
+  uint32_t seed = 100 * k;
+  for (const Pattern& pattern : sequence.patterns) {
+    images[k] = CodesFromPattern(pattern.image, rig.projectors()[k]);
+    captured.push_back(rig.PhotographLinear(images, ++seed));
+  }
+  const StructuredLightMap map = DecodeStructuredLight(options, captured);
+  ProjectorObservations out;
+  out.name = rig.projectors()[k].name;
+  out.width = geometry.width();
+  out.height = geometry.height();
+  for (int row = 0; row < map.mask.rows; ++row)
+    for (int col = 0; col < map.mask.cols; ++col) {
+      if (!map.mask.at<uint8_t>(row, col)) continue;
+      out.camera_pixels.push_back(Vec2(col, row));
+      out.projector_pixels.push_back(
+          Vec2(map.column.at<float>(row, col), map.row.at<float>(row, col)));
+    }
+  return out;
+}
+
+struct Errors {
+  double fx = 0, fy = 0, cx = 0, cy = 0, position_mm = 0, orientation_deg = 0;
+};
+
+Errors Compare(const RoomProjector& projector, const ProjectorGeometry& truth) {
+  Errors e;
+  e.fx = std::abs(projector.intrinsics[0] / truth.intrinsics()[0] - 1.0);
+  e.fy = std::abs(projector.intrinsics[1] / truth.intrinsics()[1] - 1.0);
+  e.cx = std::abs(projector.intrinsics[2] - truth.intrinsics()[2]);
+  e.cy = std::abs(projector.intrinsics[3] - truth.intrinsics()[3]);
+  e.position_mm = 1e3 * (projector.proj_from_room.inverse().translation() -
+                         truth.proj_from_world().inverse().translation())
+                            .norm();
+  e.orientation_deg = TurnDeg(projector.proj_from_room.linear(), truth.proj_from_world().linear());
+  return e;
+}
+
+struct CameraErrors {
+  double position_mm = 0, orientation_deg = 0;
+};
+CameraErrors CompareCamera(const Eigen::Isometry3d& estimate, const Eigen::Isometry3d& truth) {
+  return {1e3 * (estimate.translation() - truth.translation()).norm(),
+          TurnDeg(estimate.linear(), truth.linear())};
+}
+
+// ---------------------------------------------------------------------------------------------
+
+TEST(RoomModel, RaysAndClosestPoints) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("tiny_box");
+  const RoomModel model(rig->scene());
+  ASSERT_EQ(model.facets().size(), rig->scene().surfaces.size());  // quads: one facet each
+  // Every facet's normal and offset put its corners on its plane.
+  for (const ModelFacet& facet : model.facets())
+    for (const Vec3& corner : facet.corners)
+      EXPECT_NEAR(facet.normal.dot(corner) + facet.offset, 0.0, 1e-12);
+  // A camera ray meets the point PointSeenByPixel gives.
+  const Eigen::Isometry3d room_from_camera = TrueRoomFromCamera(*rig);
+  int checked = 0;
+  for (int row = 5; row < rig->camera().height(); row += 37)
+    for (int col = 5; col < rig->camera().width(); col += 41) {
+      Vec3 point, ray;
+      if (!rig->PointSeenByPixel(row, col, &point)) continue;
+      ASSERT_TRUE(UnprojectCameraPixel(rig->camera().lens_model(), rig->camera().intrinsics(),
+                                       Vec2(col, row), &ray));
+      double t = 0.0;
+      const int facet = model.Intersect(room_from_camera.translation(),
+                                        room_from_camera.linear() * ray, &t);
+      ASSERT_GE(facet, 0);
+      const Vec3 hit = room_from_camera.translation() + t * (room_from_camera.linear() * ray);
+      EXPECT_LT((hit - point).norm(), 1e-5);  // PointSeenByPixel is single precision
+      double distance = 1.0;
+      Vec3 nearest;
+      EXPECT_EQ(model.Closest(hit, &nearest, &distance), facet);
+      EXPECT_LT(distance, 1e-9);
+      ++checked;
+    }
+  EXPECT_GT(checked, 10);
+  // A point 3 cm in front of the back wall (y = 1, normal −y) is 3 cm from the model.
+  double distance = 0.0;
+  Vec3 nearest;
+  const int facet = model.Closest(Vec3(0.5, 0.97, 0.5), &nearest, &distance);
+  EXPECT_NEAR(distance, 0.03, 1e-12);
+  EXPECT_NEAR(model.facets()[facet].normal.y(), -1.0, 1e-12);
+  // Beyond an edge the nearest point is on the edge: 2 cm above the back wall's top edge.
+  model.Closest(Vec3(0.5, 1.0, 1.02), &nearest, &distance);
+  EXPECT_NEAR(distance, 0.02, 1e-12);
+  EXPECT_LT((nearest - Vec3(0.5, 1.0, 1.0)).norm(), 1e-12);
+}
+
+TEST(CameraModelFile, WriteReadRoundTrip) {
+  testing::TempDir dir;
+  CameraModelFile model;
+  model.lens_model = "LENSMODEL_OPENCV4";
+  model.intrinsics = {700.25, 698.5, 479.5, 319.5, -0.05, 0.01, 0.001, -0.002};
+  model.width = 960;
+  model.height = 640;
+  model.cam_from_ref.linear() =
+      Eigen::AngleAxisd(1.9, Vec3(0.2, -0.9, 0.3).normalized()).toRotationMatrix();
+  model.cam_from_ref.translation() = Vec3(0.5, -1.25, 3.0);
+  WriteCameraModelFile(dir / "x.cameramodel", model, "test");
+  const CameraModelFile back = ReadCameraModelFile(dir / "x.cameramodel");
+  EXPECT_EQ(back.lens_model, model.lens_model);
+  ASSERT_EQ(back.intrinsics.size(), 8u);
+  for (int i = 0; i < 8; ++i) EXPECT_DOUBLE_EQ(back.intrinsics[i], model.intrinsics[i]);
+  EXPECT_EQ(back.width, 960);
+  EXPECT_EQ(back.height, 640);
+  EXPECT_TRUE(back.cam_from_ref.matrix().isApprox(model.cam_from_ref.matrix(), 1e-14));
+  EXPECT_THROW(ReadCameraModelFile(dir / "missing.cameramodel"), IoError);
+}
+
+// Exact correspondences: from the guess, the joint refinement lands on the truth.
+TEST(CalibrateRoom, ExactCorrespondencesGiveTheTruth) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("c_shaped");
+  RoomCalibrationProblem problem = EmptyProblem(*rig);
+  for (int k = 0; k < static_cast<int>(rig->projectors().size()); ++k)
+    problem.projectors.push_back(ExactObservations(*rig, k, 8));
+  const RoomModel model(rig->scene());
+  const Eigen::Isometry3d truth = TrueRoomFromCamera(*rig);
+  RoomCalibration calibration;
+  RoomCalibrationSummary summary;
+  ASSERT_TRUE(CalibrateRoom({}, model, problem, PerturbedGuess(truth), &calibration, &summary))
+      << summary.BriefReport();
+  std::printf("%s\n", summary.BriefReport().c_str());
+  EXPECT_EQ(summary.termination, RoomCalibrationSummary::kConverged);
+  const CameraErrors camera = CompareCamera(calibration.room_from_camera, truth);
+  std::printf("camera: position %.4f mm, orientation %.5f deg\n", camera.position_mm,
+              camera.orientation_deg);
+  EXPECT_LT(camera.position_mm, 0.01);
+  EXPECT_LT(camera.orientation_deg, 1e-4);
+  for (size_t k = 0; k < calibration.projectors.size(); ++k) {
+    const Errors e = Compare(calibration.projectors[k], rig->projectors()[k].geometry);
+    EXPECT_LT(e.fx, 1e-5) << k;
+    EXPECT_LT(e.position_mm, 0.01) << k;
+    EXPECT_LT(summary.projectors[k].rms, 1e-3) << k;
+  }
+}
+
+// The whole chain on c_shaped: decoded structured light of three projectors, a guess 5 cm and
+// 2° off; then triangulation, ICP from the same guess, and planes fitted to the cloud.
+class CShapedDecoded : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    const auto start = std::chrono::steady_clock::now();
+    rig_ = MakeRig("c_shaped", 0.5).release();  // camera 480 x 320, projectors 1280 x 800
+    problem_ = new RoomCalibrationProblem(EmptyProblem(*rig_));
+    for (int k = 0; k < static_cast<int>(rig_->projectors().size()); ++k)
+      problem_->projectors.push_back(DecodedObservations(*rig_, k));
+    std::printf("rendered and decoded 3 projectors in %.1f s\n",
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  }
+  static void TearDownTestSuite() {
+    delete problem_;
+    delete rig_;
+  }
+  static SimulatedRig* rig_;
+  static RoomCalibrationProblem* problem_;
+};
+SimulatedRig* CShapedDecoded::rig_ = nullptr;
+RoomCalibrationProblem* CShapedDecoded::problem_ = nullptr;
+
+TEST_F(CShapedDecoded, JointRefinementMeetsTheIssueTargets) {
+  const RoomModel model(rig_->scene());
+  const Eigen::Isometry3d truth = TrueRoomFromCamera(*rig_);
+  const Eigen::Isometry3d guess = PerturbedGuess(truth);
+  const CameraErrors before = CompareCamera(guess, truth);
+  std::printf("guess: camera off by %.1f mm, %.2f deg\n", before.position_mm,
+              before.orientation_deg);
+  for (const bool distortion : {false, true}) {
+    RoomCalibrationOptions options;
+    options.refine_distortion = distortion;
+    RoomCalibration calibration;
+    RoomCalibrationSummary summary;
+    ASSERT_TRUE(CalibrateRoom(options, model, *problem_, guess, &calibration, &summary))
+        << summary.BriefReport();
+    std::printf("%s%s\n", distortion ? "k1 k2 free: " : "", summary.BriefReport().c_str());
+    const CameraErrors camera = CompareCamera(calibration.room_from_camera, truth);
+    std::printf("  camera: position %.3f mm, orientation %.4f deg\n", camera.position_mm,
+                camera.orientation_deg);
+    EXPECT_LT(camera.position_mm, 5.0);
+    EXPECT_LT(camera.orientation_deg, 0.1);
+    for (size_t k = 0; k < calibration.projectors.size(); ++k) {
+      const Errors e = Compare(calibration.projectors[k], rig_->projectors()[k].geometry);
+      std::printf("  projector %zu: fx %.4f%%, fy %.4f%%, cx %.3f px, cy %.3f px, position "
+                  "%.3f mm, orientation %.4f deg\n",
+                  k, 100 * e.fx, 100 * e.fy, e.cx, e.cy, e.position_mm, e.orientation_deg);
+      EXPECT_LT(e.fx, 0.005) << k;
+      EXPECT_LT(e.fy, 0.005) << k;
+      EXPECT_LT(e.position_mm, 5.0) << k;
+      EXPECT_LT(e.orientation_deg, 0.1) << k;
+      // Decoding error is the ±½ px staircase (rms 0.29 px): the fit's RMS must be of that size.
+      EXPECT_LT(summary.projectors[k].rms, 0.5) << k;
+    }
+  }
+}
+
+// The seed alone (CalibrateProjector on the model's planes as the guess puts them in the camera
+// frame) inherits the guess's error; the joint refinement removes it. Printed for the docs.
+TEST_F(CShapedDecoded, SeedAloneInheritsTheGuessError) {
+  const RoomModel model(rig_->scene());
+  const Eigen::Isometry3d truth = TrueRoomFromCamera(*rig_);
+  const Eigen::Isometry3d guess = PerturbedGuess(truth);
+  const Eigen::Isometry3d cam_from_room = guess.inverse();
+  for (int k = 0; k < 3; ++k) {
+    const ProjectorObservations& p = problem_->projectors[k];
+    ProjectorCalibrationProblem seed;
+    seed.camera_lens_model = problem_->camera_lens_model;
+    seed.camera_intrinsics = problem_->camera_intrinsics;
+    seed.projector_width = p.width;
+    seed.projector_height = p.height;
+    for (const ModelFacet& facet : model.facets())
+      seed.planes.push_back({cam_from_room.linear() * facet.normal,
+                             facet.offset + facet.normal.dot(guess.translation())});
+    for (size_t i = 0; i < p.camera_pixels.size(); i += 9) {
+      Vec3 ray;
+      ASSERT_TRUE(UnprojectCameraPixel(seed.camera_lens_model, seed.camera_intrinsics,
+                                       p.camera_pixels[i], &ray));
+      const int facet = model.Intersect(guess.translation(), guess.linear() * ray);
+      if (facet >= 0) seed.correspondences.push_back({p.camera_pixels[i], p.projector_pixels[i], facet});
+    }
+    ProjectorCalibration calibration;
+    ProjectorCalibrationSummary summary;
+    ASSERT_TRUE(CalibrateProjector({}, seed, &calibration, &summary)) << summary.BriefReport();
+    RoomProjector in_room;
+    in_room.intrinsics = calibration.intrinsics;
+    in_room.proj_from_room = calibration.proj_from_cam * truth.inverse();  // relative pose kept
+    const Errors e = Compare(in_room, rig_->projectors()[k].geometry);
+    std::printf("seed of projector %d (guessed planes): RMS %.3f px, fx %.3f%%, position %.1f mm "
+                "(relative to the camera), orientation %.3f deg\n",
+                k, summary.rms, 100 * e.fx, e.position_mm, e.orientation_deg);
+    // 5 cm and 2° off: the projector's pose relative to the camera is off by centimetres.
+    EXPECT_GT(e.position_mm, 10.0);
+  }
+}
+
+TEST_F(CShapedDecoded, TriangulationAndIcpRegistration) {
+  const RoomModel model(rig_->scene());
+  const Eigen::Isometry3d truth = TrueRoomFromCamera(*rig_);
+  const Eigen::Isometry3d guess = PerturbedGuess(truth);
+  RoomCalibration calibration;
+  RoomCalibrationSummary summary;
+  ASSERT_TRUE(CalibrateRoom({}, model, *problem_, guess, &calibration, &summary));
+  const std::vector<TriangulatedPoint> cloud = Triangulate(*problem_, calibration);
+  std::vector<Vec3> points;
+  std::vector<double> gaps;
+  for (const TriangulatedPoint& p : cloud) {
+    points.push_back(p.p_in_cam);
+    gaps.push_back(p.gap);
+  }
+  const DistanceStats gap = ComputeDistanceStats(gaps);
+  std::printf("triangulated %zu points; ray gap RMS %.2f mm, median %.2f mm, 95%% %.2f mm\n",
+              points.size(), gap.rms_mm, gap.median_mm, gap.p95_mm);
+  ASSERT_GT(points.size(), 10000u);
+  EXPECT_LT(gap.median_mm, 2.0);
+
+  Eigen::Isometry3d registered;
+  RegistrationSummary registration;
+  ASSERT_TRUE(RegisterModelToCloud({}, model, points, guess, &registered, &registration))
+      << registration.BriefReport();
+  std::printf("%s\n", registration.BriefReport().c_str());
+  for (size_t s = 0; s < registration.per_surface.size(); ++s)
+    std::printf("  %s: %d points, RMS %.2f mm, median %.2f mm, 95%% %.2f mm\n",
+                rig_->scene().surfaces[s].name.c_str(), registration.per_surface[s].points,
+                registration.per_surface[s].rms_mm, registration.per_surface[s].median_mm,
+                registration.per_surface[s].p95_mm);
+  EXPECT_EQ(registration.termination, RegistrationSummary::kConverged);
+  const CameraErrors icp = CompareCamera(registered, truth);
+  const CameraErrors versus_joint = CompareCamera(registered, calibration.room_from_camera);
+  std::printf("ICP camera: position %.3f mm, orientation %.4f deg from the truth; %.3f mm, "
+              "%.4f deg from the joint refinement\n",
+              icp.position_mm, icp.orientation_deg, versus_joint.position_mm,
+              versus_joint.orientation_deg);
+  EXPECT_LT(icp.position_mm, 5.0);
+  EXPECT_LT(icp.orientation_deg, 0.1);
+  // Triangulation noise, not the pose, sets the distances: 0.29 px of decoding error at 1372 px
+  // focal length over a 1 m baseline is about 5 mm in depth on the back wall 5.5 m away.
+  EXPECT_GT(registration.inlier_fraction, 0.85);
+  EXPECT_LT(registration.inliers.median_mm, 3.0);
+  EXPECT_LT(registration.inliers.rms_mm, 5.0);
+  EXPECT_GT(registration.initial_rms_mm, 10.0 * registration.inliers.rms_mm);
+
+  // Planes from the scan alone: each fitted plane matches one of the walls or the floor (seen
+  // through the true camera pose).
+  PlaneFitOptions plane_options;
+  std::vector<Vec3> thinned;
+  for (size_t i = 0; i < points.size(); i += 10) thinned.push_back(points[i]);
+  const std::vector<FittedPlane> planes = FitPlanes(plane_options, thinned);
+  std::printf("RANSAC: %zu planes\n", planes.size());
+  ASSERT_GE(planes.size(), 4u);
+  int matched = 0;
+  for (const FittedPlane& plane : planes) {
+    const Vec3 normal_in_room = truth.linear() * plane.normal;
+    const double offset_in_room = plane.offset - normal_in_room.dot(truth.translation());
+    for (const ModelFacet& facet : model.facets()) {
+      const double angle =
+          std::acos(std::clamp(std::abs(normal_in_room.dot(facet.normal)), 0.0, 1.0)) * 180 / kPi;
+      const double offset = normal_in_room.dot(facet.normal) > 0 ? offset_in_room - facet.offset
+                                                                 : offset_in_room + facet.offset;
+      if (angle < 0.5 && std::abs(offset) < 0.01) {
+        std::printf("  plane of %s: %d inliers, %.2f x %.2f m, RMS %.2f mm, %.3f deg, %.2f mm "
+                    "off\n",
+                    rig_->scene().surfaces[facet.surface].name.c_str(), plane.inliers,
+                    plane.extent.x(), plane.extent.y(), plane.rms_mm, angle, 1e3 * offset);
+        ++matched;
+        break;
+      }
+    }
+  }
+  for (const FittedPlane& plane : planes)
+    std::printf("  plane (camera frame) n = (%.3f, %.3f, %.3f), offset %.3f m, %d inliers\n",
+                plane.normal.x(), plane.normal.y(), plane.normal.z(), plane.offset,
+                plane.inliers);
+  EXPECT_EQ(matched, static_cast<int>(planes.size()));
+}
+
+// ICP alone, on exact points (the surface points the camera sees, in its frame) with 1 mm noise:
+// a known 5 cm / 2° perturbation is undone.
+TEST(RegisterModelToCloud, RecoversAKnownPerturbation) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("c_shaped");
+  const RoomModel model(rig->scene());
+  const Eigen::Isometry3d truth = TrueRoomFromCamera(*rig);
+  const Eigen::Isometry3d cam_from_room = truth.inverse();
+  std::mt19937 random(7);
+  std::normal_distribution<double> noise(0.0, 0.001);
+  std::vector<Vec3> points;
+  for (int row = 0; row < rig->camera().height(); row += 6)
+    for (int col = 0; col < rig->camera().width(); col += 6) {
+      Vec3 point;
+      if (!rig->PointSeenByPixel(row, col, &point)) continue;
+      points.push_back(cam_from_room * point + Vec3(noise(random), noise(random), noise(random)));
+    }
+  Eigen::Isometry3d registered;
+  RegistrationSummary summary;
+  ASSERT_TRUE(RegisterModelToCloud({}, model, points, PerturbedGuess(truth), &registered, &summary))
+      << summary.BriefReport();
+  std::printf("%s\n", summary.BriefReport().c_str());
+  const CameraErrors e = CompareCamera(registered, truth);
+  std::printf("recovered: position %.3f mm, orientation %.4f deg\n", e.position_mm,
+              e.orientation_deg);
+  EXPECT_LT(e.position_mm, 0.5);
+  EXPECT_LT(e.orientation_deg, 0.01);
+  // 1 mm per axis: the distance to a plane is |N(0, 1 mm)|, RMS 1 mm.
+  EXPECT_NEAR(summary.inliers.rms_mm, 1.0, 0.1);
+  EXPECT_GT(summary.inlier_fraction, 0.99);
+}
+
+TEST(CalibrateRoom, OptionsAndInputsAreChecked) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("tiny_box");
+  const RoomModel model(rig->scene());
+  RoomCalibrationProblem problem = EmptyProblem(*rig);
+  RoomCalibration calibration;
+  RoomCalibrationSummary summary;
+  EXPECT_THROW(CalibrateRoom({}, model, problem, Eigen::Isometry3d::Identity(), &calibration,
+                             &summary),
+               std::invalid_argument);  // no projector
+  problem.projectors.push_back(ExactObservations(*rig, 0, 4));
+  RoomCalibrationOptions options;
+  options.outlier_threshold = 0.0;
+  std::string why;
+  EXPECT_FALSE(options.Check(&why));
+  EXPECT_THROW(CalibrateRoom(options, model, problem, Eigen::Isometry3d::Identity(), &calibration,
+                             &summary),
+               std::invalid_argument);
+  // Only floor points: the DLT seed is degenerate (coplanar), reported, not guessed at.
+  ProjectorObservations& p = problem.projectors[0];
+  const Eigen::Isometry3d truth = TrueRoomFromCamera(*rig);
+  ProjectorObservations floor_only = p;
+  floor_only.camera_pixels.clear();
+  floor_only.projector_pixels.clear();
+  for (size_t i = 0; i < p.camera_pixels.size(); ++i) {
+    Vec3 point;
+    rig->PointSeenByPixel(static_cast<int>(p.camera_pixels[i].y()),
+                          static_cast<int>(p.camera_pixels[i].x()), &point);
+    if (point.z() < 1e-6) {
+      floor_only.camera_pixels.push_back(p.camera_pixels[i]);
+      floor_only.projector_pixels.push_back(p.projector_pixels[i]);
+    }
+  }
+  ASSERT_GT(floor_only.camera_pixels.size(), 100u);
+  problem.projectors[0] = floor_only;
+  EXPECT_FALSE(CalibrateRoom({}, model, problem, truth, &calibration, &summary));
+  EXPECT_EQ(summary.termination, RoomCalibrationSummary::kSeedFailed);
+  EXPECT_NE(summary.message.find("coplanar"), std::string::npos) << summary.message;
+}
+
+}  // namespace
+}  // namespace procam
+
+namespace procam {
+namespace {
+
+// The tiny box (1 m, 320 × 200 projectors, 240 × 160 camera, devices 1.5–2.5 m from the walls):
+// the same chain at a scale where a pixel is millimetres wide. Printed for the docs; the
+// asserted bounds are the issue's targets scaled by the room (focal 0.5%, 5 mm, 0.2°).
+TEST(CalibrateRoom, TinyBoxDecoded) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("tiny_box");
+  RoomCalibrationProblem problem = EmptyProblem(*rig);
+  for (int k = 0; k < 2; ++k) problem.projectors.push_back(DecodedObservations(*rig, k));
+  const RoomModel model(rig->scene());
+  const Eigen::Isometry3d truth = TrueRoomFromCamera(*rig);
+  for (const int max_correspondences : {10000, 40000}) {
+    RoomCalibrationOptions options;
+    options.max_correspondences = max_correspondences;
+    RoomCalibration calibration;
+    RoomCalibrationSummary summary;
+    ASSERT_TRUE(CalibrateRoom(options, model, problem, PerturbedGuess(truth), &calibration,
+                              &summary))
+        << summary.BriefReport();
+    std::printf("%s\n", summary.BriefReport().c_str());
+    const CameraErrors camera = CompareCamera(calibration.room_from_camera, truth);
+    std::printf("  camera: position %.3f mm, orientation %.4f deg\n", camera.position_mm,
+                camera.orientation_deg);
+    EXPECT_LT(camera.position_mm, 5.0);
+    EXPECT_LT(camera.orientation_deg, 0.2);
+    for (size_t k = 0; k < calibration.projectors.size(); ++k) {
+      const Errors e = Compare(calibration.projectors[k], rig->projectors()[k].geometry);
+      std::printf("  projector %zu: fx %.4f%%, fy %.4f%%, cx %.3f px, cy %.3f px, position "
+                  "%.3f mm, orientation %.4f deg\n",
+                  k, 100 * e.fx, 100 * e.fy, e.cx, e.cy, e.position_mm, e.orientation_deg);
+      EXPECT_LT(e.fx, 0.005);
+      EXPECT_LT(e.position_mm, 5.0);
+      EXPECT_LT(e.orientation_deg, 0.2);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace procam
