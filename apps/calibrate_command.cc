@@ -376,6 +376,7 @@ void AddCalibrateCommands(CLI::App& app) {
   photometric->callback([photometric_args] { RunCalibratePhotometric(*photometric_args); });
 
   AddCalibrateResponseCommand(*calibrate);
+  AddCalibrateAllCommand(*calibrate);
   AddCalibrateProjectorsCommand(*calibrate);
 }
 

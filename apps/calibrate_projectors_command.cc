@@ -15,6 +15,7 @@
 #include <stdexcept>
 
 #include "apps/commands.h"
+#include "apps/geometry_stage.h"
 #include "calibration/registration.h"
 #include "calibration/rig_directory.h"
 #include "calibration/structured_light.h"
@@ -73,13 +74,11 @@ Eigen::Isometry3d LookAt(const Vec3& centre, const Vec3& target, const Vec3& up)
 // A scene file, or a synthetic scene by name ("c_shaped" or "synthetic:c_shaped").
 Scene ResolveScene(const std::string& text) {
   if (std::filesystem::is_regular_file(text)) return LoadScene(text);
-  const std::string name = text.rfind("synthetic:", 0) == 0 ? text.substr(10) : text;
-  std::string known;
-  for (const std::string& scene : SyntheticSceneNames()) {
-    if (scene == name) return MakeSyntheticScene(name).scene;
-    known += (known.empty() ? "" : ", ") + scene;
+  try {
+    return LoadSceneArgument(text.rfind("synthetic:", 0) == 0 ? text : "synthetic:" + text);
+  } catch (const IoError& error) {
+    throw IoError("--scene " + text + ": no such file, nor a synthetic scene (" + error.what() + ")");
   }
-  throw IoError("--scene " + text + ": no such file, nor a synthetic scene (" + known + ")");
 }
 
 bool ValidName(const std::string& name) {

@@ -4,6 +4,8 @@
 // failure, and main turns that into one line on stderr and exit code 1.
 
 #include <CLI/CLI.hpp>
+#include <string>
+#include <vector>
 
 namespace procam {
 
@@ -15,8 +17,13 @@ void AddBenchCommands(CLI::App& app);         // bench formfactors, bench solver
 void AddDemoCommand(CLI::App& app);           // demo
 void AddEvaluationCommands(CLI::App& app);    // evaluate
 void AddCaptureCommands(CLI::App& app);       // cameras, capture
+void AddVerifyCommand(CLI::App& app);         // verify
 void AddCalibrateCommands(CLI::App& app);     // calibrate camera, photometric, ...
 void AddCalibrateResponseCommand(CLI::App& calibrate);  // calibrate response (the group)
+void AddCalibrateAllCommand(CLI::App& calibrate);       // calibrate all (the group)
+// Runs one capture or calibrate command in this process, as `procam ARGUMENTS...` would (its
+// output on stdout); errors propagate as exceptions.
+void RunProcamCommand(const std::vector<std::string>& arguments);
 void AddCalibrateProjectorsCommand(CLI::App& calibrate);  // calibrate projectors (the group)
 
 }  // namespace procam

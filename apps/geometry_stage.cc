@@ -1,5 +1,7 @@
 #include "apps/geometry_stage.h"
 
+#include "datasets_synthetic/paper_scenes.h"
+
 #include <chrono>
 #include <cmath>
 #include <sstream>
@@ -13,8 +15,19 @@
 
 namespace procam {
 
+Scene LoadSceneArgument(const std::string& text) {
+  if (text.rfind("synthetic:", 0) != 0) return LoadScene(text);
+  const std::string name = text.substr(10);
+  std::string known;
+  for (const std::string& scene : SyntheticSceneNames()) {
+    if (scene == name) return MakeSyntheticScene(name).scene;
+    known += (known.empty() ? "" : ", ") + scene;
+  }
+  throw IoError(text + ": no such synthetic scene (" + known + ")");
+}
+
 GeometryStage RunGeometryStage(const std::filesystem::path& scene_path, std::optional<int> patches) {
-  return RunGeometryStage(LoadScene(scene_path), patches);
+  return RunGeometryStage(LoadSceneArgument(scene_path.string()), patches);
 }
 
 GeometryStage RunGeometryStage(Scene scene, std::optional<int> patches) {

@@ -18,8 +18,13 @@ struct GeometryStage {
   double subdivision_seconds = 0.0;
 };
 
-// Loads `scene_path` (patch count from the scene unless `patches` is given) and computes the
-// fine level's form factors, logging progress.
+// The scene a command names: a scene file, or a synthetic scene as "synthetic:NAME" (its patch
+// target 1000 until the caller overrides it). Throws IoError naming the text when it is neither
+// a file nor a synthetic scene (the message lists them).
+Scene LoadSceneArgument(const std::string& text);
+
+// Loads `scene_path` (a file or "synthetic:NAME", see LoadSceneArgument; patch count from the
+// scene unless `patches` is given) and computes the fine level's form factors, logging progress.
 GeometryStage RunGeometryStage(const std::filesystem::path& scene_path, std::optional<int> patches);
 // Same for a scene already in memory.
 GeometryStage RunGeometryStage(Scene scene, std::optional<int> patches);

@@ -20,6 +20,7 @@ int main(int argc, char** argv) {
   procam::AddEvaluationCommands(app);
   procam::AddBenchCommands(app);
   procam::AddCaptureCommands(app);
+  procam::AddVerifyCommand(app);
   procam::AddCalibrateCommands(app);
   procam::AddProjectionCommands(app);
   try {

@@ -16,6 +16,7 @@
 #include <thread>
 
 #include "apps/commands.h"
+#include "apps/geometry_stage.h"
 #include "apps/rig_stage.h"
 #include "datasets_synthetic/rooms.h"
 #include "geometry/io.h"
@@ -88,7 +89,8 @@ Solution LoadSolution(const std::filesystem::path& dir, int patches_override) {
   }
   const int n = result["patches"].get<int>();
   Solution solution;
-  solution.scene = LoadScene(ResolveScenePath(result["scene"].get<std::string>(), dir));
+  solution.scene =
+      LoadSceneArgument(ResolveScenePath(result["scene"].get<std::string>(), dir).string());
 
   const std::filesystem::path e_path = dir / "E.npy";
   const NpyArray e = ReadNpy(e_path);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <map>
 #include <mutex>
+#include <tuple>
 #include <stdexcept>
 #include <utility>
 
@@ -47,7 +48,17 @@ bool SamePattern(const cv::Mat& a, const cv::Mat& b) {
 }
 
 // Scene name and patch count of a synthetic URI (reads `patches`). Throws IoError.
-std::pair<std::string, int> ParseSyntheticUri(const CameraUri& uri) {
+struct SyntheticUri {
+  std::string scene;
+  int patches = 0;
+  double albedo_variation = 0.0;
+  bool operator<(const SyntheticUri& other) const {
+    return std::tie(scene, patches, albedo_variation) <
+           std::tie(other.scene, other.patches, other.albedo_variation);
+  }
+};
+
+SyntheticUri ParseSyntheticUri(const CameraUri& uri) {
   if (uri.scheme() != "synthetic")
     throw IoError("camera '" + uri.text() + "': not a synthetic: camera URI");
   if (!IsSceneName(uri.path())) {
@@ -60,7 +71,12 @@ std::pair<std::string, int> ParseSyntheticUri(const CameraUri& uri) {
                   std::to_string(kMinPatches) + ", " + std::to_string(kMaxPatches) + "], got " +
                   std::to_string(patches));
   }
-  return {uri.path(), patches};
+  const double albedo = uri.GetDouble("albedo", 0.0);
+  if (!(albedo >= 0.0 && albedo < 0.5)) {
+    throw IoError("camera '" + uri.text() + "': albedo must be in [0, 0.5), got " +
+                  std::to_string(albedo));
+  }
+  return {uri.path(), patches, albedo};
 }
 
 }  // namespace
@@ -98,7 +114,8 @@ ProjectorImage CodesFromPattern(const cv::Mat& pattern, const Projector& project
   return image;
 }
 
-std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int patches) {
+std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int patches,
+                                                   double albedo_variation) {
   if (!IsSceneName(scene)) {
     throw std::invalid_argument("unknown synthetic scene '" + scene + "' (scenes: " + SceneList() +
                                 ")");
@@ -114,6 +131,7 @@ std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int
     projectors.push_back(ProjectorFromPlacement(placement));
   SimulatedRigOptions options;
   options.solver_patches = patches;
+  options.albedo_variation = albedo_variation;
 
   auto world = std::make_shared<SyntheticWorld>();
   world->scene = scene;
@@ -172,15 +190,16 @@ SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world) {
 }
 
 std::shared_ptr<SyntheticWorld> OpenSyntheticWorld(const CameraUri& uri) {
-  const auto [scene, patches] = ParseSyntheticUri(uri);
-  // Alive worlds by scene and patch count; a world goes when its last holder lets it go, so a
-  // camera opened later starts with dark displays rather than an earlier run's patterns.
+  const SyntheticUri key = ParseSyntheticUri(uri);
+  // Alive worlds by scene, patch count and albedo; a world goes when its last holder lets it go,
+  // so a camera opened later starts with dark displays rather than an earlier run's patterns.
   static std::mutex mutex;
-  static std::map<std::pair<std::string, int>, std::weak_ptr<SyntheticWorld>> worlds;
+  static std::map<SyntheticUri, std::weak_ptr<SyntheticWorld>> worlds;
   std::lock_guard<std::mutex> lock(mutex);
-  std::weak_ptr<SyntheticWorld>& slot = worlds[{scene, patches}];
+  std::weak_ptr<SyntheticWorld>& slot = worlds[key];
   if (std::shared_ptr<SyntheticWorld> alive = slot.lock()) return alive;
-  std::shared_ptr<SyntheticWorld> world = MakeSyntheticWorld(scene, patches);
+  std::shared_ptr<SyntheticWorld> world =
+      MakeSyntheticWorld(key.scene, key.patches, key.albedo_variation);
   slot = world;
   return world;
 }

@@ -7,7 +7,8 @@
 //   synthetic:c_shaped?patches=300&format=BGR8&noise=1
 //
 // Keys: `patches` (the solver patch count the scene and the rig's world mesh are built for,
-// [20, 5000], default 300; the world mesh is SimulatedRigOptions::world_factor = 4 times finer)
+// [20, 5000], default 300; the world mesh is SimulatedRigOptions::world_factor = 4 times finer),
+// `albedo` (SimulatedRigOptions::albedo_variation: the room's uneven paint, [0, 0.5), default 0)
 // and every key of the test camera (test_camera.h: format, width, height, fps, buffers,
 // exposure_us, reference_exposure_us, gain_db, black, noise, latency_ms, seed, fault, ...), with
 // these defaults changed: width and height = the rig camera's, format BGR8 (the rig's camera
@@ -62,7 +63,8 @@ struct SyntheticWorld {
 // radiance scale (one full-white render). At 300 patches this takes about 1 s for tiny_box and
 // 1.4 s for c_shaped on two cores. Throws std::invalid_argument naming the scene when it is
 // unknown or patches is outside [20, 5000].
-std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int patches = 300);
+std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int patches = 300,
+                                                   double albedo_variation = 0.0);
 
 // The SceneView (camera.h) of the world's camera: for an exposure start time, the radiance of
 // what every display shows at that time (MemoryDisplay::ShownAt; 8-bit grey or B, G, R
@@ -73,7 +75,8 @@ std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int
 // std::invalid_argument when `world` is empty or its displays do not match its projectors.
 SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world);
 
-// The world a "synthetic:" URI names (its path and `patches` key; other keys are left unread).
+// The world a "synthetic:" URI names (its path, `patches` and `albedo` keys; other keys are left
+// unread).
 // Worlds are shared while alive: opening the same scene and patch count again, while a camera
 // or caller still holds the world, returns the same world — so the capture command shows its
 // patterns on the displays the camera looks at. Throws IoError naming the URI: not a synthetic

@@ -1,0 +1,150 @@
+#pragma once
+// Verification with photos, and the closed loop (issue 8).
+//
+// One iteration: the solution's emittance E becomes one image per projector (the projection
+// module's renderer, with the rig's projectors as the model knows them); every projector shows
+// its image at once; the camera photographs the room through the capture sequencer (averaged
+// frames, HDR when exposures are bracketed), each photo written into a capture session as it is
+// taken; camera pixels become patches by casting each pixel's ray from the registered camera
+// (LightCameraPixels, apps/rig_stage.h); camera values become exitance in the scene's units
+// through the camera's colour calibration (x = M · (camera RGB − black), M = diag(1/k) for a
+// per-channel scale k); and the photo is compared in CIE L*a*b* (the problem's T and white)
+// with the predicted appearance (the solution's radiosity B, per patch and per pixel of the
+// patch each pixel sees) and with the desired appearance: ΔE76 and CIEDE2000 per pixel and per
+// patch.
+//
+// The closed loop updates the model from measured minus predicted and solves again:
+//   1. projector response: per projector and primary j, an exponent p (response r_j(d) →
+//      r_j(d)^p, i.e. gamma γ → γ·p) fitted to the measured radiosity of the seen patches:
+//      B_i,c = s_c ρ_i,c (D_i,c(p) + (F B)_i,c), D the direct irradiance the shown codes deliver
+//      by the rig's flux bookkeeping (code histograms per patch), F B the bounce irradiance
+//      from the measured B (the model's on unseen patches), s_c a common reflectance scale per
+//      channel; least squares on log B by coordinate descent (golden section on each p);
+//   2. reflectance: per seen patch ρ = B / (D(p) + F B) (the radiosity equation solved for ρ
+//      with the measured B), damped (ρ ← ρ_old (ρ/ρ_old)^step), the ratio bounded to
+//      [1/2, 2] and ρ to [0.01, 0.99]; unseen patches scale by s;
+//   3. RunCompensation with the updated model (method, alpha and multires of the solution).
+// It stops when the measured mean ΔE76 (photo vs desired, per pixel) improves by less than
+// `min_improvement`, or after `iterations` photos, and keeps the best iteration (the lowest
+// measured mean ΔE76), never one worse than the first.
+//
+// Output (VerificationOptions::out):
+//   iterations/K/session/     the capture session (session.json, patterns/, frames/)
+//   iterations/K/NAME.png     each projector's image; E.npy, B.npy (the solution shown),
+//                             reflectance.npy (the model's), measured_B.npy (per patch, NaN
+//                             where unseen), photo.png, predicted.png, delta_e76.png (photo vs
+//                             desired), delta_e2000.png, model_delta_e76.png (photo vs
+//                             predicted), result.json
+//   desired.png, result.json (every iteration, the best), report.html
+// Everything is written atomically as it is produced, so a fault keeps what was done.
+
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <opencv2/core/mat.hpp>
+
+#include "apps/report.h"
+#include "capture/display.h"
+#include "capture/sequencer.h"
+#include "geometry/scene.h"
+
+namespace procam {
+
+struct VerificationOptions {
+  std::filesystem::path rig_dir;       // rig.json: camera.model (registered), projectors[]
+  std::filesystem::path solution_dir;  // what `procam compensate SCENE --rig RIG_DIR` wrote
+  std::filesystem::path out;           // created; see the header comment
+  std::string camera;                  // camera URI (synthetic:SCENE?..., aravis:..., v4l2:...)
+  // Where each rig projector (rig.json's order) shows its image, e.g. GlfwDisplay on its
+  // monitor. Empty for synthetic cameras, which show the images on their world's displays.
+  std::vector<std::shared_ptr<PatternDisplay>> displays;
+  // The scene, when the solution's result.json names no file (a generated scene, as in the
+  // demo); otherwise left empty and read from the file result.json names.
+  std::optional<Scene> scene;
+  SequencerOptions sequencer;          // frames, exposures (several: HDR), settle, retries
+  std::string camera_response;         // camera_response.json: linearise (needs bracketing)
+  // Camera colour calibration, camera value per unit exitance (scene units) per channel: a
+  // number, "R,G,B", or empty: the synthetic camera's own (from its URI and the session's
+  // exposure and gain), else rig.json camera.colour ({"scale": [R,G,B]} or {"matrix": 3×3}).
+  // For bracketed (HDR) photos the units are full scale per second.
+  std::string camera_scale;
+  double camera_black = -1.0;  // camera black level, DN (< 0: the synthetic URI's, else 0)
+  double gain = -1.0;          // camera gain to set (< 0: leave it)
+  int iterations = 4;          // photos at most (iteration 0 is the solution as given), [1, 50]
+  double min_improvement = 0.01;  // relative drop of the mean ΔE76 needed to go on, [0, 1)
+  double reflectance_step = 1.0;  // damping of the reflectance update, (0, 1]
+  bool fit_response = true;       // fit the projectors' response exponents
+  bool fit_reflectance = true;    // update the per-patch reflectance
+  int min_patch_pixels = 4;       // camera pixels a patch needs to count as seen, ≥ 1
+  bool Check(std::string* why) const;
+};
+
+// Colour differences of one photo.
+struct PhotoDeltaE {
+  double mean76 = 0, max76 = 0, mean2000 = 0, max2000 = 0;  // per pixel over the seen pixels
+  double patch_mean76 = 0, patch_mean2000 = 0;  // area-weighted over the seen patches
+};
+
+struct VerificationIteration {
+  int index = 0;
+  PhotoDeltaE measured;       // photo vs desired
+  PhotoDeltaE model;          // photo vs predicted (the model's error)
+  double predicted_mean76 = 0, predicted_mean2000 = 0;  // B vs desired, same seen patches
+  double solver_mean76 = 0;   // B vs desired over every patch (compensate's number)
+  int seen_pixels = 0, seen_patches = 0;
+  // The model update made after this photo (empty for the last): per projector, the response
+  // exponent per primary and the reflectance scale s per channel.
+  std::vector<Eigen::Vector3d> response_exponent;
+  Eigen::Vector3d reflectance_scale = Eigen::Vector3d::Ones();
+  double capture_seconds = 0, solve_seconds = 0, seconds = 0;
+  std::filesystem::path directory;
+  // Pictures for the report (8-bit BGR): photo, prediction, ΔE76 heat maps.
+  cv::Mat photo, predicted, delta_e76, model_delta_e76;
+};
+
+struct VerificationSummary {
+  std::vector<VerificationIteration> iterations;
+  int best = -1;            // index of the iteration with the lowest measured mean ΔE76
+  bool complete = false;    // false when a camera or projector fault stopped the loop
+  std::string termination;  // "converged", "max_iterations" or "fault"
+  std::string error;        // the fault, when not complete
+  cv::Mat desired;          // 8-bit BGR, the desired appearance as the camera sees it
+  double seconds = 0;
+  nlohmann::json Json() const;
+  std::string BriefReport() const;  // one line
+};
+
+// Runs the loop. Camera URIs are opened through the camera registry: the synthetic backend is
+// registered here; callers register the device backends (RegisterDeviceBackends) for real
+// cameras. Throws IoError (naming the file, key, camera or projector) for bad input
+// before anything is captured; a camera or projector lost mid-run writes result.json and
+// report.html with the iterations done (complete = false) and then throws IoError saying so.
+VerificationSummary RunVerification(const VerificationOptions& options);
+
+// Appends the verification's sections (table, convergence plot, per-iteration pictures) to a
+// report, e.g. the demo's.
+void AddVerificationReport(const VerificationSummary& summary, HtmlReport* report);
+
+// A set of displays shown as one: a pattern is the displays' images side by side (left to
+// right, top-aligned, width = Σ widths, height = the tallest), so the capture sequencer shows
+// every projector's image at once. Show() throws IoError naming the projector and its display.
+class DisplayWall : public PatternDisplay {
+ public:
+  DisplayWall(std::vector<std::shared_ptr<PatternDisplay>> displays, std::vector<std::string> names);
+  cv::Size Resolution() const override;
+  std::string Name() const override;
+  void Show(const cv::Mat& pattern) override;
+  // The displays' images (CV_8UC3 B, G, R, each its display's size) as one pattern.
+  cv::Mat Compose(const std::vector<cv::Mat>& images) const;
+
+ private:
+  std::vector<std::shared_ptr<PatternDisplay>> displays_;
+  std::vector<std::string> names_;
+};
+
+}  // namespace procam

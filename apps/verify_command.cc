@@ -1,0 +1,120 @@
+// procam verify RIG_DIR SOLUTION_DIR --camera URI --out DIR: show the solution, photograph the
+// room, compare with the predicted L*a*b* appearance and close the loop (apps/verification.h).
+#include <iostream>
+#include <memory>
+
+#include "apps/commands.h"
+#include "apps/verification.h"
+#include "capture/devices.h"
+#include "geometry/io.h"
+#include "procam/config.h"
+#if PROCAM_WITH_GLFW
+#include "projection/glfw_display.h"
+#endif
+
+namespace procam {
+namespace {
+
+struct VerifyArguments {
+  std::string rig, solution, out, camera, camera_response, camera_scale;
+  std::vector<std::string> displays;
+  VerificationOptions options;
+};
+
+std::shared_ptr<PatternDisplay> OpenDisplay(const std::string& text) {
+  if (text.rfind("glfw:", 0) != 0) {
+    throw IoError("display '" + text + "': unknown; use glfw:N|NAME (procam show --list)");
+  }
+#if PROCAM_WITH_GLFW
+  try {
+    return std::make_shared<GlfwDisplay>(FindMonitor(text.substr(5)));
+  } catch (const IoError& error) {
+    throw IoError("display '" + text + "': " + error.what());
+  }
+#else
+  throw IoError("display '" + text +
+                "': this build has no GLFW output backend (reconfigure with -DPROCAM_WITH_GLFW=ON; "
+                "apt-get install libglfw3-dev libgl-dev)");
+#endif
+}
+
+void RunVerify(VerifyArguments& args) {
+  RegisterDeviceBackends();
+  VerificationOptions options = args.options;
+  options.rig_dir = args.rig;
+  options.solution_dir = args.solution;
+  options.out = args.out;
+  options.camera = args.camera;
+  options.camera_response = args.camera_response;
+  options.camera_scale = args.camera_scale;
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument("verify: " + why);
+  for (const std::string& display : args.displays) options.displays.push_back(OpenDisplay(display));
+  const VerificationSummary summary = RunVerification(options);
+  std::cout << summary.BriefReport() << "\nwrote " << args.out << "/result.json, report.html, iterations/\n";
+}
+
+}  // namespace
+
+void AddVerifyCommand(CLI::App& app) {
+  auto args = std::make_shared<VerifyArguments>();
+  CLI::App* cmd = app.add_subcommand(
+      "verify",
+      "Show a solution, photograph the room, compare with the predicted L*a*b* appearance, and "
+      "refine the model in a closed loop");
+  cmd->add_option("rig", args->rig, "Rig directory (rig.json: camera.model, projectors[])")->required();
+  cmd->add_option("solution", args->solution,
+                  "Solution directory (procam compensate SCENE --rig RIG_DIR --out DIR)")
+      ->required();
+  cmd->add_option("--camera", args->camera, "Camera URI: synthetic:SCENE?..., aravis:<id>, v4l2:/dev/video0")
+      ->required();
+  cmd->add_option("--out", args->out, "Output directory")->required();
+  cmd->add_option("--display", args->displays,
+                  "Per projector, in rig.json's order: glfw:N|NAME, its monitor (procam show "
+                  "--list); not for synthetic cameras");
+  cmd->add_option("--iterations", args->options.iterations,
+                  "Photos at most: 1 verifies only; more refine the model and solve again")
+      ->capture_default_str();
+  cmd->add_option("--min-improvement", args->options.min_improvement,
+                  "Stop when the measured mean ΔE76 drops by less than this fraction")
+      ->capture_default_str();
+  cmd->add_option("--reflectance-step", args->options.reflectance_step,
+                  "Damping of the per-patch reflectance update, (0,1]")
+      ->capture_default_str();
+  cmd->add_flag("!--no-response-fit", args->options.fit_response,
+                "Leave the projectors' responses as the rig has them");
+  cmd->add_flag("!--no-reflectance-fit", args->options.fit_reflectance,
+                "Leave the per-patch reflectance as the rig has it");
+  cmd->add_option("--min-patch-pixels", args->options.min_patch_pixels,
+                  "Camera pixels a patch needs to count as seen")
+      ->capture_default_str();
+  cmd->add_option("--camera-scale", args->camera_scale,
+                  "Camera value per unit exitance (scene units), number or R,G,B; default: "
+                  "rig.json camera.colour, or the synthetic camera's own");
+  cmd->add_option("--camera-black", args->options.camera_black,
+                  "Camera black level in DN (default: rig.json camera.colour.black, the synthetic "
+                  "URI's, or 0)");
+  cmd->add_option("--camera-response", args->camera_response,
+                  "camera_response.json (procam calibrate response) for a camera that is not "
+                  "linear; needs --exposure-us bracketing");
+  cmd->add_option("--gain", args->options.gain, "Camera gain (dB for Aravis/test cameras)");
+  cmd->add_option("--frames", args->options.sequencer.frames_per_pattern, "Frames averaged per photo")
+      ->capture_default_str();
+  cmd->add_option("--settle-ms", args->options.sequencer.settle_ms,
+                  "Wait after showing the images, milliseconds")
+      ->capture_default_str();
+  cmd->add_option("--exposure-us", args->options.sequencer.exposures_us,
+                  "Exposure(s), microseconds; several bracket and merge to HDR")
+      ->delimiter(',');
+  cmd->add_option("--retries", args->options.sequencer.max_retries,
+                  "Failed grabs retried in a row before giving up")
+      ->capture_default_str();
+  cmd->add_option("--retry-delay-ms", args->options.sequencer.retry_delay_ms,
+                  "Pause before a retry, milliseconds")
+      ->capture_default_str();
+  cmd->add_option("--timeout-ms", args->options.sequencer.grab_timeout_ms, "Grab timeout per frame")
+      ->capture_default_str();
+  cmd->callback([args] { RunVerify(*args); });
+}
+
+}  // namespace procam
