@@ -117,6 +117,19 @@ void RunCalibrateAll(const CalibrateAllArguments& args) {
   }
   const int patches = args.patches > 0 ? args.patches : synthetic ? world->patches : 0;
 
+  // Everything the later steps need is checked before anything is captured or written.
+  if (args.camera_model.empty() && args.chessboard.empty() && !synthetic) {
+    throw std::invalid_argument(
+        "--chessboard: a real camera needs chessboard photos (--chessboard DIR) or a "
+        "calibrated model (--camera-model FILE)");
+  }
+  if (!args.camera_model.empty() && !std::filesystem::exists(args.camera_model))
+    throw IoError(args.camera_model + ": file not found (--camera-model)");
+  if (args.camera_scale.empty() && !synthetic) {
+    throw std::invalid_argument(
+        "--camera-scale: required for a real camera (camera value per unit exitance, "
+        "docs/calibration.md)");
+  }
   const std::filesystem::path out(args.out);
   const std::filesystem::path captures = out / "captures";
   std::filesystem::create_directories(captures);
