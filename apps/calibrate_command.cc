@@ -17,6 +17,7 @@
 #include "apps/photometric_rig.h"
 #include "calibration/camera_calibration.h"
 #include "calibration/photometric.h"
+#include "calibration/rig_directory.h"
 #include "capture/session.h"
 #include "geometry/io.h"
 
@@ -122,8 +123,8 @@ void RunCalibrateCamera(const CalibrateCameraArguments& args) {
                          {"seed_rms_px", summary.seed_rms},
                          {"corners", summary.corners},
                          {"outliers", summary.outliers}};
-  WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
-  std::printf("wrote %s and %s\n", (out / "camera.cameramodel").c_str(),
+  UpdateRigResult(out, {"camera"}, result);
+  std::printf("wrote %s and %s (section camera)\n", (out / "camera.cameramodel").c_str(),
               (out / "result.json").c_str());
 }
 
@@ -322,11 +323,15 @@ void RunCalibratePhotometric(const CalibratePhotometricArguments& args) {
 
   const std::filesystem::path out(args.out);
   std::filesystem::create_directories(out);
-  WriteFileAtomically(out / "photometric.json", photometric.dump(2) + "\n");
-  WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
+  // One projector's photometry per file when it is named (a rig has several).
+  const std::string name = args.rig.projector.empty() ? "projector" : args.rig.projector;
+  const std::filesystem::path model_file =
+      out / (args.rig.projector.empty() ? "photometric.json" : name + ".photometric.json");
+  WriteFileAtomically(model_file, photometric.dump(2) + "\n");
+  UpdateRigResult(out, {"photometric", name}, result);
   rig_stage.Commit();
-  std::printf("wrote %s and %s\n", (out / "photometric.json").c_str(),
-              (out / "result.json").c_str());
+  std::printf("wrote %s and %s (section photometric.%s)\n", model_file.c_str(),
+              (out / "result.json").c_str(), name.c_str());
 }
 
 }  // namespace

@@ -356,13 +356,6 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& args) {
                                {"centre_room_m", Json(p.proj_from_room.inverse().translation())}});
   result_section["projectors"] = projectors_json;
 
-  nlohmann::json result = nlohmann::json::object();
-  if (std::filesystem::exists(out / "result.json")) {
-    std::ifstream in(out / "result.json");
-    result = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
-    if (!result.is_object()) result = nlohmann::json::object();
-  }
-  result["projectors"] = result_section;
   // rig.json is read before anything is written, so a malformed one stops here.
   ReadRigJson(out);
 
@@ -388,7 +381,7 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& args) {
       RigProjectorEntry(rig, p.name)["model"] = p.name + ".cameramodel";
     rig["registration"] = registration_json;
   });
-  WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
+  UpdateRigResult(out, {"projectors"}, result_section);
   std::printf("wrote %zu projector models, camera.cameramodel (pose in the room), rig.json and "
               "result.json in %s\n",
               calibration.projectors.size(), out.c_str());

@@ -28,6 +28,27 @@ void UpdateRigJson(const std::filesystem::path& rig_dir,
   WriteFileAtomically(rig_dir / "rig.json", rig.dump(2) + "\n");
 }
 
+void UpdateRigResult(const std::filesystem::path& rig_dir, const std::vector<std::string>& path,
+                     const nlohmann::json& section) {
+  nlohmann::json result = nlohmann::json::object();
+  const std::filesystem::path file = rig_dir / "result.json";
+  if (std::filesystem::exists(file)) {
+    std::ifstream in(file);
+    std::stringstream text;
+    text << in.rdbuf();
+    result = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
+    if (!result.is_object()) result = nlohmann::json::object();
+  }
+  nlohmann::json* node = &result;
+  for (const std::string& key : path) {
+    if (!(*node)[key].is_object()) (*node)[key] = nlohmann::json::object();
+    node = &(*node)[key];
+  }
+  *node = section;
+  std::filesystem::create_directories(rig_dir);
+  WriteFileAtomically(file, result.dump(2) + "\n");
+}
+
 nlohmann::json& RigProjectorEntry(nlohmann::json& rig, const std::string& name) {
   nlohmann::json& projectors = rig["projectors"];
   if (!projectors.is_array()) projectors = nlohmann::json::array();

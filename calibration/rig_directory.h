@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -30,6 +31,13 @@ nlohmann::json ReadRigJson(const std::filesystem::path& rig_dir);
 // `rig_dir`). Nothing is written when `update` throws.
 void UpdateRigJson(const std::filesystem::path& rig_dir,
                    const std::function<void(nlohmann::json&)>& update);
+
+// RIG_DIR/result.json gathers what every calibrate command reports, one section each
+// ("camera", "projectors", "photometric" → {NAME: ...}, "response"), so that one command never
+// drops another's report. Sets the section at `path` (object keys, outermost first), keeping the
+// rest; a result.json that is not a JSON object is replaced. Written atomically.
+void UpdateRigResult(const std::filesystem::path& rig_dir, const std::vector<std::string>& path,
+                     const nlohmann::json& section);
 
 // The entry of projectors[] named `name` in `rig`, created (with "name") at the end of the array
 // when missing.

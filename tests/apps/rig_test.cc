@@ -380,6 +380,7 @@ TEST(ScenePhotometryCommand, FillsTheRigInSceneUnits) {
   EXPECT_NE(no_scale.output.find("--camera-scale: required with --scene"), std::string::npos)
       << no_scale.output;
   EXPECT_FALSE(std::filesystem::exists(rig / "photometric.json"));
+  EXPECT_FALSE(std::filesystem::exists(rig / "left.photometric.json"));
 
   const CommandRun run = RunProcam(calibrate + " --camera-scale '" + uri + "'");
   std::printf("%s", run.output.c_str());
@@ -388,6 +389,9 @@ TEST(ScenePhotometryCommand, FillsTheRigInSceneUnits) {
   const nlohmann::json& entry = filled["projectors"][0];
   EXPECT_EQ(entry["model"], "left.cameramodel");  // the geometry is kept
   EXPECT_EQ(filled["photometric"]["left"]["units"], "scene");
+  EXPECT_TRUE(std::filesystem::exists(rig / "left.photometric.json"));
+  EXPECT_NE(ReadJson(rig / "result.json")["photometric"]["left"]["units"].get<std::string>().find(
+                "scene units"), std::string::npos);
   for (int c = 0; c < 3; ++c) {
     const double max = entry["max"][c].get<double>(), black = entry["black"][c].get<double>();
     std::printf("channel %c: max %.4f (true %.4f, %+.2f%%), black %.5f (true %.5f: the other "

@@ -231,7 +231,7 @@ TEST(CalibrateCommand, WritesModelAndResiduals) {
   EXPECT_LT(RelativeError(model.intrinsics()[0], kTrueIntrinsics[0]), 0.002);
   EXPECT_LT(RelativeError(model.intrinsics()[1], kTrueIntrinsics[1]), 0.002);
   std::ifstream file(dir / "rig/result.json");
-  const nlohmann::json result = nlohmann::json::parse(file);
+  const nlohmann::json result = nlohmann::json::parse(file)["camera"];  // its section
   EXPECT_EQ(result["views"].size(), 10u);
   EXPECT_EQ(result["skipped_images"][0], "999_blank.png");
   EXPECT_LT(result["residuals"]["rms_px_per_coordinate"].get<double>(), 0.1);

@@ -72,7 +72,8 @@ TEST(CalibratePhotometricCommand, RecoversTheSyntheticProjectorsGammaAndMixing) 
   }
   EXPECT_NE(model["note"].get<std::string>().find("camera units"), std::string::npos);
 
-  const nlohmann::json result = ReadJson(dir / "rig/result.json");
+  // Its section of the rig's result.json ("projector" when --projector does not name it).
+  const nlohmann::json result = ReadJson(dir / "rig/result.json")["photometric"]["projector"];
   EXPECT_EQ(result["fields"].size(), 25u);  // black + 3 channels × 8 levels
   EXPECT_GT(result["pixels_used"].get<int>(), 10000);
   EXPECT_NE(result["note"].get<std::string>().find("relative to this camera"), std::string::npos);
