@@ -233,7 +233,7 @@ CameraColour SyntheticColour(const CameraUri& uri, const SyntheticWorld& world,
   double k = 0.0;
   CameraColour colour;
   if (hdr) {
-    k = world.radiance_scale * full / (full - camera.black_level) * gain /
+    k = world.radiance_scale * full / (full - black) * gain /
         (camera.reference_exposure_us * 1e-6);
     colour.black = 0.0;
   } else {
@@ -724,7 +724,10 @@ cv::Size DisplayWall::Resolution() const {
 
 std::string DisplayWall::Name() const {
   std::string name;
-  for (const auto& display : displays_) name += (name.empty() ? "" : "+") + display->Name();
+  for (const auto& display : displays_) {
+    if (!name.empty()) name += '+';
+    name += display->Name();
+  }
   return name;
 }
 
@@ -860,6 +863,15 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
     sequencer.hdr.inverse_response = ReadInverseResponse(options.camera_response, 3);
   }
   const bool hdr = sequencer.exposures_us.size() >= 2;
+  // The HDR merge subtracts the camera's black level: the option's, rig.json's, or the
+  // synthetic URI's.
+  if (options.camera_black >= 0) {
+    sequencer.hdr.black_level = options.camera_black;
+  } else if (world) {
+    sequencer.hdr.black_level = TestCameraOptionsFromUri(uri).black_level;
+  } else {
+    sequencer.hdr.black_level = colour_source.black;
+  }
 
   // The model: geometry, the rig's reflectance and projectors (shown through 8-bit displays).
   GeometryStage geometry = options.scene
@@ -1063,8 +1075,6 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
                       {"max_relative_error", render.max_relative_error}};
     nlohmann::json model = nlohmann::json::array();
     for (size_t p = 0; p < rig.projectors.size(); ++p) {
-      const ProjectorPhotometry& photometry = projectors[p].photometry;
-      (void)photometry;
       nlohmann::json gamma = nlohmann::json::array();
       for (int j = 0; j < 3; ++j) {
         const ResponseCurve& curve = rig.projectors[p].photometry.response[j];
