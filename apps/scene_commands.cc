@@ -16,6 +16,7 @@
 #include "apps/geometry_stage.h"
 #include "apps/report.h"
 #include "apps/rig_stage.h"
+#include "apps/verification.h"
 #include "calibration/registration.h"
 #include "projection/projector_images.h"
 #include "compensation/problem.h"
@@ -81,6 +82,7 @@ void RunJsonDemo(const std::string& scene_path, int patches, const std::filesyst
 // (`procam calibrate all`), its accuracy against the ground truth, and the perceptual
 // compensation redone with the recovered rig, photographed in the true world.
 struct CalibrationStage {
+  std::string camera;                               // the synthetic camera's URI
   std::vector<std::vector<std::string>> accuracy;  // table rows
   MethodEvaluation perceptual;                      // with the recovered rig
   nlohmann::json json;
@@ -89,7 +91,7 @@ struct CalibrationStage {
 CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation, const EvaluationOptions& options,
                                      const std::filesystem::path& rig_dir) {
   CalibrationStage stage;
-  const std::string camera = fmt::format(
+  const std::string camera = stage.camera = fmt::format(
       "synthetic:{}?patches={}&albedo={}&fps=500&exposure_us=1000&reference_exposure_us=1000&black=8&noise=1",
       evaluation.name, options.patches, options.albedo_variation);
   RunProcamCommand({"calibrate", "all", "--camera", camera, "--out", rig_dir.string(), "--frames", "2",
@@ -174,11 +176,30 @@ void RunSyntheticDemo(const std::string& scene, int patches, const std::filesyst
   }
   spdlog::info("demo: calibration stage — the rig calibrated from its own simulated captures (procam calibrate all)");
   const CalibrationStage calibration = RunCalibrationStage(evaluation, options, out / "rig");
+  // Verification: the calibrated solution photographed, compared with its prediction, and the
+  // model refined from the photos (procam verify).
+  spdlog::info("demo: verification stage — photos against the predicted L*a*b*, the closed loop (procam verify)");
+  GeometryStage calibrated_geometry = evaluation.geometry;
+  ApplyRigReflectance(ReadRigDirectory(out / "rig"), &calibrated_geometry.patches);
+  WriteCompensation(calibrated_geometry, calibration.perceptual.run, out / "perceptual_calibrated", false);
+  VerificationOptions verification;
+  verification.rig_dir = out / "rig";
+  verification.solution_dir = out / "perceptual_calibrated";
+  verification.out = out / "verify";
+  verification.camera = calibration.camera;
+  verification.scene = evaluation.geometry.scene;
+  verification.sequencer.frames_per_pattern = 2;
+  verification.sequencer.settle_ms = 0;
+  verification.iterations = 4;
+  const VerificationSummary verified = RunVerification(verification);
   cv::imwrite((out / "perceptual_calibrated.png").string(), LinearToDisplay(calibration.perceptual.radiance));
   cv::imwrite((out / "perceptual_calibrated_delta_e76.png").string(),
               HeatMapWithColourBar(calibration.perceptual.delta_e76, 30.0, "dE76"));
   nlohmann::json result = EvaluationJson(evaluation);
   result["calibration"] = calibration.json;
+  result["verification"] = {{"summary", verified.BriefReport()},
+                            {"best_iteration", verified.best},
+                            {"result", (out / "verify" / "result.json").string()}};
   WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
 
   HtmlReport report("procam demo: " + scene);
@@ -219,6 +240,8 @@ void RunSyntheticDemo(const std::string& scene, int patches, const std::filesyst
       calibration.perceptual.mean_delta_e2000, evaluation.methods.back().mean_delta_e76));
   report.Figures({{"perceptual, calibrated rig", cv::imread((out / "perceptual_calibrated.png").string())},
                   {"ΔE76, calibrated rig", cv::imread((out / "perceptual_calibrated_delta_e76.png").string())}});
+  report.Heading("Verification: photos against the prediction, and the closed loop");
+  AddVerificationReport(verified, &report);
   report.Heading("Pictures");
   std::vector<std::pair<std::string, cv::Mat>> figures;
   for (const auto& [caption, name] : files) figures.emplace_back(caption, cv::imread((out / name).string()));
@@ -243,6 +266,7 @@ void RunSyntheticDemo(const std::string& scene, int patches, const std::filesyst
   std::cout << fmt::format("  {:<12} {:>10.2f} {:>9.1f} {:>12.2f} {:>11.1f}   (calibrated rig)\n", "perceptual",
                            calibration.perceptual.mean_delta_e76, calibration.perceptual.max_delta_e76,
                            calibration.perceptual.mean_delta_e2000, calibration.perceptual.max_delta_e2000);
+  std::cout << "\nverification (closed loop, calibrated rig): " << verified.BriefReport() << "\n";
   std::cout << "\nwrote " << (out / "report.html").string() << " (open it in a browser), pictures, result.json, "
             << "problem/ and per method E.npy, B.npy and projector images\n";
 }

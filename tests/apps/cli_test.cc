@@ -97,7 +97,10 @@ TEST(Cli, DemoOnTheSyntheticRigWritesAReportThatRendersInChromium) {
   const CommandRun run = Procam("demo --scene tiny_box --patches 100 --out " + (dir / "demo").string());
   ASSERT_EQ(run.exit_code, 0) << run.output;
   for (const char* name : {"report.html", "desired.png", "perceptual.png", "perceptual_delta_e76.png",
-                           "linear_delta_e2000.png", "perceptual/projector_0.png", "result.json"}) {
+                           "linear_delta_e2000.png", "perceptual/projector_0.png", "result.json",
+                           // the calibration stage (calibrate all) and the verification stage
+                           "rig/rig.json", "rig/camera.cameramodel", "rig/reflectance.npy",
+                           "perceptual_calibrated.png", "perceptual_calibrated/E.npy", "verify/result.json"}) {
     EXPECT_TRUE(std::filesystem::exists(dir / "demo" / name)) << name;
   }
   // Headless Chromium (Debian's, installed by scripts/packages.txt), no network: the page's
@@ -111,7 +114,11 @@ TEST(Cli, DemoOnTheSyntheticRigWritesAReportThatRendersInChromium) {
   ASSERT_NE(dom.find("<body"), std::string::npos) << "chromium produced no DOM: is the 'chromium' package installed?";
   EXPECT_NE(dom.find("data-ready=\"yes\""), std::string::npos) << dom.substr(0, 400);
   EXPECT_NE(dom.find("<svg class=\"plot\""), std::string::npos);
-  EXPECT_NE(dom.find("data-images=\"1"), std::string::npos);  // 10+ pictures decoded
+  const size_t images = dom.find("data-images=\"");
+  ASSERT_NE(images, std::string::npos);
+  EXPECT_GE(std::stoi(dom.substr(images + 13)), 10);  // pictures decoded
+  EXPECT_NE(dom.find("Calibration (the rig recovered"), std::string::npos);
+  EXPECT_NE(dom.find("Verification"), std::string::npos);
 }
 
 TEST(Cli, BadInputGivesOneLineNamingTheFileAndWritesNothing) {
