@@ -8,8 +8,11 @@
 //      into RIG_DIR/captures/;
 //   3. `calibrate projectors` on every structured-light session (joint refinement, registration);
 //   4. per projector: `calibrate photometric --projector NAME --scene SCENE` (scene units,
-//      per-patch reflectance).
+//      per-patch reflectance);
+//   5. the projectors' black levels separated from one another (SeparateProjectorBlacks).
+#include <algorithm>
 #include <cmath>
+#include <optional>
 #include <cstdio>
 #include <filesystem>
 #include <sstream>
@@ -20,8 +23,11 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "apps/commands.h"
+#include "apps/geometry_stage.h"
+#include "apps/rig_stage.h"
 #include "calibration/rig_directory.h"
 #include "capture/camera.h"
+#include "capture/session.h"
 #include "datasets_synthetic/chessboard_views.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/synthetic_camera.h"
@@ -82,6 +88,82 @@ std::string SyntheticCameraGuess(const std::string& scene) {
                      round(camera.centre.y(), 0.05), round(camera.centre.z(), 0.05),
                      round(camera.target.x(), 0.25), round(camera.target.y(), 0.25),
                      round(camera.target.z(), 0.25));
+}
+
+// Every photometric session's black field shows all projectors at black, so each projector's
+// fitted black is the sum of all of them there. Separates them (SeparateBlackLevels) and moves
+// each max by the same amount (the fit's max − black is unbiased), in rig.json and in a
+// `black_levels` section of result.json.
+void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector<std::string>& names,
+                             const std::filesystem::path& captures, const std::string& scene,
+                             int patches) {
+  std::printf("\n== black levels, jointly\n");
+  const nlohmann::json rig_json = ReadRigJson(out);
+  const RigDirectory rig = ReadRigDirectory(out);
+  const ProjectorGeometry camera = ReadCameraModel(out / "camera.cameramodel");
+  const GeometryStage stage =
+      RunGeometryStage(LoadSceneArgument(scene), patches > 0 ? std::optional<int>(patches) : std::nullopt);
+  std::vector<cv::Mat> transfers;
+  cv::Mat black_field;
+  int black_fields = 0;
+  double camera_black = 0.0;
+  for (const std::string& name : names) {
+    const auto projector = std::find_if(rig.projectors.begin(), rig.projectors.end(),
+                                        [&](const Projector& p) { return p.name == name; });
+    if (projector == rig.projectors.end()) throw IoError((out / "rig.json").string() + ": no projector " + name);
+    const nlohmann::json& entry = rig_json["photometric"][name];
+    const Eigen::Vector3d scale(entry["camera_scale"][0].get<double>(), entry["camera_scale"][1].get<double>(),
+                                entry["camera_scale"][2].get<double>());
+    camera_black = entry.value("camera_black", 0.0);
+    const CameraPixelLighting lighting =
+        LightCameraPixels(stage.scene, stage.patches.fine, projector->geometry, camera);
+    const UnitLightModel model = ModelUnitLight(stage.patches.fine, stage.form_factors, *projector);
+    transfers.push_back(PhotometricTransfer(lighting, stage.patches.fine, model, scale));
+    // The session's black fields (drive 0 on any channel): every projector dark.
+    const CaptureSessionData session = CaptureSessionData::Load(captures / ("photometric_" + name));
+    if (!session.Hdr(0).empty()) {
+      std::printf("HDR sessions: black levels left as fitted (not separated)\n");
+      return;
+    }
+    for (int p = 0; p < session.pattern_count(); ++p) {
+      const nlohmann::json& info = session.manifest()["patterns"][p].value("info", nlohmann::json());
+      if (!info.is_object() || info.value("kind", "") != "flat" || info.value("level", -1) != 0) continue;
+      const cv::Mat mean = session.Mean(p, 0);
+      if (black_field.empty()) black_field = cv::Mat::zeros(mean.size(), CV_32FC3);
+      black_field += mean;
+      ++black_fields;
+    }
+  }
+  if (black_fields == 0) {
+    std::printf("no black fields: black levels left as fitted\n");
+    return;
+  }
+  black_field /= black_fields;
+  const std::vector<Eigen::Vector3d> black = SeparateBlackLevels(transfers, black_field, camera_black);
+  nlohmann::json report = nlohmann::json::object();
+  UpdateRigJson(out, [&](nlohmann::json& json) {
+    for (size_t j = 0; j < names.size(); ++j) {
+      nlohmann::json& entry = RigProjectorEntry(json, names[j]);
+      nlohmann::json fitted_black = entry["black"], fitted_max = entry["max"];
+      nlohmann::json new_black = nlohmann::json::array(), new_max = nlohmann::json::array();
+      for (int c = 0; c < 3; ++c) {
+        const double shift = fitted_black[c].get<double>() - black[j][c];
+        new_black.push_back(std::max(0.0, black[j][c]));
+        new_max.push_back(fitted_max[c].get<double>() - shift);
+      }
+      report[names[j]] = {{"fitted_black", fitted_black}, {"black", new_black}, {"max", new_max}};
+      std::printf("%s: black (%.5f, %.5f, %.5f) (fitted alone: %.5f, %.5f, %.5f)\n", names[j].c_str(),
+                  new_black[0].get<double>(), new_black[1].get<double>(), new_black[2].get<double>(),
+                  fitted_black[0].get<double>(), fitted_black[1].get<double>(), fitted_black[2].get<double>());
+      entry["black"] = new_black;
+      entry["max"] = new_max;
+    }
+  });
+  UpdateRigResult(out, {"black_levels"},
+                  {{"what", "each projector's black separated from the black fields (all projectors dark) "
+                            "by least squares over the projectors' transfers; max moved by the same amount"},
+                   {"black_fields", black_fields},
+                   {"projectors", report}});
 }
 
 void RunCalibrateAll(const CalibrateAllArguments& args) {
@@ -229,6 +311,7 @@ void RunCalibrateAll(const CalibrateAllArguments& args) {
     if (patches > 0) command.insert(command.end(), {"--patches", std::to_string(patches)});
     RunProcamCommand(command);
   }
+  SeparateProjectorBlacks(out, names, captures, scene, patches);
   std::printf("\nrig calibrated: %s (rig.json, camera.cameramodel, %s, reflectance.npy); use it "
               "with `procam compensate SCENE --rig %s`\n",
               out.c_str(), Join(names, ".cameramodel, ").append(".cameramodel").c_str(),

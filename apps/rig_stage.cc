@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <limits>
 
+#include <Eigen/Cholesky>
 #include <Eigen/LU>
+#include <stdexcept>
 
 #include "calibration/rig_directory.h"
 #include "compensation/radiosity.h"
@@ -269,6 +271,49 @@ ReflectanceEstimate EstimatePatchReflectance(const CameraPixelLighting& lighting
     }
   }
   return estimate;
+}
+
+}  // namespace procam
+
+namespace procam {
+
+std::vector<Eigen::Vector3d> SeparateBlackLevels(const std::vector<cv::Mat>& transfers,
+                                                 const cv::Mat& black_field, double camera_black) {
+  const size_t count = transfers.size();
+  if (count == 0) throw std::invalid_argument("SeparateBlackLevels: no projectors");
+  if (black_field.type() != CV_32FC3)
+    throw std::invalid_argument("SeparateBlackLevels: the black field must be CV_32FC3");
+  for (const cv::Mat& transfer : transfers) {
+    if (transfer.type() != CV_32FC3 || transfer.size() != black_field.size())
+      throw std::invalid_argument("SeparateBlackLevels: transfers and black field differ in size");
+  }
+  std::vector<Eigen::Vector3d> black(count, Eigen::Vector3d::Zero());
+  for (int c = 0; c < 3; ++c) {
+    const int camera_channel = 2 - c;
+    Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(count, count);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(count);
+    Eigen::VectorXd t(count);
+    for (int row = 0; row < black_field.rows; ++row) {
+      for (int col = 0; col < black_field.cols; ++col) {
+        bool lit = false;
+        for (size_t j = 0; j < count; ++j) {
+          t[j] = transfers[j].at<cv::Vec3f>(row, col)[camera_channel];
+          lit = lit || t[j] > 0;
+        }
+        if (!lit) continue;
+        normal += t * t.transpose();
+        rhs += t * (black_field.at<cv::Vec3f>(row, col)[camera_channel] - camera_black);
+      }
+    }
+    const Eigen::LDLT<Eigen::MatrixXd> solve(normal);
+    if (solve.info() != Eigen::Success || !(solve.vectorD().minCoeff() > 1e-12 * normal.trace())) {
+      throw std::invalid_argument(
+          "SeparateBlackLevels: the projectors' light cannot be told apart in the black field");
+    }
+    const Eigen::VectorXd x = solve.solve(rhs);
+    for (size_t j = 0; j < count; ++j) black[j][c] = x[j];
+  }
+  return black;
 }
 
 }  // namespace procam

@@ -115,3 +115,20 @@ ReflectanceEstimate EstimatePatchReflectance(const CameraPixelLighting& lighting
                                              int min_pixels = 4);
 
 }  // namespace procam
+
+namespace procam {
+
+// Each projector's black level when all of them show black at once (the only state a rig can
+// photograph: a projector showing black still emits its black). The black field m (camera B, G,
+// R, camera values) is then, per pixel p and working channel c,
+//     m_p,c − camera_black = Σ_j black_j,c · T_j,p,c
+// with T_j the per-pixel transfer of projector j (PhotometricTransfer: camera value per unit
+// output, bounces included). Least squares per channel over the pixels some projector lights;
+// the projectors light different parts of the room in different proportions, which is what
+// separates them. Returns black_j (R, G, B, scene units), one per transfer. Throws
+// std::invalid_argument when sizes differ or the system is singular (projectors whose light
+// cannot be told apart).
+std::vector<Eigen::Vector3d> SeparateBlackLevels(const std::vector<cv::Mat>& transfers,
+                                                 const cv::Mat& black_field, double camera_black);
+
+}  // namespace procam
