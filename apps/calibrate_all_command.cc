@@ -327,6 +327,10 @@ void RunProcamCommand(const std::vector<std::string>& arguments) {
   app.require_subcommand(1);
   AddCaptureCommands(app);
   AddCalibrateCommands(app);
+  AddCompensationCommands(app);
+  AddBenchCommands(app);
+  AddProjectionCommands(app);
+  AddVerifyCommand(app);
   std::vector<std::string> reversed(arguments.rbegin(), arguments.rend());
   try {
     app.parse(reversed);

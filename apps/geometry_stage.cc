@@ -20,7 +20,11 @@ Scene LoadSceneArgument(const std::string& text) {
   const std::string name = text.substr(10);
   std::string known;
   for (const std::string& scene : SyntheticSceneNames()) {
-    if (scene == name) return MakeSyntheticScene(name).scene;
+    if (scene == name) {
+      Scene synthetic = MakeSyntheticScene(name).scene;
+      synthetic.path = text;  // what results record, so that later commands can rebuild it
+      return synthetic;
+    }
     known += (known.empty() ? "" : ", ") + scene;
   }
   throw IoError(text + ": no such synthetic scene (" + known + ")");

@@ -17,6 +17,7 @@
 #include "apps/report.h"
 #include "apps/rig_stage.h"
 #include "apps/verification.h"
+#include "datasets_synthetic/paper_scenes.h"
 #include "calibration/registration.h"
 #include "projection/projector_images.h"
 #include "compensation/problem.h"
@@ -48,6 +49,59 @@ struct SceneArguments {
   int patches = 0;
   double alpha = 0.5;
 };
+
+// The demo on a rig: a camera (real, or a synthetic one treated like a real one), the projectors'
+// monitors and the room model.
+struct RigDemoArguments {
+  std::string camera;
+  std::vector<std::string> displays;
+  std::string chessboard, camera_model, camera_scale, camera_guess;
+  std::vector<std::string> names;
+  int frames = 4;
+  double settle_ms = 150.0;
+  int iterations = 4;
+};
+
+// calibrate → compensate → project → photograph → verify → refine, each stage the command a user
+// would run (printed as `$ procam ...`), on whatever the camera URI names.
+void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& rig,
+                const std::filesystem::path& out) {
+  const std::string rig_dir = (out / "rig").string(), solution = (out / "solution").string();
+  const std::string patch_count = std::to_string(patches);
+  std::vector<std::string> calibrate = {"calibrate", "all", "--camera", rig.camera, "--scene", scene,
+                                        "--out", rig_dir, "--patches", patch_count,
+                                        "--frames", std::to_string(rig.frames), "--settle-ms",
+                                        fmt::format("{}", rig.settle_ms)};
+  const auto add = [](std::vector<std::string>* command, const char* option, const std::string& value) {
+    if (!value.empty()) command->insert(command->end(), {option, value});
+  };
+  std::string displays, names;
+  for (const std::string& d : rig.displays) displays += (displays.empty() ? "" : ",") + d;
+  for (const std::string& n : rig.names) names += (names.empty() ? "" : ",") + n;
+  add(&calibrate, "--display", displays);
+  add(&calibrate, "--names", names);
+  add(&calibrate, "--chessboard", rig.chessboard);
+  add(&calibrate, "--camera-model", rig.camera_model);
+  add(&calibrate, "--camera-scale", rig.camera_scale);
+  add(&calibrate, "--camera-guess", rig.camera_guess);
+  spdlog::info("demo on a rig: stage 1/4 calibration");
+  RunProcamCommand(calibrate);
+  spdlog::info("stage 2/4 compensation with the calibrated rig");
+  RunProcamCommand({"compensate", scene, "--method", "perceptual", "--multires", "--patches", patch_count, "--rig",
+                    rig_dir, "--out", solution});
+  spdlog::info("stage 3/4 projector images");
+  RunProcamCommand({"project", solution, "--out", (out / "images").string()});
+  spdlog::info("stage 4/4 photographs, verification and the closed loop");
+  std::vector<std::string> verify = {"verify", rig_dir, solution, "--camera", rig.camera,
+                                     "--out", (out / "verify").string(), "--iterations",
+                                     std::to_string(rig.iterations), "--frames", std::to_string(rig.frames),
+                                     "--settle-ms", fmt::format("{}", rig.settle_ms)};
+  for (const std::string& d : rig.displays) verify.insert(verify.end(), {"--display", d});
+  add(&verify, "--camera-scale", rig.camera_scale);
+  RunProcamCommand(verify);
+  std::cout << "\nwrote " << out.string() << "/: rig/ (the calibration), solution/ (E.npy, B.npy), images/ (one PNG "
+            << "per projector), verify/report.html (photos, ΔE per iteration)\n";
+}
 
 
 // A scene file without a camera: geometry and compensation, numbers per patch.
@@ -314,9 +368,34 @@ void AddDemoCommand(CLI::App& app) {
       ->capture_default_str();
   demo->add_option("--patches", args->patches, "Solver patches")->capture_default_str();
   demo->add_option("--out", args->out, "Output directory")->capture_default_str();
-  demo->callback([args] {
+  auto rig = std::make_shared<RigDemoArguments>();
+  demo->add_option("--camera", rig->camera,
+                   "Run the pipeline on a rig instead: the camera URI (v4l2:..., aravis:..., or synthetic:SCENE?...); "
+                   "--scene is then the room model (a scene file, or synthetic:NAME)");
+  demo->add_option("--display", rig->displays,
+                   "With --camera: each projector's monitor, in order (glfw:N|NAME, comma-separated)")
+      ->delimiter(',');
+  demo->add_option("--names", rig->names, "With --camera: projector names, comma-separated")->delimiter(',');
+  demo->add_option("--chessboard", rig->chessboard, "With --camera: chessboard photos of the camera");
+  demo->add_option("--camera-model", rig->camera_model, "With --camera: a calibrated camera.cameramodel instead");
+  demo->add_option("--camera-scale", rig->camera_scale,
+                   "With --camera: camera value per unit exitance (number or R,G,B; synthetic cameras: automatic)");
+  demo->add_option("--camera-guess", rig->camera_guess,
+                   "With --camera: camera position and a point it looks at, x,y,z,look_x,look_y,look_z");
+  demo->add_option("--frames", rig->frames, "With --camera: frames averaged per pattern")->capture_default_str();
+  demo->add_option("--settle-ms", rig->settle_ms, "With --camera: wait after each pattern, milliseconds")
+      ->capture_default_str();
+  demo->add_option("--iterations", rig->iterations, "With --camera: closed-loop photos at most")
+      ->capture_default_str();
+  demo->callback([args, rig] {
     const std::filesystem::path out = args->out;
     std::filesystem::create_directories(out);
+    if (!rig->camera.empty()) {
+      const std::vector<std::string> synthetic = SyntheticSceneNames();
+      const bool named = std::find(synthetic.begin(), synthetic.end(), args->scene) != synthetic.end();
+      RunRigDemo(named ? "synthetic:" + args->scene : args->scene, args->patches, *rig, out);
+      return;
+    }
     if (args->scene.size() > 5 && args->scene.substr(args->scene.size() - 5) == ".json") {
       RunJsonDemo(args->scene, args->patches, out);
       return;

@@ -121,6 +121,24 @@ TEST(Cli, DemoOnTheSyntheticRigWritesAReportThatRendersInChromium) {
   EXPECT_NE(dom.find("Verification"), std::string::npos);
 }
 
+// The demo on a rig (--camera): calibrate all → compensate --rig → project → verify, each the
+// command a user would run; a synthetic camera stands in for a real one here.
+TEST(Cli, DemoOnARigRunsTheWholePipelineThroughTheCommands) {
+  testing::TempDir dir;
+  const CommandRun run = Procam(
+      "demo --camera 'synthetic:tiny_box?patches=100&fps=500&exposure_us=1000&reference_exposure_us=1000"
+      "&black=8&noise=1' --scene tiny_box --patches 100 --frames 2 --settle-ms 1 --iterations 2 --out " +
+      (dir / "demo").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  for (const char* name : {"rig/rig.json", "rig/left.cameramodel", "solution/E.npy", "images/left.png",
+                           "images/right.png", "verify/result.json", "verify/report.html"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir / "demo" / name)) << name;
+  }
+  for (const char* stage : {"$ procam calibrate all", "$ procam compensate", "$ procam project", "$ procam verify"}) {
+    EXPECT_NE(run.output.find(stage), std::string::npos) << stage;
+  }
+}
+
 TEST(Cli, BadInputGivesOneLineNamingTheFileAndWritesNothing) {
   testing::TempDir dir;
   std::string bad = kScene;
