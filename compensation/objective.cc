@@ -50,6 +50,7 @@ CompensationObjective::CompensationObjective(const CompensationProblem& problem,
   for (int i = 0; i < n; ++i) triplets.emplace_back(i, i, diagonal[i]);
   weights_.resize(n, n);
   weights_.setFromTriplets(triplets.begin(), triplets.end());
+  weights_factor_.compute(weights_);
   desired_colour_.resize(n, 3);
   for (int i = 0; i < n; ++i) desired_colour_.row(i) = Colour(problem.desired.row(i).transpose()).transpose();
 }
@@ -144,6 +145,23 @@ Eigen::SparseMatrix<double> CompensationObjective::ColourHessian(const Objective
   Eigen::SparseMatrix<double> m(variables(), variables());
   m.setFromTriplets(triplets.begin(), triplets.end());
   return m;
+}
+
+std::vector<Eigen::Matrix3d> CompensationObjective::InverseColourJacobians(const ObjectivePoint& point) const {
+  std::vector<Eigen::Matrix3d> inverse(patches());
+  for (int i = 0; i < patches(); ++i) inverse[i] = point.colour_jacobian[i].inverse();
+  return inverse;
+}
+
+Eigen::MatrixX3d CompensationObjective::SolveGaussNewtonColour(const std::vector<Eigen::Matrix3d>& jacobian_inverse,
+                                                               const Eigen::MatrixX3d& r) const {
+  // Row form: (J_i⁻ᵀ r_i)ᵀ = r_iᵀ J_i⁻¹.
+  Eigen::MatrixX3d colour(patches(), 3);
+  for (int i = 0; i < patches(); ++i) colour.row(i) = r.row(i) * jacobian_inverse[i];
+  const Eigen::MatrixX3d weighted = 0.5 * weights_factor_.solve(colour);
+  Eigen::MatrixX3d result(patches(), 3);
+  for (int i = 0; i < patches(); ++i) result.row(i) = weighted.row(i) * jacobian_inverse[i].transpose();
+  return result;
 }
 
 void CompensationObjective::DeltaE(const Eigen::MatrixX3d& radiosity, Eigen::VectorXd* delta_e76,

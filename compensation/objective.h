@@ -13,6 +13,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
 
 #include "compensation/problem.h"
@@ -71,8 +72,18 @@ class CompensationObjective {
   // W as a sparse n×n matrix, and W·R for an n×3 R.
   const Eigen::SparseMatrix<double>& weights() const { return weights_; }
   // The colour-space matrix M + S in B (3n×3n, patch-major), S as in GaussNewtonProduct:
-  // H = K⁻ᵀ (M + S) K⁻¹, so H⁻¹ = K (M + S)⁻¹ Kᵀ (used as the preconditioner).
+  // H = K⁻ᵀ (M + S) K⁻¹, so H⁻¹ = K (M + S)⁻¹ Kᵀ. Assembled for tests and small problems; the
+  // solver assembles only the free variables' part of M (solver.cc).
   Eigen::SparseMatrix<double> ColourHessian(const ObjectivePoint& point) const;
+
+  // M⁻¹ R for the Gauss–Newton colour matrix M = 2 Jᵀ (W ⊗ I₃) J (R: n×3 in B, patch-major
+  // as everywhere). J is block diagonal with invertible 3×3 blocks J_i = ∂C/∂B_i and W does not
+  // depend on the point, so M⁻¹ = ½ J⁻¹ (W⁻¹ ⊗ I₃) J⁻ᵀ: per-patch 3×3 products around one
+  // sparse solve with W, factorised once in the constructor. `jacobian_inverse` holds J_i⁻¹
+  // (InverseColourJacobians).
+  Eigen::MatrixX3d SolveGaussNewtonColour(const std::vector<Eigen::Matrix3d>& jacobian_inverse,
+                                          const Eigen::MatrixX3d& r) const;
+  std::vector<Eigen::Matrix3d> InverseColourJacobians(const ObjectivePoint& point) const;
 
   // Per-patch colour differences between B and the desired radiosity in L*a*b*.
   void DeltaE(const Eigen::MatrixX3d& radiosity, Eigen::VectorXd* delta_e76,
@@ -84,6 +95,7 @@ class CompensationObjective {
   ColourModel model_;
   Eigen::VectorXd weight_diagonal_;
   Eigen::SparseMatrix<double> weights_;
+  Eigen::SimplicialLLT<Eigen::SparseMatrix<double>> weights_factor_;  // W = L Lᵀ (W is SPD: α > 0)
   Eigen::MatrixX3d desired_colour_;
 };
 

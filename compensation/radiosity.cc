@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <cassert>
 
+#include <Eigen/Cholesky>
+
+#include "compensation/dense_kernels.h"
+
 namespace procam {
 
 RadiositySystem::RadiositySystem(const Eigen::MatrixXd& form_factors, const Eigen::VectorXd& area,
@@ -27,11 +31,15 @@ RadiositySystem::RadiositySystem(const Eigen::MatrixXd& form_factors, const Eige
       // Symmetrise against rounding, then add the identity.
       m = 0.5 * (m + m.transpose()).eval();
       m.diagonal().array() += 1.0;
-      factor.llt.compute(m);
+      const Eigen::LLT<Eigen::Ref<Eigen::MatrixXd>, Eigen::Lower> llt(m);  // in place: L in m's lower part
       factor.scale = rho.cwiseSqrt().cwiseQuotient(sqrt_area);
-      if (factor.llt.info() != Eigen::Success) factor.cholesky = false;
+      if (llt.info() != Eigen::Success) factor.cholesky = false;
       if (factor.cholesky) {
-        factor.lower_float = Eigen::MatrixXd(factor.llt.matrixL()).cast<float>();
+        for (int j = 1; j < n; ++j) m.col(j).head(j) = m.row(j).head(j).transpose();  // Lᵀ above
+        factor.cholesky_factor = std::move(m);
+        const Eigen::MatrixXf single = factor.cholesky_factor.cast<float>();
+        factor.cholesky_factor_half.resize(single.size());
+        ToHalf(single.data(), single.size(), factor.cholesky_factor_half.data());
       }
     }
     if (!factor.cholesky) {
@@ -56,8 +64,7 @@ Eigen::MatrixX3d RadiositySystem::SolveFast(const Eigen::MatrixX3d& emittance) c
     for (size_t k = 0; k < factor.channels.size(); ++k) {
       block.col(k) = (factor.scale.cwiseInverse().cwiseProduct(emittance.col(factor.channels[k]))).cast<float>();
     }
-    factor.lower_float.triangularView<Eigen::Lower>().solveInPlace(block);
-    factor.lower_float.transpose().triangularView<Eigen::Upper>().solveInPlace(block);
+    CholeskySolve(factor.cholesky_factor_half.data(), size(), static_cast<int>(block.cols()), block.data());
     for (size_t k = 0; k < factor.channels.size(); ++k) {
       radiosity.col(factor.channels[k]) = factor.scale.cwiseProduct(block.col(k).cast<double>());
     }
@@ -76,8 +83,7 @@ Eigen::MatrixX3d RadiositySystem::SolveTransposedFast(const Eigen::MatrixX3d& y)
     for (size_t k = 0; k < factor.channels.size(); ++k) {
       block.col(k) = (factor.scale.cwiseProduct(y.col(factor.channels[k]))).cast<float>();
     }
-    factor.lower_float.triangularView<Eigen::Lower>().solveInPlace(block);
-    factor.lower_float.transpose().triangularView<Eigen::Upper>().solveInPlace(block);
+    CholeskySolve(factor.cholesky_factor_half.data(), size(), static_cast<int>(block.cols()), block.data());
     for (size_t k = 0; k < factor.channels.size(); ++k) {
       x.col(factor.channels[k]) = factor.scale.cwiseInverse().cwiseProduct(block.col(k).cast<double>());
     }
@@ -85,14 +91,19 @@ Eigen::MatrixX3d RadiositySystem::SolveTransposedFast(const Eigen::MatrixX3d& y)
   return x;
 }
 
+// form_factors_float_ is column-major, i.e. Fᵀ with contiguous rows for dense_kernels.h.
 Eigen::MatrixX3d RadiositySystem::MultiplyFast(const Eigen::MatrixX3d& radiosity) const {
   const Eigen::MatrixX3f b = radiosity.cast<float>();
-  return radiosity - reflectance_.cwiseProduct((form_factors_float_ * b).cast<double>());
+  Eigen::MatrixX3f fb(size(), 3);
+  DenseTransposedProduct(form_factors_float_.data(), size(), b.data(), 3, fb.data());
+  return radiosity - reflectance_.cwiseProduct(fb.cast<double>());
 }
 
 Eigen::MatrixX3d RadiositySystem::MultiplyTransposedFast(const Eigen::MatrixX3d& y) const {
   const Eigen::MatrixX3f weighted = reflectance_float_.cwiseProduct(y.cast<float>());
-  return y - (form_factors_float_.transpose() * weighted).cast<double>();
+  Eigen::MatrixX3f ft_weighted(size(), 3);
+  DenseProduct(form_factors_float_.data(), size(), weighted.data(), 3, ft_weighted.data());
+  return y - ft_weighted.cast<double>();
 }
 
 Eigen::MatrixX3d RadiositySystem::Solve(const Eigen::MatrixX3d& emittance) const {
@@ -103,7 +114,9 @@ Eigen::MatrixX3d RadiositySystem::Solve(const Eigen::MatrixX3d& emittance) const
     if (factor.cholesky) {
       // F = A^-½ S A^½ gives K = I − D F = A^-½ D^½ M D^-½ A^½, so K⁻¹ = diag(s) M⁻¹ diag(1/s)
       // with s = D^½ A^-½.
-      block = factor.scale.asDiagonal() * factor.llt.solve(factor.scale.cwiseInverse().asDiagonal() * block);
+      block = factor.scale.cwiseInverse().asDiagonal() * block;
+      CholeskySolve(factor.cholesky_factor.data(), size(), static_cast<int>(block.cols()), block.data());
+      block = factor.scale.asDiagonal() * block;
     } else {
       block = factor.lu.solve(block);
     }
@@ -119,7 +132,9 @@ Eigen::MatrixX3d RadiositySystem::SolveTransposed(const Eigen::MatrixX3d& y) con
     for (size_t k = 0; k < factor.channels.size(); ++k) block.col(k) = y.col(factor.channels[k]);
     if (factor.cholesky) {
       // (diag(s) M⁻¹ diag(1/s))ᵀ = diag(1/s) M⁻¹ diag(s).
-      block = factor.scale.cwiseInverse().asDiagonal() * factor.llt.solve(factor.scale.asDiagonal() * block);
+      block = factor.scale.asDiagonal() * block;
+      CholeskySolve(factor.cholesky_factor.data(), size(), static_cast<int>(block.cols()), block.data());
+      block = factor.scale.cwiseInverse().asDiagonal() * block;
     } else {
       block = factor.lu.transpose().solve(block);
     }
@@ -139,9 +154,13 @@ Eigen::MatrixX3d RadiositySystem::MultiplyTransposed(const Eigen::MatrixX3d& y) 
 Eigen::MatrixXd RadiositySystem::InverseMatrix(int channel) const {
   for (const Factor& factor : factors_) {
     if (std::find(factor.channels.begin(), factor.channels.end(), channel) == factor.channels.end()) continue;
-    const Eigen::MatrixXd identity = Eigen::MatrixXd::Identity(size(), size());
-    if (!factor.cholesky) return factor.lu.solve(identity);
-    return factor.scale.asDiagonal() * factor.llt.solve(factor.scale.cwiseInverse().asDiagonal() * identity);
+    if (!factor.cholesky) return factor.lu.solve(Eigen::MatrixXd::Identity(size(), size()));
+    Eigen::MatrixXd inverse = Eigen::MatrixXd::Zero(size(), size());
+    for (int j = 0; j < size(); ++j) {
+      inverse(j, j) = 1.0 / factor.scale[j];
+      CholeskySolve(factor.cholesky_factor.data(), size(), 1, inverse.col(j).data());
+    }
+    return factor.scale.asDiagonal() * inverse;
   }
   return Eigen::MatrixXd();
 }

@@ -7,13 +7,18 @@
 // is symmetric positive definite (its eigenvalues lie in [1 − max rho, 1 + max rho]), so
 // K_c⁻¹ = A^-½ D_c^½ M_c⁻¹ D_c^-½ A^½ is applied with a Cholesky factor (n³/3 flops instead of
 // LU's 2n³/3). Reflectances of exactly 0 fall back to a pivoted LU of K_c.
-// Dense factors are n² doubles per distinct channel: about 20k patches on a 24 GB machine;
-// larger rooms need the matrix-free path of the GPU/scale issue.
+// Dense factors are n² doubles plus n² halves per distinct channel (and F in double and
+// float32): about 20k patches on a 24 GB machine; larger rooms need the matrix-free path of the
+// GPU/scale issue.
+//
+// The substitutions and the float32 products with F run through dense_kernels.h (AVX2/FMA where
+// the CPU has it): Eigen's triangular solves and products with three right-hand sides are
+// SSE2-only at the project's compiler flags, 2–3× slower.
 
+#include <cstdint>
 #include <memory>
 #include <vector>
 
-#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <Eigen/LU>
 
@@ -38,10 +43,11 @@ class RadiositySystem {
   // Kᵀ Y = Y − Fᵀ (rho ∘ Y).
   Eigen::MatrixX3d MultiplyTransposed(const Eigen::MatrixX3d& y) const;
 
-  // The same four operations in float32 arithmetic (relative error ~1e-6 · cond(K)), about
-  // twice as fast: memory-bound products over half the bytes. For inner iterations whose
-  // accuracy does not matter (conjugate-gradient directions, preconditioners); objective
-  // values and gradients use the double versions.
+  // The same four operations in reduced precision, for inner iterations whose accuracy does not
+  // matter (conjugate-gradient directions, preconditioners); objective values and gradients use
+  // the double versions. The solves use a half-precision factor with float32 arithmetic
+  // (relative error ~5e-4 · cond(K), cond(K) ≤ (1 + max rho)/(1 − max rho)), about 3× faster
+  // than double: memory-bound over a quarter of the bytes. The products use F in float32.
   Eigen::MatrixX3d SolveFast(const Eigen::MatrixX3d& emittance) const;
   Eigen::MatrixX3d SolveTransposedFast(const Eigen::MatrixX3d& y) const;
   Eigen::MatrixX3d MultiplyFast(const Eigen::MatrixX3d& radiosity) const;
@@ -58,8 +64,10 @@ class RadiositySystem {
     std::vector<int> channels;
     bool cholesky = true;
     Eigen::VectorXd scale;  // D^½ A^-½ (left) — K⁻¹ = diag(scale) M⁻¹ diag(1/scale)
-    Eigen::LLT<Eigen::MatrixXd> llt;
-    Eigen::MatrixXf lower_float;  // the Cholesky factor L in float32
+    // M = L Lᵀ stored as L + Lᵀ − diag(L) (dense_kernels.h's CholeskySolve layout), in double
+    // and in IEEE half precision (for the fast solves).
+    Eigen::MatrixXd cholesky_factor;
+    std::vector<std::uint16_t> cholesky_factor_half;
     Eigen::PartialPivLU<Eigen::MatrixXd> lu;
   };
   Eigen::MatrixXd form_factors_;

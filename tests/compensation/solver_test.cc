@@ -1,11 +1,14 @@
 #include "compensation/solver.h"
 
 #include <cmath>
+#include <vector>
 
+#include <Eigen/Cholesky>
 #include <Eigen/LU>
 #include <gtest/gtest.h>
 
 #include "compensation/colour.h"
+#include "compensation/dense_kernels.h"
 #include "compensation/peers.h"
 #include "datasets_synthetic/rooms.h"
 #include "geometry/form_factors.h"
@@ -69,6 +72,102 @@ TEST(RadiositySystem, MatchesADenseSolveForGreyColouredAndBlackPatches) {
     EXPECT_LT(testing::MaxAbsDifference(system.Multiply(b), e), 1e-12);
     EXPECT_LT(testing::MaxAbsDifference(system.MultiplyTransposed(x), e), 1e-12);
   }
+}
+
+// Sizes that exercise the kernels' two-row pairs, odd rows, vector tails and several
+// substitution blocks.
+TEST(DenseKernels, ProductsMatchEigen) {
+  for (const int n : {1, 7, 203}) {
+    const Eigen::MatrixXd a = Eigen::MatrixXd::Random(n, n);
+    const Eigen::MatrixXf af = a.cast<float>();
+    for (const int columns : {1, 3}) {
+      const Eigen::MatrixXd x = Eigen::MatrixXd::Random(n, columns);
+      const Eigen::MatrixXf xf = x.cast<float>();
+      // Column-major storage passes Aᵀ with contiguous rows.
+      Eigen::MatrixXd y(n, columns);
+      DenseProduct(a.data(), n, x.data(), columns, y.data());
+      EXPECT_LT((y - a.transpose() * x).norm(), 1e-12 * (1.0 + y.norm())) << n << " " << columns;
+      Eigen::MatrixXf yf(n, columns);
+      DenseProduct(af.data(), n, xf.data(), columns, yf.data());
+      EXPECT_LT((yf - af.transpose() * xf).norm(), 1e-5f * (1.0f + yf.norm())) << n << " " << columns;
+      DenseTransposedProduct(af.data(), n, xf.data(), columns, yf.data());
+      EXPECT_LT((yf - af * xf).norm(), 1e-5f * (1.0f + yf.norm())) << n << " " << columns;
+    }
+  }
+}
+
+TEST(DenseKernels, CholeskySolveMatchesADenseSolveInEachPrecision) {
+  for (const int n : {1, 7, 203}) {
+    // Like I − D^½ S D^½: unit diagonal, small positive coupling, symmetric positive definite.
+    Eigen::MatrixXd m = -0.9 / n * Eigen::MatrixXd::Random(n, n).cwiseAbs();
+    m = (0.5 * (m + m.transpose())).eval();
+    m.diagonal().array() += 1.0;
+    const Eigen::LLT<Eigen::MatrixXd> llt(m);
+    Eigen::MatrixXd factor = llt.matrixL();
+    factor.triangularView<Eigen::StrictlyUpper>() = Eigen::MatrixXd(llt.matrixL()).transpose();
+    const Eigen::MatrixXf factor_float = factor.cast<float>();
+    std::vector<std::uint16_t> factor_half(factor_float.size());
+    ToHalf(factor_float.data(), factor_float.size(), factor_half.data());
+    for (const int columns : {1, 3}) {
+      const Eigen::MatrixXd b = Eigen::MatrixXd::Random(n, columns);
+      const Eigen::MatrixXd exact = m.fullPivLu().solve(b);
+      Eigen::MatrixXd x = b;
+      CholeskySolve(factor.data(), n, columns, x.data());
+      EXPECT_LT((x - exact).norm(), 1e-13 * exact.norm()) << n << " " << columns;
+      Eigen::MatrixXf xf = b.cast<float>();
+      CholeskySolve(factor_float.data(), n, columns, xf.data());
+      EXPECT_LT((xf.cast<double>() - exact).norm(), 1e-6 * exact.norm()) << n << " " << columns;
+      Eigen::MatrixXf xh = b.cast<float>();
+      CholeskySolve(factor_half.data(), n, columns, xh.data());
+      EXPECT_LT((xh.cast<double>() - exact).norm(), 2e-3 * exact.norm()) << n << " " << columns;
+    }
+  }
+}
+
+TEST(RadiositySystem, FastSolvesAreWithinTheirStatedAccuracy) {
+  const TestProblem test = MakeTestProblem(200);
+  const CompensationProblem& problem = test.fine;
+  const RadiositySystem system(problem.form_factors, problem.area, problem.reflectance);
+  const Eigen::MatrixX3d e = Eigen::MatrixX3d::Random(problem.size(), 3);
+  const double max_rho = problem.reflectance.maxCoeff();
+  const double bound = 5e-4 * (1.0 + max_rho) / (1.0 - max_rho);  // radiosity.h: ~5e-4·cond(K)
+  const Eigen::MatrixX3d b = system.Solve(e), x = system.SolveTransposed(e);
+  EXPECT_LT((system.SolveFast(e) - b).norm(), bound * b.norm());
+  EXPECT_LT((system.SolveTransposedFast(e) - x).norm(), bound * x.norm());
+  EXPECT_LT((system.MultiplyFast(e) - system.Multiply(e)).norm(), 1e-5 * e.norm());
+  EXPECT_LT((system.MultiplyTransposedFast(e) - system.MultiplyTransposed(e)).norm(), 1e-5 * e.norm());
+}
+
+TEST(CompensationObjective, GaussNewtonColourSolveIsTheInverseOfTheColourHessian) {
+  const TestProblem test = MakeTestProblem(60, 0.3);
+  const RadiositySystem radiosity(test.fine.form_factors, test.fine.area, test.fine.reflectance);
+  for (const ColourModel model : {ColourModel::kLab, ColourModel::kLinear}) {
+    const CompensationObjective objective(test.fine, radiosity, model);
+    Eigen::MatrixX3d e = 0.5 * (Eigen::MatrixX3d::Random(test.fine.size(), 3).array() + 1.0);
+    e.topRows(5) *= 1e-4;  // the linear branch of h
+    ObjectivePoint point;
+    objective.Evaluate(e, &point);
+    const Eigen::MatrixXd m = Eigen::MatrixXd(objective.ColourHessian(point));  // Gauss–Newton M
+    const Eigen::MatrixX3d r = Eigen::MatrixX3d::Random(test.fine.size(), 3);
+    const Eigen::MatrixX3d solved = objective.SolveGaussNewtonColour(objective.InverseColourJacobians(point), r);
+    const Eigen::VectorXd exact = m.fullPivLu().solve(Flatten(r));
+    EXPECT_LT((Flatten(solved) - exact).norm(), 1e-8 * exact.norm());
+  }
+}
+
+// With no bound active the Newton system is H d = −g, and K M⁻¹ Kᵀ (the kInverseHessian
+// preconditioner) is H⁻¹ exactly: H (K M⁻¹ Kᵀ r) = r.
+TEST(CompensationObjective, InverseHessianPreconditionerIsExactWithoutBounds) {
+  const TestProblem test = MakeTestProblem(60);
+  const RadiositySystem radiosity(test.fine.form_factors, test.fine.area, test.fine.reflectance);
+  const CompensationObjective objective(test.fine, radiosity, ColourModel::kLab);
+  const Eigen::MatrixX3d e = 0.5 * (Eigen::MatrixX3d::Random(test.fine.size(), 3).array() + 1.0);
+  ObjectivePoint point;
+  objective.Evaluate(e, &point);
+  const Eigen::MatrixX3d r = Eigen::MatrixX3d::Random(test.fine.size(), 3);
+  const Eigen::MatrixX3d preconditioned = radiosity.Multiply(
+      objective.SolveGaussNewtonColour(objective.InverseColourJacobians(point), radiosity.MultiplyTransposed(r)));
+  EXPECT_LT((objective.GaussNewtonProduct(point, preconditioned) - r).norm(), 1e-9 * r.norm());
 }
 
 // f written out patch by patch and pair by pair, as DESIGN.md states it.
@@ -177,9 +276,13 @@ TestProblem* SolveBounded::test_ = nullptr;
 
 TEST_F(SolveBounded, SatisfiesBoundsFirstOrderOptimalityAndDescends) {
   const CompensationProblem& problem = test_->fine;
+  for (const auto preconditioner : {SolverOptions::Preconditioner::kFreeColourHessian,
+                                    SolverOptions::Preconditioner::kInverseHessian}) {
   for (const CompensationMethod method : {CompensationMethod::kPerceptual, CompensationMethod::kLinear}) {
     SolverSummary summary;
-    const CompensationSolution solution = Solve(WithMethod(method), problem, &summary);
+    SolverOptions options = WithMethod(method);
+    options.preconditioner = preconditioner;
+    const CompensationSolution solution = Solve(options, problem, &summary);
     EXPECT_TRUE(summary.termination == TerminationType::kGradientTolerance ||
                 summary.termination == TerminationType::kFunctionTolerance)
         << summary.BriefReport();
@@ -197,6 +300,7 @@ TEST_F(SolveBounded, SatisfiesBoundsFirstOrderOptimalityAndDescends) {
     for (size_t k = 1; k < summary.trace.size(); ++k) {
       EXPECT_LE(summary.trace[k].cost, summary.trace[k - 1].cost) << "iteration " << k;
     }
+  }
   }
 }
 
@@ -229,8 +333,12 @@ TEST_F(SolveBounded, MultiresReachesTheSameObjective) {
 
 TEST(Solve, PerceptualAgreesWithCeresLbfgsbAndProjectedGradient) {
   const TestProblem test = MakeTestProblem(60);
-  SolverSummary summary;
+  SolverSummary summary, other;
   const CompensationSolution ours = Solve(SolverOptions(), test.fine, &summary);
+  SolverOptions inverse_hessian;
+  inverse_hessian.preconditioner = SolverOptions::Preconditioner::kInverseHessian;
+  Solve(inverse_hessian, test.fine, &other);
+  EXPECT_NEAR(other.final_cost, summary.final_cost, 1e-6 * summary.final_cost);
   const RadiositySystem radiosity(test.fine.form_factors, test.fine.area, test.fine.reflectance);
   const CompensationObjective objective(test.fine, radiosity, ColourModel::kLab);
   const Eigen::MatrixX3d start = test.fine.lower;  // a common, deliberately poor start
