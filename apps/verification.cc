@@ -28,6 +28,7 @@
 #include "compensation/solver.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "geometry/io.h"
+#include "geometry/ray_scene.h"
 #include "projection/projection_rig.h"
 #include "projection/projector_images.h"
 
@@ -513,6 +514,131 @@ void ApplyUpdate(const ModelUpdate& update, ProjectionRig* rig, GeometryStage* g
 }
 
 // ---------------------------------------------------------------------------------------------
+// Per-pixel prediction
+
+// What every camera pixel sees and how each projector lights it: the cast of LightCameraPixels
+// (apps/rig_stage.h) lit by every projector at once, keeping the projector pixel that lights
+// the point.
+struct CameraPixelRays {
+  int width = 0, height = 0, projectors = 0;
+  std::vector<int> patch;  // fine patch seen (row-major), −1 for none (or its unlit side)
+  // Per (camera pixel, projector), index pixel · projectors + k: the geometric gain G_k at the
+  // point (1/m²; 0 where k does not light it: outside its image, facing away, occluded) and
+  // the projector pixel whose area holds the point's projection (row · width + column; −1
+  // where unlit).
+  std::vector<float> gain;
+  std::vector<int32_t> projector_pixel;
+};
+
+CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
+                                 const std::vector<Projector>& projectors,
+                                 const ProjectorGeometry& camera, double ray_margin = 1e-4) {
+  CameraPixelRays rays;
+  rays.width = camera.width();
+  rays.height = camera.height();
+  rays.projectors = static_cast<int>(projectors.size());
+  const size_t count = static_cast<size_t>(rays.width) * rays.height;
+  rays.patch.assign(count, -1);
+  rays.gain.assign(count * rays.projectors, 0.0f);
+  rays.projector_pixel.assign(count * rays.projectors, -1);
+  const RayScene patches(PatchScene(level));
+  const RayScene surfaces(scene);
+  std::vector<Vec3> directions;
+  std::vector<double> densities;
+  camera.UnprojectImage(&directions, &densities);
+  const Eigen::Isometry3d room_from_cam = camera.proj_from_world().inverse();
+  const Vec3 origin = room_from_cam.translation();
+#pragma omp parallel for schedule(dynamic, 8)
+  for (int row = 0; row < rays.height; ++row) {
+    for (int col = 0; col < rays.width; ++col) {
+      const size_t index = static_cast<size_t>(row) * rays.width + col;
+      const Vec3 direction = room_from_cam.linear() * directions[index];
+      double t = 0.0;
+      int hit = -1;
+      if (!patches.Intersect(origin, direction, 0.0, std::numeric_limits<double>::infinity(), &t,
+                             &hit)) {
+        continue;
+      }
+      const Vec3 point = origin + t * direction;
+      const Patch& patch = level.patches[hit];
+      if (patch.normal.dot(origin - point) <= 0.0) continue;  // its unlit side
+      rays.patch[index] = hit;
+      for (int k = 0; k < rays.projectors; ++k) {
+        const ProjectorGeometry& projector = projectors[k].geometry;
+        Vec2 pixel;
+        const double gain = projector.Gain(point, patch.normal, &pixel);
+        if (gain <= 0.0 || !projector.InImage(pixel)) continue;
+        if (surfaces.Occluded(point, projector.CentreInWorld(), ray_margin)) continue;
+        // Pixel (c, r) covers [c − ½, c + ½] × [r − ½, r + ½] (projector.h).
+        const int x = std::clamp(static_cast<int>(std::floor(pixel.x() + 0.5)), 0, projector.width() - 1);
+        const int y = std::clamp(static_cast<int>(std::floor(pixel.y() + 0.5)), 0, projector.height() - 1);
+        rays.gain[index * rays.projectors + k] = static_cast<float>(gain);
+        rays.projector_pixel[index * rays.projectors + k] = y * projector.width() + x;
+      }
+    }
+  }
+  return rays;
+}
+
+// The predicted exitance of every camera pixel (CV_32FC3, working R, G, B, scene units; 0 where
+// the pixel sees nothing) for the images shown, by the model's split of the light at the point
+// x of patch i the pixel sees (rig_stage.h's transfer):
+//     x_p = ρ_i ⊙ (Σ_k G_k(x) · output_k(code_k) + (F B)_i),
+// code_k the code of the projector pixel that lights x, output_k the projector's photometry as
+// the model knows it, and B = K⁻¹(ρ ⊙ D) the radiosity of the direct irradiance D the shown
+// images deliver to each patch (the renderer's flux bookkeeping), so the bounce term is the one
+// of the light actually shown. `shown_radiosity` (optional) receives that B.
+cv::Mat PredictPixels(const CameraPixelRays& rays, const ProjectionRig& rig,
+                      const std::vector<ProjectorImage>& images,
+                      const Eigen::MatrixXd& form_factors,
+                      Eigen::MatrixX3d* shown_radiosity = nullptr) {
+  const Eigen::MatrixX3d direct = DirectLightModel(rig, images).Irradiance();
+  const RadiositySystem system(form_factors, rig.area, rig.reflectance);
+  const Eigen::MatrixX3d radiosity = system.Solve(rig.reflectance.cwiseProduct(direct));
+  const Eigen::MatrixX3d bounce = form_factors * radiosity;
+  if (shown_radiosity) *shown_radiosity = radiosity;
+  // Output per code: the photometry's response per primary, mixed, black to max.
+  std::vector<std::vector<Eigen::Vector3d>> light(images.size());
+  for (size_t k = 0; k < images.size(); ++k) {
+    const ProjectorPhotometry& photometry = rig.projectors[k].photometry;
+    const int max_code = (1 << images[k].bits) - 1;
+    light[k].resize(max_code + 1);
+    for (int code = 0; code <= max_code; ++code) {
+      const double drive = double(code) / max_code;
+      light[k][code] = Eigen::Vector3d(photometry.response[0].Light(drive),
+                                       photometry.response[1].Light(drive),
+                                       photometry.response[2].Light(drive));
+    }
+  }
+  cv::Mat predicted(rays.height, rays.width, CV_32FC3, cv::Scalar::all(0));
+  for (int row = 0; row < rays.height; ++row) {
+    for (int col = 0; col < rays.width; ++col) {
+      const size_t index = static_cast<size_t>(row) * rays.width + col;
+      const int i = rays.patch[index];
+      if (i < 0) continue;
+      Eigen::Vector3d irradiance = bounce.row(i).transpose();
+      for (int k = 0; k < rays.projectors; ++k) {
+        const int32_t pixel = rays.projector_pixel[index * rays.projectors + k];
+        if (pixel < 0) continue;
+        const ProjectorPhotometry& p = rig.projectors[k].photometry;
+        const cv::Vec3w& code = reinterpret_cast<const cv::Vec3w*>(images[k].codes.data)[pixel];
+        const int max_code = static_cast<int>(light[k].size()) - 1;
+        const Eigen::Vector3d relative(light[k][std::min<int>(code[0], max_code)][0],
+                                       light[k][std::min<int>(code[1], max_code)][1],
+                                       light[k][std::min<int>(code[2], max_code)][2]);
+        const Eigen::Vector3d output =
+            p.black + (p.max - p.black).cwiseProduct(p.mixing * relative);
+        irradiance += double(rays.gain[index * rays.projectors + k]) * output;
+      }
+      const Eigen::Vector3d exitance = rig.reflectance.row(i).transpose().cwiseProduct(irradiance);
+      predicted.at<cv::Vec3f>(row, col) =
+          cv::Vec3f(float(exitance[0]), float(exitance[1]), float(exitance[2]));
+    }
+  }
+  return predicted;
+}
+
+// ---------------------------------------------------------------------------------------------
 // Photos
 
 cv::Mat PatternFromImage(const ProjectorImage& image) {
@@ -541,6 +667,7 @@ cv::Mat PhotoToExitance(const cv::Mat& photo, const CameraColour& colour) {
 struct Comparison {
   PhotoDeltaE measured, model;
   double predicted_mean76 = 0, predicted_mean2000 = 0;
+  double model_constant_mean76 = 0;  // per pixel, photo vs its patch's B (constant per patch)
   Eigen::MatrixX3d patch_exitance;  // mean measured exitance per patch (NaN where unseen)
   std::vector<bool> seen;
   std::vector<int> pixels;
@@ -548,10 +675,13 @@ struct Comparison {
   cv::Mat delta_e76, delta_e2000, model_delta_e76, model_delta_e2000, predicted;  // per pixel
 };
 
-// Photo vs desired and vs predicted, per pixel and per patch (header comment).
+// Photo vs desired and vs predicted, per pixel (against the per-pixel prediction
+// `predicted_pixels`, PredictPixels) and per patch (against the solution's radiosity B), as the
+// header comment says.
 Comparison Compare(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
                    const std::vector<bool>& interior, const CompensationProblem& problem,
-                   const Eigen::MatrixX3d& radiosity, int min_pixels) {
+                   const Eigen::MatrixX3d& radiosity, const cv::Mat& predicted_pixels,
+                   int min_pixels) {
   const int n = problem.size();
   const LabConverter lab{problem.rgb_to_xyz, problem.white_xyz};
   std::vector<Eigen::Vector3d> lab_desired(n), lab_predicted(n);
@@ -565,10 +695,10 @@ Comparison Compare(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
   result.delta_e2000 = cv::Mat::zeros(rows, cols, CV_32FC1);
   result.model_delta_e76 = cv::Mat::zeros(rows, cols, CV_32FC1);
   result.model_delta_e2000 = cv::Mat::zeros(rows, cols, CV_32FC1);
-  result.predicted = cv::Mat::zeros(rows, cols, CV_32FC3);
+  result.predicted = predicted_pixels;
   Eigen::MatrixX3d sum_all = Eigen::MatrixX3d::Zero(n, 3), sum_interior = sum_all;
   std::vector<int> count_all(n, 0), count_interior(n, 0);
-  double sum76 = 0, sum2000 = 0, model76 = 0, model2000 = 0;
+  double sum76 = 0, sum2000 = 0, model76 = 0, model2000 = 0, constant76 = 0;
   for (int row = 0; row < rows; ++row) {
     for (int col = 0; col < cols; ++col) {
       const size_t index = static_cast<size_t>(row) * cols + col;
@@ -579,14 +709,15 @@ Comparison Compare(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
       const Eigen::Vector3d lab_measured = lab.Lab(x);
       const double e76 = DeltaE76(lab_measured, lab_desired[i]);
       const double e2000 = DeltaE2000(lab_measured, lab_desired[i]);
-      const double m76 = DeltaE76(lab_measured, lab_predicted[i]);
-      const double m2000 = DeltaE2000(lab_measured, lab_predicted[i]);
+      const cv::Vec3f& p = predicted_pixels.at<cv::Vec3f>(row, col);
+      const Eigen::Vector3d lab_pixel_predicted = lab.Lab(Eigen::Vector3d(p[0], p[1], p[2]));
+      const double m76 = DeltaE76(lab_measured, lab_pixel_predicted);
+      const double m2000 = DeltaE2000(lab_measured, lab_pixel_predicted);
+      constant76 += DeltaE76(lab_measured, lab_predicted[i]);
       result.delta_e76.at<float>(row, col) = float(e76);
       result.delta_e2000.at<float>(row, col) = float(e2000);
       result.model_delta_e76.at<float>(row, col) = float(m76);
       result.model_delta_e2000.at<float>(row, col) = float(m2000);
-      result.predicted.at<cv::Vec3f>(row, col) =
-          cv::Vec3f(float(radiosity(i, 0)), float(radiosity(i, 1)), float(radiosity(i, 2)));
       sum76 += e76, sum2000 += e2000, model76 += m76, model2000 += m2000;
       result.measured.max76 = std::max(result.measured.max76, e76);
       result.measured.max2000 = std::max(result.measured.max2000, e2000);
@@ -606,6 +737,7 @@ Comparison Compare(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
   result.measured.mean2000 = sum2000 / pixels;
   result.model.mean76 = model76 / pixels;
   result.model.mean2000 = model2000 / pixels;
+  result.model_constant_mean76 = constant76 / pixels;
 
   // Per patch: the mean of its interior pixels (away from patch borders, where projector pixels
   // straddling two patches spill light), or of all its pixels when too few are interior.
@@ -667,6 +799,7 @@ nlohmann::json IterationJson(const VerificationIteration& it) {
       {"directory", it.directory.string()},
       {"measured_vs_desired", DeltaEJson(it.measured)},
       {"measured_vs_predicted", DeltaEJson(it.model)},
+      {"measured_vs_patch_radiosity_pixel_mean76", it.model_constant_mean76},
       {"predicted_vs_desired", {{"patch_mean76", it.predicted_mean76},
                                 {"patch_mean2000", it.predicted_mean2000},
                                 {"solver_mean76_all_patches", it.solver_mean76}}},
@@ -757,8 +890,10 @@ void DisplayWall::Show(const cv::Mat& pattern) {
     try {
       displays_[k]->Show(colour(cv::Rect(x, 0, size.width, size.height)).clone());
     } catch (const std::exception& error) {
-      throw IoError("projector '" + names_[k] + "' (display " + displays_[k]->Name() +
-                    "): " + error.what());
+      // Displays' own messages usually start with their name (capture/display.h).
+      const std::string display = displays_[k]->Name(), what = error.what();
+      throw IoError("projector '" + names_[k] + "'" +
+                    (what.rfind(display, 0) == 0 ? "" : " (display " + display + ")") + ": " + what);
     }
     x += size.width;
   }
@@ -825,13 +960,7 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
       ResolveColourSource(options, rig_dir.json, rig_file, world != nullptr);
 
   std::vector<std::shared_ptr<PatternDisplay>> displays = options.displays;
-  if (world) {
-    if (!displays.empty()) {
-      throw IoError("--display: camera '" + options.camera +
-                    "' photographs the simulated room, whose own projectors show the images");
-    }
-    displays.assign(world->displays.begin(), world->displays.end());
-  }
+  if (world && displays.empty()) displays.assign(world->displays.begin(), world->displays.end());
   if (displays.size() != rig_dir.projectors.size()) {
     throw IoError(rig_file + ": projectors: the rig has " + std::to_string(rig_dir.projectors.size()) +
                   " projector(s) but " + std::to_string(displays.size()) +
@@ -895,8 +1024,10 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
   ProjectionRig rig = BuildProjectionRig(geometry.patches.fine, projectors, ProjectionRigOptions());
   if (camera_geometry.width() <= 0) throw IoError(camera_model_path.string() + ": bad size");
   spdlog::info("verify: casting the camera's {}x{} rays", camera_geometry.width(), camera_geometry.height());
-  const CameraPixelLighting lighting =
-      LightCameraPixels(geometry.scene, geometry.patches.fine, projectors[0].geometry, camera_geometry);
+  // What each camera pixel sees and which projector pixels light it (the geometry is fixed;
+  // the photometry the loop refines is applied per photo, PredictPixels).
+  const CameraPixelRays lighting =
+      CastCameraPixels(geometry.scene, geometry.patches.fine, projectors, camera_geometry);
   // Interior pixels: their four neighbours see the same patch.
   std::vector<bool> interior(lighting.patch.size(), false);
   for (int row = 1; row + 1 < lighting.height; ++row) {
@@ -1012,8 +1143,10 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
     cv::Mat photo32;
     photo.convertTo(photo32, CV_32FC3);
     const cv::Mat exitance = PhotoToExitance(photo32, colour);
+    const cv::Mat predicted =
+        PredictPixels(lighting, rig, images, geometry.form_factors);
     const Comparison comparison = Compare(exitance, lighting.patch, interior, problem, radiosity,
-                                          options.min_patch_pixels);
+                                          predicted, options.min_patch_pixels);
     it.measured = comparison.measured;
     it.model = comparison.model;
     it.predicted_mean76 = comparison.predicted_mean76;
@@ -1021,6 +1154,7 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
     it.solver_mean76 = SolverMeanDeltaE76(problem, radiosity);
     it.seen_pixels = comparison.seen_pixels;
     it.seen_patches = comparison.seen_patches;
+    it.model_constant_mean76 = comparison.model_constant_mean76;
     if (k == 0) heat_scale = std::max(10.0, 10.0 * std::ceil(3.0 * it.measured.mean76 / 10.0));
     it.photo = LinearToDisplay(exitance / white);
     it.predicted = LinearToDisplay(comparison.predicted / white);

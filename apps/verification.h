@@ -9,9 +9,14 @@
 // (LightCameraPixels, apps/rig_stage.h); camera values become exitance in the scene's units
 // through the camera's colour calibration (x = M · (camera RGB − black), M = diag(1/k) for a
 // per-channel scale k); and the photo is compared in CIE L*a*b* (the problem's T and white)
-// with the predicted appearance (the solution's radiosity B, per patch and per pixel of the
-// patch each pixel sees) and with the desired appearance: ΔE76 and CIEDE2000 per pixel and per
-// patch.
+// with the predicted appearance and with the desired appearance: ΔE76 and CIEDE2000 per pixel
+// and per patch. Predicted per patch: the solution's radiosity B. Predicted per pixel: the
+// light at the point x of patch i the pixel sees, split as rig_stage.h's transfer splits it,
+//     x_p = ρ_i ⊙ (Σ_k G_k(x) · output_k(code_k(x)) + (F B')_i),
+// the direct light of every projector k that lights x (geometric gain G_k, the code its image
+// shows at the projector pixel that lights x, its photometry as the model knows it) plus the
+// patch's bounce irradiance, B' = K⁻¹(ρ ⊙ D) the radiosity of the direct light D the images
+// shown deliver to each patch.
 //
 // The closed loop updates the model from measured minus predicted and solves again:
 //   1. projector response: per projector and primary j, an exponent p (response r_j(d) →
@@ -61,7 +66,9 @@ struct VerificationOptions {
   std::filesystem::path out;           // created; see the header comment
   std::string camera;                  // camera URI (synthetic:SCENE?..., aravis:..., v4l2:...)
   // Where each rig projector (rig.json's order) shows its image, e.g. GlfwDisplay on its
-  // monitor. Empty for synthetic cameras, which show the images on their world's displays.
+  // monitor. Empty for synthetic cameras, which then show the images on their world's
+  // displays (SyntheticWorld::displays); given with a synthetic camera, they must show on the
+  // world's displays (e.g. wrap them, as the fault tests do), since those are what it sees.
   std::vector<std::shared_ptr<PatternDisplay>> displays;
   // The scene, when the solution's result.json names no file (a generated scene, as in the
   // demo); otherwise left empty and read from the file result.json names.
@@ -93,7 +100,9 @@ struct PhotoDeltaE {
 struct VerificationIteration {
   int index = 0;
   PhotoDeltaE measured;       // photo vs desired
-  PhotoDeltaE model;          // photo vs predicted (the model's error)
+  PhotoDeltaE model;          // photo vs predicted (the model's error): per pixel against the
+                              // per-pixel prediction, per patch against the solution's B
+  double model_constant_mean76 = 0;  // per pixel against its patch's B (constant over the patch)
   double predicted_mean76 = 0, predicted_mean2000 = 0;  // B vs desired, same seen patches
   double solver_mean76 = 0;   // B vs desired over every patch (compensate's number)
   int seen_pixels = 0, seen_patches = 0;

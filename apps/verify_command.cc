@@ -5,6 +5,7 @@
 
 #include "apps/commands.h"
 #include "apps/verification.h"
+#include "capture/camera.h"
 #include "capture/devices.h"
 #include "geometry/io.h"
 #include "procam/config.h"
@@ -49,6 +50,10 @@ void RunVerify(VerifyArguments& args) {
   options.camera_scale = args.camera_scale;
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("verify: " + why);
+  if (!args.displays.empty() && CameraUri::Parse(options.camera).scheme() == "synthetic") {
+    throw IoError("--display: camera '" + options.camera +
+                  "' photographs the simulated room, whose own projectors show the images");
+  }
   for (const std::string& display : args.displays) options.displays.push_back(OpenDisplay(display));
   const VerificationSummary summary = RunVerification(options);
   std::cout << summary.BriefReport() << "\nwrote " << args.out << "/result.json, report.html, iterations/\n";
