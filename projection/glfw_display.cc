@@ -127,7 +127,23 @@ cv::Size GlfwDisplay::Resolution() const { return {monitor_.width, monitor_.heig
 
 std::string GlfwDisplay::Name() const { return "glfw:" + monitor_.name; }
 
+void GlfwDisplay::CheckStillThere() {
+  GLFWwindow* window = static_cast<GLFWwindow*>(window_);
+  glfwPollEvents();
+  if (glfwWindowShouldClose(window)) {
+    throw IoError(Name() + ": the projector's window was closed");
+  }
+  if (glfwGetWindowMonitor(window) == nullptr) {
+    throw IoError(Name() + ": the monitor was disconnected (the window is no longer fullscreen)");
+  }
+}
+
+void GlfwDisplay::RequestClose() {
+  glfwSetWindowShouldClose(static_cast<GLFWwindow*>(window_), GLFW_TRUE);
+}
+
 void GlfwDisplay::Show(const cv::Mat& pattern) {
+  CheckStillThere();
   if (pattern.size() != Resolution()) {
     throw IoError(Name() + ": image is " + std::to_string(pattern.cols) + "x" +
                   std::to_string(pattern.rows) + ", the monitor runs at " +
@@ -153,6 +169,7 @@ void GlfwDisplay::Show(const cv::Mat& pattern) {
 }
 
 void GlfwDisplay::Show(const ProjectorImage& image) {
+  CheckStillThere();
   if (image.codes.size() != Resolution()) {
     throw IoError(Name() + ": image is " + std::to_string(image.codes.cols) + "x" +
                   std::to_string(image.codes.rows) + ", the monitor runs at " +

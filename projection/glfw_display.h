@@ -42,7 +42,9 @@ class GlfwDisplay : public PatternDisplay {
   std::string Name() const override;  // "glfw:NAME"
   // Shows an 8- or 16-bit image, 1 or 3 channels (B, G, R as OpenCV stores them), of exactly
   // Resolution() pixels, and returns after the buffer swap. Throws IoError naming the monitor
-  // and both sizes when the size differs.
+  // and both sizes when the size differs, and IoError naming the monitor when the projector is
+  // gone: its window was closed (by hand or the window manager) or its monitor disconnected
+  // (GLFW then drops the window out of fullscreen).
   void Show(const cv::Mat& pattern) override;
   // Shows a projector image (codes in R, G, B; 10-bit codes scaled to the output's depth).
   void Show(const ProjectorImage& image);
@@ -51,9 +53,12 @@ class GlfwDisplay : public PatternDisplay {
   cv::Mat ReadBack();
   // Handles window events; false once Esc or Q was pressed or the window was closed.
   bool PollEvents();
+  // Closes the window as the window manager does when someone closes it by hand.
+  void RequestClose();
 
  private:
   void Draw();
+  void CheckStillThere();  // throws IoError when the window was closed or left its monitor
 
   MonitorInfo monitor_;
   void* window_ = nullptr;  // GLFWwindow

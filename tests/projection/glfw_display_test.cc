@@ -177,6 +177,22 @@ TEST(GlfwDisplay, ImageOfTheWrongSizeIsAnError) {
   }
 }
 
+// A projector lost mid-run (its window closed by hand or by the window manager): the next Show
+// is one error naming the monitor, which the capture and verify commands report and stop on.
+TEST(GlfwDisplay, ClosedWindowIsAnErrorNamingTheMonitor) {
+  SKIP_WITHOUT_XVFB();
+  GlfwDisplay display(FindMonitor("0"));
+  const cv::Mat black(display.Resolution(), CV_8UC3, cv::Scalar::all(0));
+  display.Show(black);
+  display.RequestClose();
+  try {
+    display.Show(black);
+    FAIL() << "no error";
+  } catch (const IoError& error) {
+    EXPECT_EQ(std::string(error.what()), display.Name() + ": the projector's window was closed");
+  }
+}
+
 TEST(TestPatterns, MarkTheCornersAndTheGrid) {
   const ProjectorImage grid = MakeTestPattern(TestPattern::kGrid, cv::Size(200, 100));
   EXPECT_EQ(grid.codes.at<cv::Vec3w>(0, 0), cv::Vec3w(255, 0, 0));
