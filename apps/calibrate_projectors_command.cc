@@ -2,8 +2,10 @@
 // intrinsics and pose and the camera's pose in the room, from one structured-light capture
 // session per projector and the scene model (issue 7, calibration/registration.h). The camera's
 // intrinsics come from RIG_DIR/camera.cameramodel (`procam calibrate camera`) and are held
-// fixed. Writes RIG_DIR/NAME.cameramodel per projector, rewrites RIG_DIR/camera.cameramodel with
-// its pose in the room, and updates RIG_DIR/rig.json and RIG_DIR/result.json.
+// fixed, or with --refine-camera refined jointly (focal length with the aspect ratio kept, cx,
+// cy; --refine-camera-aspect frees fy too; distortion kept). Writes RIG_DIR/NAME.cameramodel per
+// projector, rewrites RIG_DIR/camera.cameramodel with its pose in the room (and the refined
+// intrinsics), and updates RIG_DIR/rig.json and RIG_DIR/result.json.
 #include <cctype>
 #include <cmath>
 #include <cstdio>
@@ -33,6 +35,7 @@ struct CalibrateProjectorsArguments {
   std::string camera_guess;  // "x,y,z,look_x,look_y,look_z" in the room frame
   std::string camera_up = "0,0,1";
   std::vector<std::string> names;
+  bool refine_camera_aspect = false;
   RoomCalibrationOptions options;
 };
 
@@ -184,7 +187,11 @@ nlohmann::json StatsJson(const DistanceStats& stats) {
           {"max_mm", stats.max_mm}};
 }
 
-void RunCalibrateProjectors(const CalibrateProjectorsArguments& args) {
+void RunCalibrateProjectors(const CalibrateProjectorsArguments& input) {
+  CalibrateProjectorsArguments args = input;
+  if (args.refine_camera_aspect && !args.options.refine_camera_intrinsics)
+    throw std::invalid_argument("--refine-camera-aspect: needs --refine-camera");
+  args.options.keep_camera_aspect_ratio = !args.refine_camera_aspect;
   std::string why;
   if (!args.options.Check(&why)) throw std::invalid_argument(why);
   const std::filesystem::path out(args.out);
@@ -222,10 +229,16 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& args) {
   }
   const Scene scene = ResolveScene(args.scene);
   const RoomModel model(scene);
-  std::printf("scene %s: %zu surfaces, %zu planar facets; camera %s %dx%d (intrinsics held "
-              "fixed); guess from %s: camera at (%.3f, %.3f, %.3f)\n",
+  const char* const intrinsics_treatment =
+      !args.options.refine_camera_intrinsics ? "intrinsics held fixed"
+      : args.refine_camera_aspect            ? "fx, fy, cx, cy refined, distortion held"
+                                             : "focal length (aspect kept), cx, cy refined, "
+                                               "distortion held";
+  std::printf("scene %s: %zu surfaces, %zu planar facets; camera %s %dx%d (%s); guess from %s: "
+              "camera at (%.3f, %.3f, %.3f)\n",
               args.scene.c_str(), scene.surfaces.size(), model.facets().size(),
-              camera.lens_model.c_str(), camera.width, camera.height, guess_source.c_str(),
+              camera.lens_model.c_str(), camera.width, camera.height, intrinsics_treatment,
+              guess_source.c_str(),
               guess.translation().x(), guess.translation().y(), guess.translation().z());
 
   RoomCalibrationProblem problem;
@@ -286,7 +299,21 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& args) {
                                        {"room_from_camera", PoseJson(guess)},
                                        {"moved_mm", summary.camera_moved_mm},
                                        {"turned_deg", summary.camera_turned_deg}};
-  registration_json["camera_intrinsics"] = "held fixed (from camera.cameramodel)";
+  if (args.options.refine_camera_intrinsics) {
+    registration_json["camera_intrinsics"] = {
+        {"refined",
+         args.refine_camera_aspect ? "fx, fy, cx, cy" : "focal length (fy / fx kept), cx, cy"},
+        {"lens_model", camera.lens_model},
+        {"before", camera.intrinsics},
+        {"after", calibration.camera_intrinsics},
+        {"moved_px", std::vector<double>(summary.camera_intrinsics_moved,
+                                         summary.camera_intrinsics_moved + 4)},
+        {"sigma_px", std::vector<double>(summary.camera_sigma, summary.camera_sigma + 4)},
+        {"sigma_what", "1 sigma of fx, fy, cx, cy from the joint solve's covariance (decoding "
+                       "noise only; the walls' flatness and the model's accuracy come on top)"}};
+  } else {
+    registration_json["camera_intrinsics"] = "held fixed (from camera.cameramodel)";
+  }
   registration_json["termination"] = summary.termination == RoomCalibrationSummary::kConverged
                                          ? "converged"
                                          : "facets not settled";
@@ -372,9 +399,15 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& args) {
   }
   CameraModelFile camera_out = camera;
   camera_out.cam_from_ref = calibration.room_from_camera.inverse();
+  if (args.options.refine_camera_intrinsics) camera_out.intrinsics = calibration.camera_intrinsics;
   WriteCameraModelFile(camera_path, camera_out,
-                       "procam camera model (procam calibrate camera; pose by procam calibrate "
-                       "projectors); extrinsics = rt_cam_room, the room = the scene's frame");
+                       args.options.refine_camera_intrinsics
+                           ? "procam camera model (procam calibrate camera; fx, fy, cx, cy and "
+                             "pose by procam calibrate projectors --refine-camera); extrinsics "
+                             "= rt_cam_room, the room = the scene's frame"
+                           : "procam camera model (procam calibrate camera; pose by procam "
+                             "calibrate projectors); extrinsics = rt_cam_room, the room = the "
+                             "scene's frame");
   UpdateRigJson(out, [&](nlohmann::json& rig) {
     rig["camera"]["model"] = "camera.cameramodel";
     for (const RoomProjector& p : calibration.projectors)
@@ -382,9 +415,10 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& args) {
     rig["registration"] = registration_json;
   });
   UpdateRigResult(out, {"projectors"}, result_section);
-  std::printf("wrote %zu projector models, camera.cameramodel (pose in the room), rig.json and "
+  std::printf("wrote %zu projector models, camera.cameramodel (pose in the room%s), rig.json and "
               "result.json in %s\n",
-              calibration.projectors.size(), out.c_str());
+              calibration.projectors.size(),
+              args.options.refine_camera_intrinsics ? ", refined intrinsics" : "", out.c_str());
 }
 
 }  // namespace
@@ -394,7 +428,8 @@ void AddCalibrateProjectorsCommand(CLI::App& calibrate) {
   CLI::App* command = calibrate.add_subcommand(
       "projectors",
       "Projectors' intrinsics and poses and the camera's pose in the room, from structured-light "
-      "sessions (one per projector) and the scene model; camera intrinsics held fixed");
+      "sessions (one per projector) and the scene model; camera intrinsics held fixed unless "
+      "--refine-camera");
   command
       ->add_option("sessions", args->sessions,
                    "Capture sessions of `procam capture --sequence structured_light`, one per "
@@ -418,6 +453,12 @@ void AddCalibrateProjectorsCommand(CLI::App& calibrate) {
       ->delimiter(',');
   command->add_flag("--refine-distortion", args->options.refine_distortion,
                     "Refine projector k1, k2 (LENSMODEL_OPENCV4); default pinhole");
+  command->add_flag("--refine-camera", args->options.refine_camera_intrinsics,
+                    "Refine the camera's focal length (fy / fx kept), cx, cy jointly (distortion "
+                    "kept) and write them into camera.cameramodel; before/after in result.json");
+  command->add_flag("--refine-camera-aspect", args->refine_camera_aspect,
+                    "With --refine-camera: fx and fy free independently (weakly pinned by walls "
+                    "and a floor; see the reported 1 sigma)");
   command
       ->add_option("--max-correspondences", args->options.max_correspondences,
                    "Per projector, decoded pixels used (thinned evenly)")

@@ -1,5 +1,7 @@
 #include "apps/photometric_rig.h"
 
+#include "apps/command_line.h"
+
 #include <cmath>
 #include <cstdio>
 #include <optional>
@@ -70,24 +72,7 @@ void ParseCameraScale(const PhotometricRigArguments& args, const std::filesystem
     }
     return;
   }
-  std::vector<double> values;
-  std::stringstream stream(text);
-  std::string item;
-  while (std::getline(stream, item, ',')) {
-    try {
-      size_t used = 0;
-      values.push_back(std::stod(item, &used));
-      if (used != item.size()) throw std::invalid_argument(item);
-    } catch (const std::exception&) {
-      throw IoError("--camera-scale: '" + text +
-                    "' is not a number, R,G,B or a synthetic: camera URI");
-    }
-  }
-  if (values.size() == 1) values = {values[0], values[0], values[0]};
-  if (values.size() != 3 || !(values[0] > 0 && values[1] > 0 && values[2] > 0)) {
-    throw IoError("--camera-scale: '" + text + "': one positive number or three (R,G,B)");
-  }
-  *scale = Eigen::Vector3d(values[0], values[1], values[2]);
+  *scale = ParsePositiveRgb("--camera-scale", text);
   *black = 0.0;
 }
 

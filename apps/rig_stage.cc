@@ -1,6 +1,7 @@
 #include "apps/rig_stage.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 #include <Eigen/Cholesky>
@@ -118,15 +119,17 @@ void ApplyRigReflectance(const RigDirectory& rig, PatchHierarchy* patches) {
   }
 }
 
-CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& level,
-                                      const ProjectorGeometry& projector,
-                                      const ProjectorGeometry& camera, double ray_margin) {
-  CameraPixelLighting lighting;
-  lighting.width = camera.width();
-  lighting.height = camera.height();
-  const size_t count = static_cast<size_t>(lighting.width) * lighting.height;
-  lighting.patch.assign(count, -1);
-  lighting.gain.assign(count, 0.0);
+CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
+                                 const std::vector<Projector>& projectors,
+                                 const ProjectorGeometry& camera, double ray_margin) {
+  CameraPixelRays rays;
+  rays.width = camera.width();
+  rays.height = camera.height();
+  rays.projectors = static_cast<int>(projectors.size());
+  const size_t count = static_cast<size_t>(rays.width) * rays.height;
+  rays.patch.assign(count, -1);
+  rays.gain.assign(count * rays.projectors, 0.0f);
+  rays.projector_pixel.assign(count * rays.projectors, -1);
   const RayScene patches(PatchScene(level));
   const RayScene surfaces(scene);
   std::vector<Vec3> directions;
@@ -134,11 +137,10 @@ CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& leve
   camera.UnprojectImage(&directions, &densities);
   const Eigen::Isometry3d room_from_cam = camera.proj_from_world().inverse();
   const Vec3 origin = room_from_cam.translation();
-  const Vec3 projector_centre = projector.CentreInWorld();
 #pragma omp parallel for schedule(dynamic, 8)
-  for (int row = 0; row < lighting.height; ++row) {
-    for (int col = 0; col < lighting.width; ++col) {
-      const size_t index = static_cast<size_t>(row) * lighting.width + col;
+  for (int row = 0; row < rays.height; ++row) {
+    for (int col = 0; col < rays.width; ++col) {
+      const size_t index = static_cast<size_t>(row) * rays.width + col;
       const Vec3 direction = room_from_cam.linear() * directions[index];
       double t = 0.0;
       int hit = -1;
@@ -149,14 +151,35 @@ CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& leve
       const Vec3 point = origin + t * direction;
       const Patch& patch = level.patches[hit];
       if (patch.normal.dot(origin - point) <= 0.0) continue;  // its unlit side
-      lighting.patch[index] = hit;
-      Vec2 pixel;
-      const double gain = projector.Gain(point, patch.normal, &pixel);
-      if (gain <= 0.0 || !projector.InImage(pixel)) continue;
-      if (surfaces.Occluded(point, projector_centre, ray_margin)) continue;
-      lighting.gain[index] = gain;
+      rays.patch[index] = hit;
+      for (int k = 0; k < rays.projectors; ++k) {
+        const ProjectorGeometry& projector = projectors[k].geometry;
+        Vec2 pixel;
+        const double gain = projector.Gain(point, patch.normal, &pixel);
+        if (gain <= 0.0 || !projector.InImage(pixel)) continue;
+        if (surfaces.Occluded(point, projector.CentreInWorld(), ray_margin)) continue;
+        // Pixel (c, r) covers [c − ½, c + ½] × [r − ½, r + ½] (projector.h).
+        const int x = std::clamp(static_cast<int>(std::floor(pixel.x() + 0.5)), 0, projector.width() - 1);
+        const int y = std::clamp(static_cast<int>(std::floor(pixel.y() + 0.5)), 0, projector.height() - 1);
+        rays.gain[index * rays.projectors + k] = static_cast<float>(gain);
+        rays.projector_pixel[index * rays.projectors + k] = y * projector.width() + x;
+      }
     }
   }
+  return rays;
+}
+
+CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& level,
+                                      const ProjectorGeometry& projector,
+                                      const ProjectorGeometry& camera, double ray_margin) {
+  Projector one;
+  one.geometry = projector;
+  const CameraPixelRays rays = CastCameraPixels(scene, level, {one}, camera, ray_margin);
+  CameraPixelLighting lighting;
+  lighting.width = rays.width;
+  lighting.height = rays.height;
+  lighting.patch = rays.patch;
+  lighting.gain.assign(rays.gain.begin(), rays.gain.end());
   return lighting;
 }
 

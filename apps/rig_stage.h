@@ -72,6 +72,22 @@ struct CameraPixelLighting {
   std::vector<double> gain;  // the projector's geometric gain G at the point (1/m²), 0 if unlit
 };
 
+// What every camera pixel sees and how each projector lights it, keeping the projector pixel
+// that lights the point: the cast of LightCameraPixels for every projector at once.
+struct CameraPixelRays {
+  int width = 0, height = 0, projectors = 0;
+  std::vector<int> patch;  // fine patch seen (row-major), −1 for none (or its unlit side)
+  // Per (camera pixel, projector), index pixel · projectors + k: the geometric gain G_k at the
+  // point (1/m²; 0 where k does not light it: outside its image, facing away, occluded) and
+  // the projector pixel whose area holds the point's projection (row · width + column; −1
+  // where unlit).
+  std::vector<float> gain;
+  std::vector<int32_t> projector_pixel;
+};
+CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
+                                 const std::vector<Projector>& projectors,
+                                 const ProjectorGeometry& camera, double ray_margin = 1e-4);
+
 // Casts every camera pixel's ray (camera = a ProjectorGeometry whose proj_from_world is
 // cam_from_room) against the fine patches, and lights the hit from the projector: in its image,
 // facing it and unoccluded (shadow ray against the scene's surfaces, `ray_margin` metres).

@@ -1,5 +1,7 @@
 #include "apps/verification.h"
 
+#include "apps/command_line.h"
+
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -125,27 +127,6 @@ LoadedSolution ReadSolution(const std::filesystem::path& dir, bool scene_given) 
   return s;
 }
 
-Eigen::Vector3d ParseScale(const std::string& text, const std::string& what) {
-  std::vector<double> values;
-  std::stringstream stream(text);
-  std::string item;
-  while (std::getline(stream, item, ',')) {
-    try {
-      size_t used = 0;
-      values.push_back(std::stod(item, &used));
-      if (used != item.size()) throw std::invalid_argument(item);
-    } catch (const std::exception&) {
-      throw IoError(what + ": '" + text + "' is not a number or R,G,B");
-    }
-  }
-  if (values.size() == 1) values = {values[0], values[0], values[0]};
-  if (values.size() != 3 || !(values[0] > 0 && values[1] > 0 && values[2] > 0) ||
-      !std::isfinite(values[0] + values[1] + values[2])) {
-    throw IoError(what + ": '" + text + "': one positive number or three (R,G,B)");
-  }
-  return {values[0], values[1], values[2]};
-}
-
 // Camera colour calibration: exitance (working RGB, scene units) = to_exitance · (camera RGB −
 // black) for single exposures; HDR merges have black removed already.
 struct CameraColour {
@@ -172,7 +153,7 @@ ColourSource ResolveColourSource(const VerificationOptions& options, const nlohm
   ColourSource c;
   c.black = std::max(0.0, options.camera_black);
   if (!options.camera_scale.empty()) {
-    const Eigen::Vector3d k = ParseScale(options.camera_scale, "--camera-scale");
+    const Eigen::Vector3d k = ParsePositiveRgb("--camera-scale", options.camera_scale);
     c.matrix = k.cwiseInverse().asDiagonal();
     c.source = "--camera-scale";
     return c;
@@ -516,69 +497,6 @@ void ApplyUpdate(const ModelUpdate& update, ProjectionRig* rig, GeometryStage* g
 // ---------------------------------------------------------------------------------------------
 // Per-pixel prediction
 
-// What every camera pixel sees and how each projector lights it: the cast of LightCameraPixels
-// (apps/rig_stage.h) lit by every projector at once, keeping the projector pixel that lights
-// the point.
-struct CameraPixelRays {
-  int width = 0, height = 0, projectors = 0;
-  std::vector<int> patch;  // fine patch seen (row-major), −1 for none (or its unlit side)
-  // Per (camera pixel, projector), index pixel · projectors + k: the geometric gain G_k at the
-  // point (1/m²; 0 where k does not light it: outside its image, facing away, occluded) and
-  // the projector pixel whose area holds the point's projection (row · width + column; −1
-  // where unlit).
-  std::vector<float> gain;
-  std::vector<int32_t> projector_pixel;
-};
-
-CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
-                                 const std::vector<Projector>& projectors,
-                                 const ProjectorGeometry& camera, double ray_margin = 1e-4) {
-  CameraPixelRays rays;
-  rays.width = camera.width();
-  rays.height = camera.height();
-  rays.projectors = static_cast<int>(projectors.size());
-  const size_t count = static_cast<size_t>(rays.width) * rays.height;
-  rays.patch.assign(count, -1);
-  rays.gain.assign(count * rays.projectors, 0.0f);
-  rays.projector_pixel.assign(count * rays.projectors, -1);
-  const RayScene patches(PatchScene(level));
-  const RayScene surfaces(scene);
-  std::vector<Vec3> directions;
-  std::vector<double> densities;
-  camera.UnprojectImage(&directions, &densities);
-  const Eigen::Isometry3d room_from_cam = camera.proj_from_world().inverse();
-  const Vec3 origin = room_from_cam.translation();
-#pragma omp parallel for schedule(dynamic, 8)
-  for (int row = 0; row < rays.height; ++row) {
-    for (int col = 0; col < rays.width; ++col) {
-      const size_t index = static_cast<size_t>(row) * rays.width + col;
-      const Vec3 direction = room_from_cam.linear() * directions[index];
-      double t = 0.0;
-      int hit = -1;
-      if (!patches.Intersect(origin, direction, 0.0, std::numeric_limits<double>::infinity(), &t,
-                             &hit)) {
-        continue;
-      }
-      const Vec3 point = origin + t * direction;
-      const Patch& patch = level.patches[hit];
-      if (patch.normal.dot(origin - point) <= 0.0) continue;  // its unlit side
-      rays.patch[index] = hit;
-      for (int k = 0; k < rays.projectors; ++k) {
-        const ProjectorGeometry& projector = projectors[k].geometry;
-        Vec2 pixel;
-        const double gain = projector.Gain(point, patch.normal, &pixel);
-        if (gain <= 0.0 || !projector.InImage(pixel)) continue;
-        if (surfaces.Occluded(point, projector.CentreInWorld(), ray_margin)) continue;
-        // Pixel (c, r) covers [c − ½, c + ½] × [r − ½, r + ½] (projector.h).
-        const int x = std::clamp(static_cast<int>(std::floor(pixel.x() + 0.5)), 0, projector.width() - 1);
-        const int y = std::clamp(static_cast<int>(std::floor(pixel.y() + 0.5)), 0, projector.height() - 1);
-        rays.gain[index * rays.projectors + k] = static_cast<float>(gain);
-        rays.projector_pixel[index * rays.projectors + k] = y * projector.width() + x;
-      }
-    }
-  }
-  return rays;
-}
 
 // The predicted exitance of every camera pixel (CV_32FC3, working R, G, B, scene units; 0 where
 // the pixel sees nothing) for the images shown, by the model's split of the light at the point

@@ -224,6 +224,15 @@ std::string RoomCalibrationSummary::BriefReport() const {
                 "guess; %.2f s",
                 rounds, initial_cost, final_cost, camera_moved_mm, camera_turned_deg, time_s);
   text += line;
+  if (camera_sigma[0] != 0.0) {
+    std::snprintf(line, sizeof(line),
+                  "\n  camera fx, fy, cx, cy refined: moved %+.3f, %+.3f, %+.3f, %+.3f px; 1 sigma "
+                  "%.3g, %.3g, %.3g, %.3g px",
+                  camera_intrinsics_moved[0], camera_intrinsics_moved[1],
+                  camera_intrinsics_moved[2], camera_intrinsics_moved[3], camera_sigma[0],
+                  camera_sigma[1], camera_sigma[2], camera_sigma[3]);
+    text += line;
+  }
   for (size_t k = 0; k < projectors.size(); ++k) {
     const RoomProjectorSummary& p = projectors[k];
     std::snprintf(line, sizeof(line),
@@ -238,9 +247,35 @@ std::string RoomCalibrationSummary::BriefReport() const {
 
 namespace {
 
-// Camera ray (fixed lens) → through room_from_camera into the room → meets a fixed facet plane
-// → the point projected by the projector (proj_from_room, fx fy cx cy k1 k2) → minus the
-// decoded projector pixel.
+// Camera ray (direction with z = 1, camera frame) → through room_from_camera into the room →
+// meets a fixed facet plane → the point projected by the projector (proj_from_room, fx fy cx cy
+// k1 k2) → minus the decoded projector pixel.
+template <typename T>
+void ReprojectThroughRoom(const T* ray, const T* camera_rotation, const T* camera_translation,
+                          const T* intrinsics, const T* projector_rotation,
+                          const T* projector_translation, const Vec3& normal, double offset,
+                          const Vec2& observed, T* residual) {
+  T direction[3];
+  ceres::AngleAxisRotatePoint(camera_rotation, ray, direction);
+  const T along_normal =
+      T(normal.x()) * direction[0] + T(normal.y()) * direction[1] + T(normal.z()) * direction[2];
+  const T origin_height = T(normal.x()) * camera_translation[0] +
+                          T(normal.y()) * camera_translation[1] +
+                          T(normal.z()) * camera_translation[2] + T(offset);
+  const T s = -origin_height / along_normal;
+  T p_in_room[3];
+  for (int i = 0; i < 3; ++i) p_in_room[i] = camera_translation[i] + s * direction[i];
+  T p_in_proj[3];
+  ceres::AngleAxisRotatePoint(projector_rotation, p_in_room, p_in_proj);
+  for (int i = 0; i < 3; ++i) p_in_proj[i] += projector_translation[i];
+  const T x = p_in_proj[0] / p_in_proj[2], y = p_in_proj[1] / p_in_proj[2];
+  const T r2 = x * x + y * y;
+  const T radial = T(1.0) + intrinsics[4] * r2 + intrinsics[5] * r2 * r2;
+  residual[0] = intrinsics[0] * x * radial + intrinsics[2] - T(observed.x());
+  residual[1] = intrinsics[1] * y * radial + intrinsics[3] - T(observed.y());
+}
+
+// The camera's lens fixed: the ray is a constant.
 struct RoomReprojection {
   RoomReprojection(const Vec3& ray_in_cam, const Vec3& normal, double offset, const Vec2& observed)
       : ray_in_cam(ray_in_cam), normal(normal), offset(offset), observed(observed) {}
@@ -249,27 +284,68 @@ struct RoomReprojection {
                   const T* projector_rotation, const T* projector_translation,
                   T* residual) const {
     const T ray[3] = {T(ray_in_cam.x()), T(ray_in_cam.y()), T(ray_in_cam.z())};
-    T direction[3];
-    ceres::AngleAxisRotatePoint(camera_rotation, ray, direction);
-    const T along_normal = T(normal.x()) * direction[0] + T(normal.y()) * direction[1] +
-                           T(normal.z()) * direction[2];
-    const T origin_height = T(normal.x()) * camera_translation[0] +
-                            T(normal.y()) * camera_translation[1] +
-                            T(normal.z()) * camera_translation[2] + T(offset);
-    const T s = -origin_height / along_normal;
-    T p_in_room[3];
-    for (int i = 0; i < 3; ++i) p_in_room[i] = camera_translation[i] + s * direction[i];
-    T p_in_proj[3];
-    ceres::AngleAxisRotatePoint(projector_rotation, p_in_room, p_in_proj);
-    for (int i = 0; i < 3; ++i) p_in_proj[i] += projector_translation[i];
-    const T x = p_in_proj[0] / p_in_proj[2], y = p_in_proj[1] / p_in_proj[2];
-    const T r2 = x * x + y * y;
-    const T radial = T(1.0) + intrinsics[4] * r2 + intrinsics[5] * r2 * r2;
-    residual[0] = intrinsics[0] * x * radial + intrinsics[2] - T(observed.x());
-    residual[1] = intrinsics[1] * y * radial + intrinsics[3] - T(observed.y());
+    ReprojectThroughRoom(ray, camera_rotation, camera_translation, intrinsics, projector_rotation,
+                         projector_translation, normal, offset, observed, residual);
     return true;
   }
   Vec3 ray_in_cam;
+  Vec3 normal;
+  double offset;
+  Vec2 observed;
+};
+
+// The camera's fx, fy, cx, cy free (distortion k1 k2 p1 p2 fixed, all zero for a pinhole): the
+// ray is the undistortion x of d = ((u − cx)/fx, (v − cy)/fy), i.e. D(x) = d with D the OpenCV4
+// distortion, by two Newton steps from x0 = the exact undistortion at the intrinsics the rays
+// were last computed with. The first step is the linearisation x0 + (∂D/∂x)⁻¹ (d − d0), the
+// second makes the value (and through the Jets the derivative) exact to far below the decoding
+// noise for the steps the intrinsics take between rounds (≲ 1%).
+struct RoomReprojectionFreeCamera {
+  RoomReprojectionFreeCamera(const Vec2& camera_pixel, const Vec3& ray0, const double* distortion,
+                             bool distorted, double aspect, const Vec3& normal, double offset,
+                             const Vec2& observed)
+      : camera_pixel(camera_pixel), ray0(ray0.x(), ray0.y()), distorted(distorted),
+        aspect(aspect), normal(normal), offset(offset), observed(observed) {
+    for (int i = 0; i < 4; ++i) this->distortion[i] = distortion[i];
+  }
+  template <typename T>
+  bool operator()(const T* camera_rotation, const T* camera_translation,
+                  const T* camera_intrinsics, const T* intrinsics, const T* projector_rotation,
+                  const T* projector_translation, T* residual) const {
+    const T dx = (T(camera_pixel.x()) - camera_intrinsics[2]) / camera_intrinsics[0];
+    // aspect > 0: fy = aspect · fx (the block's fy is then held and ignored).
+    const T fy = aspect > 0.0 ? aspect * camera_intrinsics[0] : camera_intrinsics[1];
+    const T dy = (T(camera_pixel.y()) - camera_intrinsics[3]) / fy;
+    T ray[3] = {dx, dy, T(1.0)};
+    if (distorted) {
+      const double k1 = distortion[0], k2 = distortion[1], p1 = distortion[2], p2 = distortion[3];
+      T x = T(ray0.x()), y = T(ray0.y());
+      for (int step = 0; step < 2; ++step) {
+        const T r2 = x * x + y * y;
+        const T radial = T(1.0) + k1 * r2 + k2 * r2 * r2;
+        const T radial_dr2 = k1 + 2.0 * k2 * r2;  // ∂radial/∂r2
+        const T ex = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - dx;
+        const T ey = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - dy;
+        const T j00 = radial + 2.0 * x * x * radial_dr2 + 2.0 * p1 * y + 6.0 * p2 * x;
+        const T j01 = 2.0 * x * y * radial_dr2 + 2.0 * p1 * x + 2.0 * p2 * y;
+        const T j10 = 2.0 * x * y * radial_dr2 + 2.0 * p1 * x + 2.0 * p2 * y;
+        const T j11 = radial + 2.0 * y * y * radial_dr2 + 6.0 * p1 * y + 2.0 * p2 * x;
+        const T determinant = j00 * j11 - j01 * j10;
+        x -= (j11 * ex - j01 * ey) / determinant;
+        y -= (j00 * ey - j10 * ex) / determinant;
+      }
+      ray[0] = x;
+      ray[1] = y;
+    }
+    ReprojectThroughRoom(ray, camera_rotation, camera_translation, intrinsics, projector_rotation,
+                         projector_translation, normal, offset, observed, residual);
+    return true;
+  }
+  Vec2 camera_pixel;
+  Vec2 ray0;
+  double distortion[4] = {0, 0, 0, 0};
+  bool distorted;
+  double aspect;
   Vec3 normal;
   double offset;
   Vec2 observed;
@@ -280,7 +356,8 @@ struct ProjectorState {
   PoseBlock proj_from_room;
 };
 
-// Per correspondence: its camera ray (fixed) and the facet it meets under the current pose.
+// Per correspondence: its camera ray (at the current camera intrinsics) and the facet it meets
+// under the current pose.
 struct Correspondence {
   Vec2 camera_pixel;
   Vec3 ray_in_cam;
@@ -352,7 +429,19 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
            termination == RoomCalibrationSummary::kNotSettled;
   };
 
-  // Camera rays, once: the lens is fixed.
+  // The camera's lens: fx, fy, cx, cy (free with refine_camera_intrinsics) and the distortion
+  // (always fixed).
+  std::vector<double> camera_intrinsics = problem.camera_intrinsics;
+  double camera_k[4] = {camera_intrinsics[0], camera_intrinsics[1], camera_intrinsics[2],
+                        camera_intrinsics[3]};
+  const bool camera_distorted = camera_intrinsics.size() == 8;
+  double camera_distortion[4] = {0, 0, 0, 0};
+  if (camera_distorted)
+    for (int i = 0; i < 4; ++i) camera_distortion[i] = camera_intrinsics[4 + i];
+  const double camera_aspect =
+      options.keep_camera_aspect_ratio ? camera_intrinsics[1] / camera_intrinsics[0] : 0.0;
+
+  // Camera rays at the problem's lens; re-computed after every solve when the lens is refined.
   std::vector<std::vector<Correspondence>> correspondences(projector_count);
   for (int k = 0; k < projector_count; ++k) {
     const ProjectorObservations& p = problem.projectors[k];
@@ -412,29 +501,105 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
     projectors[k].proj_from_room = PoseBlock(seed.proj_from_cam * cam_from_room_guess);
   }
 
+  // With the camera's lens refined: the rays at the current fx, fy, cx, cy (a ray whose
+  // unprojection fails keeps its last one; the facets are re-chosen after this).
+  auto update_rays = [&]() {
+    if (camera_aspect > 0.0) camera_k[1] = camera_aspect * camera_k[0];
+    for (int i = 0; i < 4; ++i) camera_intrinsics[i] = camera_k[i];
+    for (std::vector<Correspondence>& list : correspondences)
+      for (Correspondence& c : list) {
+        Vec3 ray;
+        if (UnprojectCameraPixel(problem.camera_lens_model, camera_intrinsics, c.camera_pixel,
+                                 &ray))
+          c.ray_in_cam = ray;
+      }
+  };
+  // 1σ of the camera's fx, fy, cx, cy from (JᵀJ)⁻¹ s² at the solution of `ceres_problem`, whose
+  // parameter blocks are listed in `blocks` with the camera's intrinsics third.
+  auto estimate_camera_sigma = [&](ceres::Problem& ceres_problem,
+                                   const std::vector<double*>& blocks, double cost) {
+    ceres::Problem::EvaluateOptions evaluate;
+    evaluate.parameter_blocks = blocks;
+    evaluate.apply_loss_function = false;
+    ceres::CRSMatrix jacobian;
+    for (double& sigma : summary->camera_sigma) sigma = std::numeric_limits<double>::quiet_NaN();
+    if (!ceres_problem.Evaluate(evaluate, nullptr, nullptr, nullptr, &jacobian)) return;
+    const int n = jacobian.num_cols;
+    Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(n, n);
+    for (int row = 0; row < jacobian.num_rows; ++row)
+      for (int a = jacobian.rows[row]; a < jacobian.rows[row + 1]; ++a)
+        for (int b = a; b < jacobian.rows[row + 1]; ++b) {
+          const double product = jacobian.values[a] * jacobian.values[b];
+          normal(jacobian.cols[a], jacobian.cols[b]) += product;
+          if (jacobian.cols[a] != jacobian.cols[b])
+            normal(jacobian.cols[b], jacobian.cols[a]) += product;
+        }
+    // Scaled to unit diagonal first: radians, metres and pixels differ by orders of magnitude.
+    const Eigen::VectorXd scale = normal.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
+    const Eigen::MatrixXd scaled = scale.asDiagonal() * normal * scale.asDiagonal();
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(scaled);
+    if (eigen.info() != Eigen::Success ||
+        !(eigen.eigenvalues()(0) > 1e-12 * eigen.eigenvalues()(n - 1)))
+      return;
+    const Eigen::MatrixXd inverse = scale.asDiagonal() * eigen.eigenvectors() *
+                                    eigen.eigenvalues().cwiseInverse().asDiagonal() *
+                                    eigen.eigenvectors().transpose() * scale.asDiagonal();
+    const int degrees_of_freedom = jacobian.num_rows - n;
+    if (degrees_of_freedom < 1) return;
+    const double variance = 2.0 * cost / degrees_of_freedom;
+    // Columns 6… are the camera's fx, fy, cx, cy, or fx, cx, cy with fy held (tied to fx).
+    const int fx = 6, fy = camera_aspect > 0.0 ? -1 : 7, cx = fy < 0 ? 7 : 8, cy = cx + 1;
+    summary->camera_sigma[0] = std::sqrt(variance * inverse(fx, fx));
+    summary->camera_sigma[1] =
+        fy < 0 ? camera_aspect * summary->camera_sigma[0] : std::sqrt(variance * inverse(fy, fy));
+    summary->camera_sigma[2] = std::sqrt(variance * inverse(cx, cx));
+    summary->camera_sigma[3] = std::sqrt(variance * inverse(cy, cy));
+  };
+
   // Joint solves: robust until the facets settle, then least squares on the inliers.
   auto solve = [&](bool robust, ceres::Solver::Summary* ceres_summary) {
     ceres::Problem ceres_problem;
+    std::vector<double*> blocks = {camera.rotation, camera.translation, camera_k};
     for (int k = 0; k < projector_count; ++k) {
       ProjectorState& state = projectors[k];
       for (const Correspondence& c : correspondences[k]) {
         if (c.facet < 0 || (!robust && !c.inlier)) continue;
         const ModelFacet& facet = model.facets()[c.facet];
-        ceres_problem.AddResidualBlock(
-            new ceres::AutoDiffCostFunction<RoomReprojection, 2, 3, 3, 6, 3, 3>(
-                new RoomReprojection(c.ray_in_cam, facet.normal, facet.offset, c.observed)),
-            robust ? new ceres::CauchyLoss(options.loss_scale) : nullptr, camera.rotation,
-            camera.translation, state.intrinsics, state.proj_from_room.rotation,
-            state.proj_from_room.translation);
+        ceres::LossFunction* loss = robust ? new ceres::CauchyLoss(options.loss_scale) : nullptr;
+        if (options.refine_camera_intrinsics)
+          ceres_problem.AddResidualBlock(
+              new ceres::AutoDiffCostFunction<RoomReprojectionFreeCamera, 2, 3, 3, 4, 6, 3, 3>(
+                  new RoomReprojectionFreeCamera(c.camera_pixel, c.ray_in_cam, camera_distortion,
+                                                 camera_distorted, camera_aspect, facet.normal,
+                                                 facet.offset, c.observed)),
+              loss, camera.rotation, camera.translation, camera_k, state.intrinsics,
+              state.proj_from_room.rotation, state.proj_from_room.translation);
+        else
+          ceres_problem.AddResidualBlock(
+              new ceres::AutoDiffCostFunction<RoomReprojection, 2, 3, 3, 6, 3, 3>(
+                  new RoomReprojection(c.ray_in_cam, facet.normal, facet.offset, c.observed)),
+              loss, camera.rotation, camera.translation, state.intrinsics,
+              state.proj_from_room.rotation, state.proj_from_room.translation);
       }
-      if (!options.refine_distortion && ceres_problem.HasParameterBlock(state.intrinsics))
+      if (!ceres_problem.HasParameterBlock(state.intrinsics)) continue;
+      if (!options.refine_distortion)
         ceres_problem.SetManifold(state.intrinsics, new ceres::SubsetManifold(6, {4, 5}));
+      blocks.insert(blocks.end(), {state.intrinsics, state.proj_from_room.rotation,
+                                   state.proj_from_room.translation});
     }
+    if (camera_aspect > 0.0 && ceres_problem.HasParameterBlock(camera_k))
+      ceres_problem.SetManifold(camera_k, new ceres::SubsetManifold(4, {1}));
     ceres::Solve(SolverOptions(options.max_iterations), &ceres_problem, ceres_summary);
     if (summary->rounds == 0) summary->initial_cost = ceres_summary->initial_cost;
     summary->final_cost = ceres_summary->final_cost;
     ++summary->rounds;
-    return ceres_summary->IsSolutionUsable() && camera.Finite();
+    bool usable = ceres_summary->IsSolutionUsable() && camera.Finite();
+    for (const double value : camera_k) usable = usable && std::isfinite(value) && value != 0.0;
+    if (usable && options.refine_camera_intrinsics) {
+      if (!robust) estimate_camera_sigma(ceres_problem, blocks, ceres_summary->final_cost);
+      update_rays();
+    }
+    return usable;
   };
   auto count_points = [&](int k, bool inliers_only) {
     int n = 0;
@@ -480,6 +645,10 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
 
   *calibration = RoomCalibration();
   calibration->room_from_camera = camera.Pose();
+  calibration->camera_lens_model = problem.camera_lens_model;
+  calibration->camera_intrinsics = camera_intrinsics;
+  for (int i = 0; i < 4; ++i)
+    summary->camera_intrinsics_moved[i] = camera_intrinsics[i] - problem.camera_intrinsics[i];
   for (int k = 0; k < projector_count; ++k) {
     const ProjectorState& state = projectors[k];
     RoomProjector out;
@@ -529,6 +698,11 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
 
 std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem,
                                            const RoomCalibration& calibration, double max_gap) {
+  const bool own_lens = !calibration.camera_intrinsics.empty();
+  const std::string& camera_lens_model =
+      own_lens ? calibration.camera_lens_model : problem.camera_lens_model;
+  const std::vector<double>& camera_intrinsics =
+      own_lens ? calibration.camera_intrinsics : problem.camera_intrinsics;
   std::vector<TriangulatedPoint> points;
   for (size_t k = 0; k < problem.projectors.size() && k < calibration.projectors.size(); ++k) {
     const RoomProjector& projector = calibration.projectors[k];
@@ -539,8 +713,8 @@ std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem
     for (size_t i = 0; i < p.camera_pixels.size(); ++i) {
       Vec3 ray_cam, ray_proj;
       if (!p.camera_pixels[i].allFinite() || !p.projector_pixels[i].allFinite() ||
-          !UnprojectCameraPixel(problem.camera_lens_model, problem.camera_intrinsics,
-                                p.camera_pixels[i], &ray_cam) ||
+          !UnprojectCameraPixel(camera_lens_model, camera_intrinsics, p.camera_pixels[i],
+                                &ray_cam) ||
           !UnprojectCameraPixel(projector.lens_model, projector.intrinsics,
                                 p.projector_pixels[i], &ray_proj))
         continue;

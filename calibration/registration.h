@@ -6,10 +6,15 @@
 //
 //   CalibrateRoom (joint refinement, Ceres)
 //     unknowns  room_from_camera (6 dof) and, per projector, fx, fy, cx, cy (optionally k1, k2)
-//               and proj_from_room (6 dof); the camera's lens is held FIXED (from
-//               `procam calibrate camera`): it is not observable well enough from projector
-//               correspondences on a few planes to be refined here
+//               and proj_from_room (6 dof); optionally (refine_camera_intrinsics) the camera's
+//               fx, fy, cx, cy too, its distortion held at the chessboard calibration's values.
+//               By default the camera's lens is held FIXED (from `procam calibrate camera`)
 //     data      per projector, camera pixel ↔ projector pixel (decoded structured light)
+//     camera    each camera pixel's ray is its undistorted normalised coordinate x(d), d =
+//               ((u − cx)/fx, (v − cy)/fy); with free intrinsics x is computed inside the cost
+//               by two Newton steps on the OpenCV4 distortion from x0 = x(d0), the exact ray at
+//               the intrinsics of the previous round (re-computed between rounds), so the
+//               residual and its derivatives are those of the exact unprojection
 //     model     each camera ray, through the current room_from_camera, meets the model's first
 //               facet (a quad's plane, or one triangle of a mesh); the point is projected into
 //               the projector; residual = projected − decoded projector pixel. The facet is
@@ -21,7 +26,10 @@
 //               in the camera frame → CalibrateProjector per projector (DLT + Ceres)
 //   The camera pose is observable when the projectors light three or more surfaces with
 //   linearly independent normals (e.g. floor and two walls); with two walls, sliding along their
-//   common line is not.
+//   common line is not. The camera's fx, fy, cx, cy are observable in addition when the points
+//   are off one plane (the rays of a wrong focal length meet the planes where no single pinhole
+//   projector sees them in the decoded order); the summary gives their 1σ from the final solve's
+//   covariance, which says how well a given rig pins them.
 //
 //   Triangulate: each correspondence's camera ray and projector ray (midpoint of their common
 //   perpendicular, the gap between them reported) → a point cloud in the camera frame.
@@ -92,7 +100,8 @@ struct ProjectorObservations {
 };
 
 struct RoomCalibrationProblem {
-  // The camera's lens, held fixed: "LENSMODEL_PINHOLE" (4 intrinsics) or "LENSMODEL_OPENCV4" (8).
+  // The camera's lens: "LENSMODEL_PINHOLE" (4 intrinsics) or "LENSMODEL_OPENCV4" (8). Held fixed,
+  // or the start of fx, fy, cx, cy with RoomCalibrationOptions::refine_camera_intrinsics.
   std::string camera_lens_model = "LENSMODEL_PINHOLE";
   std::vector<double> camera_intrinsics;
   std::vector<ProjectorObservations> projectors;
@@ -101,6 +110,15 @@ struct RoomCalibrationProblem {
 struct RoomCalibrationOptions {
   // Refine the projectors' radial distortion k1, k2 (LENSMODEL_OPENCV4, p1 = p2 = 0).
   bool refine_distortion = false;
+  // Refine the camera's fx, fy, cx, cy jointly with its pose and the projectors (distortion held
+  // at the problem's values). Needs points off one plane; see the summary's camera_sigma.
+  bool refine_camera_intrinsics = false;
+  // With refine_camera_intrinsics: keep fy / fx at the problem's value (the chessboard's ratio)
+  // and refine one focal length, cx and cy. Rooms pin the image's vertical scale weakly when
+  // their surfaces are walls and a floor (c_shaped: fy's 1σ is 4× fx's, and the decoded
+  // staircase pulls fy 0.23% off); the aspect ratio is what a chessboard determines best.
+  // false: fx and fy free independently.
+  bool keep_camera_aspect_ratio = true;
   double loss_scale = 1.0;         // Cauchy scale of the robust pass, projector pixels, > 0
   double outlier_threshold = 2.0;  // inlier residual norm, projector pixels, > 0
   int min_correspondences = 50;    // per projector, fewest usable ones, ≥ 12
@@ -124,6 +142,9 @@ struct RoomProjector {
 
 struct RoomCalibration {
   Eigen::Isometry3d room_from_camera = Eigen::Isometry3d::Identity();
+  // The camera's lens: the problem's, with fx, fy, cx, cy refined when refine_camera_intrinsics.
+  std::string camera_lens_model;
+  std::vector<double> camera_intrinsics;
   std::vector<RoomProjector> projectors;  // same order as the problem's
 };
 
@@ -152,6 +173,12 @@ struct RoomCalibrationSummary {
   double initial_cost = 0.0, final_cost = 0.0;  // of the first and last Ceres solve
   // How far the result moved from the guess: the camera's centre (mm) and orientation (deg).
   double camera_moved_mm = 0.0, camera_turned_deg = 0.0;
+  // With refine_camera_intrinsics: how far fx, fy, cx, cy moved from the problem's (px), and
+  // their 1σ (px) from the last solve's Gauss–Newton covariance (JᵀJ)⁻¹ · s², s² = 2·cost /
+  // (residuals − parameters): decoding noise only, model errors (walls not flat) come on top.
+  // Zero when the intrinsics are held fixed; camera_sigma is NaN when JᵀJ is singular.
+  double camera_intrinsics_moved[4] = {0, 0, 0, 0};
+  double camera_sigma[4] = {0, 0, 0, 0};
   double time_s = 0.0;
   std::string message;
   std::string BriefReport() const;
@@ -175,7 +202,8 @@ struct TriangulatedPoint {
 
 // Triangulates every correspondence of `problem` by the midpoint of the camera ray and the ray
 // of projector k, whose pose in the camera frame is proj_from_room · room_from_camera of
-// `calibration`. Points behind either device, or with a gap above `max_gap` metres, are left
+// `calibration`. The camera lens is `calibration`'s when it holds one (CalibrateRoom fills it),
+// else the problem's. Points behind either device, or with a gap above `max_gap` metres, are left
 // out.
 std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem,
                                            const RoomCalibration& calibration,
