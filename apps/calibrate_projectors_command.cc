@@ -16,6 +16,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "apps/command_line.h"
 #include "apps/commands.h"
 #include "apps/geometry_stage.h"
 #include "calibration/registration.h"
@@ -39,24 +40,6 @@ struct CalibrateProjectorsArguments {
   RoomCalibrationOptions options;
 };
 
-std::vector<double> ParseNumbers(const std::string& option, const std::string& text, size_t count,
-                                 const char* expected) {
-  std::vector<double> values;
-  std::stringstream stream(text);
-  std::string item;
-  while (std::getline(stream, item, ',')) {
-    try {
-      size_t used = 0;
-      values.push_back(std::stod(item, &used));
-      if (used != item.size() || !std::isfinite(values.back())) throw std::invalid_argument("");
-    } catch (const std::exception&) {
-      throw std::invalid_argument(option + ": expected " + expected + ", got '" + text + "'");
-    }
-  }
-  if (values.size() != count)
-    throw std::invalid_argument(option + ": expected " + expected + ", got '" + text + "'");
-  return values;
-}
 
 // room_from_camera of a camera at `centre` looking at `target`, image up as close to `up` as
 // possible (camera x right, y down, z forward).
@@ -212,10 +195,10 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& input) {
   Eigen::Isometry3d guess;
   std::string guess_source;
   if (!args.camera_guess.empty()) {
-    const std::vector<double> v = ParseNumbers("--camera-guess", args.camera_guess, 6,
-                                               "x,y,z,look_x,look_y,look_z in the room (metres)");
+    const std::vector<double> v = ParseNumberList(
+        "--camera-guess", args.camera_guess, "x,y,z,look_x,look_y,look_z in the room (metres)", 6);
     const std::vector<double> up =
-        ParseNumbers("--camera-up", args.camera_up, 3, "x,y,z (the room's up direction)");
+        ParseNumberList("--camera-up", args.camera_up, "x,y,z (the room's up direction)", 3);
     guess = LookAt(Vec3(v[0], v[1], v[2]), Vec3(v[3], v[4], v[5]), Vec3(up[0], up[1], up[2]));
     guess_source = "--camera-guess";
   } else if (!camera.cam_from_ref.isApprox(Eigen::Isometry3d::Identity(), 1e-12)) {
