@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <memory>
 #include <sstream>
+#include <stdexcept>
 
 #include <nlohmann/json.hpp>
 #include <spdlog/fmt/fmt.h>
@@ -26,6 +27,8 @@ struct BenchArguments {
   std::vector<int> sizes = {100, 333, 1000, 3333};
   int ceres_max_variables = 1100;  // Ceres takes ~2 min at 1044 variables, hours at 3000
   double alpha = 0.5;
+  std::string device = "cpu";          // cpu | cuda | both: which devices' rows to run
+  int cpu_max_variables = 1 << 30;     // skip the CPU rows (and peers) above this many variables
 };
 
 void RunFormFactorBench(const BenchArguments& args) {
@@ -72,7 +75,7 @@ double TimeToTarget(const std::vector<std::pair<double, double>>& trace, double 
   return -1.0;
 }
 
-BenchRow OurSolver(const char* name, const SolverOptions& options, const CompensationProblem& problem,
+BenchRow OurSolver(const std::string& name, const SolverOptions& options, const CompensationProblem& problem,
                    const CoarseLevel& coarse) {
   SolverSummary summary;
   Solve(options, problem, &summary, coarse);
@@ -101,6 +104,12 @@ BenchRow Peer(const char* name, const PeerResult& result) {
 }
 
 void RunSolverBench(const BenchArguments& args) {
+  const bool run_gpu = args.device != "cpu";
+  std::string device_description = "none";
+  if (run_gpu && !CudaAvailable(&device_description)) {
+    throw std::runtime_error("bench solver --device " + args.device + ": " + device_description);
+  }
+  if (run_gpu) std::printf("CUDA device: %s\n", device_description.c_str());
   nlohmann::json sizes = nlohmann::json::array();
   std::printf("%s", fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11} {:>6}  {:<16} {}\n", "variables", "patches", "solver",
                        "to target s", "total s", "iters", "objective", "termination").c_str());
@@ -122,38 +131,71 @@ void RunSolverBench(const BenchArguments& args) {
     const int n = problem.size();
     spdlog::info("bench solver: {} patches, {} variables (form factors {:.2f} s)", n, 3 * n, ff.seconds);
 
-    const auto setup_start = std::chrono::steady_clock::now();
-    const RadiositySystem radiosity(problem.form_factors, problem.area, problem.reflectance);
-    const double setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_start).count();
-    const CompensationObjective objective(problem, radiosity, ColourModel::kLab);
-    const Eigen::MatrixX3d start =
-        radiosity.Multiply(problem.desired).cwiseMax(problem.lower).cwiseMin(problem.upper);
-
+    const bool run_cpu = args.device != "cuda" && 3 * n <= args.cpu_max_variables;
+    double setup = -1.0, gpu_setup = -1.0;
     std::vector<BenchRow> rows;
-    SolverOptions perceptual;
-    rows.push_back(OurSolver("perceptual", perceptual, problem, coarse));
-    perceptual.multires = true;
-    rows.push_back(OurSolver("perceptual --multires", perceptual, problem, coarse));
-    PeerOptions peer;
-    peer.max_iterations = 5000;
-    rows.push_back(Peer("L-BFGS-B (LBFGSpp)", SolveWithLbfgsb(objective, start, peer)));
-    if (3 * n <= args.ceres_max_variables) {
-      rows.push_back(Peer("Ceres LM", SolveWithCeres(objective, start, peer)));
+    if (run_cpu) {
+      const auto setup_start = std::chrono::steady_clock::now();
+      const RadiositySystem radiosity(problem.form_factors, problem.area, problem.reflectance);
+      setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_start).count();
+      const CompensationObjective objective(problem, radiosity, ColourModel::kLab);
+      const Eigen::MatrixX3d start =
+          radiosity.Multiply(problem.desired).cwiseMax(problem.lower).cwiseMin(problem.upper);
+      SolverOptions perceptual;
+      rows.push_back(OurSolver("perceptual", perceptual, problem, coarse));
+      perceptual.multires = true;
+      rows.push_back(OurSolver("perceptual --multires", perceptual, problem, coarse));
+      PeerOptions peer;
+      peer.max_iterations = 5000;
+      rows.push_back(Peer("L-BFGS-B (LBFGSpp)", SolveWithLbfgsb(objective, start, peer)));
+      if (3 * n <= args.ceres_max_variables) {
+        rows.push_back(Peer("Ceres LM", SolveWithCeres(objective, start, peer)));
+      }
     }
+    if (run_gpu) {
+      // The same solver with every K⁻¹/K⁻ᵀ on the GPU; its setup (K⁻¹ formed on the device,
+      // F uploaded) is listed apart, as the CPU's factorisation is.
+      SolverOptions perceptual;
+      perceptual.device = Device::kCuda;
+      SolverSummary gpu_summary;
+      Solve(perceptual, problem, &gpu_summary);  // setup timing, and warms the device up
+      gpu_setup = gpu_summary.setup_seconds;
+      rows.push_back(OurSolver("perceptual [cuda]", perceptual, problem, coarse));
+      perceptual.multires = true;
+      rows.push_back(OurSolver("perceptual --multires [cuda]", perceptual, problem, coarse));
+      perceptual.device_float32 = true;
+      rows.push_back(OurSolver("... [cuda float32]", perceptual, problem, coarse));
+    }
+    if (rows.empty()) continue;  // --device cpu above --cpu-max-variables
+    // The float32 rows' own objective values are float32 evaluations: not a reference.
     double best = rows.front().objective;
-    for (const BenchRow& row : rows) best = std::min(best, row.objective);
+    for (const BenchRow& row : rows) {
+      if (row.solver.find("float32") == std::string::npos) best = std::min(best, row.objective);
+    }
     const double target = best * (1.0 + 1e-6);
     for (BenchRow& row : rows) row.seconds_to_target = TimeToTarget(row.trace, target);
-    SolverOptions linear_options;
-    linear_options.method = CompensationMethod::kLinear;
-    BenchRow linear = OurSolver("linear (own objective)", linear_options, problem, coarse);
-    linear.seconds_to_target = -1.0;
-    rows.push_back(linear);
+    for (const Device device : {Device::kCpu, Device::kCuda}) {
+      if (device == Device::kCpu ? !run_cpu : !run_gpu) continue;
+      SolverOptions linear_options;
+      linear_options.method = CompensationMethod::kLinear;
+      linear_options.device = device;
+      BenchRow linear = OurSolver(device == Device::kCpu ? "linear (own objective)" : "linear [cuda]",
+                                  linear_options, problem, coarse);
+      linear.seconds_to_target = -1.0;
+      rows.push_back(linear);
+    }
 
     nlohmann::json size_json = {{"patches", n}, {"variables", 3 * n}, {"factorisation_seconds", setup},
+                                {"cuda_setup_seconds", gpu_setup},
                                 {"form_factor_seconds", ff.seconds}, {"target_objective", target}};
-    table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16} {}\n", 3 * n, n,
-                         "(factorise K once)", "", setup, "", "", "");
+    if (run_cpu) {
+      table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16} {}\n", 3 * n, n,
+                           "(factorise K once)", "", setup, "", "", "");
+    }
+    if (run_gpu) {
+      table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16} {}\n", 3 * n, n,
+                           "(invert K on cuda once)", "", gpu_setup, "", "", "");
+    }
     for (const BenchRow& row : rows) {
       const std::string to_target = row.seconds_to_target < 0 ? "-" : fmt::format("{:.4f}", row.seconds_to_target);
       table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16.10g} {}\n", 3 * n, n, row.solver,
@@ -171,6 +213,7 @@ void RunSolverBench(const BenchArguments& args) {
   }
   if (!args.json.empty()) {
     const nlohmann::json result = {{"benchmark", "solver"},
+                                   {"cuda_device", device_description},
                                    {"scene", "box room with occluder, bounds [0, 1], alpha " + std::to_string(args.alpha)},
                                    {"target", "best final objective among perceptual solvers, +1e-6 relative"},
                                    {"sizes", sizes}};
@@ -200,6 +243,11 @@ void AddBenchCommands(CLI::App& app) {
   solver->add_option("--alpha", args->alpha, "Weight of the absolute term")->check(CLI::Range(1e-9, 1.0))
       ->capture_default_str();
   solver->add_option("--json", args->json, "Also write the results as JSON here");
+  solver->add_option("--device", args->device, "Rows to run: cpu, cuda (the GPU solver) or both")
+      ->check(CLI::IsMember({"cpu", "cuda", "both"}))
+      ->capture_default_str();
+  solver->add_option("--cpu-max-variables", args->cpu_max_variables,
+                     "Skip the CPU rows (own solvers and peers) above this many variables");
   solver->callback([args] { RunSolverBench(*args); });
 }
 

@@ -2,6 +2,7 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <stdexcept>
 
 #include "apps/commands.h"
 #include "apps/compensation_stage.h"
@@ -14,7 +15,7 @@ namespace procam {
 namespace {
 
 struct CompensateArguments {
-  std::string scene, out, rig, method = "perceptual";
+  std::string scene, out, rig, method = "perceptual", device = "cpu";
   double alpha = 0.5;
   int patches = 0;
   bool multires = false, export_problem = false;
@@ -33,6 +34,10 @@ void AddCompensationCommands(CLI::App& app) {
       ->check(CLI::Range(1e-9, 1.0))
       ->capture_default_str();
   cmd->add_option("--patches", args->patches, "Override the scene's target patch count");
+  cmd->add_option("--device", args->device,
+                  "cpu | cuda: where K^-1 is applied (cuda needs a CUDA build and a GPU; docs/gpu.md)")
+      ->check(CLI::IsMember({"cpu", "cuda"}))
+      ->capture_default_str();
   cmd->add_flag("--multires", args->multires, "Solve the coarse patch level first and start from it");
   cmd->add_flag("--export", args->export_problem, "Also write the whole problem (F.npy, ...) into --out");
   cmd->add_option("--rig", args->rig,
@@ -40,6 +45,13 @@ void AddCompensationCommands(CLI::App& app) {
                   "scene's, its reflectance.npy the scene's reflectance");
   cmd->add_option("--out", args->out, "Output directory")->required();
   cmd->callback([args] {
+    Device device = Device::kCpu;
+    ParseDevice(args->device, &device);
+    if (device == Device::kCuda) {
+      // Before the form factors: a missing device fails at once, in one line.
+      std::string why;
+      if (!CudaAvailable(&why)) throw std::runtime_error("--device cuda: " + why);
+    }
     // The rig is read first: a bad rig.json fails before the form factors are computed.
     std::optional<RigDirectory> rig_dir;
     if (!args->rig.empty()) rig_dir = ReadRigDirectory(args->rig);
@@ -49,6 +61,7 @@ void AddCompensationCommands(CLI::App& app) {
     SolverOptions options;
     ParseMethod(args->method, &options.method);
     options.multires = args->multires;
+    options.device = device;
     // With projectors in the scene, their light sets the bounds; otherwise the scene's "bounds".
     std::unique_ptr<ProjectionRig> rig;
     std::vector<Projector> projectors = rig_dir ? rig_dir->projectors : ReadProjectors(stage.scene);

@@ -7,7 +7,8 @@ function(procam_add_library name)
   add_library(procam_${name} STATIC ${ARG_SOURCES})
   target_include_directories(procam_${name} PUBLIC ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR}/include)
   target_link_libraries(procam_${name} PUBLIC ${ARG_PUBLIC_LINK} PRIVATE ${ARG_PRIVATE_LINK})
-  target_compile_options(procam_${name} PRIVATE ${PROCAM_WARNINGS})
+  # Warnings for C++ sources only (nvcc takes its own flags).
+  target_compile_options(procam_${name} PRIVATE "$<$<COMPILE_LANGUAGE:CXX>:${PROCAM_WARNINGS}>")
 endfunction()
 
 # procam_add_test(MODULE NAME SOURCES... [LINK libs...])

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <utility>
 
 #include <Eigen/Cholesky>
 
@@ -53,7 +54,21 @@ RadiositySystem::RadiositySystem(const Eigen::MatrixXd& form_factors, const Eige
   reflectance_float_ = reflectance_.cast<float>();
 }
 
+RadiositySystem::RadiositySystem(const Eigen::MatrixXd& form_factors, const Eigen::VectorXd& area,
+                                 const Eigen::MatrixX3d& reflectance,
+                                 std::shared_ptr<const RadiosityBackend> backend)
+    : form_factors_(form_factors),
+      form_factors_float_(form_factors.cast<float>()),
+      reflectance_float_(reflectance.cast<float>()),
+      area_(area),
+      reflectance_(reflectance),
+      backend_(std::move(backend)) {
+  assert(backend_ != nullptr);
+  assert(form_factors_.rows() == size() && form_factors_.cols() == size() && reflectance_.rows() == size());
+}
+
 Eigen::MatrixX3d RadiositySystem::SolveFast(const Eigen::MatrixX3d& emittance) const {
+  if (backend_) return backend_->Solve(emittance, /*transposed=*/false, /*fast=*/true);
   Eigen::MatrixX3d radiosity(size(), 3);
   for (const Factor& factor : factors_) {
     if (!factor.cholesky) {
@@ -73,6 +88,7 @@ Eigen::MatrixX3d RadiositySystem::SolveFast(const Eigen::MatrixX3d& emittance) c
 }
 
 Eigen::MatrixX3d RadiositySystem::SolveTransposedFast(const Eigen::MatrixX3d& y) const {
+  if (backend_) return backend_->Solve(y, /*transposed=*/true, /*fast=*/true);
   Eigen::MatrixX3d x(size(), 3);
   for (const Factor& factor : factors_) {
     if (!factor.cholesky) {
@@ -107,6 +123,7 @@ Eigen::MatrixX3d RadiositySystem::MultiplyTransposedFast(const Eigen::MatrixX3d&
 }
 
 Eigen::MatrixX3d RadiositySystem::Solve(const Eigen::MatrixX3d& emittance) const {
+  if (backend_) return backend_->Solve(emittance, /*transposed=*/false, /*fast=*/false);
   Eigen::MatrixX3d radiosity(size(), 3);
   for (const Factor& factor : factors_) {
     Eigen::MatrixXd block(size(), factor.channels.size());
@@ -126,6 +143,7 @@ Eigen::MatrixX3d RadiositySystem::Solve(const Eigen::MatrixX3d& emittance) const
 }
 
 Eigen::MatrixX3d RadiositySystem::SolveTransposed(const Eigen::MatrixX3d& y) const {
+  if (backend_) return backend_->Solve(y, /*transposed=*/true, /*fast=*/false);
   Eigen::MatrixX3d x(size(), 3);
   for (const Factor& factor : factors_) {
     Eigen::MatrixXd block(size(), factor.channels.size());
@@ -152,6 +170,15 @@ Eigen::MatrixX3d RadiositySystem::MultiplyTransposed(const Eigen::MatrixX3d& y) 
 }
 
 Eigen::MatrixXd RadiositySystem::InverseMatrix(int channel) const {
+  if (backend_) {
+    Eigen::MatrixXd inverse(size(), size());
+    for (int j = 0; j < size(); ++j) {
+      Eigen::MatrixX3d unit = Eigen::MatrixX3d::Zero(size(), 3);
+      unit(j, channel) = 1.0;
+      inverse.col(j) = Solve(unit).col(channel);
+    }
+    return inverse;
+  }
   for (const Factor& factor : factors_) {
     if (std::find(factor.channels.begin(), factor.channels.end(), channel) == factor.channels.end()) continue;
     if (!factor.cholesky) return factor.lu.solve(Eigen::MatrixXd::Identity(size(), size()));

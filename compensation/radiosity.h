@@ -24,15 +24,36 @@
 
 namespace procam {
 
+// Another device applying K⁻¹ and K⁻ᵀ in place of RadiositySystem's CPU factors (the CUDA
+// backend of compensation/cuda_radiosity.h). Implementations own their device memory.
+class RadiosityBackend {
+ public:
+  virtual ~RadiosityBackend() = default;
+  // K⁻¹ Y (K⁻ᵀ Y when `transposed`), per channel (columns). `fast`: the reduced-precision
+  // application used for CG directions and preconditioners (RadiositySystem::SolveFast).
+  virtual Eigen::MatrixX3d Solve(const Eigen::MatrixX3d& y, bool transposed, bool fast) const = 0;
+  // Channels sharing one K⁻¹ (as RadiositySystem::factorisations).
+  virtual int factorisations() const = 0;
+};
+
 class RadiositySystem {
  public:
   // `form_factors` (n×n) and `area` (n) are copied; `reflectance` is (n,3) in [0,1).
   RadiositySystem(const Eigen::MatrixXd& form_factors, const Eigen::VectorXd& area,
                   const Eigen::MatrixX3d& reflectance);
+  // The same system with every solve (Solve, SolveTransposed and their Fast forms) done by
+  // `backend`, which already holds K⁻¹ for these inputs; nothing is factorised on the CPU.
+  // Products with K (Multiply*) stay on the CPU.
+  RadiositySystem(const Eigen::MatrixXd& form_factors, const Eigen::VectorXd& area,
+                  const Eigen::MatrixX3d& reflectance, std::shared_ptr<const RadiosityBackend> backend);
 
   int size() const { return static_cast<int>(area_.size()); }
   // Channels sharing a factorisation (1 for grey reflectance, else 3).
-  int factorisations() const { return static_cast<int>(factors_.size()); }
+  int factorisations() const {
+    return backend_ ? backend_->factorisations() : static_cast<int>(factors_.size());
+  }
+  // The device doing the solves, or null for the CPU factors.
+  const RadiosityBackend* backend() const { return backend_.get(); }
 
   // B = K⁻¹ E, per channel (columns).
   Eigen::MatrixX3d Solve(const Eigen::MatrixX3d& emittance) const;
@@ -76,6 +97,7 @@ class RadiositySystem {
   Eigen::VectorXd area_;
   Eigen::MatrixX3d reflectance_;
   std::vector<Factor> factors_;
+  std::shared_ptr<const RadiosityBackend> backend_;  // null: the CPU factors above
 };
 
 }  // namespace procam

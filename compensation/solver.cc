@@ -9,6 +9,11 @@
 
 #include <Eigen/SparseCholesky>
 
+#include "procam/config.h"
+#if PROCAM_WITH_CUDA
+#include "compensation/cuda_radiosity.h"
+#endif
+
 namespace procam {
 namespace {
 
@@ -23,6 +28,22 @@ Eigen::MatrixX3d Clamp(const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& lower,
 }
 
 double Dot(const Eigen::MatrixX3d& a, const Eigen::MatrixX3d& b) { return a.cwiseProduct(b).sum(); }
+
+// K factorised on the CPU, or inverted on the device that options.device names.
+std::shared_ptr<const RadiositySystem> MakeRadiositySystem(const SolverOptions& options,
+                                                           const CompensationProblem& problem) {
+  if (options.device == Device::kCpu) {
+    return std::make_shared<const RadiositySystem>(problem.form_factors, problem.area, problem.reflectance);
+  }
+#if PROCAM_WITH_CUDA
+  return std::make_shared<const RadiositySystem>(
+      problem.form_factors, problem.area, problem.reflectance,
+      MakeCudaRadiosityBackend(problem.form_factors, problem.area, problem.reflectance, options.device_float32));
+#else
+  throw std::runtime_error("--device cuda: this build of procam has no CUDA backend (PROCAM_WITH_CUDA is OFF: "
+                           "no nvcc was found when it was configured)");
+#endif
+}
 
 // M_FF's sparse factorisation, kept across outer iterations: once the active set settles the
 // free set, and with it the sparsity pattern, repeats, and only the numeric factorisation is
@@ -261,6 +282,33 @@ bool ParseMethod(const std::string& name, CompensationMethod* method) {
   return false;
 }
 
+const char* DeviceName(Device device) {
+  switch (device) {
+    case Device::kCpu: return "cpu";
+    case Device::kCuda: return "cuda";
+  }
+  return "?";
+}
+
+bool ParseDevice(const std::string& name, Device* device) {
+  for (Device d : {Device::kCpu, Device::kCuda}) {
+    if (name == DeviceName(d)) {
+      *device = d;
+      return true;
+    }
+  }
+  return false;
+}
+
+bool CudaAvailable(std::string* description) {
+#if PROCAM_WITH_CUDA
+  return CudaDeviceAvailable(description);
+#else
+  *description = "this build of procam has no CUDA backend (PROCAM_WITH_CUDA is OFF)";
+  return false;
+#endif
+}
+
 const char* TerminationName(TerminationType type) {
   switch (type) {
     case TerminationType::kGradientTolerance: return "gradient_tolerance";
@@ -410,8 +458,7 @@ CompensationSolution Solve(const SolverOptions& options, const CompensationProbl
   *summary = SolverSummary();
   summary->method = options.method;
   auto setup_start = Clock::now();
-  auto radiosity_system =
-      std::make_shared<const RadiositySystem>(problem.form_factors, problem.area, problem.reflectance);
+  auto radiosity_system = MakeRadiositySystem(options, problem);
   const RadiositySystem& radiosity = *radiosity_system;
   summary->setup_seconds = SecondsSince(setup_start);
   const auto solve_start = Clock::now();
@@ -437,8 +484,8 @@ CompensationSolution Solve(const SolverOptions& options, const CompensationProbl
       if (options.multires) {
         const auto coarse_start = Clock::now();
         const auto setup_coarse = Clock::now();
-        const RadiositySystem coarse_radiosity(coarse.problem->form_factors, coarse.problem->area,
-                                               coarse.problem->reflectance);
+        const std::shared_ptr<const RadiositySystem> coarse_system = MakeRadiositySystem(options, *coarse.problem);
+        const RadiositySystem& coarse_radiosity = *coarse_system;
         coarse_setup_seconds = SecondsSince(setup_coarse);
         summary->setup_seconds += coarse_setup_seconds;
         const CompensationObjective coarse_objective(*coarse.problem, coarse_radiosity, model);

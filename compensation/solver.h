@@ -31,8 +31,25 @@ const char* MethodName(CompensationMethod method);
 // Parses "naive", "reverse", "linear", "perceptual"; false if unknown.
 bool ParseMethod(const std::string& name, CompensationMethod* method);
 
+// Where the dense work of a solve (every K⁻¹ and K⁻ᵀ application) runs.
+enum class Device { kCpu, kCuda };
+const char* DeviceName(Device device);
+// Parses "cpu", "cuda"; false if unknown.
+bool ParseDevice(const std::string& name, Device* device);
+// Whether this build has the CUDA backend (PROCAM_WITH_CUDA) and a CUDA device can be used;
+// `description` gets the device, or one line saying what is missing.
+bool CudaAvailable(std::string* description);
+
 struct SolverOptions {
   CompensationMethod method = CompensationMethod::kPerceptual;
+  // kCpu: the CPU factorisation and kernels of radiosity.h (the reference). kCuda: K⁻¹ formed
+  // once on the GPU and every solve one cuBLAS product (cuda_radiosity.h); the algorithm is the
+  // same. kCuda needs a build with PROCAM_WITH_CUDA and a device: otherwise Solve throws
+  // std::runtime_error with one line saying which is missing.
+  Device device = Device::kCpu;
+  // kCuda only: objective values, gradients and line searches with the float32 K⁻¹ as well (CG
+  // products always use it). Off: float64 (docs/gpu.md compares the two).
+  bool device_float32 = false;
   // Solve the coarse level first and start the fine solve from it (needs a coarse level).
   bool multires = false;
   // Outer (Gauss–Newton) iterations, ≥ 1.

@@ -1,0 +1,62 @@
+#include "compensation/cuda_radiosity.h"
+
+#include <stdexcept>
+#include <vector>
+
+#include "compensation/cuda_dense.h"
+
+namespace procam {
+namespace {
+
+class CudaRadiosity : public RadiosityBackend {
+ public:
+  CudaRadiosity(const Eigen::MatrixXd& form_factors, const Eigen::VectorXd& area,
+                const Eigen::MatrixX3d& reflectance, bool float32)
+      : float32_(float32) {
+    std::string why;
+    if (!cuda::DeviceAvailable(&why)) throw std::runtime_error("--device cuda: " + why);
+    // As RadiositySystem: one K⁻¹ when every patch reflects the three channels alike.
+    const bool grey = (reflectance.col(0) == reflectance.col(1)) && (reflectance.col(0) == reflectance.col(2));
+    groups_ = grey ? std::vector<std::vector<int>>{{0, 1, 2}} : std::vector<std::vector<int>>{{0}, {1}, {2}};
+    const Eigen::MatrixXd f = form_factors;  // contiguous column-major
+    for (const std::vector<int>& channels : groups_) {
+      const Eigen::VectorXd rho = reflectance.col(channels.front());
+      inverses_.push_back(cuda::InverseRadiosity::Create(f.data(), area.data(), rho.data(),
+                                                         static_cast<int>(area.size())));
+    }
+  }
+
+  Eigen::MatrixX3d Solve(const Eigen::MatrixX3d& y, bool transposed, bool fast) const override {
+    Eigen::MatrixX3d x(y.rows(), 3);
+    for (size_t g = 0; g < groups_.size(); ++g) {
+      const std::vector<int>& channels = groups_[g];
+      Eigen::MatrixXd block(y.rows(), channels.size());
+      for (size_t k = 0; k < channels.size(); ++k) block.col(k) = y.col(channels[k]);
+      Eigen::MatrixXd result(y.rows(), channels.size());
+      inverses_[g]->Apply(block.data(), static_cast<int>(channels.size()), transposed, fast || float32_,
+                          result.data());
+      for (size_t k = 0; k < channels.size(); ++k) x.col(channels[k]) = result.col(k);
+    }
+    return x;
+  }
+
+  int factorisations() const override { return static_cast<int>(groups_.size()); }
+
+ private:
+  bool float32_;
+  std::vector<std::vector<int>> groups_;
+  std::vector<std::unique_ptr<cuda::InverseRadiosity>> inverses_;
+};
+
+}  // namespace
+
+bool CudaDeviceAvailable(std::string* description) { return cuda::DeviceAvailable(description); }
+
+std::shared_ptr<const RadiosityBackend> MakeCudaRadiosityBackend(const Eigen::MatrixXd& form_factors,
+                                                                 const Eigen::VectorXd& area,
+                                                                 const Eigen::MatrixX3d& reflectance,
+                                                                 bool float32) {
+  return std::make_shared<const CudaRadiosity>(form_factors, area, reflectance, float32);
+}
+
+}  // namespace procam

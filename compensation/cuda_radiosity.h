@@ -1,0 +1,31 @@
+#pragma once
+// RadiositySystem's CUDA backend (built with PROCAM_WITH_CUDA; procam/config.h says whether).
+//
+// K⁻¹ is formed once on the GPU per distinct channel reflectance (cuda_dense.h: cuSOLVER
+// Cholesky of the symmetric form, or LU when a patch is black) and kept there in float64 and
+// float32; every solve is then one cuBLAS product with three (grey room) or one column. The
+// solver's outer loop, line search, CG and the sparse colour-space work stay on the host
+// (docs/gpu.md says what is left to move).
+
+#include <memory>
+#include <string>
+
+#include <Eigen/Core>
+
+#include "compensation/radiosity.h"
+
+namespace procam {
+
+// True when a CUDA device can be used (also creates its context and library handles, so that
+// later timings exclude them); `description` gets the device, or why there is none.
+bool CudaDeviceAvailable(std::string* description);
+
+// The backend for F (n×n), area (n) and reflectance (n×3). `float32`: the solves for objective
+// values, gradients and line searches also use the float32 K⁻¹ (the Fast solves always do).
+// Throws std::runtime_error at device errors (no device, too little device memory).
+std::shared_ptr<const RadiosityBackend> MakeCudaRadiosityBackend(const Eigen::MatrixXd& form_factors,
+                                                                 const Eigen::VectorXd& area,
+                                                                 const Eigen::MatrixX3d& reflectance,
+                                                                 bool float32);
+
+}  // namespace procam
