@@ -1,5 +1,7 @@
 #include "calibration/camera_calibration.h"
 
+#include "calibration/pose_math.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -97,10 +99,8 @@ namespace {
 
 // A pose from mrcal's rt (Rodrigues rotation, then translation).
 Eigen::Isometry3d PoseFromRt(const mrcal_pose_t& rt) {
-  const Vec3 r(rt.r.x, rt.r.y, rt.r.z);
-  const double angle = r.norm();
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  if (angle > 0.0) pose.linear() = Eigen::AngleAxisd(angle, r / angle).toRotationMatrix();
+  pose.linear() = RotationOf(Vec3(rt.r.x, rt.r.y, rt.r.z));
   pose.translation() = Vec3(rt.t.x, rt.t.y, rt.t.z);
   return pose;
 }

@@ -1,5 +1,7 @@
 #include "calibration/projector_calibration.h"
 
+#include "calibration/pose_math.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -81,14 +83,7 @@ struct ProjectorReprojection {
   bool operator()(const T* intrinsics, const T* rotation, const T* translation,
                   T* residual) const {
     const T p[3] = {T(p_in_cam.x()), T(p_in_cam.y()), T(p_in_cam.z())};
-    T p_in_proj[3];
-    ceres::AngleAxisRotatePoint(rotation, p, p_in_proj);
-    for (int i = 0; i < 3; ++i) p_in_proj[i] += translation[i];
-    const T x = p_in_proj[0] / p_in_proj[2], y = p_in_proj[1] / p_in_proj[2];
-    const T r2 = x * x + y * y;
-    const T radial = T(1.0) + intrinsics[4] * r2 + intrinsics[5] * r2 * r2;
-    residual[0] = intrinsics[0] * x * radial + intrinsics[2] - T(observed.x());
-    residual[1] = intrinsics[1] * y * radial + intrinsics[3] - T(observed.y());
+    ProjectorPixelResidual(intrinsics, rotation, translation, p, observed, residual);
     return true;
   }
   Vec3 p_in_cam;
@@ -190,8 +185,7 @@ bool SeedByDlt(const std::vector<Vec3>& points, const std::vector<Vec2>& pixels,
   seed->intrinsics[2] = k(0, 2);
   seed->intrinsics[3] = k(1, 2);
   seed->intrinsics[4] = seed->intrinsics[5] = 0.0;  // the skew k(0, 1) is dropped
-  const Eigen::AngleAxisd angle_axis(r);
-  const Vec3 rotation = angle_axis.angle() * angle_axis.axis();
+  const Vec3 rotation = AngleAxisOf(r);
   for (int i = 0; i < 3; ++i) {
     seed->rotation[i] = rotation(i);
     seed->translation[i] = t(i);
@@ -322,10 +316,7 @@ bool CalibrateProjector(const ProjectorCalibrationOptions& options,
   } else {
     calibration->lens_model = "LENSMODEL_PINHOLE";
   }
-  const double angle = rotation.norm();
-  calibration->proj_from_cam.linear() =
-      angle > 0.0 ? Eigen::AngleAxisd(angle, rotation / angle).toRotationMatrix()
-                  : Eigen::Matrix3d::Identity();
+  calibration->proj_from_cam.linear() = RotationOf(rotation);
   calibration->proj_from_cam.translation() = translation;
   for (const double value : calibration->intrinsics)
     if (!std::isfinite(value)) return finish(ProjectorCalibrationSummary::kSolverFailed, "NaN");

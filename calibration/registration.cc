@@ -1,5 +1,7 @@
 #include "calibration/registration.h"
 
+#include "calibration/pose_math.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -24,17 +26,6 @@ namespace procam {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-
-Vec3 AngleAxisOf(const Eigen::Matrix3d& rotation) {
-  const Eigen::AngleAxisd angle_axis(rotation);
-  return angle_axis.angle() * angle_axis.axis();
-}
-
-Eigen::Matrix3d RotationOf(const Vec3& angle_axis) {
-  const double angle = angle_axis.norm();
-  return angle > 0.0 ? Eigen::AngleAxisd(angle, angle_axis / angle).toRotationMatrix()
-                     : Eigen::Matrix3d::Identity();
-}
 
 // A rigid transform as Ceres parameter blocks: angle-axis rotation, then translation.
 struct PoseBlock {
@@ -265,14 +256,8 @@ void ReprojectThroughRoom(const T* ray, const T* camera_rotation, const T* camer
   const T s = -origin_height / along_normal;
   T p_in_room[3];
   for (int i = 0; i < 3; ++i) p_in_room[i] = camera_translation[i] + s * direction[i];
-  T p_in_proj[3];
-  ceres::AngleAxisRotatePoint(projector_rotation, p_in_room, p_in_proj);
-  for (int i = 0; i < 3; ++i) p_in_proj[i] += projector_translation[i];
-  const T x = p_in_proj[0] / p_in_proj[2], y = p_in_proj[1] / p_in_proj[2];
-  const T r2 = x * x + y * y;
-  const T radial = T(1.0) + intrinsics[4] * r2 + intrinsics[5] * r2 * r2;
-  residual[0] = intrinsics[0] * x * radial + intrinsics[2] - T(observed.x());
-  residual[1] = intrinsics[1] * y * radial + intrinsics[3] - T(observed.y());
+  ProjectorPixelResidual(intrinsics, projector_rotation, projector_translation, p_in_room,
+                         observed, residual);
 }
 
 // The camera's lens fixed: the ray is a constant.
