@@ -138,6 +138,7 @@ void RunJsonDemo(const std::string& scene_path, int patches, const std::filesyst
 struct CalibrationStage {
   std::string camera;                               // the synthetic camera's URI
   std::vector<std::vector<std::string>> accuracy;  // table rows
+  GeometryStage geometry;                           // the patches with the rig's reflectance
   MethodEvaluation perceptual;                      // with the recovered rig
   nlohmann::json json;
 };
@@ -195,7 +196,7 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation, const Ev
 
   // Perceptual compensation with the recovered rig (projectors, photometry, reflectance), shown
   // by the true projectors in the true world.
-  GeometryStage geometry = evaluation.geometry;
+  GeometryStage& geometry = stage.geometry = evaluation.geometry;
   ApplyRigReflectance(rig, &geometry.patches);
   const ProjectionRig recovered = BuildProjectionRig(geometry.patches.fine, rig.projectors, ProjectionRigOptions());
   MethodEvaluation& result = stage.perceptual;
@@ -233,9 +234,7 @@ void RunSyntheticDemo(const std::string& scene, int patches, const std::filesyst
   // Verification: the calibrated solution photographed, compared with its prediction, and the
   // model refined from the photos (procam verify).
   spdlog::info("demo: verification stage — photos against the predicted L*a*b*, the closed loop (procam verify)");
-  GeometryStage calibrated_geometry = evaluation.geometry;
-  ApplyRigReflectance(ReadRigDirectory(out / "rig"), &calibrated_geometry.patches);
-  WriteCompensation(calibrated_geometry, calibration.perceptual.run, out / "perceptual_calibrated", false);
+  WriteCompensation(calibration.geometry, calibration.perceptual.run, out / "perceptual_calibrated", false);
   VerificationOptions verification;
   verification.rig_dir = out / "rig";
   verification.solution_dir = out / "perceptual_calibrated";
