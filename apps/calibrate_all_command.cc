@@ -111,9 +111,17 @@ void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector
     const auto projector = std::find_if(rig.projectors.begin(), rig.projectors.end(),
                                         [&](const Projector& p) { return p.name == name; });
     if (projector == rig.projectors.end()) throw IoError((out / "rig.json").string() + ": no projector " + name);
-    const nlohmann::json& entry = rig_json["photometric"][name];
-    const Eigen::Vector3d scale(entry["camera_scale"][0].get<double>(), entry["camera_scale"][1].get<double>(),
-                                entry["camera_scale"][2].get<double>());
+    // Written by step 4 for every projector; .at() names what is missing otherwise.
+    Eigen::Vector3d scale;
+    nlohmann::json entry;
+    try {
+      entry = rig_json.at("photometric").at(name);
+      const nlohmann::json& k = entry.at("camera_scale");
+      scale = Eigen::Vector3d(k.at(0).get<double>(), k.at(1).get<double>(), k.at(2).get<double>());
+    } catch (const nlohmann::json::exception&) {
+      throw IoError((out / "rig.json").string() + ": photometric." + name +
+                    ".camera_scale: missing (calibrate photometric --scene did not run for it)");
+    }
     camera_black = entry.value("camera_black", 0.0);
     const CameraPixelLighting lighting =
         LightCameraPixels(stage.scene, stage.patches.fine, projector->geometry, camera);
