@@ -4,18 +4,23 @@
 
 #include <array>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
+#include "geometry/compressed_form_factors.h"
 #include "geometry/patches.h"
 #include "geometry/scene.h"
 
 namespace procam {
 
 struct CompensationProblem {
-  Eigen::MatrixXd form_factors;   // (n,n) F, shared by all channels
+  Eigen::MatrixXd form_factors;   // (n,n) F, shared by all channels; empty when compressed
+  // F compressed (rooms too large for n²): when set, form_factors stays empty and the solver
+  // works matrix-free (compensation/radiosity.h).
+  std::shared_ptr<const CompressedFormFactors> compressed_form_factors;
   Eigen::VectorXd area;           // (n) A_i, m²
   Eigen::MatrixX3d reflectance;   // (n,3) rho, each in [0,1)
   std::vector<std::array<int, 2>> adjacency;  // (m) pairs i<j sharing an edge, once each
@@ -26,6 +31,7 @@ struct CompensationProblem {
   double alpha = 0.5;             // weight of the absolute term, in (0,1]
 
   int size() const { return static_cast<int>(area.size()); }
+  bool compressed() const { return compressed_form_factors != nullptr; }
   // Empty if the problem is consistent; otherwise one line naming what is wrong.
   std::string Validate() const;
 };

@@ -7,7 +7,12 @@ namespace procam {
 
 std::string CompensationProblem::Validate() const {
   const int n = size();
-  if (form_factors.rows() != n || form_factors.cols() != n) return "F is not n×n";
+  if (compressed()) {
+    if (compressed_form_factors->size() != n) return "compressed F does not have n patches";
+    if (form_factors.size() != 0) return "both a dense and a compressed F";
+  } else if (form_factors.rows() != n || form_factors.cols() != n) {
+    return "F is not n×n";
+  }
   if (reflectance.rows() != n || lower.rows() != n || upper.rows() != n || desired.rows() != n) {
     return "per-patch arrays do not all have n rows";
   }

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cassert>
+#include <stdexcept>
+#include <string>
 #include <utility>
 
 #include <Eigen/Cholesky>
@@ -67,8 +69,76 @@ RadiositySystem::RadiositySystem(const Eigen::MatrixXd& form_factors, const Eige
   assert(form_factors_.rows() == size() && form_factors_.cols() == size() && reflectance_.rows() == size());
 }
 
+RadiositySystem::RadiositySystem(std::shared_ptr<const CompressedFormFactors> form_factors,
+                                 const Eigen::MatrixX3d& reflectance, const IterativeRadiosityOptions& options,
+                                 std::shared_ptr<const RadiosityBackend> backend)
+    : area_(form_factors->area()),
+      reflectance_(reflectance),
+      backend_(std::move(backend)),
+      compressed_(std::move(form_factors)),
+      iterative_(options) {
+  assert(reflectance_.rows() == size());
+  reflectance_float_ = reflectance_.cast<float>();
+}
+
+Eigen::MatrixX3d RadiositySystem::ProductF(const Eigen::MatrixX3d& x) const {
+  if (compressed_) return compressed_->Multiply(x);
+  return form_factors_ * x;
+}
+
+Eigen::MatrixX3d RadiositySystem::ProductFTransposed(const Eigen::MatrixX3d& x) const {
+  if (compressed_) return compressed_->MultiplyTransposed(x);
+  return form_factors_.transpose() * x;
+}
+
+Eigen::MatrixX3d RadiositySystem::SolveIteratively(const Eigen::MatrixX3d& y, bool transposed,
+                                                   double tolerance) const {
+  const int n = size();
+  const Eigen::ArrayXd sqrt_area = area_.cwiseSqrt().array();
+  const Eigen::ArrayXXd sqrt_rho = reflectance_.cwiseSqrt().array();
+  // M w = w − D^½ A^½ F A^-½ D^½ w, per channel (column).
+  const auto apply_m = [&](const Eigen::MatrixX3d& w) {
+    Eigen::MatrixX3d inner = (w.array() * sqrt_rho).colwise() / sqrt_area;
+    const Eigen::MatrixX3d f_inner = ProductF(inner);
+    return Eigen::MatrixX3d(w.array() - (f_inner.array().colwise() * sqrt_area) * sqrt_rho);
+  };
+  Eigen::MatrixX3d rhs;
+  if (transposed) {
+    rhs = (y.array().colwise() / sqrt_area) * sqrt_rho;
+  } else {
+    rhs = (ProductF(y).array().colwise() * sqrt_area) * sqrt_rho;
+  }
+  // Conjugate gradients, the three channels side by side (one product with F for all three).
+  Eigen::MatrixX3d w = Eigen::MatrixX3d::Zero(n, 3);
+  Eigen::MatrixX3d r = rhs, p = rhs;
+  Eigen::Array3d rr = r.colwise().squaredNorm().transpose().array();
+  const Eigen::Array3d goal = tolerance * tolerance * rhs.colwise().squaredNorm().transpose().array();
+  int iteration = 0;
+  for (; (rr > goal).any(); ++iteration) {
+    if (iteration >= iterative_.max_iterations) {
+      throw std::runtime_error("radiosity: conjugate gradients did not converge in " +
+                               std::to_string(iterative_.max_iterations) + " iterations");
+    }
+    const Eigen::MatrixX3d mp = apply_m(p);
+    for (int c = 0; c < 3; ++c) {
+      if (rr[c] <= goal[c]) continue;  // this channel is done: leave it
+      const double step = rr[c] / p.col(c).dot(mp.col(c));
+      w.col(c) += step * p.col(c);
+      r.col(c) -= step * mp.col(c);
+      const double next = r.col(c).squaredNorm();
+      p.col(c) = r.col(c) + (next / rr[c]) * p.col(c);
+      rr[c] = next;
+    }
+  }
+  solve_iterations_ += iteration;
+  const Eigen::MatrixX3d scaled = (w.array() * sqrt_rho).colwise() / sqrt_area;  // A^-½ D^½ w
+  if (transposed) return y + area_.asDiagonal() * ProductF(scaled);
+  return y + scaled;
+}
+
 Eigen::MatrixX3d RadiositySystem::SolveFast(const Eigen::MatrixX3d& emittance) const {
   if (backend_) return backend_->Solve(emittance, /*transposed=*/false, /*fast=*/true);
+  if (compressed_) return SolveIteratively(emittance, false, iterative_.fast_tolerance);
   Eigen::MatrixX3d radiosity(size(), 3);
   for (const Factor& factor : factors_) {
     if (!factor.cholesky) {
@@ -89,6 +159,7 @@ Eigen::MatrixX3d RadiositySystem::SolveFast(const Eigen::MatrixX3d& emittance) c
 
 Eigen::MatrixX3d RadiositySystem::SolveTransposedFast(const Eigen::MatrixX3d& y) const {
   if (backend_) return backend_->Solve(y, /*transposed=*/true, /*fast=*/true);
+  if (compressed_) return SolveIteratively(y, true, iterative_.fast_tolerance);
   Eigen::MatrixX3d x(size(), 3);
   for (const Factor& factor : factors_) {
     if (!factor.cholesky) {
@@ -109,6 +180,7 @@ Eigen::MatrixX3d RadiositySystem::SolveTransposedFast(const Eigen::MatrixX3d& y)
 
 // form_factors_float_ is column-major, i.e. Fᵀ with contiguous rows for dense_kernels.h.
 Eigen::MatrixX3d RadiositySystem::MultiplyFast(const Eigen::MatrixX3d& radiosity) const {
+  if (compressed_) return Multiply(radiosity);
   const Eigen::MatrixX3f b = radiosity.cast<float>();
   Eigen::MatrixX3f fb(size(), 3);
   DenseTransposedProduct(form_factors_float_.data(), size(), b.data(), 3, fb.data());
@@ -116,6 +188,7 @@ Eigen::MatrixX3d RadiositySystem::MultiplyFast(const Eigen::MatrixX3d& radiosity
 }
 
 Eigen::MatrixX3d RadiositySystem::MultiplyTransposedFast(const Eigen::MatrixX3d& y) const {
+  if (compressed_) return MultiplyTransposed(y);
   const Eigen::MatrixX3f weighted = reflectance_float_.cwiseProduct(y.cast<float>());
   Eigen::MatrixX3f ft_weighted(size(), 3);
   DenseProduct(form_factors_float_.data(), size(), weighted.data(), 3, ft_weighted.data());
@@ -124,6 +197,7 @@ Eigen::MatrixX3d RadiositySystem::MultiplyTransposedFast(const Eigen::MatrixX3d&
 
 Eigen::MatrixX3d RadiositySystem::Solve(const Eigen::MatrixX3d& emittance) const {
   if (backend_) return backend_->Solve(emittance, /*transposed=*/false, /*fast=*/false);
+  if (compressed_) return SolveIteratively(emittance, false, iterative_.tolerance);
   Eigen::MatrixX3d radiosity(size(), 3);
   for (const Factor& factor : factors_) {
     Eigen::MatrixXd block(size(), factor.channels.size());
@@ -144,6 +218,7 @@ Eigen::MatrixX3d RadiositySystem::Solve(const Eigen::MatrixX3d& emittance) const
 
 Eigen::MatrixX3d RadiositySystem::SolveTransposed(const Eigen::MatrixX3d& y) const {
   if (backend_) return backend_->Solve(y, /*transposed=*/true, /*fast=*/false);
+  if (compressed_) return SolveIteratively(y, true, iterative_.tolerance);
   Eigen::MatrixX3d x(size(), 3);
   for (const Factor& factor : factors_) {
     Eigen::MatrixXd block(size(), factor.channels.size());
@@ -162,15 +237,15 @@ Eigen::MatrixX3d RadiositySystem::SolveTransposed(const Eigen::MatrixX3d& y) con
 }
 
 Eigen::MatrixX3d RadiositySystem::Multiply(const Eigen::MatrixX3d& radiosity) const {
-  return radiosity - reflectance_.cwiseProduct(form_factors_ * radiosity);
+  return radiosity - reflectance_.cwiseProduct(ProductF(radiosity));
 }
 
 Eigen::MatrixX3d RadiositySystem::MultiplyTransposed(const Eigen::MatrixX3d& y) const {
-  return y - form_factors_.transpose() * reflectance_.cwiseProduct(y);
+  return y - ProductFTransposed(reflectance_.cwiseProduct(y));
 }
 
 Eigen::MatrixXd RadiositySystem::InverseMatrix(int channel) const {
-  if (backend_) {
+  if (backend_ || compressed_) {
     Eigen::MatrixXd inverse(size(), size());
     for (int j = 0; j < size(); ++j) {
       Eigen::MatrixX3d unit = Eigen::MatrixX3d::Zero(size(), 3);

@@ -22,6 +22,8 @@
 #include <Eigen/Core>
 #include <Eigen/LU>
 
+#include "geometry/compressed_form_factors.h"
+
 namespace procam {
 
 // Another device applying K⁻¹ and K⁻ᵀ in place of RadiositySystem's CPU factors (the CUDA
@@ -36,6 +38,18 @@ class RadiosityBackend {
   virtual int factorisations() const = 0;
 };
 
+// The matrix-free system (compressed F): K⁻¹ and K⁻ᵀ by conjugate gradients on the symmetric
+// positive definite M_c = I − D_c^½ S D_c^½, S = A^½ F A^-½ (one product with F per iteration,
+// no n² storage, no division by rho so black patches need no special case):
+//   K b = e:   M w = D^½ A^½ F e,            b = e + A^-½ D^½ w
+//   Kᵀ x = y:  M w = D^½ A^-½ y,             x = y + A F A^-½ D^½ w
+// Iterations ~ √cond(M) log(1/tolerance), cond(M) ≤ (1 + max rho)/(1 − max rho).
+struct IterativeRadiosityOptions {
+  double tolerance = 1e-11;      // relative residual |r| ≤ tolerance |rhs| of Solve / SolveTransposed
+  double fast_tolerance = 1e-5;  // of the Fast solves (CG directions, preconditioners)
+  int max_iterations = 2000;     // per solve; a solve that does not converge throws std::runtime_error
+};
+
 class RadiositySystem {
  public:
   // `form_factors` (n×n) and `area` (n) are copied; `reflectance` is (n,3) in [0,1).
@@ -47,7 +61,17 @@ class RadiositySystem {
   RadiositySystem(const Eigen::MatrixXd& form_factors, const Eigen::VectorXd& area,
                   const Eigen::MatrixX3d& reflectance, std::shared_ptr<const RadiosityBackend> backend);
 
+  // Matrix-free: F compressed (shared, not copied), every solve iterative on the CPU, or by
+  // `backend` when given (which then holds what it needs of F). No n² memory.
+  RadiositySystem(std::shared_ptr<const CompressedFormFactors> form_factors, const Eigen::MatrixX3d& reflectance,
+                  const IterativeRadiosityOptions& options = {},
+                  std::shared_ptr<const RadiosityBackend> backend = nullptr);
+
   int size() const { return static_cast<int>(area_.size()); }
+  // The compressed F of a matrix-free system, else null.
+  const CompressedFormFactors* compressed() const { return compressed_.get(); }
+  // CG iterations of the iterative solves so far (matrix-free systems on the CPU).
+  int64_t solve_iterations() const { return solve_iterations_; }
   // Channels sharing a factorisation (1 for grey reflectance, else 3).
   int factorisations() const {
     return backend_ ? backend_->factorisations() : static_cast<int>(factors_.size());
@@ -74,9 +98,11 @@ class RadiositySystem {
   Eigen::MatrixX3d MultiplyFast(const Eigen::MatrixX3d& radiosity) const;
   Eigen::MatrixX3d MultiplyTransposedFast(const Eigen::MatrixX3d& y) const;
 
-  // Dense K_c⁻¹ (n×n) for one channel: for small problems, tests and peer solvers.
+  // Dense K_c⁻¹ (n×n) for one channel: for small problems, tests and peer solvers (n solves
+  // when matrix-free).
   Eigen::MatrixXd InverseMatrix(int channel) const;
 
+  // Dense F (empty when matrix-free).
   const Eigen::MatrixXd& form_factors() const { return form_factors_; }
   const Eigen::MatrixX3d& reflectance() const { return reflectance_; }
 
@@ -98,6 +124,15 @@ class RadiositySystem {
   Eigen::MatrixX3d reflectance_;
   std::vector<Factor> factors_;
   std::shared_ptr<const RadiosityBackend> backend_;  // null: the CPU factors above
+  std::shared_ptr<const CompressedFormFactors> compressed_;  // matrix-free systems
+  IterativeRadiosityOptions iterative_;
+  mutable int64_t solve_iterations_ = 0;
+
+  // F X and Fᵀ X, dense or compressed.
+  Eigen::MatrixX3d ProductF(const Eigen::MatrixX3d& x) const;
+  Eigen::MatrixX3d ProductFTransposed(const Eigen::MatrixX3d& x) const;
+  // The matrix-free solves above (transposed: Kᵀ).
+  Eigen::MatrixX3d SolveIteratively(const Eigen::MatrixX3d& y, bool transposed, double tolerance) const;
 };
 
 }  // namespace procam

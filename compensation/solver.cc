@@ -32,6 +32,12 @@ double Dot(const Eigen::MatrixX3d& a, const Eigen::MatrixX3d& b) { return a.cwis
 // K factorised on the CPU, or inverted on the device that options.device names.
 std::shared_ptr<const RadiositySystem> MakeRadiositySystem(const SolverOptions& options,
                                                            const CompensationProblem& problem) {
+  if (problem.compressed()) {
+    if (options.device == Device::kCpu) {
+      return std::make_shared<const RadiositySystem>(problem.compressed_form_factors, problem.reflectance);
+    }
+    throw std::runtime_error("--device cuda: compressed form factors are not supported on the GPU yet");
+  }
   if (options.device == Device::kCpu) {
     return std::make_shared<const RadiositySystem>(problem.form_factors, problem.area, problem.reflectance);
   }

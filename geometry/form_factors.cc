@@ -29,12 +29,6 @@ int ClipToHemisphere(const Vec3& x, const Vec3& normal, const Vec3* polygon, int
   return kept;
 }
 
-// Quadrature points of a patch with k² points, from a cache for the common k.
-struct SampleCache {
-  int k = 0;
-  std::vector<std::vector<PatchSample>> per_patch;
-};
-
 }  // namespace
 
 bool FormFactorOptions::Check(std::string* why) const {
@@ -74,86 +68,117 @@ double PointToPolygonFormFactor(const Vec3& x, const Vec3& normal, const Vec3* p
   return std::abs(sum) / (2.0 * kPi);
 }
 
+namespace {
+
+// Exchange areas A_i F_ij = A_j F_ji of patch pairs of one level: k² quadrature points on each
+// side, one shadow ray per point pair, both one-sided estimates averaged. Thread-safe queries.
+class PairIntegrator {
+ public:
+  PairIntegrator(const Scene& scene, const PatchLevel& level, const FormFactorOptions& options)
+      : level_(level), options_(options) {
+    if (options.visibility) rays_ = std::make_unique<RayScene>(scene);
+    // Margin that keeps shadow rays off the surfaces they start and end on.
+    Eigen::AlignedBox3d box;
+    for (const Patch& patch : level.patches) {
+      for (int k = 0; k < patch.corner_count; ++k) box.extend(patch.corners[k]);
+    }
+    margin_ = std::max(1e-6, 1e-5 * box.diagonal().norm());
+    const int n = level.size();
+    samples_.resize(n);
+    radius_.resize(n);
+    for (int i = 0; i < n; ++i) {
+      SamplePatch(level.patches[i], options.far_samples, &samples_[i]);
+      radius_[i] = std::sqrt(level.patches[i].area);
+    }
+  }
+
+  // Per-thread scratch and counters.
+  struct Scratch {
+    std::vector<PatchSample> near_i, near_j;
+    int64_t pairs = 0, rays = 0;
+  };
+
+  // A_i F_ij; 0 when one patch lies wholly behind the other's plane or every ray is blocked.
+  double Exchange(int i, int j, Scratch* scratch) const {
+    const Patch& pi = level_.patches[i];
+    const Patch& pj = level_.patches[j];
+    // Skip pairs where one patch lies wholly behind the other's plane.
+    bool j_in_front = false, i_in_front = false;
+    for (int k = 0; k < pj.corner_count; ++k) j_in_front |= pi.normal.dot(pj.corners[k] - pi.centroid) > margin_;
+    for (int k = 0; k < pi.corner_count; ++k) i_in_front |= pj.normal.dot(pi.corners[k] - pj.centroid) > margin_;
+    if (!j_in_front || !i_in_front) return 0.0;
+    ++scratch->pairs;
+    const double distance = (pi.centroid - pj.centroid).norm();
+    const int k = std::clamp(static_cast<int>(std::ceil(options_.near_scale * (radius_[i] + radius_[j]) / distance)),
+                             options_.far_samples, options_.near_samples);
+    double exchange_from_i = 0.0, exchange_from_j = 0.0;
+    // Estimates both exchange areas with k² samples; returns how many rays were blocked.
+    auto estimate = [&](int order) {
+      const std::vector<PatchSample>* si = &samples_[i];
+      const std::vector<PatchSample>* sj = &samples_[j];
+      if (order != options_.far_samples) {
+        SamplePatch(pi, order, &scratch->near_i);
+        SamplePatch(pj, order, &scratch->near_j);
+        si = &scratch->near_i;
+        sj = &scratch->near_j;
+      }
+      const int count = order * order;
+      const int stride = (count % 7 == 0) ? 11 : 7;  // coprime with count: a permutation
+      exchange_from_i = exchange_from_j = 0.0;
+      int blocked = 0;
+      for (int s = 0; s < count; ++s) {
+        const PatchSample& x = (*si)[s];
+        const PatchSample& y = (*sj)[(static_cast<int64_t>(s) * stride + count / 2) % count];
+        if (rays_) {
+          ++scratch->rays;
+          if (rays_->Occluded(x.point, y.point, margin_)) {
+            ++blocked;
+            continue;
+          }
+        }
+        exchange_from_i += x.weight * PointToPolygonFormFactor(x.point, pi.normal, pj.corners.data(), pj.corner_count);
+        exchange_from_j += y.weight * PointToPolygonFormFactor(y.point, pj.normal, pi.corners.data(), pi.corner_count);
+      }
+      return std::pair<int, int>(blocked, count);
+    };
+    const auto [blocked, count] = estimate(k);
+    // Partly shadowed pairs get the finest sampling: the shadow edge dominates their error.
+    if (blocked > 0 && blocked < count && k < options_.near_samples) estimate(options_.near_samples);
+    return 0.5 * (exchange_from_i + exchange_from_j);
+  }
+
+  const RayScene* rays() const { return rays_.get(); }
+  double margin() const { return margin_; }
+
+ private:
+  const PatchLevel& level_;
+  const FormFactorOptions& options_;
+  std::unique_ptr<RayScene> rays_;
+  double margin_ = 1e-6;
+  std::vector<std::vector<PatchSample>> samples_;
+  std::vector<double> radius_;
+};
+
+}  // namespace
+
 Eigen::MatrixXd ComputeFormFactors(const Scene& scene, const PatchLevel& level,
                                    const FormFactorOptions& options, FormFactorSummary* summary) {
   const auto start = std::chrono::steady_clock::now();
   const int n = level.size();
   Eigen::MatrixXd f = Eigen::MatrixXd::Zero(n, n);
-  std::unique_ptr<RayScene> rays;
-  if (options.visibility) rays = std::make_unique<RayScene>(scene);
-
-  // Margin that keeps shadow rays off the surfaces they start and end on.
-  Eigen::AlignedBox3d box;
-  for (const Patch& patch : level.patches) {
-    for (int k = 0; k < patch.corner_count; ++k) box.extend(patch.corners[k]);
-  }
-  const double margin = std::max(1e-6, 1e-5 * box.diagonal().norm());
-
-  SampleCache cache;
-  cache.k = options.far_samples;
-  cache.per_patch.resize(n);
-  std::vector<double> radius(n);
-  for (int i = 0; i < n; ++i) {
-    SamplePatch(level.patches[i], cache.k, &cache.per_patch[i]);
-    radius[i] = std::sqrt(level.patches[i].area);
-  }
-
+  const PairIntegrator integrator(scene, level, options);
   std::atomic<int64_t> pairs{0}, shadow_rays{0}, rows_done{0};
   const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
 #pragma omp parallel num_threads(threads)
   {
-    std::vector<PatchSample> near_i, near_j;
-    int64_t local_pairs = 0, local_rays = 0;
+    PairIntegrator::Scratch scratch;
 #pragma omp for schedule(dynamic, 8)
     for (int i = 0; i < n; ++i) {
-      const Patch& pi = level.patches[i];
       for (int j = i + 1; j < n; ++j) {
-        const Patch& pj = level.patches[j];
-        // Skip pairs where one patch lies wholly behind the other's plane.
-        bool j_in_front = false, i_in_front = false;
-        for (int k = 0; k < pj.corner_count; ++k) j_in_front |= pi.normal.dot(pj.corners[k] - pi.centroid) > margin;
-        for (int k = 0; k < pi.corner_count; ++k) i_in_front |= pj.normal.dot(pi.corners[k] - pj.centroid) > margin;
-        if (!j_in_front || !i_in_front) continue;
-        ++local_pairs;
-        const double distance = (pi.centroid - pj.centroid).norm();
-        int k = std::clamp(static_cast<int>(std::ceil(options.near_scale * (radius[i] + radius[j]) / distance)),
-                           options.far_samples, options.near_samples);
-        double exchange_from_i = 0.0, exchange_from_j = 0.0;
-        // Estimates both exchange areas with k² samples; returns how many rays were blocked.
-        auto estimate = [&](int order) {
-          const std::vector<PatchSample>* si = &cache.per_patch[i];
-          const std::vector<PatchSample>* sj = &cache.per_patch[j];
-          if (order != cache.k) {
-            SamplePatch(pi, order, &near_i);
-            SamplePatch(pj, order, &near_j);
-            si = &near_i;
-            sj = &near_j;
-          }
-          const int count = order * order;
-          const int stride = (count % 7 == 0) ? 11 : 7;  // coprime with count: a permutation
-          exchange_from_i = exchange_from_j = 0.0;
-          int blocked = 0;
-          for (int s = 0; s < count; ++s) {
-            const PatchSample& x = (*si)[s];
-            const PatchSample& y = (*sj)[(static_cast<int64_t>(s) * stride + count / 2) % count];
-            if (rays) {
-              ++local_rays;
-              if (rays->Occluded(x.point, y.point, margin)) {
-                ++blocked;
-                continue;
-              }
-            }
-            exchange_from_i += x.weight * PointToPolygonFormFactor(x.point, pi.normal, pj.corners.data(), pj.corner_count);
-            exchange_from_j += y.weight * PointToPolygonFormFactor(y.point, pj.normal, pi.corners.data(), pi.corner_count);
-          }
-          return std::pair<int, int>(blocked, count);
-        };
-        const auto [blocked, count] = estimate(k);
-        // Partly shadowed pairs get the finest sampling: the shadow edge dominates their error.
-        if (blocked > 0 && blocked < count && k < options.near_samples) estimate(options.near_samples);
-        const double exchange = 0.5 * (exchange_from_i + exchange_from_j);
-        f(i, j) = exchange / pi.area;
-        f(j, i) = exchange / pj.area;
+        const double exchange = integrator.Exchange(i, j, &scratch);
+        if (exchange == 0.0) continue;
+        f(i, j) = exchange / level.patches[i].area;
+        f(j, i) = exchange / level.patches[j].area;
       }
       const int64_t done = ++rows_done;
       if (options.progress && omp_get_thread_num() == 0 && done % std::max(1, n / 50) == 0) {
@@ -162,8 +187,8 @@ Eigen::MatrixXd ComputeFormFactors(const Scene& scene, const PatchLevel& level,
         options.progress(1.0 - remaining * remaining);
       }
     }
-    pairs += local_pairs;
-    shadow_rays += local_rays;
+    pairs += scratch.pairs;
+    shadow_rays += scratch.rays;
   }
   if (options.progress) options.progress(1.0);
   const double correction = LimitRowSums(&f);
@@ -173,6 +198,35 @@ Eigen::MatrixXd ComputeFormFactors(const Scene& scene, const PatchLevel& level,
     summary->shadow_rays = shadow_rays;
     SummariseFormFactors(f, level.Areas(), summary);
     summary->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+  return f;
+}
+
+CompressedFormFactors ComputeCompressedFormFactors(const Scene& scene, const PatchLevel& level,
+                                                   const FormFactorOptions& options,
+                                                   const ClusterOptions& clusters,
+                                                   CompressedBuildSummary* summary) {
+  const PairIntegrator integrator(scene, level, options);
+  std::vector<ClusterPatch> patches(level.size());
+  for (int i = 0; i < level.size(); ++i) {
+    const Patch& patch = level.patches[i];
+    patches[i] = {patch.centroid, patch.normal, patch.area, patch.surface};
+  }
+  const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
+  std::vector<PairIntegrator::Scratch> scratch(threads);
+  const PairExchange exchange = [&](int i, int j) {
+    return integrator.Exchange(i, j, &scratch[omp_get_thread_num()]);
+  };
+  Visibility visible;
+  if (integrator.rays() != nullptr) {
+    visible = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+      return !integrator.rays()->Occluded(a, b, integrator.margin());
+    };
+  }
+  CompressedFormFactors f =
+      BuildCompressedFormFactors(patches, clusters, exchange, visible, threads, options.progress, summary);
+  if (summary != nullptr) {
+    for (const auto& s : scratch) summary->visibility_rays += s.rays;
   }
   return f;
 }

@@ -16,6 +16,7 @@
 
 #include <Eigen/Core>
 
+#include "geometry/compressed_form_factors.h"
 #include "geometry/patches.h"
 #include "geometry/scene.h"
 
@@ -52,6 +53,15 @@ struct FormFactorSummary {
 // Dense n×n F of one patch level. Throws IoError if Embree fails.
 Eigen::MatrixXd ComputeFormFactors(const Scene& scene, const PatchLevel& level,
                                    const FormFactorOptions& options, FormFactorSummary* summary);
+
+// The same form factors compressed (compressed_form_factors.h): near pairs by the quadrature
+// above, far cluster pairs by their representatives, with shadow rays when
+// options.visibility. Memory and time grow about as n log n instead of n². Throws IoError if
+// Embree fails, std::invalid_argument for bad options.
+CompressedFormFactors ComputeCompressedFormFactors(const Scene& scene, const PatchLevel& level,
+                                                   const FormFactorOptions& options,
+                                                   const ClusterOptions& clusters,
+                                                   CompressedBuildSummary* summary);
 
 // Quadrature and shadow-ray noise can push a row sum slightly above 1 next to occluders.
 // Scales F symmetrically, F_ij ← s_i F_ij s_j with s_i = min(1, 1/rowsum_i), which keeps
