@@ -11,6 +11,7 @@
 
 #include "procam/config.h"
 #if PROCAM_WITH_CUDA
+#include "compensation/cuda_compressed.h"
 #include "compensation/cuda_radiosity.h"
 #endif
 
@@ -36,7 +37,15 @@ std::shared_ptr<const RadiositySystem> MakeRadiositySystem(const SolverOptions& 
     if (options.device == Device::kCpu) {
       return std::make_shared<const RadiositySystem>(problem.compressed_form_factors, problem.reflectance);
     }
-    throw std::runtime_error("--device cuda: compressed form factors are not supported on the GPU yet");
+#if PROCAM_WITH_CUDA
+    return std::make_shared<const RadiositySystem>(
+        problem.compressed_form_factors, problem.reflectance, IterativeRadiosityOptions(),
+        MakeCudaCompressedRadiosityBackend(*problem.compressed_form_factors, problem.reflectance,
+                                           IterativeRadiosityOptions()));
+#else
+    throw std::runtime_error("--device cuda: this build of procam has no CUDA backend (PROCAM_WITH_CUDA is OFF: "
+                             "no nvcc was found when it was configured)");
+#endif
   }
   if (options.device == Device::kCpu) {
     return std::make_shared<const RadiositySystem>(problem.form_factors, problem.area, problem.reflectance);
