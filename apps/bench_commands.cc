@@ -1,5 +1,6 @@
-// procam bench formfactors / bench solver: timings on generated rooms, a table on screen and
-// JSON on disk.
+// procam bench formfactors / bench solver / bench scale: timings on generated rooms, a table on
+// screen and JSON on disk.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <memory>
@@ -29,6 +30,10 @@ struct BenchArguments {
   double alpha = 0.5;
   std::string device = "cpu";          // cpu | cuda | both: which devices' rows to run
   int cpu_max_variables = 1 << 30;     // skip the CPU rows (and peers) above this many variables
+  // bench scale
+  std::vector<int> scale_sizes = {1000, 3333, 10000};
+  int dense_max_patches = 5000;         // also the dense F (and its error) up to here
+  ClusterOptions clusters;
 };
 
 void RunFormFactorBench(const BenchArguments& args) {
@@ -222,6 +227,128 @@ void RunSolverBench(const BenchArguments& args) {
   }
 }
 
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Median seconds of `repeats` calls.
+template <typename Call>
+double MedianSeconds(int repeats, Call call) {
+  std::vector<double> seconds;
+  for (int k = 0; k < repeats; ++k) {
+    const auto start = std::chrono::steady_clock::now();
+    call();
+    seconds.push_back(SecondsSince(start));
+  }
+  std::sort(seconds.begin(), seconds.end());
+  return seconds[seconds.size() / 2];
+}
+
+// The matrix-free path (issue 9): compressed form factors, their products, K⁻¹ by conjugate
+// gradients and the perceptual solver on them, per room size; beside the dense F where it fits.
+void RunScaleBench(const BenchArguments& args) {
+  const bool run_gpu = args.device != "cpu";
+  std::string device_description = "none";
+  if (run_gpu && !CudaAvailable(&device_description)) {
+    throw std::runtime_error("bench scale --device " + args.device + ": " + device_description);
+  }
+  nlohmann::json sizes = nlohmann::json::array();
+  std::printf("%s", fmt::format("{:>9} {:>8} {:>9} {:>10} {:>10} {:>9} {:>9} {:>10} {:>9} {:>6}  {:<22} {:>9} {:>6} {}\n",
+                                "variables", "patches", "build s", "MB", "dense MB", "F x ms", "error",
+                                "K⁻¹ ms", "CG iters", "", "solver", "solve s", "iters", "objective").c_str());
+  for (const int target_patches : args.scale_sizes) {
+    BoxRoomOptions room;
+    room.target_patches = target_patches;
+    const Scene scene = MakeBoxRoom(room);
+    SubdivisionOptions subdivision;
+    subdivision.target_patches = target_patches;
+    const PatchHierarchy patches = SubdividePatches(scene, subdivision);
+    const int n = patches.fine.size();
+    FormFactorOptions ff_options;
+    ff_options.threads = args.threads;
+    int last_percent = -10;
+    ff_options.progress = [&](double fraction) {
+      const int percent = static_cast<int>(100 * fraction);
+      if (percent >= last_percent + 10) {
+        last_percent = percent;
+        spdlog::info("bench scale: {} patches, near pairs {}%", n, percent);
+      }
+    };
+    CompressedBuildSummary build;
+    auto compressed = std::make_shared<const CompressedFormFactors>(
+        ComputeCompressedFormFactors(scene, patches.fine, ff_options, args.clusters, &build));
+    const Eigen::MatrixXd x = Eigen::MatrixXd::Random(n, 3).cwiseAbs();
+    const double product = MedianSeconds(5, [&] { compressed->Multiply(x); });
+    double error = -1.0, dense_seconds = -1.0;
+    Eigen::MatrixXd dense;
+    if (n <= args.dense_max_patches) {
+      FormFactorSummary ff;
+      ff_options.progress = nullptr;
+      dense = ComputeFormFactors(scene, patches.fine, ff_options, &ff);
+      dense_seconds = ff.seconds;
+      error = (compressed->Multiply(x) - dense * x).norm() / (dense * x).norm();
+    }
+    const RadiositySystem radiosity(compressed, patches.fine.reflectance);
+    const double solve = MedianSeconds(3, [&] { radiosity.Solve(Eigen::MatrixX3d::Ones(n, 3)); });
+    const int cg = static_cast<int>(radiosity.solve_iterations() / 3);
+    CompensationProblem problem = MakeProblem(scene, patches.fine, Eigen::MatrixXd(), args.alpha);
+    problem.compressed_form_factors = compressed;
+    nlohmann::json size_json = {{"patches", n},
+                                {"variables", 3 * n},
+                                {"build_seconds", build.seconds},
+                                {"bytes", build.bytes},
+                                {"dense_bytes", 8.0 * n * n},
+                                {"near_entries", build.near_entries},
+                                {"far_blocks", build.far_blocks},
+                                {"far_values", build.far_values},
+                                {"product_seconds", product},
+                                {"product_relative_error", error},
+                                {"dense_form_factor_seconds", dense_seconds},
+                                {"k_inverse_seconds", solve},
+                                {"cg_iterations", cg}};
+    const auto line = [&](const std::string& solver, double seconds, int iterations, double objective) {
+      std::printf("%s", fmt::format("{:>9} {:>8} {:>9.2f} {:>10.1f} {:>10.1f} {:>9.2f} {:>9} {:>10.2f} {:>9} {:>6}  "
+                                    "{:<22} {:>9.3f} {:>6} {:.10g}\n",
+                                    3 * n, n, build.seconds, build.bytes / 1e6, 8.0 * n * n / 1e6, 1e3 * product,
+                                    error < 0 ? std::string("-") : fmt::format("{:.2e}", error), 1e3 * solve, cg, "",
+                                    solver, seconds, iterations, objective).c_str());
+      std::fflush(stdout);
+      size_json["solvers"].push_back(
+          {{"solver", solver}, {"seconds", seconds}, {"iterations", iterations}, {"objective", objective}});
+    };
+    std::vector<Device> devices;
+    if (args.device != "cuda" && 3 * n <= args.cpu_max_variables) devices.push_back(Device::kCpu);
+    if (run_gpu) devices.push_back(Device::kCuda);
+    for (const Device device : devices) {
+      SolverOptions options;
+      options.device = device;
+      SolverSummary summary;
+      Solve(options, problem, &summary);
+      line(device == Device::kCpu ? "perceptual (matrix-free)" : "perceptual [cuda, m-free]",
+           summary.setup_seconds + summary.solve_seconds, summary.iterations, summary.final_cost);
+    }
+    if (dense.size() != 0 && args.device != "cuda" && 3 * n <= args.cpu_max_variables) {
+      const CompensationProblem dense_problem = MakeProblem(scene, patches.fine, std::move(dense), args.alpha);
+      SolverSummary summary;
+      Solve(SolverOptions(), dense_problem, &summary);
+      line("perceptual (dense F)", summary.setup_seconds + summary.solve_seconds, summary.iterations,
+           summary.final_cost);
+    }
+    if (devices.empty()) line("(no solve)", 0.0, 0, 0.0);
+    sizes.push_back(size_json);
+  }
+  if (!args.json.empty()) {
+    const nlohmann::json result = {{"benchmark", "scale"},
+                                   {"cuda_device", device_description},
+                                   {"scene", "box room with occluder, bounds [0, 1], alpha " + std::to_string(args.alpha)},
+                                   {"leaf_size", args.clusters.leaf_size},
+                                   {"admissibility", args.clusters.admissibility},
+                                   {"sizes", sizes}};
+    WriteFileAtomically(args.json, result.dump(2) + "\n");
+    std::printf("wrote %s\n", args.json.c_str());
+  }
+}
+
 }  // namespace
 
 void AddBenchCommands(CLI::App& app) {
@@ -249,6 +376,27 @@ void AddBenchCommands(CLI::App& app) {
   solver->add_option("--cpu-max-variables", args->cpu_max_variables,
                      "Skip the CPU rows (own solvers and peers) above this many variables");
   solver->callback([args] { RunSolverBench(*args); });
+
+  CLI::App* scale = bench->add_subcommand(
+      "scale", "Compressed form factors and the matrix-free solver: build, memory, products, K⁻¹, solve");
+  scale->add_option("--sizes", args->scale_sizes, "Target patch counts (3 variables each)")->delimiter(',')
+      ->capture_default_str();
+  scale->add_option("--dense-max-patches", args->dense_max_patches,
+                    "Also compute the dense F (time, product error) up to this many patches")
+      ->capture_default_str();
+  scale->add_option("--leaf-size", args->clusters.leaf_size, "Most patches per leaf cluster")
+      ->check(CLI::PositiveNumber)->capture_default_str();
+  scale->add_option("--admissibility", args->clusters.admissibility,
+                    "Far when diameters <= this x distance, in (0, 1]")
+      ->check(CLI::Range(1e-6, 1.0))->capture_default_str();
+  scale->add_option("--threads", args->threads, "Form-factor threads (0: all cores)")->capture_default_str();
+  scale->add_option("--alpha", args->alpha, "Weight of the absolute term")->check(CLI::Range(1e-9, 1.0))
+      ->capture_default_str();
+  scale->add_option("--device", args->device, "Solves to run: cpu, cuda or both")
+      ->check(CLI::IsMember({"cpu", "cuda", "both"}))->capture_default_str();
+  scale->add_option("--cpu-max-variables", args->cpu_max_variables, "Skip the CPU solves above this many variables");
+  scale->add_option("--json", args->json, "Also write the results as JSON here");
+  scale->callback([args] { RunScaleBench(*args); });
 }
 
 }  // namespace procam
