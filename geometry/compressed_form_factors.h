@@ -36,10 +36,10 @@ namespace procam {
 
 struct ClusterOptions {
   // Most patches per leaf cluster, ≥ 1.
-  int leaf_size = 32;
+  int leaf_size = 16;
   // Clusters I, J are far when max(diameter_I, diameter_J) ≤ admissibility × |c_I − c_J|; in
   // (0, 1]. Smaller: more near pairs, more accurate far blocks.
-  double admissibility = 0.5;
+  double admissibility = 0.7;
 
   bool Check(std::string* why) const;
 };

@@ -90,11 +90,13 @@ TEST_F(CompressedFormFactorsTest, FarBlocksApproximateTheDenseProductAndKeepReci
   const Eigen::MatrixXd exact = *dense_ * x;
   const double error = RelativeError(f.Multiply(x), exact);
   RecordProperty("product_relative_error", std::to_string(error));
-  EXPECT_LT(error, 0.01);  // measured 0.0034
+  EXPECT_LT(error, 0.012);  // measured 0.0072 (leaf 16, admissibility 0.7)
   // Light leaving each patch: the row sums (1 in this closed room) within a few percent.
   const Eigen::VectorXd row_error = (f.RowSums() - dense_->rowwise().sum()).cwiseAbs();
-  EXPECT_LT(row_error.maxCoeff(), 0.05);  // measured 0.025
-  EXPECT_LT(row_error.mean(), 0.005);     // measured 0.0018
+  RecordProperty("row_sum_error_max", std::to_string(row_error.maxCoeff()));
+  RecordProperty("row_sum_error_mean", std::to_string(row_error.mean()));
+  EXPECT_LT(row_error.maxCoeff(), 0.08);  // measured 0.047
+  EXPECT_LT(row_error.mean(), 0.008);     // measured 0.0045
   // A_i F_ij = A_j F_ji exactly, so Fᵀ X is A ∘ F (X / A).
   const Eigen::MatrixXd full = f.ToDense();
   const Eigen::MatrixXd exchange = f.area().asDiagonal() * full;
