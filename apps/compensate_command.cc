@@ -19,6 +19,7 @@ struct CompensateArguments {
   double alpha = 0.5;
   int patches = 0;
   bool multires = false, export_problem = false;
+  std::string form_factors = "dense";
 };
 
 }  // namespace
@@ -40,6 +41,11 @@ void AddCompensationCommands(CLI::App& app) {
       ->capture_default_str();
   cmd->add_flag("--multires", args->multires, "Solve the coarse patch level first and start from it");
   cmd->add_flag("--export", args->export_problem, "Also write the whole problem (F.npy, ...) into --out");
+  cmd->add_option("--form-factors", args->form_factors,
+                  "dense (n² doubles) | compressed (near pairs exact, far cluster pairs rank-1: rooms of "
+                  "10k–100k+ patches, solved matrix-free; docs/gpu.md)")
+      ->check(CLI::IsMember({"dense", "compressed"}))
+      ->capture_default_str();
   cmd->add_option("--rig", args->rig,
                   "Rig directory (rig.json from procam calibrate): its projectors replace the "
                   "scene's, its reflectance.npy the scene's reflectance");
@@ -55,8 +61,13 @@ void AddCompensationCommands(CLI::App& app) {
     // The rig is read first: a bad rig.json fails before the form factors are computed.
     std::optional<RigDirectory> rig_dir;
     if (!args->rig.empty()) rig_dir = ReadRigDirectory(args->rig);
+    if (args->export_problem && args->form_factors == "compressed") {
+      throw std::invalid_argument("--export writes the dense F.npy: not with --form-factors compressed");
+    }
     GeometryStage stage =
-        RunGeometryStage(args->scene, args->patches > 0 ? std::optional<int>(args->patches) : std::nullopt);
+        RunGeometryStage(args->scene, args->patches > 0 ? std::optional<int>(args->patches) : std::nullopt,
+                         args->form_factors == "compressed" ? FormFactorStorage::kCompressed
+                                                            : FormFactorStorage::kDense);
     if (rig_dir) ApplyRigReflectance(*rig_dir, &stage.patches);
     SolverOptions options;
     ParseMethod(args->method, &options.method);

@@ -11,10 +11,20 @@ CompensationRun RunCompensation(const GeometryStage& geometry, const SolverOptio
   CompensationRun run;
   const PatchHierarchy& patches = geometry.patches;
   run.fine = MakeProblem(geometry.scene, patches.fine, geometry.form_factors, alpha);
-  run.coarse = MakeProblem(geometry.scene, patches.coarse,
-                           AggregateFormFactors(geometry.form_factors, patches.fine.Areas(),
-                                                patches.coarse_of_fine, patches.coarse.size()),
-                           alpha);
+  if (geometry.compressed) {
+    run.fine.compressed_form_factors = geometry.compressed;
+    // The coarse level is only needed to start from: compressed too, computed for it directly.
+    run.coarse = MakeProblem(geometry.scene, patches.coarse, Eigen::MatrixXd(), alpha);
+    if (options.multires) {
+      run.coarse.compressed_form_factors = std::make_shared<const CompressedFormFactors>(ComputeCompressedFormFactors(
+          geometry.scene, patches.coarse, FormFactorOptions(), ClusterOptions(), nullptr));
+    }
+  } else {
+    run.coarse = MakeProblem(geometry.scene, patches.coarse,
+                             AggregateFormFactors(geometry.form_factors, patches.fine.Areas(),
+                                                  patches.coarse_of_fine, patches.coarse.size()),
+                             alpha);
+  }
   if (rig != nullptr) {
     run.fine.lower = rig->lower;
     run.fine.upper = rig->upper;
@@ -43,6 +53,21 @@ CompensationRun RunCompensation(const GeometryStage& geometry, const SolverOptio
   return run;
 }
 
+namespace {
+
+nlohmann::json FormFactorJson(const GeometryStage& geometry) {
+  const int n = geometry.patches.fine.size();
+  if (!geometry.compressed) {
+    return {{"storage", "dense"}, {"bytes", 8.0 * n * n}, {"seconds", geometry.form_factor_summary.seconds}};
+  }
+  const CompressedBuildSummary& c = geometry.compressed_summary;
+  return {{"storage", "compressed"}, {"bytes", c.bytes},          {"dense_bytes", 8.0 * n * n},
+          {"seconds", c.seconds},     {"near_entries", c.near_entries}, {"far_blocks", c.far_blocks},
+          {"far_values", c.far_values}, {"clusters", c.clusters}};
+}
+
+}  // namespace
+
 nlohmann::json CompensationResultJson(const GeometryStage& geometry, const CompensationRun& run) {
   const SolverSummary& s = run.summary;
   nlohmann::json trace = nlohmann::json::array();
@@ -70,7 +95,8 @@ nlohmann::json CompensationResultJson(const GeometryStage& geometry, const Compe
           {"message", s.message},
           {"delta_e76", {{"mean", run.mean_delta_e76}, {"max", run.max_delta_e76}}},
           {"delta_e2000", {{"mean", run.mean_delta_e2000}, {"max", run.max_delta_e2000}}},
-          {"trace", trace}};
+          {"trace", trace},
+          {"form_factors", FormFactorJson(geometry)}};
 }
 
 void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run,
@@ -80,6 +106,9 @@ void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run
   std::filesystem::create_directories(out, error);
   if (error) throw IoError(out.string() + ": cannot create directory: " + error.message());
   if (export_problem) {
+    if (run.fine.compressed()) {
+      throw std::invalid_argument("--export writes the dense F.npy: not with compressed form factors");
+    }
     nlohmann::json settings = {{"scene", geometry.scene.path.string()}, {"method", MethodName(run.summary.method)}};
     ExportProblem(run.fine, geometry.patches.fine, geometry.patches.coarse_of_fine, out, settings.dump());
   }

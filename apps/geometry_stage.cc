@@ -30,11 +30,12 @@ Scene LoadSceneArgument(const std::string& text) {
   throw IoError(text + ": no such synthetic scene (" + known + ")");
 }
 
-GeometryStage RunGeometryStage(const std::filesystem::path& scene_path, std::optional<int> patches) {
-  return RunGeometryStage(LoadSceneArgument(scene_path.string()), patches);
+GeometryStage RunGeometryStage(const std::filesystem::path& scene_path, std::optional<int> patches,
+                               FormFactorStorage storage) {
+  return RunGeometryStage(LoadSceneArgument(scene_path.string()), patches, storage);
 }
 
-GeometryStage RunGeometryStage(Scene scene, std::optional<int> patches) {
+GeometryStage RunGeometryStage(Scene scene, std::optional<int> patches, FormFactorStorage storage) {
   GeometryStage stage;
   stage.scene = std::move(scene);
   if (patches) stage.scene.target_patches = *patches;
@@ -57,6 +58,25 @@ GeometryStage RunGeometryStage(Scene scene, std::optional<int> patches) {
       last_percent = percent;
     }
   };
+  if (storage == FormFactorStorage::kCompressed) {
+    const ClusterOptions clusters;
+    stage.compressed = std::make_shared<const CompressedFormFactors>(
+        ComputeCompressedFormFactors(stage.scene, stage.patches.fine, options, clusters, &stage.compressed_summary));
+    const CompressedBuildSummary& c = stage.compressed_summary;
+    const int n = stage.patches.fine.size();
+    spdlog::info("form factors (compressed, leaf {}, admissibility {}): {} near entries, {} far blocks, "
+                 "{:.1f} MB ({:.1f}% of dense), {:.2f} s",
+                 clusters.leaf_size, clusters.admissibility, c.near_entries, c.far_blocks, c.bytes / 1e6,
+                 100.0 * c.bytes / (8.0 * n * n), c.seconds);
+    const Eigen::VectorXd rows = stage.compressed->RowSums();
+    FormFactorSummary& summary = stage.form_factor_summary;
+    summary.seconds = c.seconds;
+    summary.shadow_rays = c.visibility_rays;
+    summary.min_row_sum = rows.minCoeff();
+    summary.mean_row_sum = rows.mean();
+    summary.max_row_sum = rows.maxCoeff();
+    return stage;
+  }
   stage.form_factors = ComputeFormFactors(stage.scene, stage.patches.fine, options, &stage.form_factor_summary);
   spdlog::info("form factors: {} pairs, {} shadow rays, {:.2f} s", stage.form_factor_summary.pairs_evaluated,
                stage.form_factor_summary.shadow_rays, stage.form_factor_summary.seconds);

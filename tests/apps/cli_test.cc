@@ -31,7 +31,8 @@ const char* kScene = R"({
 
 TEST(Cli, HelpOnEverySubcommand) {
   for (const char* command : {"--help", "demo --help", "scene --help", "scene info --help", "scene export --help",
-                              "compensate --help", "bench formfactors --help", "bench solver --help"}) {
+                              "compensate --help", "bench formfactors --help", "bench solver --help",
+                              "bench scale --help"}) {
     const CommandRun run = Procam(command);
     EXPECT_EQ(run.exit_code, 0) << command;
     EXPECT_NE(run.output.find("Usage"), std::string::npos) << command << ": " << run.output;
@@ -79,6 +80,34 @@ TEST(Cli, CompensateWritesTheSolutionAndItsColourErrors) {
   const CommandRun bad = Procam("compensate " + scene.string() + " --method magic --out " + (dir / "x").string());
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_NE(bad.output.find("magic"), std::string::npos) << bad.output;
+}
+
+TEST(Cli, CompensateWithCompressedFormFactorsMatchesTheDenseSolve) {
+  testing::TempDir dir;
+  const std::string scene = (testing::SourceDir() / "data" / "scenes" / "room.json").string();
+  const auto objective = [](const std::string& result) {
+    const size_t key = result.find("\"objective\":");
+    return std::atof(result.c_str() + key + 12);
+  };
+  const CommandRun dense = Procam("compensate " + scene + " --patches 600 --out " + (dir / "dense").string());
+  ASSERT_EQ(dense.exit_code, 0) << dense.output;
+  const CommandRun compressed = Procam("compensate " + scene + " --patches 600 --multires --form-factors compressed --out " +
+                                       (dir / "compressed").string());
+  ASSERT_EQ(compressed.exit_code, 0) << compressed.output;
+  const std::string result = ReadText(dir / "compressed" / "result.json");
+  EXPECT_NE(result.find("\"storage\": \"compressed\""), std::string::npos) << result;
+  EXPECT_NE(result.find("\"near_entries\""), std::string::npos);
+  // Same room, F approximated (far blocks rank-1, no row-sum limit): the optimum's objective
+  // moved by 2.0% here (mean ΔE76 15.57 against 15.41).
+  const double a = objective(ReadText(dir / "dense" / "result.json")), b = objective(result);
+  EXPECT_GT(a, 0.0);
+  EXPECT_NEAR(b, a, 0.04 * a);
+  // --export needs the dense F: one line, nothing written.
+  const CommandRun bad = Procam("compensate " + scene + " --form-factors compressed --export --out " +
+                                (dir / "bad").string());
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.output.find("--export"), std::string::npos) << bad.output;
+  EXPECT_FALSE(std::filesystem::exists(dir / "bad"));
 }
 
 TEST(Cli, DemoOnASceneFileRunsGeometryAndCompensation) {
