@@ -1,5 +1,6 @@
 #include "apps/evaluation.h"
 
+#include <algorithm>
 #include <chrono>
 #include <stdexcept>
 
@@ -9,6 +10,8 @@
 #include <spdlog/spdlog.h>
 
 #include "compensation/colour.h"
+#include "compensation/objective.h"
+#include "compensation/solver.h"
 #include "geometry/io.h"
 
 namespace procam {
@@ -87,8 +90,40 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
                  result.mean_delta_e76, result.max_delta_e76, result.mean_delta_e2000);
     evaluation.methods.push_back(std::move(result));
   }
+  const MethodEvaluation* linear = nullptr;
+  const MethodEvaluation* perceptual = nullptr;
+  for (const MethodEvaluation& m : evaluation.methods) {
+    if (m.method == CompensationMethod::kLinear) linear = &m;
+    if (m.method == CompensationMethod::kPerceptual) perceptual = &m;
+  }
+  if (linear != nullptr && perceptual != nullptr) {
+    evaluation.model_linear = linear->run.mean_delta_e76;
+    evaluation.model_perceptual = perceptual->run.mean_delta_e76;
+    evaluation.model_lowest = LowestMeanDeltaE(perceptual->run.fine, perceptual->run.delta_e76);
+    spdlog::info("evaluate {}: per patch mean ΔE76 linear {:.2f}, perceptual {:.2f}, lowest reachable {:.2f}", name,
+                 evaluation.model_linear, evaluation.model_perceptual, evaluation.model_lowest);
+  }
   evaluation.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return evaluation;
+}
+
+double LowestMeanDeltaE(const CompensationProblem& problem, const Eigen::VectorXd& delta_e76, int rounds) {
+  CompensationProblem weighted = problem;
+  weighted.alpha = 1.0;
+  Eigen::VectorXd delta = delta_e76;
+  const double total_area = problem.area.sum();
+  double lowest = problem.area.dot(delta) / total_area;
+  for (int round = 0; round < rounds; ++round) {
+    const Eigen::VectorXd w = delta.cwiseMax(0.5).cwiseInverse();
+    weighted.patch_weight = w / w.mean();
+    SolverSummary summary;
+    const CompensationSolution solution = Solve(SolverOptions(), weighted, &summary);
+    const CompensationObjective lab(problem, *solution.radiosity_system, ColourModel::kLab);
+    Eigen::VectorXd delta_e2000;
+    lab.DeltaE(solution.radiosity, &delta, &delta_e2000);
+    lowest = std::min(lowest, problem.area.dot(delta) / total_area);
+  }
+  return lowest;
 }
 
 cv::Mat LinearToDisplay(const cv::Mat& linear) {
@@ -182,6 +217,18 @@ std::string EvaluationMarkdown(const std::vector<const SceneEvaluation*>& evalua
     }
     table += "\n";
   }
+  // Per patch in the solver's model: how far any method could go (LowestMeanDeltaE).
+  if (evaluations.front()->model_lowest >= 0) {
+    table += "\nPer patch, in the solver's model (area-weighted mean ΔE76): linear, perceptual, and the lowest mean "
+             "any emittance within the bounds reaches (reweighted least squares)\n\n"
+             "| scene | linear | perceptual | lowest reachable | perceptual / linear | lowest / linear |\n"
+             "|---|---|---|---|---|---|\n";
+    for (const SceneEvaluation* e : evaluations) {
+      table += fmt::format("| {} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} |\n", e->name, e->model_linear,
+                           e->model_perceptual, e->model_lowest, e->model_perceptual / e->model_linear,
+                           e->model_lowest / e->model_linear);
+    }
+  }
   return table;
 }
 
@@ -202,6 +249,10 @@ nlohmann::json EvaluationJson(const SceneEvaluation& evaluation) {
           {"projectors", evaluation.world->projectors().size()},
           {"camera", {{"width", evaluation.world->camera().width()}, {"height", evaluation.world->camera().height()}}},
           {"seconds", evaluation.seconds},
+          {"model_mean_delta_e76",
+           {{"linear", evaluation.model_linear},
+            {"perceptual", evaluation.model_perceptual},
+            {"lowest_reachable", evaluation.model_lowest}}},
           {"methods", methods}};
 }
 

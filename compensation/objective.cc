@@ -37,6 +37,7 @@ CompensationObjective::CompensationObjective(const CompensationProblem& problem,
   const int n = problem.size();
   const double mean_area = problem.area.mean();
   weight_diagonal_ = problem.alpha * problem.area / mean_area;
+  if (problem.patch_weight.size() == n) weight_diagonal_ = weight_diagonal_.cwiseProduct(problem.patch_weight);
   std::vector<Eigen::Triplet<double>> triplets;
   Eigen::VectorXd diagonal = weight_diagonal_;
   for (const auto& pair : problem.adjacency) {

@@ -29,6 +29,10 @@ struct CompensationProblem {
   Eigen::Matrix3d rgb_to_xyz;     // T
   Eigen::Vector3d white_xyz;      // (Xn,Yn,Zn) = T·(w,w,w)
   double alpha = 0.5;             // weight of the absolute term, in (0,1]
+  // (n) or empty (all 1): multiplies patch i's absolute term, α (A_i/A_avg) w_i |r_i|² — how much
+  // its colour matters beyond its area (e.g. where the audience looks; the evaluation's
+  // lowest-mean-ΔE bound reweights with it). DESIGN.md's objective is the empty case.
+  Eigen::VectorXd patch_weight;
 
   int size() const { return static_cast<int>(area.size()); }
   bool compressed() const { return compressed_form_factors != nullptr; }

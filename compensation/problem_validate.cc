@@ -25,6 +25,10 @@ std::string CompensationProblem::Validate() const {
   }
   if ((lower.array() > upper.array()).any()) return "lower > upper for some patch";
   if ((area.array() <= 0.0).any()) return "non-positive patch area";
+  if (patch_weight.size() != 0 &&
+      (patch_weight.size() != n || !patch_weight.allFinite() || (patch_weight.array() <= 0.0).any())) {
+    return "patch weights must be n positive numbers (or none)";
+  }
   for (const auto& pair : adjacency) {
     if (pair[0] < 0 || pair[1] >= n || pair[0] >= pair[1]) return "adjacency pair out of range";
   }

@@ -185,7 +185,10 @@ double ObjectiveByDefinition(const CompensationProblem& problem, const Eigen::Ma
   const Eigen::MatrixX3d r = lab - desired;
   const double mean_area = problem.area.mean();
   double f = 0.0;
-  for (int i = 0; i < n; ++i) f += problem.alpha * problem.area[i] / mean_area * r.row(i).squaredNorm();
+  for (int i = 0; i < n; ++i) {
+    const double weight = problem.patch_weight.size() == n ? problem.patch_weight[i] : 1.0;
+    f += problem.alpha * problem.area[i] / mean_area * weight * r.row(i).squaredNorm();
+  }
   for (const auto& pair : problem.adjacency) f += (1 - problem.alpha) * (r.row(pair[0]) - r.row(pair[1])).squaredNorm();
   return f;
 }
@@ -197,6 +200,16 @@ TEST(CompensationObjective, ValueMatchesTheDefinition) {
   const Eigen::MatrixX3d e = 0.5 * (Eigen::MatrixX3d::Random(test.fine.size(), 3).array() + 1.0);
   const double expected = ObjectiveByDefinition(test.fine, e);
   EXPECT_NEAR(objective.Value(e), expected, 1e-10 * expected);
+  // Patch weights multiply each patch's absolute term.
+  CompensationProblem weighted = test.fine;
+  weighted.patch_weight = (Eigen::VectorXd::Random(weighted.size()).array() + 1.5).matrix();
+  ASSERT_EQ(weighted.Validate(), "");
+  const CompensationObjective weighted_objective(weighted, radiosity, ColourModel::kLab);
+  const double weighted_expected = ObjectiveByDefinition(weighted, e);
+  EXPECT_GT(std::abs(weighted_expected - expected), 1e-3 * expected);
+  EXPECT_NEAR(weighted_objective.Value(e), weighted_expected, 1e-10 * weighted_expected);
+  weighted.patch_weight[3] = 0.0;
+  EXPECT_NE(weighted.Validate().find("patch weights"), std::string::npos);
 }
 
 TEST(CompensationObjective, GradientAndGaussNewtonMatchFiniteDifferences) {
