@@ -61,6 +61,15 @@ Eigen::MatrixX3d CudaCompressedRadiosity::Solve(const Eigen::MatrixX3d& y, bool 
   return x;
 }
 
+const cuda::CompressedRadiosity& CudaCompressedRadiosity::device() const { return *device_; }
+
+int CudaCompressedRadiosity::SolveOnDevice(const double* y, bool transposed, bool fast, double* x) const {
+  const int iterations = device_->SolveOnDevice(y, transposed, fast ? options_.fast_tolerance : options_.tolerance,
+                                                options_.max_iterations, x);
+  solve_iterations_ += iterations;
+  return iterations;
+}
+
 Eigen::MatrixXd CudaCompressedRadiosity::Multiply(const Eigen::MatrixXd& x) const {
   if (x.rows() != patches_) throw std::invalid_argument("compressed radiosity on the GPU: x has the wrong size");
   Eigen::MatrixXd y(patches_, x.cols());

@@ -568,9 +568,29 @@ class CompressedRadiosityImpl : public CompressedRadiosity {
   }
 
   int Solve(const double* y, bool transposed, double tolerance, int max_iterations, double* x) const override {
+    PROCAM_CUDA(cudaMemcpyAsync(staging_.get(), y, 3 * static_cast<size_t>(n_) * sizeof(double),
+                                cudaMemcpyHostToDevice, stream_));
+    const int iterations = SolveTree(staging_.get(), transposed, tolerance, max_iterations);
+    CopyOut(residual_.get(), x);
+    return iterations;
+  }
+
+  int SolveOnDevice(const double* y, bool transposed, double tolerance, int max_iterations,
+                    double* x) const override {
+    const int iterations = SolveTree(y, transposed, tolerance, max_iterations);
+    FromTreeOrderKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, order_.get(), residual_.get(), x);
+    PROCAM_CUDA_LAUNCHED("FromTreeOrderKernel");
+    return iterations;
+  }
+
+  cudaStream_t stream() const override { return stream_; }
+
+ private:
+  // The solve of Solve and SolveOnDevice: `columns` (n×3 column-major, patch order, device) in,
+  // the result in residual_ (tree order). Returns the iterations.
+  int SolveTree(const double* columns, bool transposed, double tolerance, int max_iterations) const {
     const long count = 3L * n_;
-    PROCAM_CUDA(cudaMemcpyAsync(staging_.get(), y, count * sizeof(double), cudaMemcpyHostToDevice, stream_));
-    ToTreeOrderKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, order_.get(), staging_.get(), y_.get());
+    ToTreeOrderKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, order_.get(), columns, y_.get());
     PROCAM_CUDA_LAUNCHED("ToTreeOrderKernel");
     // The right-hand side of M w = rhs (radiosity.h): D^½ A^-½ y for Kᵀ, D^½ A^½ F y for K.
     if (transposed) {
@@ -626,11 +646,9 @@ class CompressedRadiosityImpl : public CompressedRadiosity {
       AddKernel<<<Blocks(count), kThreads, 0, stream_>>>(count, y_.get(), inner_.get(), residual_.get());
       PROCAM_CUDA_LAUNCHED("AddKernel");
     }
-    CopyOut(residual_.get(), x);
     return state.iterations;
   }
 
- private:
   // y = F x, both in tree order (n×3 interleaved, device). With `direction`: y = M direction
   // (x must then be A^-½ D^½ direction) and partials_ of directionᵀ y. `gate`: the kernels
   // do nothing once every channel of the CG state has converged.

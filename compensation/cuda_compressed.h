@@ -41,6 +41,12 @@ class CudaCompressedRadiosity : public RadiosityBackend {
   // 1 when every patch reflects the three channels alike, else 3 (as the dense backend).
   int factorisations() const override { return grey_ ? 1 : 3; }
 
+  // Solve on device memory (n×3 column-major, patch order), on device().stream(), for the
+  // resident solver (cuda_solver.h); counted in solve_iterations() as Solve is.
+  int SolveOnDevice(const double* y, bool transposed, bool fast, double* x) const;
+  // The device side (its stream: device().stream()).
+  const cuda::CompressedRadiosity& device() const;
+
   // F X on the device (X n×c, any c ≥ 1), for tests and benchmarks.
   Eigen::MatrixXd Multiply(const Eigen::MatrixXd& x) const;
   // CG iterations of every solve so far.

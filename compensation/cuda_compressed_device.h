@@ -11,6 +11,9 @@
 #include <cstdint>
 #include <memory>
 
+// The CUDA runtime's stream handle (driver_types.h declares it the same way).
+typedef struct CUstream_st* cudaStream_t;
+
 namespace procam::cuda {
 
 // The parts of a CompressedFormFactors (host memory, read during Create only).
@@ -51,6 +54,14 @@ class CompressedRadiosity {
   // stops a channel at relative residual `tolerance` of the symmetric system. Returns the
   // iterations. Throws std::runtime_error when a channel has not converged in `max_iterations`.
   virtual int Solve(const double* y, bool transposed, double tolerance, int max_iterations, double* x) const = 0;
+  // The same on device memory (y and x patches × 3, column-major, patch order; they may be the
+  // same array), on stream(): work on other streams must be ordered against it by the caller.
+  // Blocks the host only where CG reads its residual norms; x is ready on stream() when it
+  // returns.
+  virtual int SolveOnDevice(const double* y, bool transposed, double tolerance, int max_iterations,
+                            double* x) const = 0;
+  // The stream every call runs on.
+  virtual cudaStream_t stream() const = 0;
 };
 
 }  // namespace procam::cuda

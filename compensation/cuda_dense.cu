@@ -33,14 +33,23 @@ void Check(cusolverStatus_t status, const char* call) {
 // One cuBLAS and one cuSOLVER handle for the process, made on first use (handle creation costs
 // milliseconds; DeviceAvailable makes them, so benchmarks time neither). Never destroyed: the
 // runtime may be torn down before static destructors run.
+// `device_blas` serves ApplyOnDevice: its stream is set per call, so that the host API's handle
+// keeps the default stream that its synchronous copies rely on. It has a workspace of its own, so
+// that cuBLAS allocates nothing while the resident solver captures its products into CUDA graphs.
+constexpr size_t kDeviceBlasWorkspace = size_t{4} << 20;
 struct Handles {
   cublasHandle_t blas = nullptr;
+  cublasHandle_t device_blas = nullptr;
+  void* device_blas_workspace = nullptr;
   cusolverDnHandle_t solver = nullptr;
 };
 const Handles& GetHandles() {
   static const Handles* handles = [] {
     auto* h = new Handles;
     PROCAM_CUDA(cublasCreate(&h->blas));
+    PROCAM_CUDA(cublasCreate(&h->device_blas));
+    PROCAM_CUDA(cudaMalloc(&h->device_blas_workspace, kDeviceBlasWorkspace));
+    PROCAM_CUDA(cublasSetWorkspace(h->device_blas, h->device_blas_workspace, kDeviceBlasWorkspace));
     PROCAM_CUDA(cusolverDnCreate(&h->solver));
     return h;
   }();
@@ -210,6 +219,24 @@ class InverseRadiosityImpl : public InverseRadiosity {
                               n_, &zero, y_.get(), n_));
     }
     PROCAM_CUDA(cudaMemcpy(y, y_.get(), count * sizeof(double), cudaMemcpyDeviceToHost));
+  }
+
+  void ApplyOnDevice(const double* x, int columns, bool transposed, double* y, cudaStream_t stream) const override {
+    if (columns < 1 || columns > 3) throw std::invalid_argument("InverseRadiosity::ApplyOnDevice: 1 to 3 columns");
+    const Handles& handles = GetHandles();
+    PROCAM_CUDA(cublasSetStream(handles.device_blas, stream));
+    const double one = 1.0, zero = 0.0;
+    PROCAM_CUDA(cublasDgemm(handles.device_blas, transposed ? CUBLAS_OP_T : CUBLAS_OP_N, CUBLAS_OP_N, n_, columns, n_,
+                            &one, inverse_.get(), n_, x, n_, &zero, y, n_));
+  }
+
+  void ApplyOnDevice(const float* x, int columns, bool transposed, float* y, cudaStream_t stream) const override {
+    if (columns < 1 || columns > 3) throw std::invalid_argument("InverseRadiosity::ApplyOnDevice: 1 to 3 columns");
+    const Handles& handles = GetHandles();
+    PROCAM_CUDA(cublasSetStream(handles.device_blas, stream));
+    const float one = 1.0f, zero = 0.0f;
+    PROCAM_CUDA(cublasSgemm(handles.device_blas, transposed ? CUBLAS_OP_T : CUBLAS_OP_N, CUBLAS_OP_N, n_, columns, n_,
+                            &one, inverse_single_.get(), n_, x, n_, &zero, y, n_));
   }
 
   bool cholesky() const override { return cholesky_; }

@@ -14,6 +14,10 @@
 #include <memory>
 #include <string>
 
+// The CUDA runtime's stream handle (driver_types.h declares it the same way), so that this header
+// needs no CUDA include.
+typedef struct CUstream_st* cudaStream_t;
+
 namespace procam::cuda {
 
 // True when a CUDA device can be used (its context is created here, so later timings exclude
@@ -30,6 +34,11 @@ class InverseRadiosity {
   // y = K⁻¹ x (K⁻ᵀ x when `transposed`); x and y are n×columns, column-major, host memory.
   // `single`: with the float32 copy of K⁻¹ (float32 arithmetic), else float64.
   virtual void Apply(const double* x, int columns, bool transposed, bool single, double* y) const = 0;
+  // The same on device memory, enqueued on `stream` without copies or synchronisation (the
+  // resident solver, cuda_solver.h): float64 with the float64 K⁻¹, float32 with its float32 copy.
+  // x and y must not overlap. Products of several threads at once are not supported.
+  virtual void ApplyOnDevice(const double* x, int columns, bool transposed, double* y, cudaStream_t stream) const = 0;
+  virtual void ApplyOnDevice(const float* x, int columns, bool transposed, float* y, cudaStream_t stream) const = 0;
   // Whether the Cholesky path was taken (else LU).
   virtual bool cholesky() const = 0;
 };

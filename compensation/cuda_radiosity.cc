@@ -42,6 +42,13 @@ class CudaRadiosity : public RadiosityBackend {
 
   int factorisations() const override { return static_cast<int>(groups_.size()); }
 
+  const std::vector<std::vector<int>>& groups() const { return groups_; }
+  std::vector<const cuda::InverseRadiosity*> inverses() const {
+    std::vector<const cuda::InverseRadiosity*> result;
+    for (const auto& inverse : inverses_) result.push_back(inverse.get());
+    return result;
+  }
+
  private:
   bool float32_;
   std::vector<std::vector<int>> groups_;
@@ -57,6 +64,15 @@ std::shared_ptr<const RadiosityBackend> MakeCudaRadiosityBackend(const Eigen::Ma
                                                                  const Eigen::MatrixX3d& reflectance,
                                                                  bool float32) {
   return std::make_shared<const CudaRadiosity>(form_factors, area, reflectance, float32);
+}
+
+bool CudaInverseRadiosities(const RadiosityBackend& backend, std::vector<const cuda::InverseRadiosity*>* inverses,
+                            std::vector<std::vector<int>>* channels) {
+  const auto* dense = dynamic_cast<const CudaRadiosity*>(&backend);
+  if (dense == nullptr) return false;
+  *inverses = dense->inverses();
+  *channels = dense->groups();
+  return true;
 }
 
 }  // namespace procam

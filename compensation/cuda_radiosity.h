@@ -3,18 +3,24 @@
 //
 // K⁻¹ is formed once on the GPU per distinct channel reflectance (cuda_dense.h: cuSOLVER
 // Cholesky of the symmetric form, or LU when a patch is black) and kept there in float64 and
-// float32; every solve is then one cuBLAS product with three (grey room) or one column. The
-// solver's outer loop, line search, CG and the sparse colour-space work stay on the host
-// (docs/gpu.md says what is left to move).
+// float32; every solve is then one cuBLAS product with three (grey room) or one column. Through
+// RadiosityBackend the solves take host matrices (the host loop, SolverOptions::device_host_loop);
+// the resident solver (cuda_solver.h) applies the same K⁻¹ to device vectors
+// (CudaInverseRadiosities, InverseRadiosity::ApplyOnDevice).
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 
 #include "compensation/radiosity.h"
 
 namespace procam {
+
+namespace cuda {
+class InverseRadiosity;
+}  // namespace cuda
 
 // True when a CUDA device can be used (also creates its context and library handles, so that
 // later timings exclude them); `description` gets the device, or why there is none.
@@ -27,5 +33,12 @@ std::shared_ptr<const RadiosityBackend> MakeCudaRadiosityBackend(const Eigen::Ma
                                                                  const Eigen::VectorXd& area,
                                                                  const Eigen::MatrixX3d& reflectance,
                                                                  bool float32);
+
+// The device K⁻¹ of a backend made by MakeCudaRadiosityBackend, for the resident solver
+// (cuda_solver.h): one per group of channels sharing a reflectance, with the group's channels
+// ({0, 1, 2} once for a grey room, else {0}, {1}, {2}). False, filling nothing, for any other
+// backend. The pointers live as long as the backend.
+bool CudaInverseRadiosities(const RadiosityBackend& backend, std::vector<const cuda::InverseRadiosity*>* inverses,
+                            std::vector<std::vector<int>>* channels);
 
 }  // namespace procam

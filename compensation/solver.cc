@@ -13,6 +13,7 @@
 #if PROCAM_WITH_CUDA
 #include "compensation/cuda_compressed.h"
 #include "compensation/cuda_radiosity.h"
+#include "compensation/cuda_solver.h"
 #endif
 
 namespace procam {
@@ -58,6 +59,18 @@ std::shared_ptr<const RadiositySystem> MakeRadiositySystem(const SolverOptions& 
   throw std::runtime_error("--device cuda: this build of procam has no CUDA backend (PROCAM_WITH_CUDA is OFF: "
                            "no nvcc was found when it was configured)");
 #endif
+}
+
+// Alg. 1 where options say: on the device (cuda_solver.h) for kCuda unless device_host_loop, else
+// MinimiseBounded (whose K⁻¹ applications run on the objective's RadiositySystem backend).
+Eigen::MatrixX3d Minimise(const SolverOptions& options, const CompensationObjective& objective,
+                          const Eigen::MatrixX3d& initial, SolverSummary* summary) {
+#if PROCAM_WITH_CUDA
+  if (options.device == Device::kCuda && !options.device_host_loop) {
+    return MinimiseBoundedOnGpu(options, objective, initial, summary);
+  }
+#endif
+  return MinimiseBounded(options, objective, initial, summary);
 }
 
 // M_FF's sparse factorisation, kept across outer iterations: once the active set settles the
@@ -510,14 +523,14 @@ CompensationSolution Solve(const SolverOptions& options, const CompensationProbl
         const Eigen::MatrixX3d coarse_reverse =
             Clamp(coarse_radiosity.Multiply(coarse.problem->desired), coarse.problem->lower, coarse.problem->upper);
         const Eigen::MatrixX3d coarse_emittance =
-            MinimiseBounded(coarse_options, coarse_objective, coarse_reverse, &coarse_summary);
+            Minimise(coarse_options, coarse_objective, coarse_reverse, &coarse_summary);
         for (int i = 0; i < problem.size(); ++i) initial.row(i) = coarse_emittance.row((*coarse.coarse_of_fine)[i]);
         initial = Clamp(initial, problem.lower, problem.upper);
         summary->coarse_iterations = coarse_summary.iterations;
         summary->coarse_seconds = SecondsSince(coarse_start) - coarse_setup_seconds;
       }
       const CompensationObjective objective(problem, radiosity, model);
-      solution.emittance = MinimiseBounded(options, objective, initial, summary);
+      solution.emittance = Minimise(options, objective, initial, summary);
       break;
     }
   }

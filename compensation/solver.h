@@ -48,8 +48,13 @@ struct SolverOptions {
   // std::runtime_error with one line saying which is missing.
   Device device = Device::kCpu;
   // kCuda only: objective values, gradients and line searches with the float32 K⁻¹ as well (CG
-  // products always use it). Off: float64 (docs/gpu.md compares the two).
+  // products always use it). Off: float64 (docs/gpu.md compares the two). Host loop only.
   bool device_float32 = false;
+  // kCuda only: run Alg. 1 on the host with only the K⁻¹/K⁻ᵀ applications on the device (n×3
+  // copied each way per application), the first GPU path, kept for comparison. Off (default):
+  // the whole loop stays on the device (cuda_solver.h: block-Jacobi preconditioner, float64
+  // values), for the linear and perceptual methods and both levels of multires.
+  bool device_host_loop = false;
   // Solve the coarse level first and start the fine solve from it (needs a coarse level).
   bool multires = false;
   // Outer (Gauss–Newton) iterations, ≥ 1.

@@ -232,35 +232,53 @@ TEST(CompressedCuda, PerceptualSolveMatchesTheCpu) {
   struct Case {
     Layout layout;
     bool coloured;
+    CompensationMethod method;
   };
-  for (const Case& c : {Case{kBothParts, false}, Case{kBothParts, true}, Case{kBothPartsDefaultOptions, false},
-                        Case{kFarOnly, false}}) {
+  for (const Case& c : {Case{kBothParts, false, CompensationMethod::kPerceptual},
+                        Case{kBothParts, true, CompensationMethod::kPerceptual},
+                        Case{kBothPartsDefaultOptions, false, CompensationMethod::kPerceptual},
+                        Case{kFarOnly, false, CompensationMethod::kPerceptual},
+                        Case{kBothPartsLarger, true, CompensationMethod::kLinear}}) {
     CompensationProblem problem = CompressedPlatesProblem(c.layout.grid, c.layout.options());
     ExpectParts(c.layout, *problem.compressed_form_factors);
     if (c.coloured) problem.reflectance.col(2) *= 0.6;
     ASSERT_EQ(problem.Validate(), "");
     ASSERT_EQ(problem.form_factors.size(), 0);
-    const std::string label = c.layout.label() + (c.coloured ? " coloured" : " grey");
     SolverOptions options;
-    options.method = CompensationMethod::kPerceptual;
-    SolverSummary cpu_summary, gpu_summary;
+    options.method = c.method;
+    SolverSummary cpu_summary;
     const CompensationSolution cpu = Solve(options, problem, &cpu_summary);
-    options.device = Device::kCuda;
-    const CompensationSolution gpu = Solve(options, problem, &gpu_summary);
-    ASSERT_NE(gpu.radiosity_system->backend(), nullptr) << label;
-    EXPECT_TRUE(((gpu.emittance - problem.lower).array() >= 0.0).all()) << label;
-    EXPECT_TRUE(((problem.upper - gpu.emittance).array() >= 0.0).all()) << label;
     // Both solutions on one yardstick: the CPU's matrix-free system.
     const RadiositySystem radiosity(problem.compressed_form_factors, problem.reflectance);
-    const CompensationObjective objective(problem, radiosity, ColourModel::kLab);
+    const CompensationObjective objective(
+        problem, radiosity, c.method == CompensationMethod::kLinear ? ColourModel::kLinear : ColourModel::kLab);
     const double reference = objective.Value(cpu.emittance);
-    const double cost = objective.Value(gpu.emittance);
-    const double relative = std::abs(cost - reference) / reference;
-    EXPECT_LT(relative, 1e-6) << label << ": " << gpu_summary.BriefReport();
-    EXPECT_GT(((cpu.emittance - problem.lower).array() == 0.0).count(), 0) << label << ": no active bound";
-    std::printf("%-52s objective %.10g (CPU %.10g, relative %.1e), %d iterations (CPU %d), %s\n", label.c_str(),
-                cost, reference, relative, gpu_summary.iterations, cpu_summary.iterations,
-                TerminationName(gpu_summary.termination));
+    EXPECT_GT(((cpu.emittance - problem.lower).array() == 0.0).count(), 0) << c.layout.label() << ": no active bound";
+    for (const bool host_loop : {true, false}) {
+      const std::string label = c.layout.label() + " " + MethodName(c.method) + (c.coloured ? " coloured" : " grey") +
+                                (host_loop ? " [cuda host loop]" : " [cuda resident]");
+      options.device = Device::kCuda;
+      options.device_host_loop = host_loop;
+      SolverSummary gpu_summary;
+      const CompensationSolution gpu = Solve(options, problem, &gpu_summary);
+      ASSERT_NE(gpu.radiosity_system->backend(), nullptr) << label;
+      EXPECT_TRUE(((gpu.emittance - problem.lower).array() >= 0.0).all()) << label;
+      EXPECT_TRUE(((problem.upper - gpu.emittance).array() >= 0.0).all()) << label;
+      ObjectivePoint point;
+      const double cost = objective.Evaluate(gpu.emittance, &point);
+      const double relative = std::abs(cost - reference) / reference;
+      EXPECT_LT(relative, 1e-6) << label << ": " << gpu_summary.BriefReport();
+      const double projected =
+          ProjectedGradientNorm(gpu.emittance, objective.Gradient(point), problem.lower, problem.upper);
+      EXPECT_LT(projected, 1e-6 * (1.0 + cost)) << label << ": " << gpu_summary.BriefReport();
+      if (!host_loop) {
+        EXPECT_LT(std::abs(gpu_summary.final_cost - cost), 1e-9 * cost) << label;
+      }
+      std::printf("%-72s objective %.10g (CPU %.10g, relative %.1e), projected gradient %.1e, %d iterations (CPU %d), "
+                  "%d CG (CPU %d), %s\n",
+                  label.c_str(), cost, reference, relative, projected, gpu_summary.iterations, cpu_summary.iterations,
+                  gpu_summary.cg_iterations, cpu_summary.cg_iterations, TerminationName(gpu_summary.termination));
+    }
   }
 }
 
@@ -294,6 +312,10 @@ double MedianMilliseconds(int repeats, const Call& call) {
 // on the CPU's matrix-free path. Objectives are the solvers' own final costs (float64 solves to
 // 1e-11). PROCAM_BENCH_LEAF_SIZE and PROCAM_BENCH_ADMISSIBILITY set the builder's options (the
 // defaults make every leaf pair of the plates far from g = 40 on: no near part).
+// A second table compares the GPU solves: `[cuda host loop]` (device_host_loop: K⁻¹ on the
+// device, the loop on the host; the first table's solve) and `[cuda resident]` (the whole loop
+// on the device; median of PROCAM_BENCH_SOLVE_REPEATS solves, default 3), with the objective's
+// relative difference from the CPU's (where it ran) or else the host loop's.
 TEST(CompressedCuda, DISABLED_Timings) {
   SKIP_WITHOUT_CUDA_DEVICE();
   std::string device;
@@ -304,6 +326,15 @@ TEST(CompressedCuda, DISABLED_Timings) {
   }
   const double cpu_max_variables = NumbersFromEnvironment("PROCAM_BENCH_CPU_MAX_VARIABLES", {30000})[0];
   const int repeats = static_cast<int>(NumbersFromEnvironment("PROCAM_BENCH_REPEATS", {5})[0]);
+  const int solve_repeats = static_cast<int>(NumbersFromEnvironment("PROCAM_BENCH_SOLVE_REPEATS", {3})[0]);
+  struct Comparison {
+    int variables, patches;
+    const char* name;
+    double setup_seconds, solve_seconds, loop_seconds;
+    int iterations, cg_iterations;
+    double objective;
+  };
+  std::vector<Comparison> comparisons;
   ClusterOptions cluster_options;
   cluster_options.leaf_size = static_cast<int>(NumbersFromEnvironment("PROCAM_BENCH_LEAF_SIZE", {32})[0]);
   cluster_options.admissibility = NumbersFromEnvironment("PROCAM_BENCH_ADMISSIBILITY", {0.5})[0];
@@ -334,6 +365,7 @@ TEST(CompressedCuda, DISABLED_Timings) {
     const double iterations = static_cast<double>(gpu->solve_iterations() - before) / repeats;
     SolverOptions options;
     options.device = Device::kCuda;
+    options.device_host_loop = true;
     SolverSummary summary;
     Solve(options, problem, &summary);
     std::printf("| %d | %d | %.3f | %ld | %ld | %ld | %.3f | %.3f | %.2f | %.1f | %.3f | %d | %.10g |", 3 * n, n,
@@ -351,11 +383,49 @@ TEST(CompressedCuda, DISABLED_Timings) {
       Solve(options, problem, &cpu_summary);
       std::printf(" %.3f | %.2f | %.1f | %.3f | %d | %.10g |\n", cpu_product_ms, cpu_solve_ms, cpu_iterations,
                   cpu_summary.solve_seconds, cpu_summary.iterations, cpu_summary.final_cost);
+      comparisons.push_back({3 * n, n, "perceptual (CPU)", cpu_summary.setup_seconds, cpu_summary.solve_seconds,
+                             cpu_summary.trace.back().seconds, cpu_summary.iterations, cpu_summary.cg_iterations,
+                             cpu_summary.final_cost});
     } else {
       std::printf(" – | – | – | – | – | – |\n");
     }
     std::fflush(stdout);
+    for (const bool host_loop : {true, false}) {
+      options.device = Device::kCuda;
+      options.device_host_loop = host_loop;
+      std::vector<double> seconds, loop_seconds;
+      SolverSummary gpu_summary = summary;  // the host loop's: the first table's solve
+      if (host_loop) {
+        seconds.push_back(summary.solve_seconds);
+        loop_seconds.push_back(summary.trace.back().seconds);
+      }
+      for (int run = 0; run < solve_repeats && !host_loop; ++run) {
+        Solve(options, problem, &gpu_summary);
+        seconds.push_back(gpu_summary.solve_seconds);
+        loop_seconds.push_back(gpu_summary.trace.back().seconds);
+      }
+      std::sort(seconds.begin(), seconds.end());
+      std::sort(loop_seconds.begin(), loop_seconds.end());
+      comparisons.push_back({3 * n, n, host_loop ? "perceptual [cuda host loop]" : "perceptual [cuda resident]",
+                             gpu_summary.setup_seconds, seconds[seconds.size() / 2],
+                             loop_seconds[loop_seconds.size() / 2], gpu_summary.iterations,
+                             gpu_summary.cg_iterations, gpu_summary.final_cost});
+    }
   }
+  std::printf("\n| variables | patches | solver | setup s | solve s | loop s | iterations | CG iterations | "
+              "objective | relative to reference |\n|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|\n");
+  double reference = 0.0;
+  int reference_variables = 0;
+  for (const Comparison& row : comparisons) {
+    if (row.variables != reference_variables) {  // the first row of each size
+      reference = row.objective;
+      reference_variables = row.variables;
+    }
+    std::printf("| %d | %d | %s | %.3f | %.4f | %.4f | %d | %d | %.10g | %.1e |\n", row.variables, row.patches,
+                row.name, row.setup_seconds, row.solve_seconds, row.loop_seconds, row.iterations, row.cg_iterations,
+                row.objective, std::abs(row.objective - reference) / reference);
+  }
+  std::fflush(stdout);
 }
 
 }  // namespace

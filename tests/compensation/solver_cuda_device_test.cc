@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include "compensation/cuda_radiosity.h"
 #include "compensation/solver.h"
 #include "tests/compensation/analytic_problem.h"
 
@@ -25,6 +26,28 @@ namespace {
     if (!CudaAvailable(&why)) GTEST_SKIP() << "no CUDA device: skipped (" << why << ")"; \
   } while (0)
 
+// The summary's records agree with each other (as MinimiseBounded keeps them).
+// The trace, one line per outer iteration (printed where a check failed).
+void PrintTrace(const char* name, const SolverSummary& summary) {
+  std::printf("  %s: %s\n", name, summary.BriefReport().c_str());
+  for (const IterationRecord& record : summary.trace) {
+    std::printf("    %2d cost %.12g step %.3g free %d CG %d projected gradient %.3g\n", record.iteration, record.cost,
+                record.step, record.free_variables, record.cg_iterations, record.projected_gradient);
+  }
+}
+
+void ExpectConsistentSummary(const SolverSummary& summary, const std::string& label) {
+  ASSERT_FALSE(summary.trace.empty()) << label;
+  EXPECT_EQ(summary.trace.back().cost, summary.final_cost) << label;
+  EXPECT_EQ(summary.trace.front().cost, summary.initial_cost) << label;
+  int cg = 0;
+  for (const IterationRecord& record : summary.trace) cg += record.cg_iterations;
+  EXPECT_EQ(cg, summary.cg_iterations) << label;
+  EXPECT_GE(summary.hessian_products, summary.cg_iterations) << label;
+  EXPECT_GE(summary.evaluations, summary.iterations + 1) << label;
+  EXPECT_LE(summary.final_cost, summary.initial_cost) << label;
+}
+
 TEST(SolveCudaAnalytic, MatchesTheCpuReference) {
   SKIP_WITHOUT_CUDA_DEVICE();
   struct Case {
@@ -33,20 +56,32 @@ TEST(SolveCudaAnalytic, MatchesTheCpuReference) {
     bool coloured;
     CompensationMethod method;
     bool multires;
+    int inner_iterations;  // SolverOptions::max_inner_iterations
+    bool second_order;
   };
-  const Case cases[] = {{8, 0.5, false, CompensationMethod::kPerceptual, false},
-                        {16, 0.3, false, CompensationMethod::kPerceptual, false},
-                        {16, 0.5, true, CompensationMethod::kPerceptual, false},
-                        {22, 0.5, false, CompensationMethod::kPerceptual, true},
-                        {16, 0.5, false, CompensationMethod::kLinear, false}};
+  const Case cases[] = {{8, 0.5, false, CompensationMethod::kPerceptual, false, 1, true},
+                        {16, 0.3, false, CompensationMethod::kPerceptual, false, 1, true},
+                        {16, 0.5, true, CompensationMethod::kPerceptual, false, 1, true},
+                        {22, 0.5, false, CompensationMethod::kPerceptual, true, 1, true},
+                        {16, 0.5, false, CompensationMethod::kLinear, false, 1, true},
+                        {24, 0.3, true, CompensationMethod::kPerceptual, true, 1, true},
+                        {24, 0.3, true, CompensationMethod::kLinear, true, 1, true},
+                        {16, 0.5, false, CompensationMethod::kPerceptual, false, 3, true},
+                        {16, 0.3, true, CompensationMethod::kPerceptual, false, 1, false},
+                        {40, 0.5, false, CompensationMethod::kPerceptual, false, 1, true}};
   for (const Case& c : cases) {
     testing::AnalyticProblem test = testing::MakeAnalyticProblem(c.grid, c.alpha);
-    if (c.coloured) test.fine.reflectance.col(2) *= 0.6;
+    if (c.coloured) {
+      test.fine.reflectance.col(2) *= 0.6;
+      test.coarse.reflectance.col(2) *= 0.6;
+    }
     const CompensationProblem& problem = test.fine;
     const CoarseLevel coarse{&test.coarse, &test.coarse_of_fine};
     SolverOptions options;
     options.method = c.method;
     options.multires = c.multires;
+    options.max_inner_iterations = c.inner_iterations;
+    options.second_order = c.second_order;
     SolverSummary cpu_summary;
     const CompensationSolution cpu = Solve(options, problem, &cpu_summary, coarse);
     const RadiositySystem radiosity(problem.form_factors, problem.area, problem.reflectance);
@@ -54,28 +89,75 @@ TEST(SolveCudaAnalytic, MatchesTheCpuReference) {
         problem, radiosity, c.method == CompensationMethod::kLinear ? ColourModel::kLinear : ColourModel::kLab);
     const double reference = objective.Value(cpu.emittance);
     EXPECT_GT(((cpu.emittance - problem.lower).array() == 0.0).count(), 0) << "no active bound";
-    for (const bool float32 : {false, true}) {
+    struct Variant {
+      bool host_loop, float32;
+      const char* name;
+    };
+    for (const Variant& v : {Variant{true, false, "host loop float64"}, Variant{true, true, "host loop float32"},
+                             Variant{false, false, "resident"}}) {
       options.device = Device::kCuda;
-      options.device_float32 = float32;
+      options.device_host_loop = v.host_loop;
+      options.device_float32 = v.float32;
       SolverSummary summary;
       const CompensationSolution gpu = Solve(options, problem, &summary, coarse);
       std::ostringstream label;
       label << MethodName(c.method) << " " << problem.size() << " patches alpha " << c.alpha
-            << (c.coloured ? " coloured" : "") << (c.multires ? " multires" : "") << (float32 ? " float32" : " float64");
+            << (c.coloured ? " coloured" : "") << (c.multires ? " multires" : "")
+            << (c.inner_iterations > 1 ? " inner 3" : "") << (c.second_order ? "" : " gauss-newton") << " ["
+            << v.name << "]";
       EXPECT_TRUE(((gpu.emittance - problem.lower).array() >= 0.0).all()) << label.str();
       EXPECT_TRUE(((problem.upper - gpu.emittance).array() >= 0.0).all()) << label.str();
       ObjectivePoint point;
       const double cost = objective.Evaluate(gpu.emittance, &point);  // CPU, double
       const double relative = std::abs(cost - reference) / reference;
-      EXPECT_LT(relative, 1e-4) << label.str() << ": " << summary.BriefReport();
+      EXPECT_LT(relative, v.host_loop ? 1e-4 : 1e-6) << label.str() << ": " << summary.BriefReport();
       const double projected =
           ProjectedGradientNorm(gpu.emittance, objective.Gradient(point), problem.lower, problem.upper);
-      EXPECT_LT(projected, (float32 ? 1e-3 : 1e-6) * (1.0 + cost)) << label.str() << ": " << summary.BriefReport();
-      std::printf("%-48s objective %.10g (CPU %.10g, relative %.1e), projected gradient %.1e, %d iterations "
-                  "(CPU %d), %s\n", label.str().c_str(), cost, reference, relative, projected, summary.iterations,
-                  cpu_summary.iterations, TerminationName(summary.termination));
+      EXPECT_LT(projected, (v.float32 ? 1e-3 : 1e-6) * (1.0 + cost)) << label.str() << ": " << summary.BriefReport();
+      if (!v.host_loop) {
+        // The solver's own final cost is the objective at its result, evaluated on the device.
+        EXPECT_LT(std::abs(summary.final_cost - cost), 1e-9 * cost) << label.str();
+        EXPECT_NE(summary.termination, TerminationType::kNumericalFailure) << label.str();
+        ExpectConsistentSummary(summary, label.str());
+        if (c.multires) {
+          EXPECT_GT(summary.coarse_iterations, 0) << label.str();
+        }
+      }
+      if (::testing::Test::HasFailure() && !v.host_loop) {
+        PrintTrace("CPU", cpu_summary);
+        PrintTrace("GPU", summary);
+      }
+      std::printf("%-62s objective %.10g (CPU %.10g, relative %.1e), projected gradient %.1e, %d iterations "
+                  "(CPU %d), %d CG (CPU %d), %s, solve %.4f s (CPU %.4f s)\n",
+                  label.str().c_str(), cost, reference, relative, projected, summary.iterations,
+                  cpu_summary.iterations, summary.cg_iterations, cpu_summary.cg_iterations,
+                  TerminationName(summary.termination), summary.solve_seconds, cpu_summary.solve_seconds);
     }
   }
+}
+
+// The resident loop stops where MinimiseBounded does on its other rules: at max_iterations, and
+// at once when the start is already optimal (the closed form E = K·Bd inside the bounds).
+TEST(SolveCudaAnalytic, ResidentStoppingRules) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const testing::AnalyticProblem test = testing::MakeAnalyticProblem(12, 0.5);
+  SolverOptions options;
+  options.device = Device::kCuda;
+  options.max_iterations = 2;
+  SolverSummary summary;
+  Solve(options, test.fine, &summary);
+  EXPECT_EQ(summary.termination, TerminationType::kMaxIterations) << summary.BriefReport();
+  EXPECT_EQ(summary.iterations, 2);
+  EXPECT_EQ(summary.trace.size(), 3u);
+
+  // Desired colours every patch can reach: the reverse-radiosity start is the optimum (f = 0).
+  CompensationProblem reachable = test.fine;
+  reachable.desired.setConstant(0.2);
+  reachable.upper.setConstant(10.0);
+  options.max_iterations = 100;
+  Solve(options, reachable, &summary);
+  EXPECT_LT(summary.final_cost, 1e-12) << summary.BriefReport();
+  EXPECT_NE(summary.termination, TerminationType::kNumericalFailure) << summary.BriefReport();
 }
 
 std::vector<int> IntegersFromEnvironment(const char* name, std::vector<int> fallback) {
@@ -87,8 +169,13 @@ std::vector<int> IntegersFromEnvironment(const char* name, std::vector<int> fall
   return values;
 }
 
-// Markdown rows: variables, patches, solver, setup s, solve s (median of `repeats`), iterations,
-// objective (CPU-evaluated where the problem fits the CPU, else the solver's own).
+// Markdown rows: variables, patches, solver, setup s, solve s (median of `repeats`), loop s (the
+// fine level's Alg. 1 alone: the trace's last time; solve s adds the reverse-radiosity start K·Bd
+// on the CPU, the objective's set-up, the coarse level and the final B = K⁻¹E), iterations,
+// CG iterations, objective (evaluated in double), and its relative difference from the
+// reference (the CPU row where the problem fits the CPU, else the host-loop GPU row of the same
+// method). `[cuda host loop]`: SolverOptions::device_host_loop (K⁻¹ on the device, the rest on the
+// host); `[cuda resident]`: the whole loop on the device (cuda_solver.h).
 TEST(SolveCudaAnalytic, DISABLED_Timings) {
   SKIP_WITHOUT_CUDA_DEVICE();
   std::string device;
@@ -96,8 +183,10 @@ TEST(SolveCudaAnalytic, DISABLED_Timings) {
   const std::vector<int> grids = IntegersFromEnvironment("PROCAM_BENCH_GRIDS", {22, 40, 70});
   const int cpu_max_variables = IntegersFromEnvironment("PROCAM_BENCH_CPU_MAX_VARIABLES", {10000})[0];
   const int repeats = IntegersFromEnvironment("PROCAM_BENCH_REPEATS", {5})[0];
-  std::printf("device: %s\n\n| variables | patches | solver | setup s | solve s | iterations | objective |\n"
-              "|---:|---:|---|---:|---:|---:|---:|\n", device.c_str());
+  std::printf("device: %s\n\n| variables | patches | solver | setup s | solve s | loop s | iterations | "
+              "CG iterations | objective | relative to reference |\n"
+              "|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|\n",
+              device.c_str());
   for (const int g : grids) {
     const testing::AnalyticProblem test = testing::MakeAnalyticProblem(g);
     const CoarseLevel coarse{&test.coarse, &test.coarse_of_fine};
@@ -105,17 +194,28 @@ TEST(SolveCudaAnalytic, DISABLED_Timings) {
     struct Row {
       const char* name;
       Device device;
-      bool multires, float32;
+      bool multires, float32, host_loop;
       CompensationMethod method;
     };
-    const Row rows[] = {{"perceptual (CPU)", Device::kCpu, false, false, CompensationMethod::kPerceptual},
-                        {"perceptual --multires (CPU)", Device::kCpu, true, false, CompensationMethod::kPerceptual},
-                        {"linear (CPU)", Device::kCpu, false, false, CompensationMethod::kLinear},
-                        {"perceptual [cuda]", Device::kCuda, false, false, CompensationMethod::kPerceptual},
-                        {"perceptual --multires [cuda]", Device::kCuda, true, false, CompensationMethod::kPerceptual},
-                        {"perceptual --multires [cuda float32]", Device::kCuda, true, true,
-                         CompensationMethod::kPerceptual},
-                        {"linear [cuda]", Device::kCuda, false, false, CompensationMethod::kLinear}};
+    constexpr auto kPerceptual = CompensationMethod::kPerceptual;
+    constexpr auto kLinear = CompensationMethod::kLinear;
+    const Row rows[] = {{"perceptual (CPU)", Device::kCpu, false, false, false, kPerceptual},
+                        {"perceptual --multires (CPU)", Device::kCpu, true, false, false, kPerceptual},
+                        {"linear (CPU)", Device::kCpu, false, false, false, kLinear},
+                        {"perceptual [cuda host loop]", Device::kCuda, false, false, true, kPerceptual},
+                        {"perceptual --multires [cuda host loop]", Device::kCuda, true, false, true, kPerceptual},
+                        {"perceptual --multires [cuda host loop float32]", Device::kCuda, true, true, true,
+                         kPerceptual},
+                        {"linear [cuda host loop]", Device::kCuda, false, false, true, kLinear},
+                        {"perceptual [cuda resident]", Device::kCuda, false, false, false, kPerceptual},
+                        {"perceptual --multires [cuda resident]", Device::kCuda, true, false, false, kPerceptual},
+                        {"linear [cuda resident]", Device::kCuda, false, false, false, kLinear}};
+    double reference[2] = {0.0, 0.0};  // perceptual, linear: the first row's objective
+    // Same yardstick for every row: the objective in double, with the float64 K⁻¹ formed on the
+    // device (a CPU factorisation of the largest sizes would take minutes).
+    const RadiositySystem yardstick(
+        test.fine.form_factors, test.fine.area, test.fine.reflectance,
+        MakeCudaRadiosityBackend(test.fine.form_factors, test.fine.area, test.fine.reflectance, /*float32=*/false));
     for (const Row& row : rows) {
       if (row.device == Device::kCpu && 3 * n > cpu_max_variables) continue;
       SolverOptions options;
@@ -123,22 +223,27 @@ TEST(SolveCudaAnalytic, DISABLED_Timings) {
       options.device = row.device;
       options.multires = row.multires;
       options.device_float32 = row.float32;
+      options.device_host_loop = row.host_loop;
       const int runs = row.device == Device::kCuda ? repeats : 1;
-      std::vector<double> solve_seconds;
+      std::vector<double> solve_seconds, loop_seconds;
       SolverSummary summary;
       CompensationSolution solution;
       for (int run = 0; run < runs; ++run) {
         solution = Solve(options, test.fine, &summary, coarse);
         solve_seconds.push_back(summary.solve_seconds);
+        loop_seconds.push_back(summary.trace.back().seconds);
       }
       std::sort(solve_seconds.begin(), solve_seconds.end());
-      double objective = summary.final_cost;
-      if (row.method == CompensationMethod::kPerceptual) {  // same yardstick for every row: double
-        const CompensationObjective lab(test.fine, *solution.radiosity_system, ColourModel::kLab);
-        objective = lab.Value(solution.emittance);
-      }
-      std::printf("| %d | %d | %s | %.4f | %.4f | %d | %.10g |\n", 3 * n, n, row.name, summary.setup_seconds,
-                  solve_seconds[solve_seconds.size() / 2], summary.iterations, objective);
+      std::sort(loop_seconds.begin(), loop_seconds.end());
+      const CompensationObjective objective(test.fine, yardstick,
+                                            row.method == kLinear ? ColourModel::kLinear : ColourModel::kLab);
+      const double value = objective.Value(solution.emittance);
+      double& first = reference[row.method == kLinear ? 1 : 0];
+      if (first == 0.0) first = value;
+      std::printf("| %d | %d | %s | %.4f | %.4f | %.4f | %d | %d | %.10g | %.1e |\n", 3 * n, n, row.name,
+                  summary.setup_seconds, solve_seconds[solve_seconds.size() / 2],
+                  loop_seconds[loop_seconds.size() / 2], summary.iterations, summary.cg_iterations, value,
+                  std::abs(value - first) / first);
       std::fflush(stdout);
     }
   }

@@ -1,0 +1,192 @@
+#include "compensation/cuda_solver.h"
+
+#include <memory>
+#include <stdexcept>
+#include <utility>
+#include <vector>
+
+#include "compensation/cuda_compressed.h"
+#include "compensation/cuda_compressed_device.h"
+#include "compensation/cuda_dense.h"
+#include "compensation/cuda_radiosity.h"
+#include "compensation/cuda_solver_device.h"
+
+namespace procam {
+namespace {
+
+// The dense backend's K⁻¹ (one per group of channels sharing a reflectance) on device vectors:
+// one cuBLAS product per group, on the loop's stream.
+class DenseDeviceRadiosity : public cuda::DeviceRadiosity {
+ public:
+  DenseDeviceRadiosity(std::vector<const cuda::InverseRadiosity*> inverses, std::vector<std::vector<int>> channels,
+                       int patches)
+      : inverses_(std::move(inverses)), channels_(std::move(channels)), patches_(patches) {}
+
+  cudaStream_t stream() const override { return nullptr; }
+  void Solve(const double* y, bool transposed, double* x, cudaStream_t stream) const override {
+    Apply(y, transposed, x, stream);
+  }
+  bool single() const override { return true; }
+  void SolveFast(const float* y, bool transposed, float* x, cudaStream_t stream) const override {
+    Apply(y, transposed, x, stream);
+  }
+  void SolveFast(const double* y, bool transposed, double* x, cudaStream_t stream) const override {
+    Apply(y, transposed, x, stream);
+  }
+  bool iterative() const override { return false; }
+
+ private:
+  // Columns are contiguous (n×3 column-major): a grey room's three channels are one product.
+  template <typename T>
+  void Apply(const T* y, bool transposed, T* x, cudaStream_t stream) const {
+    for (size_t g = 0; g < inverses_.size(); ++g) {
+      const std::vector<int>& channels = channels_[g];
+      if (channels == std::vector<int>{0, 1, 2}) {
+        inverses_[g]->ApplyOnDevice(y, 3, transposed, x, stream);
+        continue;
+      }
+      for (const int c : channels) {
+        const size_t offset = static_cast<size_t>(c) * patches_;
+        inverses_[g]->ApplyOnDevice(y + offset, 1, transposed, x + offset, stream);
+      }
+    }
+  }
+
+  std::vector<const cuda::InverseRadiosity*> inverses_;
+  std::vector<std::vector<int>> channels_;
+  int patches_;
+};
+
+// The matrix-free backend's CG solves (float64 throughout, the fast ones at its fast tolerance),
+// on the backend's own stream.
+class CompressedDeviceRadiosity : public cuda::DeviceRadiosity {
+ public:
+  explicit CompressedDeviceRadiosity(const CudaCompressedRadiosity& backend) : backend_(backend) {}
+
+  cudaStream_t stream() const override { return backend_.device().stream(); }
+  void Solve(const double* y, bool transposed, double* x, cudaStream_t) const override {
+    backend_.SolveOnDevice(y, transposed, /*fast=*/false, x);
+  }
+  bool single() const override { return false; }
+  void SolveFast(const float*, bool, float*, cudaStream_t) const override {
+    throw std::logic_error("resident GPU solve: the matrix-free solves take float64 vectors");
+  }
+  void SolveFast(const double* y, bool transposed, double* x, cudaStream_t) const override {
+    backend_.SolveOnDevice(y, transposed, /*fast=*/true, x);
+  }
+  bool iterative() const override { return true; }
+
+ private:
+  const CudaCompressedRadiosity& backend_;
+};
+
+std::unique_ptr<cuda::DeviceRadiosity> DeviceRadiosityOf(const RadiositySystem& radiosity) {
+  const RadiosityBackend* backend = radiosity.backend();
+  if (backend == nullptr) {
+    throw std::invalid_argument("resident GPU solve: the radiosity system has no CUDA backend");
+  }
+  std::vector<const cuda::InverseRadiosity*> inverses;
+  std::vector<std::vector<int>> channels;
+  if (CudaInverseRadiosities(*backend, &inverses, &channels)) {
+    return std::make_unique<DenseDeviceRadiosity>(std::move(inverses), std::move(channels), radiosity.size());
+  }
+  if (const auto* compressed = dynamic_cast<const CudaCompressedRadiosity*>(backend)) {
+    return std::make_unique<CompressedDeviceRadiosity>(*compressed);
+  }
+  throw std::invalid_argument("resident GPU solve: the radiosity system's backend is not a CUDA one");
+}
+
+TerminationType Termination(cuda::ResidentTermination termination) {
+  switch (termination) {
+    case cuda::ResidentTermination::kGradientTolerance: return TerminationType::kGradientTolerance;
+    case cuda::ResidentTermination::kFunctionTolerance: return TerminationType::kFunctionTolerance;
+    case cuda::ResidentTermination::kMaxIterations: return TerminationType::kMaxIterations;
+    case cuda::ResidentTermination::kLineSearchFailure: return TerminationType::kLineSearchFailure;
+    case cuda::ResidentTermination::kNumericalFailure: return TerminationType::kNumericalFailure;
+  }
+  return TerminationType::kNumericalFailure;
+}
+
+}  // namespace
+
+Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const CompensationObjective& objective,
+                                      const Eigen::MatrixX3d& initial, SolverSummary* summary) {
+  const std::unique_ptr<cuda::DeviceRadiosity> radiosity = DeviceRadiosityOf(objective.radiosity());
+  const CompensationProblem& problem = objective.problem();
+  const int n = objective.patches();
+
+  // W exactly as the objective holds it (symmetric, column-major: column i lists row i).
+  const Eigen::SparseMatrix<double>& w = objective.weights();
+  Eigen::VectorXd diagonal = Eigen::VectorXd::Zero(n);
+  std::vector<int> offsets(n + 1, 0), neighbours;
+  std::vector<double> neighbour_weights;
+  neighbours.reserve(w.nonZeros());
+  neighbour_weights.reserve(w.nonZeros());
+  for (int i = 0; i < n; ++i) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(w, i); it; ++it) {
+      if (it.row() == i) {
+        diagonal[i] += it.value();
+      } else {
+        neighbours.push_back(static_cast<int>(it.row()));
+        neighbour_weights.push_back(it.value());
+      }
+    }
+    offsets[i + 1] = static_cast<int>(neighbours.size());
+  }
+  const Eigen::MatrixX3d start = initial.cwiseMax(problem.lower).cwiseMin(problem.upper);
+
+  cuda::ResidentProblem resident_problem;
+  resident_problem.patches = n;
+  resident_problem.weight_diagonal = diagonal.data();
+  resident_problem.neighbour_offsets = offsets.data();
+  resident_problem.neighbours = neighbours.data();
+  resident_problem.neighbour_weights = neighbour_weights.data();
+  resident_problem.lower = problem.lower.data();
+  resident_problem.upper = problem.upper.data();
+  resident_problem.desired = problem.desired.data();
+  resident_problem.initial = start.data();
+  resident_problem.lab = objective.model() == ColourModel::kLab;
+  const Eigen::Matrix3d linear = objective.ColourJacobian(Eigen::Vector3d::Zero());  // constant for kLinear
+  for (int a = 0; a < 3; ++a) {
+    for (int b = 0; b < 3; ++b) {
+      resident_problem.rgb_to_xyz[3 * a + b] = problem.rgb_to_xyz(a, b);
+      resident_problem.linear_colour[3 * a + b] = linear(a, b);
+    }
+    resident_problem.white_xyz[a] = problem.white_xyz[a];
+  }
+
+  cuda::ResidentOptions resident_options;
+  resident_options.max_iterations = options.max_iterations;
+  resident_options.max_inner_iterations = options.max_inner_iterations;
+  resident_options.max_cg_iterations = options.max_cg_iterations;
+  resident_options.cg_tolerance = options.cg_tolerance;
+  resident_options.second_order = options.second_order;
+  resident_options.gradient_tolerance = options.gradient_tolerance;
+  resident_options.function_tolerance = options.function_tolerance;
+  resident_options.armijo = options.armijo;
+  resident_options.progress = options.progress;
+
+  cuda::ResidentSummary resident;
+  Eigen::MatrixX3d emittance(n, 3);
+  cuda::MinimiseResident(resident_options, resident_problem, *radiosity, emittance.data(), &resident);
+
+  // As MinimiseBounded writes its summary: counters and the trace added, the rest set.
+  summary->termination = Termination(resident.termination);
+  if (!resident.message.empty()) summary->message = resident.message;
+  summary->initial_cost = resident.initial_cost;
+  summary->final_cost = resident.final_cost;
+  if (resident.iterations > 0) summary->iterations = resident.iterations;
+  summary->inner_iterations += resident.inner_iterations;
+  summary->cg_iterations += resident.cg_iterations;
+  summary->evaluations += resident.evaluations;
+  summary->gradients += resident.gradients;
+  summary->hessian_products += resident.hessian_products;
+  summary->preconditioner_applications += resident.preconditioner_applications;
+  for (const cuda::ResidentIteration& record : resident.trace) {
+    summary->trace.push_back({record.iteration, record.cost, record.seconds, record.step, record.free_variables,
+                              record.cg_iterations, record.projected_gradient});
+  }
+  return emittance;
+}
+
+}  // namespace procam

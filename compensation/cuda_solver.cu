@@ -1,0 +1,1287 @@
+// cuda_solver_device.h on CUDA kernels: Alg. 1 and 2 (MinimiseBounded and SolveInnerQp of
+// solver.cc, step for step) with every vector on the device.
+//
+// Kernels run one thread per patch (colour, Jacobians, W products, 3×3 blocks) or per variable
+// (bounds, vector updates), with grid-stride loops over at most kMaxBlocks blocks. Reductions
+// (dot products, maxima) are formed in a fixed order (GridReduce) and land in one Scalars struct
+// on the device, which the host copies back where the algorithm branches: two or three times
+// per outer iteration plus about once per CG iteration. CG's own scalars (step, β, convergence)
+// stay on the device, and its kernels do nothing once CG has stopped, so that iterations can be
+// enqueued ahead of a read. On the dense path the fixed sequences are replayed as CUDA graphs
+// (PROCAM_CUDA_GRAPHS=0 turns that off); PROCAM_CUDA_SOLVER_PROFILE=1 prints where a solve's
+// time went.
+
+// The colour math of colour.h, compiled for the device as well (one definition for both sides).
+#define PROCAM_HOST_DEVICE __host__ __device__
+#include "compensation/colour.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+#include <cuda_runtime.h>
+
+#include "compensation/cuda_solver_device.h"
+
+namespace procam::cuda {
+namespace {
+
+void Throw(const char* call, const std::string& what) {
+  throw std::runtime_error(std::string("CUDA: ") + call + " failed: " + what);
+}
+void Check(cudaError_t status, const char* call) {
+  if (status != cudaSuccess) Throw(call, cudaGetErrorString(status));
+}
+#define PROCAM_CUDA(call) Check((call), #call)
+
+constexpr int kThreads = 256;  // per block; the reductions assume exactly this
+constexpr int kWarps = kThreads / 32;
+// Blocks of a kernel at most (grid-stride loops beyond): bounds the partial sums the last block
+// of a reduction combines.
+constexpr int kMaxBlocks = 1024;
+constexpr int kMaxReduced = 4;  // values one reduction combines at most
+
+int Blocks(long count) {
+  return static_cast<int>(std::max(1L, std::min<long>(kMaxBlocks, (count + kThreads - 1) / kThreads)));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scalars shared between the kernels and the host.
+
+// The conjugate-gradient solve of NewtonSystem::SolveMasked (solver.cc).
+struct CgState {
+  double r0;         // ‖r‖ at the start
+  double rz;         // rᵀz
+  double curvature;  // pᵀHp of the last iteration
+  double step;       // rᵀz / pᵀHp
+  double beta;
+  int iterations;    // products done
+  int preconditioner_applications;
+  int done;            // CG has stopped: converged, negative curvature or the iteration limit
+  int negative_first;  // stopped at negative curvature in its first iteration: the solution is p
+};
+
+struct Scalars {
+  double value;               // f at the last evaluation
+  double projected_gradient;  // ‖x − P(x − g)‖∞
+  double free_variables;      // variables not fixed by Eq. 12
+  double inner_projected;     // Alg. 2's projected gradient of q at d
+  CgState cg;
+  // CG's result: curvature of the solution, max |solution|, non-finite entries, qᵀ solution,
+  // and Alg. 2's first step length.
+  double solution_curvature, solution_max, solution_nonfinite, solution_slope, alpha;
+  // A trial of Alg. 2's step: max |δ − α s| (> 0: the projection cut), ∇qᵀδ, δᵀHδ.
+  double cut, delta_slope, quadratic;
+  // The outer direction: ∇fᵀd and its non-finite entries.
+  double direction_slope, direction_nonfinite;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Reductions.
+
+__device__ double Combine(double a, double b, bool maximum) { return maximum ? fmax(a, b) : a + b; }
+
+template <int K>
+__device__ void WarpReduce(double (&value)[K], unsigned max_mask) {
+  for (int offset = 16; offset > 0; offset /= 2) {
+    for (int k = 0; k < K; ++k) {
+      value[k] = Combine(value[k], __shfl_down_sync(0xffffffffu, value[k], offset), (max_mask >> k) & 1u);
+    }
+  }
+}
+
+// Thread 0 gets the block's totals.
+template <int K>
+__device__ void BlockReduce(double (&value)[K], unsigned max_mask, double (*warp_values)[kWarps]) {
+  const int lane = threadIdx.x % 32, warp = threadIdx.x / 32;
+  WarpReduce(value, max_mask);
+  if (lane == 0) {
+    for (int k = 0; k < K; ++k) warp_values[k][warp] = value[k];
+  }
+  __syncthreads();
+  if (warp == 0) {
+    for (int k = 0; k < K; ++k) value[k] = lane < kWarps ? warp_values[k][lane] : 0.0;
+    WarpReduce(value, max_mask);
+  }
+  __syncthreads();
+}
+
+// Combines each thread's K values over the grid: sums, or maxima where bit k of `max_mask` is set
+// (of non-negative values, so 0 is the identity; NaN is dropped, count non-finite values
+// separately). Every block forms its partial in a fixed order and the last block to finish
+// combines the partials in block order, so results do not depend on scheduling. Returns true in
+// thread 0 of that last block, whose `value` then holds the totals. Every thread of the grid must
+// call it, once per kernel.
+template <int K>
+__device__ bool GridReduce(double (&value)[K], unsigned max_mask, double* partials, unsigned* counter) {
+  __shared__ double warp_values[K][kWarps];
+  __shared__ bool last;
+  BlockReduce(value, max_mask, warp_values);
+  if (threadIdx.x == 0) {
+    for (int k = 0; k < K; ++k) partials[K * blockIdx.x + k] = value[k];
+    __threadfence();
+    last = atomicAdd(counter, 1u) == gridDim.x - 1;
+  }
+  __syncthreads();
+  if (!last) return false;
+  for (int k = 0; k < K; ++k) value[k] = 0.0;
+  for (int b = threadIdx.x; b < gridDim.x; b += blockDim.x) {
+    for (int k = 0; k < K; ++k) value[k] = Combine(value[k], __ldcg(partials + K * b + k), (max_mask >> k) & 1u);
+  }
+  BlockReduce(value, max_mask, warp_values);
+  if (threadIdx.x == 0) *counter = 0;
+  return threadIdx.x == 0;
+}
+
+// Where the reductions keep their partials.
+struct Reduction {
+  double* partials;   // kMaxReduced × kMaxBlocks
+  unsigned* counter;  // 0 between kernels
+};
+
+// ---------------------------------------------------------------------------------------------
+// Per-patch math.
+
+// The colour space (kernel argument).
+struct ColourSpace {
+  double rgb_to_xyz[9];  // row-major
+  double white[3];
+  double linear[9];      // row-major
+  int lab;
+};
+
+// W: its diagonal and its off-diagonal entries (CSR).
+struct Weights {
+  const double* diagonal;
+  const int* offsets;
+  const int* neighbours;
+  const double* values;
+};
+
+__device__ Eigen::Matrix3d RowMajor(const double* m) {
+  Eigen::Matrix3d result;
+  result << m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8];
+  return result;
+}
+
+// Colour of linear RGB and its Jacobian (CompensationObjective::Colour and ColourJacobian).
+__device__ void ColourAndJacobian(const ColourSpace& space, const double rgb[3], double colour[3], double* jacobian) {
+  const Eigen::Vector3d value(rgb[0], rgb[1], rgb[2]);
+  if (space.lab) {
+    const Eigen::Matrix3d t = RowMajor(space.rgb_to_xyz);
+    const Eigen::Vector3d white(space.white[0], space.white[1], space.white[2]);
+    const Eigen::Vector3d xyz = t * value;
+    const Eigen::Vector3d lab = XyzToLab(xyz, white);
+    const Eigen::Matrix3d j = XyzToLabJacobian(xyz, white) * t;
+    for (int a = 0; a < 3; ++a) {
+      colour[a] = lab[a];
+      if (jacobian != nullptr) {
+        for (int b = 0; b < 3; ++b) jacobian[3 * a + b] = j(a, b);
+      }
+    }
+  } else {
+    for (int a = 0; a < 3; ++a) {
+      colour[a] = space.linear[3 * a] * rgb[0] + space.linear[3 * a + 1] * rgb[1] + space.linear[3 * a + 2] * rgb[2];
+      if (jacobian != nullptr) {
+        for (int b = 0; b < 3; ++b) jacobian[3 * a + b] = space.linear[3 * a + b];
+      }
+    }
+  }
+}
+
+// (W v)_i for an n×3 column-major v.
+__device__ void WeightedRow(const Weights& w, const double* v, int n, int i, double out[3]) {
+  const double diagonal = w.diagonal[i];
+  for (int c = 0; c < 3; ++c) out[c] = diagonal * v[c * n + i];
+  for (int e = w.offsets[i]; e < w.offsets[i + 1]; ++e) {
+    const int j = w.neighbours[e];
+    const double value = w.values[e];
+    for (int c = 0; c < 3; ++c) out[c] += value * v[c * n + j];
+  }
+}
+
+// Patch i's 3×3 Jacobian (stored as nine n-long planes, row-major index).
+__device__ void LoadJacobian(const double* jacobian, int n, int i, double j[9]) {
+  for (int k = 0; k < 9; ++k) j[k] = jacobian[k * n + i];
+}
+
+// std::max / std::min as Eigen's cwiseMax / cwiseMin use them (NaN handling included).
+__device__ double Max(double a, double b) { return a < b ? b : a; }
+__device__ double Min(double a, double b) { return b < a ? b : a; }
+__device__ double Clamp(double x, double lower, double upper) { return Min(Max(x, lower), upper); }
+
+// The preconditioner block of patch i: the inverse of M_ii = 2 W_ii J_iᵀ J_i restricted to the
+// patch's free channels (zero rows and columns for the others). M_ii is positive definite in
+// theory; where its free block is not numerically (non-positive or non-finite determinant), the
+// inverse diagonal stands in.
+__device__ void FreeBlockInverse(const double j[9], double weight, const double mask[3], double inverse[9]) {
+  double m[9];
+  for (int a = 0; a < 3; ++a) {
+    for (int b = 0; b < 3; ++b) {
+      const double value = 2.0 * weight * (j[a] * j[b] + j[3 + a] * j[3 + b] + j[6 + a] * j[6 + b]);
+      m[3 * a + b] = (mask[a] != 0.0 && mask[b] != 0.0) ? value : (a == b ? 1.0 : 0.0);
+    }
+  }
+  const double c00 = m[4] * m[8] - m[5] * m[7], c01 = m[2] * m[7] - m[1] * m[8], c02 = m[1] * m[5] - m[2] * m[4];
+  const double c10 = m[5] * m[6] - m[3] * m[8], c11 = m[0] * m[8] - m[2] * m[6], c12 = m[2] * m[3] - m[0] * m[5];
+  const double c20 = m[3] * m[7] - m[4] * m[6], c21 = m[1] * m[6] - m[0] * m[7], c22 = m[0] * m[4] - m[1] * m[3];
+  const double determinant = m[0] * c00 + m[1] * c10 + m[2] * c20;
+  if (determinant > 0.0 && isfinite(determinant)) {
+    const double s = 1.0 / determinant;
+    const double adjugate[9] = {c00, c01, c02, c10, c11, c12, c20, c21, c22};
+    for (int k = 0; k < 9; ++k) inverse[k] = s * adjugate[k];
+  } else {
+    for (int k = 0; k < 9; ++k) inverse[k] = 0.0;
+    for (int a = 0; a < 3; ++a) inverse[4 * a] = m[4 * a] > 0.0 ? 1.0 / m[4 * a] : 1.0;
+  }
+  for (int a = 0; a < 3; ++a) {
+    for (int b = 0; b < 3; ++b) inverse[3 * a + b] *= mask[a] * mask[b];
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The objective (CompensationObjective::Evaluate, Gradient and AddSecondOrder).
+
+__global__ void DesiredColourKernel(int n, ColourSpace space, const double* desired, double* desired_colour) {
+  for (int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
+    const double rgb[3] = {desired[i], desired[n + i], desired[2 * n + i]};
+    double colour[3];
+    ColourAndJacobian(space, rgb, colour, nullptr);
+    for (int c = 0; c < 3; ++c) desired_colour[c * n + i] = colour[c];
+  }
+}
+
+// r_i = C(B_i) − C(Bd_i) and J_i = ∂C/∂B at B_i.
+__global__ void ResidualKernel(int n, ColourSpace space, const double* radiosity, const double* desired_colour,
+                               double* residual, double* jacobian) {
+  for (int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
+    const double rgb[3] = {radiosity[i], radiosity[n + i], radiosity[2 * n + i]};
+    double colour[3], j[9];
+    ColourAndJacobian(space, rgb, colour, j);
+    for (int c = 0; c < 3; ++c) residual[c * n + i] = colour[c] - desired_colour[c * n + i];
+    for (int k = 0; k < 9; ++k) jacobian[k * n + i] = j[k];
+  }
+}
+
+// f = Σ rᵀ W r; the gradient in B, J_iᵀ (2 W r)_i (K⁻ᵀ of it is ∇f); and the second-order term's
+// curvature Σ_k (2WR)_ik ∇²Lab_k, diagonal in XYZ (AddSecondOrder: S_i = Tᵀ diag(·) T).
+__global__ void WeightedResidualKernel(int n, ColourSpace space, Weights w, const double* radiosity,
+                                       const double* residual, const double* jacobian, double* gradient_b,
+                                       double* curvature, Scalars* scalars, Reduction reduction) {
+  double value[1] = {0.0};
+  for (int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
+    double wr[3], j[9];
+    WeightedRow(w, residual, n, i, wr);
+    LoadJacobian(jacobian, n, i, j);
+    double weighted[3];
+    for (int c = 0; c < 3; ++c) {
+      value[0] += residual[c * n + i] * wr[c];
+      weighted[c] = 2.0 * wr[c];
+    }
+    for (int b = 0; b < 3; ++b) {
+      gradient_b[b * n + i] = j[b] * weighted[0] + j[3 + b] * weighted[1] + j[6 + b] * weighted[2];
+    }
+    if (space.lab) {
+      const Eigen::Matrix3d t = RowMajor(space.rgb_to_xyz);
+      const Eigen::Vector3d xyz = t * Eigen::Vector3d(radiosity[i], radiosity[n + i], radiosity[2 * n + i]);
+      const Eigen::Vector3d curve = XyzToLabWeightedCurvature(
+          xyz, Eigen::Vector3d(space.white[0], space.white[1], space.white[2]),
+          Eigen::Vector3d(weighted[0], weighted[1], weighted[2]));
+      for (int c = 0; c < 3; ++c) curvature[c * n + i] = curve[c];
+    }
+  }
+  if (GridReduce(value, 0u, reduction.partials, reduction.counter)) scalars->value = value[0];
+}
+
+// ‖x − P(x − g)‖∞, the variables Eq. 12 fixes, and how many stay free.
+__global__ void GradientCheckKernel(long count, const double* x, const double* g, const double* lower,
+                                    const double* upper, unsigned char* fixed, Scalars* scalars,
+                                    Reduction reduction) {
+  double value[2] = {0.0, 0.0};  // max projected, free
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    const double xk = x[k], gk = g[k], l = lower[k], u = upper[k];
+    value[0] = fmax(value[0], fabs(Clamp(xk - gk, l, u) - xk));
+    const bool at_lower = xk <= l && gk > 0.0;
+    const bool at_upper = xk >= u && gk < 0.0;
+    fixed[k] = (at_lower || at_upper) ? 1 : 0;
+    value[1] += (at_lower || at_upper) ? 0.0 : 1.0;
+  }
+  if (GridReduce(value, 1u, reduction.partials, reduction.counter)) {
+    scalars->projected_gradient = value[0];
+    scalars->free_variables = value[1];
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Alg. 2 (SolveInnerQp) on q(d) = gᵀd + ½ dᵀHd, lo = l − x ≤ d ≤ hi = u − x.
+
+// ∇q = g + Hd, the mask of the free variables, and q's projected gradient at d. `first`: d = 0
+// and Hd = 0 (both written).
+__global__ void InnerStartKernel(long count, bool first, double* d, double* hd, const double* g, const double* x,
+                                 const double* lower, const double* upper, const unsigned char* fixed, double* qg,
+                                 double* mask, Scalars* scalars, Reduction reduction) {
+  const double eps = 1e-13;
+  double value[1] = {0.0};
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    double dk = 0.0, hdk = 0.0;
+    if (first) {
+      d[k] = 0.0;
+      hd[k] = 0.0;
+    } else {
+      dk = d[k];
+      hdk = hd[k];
+    }
+    const double q = g[k] + hdk;
+    const double lo = lower[k] - x[k], hi = upper[k] - x[k];
+    const bool at_lo = dk <= lo + eps * (1.0 + fabs(lo));
+    const bool at_hi = dk >= hi - eps * (1.0 + fabs(hi));
+    const bool is_fixed = fixed[k] != 0;
+    const bool bound = is_fixed || (at_lo && q > 0.0) || (at_hi && q < 0.0);
+    mask[k] = bound ? 0.0 : 1.0;
+    qg[k] = q;
+    value[0] = fmax(value[0], fabs((Clamp(dk - q, lo, hi) - dk) * (is_fixed ? 0.0 : 1.0)));
+  }
+  if (GridReduce(value, 1u, reduction.partials, reduction.counter)) scalars->inner_projected = value[0];
+}
+
+// CG on H_FF s = −∇q_F: r = −∇q ∘ mask, x = 0, the preconditioner blocks for this mask, z = P r,
+// p = z (and its copy in the products' precision).
+template <typename P>
+__global__ void CgStartKernel(int n, const double* qg, const double* mask, const double* jacobian,
+                              const double* weight_diagonal, double* x, double* r, double* b0, double* p,
+                              double* preconditioner, P* p_fast, Scalars* scalars, Reduction reduction) {
+  double value[2] = {0.0, 0.0};  // rᵀr, rᵀz
+  for (int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
+    double m[3], ri[3], j[9], block[9];
+    for (int c = 0; c < 3; ++c) {
+      const int k = c * n + i;
+      m[c] = mask[k];
+      ri[c] = -qg[k] * m[c];
+      x[k] = 0.0;
+      r[k] = ri[c];
+      b0[k] = ri[c];
+    }
+    LoadJacobian(jacobian, n, i, j);
+    FreeBlockInverse(j, weight_diagonal[i], m, block);
+    for (int e = 0; e < 9; ++e) preconditioner[e * n + i] = block[e];
+    for (int a = 0; a < 3; ++a) {
+      const double z = block[3 * a] * ri[0] + block[3 * a + 1] * ri[1] + block[3 * a + 2] * ri[2];
+      p[a * n + i] = z;
+      p_fast[a * n + i] = static_cast<P>(z);
+      value[0] += ri[a] * ri[a];
+      value[1] += ri[a] * z;
+    }
+  }
+  if (GridReduce(value, 0u, reduction.partials, reduction.counter)) {
+    CgState& cg = scalars->cg;
+    cg.r0 = sqrt(value[0]);
+    cg.rz = value[1];
+    cg.curvature = cg.step = cg.beta = 0.0;
+    cg.iterations = 0;
+    cg.done = cg.r0 == 0.0 ? 1 : 0;
+    cg.preconditioner_applications = cg.done ? 0 : 1;
+    cg.negative_first = 0;
+  }
+}
+
+// c_j = J_j u_j: patch j's part of J u.
+template <typename P>
+__device__ void ColourProduct(const double* jacobian, const P* u, int n, int j, double out[3]) {
+  const double uj[3] = {static_cast<double>(u[j]), static_cast<double>(u[n + j]), static_cast<double>(u[2 * n + j])};
+  for (int a = 0; a < 3; ++a) {
+    out[a] = jacobian[(3 * a) * n + j] * uj[0] + jacobian[(3 * a + 1) * n + j] * uj[1] +
+             jacobian[(3 * a + 2) * n + j] * uj[2];
+  }
+}
+
+// The colour-space part of a Hessian product H v = K⁻ᵀ (Jᵀ 2W J + S) K⁻¹ v, after u = K⁻¹ v:
+// back_i = J_iᵀ (2 W J u)_i + S_i u_i with S_i = Tᵀ diag(curvature_i) T; K⁻ᵀ back is H v. The
+// neighbours' J_j u_j are formed where needed (one launch, no n×3 intermediate). `gate`: nothing
+// once CG has stopped.
+template <typename P>
+__global__ void WeightedProductKernel(int n, ColourSpace space, Weights w, bool second_order, const double* jacobian,
+                                      const double* curvature, const P* u, P* back, const CgState* gate) {
+  if (gate != nullptr && gate->done) return;
+  for (int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
+    double wc[3], c[3];
+    ColourProduct(jacobian, u, n, i, c);
+    const double diagonal = w.diagonal[i];
+    for (int a = 0; a < 3; ++a) wc[a] = diagonal * c[a];
+    for (int e = w.offsets[i]; e < w.offsets[i + 1]; ++e) {
+      ColourProduct(jacobian, u, n, w.neighbours[e], c);
+      const double value = w.values[e];
+      for (int a = 0; a < 3; ++a) wc[a] += value * c[a];
+    }
+    double j[9];
+    LoadJacobian(jacobian, n, i, j);
+    double result[3];
+    for (int b = 0; b < 3; ++b) result[b] = 2.0 * (j[b] * wc[0] + j[3 + b] * wc[1] + j[6 + b] * wc[2]);
+    if (second_order) {
+      const double* t = space.rgb_to_xyz;
+      const double ui[3] = {static_cast<double>(u[i]), static_cast<double>(u[n + i]),
+                            static_cast<double>(u[2 * n + i])};
+      double scaled[3];
+      for (int a = 0; a < 3; ++a) {
+        scaled[a] = curvature[a * n + i] * (t[3 * a] * ui[0] + t[3 * a + 1] * ui[1] + t[3 * a + 2] * ui[2]);
+      }
+      for (int b = 0; b < 3; ++b) result[b] += t[b] * scaled[0] + t[3 + b] * scaled[1] + t[6 + b] * scaled[2];
+    }
+    for (int b = 0; b < 3; ++b) back[b * n + i] = static_cast<P>(result[b]);
+  }
+}
+
+// hp = (H p) ∘ mask and pᵀhp; CG stops at non-positive curvature, else takes its step length.
+template <typename P>
+__global__ void CgCurvatureKernel(long count, const P* product, const double* mask, const double* p, double* hp,
+                                  Scalars* scalars, Reduction reduction) {
+  if (scalars->cg.done) return;
+  double value[1] = {0.0};
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    const double h = static_cast<double>(product[k]) * mask[k];
+    hp[k] = h;
+    value[0] += p[k] * h;
+  }
+  if (GridReduce(value, 0u, reduction.partials, reduction.counter)) {
+    CgState& cg = scalars->cg;
+    ++cg.iterations;
+    const double curvature = value[0];
+    cg.curvature = curvature;
+    if (!(curvature > 0.0)) {
+      cg.done = 1;
+      cg.negative_first = cg.iterations == 1 ? 1 : 0;
+    } else {
+      cg.step = cg.rz / curvature;
+    }
+  }
+}
+
+// x += step p, r −= step hp, z = P r; CG stops once ‖r‖ ≤ tolerance ‖r0‖ or at the iteration limit.
+__global__ void CgUpdateKernel(int n, const double* p, const double* hp, const double* preconditioner, double* x,
+                               double* r, double* z, double tolerance, int max_iterations, Scalars* scalars,
+                               Reduction reduction) {
+  if (scalars->cg.done) return;
+  const double step = scalars->cg.step;
+  double value[2] = {0.0, 0.0};  // rᵀr, rᵀz
+  for (int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
+    double ri[3];
+    for (int c = 0; c < 3; ++c) {
+      const int k = c * n + i;
+      x[k] += step * p[k];
+      ri[c] = r[k] - step * hp[k];
+      r[k] = ri[c];
+      value[0] += ri[c] * ri[c];
+    }
+    for (int a = 0; a < 3; ++a) {
+      const double za = preconditioner[(3 * a) * n + i] * ri[0] + preconditioner[(3 * a + 1) * n + i] * ri[1] +
+                        preconditioner[(3 * a + 2) * n + i] * ri[2];
+      z[a * n + i] = za;
+      value[1] += ri[a] * za;
+    }
+  }
+  if (GridReduce(value, 0u, reduction.partials, reduction.counter)) {
+    CgState& cg = scalars->cg;
+    if (sqrt(value[0]) <= tolerance * cg.r0) {
+      cg.done = 1;
+    } else {
+      ++cg.preconditioner_applications;
+      cg.beta = value[1] / cg.rz;
+      cg.rz = value[1];
+      if (cg.iterations >= max_iterations) cg.done = 1;
+    }
+  }
+}
+
+// p = z + β p.
+template <typename P>
+__global__ void CgDirectionKernel(long count, const double* z, double* p, P* p_fast, const Scalars* scalars) {
+  if (scalars->cg.done) return;
+  const double beta = scalars->cg.beta;
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    const double value = z[k] + beta * p[k];
+    p[k] = value;
+    p_fast[k] = static_cast<P>(value);
+  }
+}
+
+// CG's solution s (p after negative curvature in the first iteration, else x), its curvature
+// sᵀHs = xᵀ(b − r) (from CG's residual), max |s|, non-finite entries, ∇qᵀs, and Alg. 2's first
+// step length: the minimiser along s.
+__global__ void CgFinishKernel(long count, const double* x, const double* b0, const double* r, const double* p,
+                               const double* qg, double* solution, Scalars* scalars, Reduction reduction) {
+  const bool negative = scalars->cg.negative_first != 0;
+  double value[4] = {0.0, 0.0, 0.0, 0.0};  // curvature, max, non-finite, slope
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    const double s = negative ? p[k] : x[k];
+    solution[k] = s;
+    value[0] += x[k] * (b0[k] - r[k]);
+    value[1] = fmax(value[1], fabs(s));
+    value[2] += isfinite(s) ? 0.0 : 1.0;
+    value[3] += qg[k] * s;
+  }
+  if (GridReduce(value, 2u, reduction.partials, reduction.counter)) {
+    const double curvature = negative ? scalars->cg.curvature : value[0];
+    scalars->solution_curvature = curvature;
+    scalars->solution_max = value[1];
+    scalars->solution_nonfinite = value[2];
+    scalars->solution_slope = value[3];
+    const double minimiser = -value[3] / curvature;
+    scalars->alpha = curvature > 0.0 ? Max(minimiser, 0.0) : 1.0;
+  }
+}
+
+// A step of Alg. 2: trial = P(d + α s) within [lo, hi], δ = trial − d, whether the projection cut
+// (max |δ − α s| > 0) and ∇qᵀδ. α from `alpha_on_device` when given (CgFinishKernel's), else
+// `alpha`.
+__global__ void StepTrialKernel(long count, const double* d, const double* solution, const double* x,
+                                const double* lower, const double* upper, const double* qg, double alpha,
+                                const double* alpha_on_device, double* trial, double* delta, Scalars* scalars,
+                                Reduction reduction) {
+  const double a = alpha_on_device != nullptr ? *alpha_on_device : alpha;
+  double value[2] = {0.0, 0.0};  // max cut, slope
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    const double lo = lower[k] - x[k], hi = upper[k] - x[k];
+    const double t = Clamp(d[k] + a * solution[k], lo, hi);
+    const double dk = t - d[k];
+    trial[k] = t;
+    delta[k] = dk;
+    value[0] = fmax(value[0], fabs(dk - a * solution[k]));
+    value[1] += qg[k] * dk;
+  }
+  if (GridReduce(value, 1u, reduction.partials, reduction.counter)) {
+    scalars->cut = value[0];
+    scalars->delta_slope = value[1];
+  }
+}
+
+template <typename P>
+__global__ void ToPrecisionKernel(long count, const double* v, P* out) {
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    out[k] = static_cast<P>(v[k]);
+  }
+}
+
+// δᵀ(Hδ).
+template <typename P>
+__global__ void QuadraticKernel(long count, const double* delta, const P* product, Scalars* scalars,
+                                Reduction reduction) {
+  double value[1] = {0.0};
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    value[0] += delta[k] * static_cast<double>(product[k]);
+  }
+  if (GridReduce(value, 0u, reduction.partials, reduction.counter)) scalars->quadratic = value[0];
+}
+
+// d = trial; Hd += Hδ when `accumulate`.
+template <typename P>
+__global__ void AcceptStepKernel(long count, const double* trial, const P* product, bool accumulate, double* d,
+                                 double* hd) {
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    d[k] = trial[k];
+    if (accumulate) hd[k] += static_cast<double>(product[k]);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Alg. 1's direction and Armijo search.
+
+// ∇fᵀd and d's non-finite entries.
+__global__ void DirectionSlopeKernel(long count, const double* g, const double* d, Scalars* scalars,
+                                     Reduction reduction) {
+  double value[2] = {0.0, 0.0};
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    value[0] += g[k] * d[k];
+    value[1] += isfinite(d[k]) ? 0.0 : 1.0;
+  }
+  if (GridReduce(value, 0u, reduction.partials, reduction.counter)) {
+    scalars->direction_slope = value[0];
+    scalars->direction_nonfinite = value[1];
+  }
+}
+
+// The projected steepest-descent direction d = P(x − g) − x and ∇fᵀd.
+__global__ void SteepestDirectionKernel(long count, const double* x, const double* g, const double* lower,
+                                        const double* upper, double* d, Scalars* scalars, Reduction reduction) {
+  double value[1] = {0.0};
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    const double dk = Clamp(x[k] - g[k], lower[k], upper[k]) - x[k];
+    d[k] = dk;
+    value[0] += g[k] * dk;
+  }
+  if (GridReduce(value, 0u, reduction.partials, reduction.counter)) {
+    scalars->direction_slope = value[0];
+    scalars->direction_nonfinite = 0.0;
+  }
+}
+
+// out = P(x + step d).
+__global__ void LineTrialKernel(long count, const double* x, const double* d, double step, const double* lower,
+                                const double* upper, double* out) {
+  for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
+       k += static_cast<long>(gridDim.x) * blockDim.x) {
+    out[k] = Clamp(x[k] + step * d[k], lower[k], upper[k]);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Device memory, kept between calls.
+
+// One region carved into the loop's arrays; grown (never shrunk) when a larger problem comes.
+// Carving runs twice: once measuring (Measure, then Take returns null), once for real (after
+// Allocate).
+class Workspace {
+ public:
+  void Measure() {
+    measuring_ = true;
+    used_ = 0;
+  }
+  void Allocate() {
+    const size_t bytes = used_;
+    if (bytes > capacity_) {
+      if (base_ != nullptr) PROCAM_CUDA(cudaFree(base_));
+      base_ = nullptr;
+      capacity_ = 0;
+      PROCAM_CUDA(cudaMalloc(&base_, bytes));
+      capacity_ = bytes;
+    }
+    measuring_ = false;
+    used_ = 0;
+  }
+  template <typename T>
+  T* Take(size_t count) {
+    const size_t bytes = (std::max<size_t>(count, 1) * sizeof(T) + 255) / 256 * 256;
+    used_ += bytes;
+    if (measuring_) return nullptr;
+    if (used_ > capacity_) throw std::logic_error("resident GPU solve: workspace carved past its size");
+    return reinterpret_cast<T*>(static_cast<char*>(base_) + used_ - bytes);
+  }
+
+  // The loop's stream (where the radiosity solves name none), the device scalars and their
+  // pinned host copy, made once.
+  cudaStream_t stream() {
+    if (stream_ == nullptr) PROCAM_CUDA(cudaStreamCreateWithFlags(&stream_, cudaStreamNonBlocking));
+    return stream_;
+  }
+  Scalars* device_scalars() {
+    if (device_scalars_ == nullptr) {
+      PROCAM_CUDA(cudaMalloc(&device_scalars_, sizeof(Scalars)));
+      PROCAM_CUDA(cudaMalloc(&partials_, kMaxReduced * kMaxBlocks * sizeof(double)));
+      PROCAM_CUDA(cudaMalloc(&counter_, sizeof(unsigned)));
+      PROCAM_CUDA(cudaMallocHost(&host_scalars_, sizeof(Scalars)));
+    }
+    return device_scalars_;
+  }
+  Scalars* host_scalars() { return host_scalars_; }
+  Reduction reduction() const { return {partials_, counter_}; }
+
+ private:
+  void* base_ = nullptr;
+  size_t capacity_ = 0, used_ = 0;
+  bool measuring_ = false;
+  cudaStream_t stream_ = nullptr;
+  Scalars* device_scalars_ = nullptr;
+  Scalars* host_scalars_ = nullptr;
+  double* partials_ = nullptr;
+  unsigned* counter_ = nullptr;
+};
+
+// Never destroyed (the runtime may be torn down before static destructors run), as the handles
+// of cuda_dense.cu.
+Workspace& SharedWorkspace() {
+  static Workspace* workspace = new Workspace;
+  return *workspace;
+}
+std::mutex& WorkspaceMutex() {
+  static std::mutex* mutex = new std::mutex;
+  return *mutex;
+}
+
+using Clock = std::chrono::steady_clock;
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// Opt-in diagnostics: with PROCAM_CUDA_SOLVER_PROFILE=1 every resident solve prints to stderr
+// where its time went (enqueueing on the host, waiting for the device) and the unit costs of its
+// operations, measured after the solve. Off: nothing is counted or timed.
+bool ProfileEnabled() {
+  static const bool enabled = [] {
+    const char* value = std::getenv("PROCAM_CUDA_SOLVER_PROFILE");
+    return value != nullptr && std::string(value) != "0";
+  }();
+  return enabled;
+}
+
+// Everything the objective knows at one point (ObjectivePoint).
+struct Point {
+  double* emittance;
+  double* radiosity;
+  double* residual;
+  double* jacobian;    // 9 planes of n
+  double* gradient_b;  // J_iᵀ (2 W r)_i
+  double* curvature;   // second-order term, diagonal in XYZ
+};
+
+// Whether the dense path replays its fixed sequences as CUDA graphs (PROCAM_CUDA_GRAPHS=0: plain
+// launches, for comparison).
+bool GraphsEnabled() {
+  static const bool enabled = [] {
+    const char* value = std::getenv("PROCAM_CUDA_GRAPHS");
+    return value == nullptr || std::string(value) != "0";
+  }();
+  return enabled;
+}
+
+// The loop's fixed sequences of device work, each replayed as one CUDA graph.
+enum class Sequence {
+  kHead,         // gradient, its check, Alg. 2's start and CG's start
+  kCgIteration,  // one CG iteration
+  kTail,         // CG's finish and Alg. 2's first trial step
+  kFirstTrial,   // the direction's slope and the Armijo search's first trial
+  kCount
+};
+
+// Problems below this many patches are launch-bound: CG's first read of its state comes after
+// one iteration fewer than the last Newton system took (an iteration enqueued past CG's end costs
+// its two products, ~3× a read on the H100, so the guess errs low), then after every iteration.
+// Above, each iteration's products cost far more than a read: one iteration per read.
+constexpr int kSmallPatches = 4096;
+
+// The loop; P is the precision of the Hessian products' vectors (float: the dense float32 K⁻¹;
+// double: the matrix-free CG).
+template <typename P>
+class Loop {
+ public:
+  Loop(const ResidentOptions& options, const ResidentProblem& problem, const DeviceRadiosity& radiosity,
+       Workspace* workspace)
+      : options_(options), radiosity_(radiosity), n_(problem.patches), count_(3L * problem.patches) {
+    stream_ = radiosity.stream() != nullptr ? radiosity.stream() : workspace->stream();
+    scalars_ = workspace->device_scalars();
+    host_ = workspace->host_scalars();
+    reduction_ = workspace->reduction();
+    const size_t n = static_cast<size_t>(n_), vector = 3 * n;
+    const int entries = problem.neighbour_offsets[n_];
+    workspace->Measure();
+    Carve(workspace, entries);
+    workspace->Allocate();
+    Carve(workspace, entries);
+
+    const size_t bytes = vector * sizeof(double);
+    PROCAM_CUDA(cudaMemsetAsync(reduction_.counter, 0, sizeof(unsigned), stream_));
+    PROCAM_CUDA(cudaMemcpyAsync(lower_, problem.lower, bytes, cudaMemcpyHostToDevice, stream_));
+    PROCAM_CUDA(cudaMemcpyAsync(upper_, problem.upper, bytes, cudaMemcpyHostToDevice, stream_));
+    PROCAM_CUDA(cudaMemcpyAsync(current_.emittance, problem.initial, bytes, cudaMemcpyHostToDevice, stream_));
+    PROCAM_CUDA(cudaMemcpyAsync(weight_diagonal_, problem.weight_diagonal, n * sizeof(double),
+                                cudaMemcpyHostToDevice, stream_));
+    PROCAM_CUDA(cudaMemcpyAsync(offsets_, problem.neighbour_offsets, (n + 1) * sizeof(int), cudaMemcpyHostToDevice,
+                                stream_));
+    if (entries > 0) {
+      PROCAM_CUDA(cudaMemcpyAsync(neighbours_, problem.neighbours, entries * sizeof(int), cudaMemcpyHostToDevice,
+                                  stream_));
+      PROCAM_CUDA(cudaMemcpyAsync(neighbour_weights_, problem.neighbour_weights, entries * sizeof(double),
+                                  cudaMemcpyHostToDevice, stream_));
+    }
+    weights_ = {weight_diagonal_, offsets_, neighbours_, neighbour_weights_};
+    for (int k = 0; k < 9; ++k) {
+      space_.rgb_to_xyz[k] = problem.rgb_to_xyz[k];
+      space_.linear[k] = problem.linear_colour[k];
+    }
+    for (int c = 0; c < 3; ++c) space_.white[c] = problem.white_xyz[c];
+    space_.lab = problem.lab ? 1 : 0;
+    second_order_ = problem.lab && options.second_order;
+    // The desired colours, through the trial point's emittance as staging.
+    PROCAM_CUDA(cudaMemcpyAsync(trial_.emittance, problem.desired, bytes, cudaMemcpyHostToDevice, stream_));
+    DesiredColourKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, trial_.emittance, desired_colour_);
+    Launched("DesiredColourKernel");
+    small_ = n_ < kSmallPatches;
+    graphs_ = !radiosity.iterative() && GraphsEnabled();
+  }
+
+  ~Loop() {
+    for (auto& by_parity : graphs_by_parity_) {
+      for (cudaGraphExec_t graph : by_parity) {
+        if (graph != nullptr) cudaGraphExecDestroy(graph);
+      }
+    }
+  }
+  Loop(const Loop&) = delete;
+  Loop& operator=(const Loop&) = delete;
+
+  // Every device array of the loop, from `workspace`.
+  void Carve(Workspace* workspace, int entries) {
+    const size_t n = static_cast<size_t>(n_), vector = 3 * n;
+    for (Point* point : {&current_, &trial_}) {
+      point->emittance = workspace->Take<double>(vector);
+      point->radiosity = workspace->Take<double>(vector);
+      point->residual = workspace->Take<double>(vector);
+      point->jacobian = workspace->Take<double>(9 * n);
+      point->gradient_b = workspace->Take<double>(vector);
+      point->curvature = workspace->Take<double>(vector);
+    }
+    for (double** array : {&lower_, &upper_, &desired_colour_, &gradient_, &d_, &hd_, &qg_, &mask_, &x_, &r_, &b0_,
+                           &p_, &z_, &hp_, &solution_, &delta_, &step_trial_}) {
+      *array = workspace->Take<double>(vector);
+    }
+    preconditioner_ = workspace->Take<double>(9 * n);
+    for (P** array : {&p_fast_, &u_fast_, &back_fast_, &product_fast_}) *array = workspace->Take<P>(vector);
+    weight_diagonal_ = workspace->Take<double>(n);
+    offsets_ = workspace->Take<int>(n + 1);
+    neighbours_ = workspace->Take<int>(entries);
+    neighbour_weights_ = workspace->Take<double>(entries);
+    fixed_ = workspace->Take<unsigned char>(vector);
+  }
+
+  void Run(double* emittance, ResidentSummary* summary) {
+    const auto start = Clock::now();
+    Evaluate(current_);
+    Sync();
+    ++summary->evaluations;
+    double cost = host_->value;
+    summary->initial_cost = cost;
+    summary->trace.push_back({0, cost, SecondsSince(start), 0.0, 3 * n_, 0, 0.0});
+    summary->termination = ResidentTermination::kMaxIterations;
+    if (!std::isfinite(cost)) {
+      summary->termination = ResidentTermination::kNumericalFailure;
+      summary->message = "objective is not finite at the start";
+      summary->final_cost = cost;
+      Download(current_.emittance, emittance);
+      return;
+    }
+    // Products enqueued ahead of a read only where they are cheap (not matrix-free).
+    const bool ahead = !radiosity_.iterative();
+    int expected_cg = 1;  // CG iterations of the last Newton system
+    for (int iteration = 1; iteration <= options_.max_iterations; ++iteration) {
+      // The gradient, and Alg. 2's first inner iteration with CG started (and run ahead) before
+      // the host knows whether the gradient test stops the loop.
+      Enqueue(Sequence::kHead, [&] {
+        Gradient(current_);
+        GradientCheck();
+        InnerStart(/*first=*/true);
+        if (ahead) CgStart();
+      });
+      ++summary->gradients;
+      if (ahead) {
+        CgIterations(FirstBatch(expected_cg));
+        CgFinish();
+      }
+      Sync();
+      const double projected = host_->projected_gradient;
+      summary->trace.back().projected_gradient = projected;
+      if (projected <= options_.gradient_tolerance * (1.0 + cost)) {
+        summary->termination = ResidentTermination::kGradientTolerance;
+        break;
+      }
+      const int free_variables = static_cast<int>(host_->free_variables);
+      int cg = 0;
+      int products = 0;
+      int preconditioner_applications = 0;
+      SolveInnerQp(ahead, &expected_cg, summary, &cg, &products, &preconditioner_applications);
+      summary->cg_iterations += cg;
+      summary->hessian_products += products;
+      summary->preconditioner_applications += preconditioner_applications;
+
+      // The direction's slope and the Armijo search's first trial (a = 1), read together.
+      Enqueue(Sequence::kFirstTrial, [&] {
+        DirectionSlopeKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, gradient_, d_, scalars_, reduction_);
+        Launched("DirectionSlopeKernel");
+        LineTrial(1.0);
+        Evaluate(trial_);
+      });
+      Sync();
+      double slope = host_->direction_slope;
+      bool first_trial_evaluated = true;
+      if (host_->direction_nonfinite > 0.0 || !(slope < 0.0)) {
+        // Fall back to the projected steepest-descent step.
+        SteepestDirectionKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, gradient_,
+                                                                          lower_, upper_, d_, scalars_, reduction_);
+        Launched("SteepestDirectionKernel");
+        Sync();
+        slope = host_->direction_slope;
+        first_trial_evaluated = false;
+      }
+      double step = 1.0;
+      double trial_cost = 0.0;
+      bool accepted = false;
+      for (int halving = 0; halving < 40; ++halving, step *= 0.5) {
+        if (halving > 0 || !first_trial_evaluated) {
+          LineTrial(step);
+          Evaluate(trial_);
+          Sync();
+        }
+        ++summary->evaluations;
+        trial_cost = host_->value;
+        if (std::isfinite(trial_cost) && trial_cost <= cost + options_.armijo * step * slope) {
+          accepted = true;
+          break;
+        }
+      }
+      summary->iterations = iteration;
+      if (!accepted) {
+        summary->termination = ResidentTermination::kLineSearchFailure;
+        summary->message = "no Armijo step along the Gauss-Newton direction";
+        break;
+      }
+      const double previous = cost;
+      std::swap(current_, trial_);
+      parity_ ^= 1;
+      cost = trial_cost;
+      summary->trace.push_back({iteration, cost, SecondsSince(start), step, free_variables, cg, 0.0});
+      if (options_.progress) options_.progress(iteration, cost, SecondsSince(start));
+      if (previous - cost <= options_.function_tolerance * previous) {
+        summary->termination = ResidentTermination::kFunctionTolerance;
+        Gradient(current_);
+        GradientCheck();
+        Sync();
+        summary->trace.back().projected_gradient = host_->projected_gradient;
+        break;
+      }
+    }
+    summary->final_cost = cost;
+    Download(current_.emittance, emittance);
+    if (ProfileEnabled()) PrintProfile(SecondsSince(start));
+  }
+
+ private:
+  void Launched(const char* name) {
+    Check(cudaGetLastError(), name);
+    ++profile_.launches;
+  }
+
+  // The scalars to the host; waits for everything enqueued.
+  void Sync() {
+    PROCAM_CUDA(cudaMemcpyAsync(host_, scalars_, sizeof(Scalars), cudaMemcpyDeviceToHost, stream_));
+    const auto start = Clock::now();
+    PROCAM_CUDA(cudaStreamSynchronize(stream_));
+    ++profile_.syncs;
+    profile_.sync_seconds += SecondsSince(start);
+  }
+
+  // Enqueues `sequence` (whose device work depends on nothing but the sequence and which point
+  // buffer is current): replayed from a CUDA graph on the dense path, captured at its second use
+  // (the first runs directly, so that cuBLAS has set itself up outside the capture); enqueued
+  // directly on the matrix-free path, whose solves read their residuals on the host, or where a
+  // capture failed.
+  template <typename Work>
+  void Enqueue(Sequence sequence, const Work& work) {
+    if (!graphs_) {
+      work();
+      return;
+    }
+    const int s = static_cast<int>(sequence);
+    cudaGraphExec_t& graph = graphs_by_parity_[s][parity_];
+    if (graph == nullptr) {
+      if (uses_[s][parity_]++ == 0 || !Capture(work, &graph)) {
+        work();
+        return;
+      }
+    }
+    PROCAM_CUDA(cudaGraphLaunch(graph, stream_));
+    ++profile_.graph_launches;
+  }
+
+  // Records `work` into `graph`; false (graphs off from then on) where the capture or the
+  // instantiation failed.
+  template <typename Work>
+  bool Capture(const Work& work, cudaGraphExec_t* graph) {
+    if (cudaStreamBeginCapture(stream_, cudaStreamCaptureModeThreadLocal) != cudaSuccess) {
+      cudaGetLastError();
+      graphs_ = false;
+      return false;
+    }
+    bool recorded = true;
+    try {
+      work();
+    } catch (const std::exception&) {
+      recorded = false;
+    }
+    cudaGraph_t captured = nullptr;
+    const bool ended = cudaStreamEndCapture(stream_, &captured) == cudaSuccess && captured != nullptr;
+    const bool ok = recorded && ended && cudaGraphInstantiate(graph, captured, 0) == cudaSuccess;
+    if (captured != nullptr) cudaGraphDestroy(captured);
+    if (!ok) {
+      *graph = nullptr;
+      cudaGetLastError();
+      graphs_ = false;
+    }
+    return ok;
+  }
+
+  // PROCAM_CUDA_SOLVER_PROFILE: the solve's counts, then unit costs in µs (time to enqueue one,
+  // and per operation until the device has finished a run of them).
+  void PrintProfile(double loop_seconds) {
+    const Profile counted = profile_;
+    const int repeats = radiosity_.iterative() ? 5 : 100;
+    const auto unit = [&](int count, const auto& enqueue, double* enqueue_us, double* complete_us) {
+      PROCAM_CUDA(cudaStreamSynchronize(stream_));
+      const auto start = Clock::now();
+      for (int k = 0; k < count; ++k) enqueue();
+      *enqueue_us = 1e6 * SecondsSince(start) / count;
+      PROCAM_CUDA(cudaStreamSynchronize(stream_));
+      *complete_us = 1e6 * SecondsSince(start) / count;
+    };
+    double kernel[2], fast[2], solve[2], sync[2];
+    unit(100, [&] { ToPrecisionKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, p_fast_); },
+         &kernel[0], &kernel[1]);
+    unit(repeats, [&] { SolveFast(p_fast_, false, u_fast_); }, &fast[0], &fast[1]);
+    unit(repeats, [&] { radiosity_.Solve(current_.emittance, false, trial_.radiosity, stream_); }, &solve[0],
+         &solve[1]);
+    unit(100, [&] { Sync(); }, &sync[0], &sync[1]);
+    std::fprintf(stderr,
+                 "resident profile: %d patches, loop %.3f ms: %d syncs waiting %.3f ms, %d kernels, %d solves, "
+                 "%d fast solves enqueued directly, %d graph launches (graphs %s); unit costs, µs to enqueue / to "
+                 "complete: kernel %.1f / %.1f, fast solve %.1f / %.1f, solve %.1f / %.1f, sync %.1f\n",
+                 n_, 1e3 * loop_seconds, counted.syncs, 1e3 * counted.sync_seconds, counted.launches, counted.solves,
+                 counted.fast_solves, counted.graph_launches, graphs_ ? "on" : "off", kernel[0], kernel[1], fast[0],
+                 fast[1], solve[0], solve[1], sync[1]);
+  }
+
+  void Download(const double* device, double* host) {
+    PROCAM_CUDA(cudaMemcpyAsync(host, device, count_ * sizeof(double), cudaMemcpyDeviceToHost, stream_));
+    PROCAM_CUDA(cudaStreamSynchronize(stream_));
+  }
+
+  void SolveFast(const P* y, bool transposed, P* x) {
+    radiosity_.SolveFast(y, transposed, x, stream_);
+    ++profile_.fast_solves;
+  }
+
+  // result = H v (GaussNewtonProduct with fast solves); `gate`: skipped once CG has stopped
+  // (the solves themselves still run).
+  void Product(const P* v, P* result, const CgState* gate) {
+    SolveFast(v, false, u_fast_);
+    WeightedProductKernel<P><<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, weights_, second_order_,
+                                                                    current_.jacobian, current_.curvature, u_fast_,
+                                                                    back_fast_, gate);
+    Launched("WeightedProductKernel");
+    SolveFast(back_fast_, true, result);
+  }
+
+  // Fills `point` at point.emittance; f lands in the scalars.
+  void Evaluate(const Point& point) {
+    radiosity_.Solve(point.emittance, false, point.radiosity, stream_);
+    ++profile_.solves;
+    ResidualKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, point.radiosity, desired_colour_, point.residual,
+                                                          point.jacobian);
+    Launched("ResidualKernel");
+    WeightedResidualKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, weights_, point.radiosity,
+                                                                  point.residual, point.jacobian, point.gradient_b,
+                                                                  point.curvature, scalars_, reduction_);
+    Launched("WeightedResidualKernel");
+  }
+
+  void Gradient(const Point& point) {
+    radiosity_.Solve(point.gradient_b, true, gradient_, stream_);
+    ++profile_.solves;
+  }
+
+  void GradientCheck() {
+    GradientCheckKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, gradient_, lower_,
+                                                                   upper_, fixed_, scalars_, reduction_);
+    Launched("GradientCheckKernel");
+  }
+
+  void LineTrial(double step) {
+    LineTrialKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, d_, step, lower_, upper_,
+                                                               trial_.emittance);
+    Launched("LineTrialKernel");
+  }
+
+  // ∇q, the mask and q's projected gradient (first: at d = 0).
+  void InnerStart(bool first) {
+    InnerStartKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, first, d_, hd_, gradient_,
+                                                                current_.emittance, lower_, upper_, fixed_, qg_,
+                                                                mask_, scalars_, reduction_);
+    Launched("InnerStartKernel");
+  }
+
+  // Alg. 2's later inner iterations: InnerStart, and with `ahead` CG started and `iterations` of
+  // it enqueued with its finish and first trial step (all read at the next Sync).
+  void StartInner(bool first, bool ahead, int iterations) {
+    InnerStart(first);
+    if (ahead) {
+      CgStart();
+      CgIterations(FirstBatch(iterations));
+      CgFinish();
+    }
+  }
+
+  // CG iterations enqueued before the first read of CG's state, given the last system's count.
+  int FirstBatch(int expected) const { return small_ ? std::max(1, expected - 1) : 1; }
+
+  void CgStart() {
+    CgStartKernel<P><<<Blocks(n_), kThreads, 0, stream_>>>(n_, qg_, mask_, current_.jacobian, weight_diagonal_, x_,
+                                                            r_, b0_, p_, preconditioner_, p_fast_, scalars_,
+                                                            reduction_);
+    Launched("CgStartKernel");
+  }
+
+  // NewtonSystem::SolveMasked's loop body, `iterations` times (no-ops once CG has stopped).
+  void CgIterations(int iterations) {
+    for (int i = 0; i < iterations; ++i) Enqueue(Sequence::kCgIteration, [&] { CgIteration(); });
+  }
+
+  void CgIteration() {
+    Product(p_fast_, product_fast_, &scalars_->cg);
+    CgCurvatureKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, product_fast_, mask_, p_, hp_, scalars_,
+                                                                    reduction_);
+    Launched("CgCurvatureKernel");
+    CgUpdateKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, p_, hp_, preconditioner_, x_, r_, z_,
+                                                          options_.cg_tolerance, options_.max_cg_iterations, scalars_,
+                                                          reduction_);
+    Launched("CgUpdateKernel");
+    CgDirectionKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, z_, p_, p_fast_, scalars_);
+    Launched("CgDirectionKernel");
+  }
+
+  // CG's solution and Alg. 2's first trial step along it (with CgFinishKernel's step length).
+  void CgFinish() {
+    Enqueue(Sequence::kTail, [&] { CgFinishDirect(); });
+  }
+
+  void CgFinishDirect() {
+    CgFinishKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, x_, b0_, r_, p_, qg_, solution_, scalars_,
+                                                              reduction_);
+    Launched("CgFinishKernel");
+    StepTrial(0.0, &scalars_->alpha);
+  }
+
+  void StepTrial(double alpha, const double* alpha_on_device) {
+    StepTrialKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, d_, solution_, current_.emittance, lower_,
+                                                               upper_, qg_, alpha, alpha_on_device, step_trial_,
+                                                               delta_, scalars_, reduction_);
+    Launched("StepTrialKernel");
+  }
+
+  // Alg. 2 (SolveInnerQp) from d = 0: leaves the step in d_. The first inner iteration's start
+  // is already enqueued and read (StartInner(true, ...) before the last Sync).
+  void SolveInnerQp(bool ahead, int* expected_cg, ResidentSummary* summary, int* cg_total, int* products,
+                    int* preconditioner_applications) {
+    double first_norm = -1.0;
+    for (int inner = 0; inner < options_.max_inner_iterations; ++inner) {
+      if (inner > 0) {
+        StartInner(/*first=*/false, ahead, *expected_cg);
+        Sync();
+      }
+      const double projected = host_->inner_projected;
+      if (first_norm < 0.0) first_norm = projected;
+      if (projected <= options_.cg_tolerance * first_norm || projected == 0.0) break;
+      ++summary->inner_iterations;
+      if (!ahead) {
+        CgStart();
+        CgFinish();
+        Sync();
+      }
+      while (!host_->cg.done) {
+        CgIterations(1);
+        CgFinish();
+        Sync();
+      }
+      const int iterations = host_->cg.iterations;
+      *cg_total += iterations;
+      *products += iterations;
+      *preconditioner_applications += host_->cg.preconditioner_applications;
+      *expected_cg = std::max(1, iterations);
+      if (host_->solution_nonfinite > 0.0 || host_->solution_max == 0.0) break;
+      // The minimiser along the step, then projection; halve until q decreases enough (the
+      // first trial is CgFinish's).
+      const bool last_inner = inner + 1 == options_.max_inner_iterations;
+      const double curvature = host_->solution_curvature;
+      double alpha = host_->alpha;
+      bool accepted = false;
+      for (int halving = 0; halving < 30 && alpha > 0.0; ++halving, alpha *= 0.5) {
+        if (halving > 0) {
+          StepTrial(alpha, nullptr);
+          Sync();
+        }
+        const bool cut = host_->cut > 0.0;
+        const double delta_slope = host_->delta_slope;
+        double quadratic = alpha * alpha * curvature;
+        if (cut || !last_inner) {
+          // δ in the products' precision, through CG's p (CG is done with it).
+          ToPrecisionKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, p_fast_);
+          Launched("ToPrecisionKernel");
+          Product(p_fast_, product_fast_, nullptr);
+          ++*products;
+          QuadraticKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, product_fast_, scalars_,
+                                                                        reduction_);
+          Launched("QuadraticKernel");
+          Sync();
+          if (cut) quadratic = host_->quadratic;
+        }
+        const double change = delta_slope + 0.5 * quadratic;
+        if (change <= 1e-4 * delta_slope && change < 0.0) {
+          AcceptStepKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, step_trial_, product_fast_,
+                                                                         !last_inner, d_, hd_);
+          Launched("AcceptStepKernel");
+          accepted = true;
+          break;
+        }
+      }
+      if (!accepted) break;
+    }
+  }
+
+  struct Profile {
+    int syncs = 0, launches = 0, solves = 0, fast_solves = 0, graph_launches = 0;
+    double sync_seconds = 0.0;  // the host waiting in cudaStreamSynchronize
+  };
+
+  const ResidentOptions& options_;
+  const DeviceRadiosity& radiosity_;
+  Profile profile_;
+  // CUDA graphs of the sequences, per parity (which point buffer is current_).
+  bool graphs_ = false;
+  int parity_ = 0;
+  cudaGraphExec_t graphs_by_parity_[static_cast<int>(Sequence::kCount)][2] = {};
+  int uses_[static_cast<int>(Sequence::kCount)][2] = {};
+  const int n_;
+  const long count_;  // variables, 3n
+  bool small_ = true;
+  bool second_order_ = false;
+  cudaStream_t stream_ = nullptr;
+  Scalars* scalars_ = nullptr;  // device
+  Scalars* host_ = nullptr;     // pinned host copy, as of the last Sync
+  Reduction reduction_{};
+  ColourSpace space_{};
+  Weights weights_{};
+  Point current_{}, trial_{};
+  double *lower_, *upper_, *desired_colour_, *gradient_, *d_, *hd_, *qg_, *mask_;
+  double *x_, *r_, *b0_, *p_, *z_, *hp_, *solution_, *delta_, *step_trial_, *preconditioner_;
+  P *p_fast_, *u_fast_, *back_fast_, *product_fast_;
+  double *weight_diagonal_, *neighbour_weights_;
+  int *offsets_, *neighbours_;
+  unsigned char* fixed_;
+};
+
+}  // namespace
+
+void MinimiseResident(const ResidentOptions& options, const ResidentProblem& problem, const DeviceRadiosity& radiosity,
+                      double* emittance, ResidentSummary* summary) {
+  if (problem.patches <= 0) throw std::invalid_argument("resident GPU solve: no patches");
+  std::lock_guard<std::mutex> lock(WorkspaceMutex());
+  Workspace& workspace = SharedWorkspace();
+  if (radiosity.single()) {
+    Loop<float>(options, problem, radiosity, &workspace).Run(emittance, summary);
+  } else {
+    Loop<double>(options, problem, radiosity, &workspace).Run(emittance, summary);
+  }
+}
+
+}  // namespace procam::cuda

@@ -1,0 +1,37 @@
+#pragma once
+// The device-resident GPU solver (built with PROCAM_WITH_CUDA; procam/config.h says whether):
+// Alg. 1 (active-set Gauss–Newton) with Alg. 2 (modified projected Newton) and the Armijo search
+// of MinimiseBounded (solver.h), for the perceptual and linear methods, with the whole loop on the
+// device. Solve calls it for SolverOptions::device = Device::kCuda unless device_host_loop.
+//
+// What runs where (cuda_solver.cu; docs/gpu.md has the measurements):
+//   device  K⁻¹ and K⁻ᵀ (the dense float64/float32 K⁻¹ of cuda_radiosity.h as cuBLAS products,
+//           or the matrix-free CG of cuda_compressed.h), per-patch colour, residual, Jacobian
+//           and second-order term, products with W (the adjacency in CSR form), objective,
+//           gradient, projected gradient and active set, CG on the free variables, its
+//           preconditioner, Alg. 2's projected step and the Armijo trials;
+//   host    the control flow, reading back a few scalars per step (costs, slopes, CG's state),
+//           and the records of the summary.
+// The algorithm and its stopping rules are MinimiseBounded's, with one difference: CG is
+// preconditioned by the inverses of the 3×3 diagonal blocks of M_FF (block Jacobi) instead of a
+// sparse factorisation of M_FF, whatever SolverOptions::preconditioner says. Values, gradients
+// and line searches are float64; the Hessian products of CG use the same reduced-precision solves
+// as the host loop (the dense float32 K⁻¹; the matrix-free CG at its fast tolerance).
+// SolverOptions::device_float32 is not used (the host loop's option).
+
+#include <Eigen/Core>
+
+#include "compensation/objective.h"
+#include "compensation/solver.h"
+
+namespace procam {
+
+// MinimiseBounded on the device: the same outer iterations, stopping rules and summary records
+// (trace, counters, termination), added to `summary` as MinimiseBounded adds them.
+// `objective.radiosity()` must have been built with a CUDA backend (MakeCudaRadiosityBackend or
+// MakeCudaCompressedRadiosityBackend), else std::invalid_argument. Throws std::runtime_error at
+// device errors (naming the CUDA call). Calls from several threads are serialised.
+Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const CompensationObjective& objective,
+                                      const Eigen::MatrixX3d& initial, SolverSummary* summary);
+
+}  // namespace procam

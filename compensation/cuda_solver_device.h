@@ -1,0 +1,116 @@
+#pragma once
+// The device-resident loop of cuda_solver.h behind a plain C++ interface (no Eigen or CUDA
+// runtime types), so that only cuda_solver.cu is compiled by nvcc.
+//
+// Vectors on the device are n×3, column-major (channel-planar: value c·n + i), in patch order:
+// the layout of Eigen::MatrixX3d, so that uploads and downloads are single copies, and the
+// layout the dense K⁻¹ multiplies (one cuBLAS product per group of channels).
+
+#include <functional>
+#include <string>
+#include <vector>
+
+// The CUDA runtime's stream handle (driver_types.h declares it the same way).
+typedef struct CUstream_st* cudaStream_t;
+
+namespace procam::cuda {
+
+// K⁻¹ and K⁻ᵀ of one problem on device memory, as the resident loop uses them.
+class DeviceRadiosity {
+ public:
+  virtual ~DeviceRadiosity() = default;
+  // The stream the solves run on, which the loop's kernels then share; null: the solves run on
+  // the stream passed to each call (the loop's own).
+  virtual cudaStream_t stream() const = 0;
+  // x = K⁻¹ y (K⁻ᵀ y when `transposed`) in float64 to full accuracy: objective values and
+  // gradients. y and x must not overlap.
+  virtual void Solve(const double* y, bool transposed, double* x, cudaStream_t stream) const = 0;
+  // The reduced-precision solves of the Hessian products (RadiositySystem::SolveFast):
+  // single(): float32 vectors (the dense float32 K⁻¹); else float64 vectors (the matrix-free CG
+  // at its fast tolerance). Only the overload that single() names is called.
+  virtual bool single() const = 0;
+  virtual void SolveFast(const float* y, bool transposed, float* x, cudaStream_t stream) const = 0;
+  virtual void SolveFast(const double* y, bool transposed, double* x, cudaStream_t stream) const = 0;
+  // True when a solve is itself iterative and reads its convergence on the host (the matrix-free
+  // CG): the loop then enqueues no product whose result it might not need.
+  virtual bool iterative() const = 0;
+};
+
+// The problem in the loop's terms (host memory, read during the call only).
+struct ResidentProblem {
+  int patches = 0;
+  // W = α diag(A/Ā) + (1−α) L (CompensationObjective::weights()): its diagonal, and its
+  // off-diagonal entries in CSR form (row i: the neighbours j and W_ij = −(1−α)).
+  const double* weight_diagonal = nullptr;   // patches
+  const int* neighbour_offsets = nullptr;    // patches + 1
+  const int* neighbours = nullptr;           // neighbour_offsets[patches]
+  const double* neighbour_weights = nullptr;  // neighbour_offsets[patches]
+  const double* lower = nullptr;            // n×3 column-major: bounds on E
+  const double* upper = nullptr;
+  const double* desired = nullptr;          // n×3 column-major: Bd, linear RGB
+  const double* initial = nullptr;          // n×3 column-major, within the bounds
+  // The colour space: L*a*b* of T·rgb relative to `white_xyz`, or linear_colour · rgb.
+  bool lab = true;
+  double rgb_to_xyz[9] = {};     // T, row-major
+  double white_xyz[3] = {};
+  double linear_colour[9] = {};  // row-major
+};
+
+// SolverOptions' settings of Alg. 1 and 2 (solver.h documents each).
+struct ResidentOptions {
+  int max_iterations = 100;
+  int max_inner_iterations = 1;
+  int max_cg_iterations = 200;
+  double cg_tolerance = 0.3;
+  bool second_order = true;
+  double gradient_tolerance = 1e-9;
+  double function_tolerance = 1e-12;
+  double armijo = 1e-4;
+  std::function<void(int, double, double)> progress;
+};
+
+enum class ResidentTermination {
+  kGradientTolerance,
+  kFunctionTolerance,
+  kMaxIterations,
+  kLineSearchFailure,
+  kNumericalFailure
+};
+
+// SolverSummary's records of the loop (solver.h documents each field).
+struct ResidentIteration {
+  int iteration = 0;
+  double cost = 0.0;
+  double seconds = 0.0;
+  double step = 0.0;
+  int free_variables = 0;
+  int cg_iterations = 0;
+  double projected_gradient = 0.0;
+};
+
+struct ResidentSummary {
+  ResidentTermination termination = ResidentTermination::kMaxIterations;
+  std::string message;
+  double initial_cost = 0.0;
+  double final_cost = 0.0;
+  int iterations = 0;
+  int inner_iterations = 0;
+  int cg_iterations = 0;
+  int evaluations = 0;
+  int gradients = 0;
+  int hessian_products = 0;
+  int preconditioner_applications = 0;
+  std::vector<ResidentIteration> trace;
+};
+
+// Alg. 1 with Alg. 2 (as MinimiseBounded, solver.cc) with every vector on the device: the
+// per-patch colour, residual, Jacobian and second-order term, W products (CSR), gradient, active
+// set, conjugate gradients preconditioned by the inverse 3×3 diagonal blocks of the free
+// variables' colour Hessian M_FF, the projected step of Alg. 2 and the Armijo search. The host
+// reads back a few scalars per step. `emittance` (n×3 column-major, host) gets the result.
+// Throws std::runtime_error at device errors. Calls are serialised (one device workspace per
+// process, grown as needed and kept between calls).
+void MinimiseResident(const ResidentOptions& options, const ResidentProblem& problem, const DeviceRadiosity& radiosity,
+                      double* emittance, ResidentSummary* summary);
+
+}  // namespace procam::cuda
