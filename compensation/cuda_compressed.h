@@ -49,6 +49,11 @@ class CudaCompressedRadiosity : public RadiosityBackend {
 
   // F X on the device (X n×c, any c ≥ 1), for tests and benchmarks.
   Eigen::MatrixXd Multiply(const Eigen::MatrixXd& x) const;
+  // RadiositySystem's products with F (K·Bd of the solver's start, Multiply*) on the device.
+  bool MultiplyF(const Eigen::MatrixX3d& x, Eigen::MatrixX3d* fx) const override {
+    *fx = Multiply(x);
+    return true;
+  }
   // CG iterations of every solve so far.
   int64_t solve_iterations() const { return solve_iterations_; }
 

@@ -276,6 +276,36 @@ bool DeviceAvailable(std::string* description) {
   return true;
 }
 
+class DeviceMatrixImpl : public DeviceMatrix {
+ public:
+  DeviceMatrixImpl(const double* matrix, int n) : n_(n), matrix_(static_cast<size_t>(n) * n) {
+    GetHandles();
+    PROCAM_CUDA(cudaMemcpy(matrix_.get(), matrix, matrix_.size() * sizeof(double), cudaMemcpyHostToDevice));
+  }
+
+  void Apply(const double* x, int columns, double* y) const override {
+    const size_t count = static_cast<size_t>(n_) * columns;
+    if (in_.size() < count) {
+      in_ = DeviceArray<double>(count);
+      out_ = DeviceArray<double>(count);
+    }
+    PROCAM_CUDA(cudaMemcpy(in_.get(), x, count * sizeof(double), cudaMemcpyHostToDevice));
+    const double one = 1.0, zero = 0.0;
+    PROCAM_CUDA(cublasDgemm(GetHandles().blas, CUBLAS_OP_N, CUBLAS_OP_N, n_, columns, n_, &one, matrix_.get(), n_,
+                            in_.get(), n_, &zero, out_.get(), n_));
+    PROCAM_CUDA(cudaMemcpy(y, out_.get(), count * sizeof(double), cudaMemcpyDeviceToHost));
+  }
+
+ private:
+  int n_;
+  DeviceArray<double> matrix_;
+  mutable DeviceArray<double> in_, out_;
+};
+
+std::unique_ptr<DeviceMatrix> DeviceMatrix::Create(const double* matrix, int n) {
+  return std::make_unique<DeviceMatrixImpl>(matrix, n);
+}
+
 std::unique_ptr<InverseRadiosity> InverseRadiosity::Create(const double* form_factors, const double* area,
                                                            const double* reflectance, int n) {
   return std::make_unique<InverseRadiosityImpl>(form_factors, area, reflectance, n);

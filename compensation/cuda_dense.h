@@ -43,4 +43,15 @@ class InverseRadiosity {
   virtual bool cholesky() const = 0;
 };
 
+// A dense n×n matrix kept on the device for products with a few columns (F, for the solver's
+// K·Bd start when K⁻¹ lives on the device: an n² product the CPU would otherwise do).
+class DeviceMatrix {
+ public:
+  virtual ~DeviceMatrix() = default;
+  // `matrix` n×n column-major, host memory. Throws std::runtime_error like InverseRadiosity.
+  static std::unique_ptr<DeviceMatrix> Create(const double* matrix, int n);
+  // y = A x; x and y n×columns, column-major, host memory (copied each way).
+  virtual void Apply(const double* x, int columns, double* y) const = 0;
+};
+
 }  // namespace procam::cuda

@@ -24,6 +24,15 @@ class CudaRadiosity : public RadiosityBackend {
       inverses_.push_back(cuda::InverseRadiosity::Create(f.data(), area.data(), rho.data(),
                                                          static_cast<int>(area.size())));
     }
+    form_factors_ = cuda::DeviceMatrix::Create(f.data(), static_cast<int>(area.size()));
+  }
+
+  // The solver's K·Bd start: an n² product, ~0.3 s on two CPU cores at 9800 patches.
+  bool MultiplyF(const Eigen::MatrixX3d& x, Eigen::MatrixX3d* fx) const override {
+    fx->resize(x.rows(), 3);
+    const Eigen::MatrixX3d contiguous = x;
+    form_factors_->Apply(contiguous.data(), 3, fx->data());
+    return true;
   }
 
   Eigen::MatrixX3d Solve(const Eigen::MatrixX3d& y, bool transposed, bool fast) const override {
@@ -53,6 +62,7 @@ class CudaRadiosity : public RadiosityBackend {
   bool float32_;
   std::vector<std::vector<int>> groups_;
   std::vector<std::unique_ptr<cuda::InverseRadiosity>> inverses_;
+  std::unique_ptr<cuda::DeviceMatrix> form_factors_;  // F, for MultiplyF
 };
 
 }  // namespace

@@ -51,7 +51,6 @@ CompensationObjective::CompensationObjective(const CompensationProblem& problem,
   for (int i = 0; i < n; ++i) triplets.emplace_back(i, i, diagonal[i]);
   weights_.resize(n, n);
   weights_.setFromTriplets(triplets.begin(), triplets.end());
-  weights_factor_.compute(weights_);
   desired_colour_.resize(n, 3);
   for (int i = 0; i < n; ++i) desired_colour_.row(i) = Colour(problem.desired.row(i).transpose()).transpose();
 }
@@ -159,6 +158,7 @@ Eigen::MatrixX3d CompensationObjective::SolveGaussNewtonColour(const std::vector
   // Row form: (J_i⁻ᵀ r_i)ᵀ = r_iᵀ J_i⁻¹.
   Eigen::MatrixX3d colour(patches(), 3);
   for (int i = 0; i < patches(); ++i) colour.row(i) = r.row(i) * jacobian_inverse[i];
+  std::call_once(weights_factored_, [this] { weights_factor_.compute(weights_); });
   const Eigen::MatrixX3d weighted = 0.5 * weights_factor_.solve(colour);
   Eigen::MatrixX3d result(patches(), 3);
   for (int i = 0; i < patches(); ++i) result.row(i) = weighted.row(i) * jacobian_inverse[i].transpose();

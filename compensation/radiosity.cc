@@ -82,12 +82,19 @@ RadiositySystem::RadiositySystem(std::shared_ptr<const CompressedFormFactors> fo
 }
 
 Eigen::MatrixX3d RadiositySystem::ProductF(const Eigen::MatrixX3d& x) const {
+  Eigen::MatrixX3d fx;
+  if (backend_ && backend_->MultiplyF(x, &fx)) return fx;
   if (compressed_) return compressed_->Multiply(x);
   return form_factors_ * x;
 }
 
 Eigen::MatrixX3d RadiositySystem::ProductFTransposed(const Eigen::MatrixX3d& x) const {
-  if (compressed_) return compressed_->MultiplyTransposed(x);
+  if (compressed_) {
+    // Fᵀ X = A ∘ F (X / A): exact for the compressed F, whose exchange areas are symmetric.
+    Eigen::MatrixX3d fx;
+    if (backend_ && backend_->MultiplyF(area_.cwiseInverse().asDiagonal() * x, &fx)) return area_.asDiagonal() * fx;
+    return compressed_->MultiplyTransposed(x);
+  }
   return form_factors_.transpose() * x;
 }
 

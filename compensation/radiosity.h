@@ -36,6 +36,13 @@ class RadiosityBackend {
   virtual Eigen::MatrixX3d Solve(const Eigen::MatrixX3d& y, bool transposed, bool fast) const = 0;
   // Channels sharing one K⁻¹ (as RadiositySystem::factorisations).
   virtual int factorisations() const = 0;
+  // F X on the device, when the backend holds F (the matrix-free one); false: the caller
+  // multiplies on the CPU.
+  virtual bool MultiplyF(const Eigen::MatrixX3d& x, Eigen::MatrixX3d* fx) const {
+    (void)x;
+    (void)fx;
+    return false;
+  }
 };
 
 // The matrix-free system (compressed F): K⁻¹ and K⁻ᵀ by conjugate gradients on the symmetric

@@ -1,36 +1,49 @@
 #!/usr/bin/env bash
-# GPU benchmark of the solver (issue 9), in one call on a machine with a CUDA device:
-#   scripts/bench_gpu.sh TEST_BINARY OUTPUT.md [COMMIT]
-# TEST_BINARY is compensation_solver_cuda_device_test (tests/compensation/solver_cuda_device_test.cc:
-# it links only procam_compensation, so it runs where Embree/OpenCV are missing). It first runs
-# the GPU-vs-CPU checks, then DISABLED_Timings, and writes a markdown table (device, date,
-# commit, rows of CPU and GPU solves at about 3000 / 10000 / 30000 variables, the paper's
-# figures beside them) to OUTPUT.md, for docs/gpu.md. Sizes: PROCAM_BENCH_GRIDS (plates of g×g
-# patches each, n = 2g²), CPU rows up to PROCAM_BENCH_CPU_MAX_VARIABLES.
+# GPU benchmark and checks of the solver (issue 9), in one call on a machine with a CUDA device:
+#   scripts/bench_gpu.sh BINARY_DIR OUTPUT.md [COMMIT]
+# BINARY_DIR holds compensation_solver_cuda_device_test and compensation_compressed_cuda_device_test
+# (tests/compensation/*_device_test.cc: built from the solver's sources with only the CUDA
+# libraries and libgomp, so they run where Embree/OpenCV are missing; put libgomp.so.1 beside
+# them). It runs every GPU-vs-CPU check of both, then their DISABLED_Timings, and writes the
+# device, date, commit and both markdown tables to OUTPUT.md (for docs/gpu.md):
+#   dense analytic plates: PROCAM_BENCH_GRIDS (g×g patches per plate, n = 2g²; default 22,70:
+#     2904 and 29 400 variables), CPU rows up to PROCAM_BENCH_CPU_MAX_VARIABLES (10 000);
+#   compressed plates: PROCAM_BENCH_COMPRESSED_GRIDS (default 40,120,224: 9600, 86 400 and
+#     301 056 variables), CPU rows up to 30 000 variables.
 set -euo pipefail
-binary=$1
+dir=$1
 output=$2
 commit=${3:-$(git rev-parse --short HEAD 2>/dev/null || echo unknown)}
-export PROCAM_BENCH_GRIDS=${PROCAM_BENCH_GRIDS:-22,40,70}
-export PROCAM_BENCH_CPU_MAX_VARIABLES=${PROCAM_BENCH_CPU_MAX_VARIABLES:-10000}
+export LD_LIBRARY_PATH="$dir${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+export PROCAM_BENCH_GRIDS=${PROCAM_BENCH_GRIDS:-22,70}
+export PROCAM_BENCH_REPEATS=${PROCAM_BENCH_REPEATS:-3}
+export PROCAM_BENCH_COMPRESSED_GRIDS=${PROCAM_BENCH_COMPRESSED_GRIDS:-40,120,224}
+dense="$dir/compensation_solver_cuda_device_test"
+compressed="$dir/compensation_compressed_cuda_device_test"
 device=$(nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>/dev/null || echo "no nvidia-smi")
 cpu=$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ //')
-checks=$("$binary" --gtest_filter='SolveCudaAnalytic.MatchesTheCpuReference:-*DISABLED*' 2>&1) || { echo "$checks"; exit 1; }
+
+checks=$("$dense" 2>&1) || { echo "$checks"; exit 1; }
 echo "$checks"
-timings=$("$binary" --gtest_also_run_disabled_tests --gtest_filter='*Timings' 2>&1)
+compressed_checks=$("$compressed" 2>&1) || { echo "$compressed_checks"; exit 1; }
+echo "$compressed_checks"
+timings=$(PROCAM_BENCH_CPU_MAX_VARIABLES=${PROCAM_BENCH_CPU_MAX_VARIABLES:-10000} \
+  "$dense" --gtest_also_run_disabled_tests --gtest_filter='*Timings' 2>&1)
 echo "$timings"
+compressed_timings=$(PROCAM_BENCH_CPU_MAX_VARIABLES=30000 \
+  "$compressed" --gtest_also_run_disabled_tests --gtest_filter='*Timings' 2>&1)
+echo "$compressed_timings"
 {
-  echo "Measured $(date -u +%Y-%m-%d) at commit $commit on $device (host CPU: $cpu, $(nproc) cores);"
-  echo "\`scripts/bench_gpu.sh\`: analytic facing-plates rooms (tests/compensation/analytic_problem.h),"
-  echo "bounds [0, 1], alpha 0.5, rho 0.9. Setup = CPU Cholesky of K, or K⁻¹ formed on the GPU; solve ="
-  echo "everything after it (GPU rows: median of ${PROCAM_BENCH_REPEATS:-5}); objective evaluated in double."
+  echo "Measured $(date -u +%Y-%m-%d) at commit $commit on $device (host CPU: $cpu, $(nproc) cores),"
+  echo "\`scripts/bench_gpu.sh\`: analytic facing plates (bounds [0, 1], alpha 0.5, rho 0.9); GPU rows"
+  echo "median of $PROCAM_BENCH_REPEATS. Dense F (\`solver_cuda_device_test\`):"
   echo
   echo "$timings" | grep '^|'
   echo
-  echo "GPU-vs-CPU checks of the same run:"
+  echo "Compressed F (\`compressed_cuda_device_test\`):"
   echo
-  echo '```'
-  echo "$checks" | grep -E 'objective .* relative' || true
-  echo '```'
+  echo "$compressed_timings" | grep '^|'
+  echo
+  echo "GPU-vs-CPU checks of the same run: $(echo "$checks" | grep -c '^\[       OK') + $(echo "$compressed_checks" | grep -c '^\[       OK') tests passed."
 } > "$output"
 echo "wrote $output"

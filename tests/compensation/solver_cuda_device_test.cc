@@ -48,6 +48,19 @@ void ExpectConsistentSummary(const SolverSummary& summary, const std::string& la
   EXPECT_LE(summary.final_cost, summary.initial_cost) << label;
 }
 
+TEST(SolveCudaAnalytic, ProductsWithKOnTheDeviceMatchTheCpu) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const CompensationProblem p = testing::PlatesProblem(16, 0.5, 0.9);
+  Eigen::MatrixX3d rho = p.reflectance;
+  rho.col(1) *= 0.8;
+  const RadiositySystem cpu(p.form_factors, p.area, rho);
+  const RadiositySystem gpu(p.form_factors, p.area, rho, MakeCudaRadiosityBackend(p.form_factors, p.area, rho, false));
+  const Eigen::MatrixX3d x = Eigen::MatrixX3d::Random(p.size(), 3);
+  const Eigen::MatrixX3d kx = cpu.Multiply(x), ktx = cpu.MultiplyTransposed(x);
+  EXPECT_LT((gpu.Multiply(x) - kx).norm(), 1e-12 * kx.norm());
+  EXPECT_LT((gpu.MultiplyTransposed(x) - ktx).norm(), 1e-12 * ktx.norm());
+}
+
 TEST(SolveCudaAnalytic, MatchesTheCpuReference) {
   SKIP_WITHOUT_CUDA_DEVICE();
   struct Case {
