@@ -36,13 +36,22 @@ struct BenchArguments {
   ClusterOptions clusters;
 };
 
-void RunFormFactorBench(const BenchArguments& args) {
+// The benchmark room: closed, with an occluder, about `target_patches` patches.
+Scene BenchRoom(int target_patches) {
   BoxRoomOptions room;
-  room.target_patches = args.patches;
-  const Scene scene = MakeBoxRoom(room);
+  room.target_patches = target_patches;
+  return MakeBoxRoom(room);
+}
+
+PatchHierarchy BenchPatches(const Scene& scene) {
   SubdivisionOptions subdivision;
-  subdivision.target_patches = args.patches;
-  const PatchHierarchy hierarchy = SubdividePatches(scene, subdivision);
+  subdivision.target_patches = scene.target_patches;
+  return SubdividePatches(scene, subdivision);
+}
+
+void RunFormFactorBench(const BenchArguments& args) {
+  const Scene scene = BenchRoom(args.patches);
+  const PatchHierarchy hierarchy = BenchPatches(scene);
   FormFactorOptions options;
   options.threads = args.threads;
   FormFactorSummary summary;
@@ -120,12 +129,8 @@ void RunSolverBench(const BenchArguments& args) {
                        "to target s", "total s", "iters", "objective", "termination").c_str());
   for (const int target_patches : args.sizes) {
     std::ostringstream table;
-    BoxRoomOptions room;
-    room.target_patches = target_patches;
-    const Scene scene = MakeBoxRoom(room);
-    SubdivisionOptions subdivision;
-    subdivision.target_patches = target_patches;
-    const PatchHierarchy patches = SubdividePatches(scene, subdivision);
+    const Scene scene = BenchRoom(target_patches);
+    const PatchHierarchy patches = BenchPatches(scene);
     FormFactorSummary ff;
     Eigen::MatrixXd f = ComputeFormFactors(scene, patches.fine, FormFactorOptions(), &ff);
     const Eigen::MatrixXd coarse_f =
@@ -257,12 +262,8 @@ void RunScaleBench(const BenchArguments& args) {
                                 "variables", "patches", "build s", "MB", "dense MB", "F x ms", "error",
                                 "K⁻¹ ms", "CG iters", "", "solver", "solve s", "iters", "objective").c_str());
   for (const int target_patches : args.scale_sizes) {
-    BoxRoomOptions room;
-    room.target_patches = target_patches;
-    const Scene scene = MakeBoxRoom(room);
-    SubdivisionOptions subdivision;
-    subdivision.target_patches = target_patches;
-    const PatchHierarchy patches = SubdividePatches(scene, subdivision);
+    const Scene scene = BenchRoom(target_patches);
+    const PatchHierarchy patches = BenchPatches(scene);
     const int n = patches.fine.size();
     FormFactorOptions ff_options;
     ff_options.threads = args.threads;

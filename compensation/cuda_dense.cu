@@ -11,24 +11,19 @@
 #include <cuda_runtime.h>
 #include <cusolverDn.h>
 
+#include "compensation/cuda_common.cuh"
+
 namespace procam::cuda {
 namespace {
 
-void Throw(const char* call, const std::string& what) {
-  throw std::runtime_error(std::string("CUDA: ") + call + " failed: " + what);
-}
-void Check(cudaError_t status, const char* call) {
-  if (status != cudaSuccess) Throw(call, cudaGetErrorString(status));
-}
+// The library statuses beside cuda_common.cuh's cudaError_t check, all found by PROCAM_CUDA.
+using ::procam::cuda::Check;
 void Check(cublasStatus_t status, const char* call) {
   if (status != CUBLAS_STATUS_SUCCESS) Throw(call, "cuBLAS status " + std::to_string(static_cast<int>(status)));
 }
 void Check(cusolverStatus_t status, const char* call) {
   if (status != CUSOLVER_STATUS_SUCCESS) Throw(call, "cuSOLVER status " + std::to_string(static_cast<int>(status)));
 }
-#define PROCAM_CUDA(call) Check((call), #call)
-// After a kernel launch.
-#define PROCAM_CUDA_LAUNCHED(name) Check(cudaGetLastError(), name)
 
 // One cuBLAS and one cuSOLVER handle for the process, made on first use (handle creation costs
 // milliseconds; DeviceAvailable makes them, so benchmarks time neither). Never destroyed: the
@@ -55,33 +50,6 @@ const Handles& GetHandles() {
   }();
   return *handles;
 }
-
-// Device memory owned by one object.
-template <typename T>
-class DeviceArray {
- public:
-  DeviceArray() = default;
-  explicit DeviceArray(size_t count) : count_(count) {
-    PROCAM_CUDA(cudaMalloc(reinterpret_cast<void**>(&data_), count * sizeof(T)));
-  }
-  ~DeviceArray() {
-    if (data_ != nullptr) cudaFree(data_);
-  }
-  DeviceArray(const DeviceArray&) = delete;
-  DeviceArray& operator=(const DeviceArray&) = delete;
-  DeviceArray(DeviceArray&& other) noexcept : data_(other.data_), count_(other.count_) { other.data_ = nullptr; }
-  DeviceArray& operator=(DeviceArray&& other) noexcept {
-    std::swap(data_, other.data_);
-    std::swap(count_, other.count_);
-    return *this;
-  }
-  T* get() const { return data_; }
-  size_t size() const { return count_; }
-
- private:
-  T* data_ = nullptr;
-  size_t count_ = 0;
-};
 
 constexpr int kThreads = 256;
 int Blocks(long count) { return static_cast<int>((count + kThreads - 1) / kThreads); }

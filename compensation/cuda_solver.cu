@@ -28,18 +28,11 @@
 
 #include <cuda_runtime.h>
 
+#include "compensation/cuda_common.cuh"
 #include "compensation/cuda_solver_device.h"
 
 namespace procam::cuda {
 namespace {
-
-void Throw(const char* call, const std::string& what) {
-  throw std::runtime_error(std::string("CUDA: ") + call + " failed: " + what);
-}
-void Check(cudaError_t status, const char* call) {
-  if (status != cudaSuccess) Throw(call, cudaGetErrorString(status));
-}
-#define PROCAM_CUDA(call) Check((call), #call)
 
 constexpr int kThreads = 256;  // per block; the reductions assume exactly this
 constexpr int kWarps = kThreads / 32;
