@@ -10,11 +10,15 @@
 #     2904 and 29 400 variables), CPU rows up to PROCAM_BENCH_CPU_MAX_VARIABLES (10 000);
 #   compressed plates: PROCAM_BENCH_COMPRESSED_GRIDS (default 40,120,224: 9600, 86 400 and
 #     301 056 variables), CPU rows up to 30 000 variables.
+# Real rooms: problem directories under BINARY_DIR/problems (written here by `procam compensate
+# ROOM --export --out BINARY_DIR/problems/NAME`: F from Embree, projector bounds) are solved on
+# the GPU against the CPU as well (SolveCudaExported).
 set -euo pipefail
 dir=$1
 output=$2
 commit=${3:-$(git rev-parse --short HEAD 2>/dev/null || echo unknown)}
 export LD_LIBRARY_PATH="$dir${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+if [[ -d "$dir/problems" ]]; then export PROCAM_DEVICE_PROBLEMS="$dir/problems"; fi
 export PROCAM_BENCH_GRIDS=${PROCAM_BENCH_GRIDS:-22,70}
 export PROCAM_BENCH_REPEATS=${PROCAM_BENCH_REPEATS:-3}
 export PROCAM_BENCH_COMPRESSED_GRIDS=${PROCAM_BENCH_COMPRESSED_GRIDS:-40,120,224}
@@ -44,6 +48,10 @@ echo "$compressed_timings"
   echo
   echo "$compressed_timings" | grep '^|'
   echo
-  echo "GPU-vs-CPU checks of the same run: $(echo "$checks" | grep -c '^\[       OK') + $(echo "$compressed_checks" | grep -c '^\[       OK') tests passed."
+  echo "GPU-vs-CPU checks of the same run: $(echo "$checks" | grep -c '^\[       OK') + $(echo "$compressed_checks" | grep -c '^\[       OK') tests passed; exported rooms:"
+  echo
+  echo '```'
+  echo "$checks" | grep -E ' (resident|host loop) +objective' || echo "(none)"
+  echo '```'
 } > "$output"
 echo "wrote $output"

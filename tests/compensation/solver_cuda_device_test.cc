@@ -7,13 +7,20 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
+
+#include <nlohmann/json.hpp>
+
+#include "compensation/colour.h"
 #include "compensation/cuda_radiosity.h"
+#include "geometry/io.h"
 #include "compensation/solver.h"
 #include "tests/compensation/analytic_problem.h"
 
@@ -46,6 +53,78 @@ void ExpectConsistentSummary(const SolverSummary& summary, const std::string& la
   EXPECT_GE(summary.hessian_products, summary.cg_iterations) << label;
   EXPECT_GE(summary.evaluations, summary.iterations + 1) << label;
   EXPECT_LE(summary.final_cost, summary.initial_cost) << label;
+}
+
+// A problem written by `procam compensate ... --export` (F from Embree's shadow rays, the
+// projectors' bounds): real rooms on a machine that has no Embree. The desired radiosity comes
+// back from desired_lab.npy through LabToXyz and T⁻¹.
+CompensationProblem ReadExportedProblem(const std::filesystem::path& directory) {
+  const auto matrix = [&](const char* name) {
+    const NpyArray array = ReadNpy(directory / name);
+    const int64_t rows = array.shape.at(0), columns = array.shape.size() > 1 ? array.shape[1] : 1;
+    Eigen::MatrixXd m(rows, columns);
+    for (int64_t i = 0; i < rows; ++i) {
+      for (int64_t j = 0; j < columns; ++j) m(i, j) = array.values[i * columns + j];
+    }
+    return m;
+  };
+  CompensationProblem p;
+  p.form_factors = matrix("F.npy");
+  p.area = matrix("area.npy").col(0);
+  p.reflectance = matrix("rho.npy");
+  p.lower = matrix("lower.npy");
+  p.upper = matrix("upper.npy");
+  p.rgb_to_xyz = matrix("T.npy");
+  p.white_xyz = matrix("white_xyz.npy").col(0);
+  const Eigen::MatrixXd adjacency = matrix("adjacency.npy");
+  for (int k = 0; k < adjacency.rows(); ++k) {
+    p.adjacency.push_back({static_cast<int>(adjacency(k, 0)), static_cast<int>(adjacency(k, 1))});
+  }
+  const Eigen::MatrixXd lab = matrix("desired_lab.npy");
+  const Eigen::Matrix3d to_rgb = p.rgb_to_xyz.inverse();
+  p.desired.resize(lab.rows(), 3);
+  for (int i = 0; i < lab.rows(); ++i) {
+    p.desired.row(i) = (to_rgb * LabToXyz(lab.row(i).transpose(), p.white_xyz)).transpose();
+  }
+  std::ifstream meta(directory / "problem.json");
+  p.alpha = nlohmann::json::parse(meta).at("alpha").get<double>();
+  return p;
+}
+
+// Every problem directory under $PROCAM_DEVICE_PROBLEMS (scripts/bench_gpu.sh exports them on
+// the build machine: box room with an occluder, the room example with its projectors).
+TEST(SolveCudaExported, ResidentAndHostLoopMatchTheCpuOnRealRooms) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const char* root = std::getenv("PROCAM_DEVICE_PROBLEMS");
+  if (root == nullptr) GTEST_SKIP() << "PROCAM_DEVICE_PROBLEMS not set: no exported rooms to solve";
+  int solved = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(root)) {
+    if (!std::filesystem::exists(entry.path() / "F.npy")) continue;
+    const CompensationProblem p = ReadExportedProblem(entry.path());
+    ASSERT_EQ(p.Validate(), "") << entry.path();
+    for (const CompensationMethod method : {CompensationMethod::kPerceptual, CompensationMethod::kLinear}) {
+      SolverOptions cpu;
+      cpu.method = method;
+      SolverSummary reference;
+      Solve(cpu, p, &reference);
+      for (const bool host_loop : {false, true}) {
+        SolverOptions gpu = cpu;
+        gpu.device = Device::kCuda;
+        gpu.device_host_loop = host_loop;
+        SolverSummary summary;
+        const CompensationSolution solution = Solve(gpu, p, &summary);
+        const double relative = std::abs(summary.final_cost - reference.final_cost) / reference.final_cost;
+        std::printf("%-28s %-10s %-9s objective %.10g (CPU %.10g, relative %.1e), %d iterations (CPU %d)\n",
+                    entry.path().filename().c_str(), MethodName(method), host_loop ? "host loop" : "resident",
+                    summary.final_cost, reference.final_cost, relative, summary.iterations, reference.iterations);
+        EXPECT_LT(relative, 1e-6) << entry.path() << " " << MethodName(method);
+        EXPECT_TRUE(((solution.emittance - p.lower).array() >= 0.0).all());
+        EXPECT_TRUE(((p.upper - solution.emittance).array() >= 0.0).all());
+      }
+    }
+    ++solved;
+  }
+  EXPECT_GT(solved, 0) << "no problem directories under " << root;
 }
 
 TEST(SolveCudaAnalytic, ProductsWithKOnTheDeviceMatchTheCpu) {
