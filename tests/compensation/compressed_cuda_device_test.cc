@@ -17,6 +17,8 @@
 #include <cuda_runtime.h>
 #include <gtest/gtest.h>
 
+#include "tests/compensation/cuda_skip.h"
+
 #include "compensation/colour.h"
 #include "compensation/cuda_compressed.h"
 #include "compensation/objective.h"
@@ -26,12 +28,6 @@
 
 namespace procam {
 namespace {
-
-#define SKIP_WITHOUT_CUDA_DEVICE()                                                      \
-  do {                                                                                  \
-    std::string why;                                                                    \
-    if (!CudaAvailable(&why)) GTEST_SKIP() << "no CUDA device: skipped (" << why << ")"; \
-  } while (0)
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kPlateDistance = 0.5;  // m

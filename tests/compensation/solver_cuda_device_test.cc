@@ -14,6 +14,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/compensation/cuda_skip.h"
+
 #include <filesystem>
 
 #include <nlohmann/json.hpp>
@@ -26,12 +28,6 @@
 
 namespace procam {
 namespace {
-
-#define SKIP_WITHOUT_CUDA_DEVICE()                                                      \
-  do {                                                                                  \
-    std::string why;                                                                    \
-    if (!CudaAvailable(&why)) GTEST_SKIP() << "no CUDA device: skipped (" << why << ")"; \
-  } while (0)
 
 // The summary's records agree with each other (as MinimiseBounded keeps them).
 // The trace, one line per outer iteration (printed where a check failed).

@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/compensation/cuda_skip.h"
+
 #include "compensation/solver.h"
 #include "datasets_synthetic/rooms.h"
 #include "geometry/form_factors.h"
@@ -39,12 +41,6 @@ TestProblem MakeTestProblem(int target_patches, double alpha, int variant = 0) {
   if (variant == 2) test.fine.reflectance(5, 2) = 0.0;
   return test;
 }
-
-#define SKIP_WITHOUT_CUDA_DEVICE()                                          \
-  do {                                                                      \
-    std::string why;                                                        \
-    if (!CudaAvailable(&why)) GTEST_SKIP() << "no CUDA device: skipped (" << why << ")"; \
-  } while (0)
 
 TEST(SolveCuda, WithoutADeviceFailsWithOneLine) {
   std::string why;
