@@ -312,6 +312,10 @@ TEST(SolveCudaAnalytic, DISABLED_Timings) {
       options.multires = row.multires;
       options.device_float32 = row.float32;
       options.device_host_loop = row.host_loop;
+      // PROCAM_BENCH_CG_TOLERANCE: the inexact-Newton forcing term of the GPU rows, to compare.
+      if (const char* tolerance = std::getenv("PROCAM_BENCH_CG_TOLERANCE"); tolerance && row.device == Device::kCuda) {
+        options.cg_tolerance = std::atof(tolerance);
+      }
       const int runs = row.device == Device::kCuda ? repeats : 1;
       std::vector<double> solve_seconds, loop_seconds;
       SolverSummary summary;
