@@ -287,7 +287,8 @@ void RunScaleBench(const BenchArguments& args) {
       ff_options.progress = nullptr;
       dense = ComputeFormFactors(scene, patches.fine, ff_options, &ff);
       dense_seconds = ff.seconds;
-      error = (compressed->Multiply(x) - dense * x).norm() / (dense * x).norm();
+      const Eigen::MatrixXd exact = dense * x;
+      error = (compressed->Multiply(x) - exact).norm() / exact.norm();
     }
     const RadiositySystem radiosity(compressed, patches.fine.reflectance);
     const double solve = MedianSeconds(3, [&] { radiosity.Solve(Eigen::MatrixX3d::Ones(n, 3)); });

@@ -77,8 +77,7 @@ RadiositySystem::RadiositySystem(std::shared_ptr<const CompressedFormFactors> fo
       backend_(std::move(backend)),
       compressed_(std::move(form_factors)),
       iterative_(options) {
-  assert(reflectance_.rows() == size());
-  reflectance_float_ = reflectance_.cast<float>();
+  assert(reflectance_.rows() == size());  // the Fast products are the double ones here: no float copies
 }
 
 Eigen::MatrixX3d RadiositySystem::ProductF(const Eigen::MatrixX3d& x) const {
