@@ -1,13 +1,18 @@
 // cuda_dense.h on cuBLAS and cuSOLVER.
 #include "compensation/cuda_dense.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include <cublas_v2.h>
+#include <cuda_fp16.h>
 #include <cuda_runtime.h>
 #include <cusolverDn.h>
 
@@ -52,6 +57,7 @@ const Handles& GetHandles() {
 }
 
 constexpr int kThreads = 256;
+constexpr int kProductThreads = 256;  // TransposedProductKernel's block
 int Blocks(long count) { return static_cast<int>((count + kThreads - 1) / kThreads); }
 
 // out(i,j) = δij − ½ (l_i F_ij r_j + l_j F_ji r_i): the symmetric M (column-major, n×n).
@@ -90,6 +96,150 @@ __global__ void ConvertKernel(const From* in, long count, To* out) {
   if (k < count) out[k] = static_cast<To>(in[k]);
 }
 
+// y = post · diag(left) Aᵀ diag(right) x for a column-major n×n A (float64 or float32) and an
+// n×columns x in the same type (columns ≤ 3; left/right null: ones). The transposed product reads
+// A's columns, which are contiguous, so each output is one coalesced pass and no product needs a
+// second reduction kernel: K⁻ᵀx is it with no scaling, and K⁻¹x on the Cholesky path too, through
+// K⁻¹ = diag(s²) K⁻ᵀ diag(s⁻²) (K⁻¹ = S M⁻¹ S⁻¹ with M⁻¹ symmetric). Each block forms kRows
+// outputs; its threads stride over the sum (one matrix load, reused for every column) and
+// combine their partials in a fixed order (WriteRows). cuBLAS's GEMM with three columns was
+// measured slower (docs/gpu.md).
+
+// The block's partial sums of outputs first … first + kRows − 1 combined (warp shuffles, then the
+// warps in order) and written, times post and left.
+template <typename T, int kRows>
+__device__ void WriteRows(T (&sum)[kRows][3], int first, int n, int columns, const T* left, T post, T* y) {
+  constexpr int kWarps = kProductThreads / 32;
+  __shared__ T partial[kRows * 3][kWarps];
+  const int lane = threadIdx.x % 32, warp = threadIdx.x / 32;
+#pragma unroll
+  for (int r = 0; r < kRows; ++r) {
+#pragma unroll
+    for (int c = 0; c < 3; ++c) {
+      T value = sum[r][c];
+      for (int offset = 16; offset > 0; offset /= 2) value += __shfl_down_sync(0xffffffffu, value, offset);
+      if (lane == 0) partial[3 * r + c][warp] = value;
+    }
+  }
+  __syncthreads();
+  const int r = threadIdx.x / 3, c = threadIdx.x % 3;
+  if (r < kRows && c < columns && first + r < n) {
+    T value = 0;
+    for (int w = 0; w < kWarps; ++w) value += partial[3 * r + c][w];
+    const int i = first + r;
+    y[static_cast<size_t>(c) * n + i] = post * (left != nullptr ? left[i] * value : value);
+  }
+}
+
+// x_j · right_j for the columns there are (zeros beyond).
+template <typename T>
+__device__ void ScaledEntry(const T* __restrict__ x, const T* __restrict__ right, int n, int columns, int j, T (&v)[3]) {
+  const T scale = right != nullptr ? right[j] : T(1);
+#pragma unroll
+  for (int c = 0; c < 3; ++c) v[c] = c < columns ? scale * x[static_cast<size_t>(c) * n + j] : T(0);
+}
+
+template <typename T, int kRows>
+__global__ void __launch_bounds__(kProductThreads)
+    TransposedProductKernel(int n, int columns, const T* __restrict__ matrix, const T* __restrict__ left,
+                            const T* __restrict__ right, T post, const T* __restrict__ x, T* __restrict__ y) {
+  const int first = blockIdx.x * kRows;
+  const T* row[kRows];
+  for (int r = 0; r < kRows; ++r) row[r] = matrix + static_cast<size_t>(min(first + r, n - 1)) * n;
+  T sum[kRows][3] = {};
+  for (int j = threadIdx.x; j < n; j += kProductThreads) {
+    T v[3];
+    ScaledEntry(x, right, n, columns, j, v);
+#pragma unroll
+    for (int r = 0; r < kRows; ++r) {
+      const T m = row[r][j];
+#pragma unroll
+      for (int c = 0; c < 3; ++c) sum[r][c] += m * v[c];
+    }
+  }
+  WriteRows(sum, first, n, columns, left, post, y);
+}
+
+// The float16 copy of A: its columns in groups of four, interleaved, so that one 8-byte load
+// gives four outputs' terms and a warp's load is 256 contiguous bytes (a column-major float16
+// matrix would give 64): entry (j, 4q + t) at quads[q n + j], element t (columns past n: zeros).
+struct alignas(8) HalfQuad {
+  __half2 low, high;
+};
+
+__global__ void ToHalfQuadsKernel(const double* in, int n, double scale, HalfQuad* out) {
+  const long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x;
+  const long quads = (n + 3) / 4;
+  if (k >= quads * n) return;
+  const int q = static_cast<int>(k / n), j = static_cast<int>(k % n);
+  __half v[4];
+  for (int t = 0; t < 4; ++t) {
+    const int column = 4 * q + t;
+    v[t] = column < n ? __double2half(scale * in[static_cast<size_t>(column) * n + j]) : __double2half(0.0);
+  }
+  out[k] = {__halves2half2(v[0], v[1]), __halves2half2(v[2], v[3])};
+}
+
+// TransposedProductKernel on the float16 quads, float32 vectors and sums: 4·kQuads outputs per
+// block.
+template <int kQuads>
+__global__ void __launch_bounds__(kProductThreads)
+    HalfProductKernel(int n, int columns, const HalfQuad* __restrict__ matrix, const float* __restrict__ left,
+                      const float* __restrict__ right, float post, const float* __restrict__ x,
+                      float* __restrict__ y) {
+  const int quads = (n + 3) / 4;
+  const int first_quad = blockIdx.x * kQuads;
+  const HalfQuad* quad[kQuads];
+  for (int q = 0; q < kQuads; ++q) quad[q] = matrix + static_cast<size_t>(min(first_quad + q, quads - 1)) * n;
+  float sum[4 * kQuads][3] = {};
+  for (int j = threadIdx.x; j < n; j += kProductThreads) {
+    float v[3];
+    ScaledEntry(x, right, n, columns, j, v);
+#pragma unroll
+    for (int q = 0; q < kQuads; ++q) {
+      const HalfQuad h = quad[q][j];
+      const float2 low = __half22float2(h.low), high = __half22float2(h.high);
+      const float m[4] = {low.x, low.y, high.x, high.y};
+#pragma unroll
+      for (int t = 0; t < 4; ++t) {
+#pragma unroll
+        for (int c = 0; c < 3; ++c) sum[4 * q + t][c] += m[t] * v[c];
+      }
+    }
+  }
+  WriteRows(sum, 4 * first_quad, n, columns, left, post, y);
+}
+
+// Enqueues TransposedProductKernel with `rows` outputs per block (1, 2, 4 or 8).
+template <typename T>
+void TransposedProduct(int n, int columns, int rows, const T* matrix, const T* left, const T* right, T post,
+                       const T* x, T* y, cudaStream_t stream) {
+  const int blocks = (n + rows - 1) / rows;
+  const auto launch = [&](auto kernel) {
+    kernel<<<blocks, kProductThreads, 0, stream>>>(n, columns, matrix, left, right, post, x, y);
+  };
+  switch (rows) {
+    case 1: launch(TransposedProductKernel<T, 1>); break;
+    case 2: launch(TransposedProductKernel<T, 2>); break;
+    case 4: launch(TransposedProductKernel<T, 4>); break;
+    default: launch(TransposedProductKernel<T, 8>); break;
+  }
+  PROCAM_CUDA_LAUNCHED("TransposedProductKernel");
+}
+
+// The same on the float16 quads: 4 outputs per block, 8 where `rows` is 8.
+void TransposedProduct(int n, int columns, int rows, const HalfQuad* matrix, const float* left, const float* right,
+                       float post, const float* x, float* y, cudaStream_t stream) {
+  const int quads = (n + 3) / 4, per_block = rows == 8 ? 2 : 1;
+  const int blocks = (quads + per_block - 1) / per_block;
+  if (per_block == 2) {
+    HalfProductKernel<2><<<blocks, kProductThreads, 0, stream>>>(n, columns, matrix, left, right, post, x, y);
+  } else {
+    HalfProductKernel<1><<<blocks, kProductThreads, 0, stream>>>(n, columns, matrix, left, right, post, x, y);
+  }
+  PROCAM_CUDA_LAUNCHED("HalfProductKernel");
+}
+
 class InverseRadiosityImpl : public InverseRadiosity {
  public:
   InverseRadiosityImpl(const double* form_factors, const double* area, const double* reflectance, int n) : n_(n) {
@@ -97,7 +247,8 @@ class InverseRadiosityImpl : public InverseRadiosity {
     const size_t n2 = static_cast<size_t>(n) * n;
     size_t free_bytes = 0, total_bytes = 0;
     PROCAM_CUDA(cudaMemGetInfo(&free_bytes, &total_bytes));
-    const size_t needed = n2 * (3 * sizeof(double) + sizeof(float));  // F, M, K⁻¹, float32 K⁻¹
+    // F, M, K⁻¹, float32 and float16 K⁻¹
+    const size_t needed = n2 * (3 * sizeof(double) + sizeof(float) + sizeof(uint16_t));
     if (needed > free_bytes) {
       throw std::runtime_error("CUDA: the dense K^-1 of " + std::to_string(n) + " patches needs " +
                                std::to_string(needed >> 20) + " MiB of device memory, " +
@@ -157,9 +308,37 @@ class InverseRadiosityImpl : public InverseRadiosity {
       PROCAM_CUDA(cusolverDnDgetrs(handles.solver, CUBLAS_OP_N, n, n, m.get(), n, pivots.get(), inverse_.get(), n,
                                    info.get()));
     }
+    if (cholesky_) {
+      // K⁻¹x = diag(s²) K⁻ᵀ diag(s⁻²) x (TransposedProductKernel).
+      std::vector<double> square(n), inverse_square(n);
+      for (int i = 0; i < n; ++i) {
+        square[i] = scale[i] * scale[i];
+        inverse_square[i] = 1.0 / square[i];
+      }
+      square_ = Upload(square);
+      inverse_square_ = Upload(inverse_square);
+      square_single_ = Upload(std::vector<float>(square.begin(), square.end()));
+      inverse_square_single_ = Upload(std::vector<float>(inverse_square.begin(), inverse_square.end()));
+    }
+    product_rows_ = ProductRows();
     inverse_single_ = DeviceArray<float>(n2);
     ConvertKernel<<<Blocks(n2), kThreads>>>(inverse_.get(), static_cast<long>(n2), inverse_single_.get());
     PROCAM_CUDA_LAUNCHED("ConvertKernel");
+    if (product_rows_ > 0 && HalfProducts()) {
+      // K⁻¹ · 2^k in float16, 2^k the largest power of two that keeps max |K⁻¹| under 2^15 (the
+      // format's largest is 65504): entries down to 6e-5 · 2^-k keep 11 significant bits.
+      int64_t largest = 0;
+      PROCAM_CUDA(cublasIdamax_64(handles.blas, static_cast<int64_t>(n2), inverse_.get(), 1, &largest));
+      double peak = 0.0;
+      PROCAM_CUDA(cudaMemcpy(&peak, inverse_.get() + (largest - 1), sizeof(double), cudaMemcpyDeviceToHost));
+      const double power = std::floor(std::log2(32768.0 / std::max(std::abs(peak), 1e-300)));
+      const double factor = std::ldexp(1.0, static_cast<int>(std::min(power, 60.0)));
+      half_post_ = static_cast<float>(1.0 / factor);
+      const long quads = static_cast<long>((n + 3) / 4) * n;
+      inverse_half_ = DeviceArray<HalfQuad>(quads);
+      ToHalfQuadsKernel<<<Blocks(quads), kThreads>>>(inverse_.get(), n, factor, inverse_half_.get());
+      PROCAM_CUDA_LAUNCHED("ToHalfQuadsKernel");
+    }
     x_ = DeviceArray<double>(3 * static_cast<size_t>(n));
     y_ = DeviceArray<double>(3 * static_cast<size_t>(n));
     x_single_ = DeviceArray<float>(3 * static_cast<size_t>(n));
@@ -190,30 +369,82 @@ class InverseRadiosityImpl : public InverseRadiosity {
   }
 
   void ApplyOnDevice(const double* x, int columns, bool transposed, double* y, cudaStream_t stream) const override {
-    if (columns < 1 || columns > 3) throw std::invalid_argument("InverseRadiosity::ApplyOnDevice: 1 to 3 columns");
-    const Handles& handles = GetHandles();
-    PROCAM_CUDA(cublasSetStream(handles.device_blas, stream));
-    const double one = 1.0, zero = 0.0;
-    PROCAM_CUDA(cublasDgemm(handles.device_blas, transposed ? CUBLAS_OP_T : CUBLAS_OP_N, CUBLAS_OP_N, n_, columns, n_,
-                            &one, inverse_.get(), n_, x, n_, &zero, y, n_));
+    ApplyOnDevice(inverse_.get(), 1.0, square_.get(), inverse_square_.get(), x, columns, transposed, y, stream);
   }
 
   void ApplyOnDevice(const float* x, int columns, bool transposed, float* y, cudaStream_t stream) const override {
-    if (columns < 1 || columns > 3) throw std::invalid_argument("InverseRadiosity::ApplyOnDevice: 1 to 3 columns");
-    const Handles& handles = GetHandles();
-    PROCAM_CUDA(cublasSetStream(handles.device_blas, stream));
-    const float one = 1.0f, zero = 0.0f;
-    PROCAM_CUDA(cublasSgemm(handles.device_blas, transposed ? CUBLAS_OP_T : CUBLAS_OP_N, CUBLAS_OP_N, n_, columns, n_,
-                            &one, inverse_single_.get(), n_, x, n_, &zero, y, n_));
+    if (inverse_half_.size() > 0 && (transposed || cholesky_)) {
+      ApplyOnDevice(inverse_half_.get(), half_post_, square_single_.get(), inverse_square_single_.get(), x, columns,
+                    transposed, y, stream);
+    } else {
+      ApplyOnDevice(inverse_single_.get(), 1.0f, square_single_.get(), inverse_square_single_.get(), x, columns,
+                    transposed, y, stream);
+    }
   }
 
   bool cholesky() const override { return cholesky_; }
 
  private:
+  // y = K⁻¹x or K⁻ᵀx with `inverse` (post · K⁻¹ stored as S) and the Cholesky path's s², s⁻² in
+  // T: own kernel, or cuBLAS's GEMM (S = T) for K⁻¹x on the LU path and where
+  // PROCAM_CUDA_DENSE_PRODUCT=cublas.
+  template <typename S, typename T>
+  void ApplyOnDevice(const S* inverse, T post, const T* square, const T* inverse_square, const T* x, int columns,
+                     bool transposed, T* y, cudaStream_t stream) const {
+    if (columns < 1 || columns > 3) throw std::invalid_argument("InverseRadiosity::ApplyOnDevice: 1 to 3 columns");
+    if (product_rows_ > 0 && (transposed || cholesky_)) {
+      TransposedProduct(n_, columns, product_rows_, inverse, transposed ? nullptr : square,
+                        transposed ? nullptr : inverse_square, post, x, y, stream);
+      return;
+    }
+    if constexpr (std::is_same_v<S, T>) {
+      const Handles& handles = GetHandles();
+      PROCAM_CUDA(cublasSetStream(handles.device_blas, stream));
+      const T one = 1, zero = 0;
+      const cublasOperation_t op = transposed ? CUBLAS_OP_T : CUBLAS_OP_N;
+      if constexpr (std::is_same_v<T, double>) {
+        PROCAM_CUDA(cublasDgemm(handles.device_blas, op, CUBLAS_OP_N, n_, columns, n_, &one, inverse, n_, x, n_,
+                                &zero, y, n_));
+      } else {
+        PROCAM_CUDA(cublasSgemm(handles.device_blas, op, CUBLAS_OP_N, n_, columns, n_, &one, inverse, n_, x, n_,
+                                &zero, y, n_));
+      }
+    }
+  }
+
+  // Outputs per block of TransposedProductKernel; 0: cuBLAS. PROCAM_CUDA_DENSE_PRODUCT (for
+  // benchmarks): cublas, or 1/2/4/8 rows.
+  static int ProductRows() {
+    const char* choice = std::getenv("PROCAM_CUDA_DENSE_PRODUCT");
+    if (choice == nullptr || *choice == '\0') return 4;
+    const std::string text = choice;
+    if (text == "cublas") return 0;
+    if (text == "1" || text == "2" || text == "4" || text == "8") return std::stoi(text);
+    throw std::invalid_argument("PROCAM_CUDA_DENSE_PRODUCT: '" + text + "' is not cublas, 1, 2, 4 or 8");
+  }
+
+  // Whether the float32 products (CG's Hessian products) read a float16 copy of K⁻¹: half the
+  // bytes of the bandwidth-bound product. PROCAM_CUDA_CG_MATRIX = float16 (default) or float32.
+  static bool HalfProducts() {
+    const char* choice = std::getenv("PROCAM_CUDA_CG_MATRIX");
+    if (choice == nullptr || *choice == '\0') return true;
+    const std::string text = choice;
+    if (text == "float16") return true;
+    if (text == "float32") return false;
+    throw std::invalid_argument("PROCAM_CUDA_CG_MATRIX: '" + text + "' is not float16 or float32");
+  }
+
   int n_ = 0;
   bool cholesky_ = true;
   DeviceArray<double> inverse_;        // K⁻¹, column-major
   DeviceArray<float> inverse_single_;  // the same in float32
+  // Cholesky path: s² and s⁻² (s = D^½ A^-½), float64 and float32.
+  DeviceArray<double> square_, inverse_square_;
+  DeviceArray<float> square_single_, inverse_square_single_;
+  int product_rows_ = 0;
+  // 2^k K⁻¹ in float16, as quads of columns (empty: not used), and 2^-k.
+  DeviceArray<HalfQuad> inverse_half_;
+  float half_post_ = 1.0f;
   // Staging for Apply (n×3 each).
   DeviceArray<double> x_, y_;
   DeviceArray<float> x_single_, y_single_;
@@ -246,17 +477,17 @@ bool DeviceAvailable(std::string* description) {
 
 class DeviceMatrixImpl : public DeviceMatrix {
  public:
-  DeviceMatrixImpl(const double* matrix, int n) : n_(n), matrix_(static_cast<size_t>(n) * n) {
+  // The staging vectors are allocated here, with the matrix: a cudaMalloc in the first Apply
+  // would land in the solve's time.
+  DeviceMatrixImpl(const double* matrix, int n)
+      : n_(n), matrix_(static_cast<size_t>(n) * n), in_(3 * static_cast<size_t>(n)), out_(3 * static_cast<size_t>(n)) {
     GetHandles();
     PROCAM_CUDA(cudaMemcpy(matrix_.get(), matrix, matrix_.size() * sizeof(double), cudaMemcpyHostToDevice));
   }
 
   void Apply(const double* x, int columns, double* y) const override {
+    if (columns < 1 || columns > 3) throw std::invalid_argument("DeviceMatrix::Apply: 1 to 3 columns");
     const size_t count = static_cast<size_t>(n_) * columns;
-    if (in_.size() < count) {
-      in_ = DeviceArray<double>(count);
-      out_ = DeviceArray<double>(count);
-    }
     PROCAM_CUDA(cudaMemcpy(in_.get(), x, count * sizeof(double), cudaMemcpyHostToDevice));
     const double one = 1.0, zero = 0.0;
     PROCAM_CUDA(cublasDgemm(GetHandles().blas, CUBLAS_OP_N, CUBLAS_OP_N, n_, columns, n_, &one, matrix_.get(), n_,
@@ -267,7 +498,7 @@ class DeviceMatrixImpl : public DeviceMatrix {
  private:
   int n_;
   DeviceArray<double> matrix_;
-  mutable DeviceArray<double> in_, out_;
+  DeviceArray<double> in_, out_;
 };
 
 std::unique_ptr<DeviceMatrix> DeviceMatrix::Create(const double* matrix, int n) {

@@ -3,7 +3,8 @@
 //
 // K⁻¹ is formed once on the GPU per distinct channel reflectance (cuda_dense.h: cuSOLVER
 // Cholesky of the symmetric form, or LU when a patch is black) and kept there in float64 and
-// float32; every solve is then one cuBLAS product with three (grey room) or one column. Through
+// float32 (and float16 for CG's products); every solve is then one product with three (grey room)
+// or one column. Through
 // RadiosityBackend the solves take host matrices (the host loop, SolverOptions::device_host_loop);
 // the resident solver (cuda_solver.h) applies the same K⁻¹ to device vectors
 // (CudaInverseRadiosities, InverseRadiosity::ApplyOnDevice).

@@ -15,7 +15,7 @@ namespace procam {
 namespace {
 
 // The dense backend's K⁻¹ (one per group of channels sharing a reflectance) on device vectors:
-// one cuBLAS product per group, on the loop's stream.
+// one product per group, on the loop's stream.
 class DenseDeviceRadiosity : public cuda::DeviceRadiosity {
  public:
   DenseDeviceRadiosity(std::vector<const cuda::InverseRadiosity*> inverses, std::vector<std::vector<int>> channels,
@@ -110,7 +110,8 @@ TerminationType Termination(cuda::ResidentTermination termination) {
 }  // namespace
 
 Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const CompensationObjective& objective,
-                                      const Eigen::MatrixX3d& initial, SolverSummary* summary) {
+                                      const Eigen::MatrixX3d& initial, SolverSummary* summary,
+                                      Eigen::MatrixX3d* radiosity_out) {
   const std::unique_ptr<cuda::DeviceRadiosity> radiosity = DeviceRadiosityOf(objective.radiosity());
   const CompensationProblem& problem = objective.problem();
   const int n = objective.patches();
@@ -168,7 +169,9 @@ Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const Compen
 
   cuda::ResidentSummary resident;
   Eigen::MatrixX3d emittance(n, 3);
-  cuda::MinimiseResident(resident_options, resident_problem, *radiosity, emittance.data(), &resident);
+  if (radiosity_out != nullptr) radiosity_out->resize(n, 3);
+  cuda::MinimiseResident(resident_options, resident_problem, *radiosity, emittance.data(),
+                         radiosity_out != nullptr ? radiosity_out->data() : nullptr, &resident);
 
   // As MinimiseBounded writes its summary: counters and the trace added, the rest set.
   summary->termination = Termination(resident.termination);

@@ -348,10 +348,12 @@ __global__ void InnerStartKernel(long count, bool first, double* d, double* hd, 
 
 // CG on H_FF s = −∇q_F: r = −∇q ∘ mask, x = 0, the preconditioner blocks for this mask, z = P r,
 // p = z (and its copy in the products' precision).
+// With `split` (the Neumann preconditioner), z = D⁻¹r goes to `y` instead, and NeumannKernel forms
+// z, p and rᵀz from it.
 template <typename P>
-__global__ void CgStartKernel(int n, const double* qg, const double* mask, const double* jacobian,
+__global__ void CgStartKernel(int n, bool split, const double* qg, const double* mask, const double* jacobian,
                               const double* weight_diagonal, double* x, double* r, double* b0, double* p,
-                              double* preconditioner, P* p_fast, Scalars* scalars, Reduction reduction) {
+                              double* preconditioner, P* p_fast, double* y, Scalars* scalars, Reduction reduction) {
   double value[2] = {0.0, 0.0};  // rᵀr, rᵀz
   for (int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
     double m[3], ri[3], j[9], block[9];
@@ -368,8 +370,12 @@ __global__ void CgStartKernel(int n, const double* qg, const double* mask, const
     for (int e = 0; e < 9; ++e) preconditioner[e * n + i] = block[e];
     for (int a = 0; a < 3; ++a) {
       const double z = block[3 * a] * ri[0] + block[3 * a + 1] * ri[1] + block[3 * a + 2] * ri[2];
-      p[a * n + i] = z;
-      p_fast[a * n + i] = static_cast<P>(z);
+      if (split) {
+        y[a * n + i] = z;
+      } else {
+        p[a * n + i] = z;
+        p_fast[a * n + i] = static_cast<P>(z);
+      }
       value[0] += ri[a] * ri[a];
       value[1] += ri[a] * z;
     }
@@ -459,9 +465,10 @@ __global__ void CgCurvatureKernel(long count, const P* product, const double* ma
 }
 
 // x += step p, r −= step hp, z = P r; CG stops once ‖r‖ ≤ tolerance ‖r0‖ or at the iteration limit.
-__global__ void CgUpdateKernel(int n, const double* p, const double* hp, const double* preconditioner, double* x,
-                               double* r, double* z, double tolerance, int max_iterations, Scalars* scalars,
-                               Reduction reduction) {
+// With `split` (the Neumann preconditioner), `z` gets D⁻¹r, and NeumannKernel the rest.
+__global__ void CgUpdateKernel(int n, bool split, const double* p, const double* hp, const double* preconditioner,
+                               double* x, double* r, double* z, double tolerance, int max_iterations,
+                               Scalars* scalars, Reduction reduction) {
   if (scalars->cg.done) return;
   const double step = scalars->cg.step;
   double value[2] = {0.0, 0.0};  // rᵀr, rᵀz
@@ -485,10 +492,59 @@ __global__ void CgUpdateKernel(int n, const double* p, const double* hp, const d
     CgState& cg = scalars->cg;
     if (sqrt(value[0]) <= tolerance * cg.r0) {
       cg.done = 1;
-    } else {
+    } else if (!split) {
       ++cg.preconditioner_applications;
       cg.beta = value[1] / cg.rz;
       cg.rz = value[1];
+      if (cg.iterations >= max_iterations) cg.done = 1;
+    }
+  }
+}
+
+// The Neumann preconditioner: block Jacobi with one term of the Neumann series of M_FF = D − N
+// (D its 3×3 diagonal blocks, −N the coupling through W's neighbours): z = (D⁻¹ + D⁻¹ N D⁻¹) r =
+// y − D⁻¹ M_off y with y = D⁻¹ r, M_off,ij = 2 W_ij J_iᵀ J_j on the free variables. It is SPD
+// because D^-½ M_FF D^-½ has its eigenvalues in (0, 2): W = diag(α a) + (1 − α) L is strictly
+// diagonally dominant, so M ≺ 2D, and restricting both sides to the free variables keeps it.
+// Where block Jacobi maps that spectrum to itself, this maps λ to λ(2 − λ) ≤ 1, lifting the
+// smooth modes (small λ) by up to 2×. Then rᵀz; at the start p = z, else β (as CgUpdateKernel
+// without `split`).
+template <typename P>
+__global__ void NeumannKernel(int n, bool start, Weights w, const double* jacobian, const double* preconditioner,
+                              const double* y, const double* r, double* z, double* p, P* p_fast, int max_iterations,
+                              Scalars* scalars, Reduction reduction) {
+  if (scalars->cg.done) return;
+  double value[1] = {0.0};  // rᵀz
+  for (int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
+    double coupled[3] = {0.0, 0.0, 0.0}, c[3];
+    for (int e = w.offsets[i]; e < w.offsets[i + 1]; ++e) {
+      ColourProduct(jacobian, y, n, w.neighbours[e], c);
+      for (int a = 0; a < 3; ++a) coupled[a] += w.values[e] * c[a];
+    }
+    double j[9], t[3];
+    LoadJacobian(jacobian, n, i, j);
+    for (int b = 0; b < 3; ++b) t[b] = 2.0 * (j[b] * coupled[0] + j[3 + b] * coupled[1] + j[6 + b] * coupled[2]);
+    for (int a = 0; a < 3; ++a) {
+      const double za = y[a * n + i] - (preconditioner[(3 * a) * n + i] * t[0] +
+                                        preconditioner[(3 * a + 1) * n + i] * t[1] +
+                                        preconditioner[(3 * a + 2) * n + i] * t[2]);
+      if (start) {
+        p[a * n + i] = za;
+        p_fast[a * n + i] = static_cast<P>(za);
+      } else {
+        z[a * n + i] = za;
+      }
+      value[0] += r[a * n + i] * za;
+    }
+  }
+  if (GridReduce(value, 0u, reduction.partials, reduction.counter)) {
+    CgState& cg = scalars->cg;
+    if (start) {
+      cg.rz = value[0];
+    } else {
+      ++cg.preconditioner_applications;
+      cg.beta = value[0] / cg.rz;
+      cg.rz = value[0];
       if (cg.iterations >= max_iterations) cg.done = 1;
     }
   }
@@ -742,6 +798,19 @@ bool GraphsEnabled() {
   return enabled;
 }
 
+// CG's preconditioner: PROCAM_CUDA_PRECONDITIONER = neumann (NeumannKernel, the default) or
+// jacobi (the 3×3 diagonal blocks alone).
+bool NeumannPreconditioner() {
+  static const bool neumann = [] {
+    const char* choice = std::getenv("PROCAM_CUDA_PRECONDITIONER");
+    if (choice == nullptr || *choice == '\0' || std::string(choice) == "neumann") return true;
+    if (std::string(choice) == "jacobi") return false;
+    throw std::invalid_argument(std::string("PROCAM_CUDA_PRECONDITIONER: '") + choice +
+                                "' is not neumann or jacobi");
+  }();
+  return neumann;
+}
+
 // The loop's fixed sequences of device work, each replayed as one CUDA graph.
 enum class Sequence {
   kHead,         // gradient, its check, Alg. 2's start and CG's start
@@ -804,6 +873,7 @@ class Loop {
     DesiredColourKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, trial_.emittance, desired_colour_);
     Launched("DesiredColourKernel");
     small_ = n_ < kSmallPatches;
+    neumann_ = NeumannPreconditioner();
     graphs_ = !radiosity.iterative() && GraphsEnabled();
   }
 
@@ -829,7 +899,7 @@ class Loop {
       point->curvature = workspace->Take<double>(vector);
     }
     for (double** array : {&lower_, &upper_, &desired_colour_, &gradient_, &d_, &hd_, &qg_, &mask_, &x_, &r_, &b0_,
-                           &p_, &z_, &hp_, &solution_, &delta_, &step_trial_}) {
+                           &p_, &z_, &y_, &hp_, &solution_, &delta_, &step_trial_}) {
       *array = workspace->Take<double>(vector);
     }
     preconditioner_ = workspace->Take<double>(9 * n);
@@ -841,7 +911,7 @@ class Loop {
     fixed_ = workspace->Take<unsigned char>(vector);
   }
 
-  void Run(double* emittance, ResidentSummary* summary) {
+  void Run(double* emittance, double* radiosity, ResidentSummary* summary) {
     const auto start = Clock::now();
     Evaluate(current_);
     Sync();
@@ -855,6 +925,7 @@ class Loop {
       summary->message = "objective is not finite at the start";
       summary->final_cost = cost;
       Download(current_.emittance, emittance);
+      if (radiosity != nullptr) Download(current_.radiosity, radiosity);
       return;
     }
     // Products enqueued ahead of a read only where they are cheap (not matrix-free).
@@ -948,6 +1019,7 @@ class Loop {
     }
     summary->final_cost = cost;
     Download(current_.emittance, emittance);
+    if (radiosity != nullptr) Download(current_.radiosity, radiosity);  // K⁻¹E, evaluated at acceptance
     if (ProfileEnabled()) PrintProfile(SecondsSince(start));
   }
 
@@ -1119,10 +1191,18 @@ class Loop {
   int FirstBatch(int expected) const { return small_ ? std::max(1, expected - 1) : 1; }
 
   void CgStart() {
-    CgStartKernel<P><<<Blocks(n_), kThreads, 0, stream_>>>(n_, qg_, mask_, current_.jacobian, weight_diagonal_, x_,
-                                                            r_, b0_, p_, preconditioner_, p_fast_, scalars_,
-                                                            reduction_);
+    CgStartKernel<P><<<Blocks(n_), kThreads, 0, stream_>>>(n_, neumann_, qg_, mask_, current_.jacobian,
+                                                            weight_diagonal_, x_, r_, b0_, p_, preconditioner_,
+                                                            p_fast_, y_, scalars_, reduction_);
     Launched("CgStartKernel");
+    if (neumann_) Neumann(/*start=*/true);
+  }
+
+  void Neumann(bool start) {
+    NeumannKernel<P><<<Blocks(n_), kThreads, 0, stream_>>>(n_, start, weights_, current_.jacobian, preconditioner_,
+                                                            y_, r_, z_, p_, p_fast_, options_.max_cg_iterations,
+                                                            scalars_, reduction_);
+    Launched("NeumannKernel");
   }
 
   // NewtonSystem::SolveMasked's loop body, `iterations` times (no-ops once CG has stopped).
@@ -1135,10 +1215,11 @@ class Loop {
     CgCurvatureKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, product_fast_, mask_, p_, hp_, scalars_,
                                                                     reduction_);
     Launched("CgCurvatureKernel");
-    CgUpdateKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, p_, hp_, preconditioner_, x_, r_, z_,
-                                                          options_.cg_tolerance, options_.max_cg_iterations, scalars_,
-                                                          reduction_);
+    CgUpdateKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, neumann_, p_, hp_, preconditioner_, x_, r_,
+                                                          neumann_ ? y_ : z_, options_.cg_tolerance,
+                                                          options_.max_cg_iterations, scalars_, reduction_);
     Launched("CgUpdateKernel");
+    if (neumann_) Neumann(/*start=*/false);
     CgDirectionKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, z_, p_, p_fast_, scalars_);
     Launched("CgDirectionKernel");
   }
@@ -1248,6 +1329,7 @@ class Loop {
   const long count_;  // variables, 3n
   bool small_ = true;
   bool second_order_ = false;
+  bool neumann_ = false;  // CG's preconditioner: block Jacobi with a Neumann term (NeumannKernel)
   cudaStream_t stream_ = nullptr;
   Scalars* scalars_ = nullptr;  // device
   Scalars* host_ = nullptr;     // pinned host copy, as of the last Sync
@@ -1256,7 +1338,7 @@ class Loop {
   Weights weights_{};
   Point current_{}, trial_{};
   double *lower_, *upper_, *desired_colour_, *gradient_, *d_, *hd_, *qg_, *mask_;
-  double *x_, *r_, *b0_, *p_, *z_, *hp_, *solution_, *delta_, *step_trial_, *preconditioner_;
+  double *x_, *r_, *b0_, *p_, *z_, *y_, *hp_, *solution_, *delta_, *step_trial_, *preconditioner_;
   P *p_fast_, *u_fast_, *back_fast_, *product_fast_;
   double *weight_diagonal_, *neighbour_weights_;
   int *offsets_, *neighbours_;
@@ -1266,14 +1348,14 @@ class Loop {
 }  // namespace
 
 void MinimiseResident(const ResidentOptions& options, const ResidentProblem& problem, const DeviceRadiosity& radiosity,
-                      double* emittance, ResidentSummary* summary) {
+                      double* emittance, double* radiosity_out, ResidentSummary* summary) {
   if (problem.patches <= 0) throw std::invalid_argument("resident GPU solve: no patches");
   std::lock_guard<std::mutex> lock(WorkspaceMutex());
   Workspace& workspace = SharedWorkspace();
   if (radiosity.single()) {
-    Loop<float>(options, problem, radiosity, &workspace).Run(emittance, summary);
+    Loop<float>(options, problem, radiosity, &workspace).Run(emittance, radiosity_out, summary);
   } else {
-    Loop<double>(options, problem, radiosity, &workspace).Run(emittance, summary);
+    Loop<double>(options, problem, radiosity, &workspace).Run(emittance, radiosity_out, summary);
   }
 }
 

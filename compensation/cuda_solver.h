@@ -5,7 +5,7 @@
 // device. Solve calls it for SolverOptions::device = Device::kCuda unless device_host_loop.
 //
 // What runs where (cuda_solver.cu; docs/gpu.md has the measurements):
-//   device  K⁻¹ and K⁻ᵀ (the dense float64/float32 K⁻¹ of cuda_radiosity.h as cuBLAS products,
+//   device  K⁻¹ and K⁻ᵀ (the dense K⁻¹ of cuda_radiosity.h, float64 and float16 copies,
 //           or the matrix-free CG of cuda_compressed.h), per-patch colour, residual, Jacobian
 //           and second-order term, products with W (the adjacency in CSR form), objective,
 //           gradient, projected gradient and active set, CG on the free variables, its
@@ -13,11 +13,13 @@
 //   host    the control flow, reading back a few scalars per step (costs, slopes, CG's state),
 //           and the records of the summary.
 // The algorithm and its stopping rules are MinimiseBounded's, with one difference: CG is
-// preconditioned by the inverses of the 3×3 diagonal blocks of M_FF (block Jacobi) instead of a
-// sparse factorisation of M_FF, whatever SolverOptions::preconditioner says. Values, gradients
-// and line searches are float64; the Hessian products of CG use the same reduced-precision solves
-// as the host loop (the dense float32 K⁻¹; the matrix-free CG at its fast tolerance).
-// SolverOptions::device_float32 is not used (the host loop's option).
+// preconditioned by the inverses of the 3×3 diagonal blocks of M_FF with one Neumann term for
+// their coupling through W (z = D⁻¹r + D⁻¹ N D⁻¹ r; PROCAM_CUDA_PRECONDITIONER=jacobi drops the
+// term) instead of a sparse factorisation of M_FF, whatever SolverOptions::preconditioner says.
+// Values, gradients and line searches are float64; the Hessian products of CG use
+// reduced-precision solves (the dense K⁻¹ in float16 with float32 vectors and sums; the
+// matrix-free CG at its fast tolerance). SolverOptions::device_float32 is not used (the host
+// loop's option).
 
 #include <Eigen/Core>
 
@@ -30,8 +32,11 @@ namespace procam {
 // (trace, counters, termination), added to `summary` as MinimiseBounded adds them.
 // `objective.radiosity()` must have been built with a CUDA backend (MakeCudaRadiosityBackend or
 // MakeCudaCompressedRadiosityBackend), else std::invalid_argument. Throws std::runtime_error at
-// device errors (naming the CUDA call). Calls from several threads are serialised.
+// device errors (naming the CUDA call). Calls from several threads are serialised. `radiosity`
+// (if not null) gets the result's K⁻¹E from the device (its last evaluation), which spares the
+// caller a product.
 Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const CompensationObjective& objective,
-                                      const Eigen::MatrixX3d& initial, SolverSummary* summary);
+                                      const Eigen::MatrixX3d& initial, SolverSummary* summary,
+                                      Eigen::MatrixX3d* radiosity = nullptr);
 
 }  // namespace procam

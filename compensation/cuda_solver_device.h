@@ -4,7 +4,7 @@
 //
 // Vectors on the device are n×3, column-major (channel-planar: value c·n + i), in patch order:
 // the layout of Eigen::MatrixX3d, so that uploads and downloads are single copies, and the
-// layout the dense K⁻¹ multiplies (one cuBLAS product per group of channels).
+// layout the dense K⁻¹ multiplies (one product per group of channels).
 
 #include <functional>
 #include <string>
@@ -107,10 +107,11 @@ struct ResidentSummary {
 // per-patch colour, residual, Jacobian and second-order term, W products (CSR), gradient, active
 // set, conjugate gradients preconditioned by the inverse 3×3 diagonal blocks of the free
 // variables' colour Hessian M_FF, the projected step of Alg. 2 and the Armijo search. The host
-// reads back a few scalars per step. `emittance` (n×3 column-major, host) gets the result.
+// reads back a few scalars per step. `emittance` (n×3 column-major, host) gets the result and
+// `radiosity_out` (if not null) its radiosity K⁻¹E, as the last evaluation formed it.
 // Throws std::runtime_error at device errors. Calls are serialised (one device workspace per
 // process, grown as needed and kept between calls).
 void MinimiseResident(const ResidentOptions& options, const ResidentProblem& problem, const DeviceRadiosity& radiosity,
-                      double* emittance, ResidentSummary* summary);
+                      double* emittance, double* radiosity_out, ResidentSummary* summary);
 
 }  // namespace procam::cuda

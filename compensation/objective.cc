@@ -51,8 +51,16 @@ CompensationObjective::CompensationObjective(const CompensationProblem& problem,
   for (int i = 0; i < n; ++i) triplets.emplace_back(i, i, diagonal[i]);
   weights_.resize(n, n);
   weights_.setFromTriplets(triplets.begin(), triplets.end());
-  desired_colour_.resize(n, 3);
-  for (int i = 0; i < n; ++i) desired_colour_.row(i) = Colour(problem.desired.row(i).transpose()).transpose();
+}
+
+const Eigen::MatrixX3d& CompensationObjective::DesiredColour() const {
+  std::call_once(desired_colour_formed_, [this] {
+    desired_colour_.resize(patches(), 3);
+    for (int i = 0; i < patches(); ++i) {
+      desired_colour_.row(i) = Colour(problem_.desired.row(i).transpose()).transpose();
+    }
+  });
+  return desired_colour_;
 }
 
 Eigen::Vector3d CompensationObjective::Colour(const Eigen::Vector3d& rgb) const {
@@ -75,9 +83,10 @@ double CompensationObjective::Evaluate(const Eigen::MatrixX3d& emittance, Object
   point->radiosity = radiosity_.Solve(emittance);
   point->residual.resize(n, 3);
   point->colour_jacobian.resize(n);
+  const Eigen::MatrixX3d& desired = DesiredColour();
   for (int i = 0; i < n; ++i) {
     const Eigen::Vector3d rgb = point->radiosity.row(i).transpose();
-    point->residual.row(i) = (Colour(rgb) - desired_colour_.row(i).transpose()).transpose();
+    point->residual.row(i) = (Colour(rgb) - desired.row(i).transpose()).transpose();
     point->colour_jacobian[i] = ColourJacobian(rgb);
   }
   point->value = point->residual.cwiseProduct(weights_ * point->residual).sum();
@@ -87,8 +96,9 @@ double CompensationObjective::Evaluate(const Eigen::MatrixX3d& emittance, Object
 double CompensationObjective::Value(const Eigen::MatrixX3d& emittance) const {
   const Eigen::MatrixX3d radiosity = radiosity_.Solve(emittance);
   Eigen::MatrixX3d residual(patches(), 3);
+  const Eigen::MatrixX3d& desired = DesiredColour();
   for (int i = 0; i < patches(); ++i) {
-    residual.row(i) = (Colour(radiosity.row(i).transpose()) - desired_colour_.row(i).transpose()).transpose();
+    residual.row(i) = (Colour(radiosity.row(i).transpose()) - desired.row(i).transpose()).transpose();
   }
   return residual.cwiseProduct(weights_ * residual).sum();
 }

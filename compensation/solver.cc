@@ -63,12 +63,16 @@ std::shared_ptr<const RadiositySystem> MakeRadiositySystem(const SolverOptions& 
 
 // Alg. 1 where options say: on the device (cuda_solver.h) for kCuda unless device_host_loop, else
 // MinimiseBounded (whose K⁻¹ applications run on the objective's RadiositySystem backend).
+// `radiosity` (if not null) gets the result's K⁻¹E where the device formed it, else stays empty.
 Eigen::MatrixX3d Minimise(const SolverOptions& options, const CompensationObjective& objective,
-                          const Eigen::MatrixX3d& initial, SolverSummary* summary) {
+                          const Eigen::MatrixX3d& initial, SolverSummary* summary,
+                          Eigen::MatrixX3d* radiosity = nullptr) {
 #if PROCAM_WITH_CUDA
   if (options.device == Device::kCuda && !options.device_host_loop) {
-    return MinimiseBoundedOnGpu(options, objective, initial, summary);
+    return MinimiseBoundedOnGpu(options, objective, initial, summary, radiosity);
   }
+#else
+  (void)radiosity;
 #endif
   return MinimiseBounded(options, objective, initial, summary);
 }
@@ -530,11 +534,11 @@ CompensationSolution Solve(const SolverOptions& options, const CompensationProbl
         summary->coarse_seconds = SecondsSince(coarse_start) - coarse_setup_seconds;
       }
       const CompensationObjective objective(problem, radiosity, model);
-      solution.emittance = Minimise(options, objective, initial, summary);
+      solution.emittance = Minimise(options, objective, initial, summary, &solution.radiosity);
       break;
     }
   }
-  solution.radiosity = radiosity.Solve(solution.emittance);
+  if (solution.radiosity.rows() != problem.size()) solution.radiosity = radiosity.Solve(solution.emittance);
   solution.radiosity_system = std::move(radiosity_system);
   summary->solve_seconds = SecondsSince(solve_start) - coarse_setup_seconds;
   return solution;

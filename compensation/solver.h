@@ -43,7 +43,7 @@ bool CudaAvailable(std::string* description);
 struct SolverOptions {
   CompensationMethod method = CompensationMethod::kPerceptual;
   // kCpu: the CPU factorisation and kernels of radiosity.h (the reference). kCuda: K⁻¹ formed
-  // once on the GPU and every solve one cuBLAS product (cuda_radiosity.h); the algorithm is the
+  // once on the GPU and every solve one matrix product (cuda_radiosity.h); the algorithm is the
   // same. kCuda needs a build with PROCAM_WITH_CUDA and a device: otherwise Solve throws
   // std::runtime_error with one line saying which is missing.
   Device device = Device::kCpu;
@@ -52,7 +52,7 @@ struct SolverOptions {
   bool device_float32 = false;
   // kCuda only: run Alg. 1 on the host with only the K⁻¹/K⁻ᵀ applications on the device (n×3
   // copied each way per application), the first GPU path, kept for comparison. Off (default):
-  // the whole loop stays on the device (cuda_solver.h: block-Jacobi preconditioner, float64
+  // the whole loop stays on the device (cuda_solver.h: own CG preconditioner, float64
   // values), for the linear and perceptual methods and both levels of multires.
   bool device_host_loop = false;
   // Solve the coarse level first and start the fine solve from it (needs a coarse level).

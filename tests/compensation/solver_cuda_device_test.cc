@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -18,9 +19,12 @@
 
 #include <filesystem>
 
+#include <cublas_v2.h>
+#include <cuda_runtime.h>
 #include <nlohmann/json.hpp>
 
 #include "compensation/colour.h"
+#include "compensation/cuda_dense.h"
 #include "compensation/cuda_radiosity.h"
 #include "geometry/io.h"
 #include "compensation/solver.h"
@@ -28,6 +32,15 @@
 
 namespace procam {
 namespace {
+
+std::vector<int> IntegersFromEnvironment(const char* name, std::vector<int> fallback) {
+  const char* text = std::getenv(name);
+  if (text == nullptr) return fallback;
+  std::vector<int> values;
+  std::stringstream stream(text);
+  for (std::string item; std::getline(stream, item, ',');) values.push_back(std::stoi(item));
+  return values;
+}
 
 // The summary's records agree with each other (as MinimiseBounded keeps them).
 // The trace, one line per outer iteration (printed where a check failed).
@@ -123,6 +136,235 @@ TEST(SolveCudaExported, ResidentAndHostLoopMatchTheCpuOnRealRooms) {
   EXPECT_GT(solved, 0) << "no problem directories under " << root;
 }
 
+// A random reciprocal room of n patches: areas spread over two decades, exchange areas G
+// symmetric and positive, F = A⁻¹G scaled to row sums ≤ 0.9; reflectance in [0.05, 0.95] with
+// patch `black` (if ≥ 0) at 0, which sends InverseRadiosity down its LU path.
+struct RandomRoom {
+  Eigen::MatrixXd form_factors;
+  Eigen::VectorXd area, reflectance;
+};
+RandomRoom MakeRandomRoom(int n, int black, unsigned seed) {
+  std::srand(seed);
+  RandomRoom room;
+  room.area = (Eigen::VectorXd::Random(n).array() + 1.0).unaryExpr([](double u) { return std::pow(10.0, u); });
+  Eigen::MatrixXd g = (Eigen::MatrixXd::Random(n, n).array() + 1.0).matrix();
+  g = 0.5 * (g + g.transpose()).eval();
+  g.diagonal().setZero();
+  room.form_factors = room.area.cwiseInverse().asDiagonal() * g;
+  const double largest = room.form_factors.rowwise().sum().maxCoeff();
+  if (largest > 0.0) room.form_factors *= 0.9 / largest;  // one factor for all: reciprocity holds
+  room.reflectance = 0.5 + 0.45 * Eigen::VectorXd::Random(n).array();
+  if (black >= 0) room.reflectance[black] = 0.0;
+  return room;
+}
+
+template <typename T>
+struct DeviceBuffer {
+  explicit DeviceBuffer(size_t count) : count(count) { EXPECT_EQ(cudaMalloc(&data, count * sizeof(T)), cudaSuccess); }
+  ~DeviceBuffer() { cudaFree(data); }
+  T* data = nullptr;
+  size_t count;
+};
+
+// Sets an environment variable for one scope (the dense backend reads its choices at Create).
+class ScopedEnvironment {
+ public:
+  ScopedEnvironment(const char* name, const char* value) : name_(name) { setenv(name, value, 1); }
+  ~ScopedEnvironment() { unsetenv(name_); }
+
+ private:
+  const char* name_;
+};
+
+// InverseRadiosity::ApplyOnDevice (own product kernel, both directions, float64 and float32 with
+// the float32 or the float16 copy of K⁻¹, 1–3 columns) against K⁻¹x and K⁻ᵀx solved on the CPU by
+// LU of K = I − diag(ρ)F, on rooms whose areas differ (the kernel's K⁻¹x goes through s² = ρ/A)
+// and with a black patch (LU path, cuBLAS for K⁻¹x). Sizes not multiples of the block: 1, 37,
+// 1000, 4500 patches. Outputs are poisoned with NaN first: every entry must be written.
+TEST(SolveCudaAnalytic, DenseProductsOnTheDeviceMatchTheCpu) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  for (const int n : {1, 37, 1000, 4500}) {
+    for (const int black : {-1, n / 2}) {
+      const RandomRoom room = MakeRandomRoom(n, black, 17u + n);
+      const Eigen::MatrixXd k =
+          Eigen::MatrixXd::Identity(n, n) - room.reflectance.asDiagonal() * room.form_factors;
+      const Eigen::PartialPivLU<Eigen::MatrixXd> lu(k);
+      const Eigen::PartialPivLU<Eigen::MatrixXd> lu_transposed(k.transpose());
+      for (const char* cg_matrix : {"float32", "float16"}) {
+        const ScopedEnvironment choice("PROCAM_CUDA_CG_MATRIX", cg_matrix);
+        const auto inverse = cuda::InverseRadiosity::Create(room.form_factors.data(), room.area.data(),
+                                                            room.reflectance.data(), n);
+        EXPECT_EQ(inverse->cholesky(), black < 0) << n;
+        // float16 entries keep 11 significant bits: each product within 2^-11 of the truth in
+        // the worst case (measured ~1e-4; float32 ~1e-7).
+        const double single_tolerance = std::string(cg_matrix) == "float16" ? 5e-4 : 1e-5;
+        for (const int columns : {1, 3}) {
+          const Eigen::MatrixXd x = Eigen::MatrixXd::Random(n, columns);
+          for (const bool transposed : {false, true}) {
+            const Eigen::MatrixXd truth = transposed ? lu_transposed.solve(x) : lu.solve(x);
+            const size_t count = static_cast<size_t>(n) * columns;
+            const std::string label = std::to_string(n) + " patches, black " + std::to_string(black) + ", " +
+                                      std::to_string(columns) + " columns, transposed " +
+                                      std::to_string(transposed) + ", CG matrix " + cg_matrix;
+            DeviceBuffer<double> dx(count), dy(count);
+            cudaMemcpy(dx.data, x.data(), count * sizeof(double), cudaMemcpyHostToDevice);
+            cudaMemset(dy.data, 0xff, count * sizeof(double));
+            inverse->ApplyOnDevice(dx.data, columns, transposed, dy.data, nullptr);
+            Eigen::MatrixXd y(n, columns);
+            ASSERT_EQ(cudaMemcpy(y.data(), dy.data, count * sizeof(double), cudaMemcpyDeviceToHost), cudaSuccess);
+            EXPECT_LT((y - truth).norm(), 1e-12 * truth.norm()) << label;
+            const Eigen::MatrixXf xf = x.cast<float>();
+            DeviceBuffer<float> fx(count), fy(count);
+            cudaMemcpy(fx.data, xf.data(), count * sizeof(float), cudaMemcpyHostToDevice);
+            cudaMemset(fy.data, 0xff, count * sizeof(float));
+            inverse->ApplyOnDevice(fx.data, columns, transposed, fy.data, nullptr);
+            Eigen::MatrixXf yf(n, columns);
+            ASSERT_EQ(cudaMemcpy(yf.data(), fy.data, count * sizeof(float), cudaMemcpyDeviceToHost), cudaSuccess);
+            const double error = (yf.cast<double>() - truth).norm() / truth.norm();
+            EXPECT_LT(error, single_tolerance) << label << " (float32 vectors)";
+            if (n == 4500 && columns == 3) std::printf("  %s: float32 vectors, relative error %.1e\n", label.c_str(), error);
+          }
+        }
+      }
+    }
+  }
+}
+
+// Microseconds per K⁻¹ product with three columns (median of 200, CUDA events, inputs rotated
+// over 4 buffers): cuBLAS GEMM against TransposedProductKernel with 4 and 8 outputs per block
+// (PROCAM_CUDA_DENSE_PRODUCT), float64, and float32 vectors with the float32 or the float16 copy
+// of K⁻¹ (PROCAM_CUDA_CG_MATRIX); K⁻¹x and K⁻ᵀx. Sizes: PROCAM_BENCH_GRIDS. GB/s: the matrix's
+// bytes over the best time.
+TEST(SolveCudaAnalytic, DISABLED_ProductTimings) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  struct Variant {
+    const char* rows;
+    const char* cg_matrix;
+  };
+  const Variant variants[] = {{"cublas", "float32"}, {"4", "float32"}, {"8", "float32"}, {"4", "float16"}, {"8", "float16"}};
+  std::printf("| patches | vectors | product | cuBLAS µs | 4 rows µs | 8 rows µs | 4 rows, float16 K⁻¹ µs | "
+              "8 rows, float16 K⁻¹ µs |\n|---:|---|---|---:|---:|---:|---:|---:|\n");
+  for (const int g : IntegersFromEnvironment("PROCAM_BENCH_GRIDS", {22, 40, 70})) {
+    const CompensationProblem p = testing::PlatesProblem(g, 0.5, 0.9);
+    const int n = p.size();
+    const Eigen::VectorXd rho = p.reflectance.col(0);
+    std::vector<std::unique_ptr<cuda::InverseRadiosity>> inverses;
+    for (const Variant& variant : variants) {
+      const ScopedEnvironment rows("PROCAM_CUDA_DENSE_PRODUCT", variant.rows);
+      const ScopedEnvironment cg_matrix("PROCAM_CUDA_CG_MATRIX", variant.cg_matrix);
+      inverses.push_back(cuda::InverseRadiosity::Create(p.form_factors.data(), p.area.data(), rho.data(), n));
+    }
+    const size_t count = 3 * static_cast<size_t>(n);
+    const Eigen::VectorXd x = Eigen::VectorXd::Random(4 * count);
+    const Eigen::VectorXf xf = x.cast<float>();
+    DeviceBuffer<double> dx(4 * count), dy(count);
+    DeviceBuffer<float> fx(4 * count), fy(count);
+    cudaMemcpy(dx.data, x.data(), x.size() * sizeof(double), cudaMemcpyHostToDevice);
+    cudaMemcpy(fx.data, xf.data(), xf.size() * sizeof(float), cudaMemcpyHostToDevice);
+    cudaEvent_t start, stop;
+    cudaEventCreate(&start);
+    cudaEventCreate(&stop);
+    for (const bool single : {true, false}) {
+      for (const bool transposed : {false, true}) {
+        std::printf("| %d | %s | %s |", n, single ? "float32" : "float64", transposed ? "K⁻ᵀx" : "K⁻¹x");
+        for (size_t v = 0; v < inverses.size(); ++v) {
+          if (!single && std::string(variants[v].cg_matrix) == "float16") {
+            std::printf(" – |");
+            continue;
+          }
+          std::vector<float> times;
+          for (int run = 0; run < 220; ++run) {
+            const size_t offset = (run % 4) * count;
+            cudaEventRecord(start);
+            if (single) {
+              inverses[v]->ApplyOnDevice(fx.data + offset, 3, transposed, fy.data, nullptr);
+            } else {
+              inverses[v]->ApplyOnDevice(dx.data + offset, 3, transposed, dy.data, nullptr);
+            }
+            cudaEventRecord(stop);
+            cudaEventSynchronize(stop);
+            float ms = 0.0f;
+            cudaEventElapsedTime(&ms, start, stop);
+            if (run >= 20) times.push_back(ms);
+          }
+          std::sort(times.begin(), times.end());
+          std::printf(" %.1f |", 1e3 * times[times.size() / 2]);
+        }
+        std::printf("\n");
+        std::fflush(stdout);
+      }
+    }
+    ASSERT_EQ(cudaGetLastError(), cudaSuccess);
+    cudaEventDestroy(start);
+    cudaEventDestroy(stop);
+  }
+}
+
+// Microseconds per product of an n×n symmetric matrix with three columns through cuBLAS: GEMM
+// against SYMM (which reads one triangle, half the bytes), float64 and float32 (a question for
+// the dense backend's storage: K⁻¹ = S M⁻¹ S⁻¹ with M⁻¹ symmetric). Median of 100, CUDA events.
+TEST(SolveCudaAnalytic, DISABLED_SymmetricProductTimings) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  cublasHandle_t handle;
+  ASSERT_EQ(cublasCreate(&handle), CUBLAS_STATUS_SUCCESS);
+  std::printf("| n | precision | GEMM µs | SYMM µs |\n|---:|---|---:|---:|\n");
+  for (const int n : {968, 3200, 9800}) {
+    Eigen::MatrixXd a = Eigen::MatrixXd::Random(n, n);
+    a = (0.5 * (a + a.transpose())).eval();
+    const Eigen::MatrixXf af = a.cast<float>();
+    const Eigen::MatrixXd x = Eigen::MatrixXd::Random(n, 3);
+    const Eigen::MatrixXf xf = x.cast<float>();
+    const size_t n2 = static_cast<size_t>(n) * n;
+    DeviceBuffer<double> da(n2), dx(3 * n), dy(3 * n);
+    DeviceBuffer<float> fa(n2), fx(3 * n), fy(3 * n);
+    cudaMemcpy(da.data, a.data(), n2 * sizeof(double), cudaMemcpyHostToDevice);
+    cudaMemcpy(fa.data, af.data(), n2 * sizeof(float), cudaMemcpyHostToDevice);
+    cudaMemcpy(dx.data, x.data(), 3 * n * sizeof(double), cudaMemcpyHostToDevice);
+    cudaMemcpy(fx.data, xf.data(), 3 * n * sizeof(float), cudaMemcpyHostToDevice);
+    cudaEvent_t start, stop;
+    cudaEventCreate(&start);
+    cudaEventCreate(&stop);
+    const auto time = [&](const auto& product) {
+      std::vector<float> times;
+      for (int run = 0; run < 120; ++run) {
+        cudaEventRecord(start);
+        product();
+        cudaEventRecord(stop);
+        cudaEventSynchronize(stop);
+        float ms = 0.0f;
+        cudaEventElapsedTime(&ms, start, stop);
+        if (run >= 20) times.push_back(ms);
+      }
+      std::sort(times.begin(), times.end());
+      return 1e3 * times[times.size() / 2];
+    };
+    const double one = 1.0, zero = 0.0;
+    const float onef = 1.0f, zerof = 0.0f;
+    const double dgemm = time([&] {
+      cublasDgemm(handle, CUBLAS_OP_N, CUBLAS_OP_N, n, 3, n, &one, da.data, n, dx.data, n, &zero, dy.data, n);
+    });
+    const double dsymm = time([&] {
+      cublasDsymm(handle, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, n, 3, &one, da.data, n, dx.data, n, &zero,
+                  dy.data, n);
+    });
+    Eigen::MatrixXd y(n, 3);
+    cudaMemcpy(y.data(), dy.data, 3 * n * sizeof(double), cudaMemcpyDeviceToHost);
+    EXPECT_LT((y - a * x).norm(), 1e-12 * (a * x).norm());
+    const double sgemm = time([&] {
+      cublasSgemm(handle, CUBLAS_OP_N, CUBLAS_OP_N, n, 3, n, &onef, fa.data, n, fx.data, n, &zerof, fy.data, n);
+    });
+    const double ssymm = time([&] {
+      cublasSsymm(handle, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, n, 3, &onef, fa.data, n, fx.data, n, &zerof,
+                  fy.data, n);
+    });
+    std::printf("| %d | float64 | %.1f | %.1f |\n| %d | float32 | %.1f | %.1f |\n", n, dgemm, dsymm, n, sgemm, ssymm);
+    std::fflush(stdout);
+    cudaEventDestroy(start);
+    cudaEventDestroy(stop);
+  }
+  cublasDestroy(handle);
+}
+
 TEST(SolveCudaAnalytic, ProductsWithKOnTheDeviceMatchTheCpu) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const CompensationProblem p = testing::PlatesProblem(16, 0.5, 0.9);
@@ -197,6 +439,10 @@ TEST(SolveCudaAnalytic, MatchesTheCpuReference) {
       EXPECT_TRUE(((problem.upper - gpu.emittance).array() >= 0.0).all()) << label.str();
       ObjectivePoint point;
       const double cost = objective.Evaluate(gpu.emittance, &point);  // CPU, double
+      // The solution's radiosity (from the device's last evaluation on the resident path) is K⁻¹E
+      // (the host loop's float32 variant solves with the float32 K⁻¹).
+      EXPECT_LT((gpu.radiosity - point.radiosity).norm(), (v.float32 ? 1e-5 : 1e-10) * point.radiosity.norm())
+          << label.str();
       const double relative = std::abs(cost - reference) / reference;
       EXPECT_LT(relative, v.host_loop ? 1e-4 : 1e-6) << label.str() << ": " << summary.BriefReport();
       const double projected =
@@ -246,15 +492,6 @@ TEST(SolveCudaAnalytic, ResidentStoppingRules) {
   Solve(options, reachable, &summary);
   EXPECT_LT(summary.final_cost, 1e-12) << summary.BriefReport();
   EXPECT_NE(summary.termination, TerminationType::kNumericalFailure) << summary.BriefReport();
-}
-
-std::vector<int> IntegersFromEnvironment(const char* name, std::vector<int> fallback) {
-  const char* text = std::getenv(name);
-  if (text == nullptr) return fallback;
-  std::vector<int> values;
-  std::stringstream stream(text);
-  for (std::string item; std::getline(stream, item, ',');) values.push_back(std::stoi(item));
-  return values;
 }
 
 // Markdown rows: variables, patches, solver, setup s, solve s (median of `repeats`), loop s (the
