@@ -5,7 +5,8 @@
 # (tests/compensation/*_device_test.cc: built from the solver's sources with only the CUDA
 # libraries and libgomp, so they run where Embree/OpenCV are missing; put libgomp.so.1 beside
 # them). It runs every GPU-vs-CPU check of both, then their DISABLED_Timings, and writes the
-# device, date, commit and both markdown tables to OUTPUT.md (for docs/gpu.md):
+# device, date, commit and the markdown tables to OUTPUT.md (for docs/gpu.md; the product timings
+# of the dense K⁻¹ with them):
 #   dense analytic plates: PROCAM_BENCH_GRIDS (g×g patches per plate, n = 2g²; default 22,70:
 #     2904 and 29 400 variables), CPU rows up to PROCAM_BENCH_CPU_MAX_VARIABLES (10 000);
 #   compressed plates: PROCAM_BENCH_COMPRESSED_GRIDS (default 40,120,224: 9600, 86 400 and
@@ -32,8 +33,10 @@ echo "$checks"
 compressed_checks=$("$compressed" 2>&1) || { echo "$compressed_checks"; exit 1; }
 echo "$compressed_checks"
 timings=$(PROCAM_BENCH_CPU_MAX_VARIABLES=${PROCAM_BENCH_CPU_MAX_VARIABLES:-10000} \
-  "$dense" --gtest_also_run_disabled_tests --gtest_filter='*Timings' 2>&1)
+  "$dense" --gtest_also_run_disabled_tests --gtest_filter='*.DISABLED_Timings' 2>&1)
 echo "$timings"
+products=$("$dense" --gtest_also_run_disabled_tests --gtest_filter='*.DISABLED_ProductTimings' 2>&1)
+echo "$products"
 compressed_timings=$(PROCAM_BENCH_CPU_MAX_VARIABLES=30000 \
   "$compressed" --gtest_also_run_disabled_tests --gtest_filter='*Timings' 2>&1)
 echo "$compressed_timings"
@@ -44,14 +47,19 @@ echo "$compressed_timings"
   echo
   echo "$timings" | grep '^|'
   echo
+  echo "Products with the dense K⁻¹, three columns, µs (median of 200; \`DISABLED_ProductTimings\`):"
+  echo
+  echo "$products" | grep '^|'
+  echo
   echo "Compressed F (\`compressed_cuda_device_test\`):"
   echo
   echo "$compressed_timings" | grep '^|'
   echo
-  echo "GPU-vs-CPU checks of the same run: $(echo "$checks" | grep -c '^\[       OK') + $(echo "$compressed_checks" | grep -c '^\[       OK') tests passed; exported rooms:"
+  echo "GPU-vs-CPU checks of the same run: $(echo "$checks" | grep -c '^\[       OK') + $(echo "$compressed_checks" | grep -c '^\[       OK') tests passed."
   echo
-  echo '```'
-  echo "$checks" | grep -E ' (resident|host loop) +objective' || echo "(none)"
-  echo '```'
+  echo "Real rooms exported here (\`procam compensate ROOM --export\`: F from Embree, projector bounds;"
+  echo "GPU rows median of 3):"
+  echo
+  echo "$checks" | grep '^|' || echo "(none: no BINARY_DIR/problems)"
 } > "$output"
 echo "wrote $output"

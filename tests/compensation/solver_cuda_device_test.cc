@@ -100,32 +100,47 @@ CompensationProblem ReadExportedProblem(const std::filesystem::path& directory) 
   return p;
 }
 
-// Every problem directory under $PROCAM_DEVICE_PROBLEMS (scripts/bench_gpu.sh exports them on
-// the build machine: box room with an occluder, the room example with its projectors).
+// Every problem directory under $PROCAM_DEVICE_PROBLEMS (written on the build machine by
+// `procam compensate ROOM --export`: Embree's F, the projectors' bounds): solved on the CPU, the
+// resident loop and the host loop, objectives compared; one markdown row each with the solve
+// time (GPU: median of 3; scripts/bench_gpu.sh collects the rows into its table).
 TEST(SolveCudaExported, ResidentAndHostLoopMatchTheCpuOnRealRooms) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const char* root = std::getenv("PROCAM_DEVICE_PROBLEMS");
   if (root == nullptr) GTEST_SKIP() << "PROCAM_DEVICE_PROBLEMS not set: no exported rooms to solve";
   int solved = 0;
+  std::printf("| room | patches | variables | method | solver | solve s | iterations | CG iterations | objective | "
+              "relative to the CPU |\n|---|---:|---:|---|---|---:|---:|---:|---:|---:|\n");
   for (const auto& entry : std::filesystem::directory_iterator(root)) {
     if (!std::filesystem::exists(entry.path() / "F.npy")) continue;
     const CompensationProblem p = ReadExportedProblem(entry.path());
     ASSERT_EQ(p.Validate(), "") << entry.path();
+    const std::string room = entry.path().filename().string();
     for (const CompensationMethod method : {CompensationMethod::kPerceptual, CompensationMethod::kLinear}) {
       SolverOptions cpu;
       cpu.method = method;
       SolverSummary reference;
       Solve(cpu, p, &reference);
+      const auto row = [&](const char* solver, const SolverSummary& summary, double seconds) {
+        std::printf("| %s | %d | %d | %s | %s | %.4f | %d | %d | %.10g | %.1e |\n", room.c_str(), p.size(),
+                    3 * p.size(), MethodName(method), solver, seconds, summary.iterations, summary.cg_iterations,
+                    summary.final_cost, std::abs(summary.final_cost - reference.final_cost) / reference.final_cost);
+      };
+      row("CPU", reference, reference.solve_seconds);
       for (const bool host_loop : {false, true}) {
         SolverOptions gpu = cpu;
         gpu.device = Device::kCuda;
         gpu.device_host_loop = host_loop;
         SolverSummary summary;
-        const CompensationSolution solution = Solve(gpu, p, &summary);
+        CompensationSolution solution;
+        std::vector<double> seconds;
+        for (int run = 0; run < 3; ++run) {
+          solution = Solve(gpu, p, &summary);
+          seconds.push_back(summary.solve_seconds);
+        }
+        std::sort(seconds.begin(), seconds.end());
+        row(host_loop ? "cuda host loop" : "cuda resident", summary, seconds[1]);
         const double relative = std::abs(summary.final_cost - reference.final_cost) / reference.final_cost;
-        std::printf("%-28s %-10s %-9s objective %.10g (CPU %.10g, relative %.1e), %d iterations (CPU %d)\n",
-                    entry.path().filename().c_str(), MethodName(method), host_loop ? "host loop" : "resident",
-                    summary.final_cost, reference.final_cost, relative, summary.iterations, reference.iterations);
         EXPECT_LT(relative, 1e-6) << entry.path() << " " << MethodName(method);
         EXPECT_TRUE(((solution.emittance - p.lower).array() >= 0.0).all());
         EXPECT_TRUE(((p.upper - solution.emittance).array() >= 0.0).all());
