@@ -1065,6 +1065,13 @@ class Loop {
   // instantiation failed.
   template <typename Work>
   bool Capture(const Work& work, cudaGraphExec_t* graph) {
+    const auto start = Clock::now();
+    ++profile_.captures;
+    struct Timed {
+      Profile& profile;
+      Clock::time_point start;
+      ~Timed() { profile.capture_seconds += SecondsSince(start); }
+    } timed{profile_, start};
     if (cudaStreamBeginCapture(stream_, cudaStreamCaptureModeThreadLocal) != cudaSuccess) {
       cudaGetLastError();
       graphs_ = false;
@@ -1110,11 +1117,12 @@ class Loop {
     unit(100, [&] { Sync(); }, &sync[0], &sync[1]);
     std::fprintf(stderr,
                  "resident profile: %d patches, loop %.3f ms: %d syncs waiting %.3f ms, %d kernels, %d solves, "
-                 "%d fast solves enqueued directly, %d graph launches (graphs %s); unit costs, µs to enqueue / to "
-                 "complete: kernel %.1f / %.1f, fast solve %.1f / %.1f, solve %.1f / %.1f, sync %.1f\n",
+                 "%d fast solves enqueued directly, %d graph launches (graphs %s, %d captured in %.3f ms); unit "
+                 "costs, µs to enqueue / to complete: kernel %.1f / %.1f, fast solve %.1f / %.1f, solve %.1f / "
+                 "%.1f, sync %.1f\n",
                  n_, 1e3 * loop_seconds, counted.syncs, 1e3 * counted.sync_seconds, counted.launches, counted.solves,
-                 counted.fast_solves, counted.graph_launches, graphs_ ? "on" : "off", kernel[0], kernel[1], fast[0],
-                 fast[1], solve[0], solve[1], sync[1]);
+                 counted.fast_solves, counted.graph_launches, graphs_ ? "on" : "off", counted.captures,
+                 1e3 * counted.capture_seconds, kernel[0], kernel[1], fast[0], fast[1], solve[0], solve[1], sync[1]);
   }
 
   void Download(const double* device, double* host) {
@@ -1313,8 +1321,9 @@ class Loop {
   }
 
   struct Profile {
-    int syncs = 0, launches = 0, solves = 0, fast_solves = 0, graph_launches = 0;
-    double sync_seconds = 0.0;  // the host waiting in cudaStreamSynchronize
+    int syncs = 0, launches = 0, solves = 0, fast_solves = 0, graph_launches = 0, captures = 0;
+    double sync_seconds = 0.0;     // the host waiting in cudaStreamSynchronize
+    double capture_seconds = 0.0;  // recording and instantiating the CUDA graphs
   };
 
   const ResidentOptions& options_;
