@@ -96,14 +96,15 @@ __global__ void ConvertKernel(const From* in, long count, To* out) {
   if (k < count) out[k] = static_cast<To>(in[k]);
 }
 
-// y = post · diag(left) Aᵀ diag(right) x for a column-major n×n A (float64 or float32) and an
-// n×columns x in the same type (columns ≤ 3; left/right null: ones). The transposed product reads
+// y = post · diag(left) Aᵀ diag(right) x for an n×n A (column-major float64 or float32, or the
+// float16 quads below) and an n×columns x (columns ≤ 3; left/right null: ones). The transposed product reads
 // A's columns, which are contiguous, so each output is one coalesced pass and no product needs a
 // second reduction kernel: K⁻ᵀx is it with no scaling, and K⁻¹x on the Cholesky path too, through
 // K⁻¹ = diag(s²) K⁻ᵀ diag(s⁻²) (K⁻¹ = S M⁻¹ S⁻¹ with M⁻¹ symmetric). Each block forms kRows
 // outputs; its threads stride over the sum (one matrix load, reused for every column) and
-// combine their partials in a fixed order (WriteRows). cuBLAS's GEMM with three columns was
-// measured slower (docs/gpu.md).
+// combine their partials in a fixed order (WriteRows); a Rows type (ColumnRows, HalfQuadRows)
+// says how a block's rows are stored. cuBLAS's GEMM with three columns was measured slower
+// (docs/gpu.md).
 
 // The block's partial sums of outputs first … first + kRows − 1 combined (warp shuffles, then the
 // warps in order) and written, times post and left.
@@ -139,26 +140,20 @@ __device__ void ScaledEntry(const T* __restrict__ x, const T* __restrict__ right
   for (int c = 0; c < 3; ++c) v[c] = c < columns ? scale * x[static_cast<size_t>(c) * n + j] : T(0);
 }
 
+// A block's kRows rows of Aᵀ (columns of A) stored as T: entry j of each, one load per row.
 template <typename T, int kRows>
-__global__ void __launch_bounds__(kProductThreads)
-    TransposedProductKernel(int n, int columns, const T* __restrict__ matrix, const T* __restrict__ left,
-                            const T* __restrict__ right, T post, const T* __restrict__ x, T* __restrict__ y) {
-  const int first = blockIdx.x * kRows;
+struct ColumnRows {
+  using Value = T;
+  static constexpr int kCount = kRows;
   const T* row[kRows];
-  for (int r = 0; r < kRows; ++r) row[r] = matrix + static_cast<size_t>(min(first + r, n - 1)) * n;
-  T sum[kRows][3] = {};
-  for (int j = threadIdx.x; j < n; j += kProductThreads) {
-    T v[3];
-    ScaledEntry(x, right, n, columns, j, v);
-#pragma unroll
-    for (int r = 0; r < kRows; ++r) {
-      const T m = row[r][j];
-#pragma unroll
-      for (int c = 0; c < 3; ++c) sum[r][c] += m * v[c];
-    }
+  __device__ ColumnRows(const T* matrix, int n, int first) {
+    for (int r = 0; r < kRows; ++r) row[r] = matrix + static_cast<size_t>(min(first + r, n - 1)) * n;
   }
-  WriteRows(sum, first, n, columns, left, post, y);
-}
+  __device__ void Load(int j, T (&m)[kRows]) const {
+#pragma unroll
+    for (int r = 0; r < kRows; ++r) m[r] = row[r][j];
+  }
+};
 
 // The float16 copy of A: its columns in groups of four, interleaved, so that one 8-byte load
 // gives four outputs' terms and a warp's load is 256 contiguous bytes (a column-major float16
@@ -166,6 +161,53 @@ __global__ void __launch_bounds__(kProductThreads)
 struct alignas(8) HalfQuad {
   __half2 low, high;
 };
+
+// A block's 4·kQuads rows of Aᵀ from the float16 quads, widened to float32.
+template <int kQuads>
+struct HalfQuadRows {
+  using Value = float;
+  static constexpr int kCount = 4 * kQuads;
+  const HalfQuad* quad[kQuads];
+  __device__ HalfQuadRows(const HalfQuad* matrix, int n, int first) {
+    const int quads = (n + 3) / 4;
+    for (int q = 0; q < kQuads; ++q) quad[q] = matrix + static_cast<size_t>(min(first / 4 + q, quads - 1)) * n;
+  }
+  __device__ void Load(int j, float (&m)[4 * kQuads]) const {
+#pragma unroll
+    for (int q = 0; q < kQuads; ++q) {
+      const HalfQuad h = quad[q][j];
+      const float2 low = __half22float2(h.low), high = __half22float2(h.high);
+      m[4 * q] = low.x;
+      m[4 * q + 1] = low.y;
+      m[4 * q + 2] = high.x;
+      m[4 * q + 3] = high.y;
+    }
+  }
+};
+
+template <typename Rows, typename S>
+__global__ void __launch_bounds__(kProductThreads)
+    TransposedProductKernel(int n, int columns, const S* __restrict__ matrix,
+                            const typename Rows::Value* __restrict__ left,
+                            const typename Rows::Value* __restrict__ right, typename Rows::Value post,
+                            const typename Rows::Value* __restrict__ x, typename Rows::Value* __restrict__ y) {
+  using T = typename Rows::Value;
+  constexpr int kRows = Rows::kCount;
+  const int first = blockIdx.x * kRows;
+  const Rows rows(matrix, n, first);
+  T sum[kRows][3] = {};
+  for (int j = threadIdx.x; j < n; j += kProductThreads) {
+    T v[3], m[kRows];
+    ScaledEntry(x, right, n, columns, j, v);
+    rows.Load(j, m);
+#pragma unroll
+    for (int r = 0; r < kRows; ++r) {
+#pragma unroll
+      for (int c = 0; c < 3; ++c) sum[r][c] += m[r] * v[c];
+    }
+  }
+  WriteRows(sum, first, n, columns, left, post, y);
+}
 
 __global__ void ToHalfQuadsKernel(const double* in, int n, double scale, HalfQuad* out) {
   const long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x;
@@ -180,64 +222,34 @@ __global__ void ToHalfQuadsKernel(const double* in, int n, double scale, HalfQua
   out[k] = {__halves2half2(v[0], v[1]), __halves2half2(v[2], v[3])};
 }
 
-// TransposedProductKernel on the float16 quads, float32 vectors and sums: 4·kQuads outputs per
-// block.
-template <int kQuads>
-__global__ void __launch_bounds__(kProductThreads)
-    HalfProductKernel(int n, int columns, const HalfQuad* __restrict__ matrix, const float* __restrict__ left,
-                      const float* __restrict__ right, float post, const float* __restrict__ x,
-                      float* __restrict__ y) {
-  const int quads = (n + 3) / 4;
-  const int first_quad = blockIdx.x * kQuads;
-  const HalfQuad* quad[kQuads];
-  for (int q = 0; q < kQuads; ++q) quad[q] = matrix + static_cast<size_t>(min(first_quad + q, quads - 1)) * n;
-  float sum[4 * kQuads][3] = {};
-  for (int j = threadIdx.x; j < n; j += kProductThreads) {
-    float v[3];
-    ScaledEntry(x, right, n, columns, j, v);
-#pragma unroll
-    for (int q = 0; q < kQuads; ++q) {
-      const HalfQuad h = quad[q][j];
-      const float2 low = __half22float2(h.low), high = __half22float2(h.high);
-      const float m[4] = {low.x, low.y, high.x, high.y};
-#pragma unroll
-      for (int t = 0; t < 4; ++t) {
-#pragma unroll
-        for (int c = 0; c < 3; ++c) sum[4 * q + t][c] += m[t] * v[c];
-      }
-    }
-  }
-  WriteRows(sum, 4 * first_quad, n, columns, left, post, y);
+template <typename Rows, typename S, typename T>
+void LaunchProduct(int n, int columns, const S* matrix, const T* left, const T* right, T post, const T* x, T* y,
+                   cudaStream_t stream) {
+  const int blocks = (n + Rows::kCount - 1) / Rows::kCount;
+  TransposedProductKernel<Rows><<<blocks, kProductThreads, 0, stream>>>(n, columns, matrix, left, right, post, x, y);
+  PROCAM_CUDA_LAUNCHED("TransposedProductKernel");
 }
 
 // Enqueues TransposedProductKernel with `rows` outputs per block (1, 2, 4 or 8).
 template <typename T>
 void TransposedProduct(int n, int columns, int rows, const T* matrix, const T* left, const T* right, T post,
                        const T* x, T* y, cudaStream_t stream) {
-  const int blocks = (n + rows - 1) / rows;
-  const auto launch = [&](auto kernel) {
-    kernel<<<blocks, kProductThreads, 0, stream>>>(n, columns, matrix, left, right, post, x, y);
-  };
   switch (rows) {
-    case 1: launch(TransposedProductKernel<T, 1>); break;
-    case 2: launch(TransposedProductKernel<T, 2>); break;
-    case 4: launch(TransposedProductKernel<T, 4>); break;
-    default: launch(TransposedProductKernel<T, 8>); break;
+    case 1: LaunchProduct<ColumnRows<T, 1>>(n, columns, matrix, left, right, post, x, y, stream); break;
+    case 2: LaunchProduct<ColumnRows<T, 2>>(n, columns, matrix, left, right, post, x, y, stream); break;
+    case 4: LaunchProduct<ColumnRows<T, 4>>(n, columns, matrix, left, right, post, x, y, stream); break;
+    default: LaunchProduct<ColumnRows<T, 8>>(n, columns, matrix, left, right, post, x, y, stream); break;
   }
-  PROCAM_CUDA_LAUNCHED("TransposedProductKernel");
 }
 
-// The same on the float16 quads: 4 outputs per block, 8 where `rows` is 8.
+// The same on the float16 quads: 8 outputs per block (two quads), 4 where `rows` is below 8.
 void TransposedProduct(int n, int columns, int rows, const HalfQuad* matrix, const float* left, const float* right,
                        float post, const float* x, float* y, cudaStream_t stream) {
-  const int quads = (n + 3) / 4, per_block = rows == 8 ? 2 : 1;
-  const int blocks = (quads + per_block - 1) / per_block;
-  if (per_block == 2) {
-    HalfProductKernel<2><<<blocks, kProductThreads, 0, stream>>>(n, columns, matrix, left, right, post, x, y);
+  if (rows >= 8) {
+    LaunchProduct<HalfQuadRows<2>>(n, columns, matrix, left, right, post, x, y, stream);
   } else {
-    HalfProductKernel<1><<<blocks, kProductThreads, 0, stream>>>(n, columns, matrix, left, right, post, x, y);
+    LaunchProduct<HalfQuadRows<1>>(n, columns, matrix, left, right, post, x, y, stream);
   }
-  PROCAM_CUDA_LAUNCHED("HalfProductKernel");
 }
 
 class InverseRadiosityImpl : public InverseRadiosity {
@@ -320,7 +332,8 @@ class InverseRadiosityImpl : public InverseRadiosity {
       square_single_ = Upload(std::vector<float>(square.begin(), square.end()));
       inverse_square_single_ = Upload(std::vector<float>(inverse_square.begin(), inverse_square.end()));
     }
-    product_rows_ = ProductRows();
+    product_rows_ = ProductRows(4);
+    half_rows_ = ProductRows(8);
     inverse_single_ = DeviceArray<float>(n2);
     ConvertKernel<<<Blocks(n2), kThreads>>>(inverse_.get(), static_cast<long>(n2), inverse_single_.get());
     PROCAM_CUDA_LAUNCHED("ConvertKernel");
@@ -393,7 +406,8 @@ class InverseRadiosityImpl : public InverseRadiosity {
                      bool transposed, T* y, cudaStream_t stream) const {
     if (columns < 1 || columns > 3) throw std::invalid_argument("InverseRadiosity::ApplyOnDevice: 1 to 3 columns");
     if (product_rows_ > 0 && (transposed || cholesky_)) {
-      TransposedProduct(n_, columns, product_rows_, inverse, transposed ? nullptr : square,
+      const int rows = std::is_same_v<S, HalfQuad> ? half_rows_ : product_rows_;
+      TransposedProduct(n_, columns, rows, inverse, transposed ? nullptr : square,
                         transposed ? nullptr : inverse_square, post, x, y, stream);
       return;
     }
@@ -413,10 +427,11 @@ class InverseRadiosityImpl : public InverseRadiosity {
   }
 
   // Outputs per block of TransposedProductKernel; 0: cuBLAS. PROCAM_CUDA_DENSE_PRODUCT (for
-  // benchmarks): cublas, or 1/2/4/8 rows.
-  static int ProductRows() {
+  // benchmarks): cublas, or 1/2/4/8 rows; else `fallback` (4 for float64/float32 K⁻¹, 8 for the
+  // float16 quads: the fastest at 9800 patches, docs/gpu.md).
+  static int ProductRows(int fallback) {
     const char* choice = std::getenv("PROCAM_CUDA_DENSE_PRODUCT");
-    if (choice == nullptr || *choice == '\0') return 4;
+    if (choice == nullptr || *choice == '\0') return fallback;
     const std::string text = choice;
     if (text == "cublas") return 0;
     if (text == "1" || text == "2" || text == "4" || text == "8") return std::stoi(text);
@@ -441,7 +456,7 @@ class InverseRadiosityImpl : public InverseRadiosity {
   // Cholesky path: s² and s⁻² (s = D^½ A^-½), float64 and float32.
   DeviceArray<double> square_, inverse_square_;
   DeviceArray<float> square_single_, inverse_square_single_;
-  int product_rows_ = 0;
+  int product_rows_ = 0, half_rows_ = 0;
   // 2^k K⁻¹ in float16, as quads of columns (empty: not used), and 2^-k.
   DeviceArray<HalfQuad> inverse_half_;
   float half_post_ = 1.0f;

@@ -181,6 +181,21 @@ struct DeviceBuffer {
   size_t count;
 };
 
+// InverseRadiosity::ApplyOnDevice on x in T (float64 or float32), with the output poisoned
+// (NaN) first so that an entry not written shows.
+template <typename T>
+Eigen::MatrixXd DeviceProduct(const cuda::InverseRadiosity& inverse, const Eigen::MatrixXd& x, bool transposed) {
+  const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> input = x.cast<T>();
+  const size_t count = static_cast<size_t>(x.size());
+  DeviceBuffer<T> in(count), out(count);
+  cudaMemcpy(in.data, input.data(), count * sizeof(T), cudaMemcpyHostToDevice);
+  cudaMemset(out.data, 0xff, count * sizeof(T));
+  inverse.ApplyOnDevice(in.data, static_cast<int>(x.cols()), transposed, out.data, nullptr);
+  Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> output(x.rows(), x.cols());
+  EXPECT_EQ(cudaMemcpy(output.data(), out.data, count * sizeof(T), cudaMemcpyDeviceToHost), cudaSuccess);
+  return output.template cast<double>();
+}
+
 // Sets an environment variable for one scope (the dense backend reads its choices at Create).
 class ScopedEnvironment {
  public:
@@ -217,25 +232,12 @@ TEST(SolveCudaAnalytic, DenseProductsOnTheDeviceMatchTheCpu) {
           const Eigen::MatrixXd x = Eigen::MatrixXd::Random(n, columns);
           for (const bool transposed : {false, true}) {
             const Eigen::MatrixXd truth = transposed ? lu_transposed.solve(x) : lu.solve(x);
-            const size_t count = static_cast<size_t>(n) * columns;
             const std::string label = std::to_string(n) + " patches, black " + std::to_string(black) + ", " +
                                       std::to_string(columns) + " columns, transposed " +
                                       std::to_string(transposed) + ", CG matrix " + cg_matrix;
-            DeviceBuffer<double> dx(count), dy(count);
-            cudaMemcpy(dx.data, x.data(), count * sizeof(double), cudaMemcpyHostToDevice);
-            cudaMemset(dy.data, 0xff, count * sizeof(double));
-            inverse->ApplyOnDevice(dx.data, columns, transposed, dy.data, nullptr);
-            Eigen::MatrixXd y(n, columns);
-            ASSERT_EQ(cudaMemcpy(y.data(), dy.data, count * sizeof(double), cudaMemcpyDeviceToHost), cudaSuccess);
+            const Eigen::MatrixXd y = DeviceProduct<double>(*inverse, x, transposed);
             EXPECT_LT((y - truth).norm(), 1e-12 * truth.norm()) << label;
-            const Eigen::MatrixXf xf = x.cast<float>();
-            DeviceBuffer<float> fx(count), fy(count);
-            cudaMemcpy(fx.data, xf.data(), count * sizeof(float), cudaMemcpyHostToDevice);
-            cudaMemset(fy.data, 0xff, count * sizeof(float));
-            inverse->ApplyOnDevice(fx.data, columns, transposed, fy.data, nullptr);
-            Eigen::MatrixXf yf(n, columns);
-            ASSERT_EQ(cudaMemcpy(yf.data(), fy.data, count * sizeof(float), cudaMemcpyDeviceToHost), cudaSuccess);
-            const double error = (yf.cast<double>() - truth).norm() / truth.norm();
+            const double error = (DeviceProduct<float>(*inverse, x, transposed) - truth).norm() / truth.norm();
             EXPECT_LT(error, single_tolerance) << label << " (float32 vectors)";
             if (n == 4500 && columns == 3) std::printf("  %s: float32 vectors, relative error %.1e\n", label.c_str(), error);
           }
@@ -243,6 +245,29 @@ TEST(SolveCudaAnalytic, DenseProductsOnTheDeviceMatchTheCpu) {
       }
     }
   }
+}
+
+// Median microseconds of `runs` timed calls of work(run) after `warmup` untimed ones (CUDA
+// events on the default stream).
+template <typename Work>
+double MedianMicroseconds(int warmup, int runs, const Work& work) {
+  cudaEvent_t start, stop;
+  cudaEventCreate(&start);
+  cudaEventCreate(&stop);
+  std::vector<float> times;
+  for (int run = 0; run < warmup + runs; ++run) {
+    cudaEventRecord(start);
+    work(run);
+    cudaEventRecord(stop);
+    cudaEventSynchronize(stop);
+    float ms = 0.0f;
+    cudaEventElapsedTime(&ms, start, stop);
+    if (run >= warmup) times.push_back(ms);
+  }
+  cudaEventDestroy(start);
+  cudaEventDestroy(stop);
+  std::sort(times.begin(), times.end());
+  return 1e3 * times[times.size() / 2];
 }
 
 // Microseconds per K⁻¹ product with three columns (median of 200, CUDA events, inputs rotated
@@ -276,9 +301,6 @@ TEST(SolveCudaAnalytic, DISABLED_ProductTimings) {
     DeviceBuffer<float> fx(4 * count), fy(count);
     cudaMemcpy(dx.data, x.data(), x.size() * sizeof(double), cudaMemcpyHostToDevice);
     cudaMemcpy(fx.data, xf.data(), xf.size() * sizeof(float), cudaMemcpyHostToDevice);
-    cudaEvent_t start, stop;
-    cudaEventCreate(&start);
-    cudaEventCreate(&stop);
     for (const bool single : {true, false}) {
       for (const bool transposed : {false, true}) {
         std::printf("| %d | %s | %s |", n, single ? "float32" : "float64", transposed ? "K⁻ᵀx" : "K⁻¹x");
@@ -287,31 +309,21 @@ TEST(SolveCudaAnalytic, DISABLED_ProductTimings) {
             std::printf(" – |");
             continue;
           }
-          std::vector<float> times;
-          for (int run = 0; run < 220; ++run) {
+          const double us = MedianMicroseconds(20, 200, [&](int run) {
             const size_t offset = (run % 4) * count;
-            cudaEventRecord(start);
             if (single) {
               inverses[v]->ApplyOnDevice(fx.data + offset, 3, transposed, fy.data, nullptr);
             } else {
               inverses[v]->ApplyOnDevice(dx.data + offset, 3, transposed, dy.data, nullptr);
             }
-            cudaEventRecord(stop);
-            cudaEventSynchronize(stop);
-            float ms = 0.0f;
-            cudaEventElapsedTime(&ms, start, stop);
-            if (run >= 20) times.push_back(ms);
-          }
-          std::sort(times.begin(), times.end());
-          std::printf(" %.1f |", 1e3 * times[times.size() / 2]);
+          });
+          std::printf(" %.1f |", us);
         }
         std::printf("\n");
         std::fflush(stdout);
       }
     }
     ASSERT_EQ(cudaGetLastError(), cudaSuccess);
-    cudaEventDestroy(start);
-    cudaEventDestroy(stop);
   }
 }
 
@@ -336,23 +348,7 @@ TEST(SolveCudaAnalytic, DISABLED_SymmetricProductTimings) {
     cudaMemcpy(fa.data, af.data(), n2 * sizeof(float), cudaMemcpyHostToDevice);
     cudaMemcpy(dx.data, x.data(), 3 * n * sizeof(double), cudaMemcpyHostToDevice);
     cudaMemcpy(fx.data, xf.data(), 3 * n * sizeof(float), cudaMemcpyHostToDevice);
-    cudaEvent_t start, stop;
-    cudaEventCreate(&start);
-    cudaEventCreate(&stop);
-    const auto time = [&](const auto& product) {
-      std::vector<float> times;
-      for (int run = 0; run < 120; ++run) {
-        cudaEventRecord(start);
-        product();
-        cudaEventRecord(stop);
-        cudaEventSynchronize(stop);
-        float ms = 0.0f;
-        cudaEventElapsedTime(&ms, start, stop);
-        if (run >= 20) times.push_back(ms);
-      }
-      std::sort(times.begin(), times.end());
-      return 1e3 * times[times.size() / 2];
-    };
+    const auto time = [&](const auto& product) { return MedianMicroseconds(20, 100, [&](int) { product(); }); };
     const double one = 1.0, zero = 0.0;
     const float onef = 1.0f, zerof = 0.0f;
     const double dgemm = time([&] {
@@ -374,8 +370,6 @@ TEST(SolveCudaAnalytic, DISABLED_SymmetricProductTimings) {
     });
     std::printf("| %d | float64 | %.1f | %.1f |\n| %d | float32 | %.1f | %.1f |\n", n, dgemm, dsymm, n, sgemm, ssymm);
     std::fflush(stdout);
-    cudaEventDestroy(start);
-    cudaEventDestroy(stop);
   }
   cublasDestroy(handle);
 }
