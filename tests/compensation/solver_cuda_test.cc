@@ -2,8 +2,13 @@
 // Tests that need a GPU skip with "no CUDA device: skipped" where there is none (CI); the one
 // that checks the error without a device runs everywhere else.
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <set>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -12,6 +17,7 @@
 #include "compensation/solver.h"
 #include "datasets_synthetic/rooms.h"
 #include "geometry/form_factors.h"
+#include "geometry/io.h"
 #include "tests/testing/testing.h"
 
 namespace procam {
@@ -94,21 +100,22 @@ struct Case {
   bool multires;
 };
 
+const Case kCases[] = {
+    {"perceptual 60", 60, 0.5, 0, CompensationMethod::kPerceptual, false},
+    {"perceptual 200 alpha 0.3", 200, 0.3, 0, CompensationMethod::kPerceptual, false},
+    {"perceptual 200 coloured", 200, 0.5, 1, CompensationMethod::kPerceptual, false},
+    {"perceptual 200 black patch", 200, 0.5, 2, CompensationMethod::kPerceptual, false},
+    {"perceptual 1000 multires", 1000, 0.5, 0, CompensationMethod::kPerceptual, true},
+    {"linear 200", 200, 0.5, 0, CompensationMethod::kLinear, false},
+    {"linear 1000", 1000, 0.5, 0, CompensationMethod::kLinear, false},
+};
+
 // The GPU solve reaches the CPU reference's objective within 1e-4 relative (float64 and float32
 // objective evaluations), stays within the bounds and is first-order optimal by the CPU's own
 // double-precision gradient.
 TEST(SolveCuda, MatchesTheCpuReferenceOnEveryTestProblem) {
   SKIP_WITHOUT_CUDA_DEVICE();
-  const Case cases[] = {
-      {"perceptual 60", 60, 0.5, 0, CompensationMethod::kPerceptual, false},
-      {"perceptual 200 alpha 0.3", 200, 0.3, 0, CompensationMethod::kPerceptual, false},
-      {"perceptual 200 coloured", 200, 0.5, 1, CompensationMethod::kPerceptual, false},
-      {"perceptual 200 black patch", 200, 0.5, 2, CompensationMethod::kPerceptual, false},
-      {"perceptual 1000 multires", 1000, 0.5, 0, CompensationMethod::kPerceptual, true},
-      {"linear 200", 200, 0.5, 0, CompensationMethod::kLinear, false},
-      {"linear 1000", 1000, 0.5, 0, CompensationMethod::kLinear, false},
-  };
-  for (const Case& c : cases) {
+  for (const Case& c : kCases) {
     const TestProblem test = MakeTestProblem(c.patches, c.alpha, c.variant);
     const CompensationProblem& problem = test.fine;
     const CoarseLevel coarse{&test.coarse, &test.patches.coarse_of_fine};
@@ -140,6 +147,31 @@ TEST(SolveCuda, MatchesTheCpuReferenceOnEveryTestProblem) {
                   "CPU %d\n", c.name, float32 ? "float32" : "float64", cost, reference, relative, projected,
                   summary.iterations, cpu_summary.iterations);
     }
+  }
+}
+
+// This binary needs Embree and OpenCV, which the device machine lacks. With
+// PROCAM_EXPORT_TEST_PROBLEMS=DIR it writes the fine level of every problem above (one per room
+// variant and α, as `procam compensate --export` would) under DIR/test_*; carried to the device
+// machine, solver_cuda_device_test's SolveCudaExported solves them there on the CPU and the GPU
+// (perceptual and linear, without the coarse level). Checks what was written reads back.
+TEST(SolveCuda, ExportsItsProblemsForTheDeviceMachine) {
+  const char* root = std::getenv("PROCAM_EXPORT_TEST_PROBLEMS");
+  if (root == nullptr) GTEST_SKIP() << "PROCAM_EXPORT_TEST_PROBLEMS not set: nothing to export";
+  std::set<std::string> written;
+  for (const Case& c : kCases) {
+    const std::string name = "test_" + std::to_string(c.patches) + "_alpha_" + std::to_string(c.alpha).substr(0, 3) +
+                             "_variant_" + std::to_string(c.variant);
+    if (!written.insert(name).second) continue;  // perceptual and linear share a problem
+    const TestProblem test = MakeTestProblem(c.patches, c.alpha, c.variant);
+    const std::filesystem::path directory = std::filesystem::path(root) / name;
+    ExportProblem(test.fine, test.patches.fine, test.patches.coarse_of_fine, directory,
+                  R"({"source": "tests/compensation/solver_cuda_test.cc"})");
+    const NpyArray f = ReadNpy(directory / "F.npy"), rho = ReadNpy(directory / "rho.npy");
+    ASSERT_EQ(f.shape, (std::vector<int64_t>{test.fine.size(), test.fine.size()})) << name;
+    EXPECT_EQ(f.values[1], test.fine.form_factors(0, 1)) << name;  // C order: row 0, column 1
+    EXPECT_EQ(rho.values[3 * 5 + 2], test.fine.reflectance(5, 2)) << name;  // the black patch of variant 2
+    std::printf("wrote %s (%d patches)\n", directory.c_str(), test.fine.size());
   }
 }
 
