@@ -12,8 +12,10 @@
 #   compressed plates: PROCAM_BENCH_COMPRESSED_GRIDS (default 40,120,224: 9600, 86 400 and
 #     301 056 variables), CPU rows up to 30 000 variables.
 # Real rooms: problem directories under BINARY_DIR/problems (written here by `procam compensate
-# ROOM --export --out BINARY_DIR/problems/NAME`: F from Embree, projector bounds) are solved on
-# the GPU against the CPU as well (SolveCudaExported).
+# ROOM --export --out BINARY_DIR/problems/NAME`: F from Embree, projector bounds; and by
+# `PROCAM_EXPORT_TEST_PROBLEMS=BINARY_DIR/problems compensation_solver_cuda_test
+# --gtest_filter='*Exports*'`: that test's rooms) are solved on the GPU against the CPU as well
+# (SolveCudaExported), one table row per room, method and solver.
 set -euo pipefail
 dir=$1
 output=$2
@@ -58,7 +60,7 @@ echo "$compressed_timings"
   echo "GPU-vs-CPU checks of the same run: $(echo "$checks" | grep -c '^\[       OK') + $(echo "$compressed_checks" | grep -c '^\[       OK') tests passed."
   echo
   echo "Real rooms exported here (\`procam compensate ROOM --export\`: F from Embree, projector bounds;"
-  echo "GPU rows median of 3):"
+  echo "test_*: solver_cuda_test's rooms; GPU rows median of 3):"
   echo
   echo "$checks" | grep '^|' || echo "(none: no BINARY_DIR/problems)"
 } > "$output"
