@@ -36,22 +36,11 @@ struct BenchArguments {
   ClusterOptions clusters;
 };
 
-// The benchmark room: closed, with an occluder, about `target_patches` patches.
-Scene BenchRoom(int target_patches) {
-  BoxRoomOptions room;
-  room.target_patches = target_patches;
-  return MakeBoxRoom(room);
-}
-
-PatchHierarchy BenchPatches(const Scene& scene) {
-  SubdivisionOptions subdivision;
-  subdivision.target_patches = scene.target_patches;
-  return SubdividePatches(scene, subdivision);
-}
 
 void RunFormFactorBench(const BenchArguments& args) {
-  const Scene scene = BenchRoom(args.patches);
-  const PatchHierarchy hierarchy = BenchPatches(scene);
+  const SubdividedRoom room = MakeSubdividedBoxRoom(args.patches);  // closed, with an occluder
+  const Scene& scene = room.scene;
+  const PatchHierarchy& hierarchy = room.patches;
   FormFactorOptions options;
   options.threads = args.threads;
   FormFactorSummary summary;
@@ -129,8 +118,9 @@ void RunSolverBench(const BenchArguments& args) {
                        "to target s", "total s", "iters", "objective", "termination").c_str());
   for (const int target_patches : args.sizes) {
     std::ostringstream table;
-    const Scene scene = BenchRoom(target_patches);
-    const PatchHierarchy patches = BenchPatches(scene);
+    const SubdividedRoom room = MakeSubdividedBoxRoom(target_patches);
+    const Scene& scene = room.scene;
+    const PatchHierarchy& patches = room.patches;
     FormFactorSummary ff;
     Eigen::MatrixXd f = ComputeFormFactors(scene, patches.fine, FormFactorOptions(), &ff);
     const Eigen::MatrixXd coarse_f =
@@ -262,8 +252,9 @@ void RunScaleBench(const BenchArguments& args) {
                                 "variables", "patches", "build s", "MB", "dense MB", "F x ms", "error",
                                 "K⁻¹ ms", "CG iters", "", "solver", "solve s", "iters", "objective").c_str());
   for (const int target_patches : args.scale_sizes) {
-    const Scene scene = BenchRoom(target_patches);
-    const PatchHierarchy patches = BenchPatches(scene);
+    const SubdividedRoom room = MakeSubdividedBoxRoom(target_patches);
+    const Scene& scene = room.scene;
+    const PatchHierarchy& patches = room.patches;
     const int n = patches.fine.size();
     FormFactorOptions ff_options;
     ff_options.threads = args.threads;

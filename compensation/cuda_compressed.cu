@@ -349,31 +349,17 @@ void LaunchSparseProduct(const DeviceCsr& s, const double* x, const double* far,
   const int* offsets = s.offsets.get();
   const int* columns = s.columns.get();
   const double* values = s.values.get();
+  const auto launch = [&](auto kernel) {
+    kernel<<<blocks, kThreads, 0, stream>>>(s.rows, offsets, columns, values, x, far, direction, from_f, gate, y,
+                                            partials);
+  };
   switch (s.lanes) {
-    case 1:
-      SparseProductKernel<1, kOperatorM><<<blocks, kThreads, 0, stream>>>(s.rows, offsets, columns, values, x, far,
-                                                                         direction, from_f, gate, y, partials);
-      break;
-    case 2:
-      SparseProductKernel<2, kOperatorM><<<blocks, kThreads, 0, stream>>>(s.rows, offsets, columns, values, x, far,
-                                                                         direction, from_f, gate, y, partials);
-      break;
-    case 4:
-      SparseProductKernel<4, kOperatorM><<<blocks, kThreads, 0, stream>>>(s.rows, offsets, columns, values, x, far,
-                                                                         direction, from_f, gate, y, partials);
-      break;
-    case 8:
-      SparseProductKernel<8, kOperatorM><<<blocks, kThreads, 0, stream>>>(s.rows, offsets, columns, values, x, far,
-                                                                         direction, from_f, gate, y, partials);
-      break;
-    case 16:
-      SparseProductKernel<16, kOperatorM><<<blocks, kThreads, 0, stream>>>(s.rows, offsets, columns, values, x,
-                                                                          far, direction, from_f, gate, y, partials);
-      break;
-    default:
-      SparseProductKernel<32, kOperatorM><<<blocks, kThreads, 0, stream>>>(s.rows, offsets, columns, values, x,
-                                                                          far, direction, from_f, gate, y, partials);
-      break;
+    case 1: launch(SparseProductKernel<1, kOperatorM>); break;
+    case 2: launch(SparseProductKernel<2, kOperatorM>); break;
+    case 4: launch(SparseProductKernel<4, kOperatorM>); break;
+    case 8: launch(SparseProductKernel<8, kOperatorM>); break;
+    case 16: launch(SparseProductKernel<16, kOperatorM>); break;
+    default: launch(SparseProductKernel<32, kOperatorM>); break;
   }
   PROCAM_CUDA_LAUNCHED("SparseProductKernel");
 }

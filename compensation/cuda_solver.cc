@@ -96,17 +96,6 @@ std::unique_ptr<cuda::DeviceRadiosity> DeviceRadiosityOf(const RadiositySystem& 
   throw std::invalid_argument("resident GPU solve: the radiosity system's backend is not a CUDA one");
 }
 
-TerminationType Termination(cuda::ResidentTermination termination) {
-  switch (termination) {
-    case cuda::ResidentTermination::kGradientTolerance: return TerminationType::kGradientTolerance;
-    case cuda::ResidentTermination::kFunctionTolerance: return TerminationType::kFunctionTolerance;
-    case cuda::ResidentTermination::kMaxIterations: return TerminationType::kMaxIterations;
-    case cuda::ResidentTermination::kLineSearchFailure: return TerminationType::kLineSearchFailure;
-    case cuda::ResidentTermination::kNumericalFailure: return TerminationType::kNumericalFailure;
-  }
-  return TerminationType::kNumericalFailure;
-}
-
 }  // namespace
 
 Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const CompensationObjective& objective,
@@ -174,7 +163,7 @@ Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const Compen
                          radiosity_out != nullptr ? radiosity_out->data() : nullptr, &resident);
 
   // As MinimiseBounded writes its summary: counters and the trace added, the rest set.
-  summary->termination = Termination(resident.termination);
+  summary->termination = resident.termination;
   if (!resident.message.empty()) summary->message = resident.message;
   summary->initial_cost = resident.initial_cost;
   summary->final_cost = resident.final_cost;
@@ -185,10 +174,7 @@ Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const Compen
   summary->gradients += resident.gradients;
   summary->hessian_products += resident.hessian_products;
   summary->preconditioner_applications += resident.preconditioner_applications;
-  for (const cuda::ResidentIteration& record : resident.trace) {
-    summary->trace.push_back({record.iteration, record.cost, record.seconds, record.step, record.free_variables,
-                              record.cg_iterations, record.projected_gradient});
-  }
+  summary->trace.insert(summary->trace.end(), resident.trace.begin(), resident.trace.end());
   return emittance;
 }
 

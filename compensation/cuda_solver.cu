@@ -919,9 +919,9 @@ class Loop {
     double cost = host_->value;
     summary->initial_cost = cost;
     summary->trace.push_back({0, cost, SecondsSince(start), 0.0, 3 * n_, 0, 0.0});
-    summary->termination = ResidentTermination::kMaxIterations;
+    summary->termination = TerminationType::kMaxIterations;
     if (!std::isfinite(cost)) {
-      summary->termination = ResidentTermination::kNumericalFailure;
+      summary->termination = TerminationType::kNumericalFailure;
       summary->message = "objective is not finite at the start";
       summary->final_cost = cost;
       Download(current_.emittance, emittance);
@@ -949,7 +949,7 @@ class Loop {
       const double projected = host_->projected_gradient;
       summary->trace.back().projected_gradient = projected;
       if (projected <= options_.gradient_tolerance * (1.0 + cost)) {
-        summary->termination = ResidentTermination::kGradientTolerance;
+        summary->termination = TerminationType::kGradientTolerance;
         break;
       }
       const int free_variables = static_cast<int>(host_->free_variables);
@@ -998,7 +998,7 @@ class Loop {
       }
       summary->iterations = iteration;
       if (!accepted) {
-        summary->termination = ResidentTermination::kLineSearchFailure;
+        summary->termination = TerminationType::kLineSearchFailure;
         summary->message = "no Armijo step along the Gauss-Newton direction";
         break;
       }
@@ -1009,7 +1009,7 @@ class Loop {
       summary->trace.push_back({iteration, cost, SecondsSince(start), step, free_variables, cg, 0.0});
       if (options_.progress) options_.progress(iteration, cost, SecondsSince(start));
       if (previous - cost <= options_.function_tolerance * previous) {
-        summary->termination = ResidentTermination::kFunctionTolerance;
+        summary->termination = TerminationType::kFunctionTolerance;
         Gradient(current_);
         GradientCheck();
         Sync();

@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "compensation/solver_records.h"
+
 // The CUDA runtime's stream handle (driver_types.h declares it the same way).
 typedef struct CUstream_st* cudaStream_t;
 
@@ -69,27 +71,10 @@ struct ResidentOptions {
   std::function<void(int, double, double)> progress;
 };
 
-enum class ResidentTermination {
-  kGradientTolerance,
-  kFunctionTolerance,
-  kMaxIterations,
-  kLineSearchFailure,
-  kNumericalFailure
-};
-
-// SolverSummary's records of the loop (solver.h documents each field).
-struct ResidentIteration {
-  int iteration = 0;
-  double cost = 0.0;
-  double seconds = 0.0;
-  double step = 0.0;
-  int free_variables = 0;
-  int cg_iterations = 0;
-  double projected_gradient = 0.0;
-};
-
+// SolverSummary's records of the loop (solver.h documents each field; the termination and the
+// trace are solver_records.h's own types).
 struct ResidentSummary {
-  ResidentTermination termination = ResidentTermination::kMaxIterations;
+  TerminationType termination = TerminationType::kMaxIterations;
   std::string message;
   double initial_cost = 0.0;
   double final_cost = 0.0;
@@ -100,7 +85,7 @@ struct ResidentSummary {
   int gradients = 0;
   int hessian_products = 0;
   int preconditioner_applications = 0;
-  std::vector<ResidentIteration> trace;
+  std::vector<IterationRecord> trace;
 };
 
 // Alg. 1 with Alg. 2 (as MinimiseBounded, solver.cc) with every vector on the device: the

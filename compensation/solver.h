@@ -23,6 +23,7 @@
 
 #include "compensation/objective.h"
 #include "compensation/problem.h"
+#include "compensation/solver_records.h"
 
 namespace procam {
 
@@ -91,33 +92,6 @@ struct SolverOptions {
   std::function<void(int, double, double)> progress;
 
   bool Check(std::string* why) const;
-};
-
-enum class TerminationType {
-  // ‖E − P(E − ∇f(E))‖∞ ≤ gradient_tolerance·(1 + f): a first-order critical point.
-  kGradientTolerance,
-  // f(E_k) − f(E_k+1) ≤ function_tolerance · f(E_k).
-  kFunctionTolerance,
-  // The closed-form methods (naive, reverse) return after one evaluation.
-  kClosedForm,
-  // max_iterations outer iterations were done without meeting a tolerance.
-  kMaxIterations,
-  // No step along the Gauss–Newton direction satisfied the Armijo condition (f is then at a
-  // point where the model no longer predicts decrease; the result is still feasible).
-  kLineSearchFailure,
-  // The objective or a direction became non-finite; the last finite iterate is returned.
-  kNumericalFailure,
-};
-const char* TerminationName(TerminationType type);
-
-struct IterationRecord {
-  int iteration = 0;
-  double cost = 0.0;
-  double seconds = 0.0;          // since the solve started
-  double step = 0.0;             // line-search step length (0 for the start)
-  int free_variables = 0;
-  int cg_iterations = 0;
-  double projected_gradient = 0.0;  // ‖E − P(E − ∇f)‖∞
 };
 
 struct SolverSummary {

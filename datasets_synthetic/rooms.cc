@@ -46,4 +46,15 @@ Scene MakeBoxRoom(const BoxRoomOptions& options) {
   return scene;
 }
 
+SubdividedRoom MakeSubdividedBoxRoom(int target_patches) {
+  SubdividedRoom room;
+  BoxRoomOptions options;
+  options.target_patches = target_patches;
+  room.scene = MakeBoxRoom(options);
+  SubdivisionOptions subdivision;
+  subdivision.target_patches = target_patches;
+  room.patches = SubdividePatches(room.scene, subdivision);
+  return room;
+}
+
 }  // namespace procam

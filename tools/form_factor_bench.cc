@@ -64,12 +64,9 @@ int Run(int argc, char** argv) {
   std::printf("| patches | threads | compressed F s | near entries | far blocks | visibility rays | MB | dense F s |\n"
               "|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const int target : sizes) {
-    procam::BoxRoomOptions room;
-    room.target_patches = target;
-    const procam::Scene scene = procam::MakeBoxRoom(room);
-    procam::SubdivisionOptions subdivision;
-    subdivision.target_patches = scene.target_patches;
-    const procam::PatchHierarchy patches = procam::SubdividePatches(scene, subdivision);
+    const procam::SubdividedRoom room = procam::MakeSubdividedBoxRoom(target);
+    const procam::Scene& scene = room.scene;
+    const procam::PatchHierarchy& patches = room.patches;
     const int n = patches.fine.size();
     for (const int t : threads) {
       procam::FormFactorOptions options;

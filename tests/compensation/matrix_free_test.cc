@@ -1,6 +1,7 @@
 // The matrix-free path (issue 9): compressed form factors, K⁻¹ by conjugate gradients, and the
 // solver on top of it, against the dense path on the very same F.
 #include <memory>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -26,12 +27,9 @@ struct Pair {
 // A box room with an occluder, big enough for far blocks at the default admissibility.
 Pair MakePair(int target_patches) {
   Pair pair;
-  BoxRoomOptions room;
-  room.target_patches = target_patches;
-  pair.scene = MakeBoxRoom(room);
-  SubdivisionOptions subdivision;
-  subdivision.target_patches = target_patches;
-  pair.patches = SubdividePatches(pair.scene, subdivision);
+  SubdividedRoom room = MakeSubdividedBoxRoom(target_patches);
+  pair.scene = std::move(room.scene);
+  pair.patches = std::move(room.patches);
   CompressedBuildSummary summary;
   pair.compressed = std::make_shared<const CompressedFormFactors>(ComputeCompressedFormFactors(
       pair.scene, pair.patches.fine, FormFactorOptions(), ClusterOptions(), &summary));

@@ -8,6 +8,7 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -32,12 +33,9 @@ struct TestProblem {
 // solver_test.cc; `variant` 1 colours the reflectance (three K⁻¹), 2 adds a black patch (LU).
 TestProblem MakeTestProblem(int target_patches, double alpha, int variant = 0) {
   TestProblem test;
-  BoxRoomOptions room;
-  room.target_patches = target_patches;
-  const Scene scene = MakeBoxRoom(room);
-  SubdivisionOptions subdivision;
-  subdivision.target_patches = target_patches;
-  test.patches = SubdividePatches(scene, subdivision);
+  SubdividedRoom room = MakeSubdividedBoxRoom(target_patches);
+  const Scene& scene = room.scene;
+  test.patches = std::move(room.patches);
   Eigen::MatrixXd f = ComputeFormFactors(scene, test.patches.fine, FormFactorOptions(), nullptr);
   const Eigen::MatrixXd coarse_f = AggregateFormFactors(f, test.patches.fine.Areas(), test.patches.coarse_of_fine,
                                                         test.patches.coarse.size());

@@ -1,6 +1,7 @@
 #include "compensation/solver.h"
 
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Cholesky>
@@ -26,12 +27,9 @@ struct TestProblem {
 // A box room with an occluder and saturated desired colours, so that bounds [0, white] bite.
 TestProblem MakeTestProblem(int target_patches, double alpha = 0.5) {
   TestProblem test;
-  BoxRoomOptions room;
-  room.target_patches = target_patches;
-  test.scene = MakeBoxRoom(room);
-  SubdivisionOptions subdivision;
-  subdivision.target_patches = target_patches;
-  test.patches = SubdividePatches(test.scene, subdivision);
+  SubdividedRoom room = MakeSubdividedBoxRoom(target_patches);
+  test.scene = std::move(room.scene);
+  test.patches = std::move(room.patches);
   Eigen::MatrixXd f = ComputeFormFactors(test.scene, test.patches.fine, FormFactorOptions(), nullptr);
   const Eigen::MatrixXd coarse_f = AggregateFormFactors(f, test.patches.fine.Areas(), test.patches.coarse_of_fine,
                                                         test.patches.coarse.size());

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <random>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -20,12 +21,9 @@ struct Room {
 
 Room MakeRoom(int target_patches) {
   Room room;
-  BoxRoomOptions box;
-  box.target_patches = target_patches;
-  room.scene = MakeBoxRoom(box);
-  SubdivisionOptions subdivision;
-  subdivision.target_patches = target_patches;
-  room.patches = SubdividePatches(room.scene, subdivision);
+  SubdividedRoom box = MakeSubdividedBoxRoom(target_patches);
+  room.scene = std::move(box.scene);
+  room.patches = std::move(box.patches);
   room.options.threads = 2;
   return room;
 }
