@@ -423,6 +423,8 @@ class InverseRadiosityImpl : public InverseRadiosity {
         PROCAM_CUDA(cublasSgemm(handles.device_blas, op, CUBLAS_OP_N, n_, columns, n_, &one, inverse, n_, x, n_,
                                 &zero, y, n_));
       }
+    } else {
+      throw std::logic_error("InverseRadiosity: K^-1 x on the LU path needs the float32 or float64 copy");
     }
   }
 

@@ -991,7 +991,7 @@ class Loop {
         }
         ++summary->evaluations;
         trial_cost = host_->value;
-        if (std::isfinite(trial_cost) && trial_cost <= cost + options_.armijo * step * slope) {
+        if (ArmijoAccepts(trial_cost, cost, options_.armijo, step, slope)) {
           accepted = true;
           break;
         }
@@ -999,7 +999,7 @@ class Loop {
       summary->iterations = iteration;
       if (!accepted) {
         summary->termination = TerminationType::kLineSearchFailure;
-        summary->message = "no Armijo step along the Gauss-Newton direction";
+        summary->message = kNoArmijoStep;
         break;
       }
       const double previous = cost;

@@ -450,7 +450,7 @@ Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const Compensatio
     for (int halving = 0; halving < 40; ++halving, step *= 0.5) {
       const double trial_cost = objective.Evaluate(Clamp(x + step * direction, lower, upper), &trial);
       ++summary->evaluations;
-      if (std::isfinite(trial_cost) && trial_cost <= cost + options.armijo * step * slope) {
+      if (ArmijoAccepts(trial_cost, cost, options.armijo, step, slope)) {
         accepted = true;
         break;
       }
@@ -458,7 +458,7 @@ Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const Compensatio
     summary->iterations = iteration;
     if (!accepted) {
       summary->termination = TerminationType::kLineSearchFailure;
-      summary->message = "no Armijo step along the Gauss-Newton direction";
+      summary->message = kNoArmijoStep;
       break;
     }
     const double previous = cost;

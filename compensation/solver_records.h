@@ -3,6 +3,8 @@
 // well: plain C++, no Eigen or OpenCV, so that both sides share one definition (solver.h has the
 // rest of SolverSummary).
 
+#include <cmath>
+
 namespace procam {
 
 enum class TerminationType {
@@ -31,5 +33,12 @@ struct IterationRecord {
   int cg_iterations = 0;
   double projected_gradient = 0.0;  // ‖E − P(E − ∇f)‖∞
 };
+
+// Alg. 1's Armijo test of a line-search trial, and the message when no trial passes: one rule
+// for the CPU loop (solver.cc) and the CUDA loop (cuda_solver.cu).
+inline bool ArmijoAccepts(double trial_cost, double cost, double armijo, double step, double slope) {
+  return std::isfinite(trial_cost) && trial_cost <= cost + armijo * step * slope;
+}
+inline constexpr char kNoArmijoStep[] = "no Armijo step along the Gauss-Newton direction";
 
 }  // namespace procam
