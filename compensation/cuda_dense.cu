@@ -386,7 +386,7 @@ class InverseRadiosityImpl : public InverseRadiosity {
   }
 
   void ApplyOnDevice(const float* x, int columns, bool transposed, float* y, cudaStream_t stream) const override {
-    if (inverse_half_.size() > 0 && (transposed || cholesky_)) {
+    if (inverse_half_.size() > 0 && OwnKernel(transposed)) {
       ApplyOnDevice(inverse_half_.get(), half_post_, square_single_.get(), inverse_square_single_.get(), x, columns,
                     transposed, y, stream);
     } else {
@@ -398,6 +398,10 @@ class InverseRadiosityImpl : public InverseRadiosity {
   bool cholesky() const override { return cholesky_; }
 
  private:
+  // Whether TransposedProductKernel serves this direction: K⁻ᵀx always, K⁻¹x on the Cholesky path
+  // (K⁻¹ = diag(s²) K⁻ᵀ diag(s⁻²)); not where PROCAM_CUDA_DENSE_PRODUCT=cublas.
+  bool OwnKernel(bool transposed) const { return product_rows_ > 0 && (transposed || cholesky_); }
+
   // y = K⁻¹x or K⁻ᵀx with `inverse` (post · K⁻¹ stored as S) and the Cholesky path's s², s⁻² in
   // T: own kernel, or cuBLAS's GEMM (S = T) for K⁻¹x on the LU path and where
   // PROCAM_CUDA_DENSE_PRODUCT=cublas.
@@ -405,7 +409,7 @@ class InverseRadiosityImpl : public InverseRadiosity {
   void ApplyOnDevice(const S* inverse, T post, const T* square, const T* inverse_square, const T* x, int columns,
                      bool transposed, T* y, cudaStream_t stream) const {
     if (columns < 1 || columns > 3) throw std::invalid_argument("InverseRadiosity::ApplyOnDevice: 1 to 3 columns");
-    if (product_rows_ > 0 && (transposed || cholesky_)) {
+    if (OwnKernel(transposed)) {
       const int rows = std::is_same_v<S, HalfQuad> ? half_rows_ : product_rows_;
       TransposedProduct(n_, columns, rows, inverse, transposed ? nullptr : square,
                         transposed ? nullptr : inverse_square, post, x, y, stream);
