@@ -17,9 +17,12 @@
 #include <cusolverDn.h>
 
 #include "compensation/cuda_common.cuh"
+#include "compensation/cuda_product.cuh"
 
 namespace procam::cuda {
 namespace {
+
+using namespace product;  // NOLINT: the product kernel's own header
 
 // The library statuses beside cuda_common.cuh's cudaError_t check, all found by PROCAM_CUDA.
 using ::procam::cuda::Check;
@@ -57,7 +60,6 @@ const Handles& GetHandles() {
 }
 
 constexpr int kThreads = 256;
-constexpr int kProductThreads = 256;  // TransposedProductKernel's block
 int Blocks(long count) { return static_cast<int>((count + kThreads - 1) / kThreads); }
 
 // out(i,j) = δij − ½ (l_i F_ij r_j + l_j F_ji r_i): the symmetric M (column-major, n×n).
@@ -96,117 +98,19 @@ __global__ void ConvertKernel(const From* in, long count, To* out) {
   if (k < count) out[k] = static_cast<To>(in[k]);
 }
 
-// y = post · diag(left) Aᵀ diag(right) x for an n×n A (column-major float64 or float32, or the
-// float16 quads below) and an n×columns x (columns ≤ 3; left/right null: ones). The transposed product reads
-// A's columns, which are contiguous, so each output is one coalesced pass and no product needs a
-// second reduction kernel: K⁻ᵀx is it with no scaling, and K⁻¹x on the Cholesky path too, through
-// K⁻¹ = diag(s²) K⁻ᵀ diag(s⁻²) (K⁻¹ = S M⁻¹ S⁻¹ with M⁻¹ symmetric). Each block forms kRows
-// outputs; its threads stride over the sum (one matrix load, reused for every column) and
-// combine their partials in a fixed order (WriteRows); a Rows type (ColumnRows, HalfQuadRows)
-// says how a block's rows are stored. cuBLAS's GEMM with three columns was measured slower
-// (docs/gpu.md).
+// Outputs per block of the product by default: 4 on the float64 and float32 K⁻¹, 8 on the float16
+// quads (DenseRows and HalfRows of cuda_product.cuh; the fastest at 9800 patches, docs/gpu.md).
+constexpr int kDoubleRows = DenseRows<double>::kCount;
+constexpr int kHalfRows = HalfRows::kCount;
 
-// The block's partial sums of outputs first … first + kRows − 1 combined (warp shuffles, then the
-// warps in order) and written, times post and left.
-template <typename T, int kRows>
-__device__ void WriteRows(T (&sum)[kRows][3], int first, int n, int columns, const T* left, T post, T* y) {
-  constexpr int kWarps = kProductThreads / 32;
-  __shared__ T partial[kRows * 3][kWarps];
-  const int lane = threadIdx.x % 32, warp = threadIdx.x / 32;
-#pragma unroll
-  for (int r = 0; r < kRows; ++r) {
-#pragma unroll
-    for (int c = 0; c < 3; ++c) {
-      T value = sum[r][c];
-      for (int offset = 16; offset > 0; offset /= 2) value += __shfl_down_sync(0xffffffffu, value, offset);
-      if (lane == 0) partial[3 * r + c][warp] = value;
-    }
-  }
-  __syncthreads();
-  const int r = threadIdx.x / 3, c = threadIdx.x % 3;
-  if (r < kRows && c < columns && first + r < n) {
-    T value = 0;
-    for (int w = 0; w < kWarps; ++w) value += partial[3 * r + c][w];
-    const int i = first + r;
-    y[static_cast<size_t>(c) * n + i] = post * (left != nullptr ? left[i] * value : value);
-  }
-}
-
-// x_j · right_j for the columns there are (zeros beyond).
-template <typename T>
-__device__ void ScaledEntry(const T* __restrict__ x, const T* __restrict__ right, int n, int columns, int j, T (&v)[3]) {
-  const T scale = right != nullptr ? right[j] : T(1);
-#pragma unroll
-  for (int c = 0; c < 3; ++c) v[c] = c < columns ? scale * x[static_cast<size_t>(c) * n + j] : T(0);
-}
-
-// A block's kRows rows of Aᵀ (columns of A) stored as T: entry j of each, one load per row.
-template <typename T, int kRows>
-struct ColumnRows {
-  using Value = T;
-  static constexpr int kCount = kRows;
-  const T* row[kRows];
-  __device__ ColumnRows(const T* matrix, int n, int first) {
-    for (int r = 0; r < kRows; ++r) row[r] = matrix + static_cast<size_t>(min(first + r, n - 1)) * n;
-  }
-  __device__ void Load(int j, T (&m)[kRows]) const {
-#pragma unroll
-    for (int r = 0; r < kRows; ++r) m[r] = row[r][j];
-  }
-};
-
-// The float16 copy of A: its columns in groups of four, interleaved, so that one 8-byte load
-// gives four outputs' terms and a warp's load is 256 contiguous bytes (a column-major float16
-// matrix would give 64): entry (j, 4q + t) at quads[q n + j], element t (columns past n: zeros).
-struct alignas(8) HalfQuad {
-  __half2 low, high;
-};
-
-// A block's 4·kQuads rows of Aᵀ from the float16 quads, widened to float32.
-template <int kQuads>
-struct HalfQuadRows {
-  using Value = float;
-  static constexpr int kCount = 4 * kQuads;
-  const HalfQuad* quad[kQuads];
-  __device__ HalfQuadRows(const HalfQuad* matrix, int n, int first) {
-    const int quads = (n + 3) / 4;
-    for (int q = 0; q < kQuads; ++q) quad[q] = matrix + static_cast<size_t>(min(first / 4 + q, quads - 1)) * n;
-  }
-  __device__ void Load(int j, float (&m)[4 * kQuads]) const {
-#pragma unroll
-    for (int q = 0; q < kQuads; ++q) {
-      const HalfQuad h = quad[q][j];
-      const float2 low = __half22float2(h.low), high = __half22float2(h.high);
-      m[4 * q] = low.x;
-      m[4 * q + 1] = low.y;
-      m[4 * q + 2] = high.x;
-      m[4 * q + 3] = high.y;
-    }
-  }
-};
-
+// One group of outputs per block (cuda_product.cuh has the product and its layouts).
 template <typename Rows, typename S>
 __global__ void __launch_bounds__(kProductThreads)
     TransposedProductKernel(int n, int columns, const S* __restrict__ matrix,
                             const typename Rows::Value* __restrict__ left,
                             const typename Rows::Value* __restrict__ right, typename Rows::Value post,
                             const typename Rows::Value* __restrict__ x, typename Rows::Value* __restrict__ y) {
-  using T = typename Rows::Value;
-  constexpr int kRows = Rows::kCount;
-  const int first = blockIdx.x * kRows;
-  const Rows rows(matrix, n, first);
-  T sum[kRows][3] = {};
-  for (int j = threadIdx.x; j < n; j += kProductThreads) {
-    T v[3], m[kRows];
-    ScaledEntry(x, right, n, columns, j, v);
-    rows.Load(j, m);
-#pragma unroll
-    for (int r = 0; r < kRows; ++r) {
-#pragma unroll
-      for (int c = 0; c < 3; ++c) sum[r][c] += m[r] * v[c];
-    }
-  }
-  WriteRows(sum, first, n, columns, left, post, y);
+  TransposedProductGroup<Rows>(blockIdx.x, n, columns, matrix, left, right, post, x, y);
 }
 
 __global__ void ToHalfQuadsKernel(const double* in, int n, double scale, HalfQuad* out) {
@@ -225,8 +129,7 @@ __global__ void ToHalfQuadsKernel(const double* in, int n, double scale, HalfQua
 template <typename Rows, typename S, typename T>
 void LaunchProduct(int n, int columns, const S* matrix, const T* left, const T* right, T post, const T* x, T* y,
                    cudaStream_t stream) {
-  const int blocks = (n + Rows::kCount - 1) / Rows::kCount;
-  TransposedProductKernel<Rows><<<blocks, kProductThreads, 0, stream>>>(n, columns, matrix, left, right, post, x, y);
+  TransposedProductKernel<Rows><<<ProductGroups<Rows>(n), kProductThreads, 0, stream>>>(n, columns, matrix, left, right, post, x, y);
   PROCAM_CUDA_LAUNCHED("TransposedProductKernel");
 }
 
@@ -332,8 +235,8 @@ class InverseRadiosityImpl : public InverseRadiosity {
       square_single_ = Upload(std::vector<float>(square.begin(), square.end()));
       inverse_square_single_ = Upload(std::vector<float>(inverse_square.begin(), inverse_square.end()));
     }
-    product_rows_ = ProductRows(4);
-    half_rows_ = ProductRows(8);
+    product_rows_ = ProductRows(kDoubleRows);
+    half_rows_ = ProductRows(kHalfRows);
     inverse_single_ = DeviceArray<float>(n2);
     ConvertKernel<<<Blocks(n2), kThreads>>>(inverse_.get(), static_cast<long>(n2), inverse_single_.get());
     PROCAM_CUDA_LAUNCHED("ConvertKernel");
@@ -397,6 +300,21 @@ class InverseRadiosityImpl : public InverseRadiosity {
 
   bool cholesky() const override { return cholesky_; }
 
+  bool View(DenseInverseView* view) const override {
+    if (!cholesky_ || inverse_half_.size() == 0 || product_rows_ != kDoubleRows || half_rows_ != kHalfRows) {
+      return false;
+    }
+    view->n = n_;
+    view->inverse = inverse_.get();
+    view->half_quads = inverse_half_.get();
+    view->half_post = half_post_;
+    view->square = square_.get();
+    view->inverse_square = inverse_square_.get();
+    view->square_single = square_single_.get();
+    view->inverse_square_single = inverse_square_single_.get();
+    return true;
+  }
+
  private:
   // Whether TransposedProductKernel serves this direction: K⁻ᵀx always, K⁻¹x on the Cholesky path
   // (K⁻¹ = diag(s²) K⁻ᵀ diag(s⁻²)); not where PROCAM_CUDA_DENSE_PRODUCT=cublas.
@@ -434,7 +352,7 @@ class InverseRadiosityImpl : public InverseRadiosity {
 
   // Outputs per block of TransposedProductKernel; 0: cuBLAS. PROCAM_CUDA_DENSE_PRODUCT (for
   // benchmarks): cublas, or 1/2/4/8 rows; else `fallback` (4 for float64/float32 K⁻¹, 8 for the
-  // float16 quads: the fastest at 9800 patches, docs/gpu.md).
+  // float16 quads).
   static int ProductRows(int fallback) {
     const char* choice = std::getenv("PROCAM_CUDA_DENSE_PRODUCT");
     if (choice == nullptr || *choice == '\0') return fallback;

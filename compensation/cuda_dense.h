@@ -26,6 +26,22 @@ namespace procam::cuda {
 // it); `description` gets the device's name and memory, or why none can be used.
 bool DeviceAvailable(std::string* description);
 
+// The dense K⁻¹'s device arrays as the fused resident loop reads them (cuda_solver.cu runs the
+// product of cuda_product.cuh inside its own kernel): K⁻ᵀx = Aᵀx and, on the Cholesky path,
+// K⁻¹x = diag(s²) Aᵀ diag(s⁻²) x for A = K⁻¹ (column-major), in float64 or from the float16
+// quads of 2^k K⁻¹ (times 2^-k) with float32 vectors. Device pointers, owned by the
+// InverseRadiosity.
+struct DenseInverseView {
+  int n = 0;
+  const double* inverse = nullptr;
+  const void* half_quads = nullptr;  // cuda_product.cuh's HalfQuad
+  float half_post = 1.0f;            // 2^-k
+  const double* square = nullptr;    // s²
+  const double* inverse_square = nullptr;
+  const float* square_single = nullptr;
+  const float* inverse_square_single = nullptr;
+};
+
 class InverseRadiosity {
  public:
   virtual ~InverseRadiosity() = default;
@@ -45,6 +61,10 @@ class InverseRadiosity {
   virtual void ApplyOnDevice(const float* x, int columns, bool transposed, float* y, cudaStream_t stream) const = 0;
   // Whether the Cholesky path was taken (else LU).
   virtual bool cholesky() const = 0;
+  // Fills `view` and returns true where ApplyOnDevice runs the own product kernel at its default
+  // shape in both directions with the float16 copy for float32 vectors (the Cholesky path, no
+  // PROCAM_CUDA_DENSE_PRODUCT or PROCAM_CUDA_CG_MATRIX override); else false.
+  virtual bool View(DenseInverseView* view) const = 0;
 };
 
 // A dense n×n matrix kept on the device for products with a few columns (F, for the solver's

@@ -34,6 +34,9 @@ class DenseDeviceRadiosity : public cuda::DeviceRadiosity {
     Apply(y, transposed, x, stream);
   }
   bool iterative() const override { return false; }
+  bool DenseView(cuda::DenseInverseView* view) const override {
+    return inverses_.size() == 1 && channels_[0] == std::vector<int>{0, 1, 2} && inverses_[0]->View(view);
+  }
 
  private:
   // Columns are contiguous (n×3 column-major): a grey room's three channels are one product.

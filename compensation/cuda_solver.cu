@@ -24,11 +24,15 @@
 #include <mutex>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <utility>
+#include <vector>
 
+#include <cooperative_groups.h>
 #include <cuda_runtime.h>
 
 #include "compensation/cuda_common.cuh"
+#include "compensation/cuda_product.cuh"
 #include "compensation/cuda_solver_device.h"
 
 namespace procam::cuda {
@@ -252,7 +256,7 @@ __global__ void DesiredColourKernel(int n, ColourSpace space, const double* desi
 }
 
 // r_i = C(B_i) − C(Bd_i) and J_i = ∂C/∂B at B_i.
-__global__ void ResidualKernel(int n, ColourSpace space, const double* radiosity, const double* desired_colour,
+__device__ void ResidualPhase(int n, ColourSpace space, const double* radiosity, const double* desired_colour,
                                double* residual, double* jacobian) {
   for (int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
     const double rgb[3] = {radiosity[i], radiosity[n + i], radiosity[2 * n + i]};
@@ -265,7 +269,7 @@ __global__ void ResidualKernel(int n, ColourSpace space, const double* radiosity
 
 // f = Σ rᵀ W r; the gradient in B, J_iᵀ (2 W r)_i (K⁻ᵀ of it is ∇f); and the second-order term's
 // curvature Σ_k (2WR)_ik ∇²Lab_k, diagonal in XYZ (AddSecondOrder: S_i = Tᵀ diag(·) T).
-__global__ void WeightedResidualKernel(int n, ColourSpace space, Weights w, const double* radiosity,
+__device__ void WeightedResidualPhase(int n, ColourSpace space, Weights w, const double* radiosity,
                                        const double* residual, const double* jacobian, double* gradient_b,
                                        double* curvature, Scalars* scalars, Reduction reduction) {
   double value[1] = {0.0};
@@ -294,7 +298,7 @@ __global__ void WeightedResidualKernel(int n, ColourSpace space, Weights w, cons
 }
 
 // ‖x − P(x − g)‖∞, the variables Eq. 12 fixes, and how many stay free.
-__global__ void GradientCheckKernel(long count, const double* x, const double* g, const double* lower,
+__device__ void GradientCheckPhase(long count, const double* x, const double* g, const double* lower,
                                     const double* upper, unsigned char* fixed, Scalars* scalars,
                                     Reduction reduction) {
   double value[2] = {0.0, 0.0};  // max projected, free
@@ -318,7 +322,7 @@ __global__ void GradientCheckKernel(long count, const double* x, const double* g
 
 // ∇q = g + Hd, the mask of the free variables, and q's projected gradient at d. `first`: d = 0
 // and Hd = 0 (both written).
-__global__ void InnerStartKernel(long count, bool first, double* d, double* hd, const double* g, const double* x,
+__device__ void InnerStartPhase(long count, bool first, double* d, double* hd, const double* g, const double* x,
                                  const double* lower, const double* upper, const unsigned char* fixed, double* qg,
                                  double* mask, Scalars* scalars, Reduction reduction) {
   const double eps = 1e-13;
@@ -348,10 +352,10 @@ __global__ void InnerStartKernel(long count, bool first, double* d, double* hd, 
 
 // CG on H_FF s = −∇q_F: r = −∇q ∘ mask, x = 0, the preconditioner blocks for this mask, z = P r,
 // p = z (and its copy in the products' precision).
-// With `split` (the Neumann preconditioner), z = D⁻¹r goes to `y` instead, and NeumannKernel forms
+// With `split` (the Neumann preconditioner), z = D⁻¹r goes to `y` instead, and NeumannPhase forms
 // z, p and rᵀz from it.
 template <typename P>
-__global__ void CgStartKernel(int n, bool split, const double* qg, const double* mask, const double* jacobian,
+__device__ void CgStartPhase(int n, bool split, const double* qg, const double* mask, const double* jacobian,
                               const double* weight_diagonal, double* x, double* r, double* b0, double* p,
                               double* preconditioner, P* p_fast, double* y, Scalars* scalars, Reduction reduction) {
   double value[2] = {0.0, 0.0};  // rᵀr, rᵀz
@@ -407,7 +411,7 @@ __device__ void ColourProduct(const double* jacobian, const P* u, int n, int j, 
 // neighbours' J_j u_j are formed where needed (one launch, no n×3 intermediate). `gate`: nothing
 // once CG has stopped.
 template <typename P>
-__global__ void WeightedProductKernel(int n, ColourSpace space, Weights w, bool second_order, const double* jacobian,
+__device__ void WeightedProductPhase(int n, ColourSpace space, Weights w, bool second_order, const double* jacobian,
                                       const double* curvature, const P* u, P* back, const CgState* gate) {
   if (gate != nullptr && gate->done) return;
   for (int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
@@ -440,7 +444,7 @@ __global__ void WeightedProductKernel(int n, ColourSpace space, Weights w, bool 
 
 // hp = (H p) ∘ mask and pᵀhp; CG stops at non-positive curvature, else takes its step length.
 template <typename P>
-__global__ void CgCurvatureKernel(long count, const P* product, const double* mask, const double* p, double* hp,
+__device__ void CgCurvaturePhase(long count, const P* product, const double* mask, const double* p, double* hp,
                                   Scalars* scalars, Reduction reduction) {
   if (scalars->cg.done) return;
   double value[1] = {0.0};
@@ -465,8 +469,8 @@ __global__ void CgCurvatureKernel(long count, const P* product, const double* ma
 }
 
 // x += step p, r −= step hp, z = P r; CG stops once ‖r‖ ≤ tolerance ‖r0‖ or at the iteration limit.
-// With `split` (the Neumann preconditioner), `z` gets D⁻¹r, and NeumannKernel the rest.
-__global__ void CgUpdateKernel(int n, bool split, const double* p, const double* hp, const double* preconditioner,
+// With `split` (the Neumann preconditioner), `z` gets D⁻¹r, and NeumannPhase the rest.
+__device__ void CgUpdatePhase(int n, bool split, const double* p, const double* hp, const double* preconditioner,
                                double* x, double* r, double* z, double tolerance, int max_iterations,
                                Scalars* scalars, Reduction reduction) {
   if (scalars->cg.done) return;
@@ -507,10 +511,10 @@ __global__ void CgUpdateKernel(int n, bool split, const double* p, const double*
 // because D^-½ M_FF D^-½ has its eigenvalues in (0, 2): W = diag(α a) + (1 − α) L is strictly
 // diagonally dominant, so M ≺ 2D, and restricting both sides to the free variables keeps it.
 // Where block Jacobi maps that spectrum to itself, this maps λ to λ(2 − λ) ≤ 1, lifting the
-// smooth modes (small λ) by up to 2×. Then rᵀz; at the start p = z, else β (as CgUpdateKernel
+// smooth modes (small λ) by up to 2×. Then rᵀz; at the start p = z, else β (as CgUpdatePhase
 // without `split`).
 template <typename P>
-__global__ void NeumannKernel(int n, bool start, Weights w, const double* jacobian, const double* preconditioner,
+__device__ void NeumannPhase(int n, bool start, Weights w, const double* jacobian, const double* preconditioner,
                               const double* y, const double* r, double* z, double* p, P* p_fast, int max_iterations,
                               Scalars* scalars, Reduction reduction) {
   if (scalars->cg.done) return;
@@ -552,7 +556,7 @@ __global__ void NeumannKernel(int n, bool start, Weights w, const double* jacobi
 
 // p = z + β p.
 template <typename P>
-__global__ void CgDirectionKernel(long count, const double* z, double* p, P* p_fast, const Scalars* scalars) {
+__device__ void CgDirectionPhase(long count, const double* z, double* p, P* p_fast, const Scalars* scalars) {
   if (scalars->cg.done) return;
   const double beta = scalars->cg.beta;
   for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
@@ -566,7 +570,7 @@ __global__ void CgDirectionKernel(long count, const double* z, double* p, P* p_f
 // CG's solution s (p after negative curvature in the first iteration, else x), its curvature
 // sᵀHs = xᵀ(b − r) (from CG's residual), max |s|, non-finite entries, ∇qᵀs, and Alg. 2's first
 // step length: the minimiser along s.
-__global__ void CgFinishKernel(long count, const double* x, const double* b0, const double* r, const double* p,
+__device__ void CgFinishPhase(long count, const double* x, const double* b0, const double* r, const double* p,
                                const double* qg, double* solution, Scalars* scalars, Reduction reduction) {
   const bool negative = scalars->cg.negative_first != 0;
   double value[4] = {0.0, 0.0, 0.0, 0.0};  // curvature, max, non-finite, slope
@@ -591,9 +595,9 @@ __global__ void CgFinishKernel(long count, const double* x, const double* b0, co
 }
 
 // A step of Alg. 2: trial = P(d + α s) within [lo, hi], δ = trial − d, whether the projection cut
-// (max |δ − α s| > 0) and ∇qᵀδ. α from `alpha_on_device` when given (CgFinishKernel's), else
+// (max |δ − α s| > 0) and ∇qᵀδ. α from `alpha_on_device` when given (CgFinishPhase's), else
 // `alpha`.
-__global__ void StepTrialKernel(long count, const double* d, const double* solution, const double* x,
+__device__ void StepTrialPhase(long count, const double* d, const double* solution, const double* x,
                                 const double* lower, const double* upper, const double* qg, double alpha,
                                 const double* alpha_on_device, double* trial, double* delta, Scalars* scalars,
                                 Reduction reduction) {
@@ -616,7 +620,7 @@ __global__ void StepTrialKernel(long count, const double* d, const double* solut
 }
 
 template <typename P>
-__global__ void ToPrecisionKernel(long count, const double* v, P* out) {
+__device__ void ToPrecisionPhase(long count, const double* v, P* out) {
   for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
        k += static_cast<long>(gridDim.x) * blockDim.x) {
     out[k] = static_cast<P>(v[k]);
@@ -625,7 +629,7 @@ __global__ void ToPrecisionKernel(long count, const double* v, P* out) {
 
 // δᵀ(Hδ).
 template <typename P>
-__global__ void QuadraticKernel(long count, const double* delta, const P* product, Scalars* scalars,
+__device__ void QuadraticPhase(long count, const double* delta, const P* product, Scalars* scalars,
                                 Reduction reduction) {
   double value[1] = {0.0};
   for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
@@ -637,7 +641,7 @@ __global__ void QuadraticKernel(long count, const double* delta, const P* produc
 
 // d = trial; Hd += Hδ when `accumulate`.
 template <typename P>
-__global__ void AcceptStepKernel(long count, const double* trial, const P* product, bool accumulate, double* d,
+__device__ void AcceptStepPhase(long count, const double* trial, const P* product, bool accumulate, double* d,
                                  double* hd) {
   for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
        k += static_cast<long>(gridDim.x) * blockDim.x) {
@@ -650,7 +654,7 @@ __global__ void AcceptStepKernel(long count, const double* trial, const P* produ
 // Alg. 1's direction and Armijo search.
 
 // ∇fᵀd and d's non-finite entries.
-__global__ void DirectionSlopeKernel(long count, const double* g, const double* d, Scalars* scalars,
+__device__ void DirectionSlopePhase(long count, const double* g, const double* d, Scalars* scalars,
                                      Reduction reduction) {
   double value[2] = {0.0, 0.0};
   for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
@@ -665,7 +669,7 @@ __global__ void DirectionSlopeKernel(long count, const double* g, const double* 
 }
 
 // The projected steepest-descent direction d = P(x − g) − x and ∇fᵀd.
-__global__ void SteepestDirectionKernel(long count, const double* x, const double* g, const double* lower,
+__device__ void SteepestDirectionPhase(long count, const double* x, const double* g, const double* lower,
                                         const double* upper, double* d, Scalars* scalars, Reduction reduction) {
   double value[1] = {0.0};
   for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
@@ -681,12 +685,19 @@ __global__ void SteepestDirectionKernel(long count, const double* x, const doubl
 }
 
 // out = P(x + step d).
-__global__ void LineTrialKernel(long count, const double* x, const double* d, double step, const double* lower,
+__device__ void LineTrialPhase(long count, const double* x, const double* d, double step, const double* lower,
                                 const double* upper, double* out) {
   for (long k = blockIdx.x * static_cast<long>(blockDim.x) + threadIdx.x; k < count;
        k += static_cast<long>(gridDim.x) * blockDim.x) {
     out[k] = Clamp(x[k] + step * d[k], lower[k], upper[k]);
   }
+}
+
+// A phase launched alone (the host-driven loop): one kernel, whose grid-stride loops and
+// reduction the phase's own code does.
+template <auto kPhase, typename... Args>
+__global__ void __launch_bounds__(kThreads) Kernel(Args... args) {
+  kPhase(args...);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -798,7 +809,7 @@ bool GraphsEnabled() {
   return enabled;
 }
 
-// CG's preconditioner: PROCAM_CUDA_PRECONDITIONER = neumann (NeumannKernel, the default) or
+// CG's preconditioner: PROCAM_CUDA_PRECONDITIONER = neumann (NeumannPhase, the default) or
 // jacobi (the 3×3 diagonal blocks alone).
 bool NeumannPreconditioner() {
   static const bool neumann = [] {
@@ -809,6 +820,325 @@ bool NeumannPreconditioner() {
                                 "' is not neumann or jacobi");
   }();
   return neumann;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The fused loop: Loop::Run in one cooperative kernel, for small problems on the dense K⁻¹.
+//
+// Below a few thousand patches every kernel of the host-driven loop is launch-bound, and each of
+// its ~45 host reads per solve leaves the device idle: the solve is paid in latency, not
+// arithmetic. Here the same phases (the same device functions) run in the same order inside one
+// kernel launched cooperatively, with a grid-wide barrier after each; the control flow of Run
+// and SolveInnerQp runs in every thread on the scalars the reductions wrote, so every block takes
+// the same branch. A reduction's last block writes its scalars only after every block has entered
+// the phase, so every read of a scalar (right after a barrier) precedes the next write of it. The
+// grid is one wave of resident blocks; the K⁻¹ products loop over their groups of outputs
+// (cuda_product.cuh, as the standalone kernel forms them).
+
+// The fused loop's summary, in device memory beside its trace.
+struct FusedRecords {
+  int termination;  // TerminationType
+  int iterations, inner_iterations, cg_iterations, evaluations, gradients, hessian_products;
+  int preconditioner_applications;
+  int records;  // trace entries written
+  int result;   // the point (0 or 1) that holds the result
+  double initial_cost, final_cost;
+};
+
+// Everything the fused kernel reads: ResidentOptions' numbers, the problem and the loop's arrays.
+struct FusedArgs {
+  int n;
+  long count;
+  int max_iterations, max_inner_iterations, max_cg_iterations;
+  double cg_tolerance, gradient_tolerance, function_tolerance, armijo;
+  bool second_order, neumann;
+  ColourSpace space;
+  Weights weights;
+  DenseInverseView inverse;
+  Point points[2];
+  double *lower, *upper, *desired_colour, *gradient, *d, *hd, *qg, *mask;
+  double *x, *r, *b0, *p, *z, *y, *hp, *solution, *delta, *step_trial, *preconditioner;
+  float *p_fast, *u_fast, *back_fast, *product_fast;
+  unsigned char* fixed;
+  Scalars* scalars;
+  Reduction reduction;
+  FusedRecords* records;
+  IterationRecord* trace;  // max_iterations + 1 entries
+};
+
+__device__ unsigned long long GlobalNanoseconds() {
+  unsigned long long t;
+  asm volatile("mov.u64 %0, %%globaltimer;" : "=l"(t));
+  return t;
+}
+
+class FusedLoop {
+ public:
+  __device__ explicit FusedLoop(const FusedArgs& a) : a_(a), grid_(cooperative_groups::this_grid()) {}
+
+  // Run's outer loop (Alg. 1 with the Armijo search), step for step.
+  __device__ void Run() {
+    const unsigned long long start = GlobalNanoseconds();
+    const Scalars& s = *a_.scalars;
+    FusedRecords counts = {};
+    counts.termination = static_cast<int>(TerminationType::kMaxIterations);
+    int current = 0;
+    Evaluate(a_.points[0]);
+    counts.evaluations = 1;
+    double cost = s.value;
+    counts.initial_cost = cost;
+    Record(&counts, 0, cost, start, 0.0, 3 * a_.n, 0);
+    if (!isfinite(cost)) {
+      counts.termination = static_cast<int>(TerminationType::kNumericalFailure);
+      Finish(&counts, cost, current);
+      return;
+    }
+    for (int iteration = 1; iteration <= a_.max_iterations; ++iteration) {
+      const Point& point = a_.points[current];
+      Gradient(point);
+      ++counts.gradients;
+      SetProjectedGradient(counts, s.projected_gradient);
+      if (s.projected_gradient <= a_.gradient_tolerance * (1.0 + cost)) {
+        counts.termination = static_cast<int>(TerminationType::kGradientTolerance);
+        break;
+      }
+      const int free_variables = static_cast<int>(s.free_variables);
+      int cg = 0;
+      SolveInnerQp(point, &counts, &cg);
+      counts.cg_iterations += cg;
+
+      // The direction's slope and the Armijo search's first trial (a = 1).
+      const Point& trial = a_.points[current ^ 1];
+      DirectionSlopePhase(a_.count, a_.gradient, a_.d, a_.scalars, a_.reduction);
+      Barrier();
+      LineTrial(point, trial, 1.0);
+      double slope = s.direction_slope;
+      bool first_trial_evaluated = true;
+      if (s.direction_nonfinite > 0.0 || !(slope < 0.0)) {
+        SteepestDirectionPhase(a_.count, point.emittance, a_.gradient, a_.lower, a_.upper, a_.d, a_.scalars,
+                               a_.reduction);
+        Barrier();
+        slope = s.direction_slope;
+        first_trial_evaluated = false;
+      }
+      double step = 1.0, trial_cost = 0.0;
+      bool accepted = false;
+      for (int halving = 0; halving < 40; ++halving, step *= 0.5) {
+        if (halving > 0 || !first_trial_evaluated) LineTrial(point, trial, step);
+        ++counts.evaluations;
+        trial_cost = s.value;
+        if (ArmijoAccepts(trial_cost, cost, a_.armijo, step, slope)) {
+          accepted = true;
+          break;
+        }
+      }
+      counts.iterations = iteration;
+      if (!accepted) {
+        counts.termination = static_cast<int>(TerminationType::kLineSearchFailure);
+        break;
+      }
+      const double previous = cost;
+      current ^= 1;
+      cost = trial_cost;
+      Record(&counts, iteration, cost, start, step, free_variables, cg);
+      if (previous - cost <= a_.function_tolerance * previous) {
+        counts.termination = static_cast<int>(TerminationType::kFunctionTolerance);
+        Gradient(a_.points[current]);
+        SetProjectedGradient(counts, s.projected_gradient);
+        break;
+      }
+    }
+    Finish(&counts, cost, current);
+  }
+
+ private:
+  __device__ bool Leader() const { return blockIdx.x == 0 && threadIdx.x == 0; }
+  __device__ void Barrier() { grid_.sync(); }
+
+  // x = K⁻¹y (K⁻ᵀy when `transposed`): float64, or float32 vectors on the float16 quads.
+  template <typename Rows, typename S, typename T>
+  __device__ void Product(const S* matrix, T post, const T* square, const T* inverse_square, const T* y,
+                          bool transposed, T* x) {
+    const int groups = product::ProductGroups<Rows>(a_.n);
+    for (int group = blockIdx.x; group < groups; group += gridDim.x) {
+      product::TransposedProductGroup<Rows>(group, a_.n, 3, matrix, transposed ? nullptr : square,
+                                            transposed ? nullptr : inverse_square, post, y, x);
+      __syncthreads();  // the block's shared partials are reused by its next group
+    }
+    Barrier();
+  }
+  __device__ void Solve(const double* y, bool transposed, double* x) {
+    const DenseInverseView& k = a_.inverse;
+    Product<product::DenseRows<double>>(k.inverse, 1.0, k.square, k.inverse_square, y, transposed, x);
+  }
+  __device__ void SolveFast(const float* y, bool transposed, float* x) {
+    const DenseInverseView& k = a_.inverse;
+    Product<product::HalfRows>(static_cast<const product::HalfQuad*>(k.half_quads), k.half_post, k.square_single,
+                               k.inverse_square_single, y, transposed, x);
+  }
+
+  // H v (Loop::Product).
+  __device__ void HessianProduct(const Point& point, const float* v, float* result) {
+    SolveFast(v, false, a_.u_fast);
+    WeightedProductPhase<float>(a_.n, a_.space, a_.weights, a_.second_order, point.jacobian, point.curvature,
+                                a_.u_fast, a_.back_fast, nullptr);
+    Barrier();
+    SolveFast(a_.back_fast, true, result);
+  }
+
+  __device__ void Evaluate(const Point& point) {
+    Solve(point.emittance, false, point.radiosity);
+    ResidualPhase(a_.n, a_.space, point.radiosity, a_.desired_colour, point.residual, point.jacobian);
+    Barrier();
+    WeightedResidualPhase(a_.n, a_.space, a_.weights, point.radiosity, point.residual, point.jacobian,
+                          point.gradient_b, point.curvature, a_.scalars, a_.reduction);
+    Barrier();
+  }
+
+  // The gradient and its check.
+  __device__ void Gradient(const Point& point) {
+    Solve(point.gradient_b, true, a_.gradient);
+    GradientCheckPhase(a_.count, point.emittance, a_.gradient, a_.lower, a_.upper, a_.fixed, a_.scalars,
+                       a_.reduction);
+    Barrier();
+  }
+
+  // trial = P(x + step d), evaluated.
+  __device__ void LineTrial(const Point& point, const Point& trial, double step) {
+    LineTrialPhase(a_.count, point.emittance, a_.d, step, a_.lower, a_.upper, trial.emittance);
+    Barrier();
+    Evaluate(trial);
+  }
+
+  __device__ void StepTrial(const Point& point, double alpha, const double* alpha_on_device) {
+    StepTrialPhase(a_.count, a_.d, a_.solution, point.emittance, a_.lower, a_.upper, a_.qg, alpha, alpha_on_device,
+                   a_.step_trial, a_.delta, a_.scalars, a_.reduction);
+    Barrier();
+  }
+
+  __device__ void Neumann(const Point& point, bool start) {
+    NeumannPhase<float>(a_.n, start, a_.weights, point.jacobian, a_.preconditioner, a_.y, a_.r, a_.z, a_.p,
+                        a_.p_fast, a_.max_cg_iterations, a_.scalars, a_.reduction);
+    Barrier();
+  }
+
+  // Loop::CgIteration.
+  __device__ void CgIteration(const Point& point) {
+    HessianProduct(point, a_.p_fast, a_.product_fast);
+    CgCurvaturePhase<float>(a_.count, a_.product_fast, a_.mask, a_.p, a_.hp, a_.scalars, a_.reduction);
+    Barrier();
+    CgUpdatePhase(a_.n, a_.neumann, a_.p, a_.hp, a_.preconditioner, a_.x, a_.r, a_.neumann ? a_.y : a_.z,
+                  a_.cg_tolerance, a_.max_cg_iterations, a_.scalars, a_.reduction);
+    Barrier();
+    if (a_.neumann) Neumann(point, /*start=*/false);
+    CgDirectionPhase<float>(a_.count, a_.z, a_.p, a_.p_fast, a_.scalars);
+    Barrier();
+  }
+
+  // Loop::SolveInnerQp: Alg. 2 from d = 0, leaving the step in d.
+  __device__ void SolveInnerQp(const Point& point, FusedRecords* counts, int* cg_total) {
+    const Scalars& s = *a_.scalars;
+    double first_norm = -1.0;
+    for (int inner = 0; inner < a_.max_inner_iterations; ++inner) {
+      InnerStartPhase(a_.count, inner == 0, a_.d, a_.hd, a_.gradient, point.emittance, a_.lower, a_.upper, a_.fixed,
+                      a_.qg, a_.mask, a_.scalars, a_.reduction);
+      Barrier();
+      const double projected = s.inner_projected;
+      if (first_norm < 0.0) first_norm = projected;
+      if (projected <= a_.cg_tolerance * first_norm || projected == 0.0) break;
+      ++counts->inner_iterations;
+      CgStartPhase<float>(a_.n, a_.neumann, a_.qg, a_.mask, point.jacobian, a_.weights.diagonal, a_.x, a_.r, a_.b0,
+                          a_.p, a_.preconditioner, a_.p_fast, a_.y, a_.scalars, a_.reduction);
+      Barrier();
+      if (a_.neumann) Neumann(point, /*start=*/true);
+      while (!s.cg.done) CgIteration(point);
+      CgFinishPhase(a_.count, a_.x, a_.b0, a_.r, a_.p, a_.qg, a_.solution, a_.scalars, a_.reduction);
+      Barrier();
+      StepTrial(point, 0.0, &a_.scalars->alpha);
+      const int iterations = s.cg.iterations;
+      *cg_total += iterations;
+      counts->hessian_products += iterations;
+      counts->preconditioner_applications += s.cg.preconditioner_applications;
+      if (s.solution_nonfinite > 0.0 || s.solution_max == 0.0) break;
+      const bool last_inner = inner + 1 == a_.max_inner_iterations;
+      const double curvature = s.solution_curvature;
+      double alpha = s.alpha;
+      bool accepted = false;
+      for (int halving = 0; halving < 30 && alpha > 0.0; ++halving, alpha *= 0.5) {
+        if (halving > 0) StepTrial(point, alpha, nullptr);
+        const bool cut = s.cut > 0.0;
+        const double delta_slope = s.delta_slope;
+        double quadratic = alpha * alpha * curvature;
+        if (cut || !last_inner) {
+          ToPrecisionPhase<float>(a_.count, a_.delta, a_.p_fast);
+          Barrier();
+          HessianProduct(point, a_.p_fast, a_.product_fast);
+          ++counts->hessian_products;
+          QuadraticPhase<float>(a_.count, a_.delta, a_.product_fast, a_.scalars, a_.reduction);
+          Barrier();
+          if (cut) quadratic = s.quadratic;
+        }
+        const double change = delta_slope + 0.5 * quadratic;
+        if (change <= 1e-4 * delta_slope && change < 0.0) {
+          AcceptStepPhase<float>(a_.count, a_.step_trial, a_.product_fast, !last_inner, a_.d, a_.hd);
+          Barrier();
+          accepted = true;
+          break;
+        }
+      }
+      if (!accepted) break;
+    }
+  }
+
+  // Trace entry counts->records (the leader writes it).
+  __device__ void Record(FusedRecords* counts, int iteration, double cost, unsigned long long start, double step,
+                         int free_variables, int cg) {
+    if (Leader()) {
+      IterationRecord& record = a_.trace[counts->records];
+      record.iteration = iteration;
+      record.cost = cost;
+      record.seconds = 1e-9 * static_cast<double>(GlobalNanoseconds() - start);
+      record.step = step;
+      record.free_variables = free_variables;
+      record.cg_iterations = cg;
+      record.projected_gradient = 0.0;
+    }
+    ++counts->records;
+  }
+  __device__ void SetProjectedGradient(const FusedRecords& counts, double projected) {
+    if (Leader()) a_.trace[counts.records - 1].projected_gradient = projected;
+  }
+
+  __device__ void Finish(FusedRecords* counts, double cost, int current) {
+    counts->final_cost = cost;
+    counts->result = current;
+    if (Leader()) *a_.records = *counts;
+  }
+
+  const FusedArgs a_;
+  cooperative_groups::grid_group grid_;
+};
+
+__global__ void __launch_bounds__(kThreads) FusedLoopKernel(const FusedArgs args) {
+  FusedLoop(args).Run();
+}
+
+// Whether small dense problems run the fused loop (PROCAM_CUDA_FUSED=0: the host-driven loop,
+// for comparison), and its grid (PROCAM_CUDA_FUSED_BLOCKS: blocks; default one per
+// multiprocessor).
+bool FusedEnabled() {
+  static const bool enabled = [] {
+    const char* value = std::getenv("PROCAM_CUDA_FUSED");
+    return value == nullptr || std::string(value) != "0";
+  }();
+  return enabled;
+}
+int FusedBlocksWanted() {
+  static const int blocks = [] {
+    const char* value = std::getenv("PROCAM_CUDA_FUSED_BLOCKS");
+    return value != nullptr && *value != '\0' ? std::atoi(value) : 0;
+  }();
+  return blocks;
 }
 
 // The loop's fixed sequences of device work, each replayed as one CUDA graph.
@@ -875,6 +1205,9 @@ class Loop {
     small_ = n_ < kSmallPatches;
     neumann_ = NeumannPreconditioner();
     graphs_ = !radiosity.iterative() && GraphsEnabled();
+    if constexpr (std::is_same_v<P, float>) {
+      fused_blocks_ = small_ && FusedEnabled() && radiosity.DenseView(&inverse_view_) ? FusedBlocks() : 0;
+    }
   }
 
   ~Loop() {
@@ -909,9 +1242,15 @@ class Loop {
     neighbours_ = workspace->Take<int>(entries);
     neighbour_weights_ = workspace->Take<double>(entries);
     fixed_ = workspace->Take<unsigned char>(vector);
+    records_ = workspace->Take<FusedRecords>(1);
+    trace_ = workspace->Take<IterationRecord>(static_cast<size_t>(options_.max_iterations) + 1);
   }
 
   void Run(double* emittance, double* radiosity, ResidentSummary* summary) {
+    if (fused_blocks_ > 0) {
+      RunFused(emittance, radiosity, summary);
+      return;
+    }
     const auto start = Clock::now();
     Evaluate(current_);
     Sync();
@@ -963,8 +1302,8 @@ class Loop {
 
       // The direction's slope and the Armijo search's first trial (a = 1), read together.
       Enqueue(Sequence::kFirstTrial, [&] {
-        DirectionSlopeKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, gradient_, d_, scalars_, reduction_);
-        Launched("DirectionSlopeKernel");
+        Kernel<DirectionSlopePhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, gradient_, d_, scalars_, reduction_);
+        Launched("DirectionSlopePhase");
         LineTrial(1.0);
         Evaluate(trial_);
       });
@@ -973,9 +1312,9 @@ class Loop {
       bool first_trial_evaluated = true;
       if (host_->direction_nonfinite > 0.0 || !(slope < 0.0)) {
         // Fall back to the projected steepest-descent step.
-        SteepestDirectionKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, gradient_,
+        Kernel<SteepestDirectionPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, gradient_,
                                                                           lower_, upper_, d_, scalars_, reduction_);
-        Launched("SteepestDirectionKernel");
+        Launched("SteepestDirectionPhase");
         Sync();
         slope = host_->direction_slope;
         first_trial_evaluated = false;
@@ -1024,6 +1363,99 @@ class Loop {
   }
 
  private:
+  // Run in one cooperative kernel (FusedLoop), then the summary from its records: the trace's
+  // times are the device's, from the kernel's start, plus the host's time until the launch; the
+  // progress callback is called afterwards, once per iteration, with those records.
+  void RunFused(double* emittance, double* radiosity, ResidentSummary* summary) {
+    const auto start = Clock::now();
+    FusedArgs args{};
+    args.n = n_;
+    args.count = count_;
+    args.max_iterations = options_.max_iterations;
+    args.max_inner_iterations = options_.max_inner_iterations;
+    args.max_cg_iterations = options_.max_cg_iterations;
+    args.cg_tolerance = options_.cg_tolerance;
+    args.gradient_tolerance = options_.gradient_tolerance;
+    args.function_tolerance = options_.function_tolerance;
+    args.armijo = options_.armijo;
+    args.second_order = second_order_;
+    args.neumann = neumann_;
+    args.space = space_;
+    args.weights = weights_;
+    args.inverse = inverse_view_;
+    args.points[0] = current_;
+    args.points[1] = trial_;
+    args.lower = lower_, args.upper = upper_, args.desired_colour = desired_colour_, args.gradient = gradient_;
+    args.d = d_, args.hd = hd_, args.qg = qg_, args.mask = mask_, args.x = x_, args.r = r_, args.b0 = b0_;
+    args.p = p_, args.z = z_, args.y = y_, args.hp = hp_, args.solution = solution_, args.delta = delta_;
+    args.step_trial = step_trial_, args.preconditioner = preconditioner_;
+    if constexpr (std::is_same_v<P, float>) {  // fused_blocks_ is 0 otherwise
+      args.p_fast = p_fast_, args.u_fast = u_fast_, args.back_fast = back_fast_, args.product_fast = product_fast_;
+    }
+    args.fixed = fixed_;
+    args.scalars = scalars_;
+    args.reduction = reduction_;
+    args.records = records_;
+    args.trace = trace_;
+    void* parameters[] = {&args};
+    const double launched = SecondsSince(start);
+    PROCAM_CUDA(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&FusedLoopKernel), fused_blocks_, kThreads,
+                                            parameters, 0, stream_));
+    FusedRecords records{};
+    PROCAM_CUDA(cudaMemcpyAsync(&records, records_, sizeof records, cudaMemcpyDeviceToHost, stream_));
+    PROCAM_CUDA(cudaStreamSynchronize(stream_));
+    std::vector<IterationRecord> trace(records.records);
+    PROCAM_CUDA(cudaMemcpyAsync(trace.data(), trace_, trace.size() * sizeof(IterationRecord), cudaMemcpyDeviceToHost,
+                                stream_));
+    const Point& result = records.result == 0 ? current_ : trial_;
+    Download(result.emittance, emittance);
+    if (radiosity != nullptr) Download(result.radiosity, radiosity);
+    summary->termination = static_cast<TerminationType>(records.termination);
+    if (summary->termination == TerminationType::kNumericalFailure) {
+      summary->message = "objective is not finite at the start";
+    } else if (summary->termination == TerminationType::kLineSearchFailure) {
+      summary->message = kNoArmijoStep;
+    }
+    summary->initial_cost = records.initial_cost;
+    summary->final_cost = records.final_cost;
+    summary->iterations = records.iterations;
+    summary->inner_iterations = records.inner_iterations;
+    summary->cg_iterations = records.cg_iterations;
+    summary->evaluations = records.evaluations;
+    summary->gradients = records.gradients;
+    summary->hessian_products = records.hessian_products;
+    summary->preconditioner_applications = records.preconditioner_applications;
+    for (IterationRecord& record : trace) record.seconds += launched;
+    summary->trace = std::move(trace);
+    if (options_.progress) {
+      for (const IterationRecord& record : summary->trace) {
+        if (record.iteration > 0) options_.progress(record.iteration, record.cost, record.seconds);
+      }
+    }
+    if (ProfileEnabled()) {
+      std::fprintf(stderr, "resident profile: %d patches, fused loop on %d blocks: %.3f ms (launched after %.3f ms)\n",
+                   n_, fused_blocks_, 1e3 * SecondsSince(start), 1e3 * launched);
+    }
+  }
+
+  // The fused loop's grid: one wave of resident blocks, at most one per multiprocessor unless
+  // PROCAM_CUDA_FUSED_BLOCKS asks for more (and the device fits them); 0 where the device has no
+  // cooperative launch.
+  static int FusedBlocks() {
+    static const int blocks = [] {
+      int device = 0, cooperative = 0, multiprocessors = 0, per_multiprocessor = 0;
+      PROCAM_CUDA(cudaGetDevice(&device));
+      PROCAM_CUDA(cudaDeviceGetAttribute(&cooperative, cudaDevAttrCooperativeLaunch, device));
+      PROCAM_CUDA(cudaDeviceGetAttribute(&multiprocessors, cudaDevAttrMultiProcessorCount, device));
+      PROCAM_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_multiprocessor, FusedLoopKernel, kThreads, 0));
+      const int resident = std::min(kMaxBlocks, multiprocessors * per_multiprocessor);
+      if (cooperative == 0 || resident == 0) return 0;
+      const int wanted = FusedBlocksWanted();
+      return wanted > 0 ? std::min(wanted, resident) : std::min(multiprocessors, resident);
+    }();
+    return blocks;
+  }
+
   void Launched(const char* name) {
     Check(cudaGetLastError(), name);
     ++profile_.launches;
@@ -1109,7 +1541,7 @@ class Loop {
       *complete_us = 1e6 * SecondsSince(start) / count;
     };
     double kernel[2], fast[2], solve[2], sync[2];
-    unit(100, [&] { ToPrecisionKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, p_fast_); },
+    unit(100, [&] { Kernel<ToPrecisionPhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, p_fast_); },
          &kernel[0], &kernel[1]);
     unit(repeats, [&] { SolveFast(p_fast_, false, u_fast_); }, &fast[0], &fast[1]);
     unit(repeats, [&] { radiosity_.Solve(current_.emittance, false, trial_.radiosity, stream_); }, &solve[0],
@@ -1139,10 +1571,10 @@ class Loop {
   // (the solves themselves still run).
   void Product(const P* v, P* result, const CgState* gate) {
     SolveFast(v, false, u_fast_);
-    WeightedProductKernel<P><<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, weights_, second_order_,
+    Kernel<WeightedProductPhase<P>><<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, weights_, second_order_,
                                                                     current_.jacobian, current_.curvature, u_fast_,
                                                                     back_fast_, gate);
-    Launched("WeightedProductKernel");
+    Launched("WeightedProductPhase");
     SolveFast(back_fast_, true, result);
   }
 
@@ -1150,13 +1582,13 @@ class Loop {
   void Evaluate(const Point& point) {
     radiosity_.Solve(point.emittance, false, point.radiosity, stream_);
     ++profile_.solves;
-    ResidualKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, point.radiosity, desired_colour_, point.residual,
+    Kernel<ResidualPhase><<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, point.radiosity, desired_colour_, point.residual,
                                                           point.jacobian);
-    Launched("ResidualKernel");
-    WeightedResidualKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, weights_, point.radiosity,
+    Launched("ResidualPhase");
+    Kernel<WeightedResidualPhase><<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, weights_, point.radiosity,
                                                                   point.residual, point.jacobian, point.gradient_b,
                                                                   point.curvature, scalars_, reduction_);
-    Launched("WeightedResidualKernel");
+    Launched("WeightedResidualPhase");
   }
 
   void Gradient(const Point& point) {
@@ -1165,23 +1597,23 @@ class Loop {
   }
 
   void GradientCheck() {
-    GradientCheckKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, gradient_, lower_,
+    Kernel<GradientCheckPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, gradient_, lower_,
                                                                    upper_, fixed_, scalars_, reduction_);
-    Launched("GradientCheckKernel");
+    Launched("GradientCheckPhase");
   }
 
   void LineTrial(double step) {
-    LineTrialKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, d_, step, lower_, upper_,
+    Kernel<LineTrialPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, d_, step, lower_, upper_,
                                                                trial_.emittance);
-    Launched("LineTrialKernel");
+    Launched("LineTrialPhase");
   }
 
   // ∇q, the mask and q's projected gradient (first: at d = 0).
   void InnerStart(bool first) {
-    InnerStartKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, first, d_, hd_, gradient_,
+    Kernel<InnerStartPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, first, d_, hd_, gradient_,
                                                                 current_.emittance, lower_, upper_, fixed_, qg_,
                                                                 mask_, scalars_, reduction_);
-    Launched("InnerStartKernel");
+    Launched("InnerStartPhase");
   }
 
   // Alg. 2's later inner iterations: InnerStart, and with `ahead` CG started and `iterations` of
@@ -1199,18 +1631,18 @@ class Loop {
   int FirstBatch(int expected) const { return small_ ? std::max(1, expected - 1) : 1; }
 
   void CgStart() {
-    CgStartKernel<P><<<Blocks(n_), kThreads, 0, stream_>>>(n_, neumann_, qg_, mask_, current_.jacobian,
+    Kernel<CgStartPhase<P>><<<Blocks(n_), kThreads, 0, stream_>>>(n_, neumann_, qg_, mask_, current_.jacobian,
                                                             weight_diagonal_, x_, r_, b0_, p_, preconditioner_,
                                                             p_fast_, y_, scalars_, reduction_);
-    Launched("CgStartKernel");
+    Launched("CgStartPhase");
     if (neumann_) Neumann(/*start=*/true);
   }
 
   void Neumann(bool start) {
-    NeumannKernel<P><<<Blocks(n_), kThreads, 0, stream_>>>(n_, start, weights_, current_.jacobian, preconditioner_,
+    Kernel<NeumannPhase<P>><<<Blocks(n_), kThreads, 0, stream_>>>(n_, start, weights_, current_.jacobian, preconditioner_,
                                                             y_, r_, z_, p_, p_fast_, options_.max_cg_iterations,
                                                             scalars_, reduction_);
-    Launched("NeumannKernel");
+    Launched("NeumannPhase");
   }
 
   // NewtonSystem::SolveMasked's loop body, `iterations` times (no-ops once CG has stopped).
@@ -1220,35 +1652,35 @@ class Loop {
 
   void CgIteration() {
     Product(p_fast_, product_fast_, &scalars_->cg);
-    CgCurvatureKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, product_fast_, mask_, p_, hp_, scalars_,
+    Kernel<CgCurvaturePhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, product_fast_, mask_, p_, hp_, scalars_,
                                                                     reduction_);
-    Launched("CgCurvatureKernel");
-    CgUpdateKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, neumann_, p_, hp_, preconditioner_, x_, r_,
+    Launched("CgCurvaturePhase");
+    Kernel<CgUpdatePhase><<<Blocks(n_), kThreads, 0, stream_>>>(n_, neumann_, p_, hp_, preconditioner_, x_, r_,
                                                           neumann_ ? y_ : z_, options_.cg_tolerance,
                                                           options_.max_cg_iterations, scalars_, reduction_);
-    Launched("CgUpdateKernel");
+    Launched("CgUpdatePhase");
     if (neumann_) Neumann(/*start=*/false);
-    CgDirectionKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, z_, p_, p_fast_, scalars_);
-    Launched("CgDirectionKernel");
+    Kernel<CgDirectionPhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, z_, p_, p_fast_, scalars_);
+    Launched("CgDirectionPhase");
   }
 
-  // CG's solution and Alg. 2's first trial step along it (with CgFinishKernel's step length).
+  // CG's solution and Alg. 2's first trial step along it (with CgFinishPhase's step length).
   void CgFinish() {
     Enqueue(Sequence::kTail, [&] { CgFinishDirect(); });
   }
 
   void CgFinishDirect() {
-    CgFinishKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, x_, b0_, r_, p_, qg_, solution_, scalars_,
+    Kernel<CgFinishPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, x_, b0_, r_, p_, qg_, solution_, scalars_,
                                                               reduction_);
-    Launched("CgFinishKernel");
+    Launched("CgFinishPhase");
     StepTrial(0.0, &scalars_->alpha);
   }
 
   void StepTrial(double alpha, const double* alpha_on_device) {
-    StepTrialKernel<<<Blocks(count_), kThreads, 0, stream_>>>(count_, d_, solution_, current_.emittance, lower_,
+    Kernel<StepTrialPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, d_, solution_, current_.emittance, lower_,
                                                                upper_, qg_, alpha, alpha_on_device, step_trial_,
                                                                delta_, scalars_, reduction_);
-    Launched("StepTrialKernel");
+    Launched("StepTrialPhase");
   }
 
   // Alg. 2 (SolveInnerQp) from d = 0: leaves the step in d_. The first inner iteration's start
@@ -1297,21 +1729,21 @@ class Loop {
         double quadratic = alpha * alpha * curvature;
         if (cut || !last_inner) {
           // δ in the products' precision, through CG's p (CG is done with it).
-          ToPrecisionKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, p_fast_);
-          Launched("ToPrecisionKernel");
+          Kernel<ToPrecisionPhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, p_fast_);
+          Launched("ToPrecisionPhase");
           Product(p_fast_, product_fast_, nullptr);
           ++*products;
-          QuadraticKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, product_fast_, scalars_,
+          Kernel<QuadraticPhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, product_fast_, scalars_,
                                                                         reduction_);
-          Launched("QuadraticKernel");
+          Launched("QuadraticPhase");
           Sync();
           if (cut) quadratic = host_->quadratic;
         }
         const double change = delta_slope + 0.5 * quadratic;
         if (change <= 1e-4 * delta_slope && change < 0.0) {
-          AcceptStepKernel<P><<<Blocks(count_), kThreads, 0, stream_>>>(count_, step_trial_, product_fast_,
+          Kernel<AcceptStepPhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, step_trial_, product_fast_,
                                                                          !last_inner, d_, hd_);
-          Launched("AcceptStepKernel");
+          Launched("AcceptStepPhase");
           accepted = true;
           break;
         }
@@ -1338,7 +1770,7 @@ class Loop {
   const long count_;  // variables, 3n
   bool small_ = true;
   bool second_order_ = false;
-  bool neumann_ = false;  // CG's preconditioner: block Jacobi with a Neumann term (NeumannKernel)
+  bool neumann_ = false;  // CG's preconditioner: block Jacobi with a Neumann term (NeumannPhase)
   cudaStream_t stream_ = nullptr;
   Scalars* scalars_ = nullptr;  // device
   Scalars* host_ = nullptr;     // pinned host copy, as of the last Sync
@@ -1352,6 +1784,11 @@ class Loop {
   double *weight_diagonal_, *neighbour_weights_;
   int *offsets_, *neighbours_;
   unsigned char* fixed_;
+  // The fused loop (FusedLoop): its grid (0: not used), the dense K⁻¹ it reads, and its records.
+  int fused_blocks_ = 0;
+  DenseInverseView inverse_view_{};
+  FusedRecords* records_ = nullptr;
+  IterationRecord* trace_ = nullptr;
 };
 
 }  // namespace

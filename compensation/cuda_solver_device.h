@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "compensation/cuda_dense.h"
 #include "compensation/solver_records.h"
 
 // The CUDA runtime's stream handle (driver_types.h declares it the same way).
@@ -36,6 +37,9 @@ class DeviceRadiosity {
   // True when a solve is itself iterative and reads its convergence on the host (the matrix-free
   // CG): the loop then enqueues no product whose result it might not need.
   virtual bool iterative() const = 0;
+  // The dense K⁻¹ behind the solves, where one K⁻¹ serves all three channels and the fused loop
+  // can run its products itself (InverseRadiosity::View); false otherwise.
+  virtual bool DenseView(DenseInverseView* /*view*/) const { return false; }
 };
 
 // The problem in the loop's terms (host memory, read during the call only).

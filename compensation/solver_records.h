@@ -5,6 +5,11 @@
 
 #include <cmath>
 
+// ArmijoAccepts is compiled for the device as well where cuda_solver.cu defines this.
+#ifndef PROCAM_HOST_DEVICE
+#define PROCAM_HOST_DEVICE
+#endif
+
 namespace procam {
 
 enum class TerminationType {
@@ -36,7 +41,7 @@ struct IterationRecord {
 
 // Alg. 1's Armijo test of a line-search trial, and the message when no trial passes: one rule
 // for the CPU loop (solver.cc) and the CUDA loop (cuda_solver.cu).
-inline bool ArmijoAccepts(double trial_cost, double cost, double armijo, double step, double slope) {
+PROCAM_HOST_DEVICE inline bool ArmijoAccepts(double trial_cost, double cost, double armijo, double step, double slope) {
   return std::isfinite(trial_cost) && trial_cost <= cost + armijo * step * slope;
 }
 inline constexpr char kNoArmijoStep[] = "no Armijo step along the Gauss-Newton direction";
