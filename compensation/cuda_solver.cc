@@ -34,8 +34,19 @@ class DenseDeviceRadiosity : public cuda::DeviceRadiosity {
     Apply(y, transposed, x, stream);
   }
   bool iterative() const override { return false; }
-  bool DenseView(cuda::DenseInverseView* view) const override {
-    return inverses_.size() == 1 && channels_[0] == std::vector<int>{0, 1, 2} && inverses_[0]->View(view);
+  // As Apply forms them: a group of all three channels in one product, else one per channel.
+  int DenseProducts(cuda::DenseProduct (&products)[3]) const override {
+    int count = 0;
+    for (size_t g = 0; g < inverses_.size(); ++g) {
+      cuda::DenseInverseView view;
+      if (!inverses_[g]->View(&view)) return 0;
+      if (channels_[g] == std::vector<int>{0, 1, 2}) {
+        products[count++] = {view, 0, 3};
+        continue;
+      }
+      for (const int c : channels_[g]) products[count++] = {view, c, 1};
+    }
+    return count;
   }
 
  private:
@@ -157,6 +168,7 @@ Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const Compen
   resident_options.gradient_tolerance = options.gradient_tolerance;
   resident_options.function_tolerance = options.function_tolerance;
   resident_options.armijo = options.armijo;
+  resident_options.fused = options.device_fused;
   resident_options.progress = options.progress;
 
   cuda::ResidentSummary resident;
@@ -177,6 +189,7 @@ Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const Compen
   summary->gradients += resident.gradients;
   summary->hessian_products += resident.hessian_products;
   summary->preconditioner_applications += resident.preconditioner_applications;
+  summary->device_fused = resident.fused;
   summary->trace.insert(summary->trace.end(), resident.trace.begin(), resident.trace.end());
   return emittance;
 }

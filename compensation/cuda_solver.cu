@@ -21,6 +21,8 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <initializer_list>
 #include <mutex>
 #include <stdexcept>
 #include <string>
@@ -724,9 +726,11 @@ class Workspace {
     measuring_ = false;
     used_ = 0;
   }
+  static size_t Aligned(size_t bytes) { return (bytes + 255) / 256 * 256; }
+
   template <typename T>
   T* Take(size_t count) {
-    const size_t bytes = (std::max<size_t>(count, 1) * sizeof(T) + 255) / 256 * 256;
+    const size_t bytes = Aligned(std::max<size_t>(count, 1) * sizeof(T));
     used_ += bytes;
     if (measuring_) return nullptr;
     if (used_ > capacity_) throw std::logic_error("resident GPU solve: workspace carved past its size");
@@ -749,12 +753,73 @@ class Workspace {
     return device_scalars_;
   }
   Scalars* host_scalars() { return host_scalars_; }
+
+  // Host-to-device copies enqueued on `stream` from pinned staging (kept, grown as needed), so
+  // that they neither block the host nor wait for a bounce buffer; the staging is reused once the
+  // last upload's copies have finished.
+  struct Upload {
+    void* device;
+    const void* host;
+    size_t bytes;
+  };
+  void UploadAll(std::initializer_list<Upload> copies, cudaStream_t stream) {
+    size_t total = 0;
+    for (const Upload& copy : copies) total += Aligned(copy.bytes);
+    char* staging = Staging(total);
+    for (const Upload& copy : copies) {
+      if (copy.bytes == 0) continue;
+      std::memcpy(staging, copy.host, copy.bytes);
+      PROCAM_CUDA(cudaMemcpyAsync(copy.device, staging, copy.bytes, cudaMemcpyHostToDevice, stream));
+      staging += Aligned(copy.bytes);
+    }
+    PROCAM_CUDA(cudaEventRecord(staged_, stream));
+  }
+
+  // Device-to-host copies through the same staging, waited for together.
+  struct Download {
+    void* host;
+    const void* device;
+    size_t bytes;
+  };
+  void DownloadAll(std::initializer_list<Download> copies, cudaStream_t stream) {
+    size_t total = 0;
+    for (const Download& copy : copies) total += Aligned(copy.bytes);
+    char* staging = Staging(total);
+    char* next = staging;
+    for (const Download& copy : copies) {
+      PROCAM_CUDA(cudaMemcpyAsync(next, copy.device, copy.bytes, cudaMemcpyDeviceToHost, stream));
+      next += Aligned(copy.bytes);
+    }
+    PROCAM_CUDA(cudaEventRecord(staged_, stream));
+    PROCAM_CUDA(cudaEventSynchronize(staged_));
+    for (const Download& copy : copies) {
+      std::memcpy(copy.host, staging, copy.bytes);
+      staging += Aligned(copy.bytes);
+    }
+  }
+
+  // The pinned staging, at least `bytes`, once the copies of its last use have finished.
+  char* Staging(size_t bytes) {
+    if (staged_ == nullptr) PROCAM_CUDA(cudaEventCreateWithFlags(&staged_, cudaEventDisableTiming));
+    PROCAM_CUDA(cudaEventSynchronize(staged_));
+    if (bytes > pinned_capacity_) {
+      if (pinned_ != nullptr) PROCAM_CUDA(cudaFreeHost(pinned_));
+      pinned_ = nullptr;
+      pinned_capacity_ = 0;
+      PROCAM_CUDA(cudaMallocHost(&pinned_, bytes));
+      pinned_capacity_ = bytes;
+    }
+    return static_cast<char*>(pinned_);
+  }
   Reduction reduction() const { return {partials_, counter_}; }
 
  private:
   void* base_ = nullptr;
   size_t capacity_ = 0, used_ = 0;
   bool measuring_ = false;
+  void* pinned_ = nullptr;
+  size_t pinned_capacity_ = 0;
+  cudaEvent_t staged_ = nullptr;  // recorded after the staging's last copies
   cudaStream_t stream_ = nullptr;
   Scalars* device_scalars_ = nullptr;
   Scalars* host_scalars_ = nullptr;
@@ -854,7 +919,8 @@ struct FusedArgs {
   bool second_order, neumann;
   ColourSpace space;
   Weights weights;
-  DenseInverseView inverse;
+  DenseProduct products[3];  // the K⁻¹ solves, `product_count` of them
+  int product_count;
   Point points[2];
   double *lower, *upper, *desired_colour, *gradient, *d, *hd, *qg, *mask;
   double *x, *r, *b0, *p, *z, *y, *hp, *solution, *delta, *step_trial, *preconditioner;
@@ -955,26 +1021,48 @@ class FusedLoop {
   __device__ bool Leader() const { return blockIdx.x == 0 && threadIdx.x == 0; }
   __device__ void Barrier() { grid_.sync(); }
 
-  // x = K⁻¹y (K⁻ᵀy when `transposed`): float64, or float32 vectors on the float16 quads.
-  template <typename Rows, typename S, typename T>
-  __device__ void Product(const S* matrix, T post, const T* square, const T* inverse_square, const T* y,
-                          bool transposed, T* x) {
-    const int groups = product::ProductGroups<Rows>(a_.n);
+  // What one K⁻¹ product reads: the stored K⁻¹ (S), the Cholesky path's s² and s⁻² and the
+  // factor the stored copy is scaled by, in the vectors' precision T.
+  template <typename S, typename T>
+  struct Operand {
+    const S* matrix;
+    const T *square, *inverse_square;
+    T post;
+  };
+
+  // x = K⁻¹y (K⁻ᵀy when `transposed`): every group of outputs of every product, spread over the
+  // grid; `operand(view)` gives a product's Operand.
+  template <typename Rows, typename T, typename OperandOf>
+  __device__ void Product(const OperandOf& operand, const T* y, bool transposed, T* x) {
+    const int per_product = product::ProductGroups<Rows>(a_.n);
+    const int groups = per_product * a_.product_count;
     for (int group = blockIdx.x; group < groups; group += gridDim.x) {
-      product::TransposedProductGroup<Rows>(group, a_.n, 3, matrix, transposed ? nullptr : square,
-                                            transposed ? nullptr : inverse_square, post, y, x);
+      const DenseProduct& p = a_.products[group / per_product];
+      const auto o = operand(p.inverse);
+      const size_t offset = static_cast<size_t>(p.first_channel) * a_.n;
+      product::TransposedProductGroup<Rows>(group % per_product, a_.n, p.columns, o.matrix,
+                                            transposed ? nullptr : o.square, transposed ? nullptr : o.inverse_square,
+                                            o.post, y + offset, x + offset);
       __syncthreads();  // the block's shared partials are reused by its next group
     }
     Barrier();
   }
+  // float64 with the float64 K⁻¹.
   __device__ void Solve(const double* y, bool transposed, double* x) {
-    const DenseInverseView& k = a_.inverse;
-    Product<product::DenseRows<double>>(k.inverse, 1.0, k.square, k.inverse_square, y, transposed, x);
+    Product<product::DenseRows<double>>(
+        [](const DenseInverseView& k) {
+          return Operand<double, double>{k.inverse, k.square, k.inverse_square, 1.0};
+        },
+        y, transposed, x);
   }
+  // float32 vectors with the float16 quads of 2^k K⁻¹.
   __device__ void SolveFast(const float* y, bool transposed, float* x) {
-    const DenseInverseView& k = a_.inverse;
-    Product<product::HalfRows>(static_cast<const product::HalfQuad*>(k.half_quads), k.half_post, k.square_single,
-                               k.inverse_square_single, y, transposed, x);
+    Product<product::HalfRows>(
+        [](const DenseInverseView& k) {
+          return Operand<product::HalfQuad, float>{static_cast<const product::HalfQuad*>(k.half_quads),
+                                                   k.square_single, k.inverse_square_single, k.half_post};
+        },
+        y, transposed, x);
   }
 
   // H v (Loop::Product).
@@ -1123,16 +1211,8 @@ __global__ void __launch_bounds__(kThreads) FusedLoopKernel(const FusedArgs args
   FusedLoop(args).Run();
 }
 
-// Whether small dense problems run the fused loop (PROCAM_CUDA_FUSED=0: the host-driven loop,
-// for comparison), and its grid (PROCAM_CUDA_FUSED_BLOCKS: blocks; default one per
-// multiprocessor).
-bool FusedEnabled() {
-  static const bool enabled = [] {
-    const char* value = std::getenv("PROCAM_CUDA_FUSED");
-    return value == nullptr || std::string(value) != "0";
-  }();
-  return enabled;
-}
+// The fused loop's grid as PROCAM_CUDA_FUSED_BLOCKS asks (blocks, for measurements; 0: the
+// default, one per multiprocessor).
 int FusedBlocksWanted() {
   static const int blocks = [] {
     const char* value = std::getenv("PROCAM_CUDA_FUSED_BLOCKS");
@@ -1163,7 +1243,8 @@ class Loop {
  public:
   Loop(const ResidentOptions& options, const ResidentProblem& problem, const DeviceRadiosity& radiosity,
        Workspace* workspace)
-      : options_(options), radiosity_(radiosity), n_(problem.patches), count_(3L * problem.patches) {
+      : options_(options), radiosity_(radiosity), workspace_(workspace), n_(problem.patches),
+        count_(3L * problem.patches) {
     stream_ = radiosity.stream() != nullptr ? radiosity.stream() : workspace->stream();
     scalars_ = workspace->device_scalars();
     host_ = workspace->host_scalars();
@@ -1175,21 +1256,20 @@ class Loop {
     workspace->Allocate();
     Carve(workspace, entries);
 
+    // The problem's arrays through pinned staging: copies that neither block the host nor wait for
+    // a bounce buffer (pageable copies cost ~10 µs each, most of a small solve's set-up).
     const size_t bytes = vector * sizeof(double);
     PROCAM_CUDA(cudaMemsetAsync(reduction_.counter, 0, sizeof(unsigned), stream_));
-    PROCAM_CUDA(cudaMemcpyAsync(lower_, problem.lower, bytes, cudaMemcpyHostToDevice, stream_));
-    PROCAM_CUDA(cudaMemcpyAsync(upper_, problem.upper, bytes, cudaMemcpyHostToDevice, stream_));
-    PROCAM_CUDA(cudaMemcpyAsync(current_.emittance, problem.initial, bytes, cudaMemcpyHostToDevice, stream_));
-    PROCAM_CUDA(cudaMemcpyAsync(weight_diagonal_, problem.weight_diagonal, n * sizeof(double),
-                                cudaMemcpyHostToDevice, stream_));
-    PROCAM_CUDA(cudaMemcpyAsync(offsets_, problem.neighbour_offsets, (n + 1) * sizeof(int), cudaMemcpyHostToDevice,
-                                stream_));
-    if (entries > 0) {
-      PROCAM_CUDA(cudaMemcpyAsync(neighbours_, problem.neighbours, entries * sizeof(int), cudaMemcpyHostToDevice,
-                                  stream_));
-      PROCAM_CUDA(cudaMemcpyAsync(neighbour_weights_, problem.neighbour_weights, entries * sizeof(double),
-                                  cudaMemcpyHostToDevice, stream_));
-    }
+    workspace->UploadAll(
+        {{lower_, problem.lower, bytes},
+         {upper_, problem.upper, bytes},
+         {current_.emittance, problem.initial, bytes},
+         {trial_.emittance, problem.desired, bytes},  // the desired colours' staging
+         {weight_diagonal_, problem.weight_diagonal, n * sizeof(double)},
+         {offsets_, problem.neighbour_offsets, (n + 1) * sizeof(int)},
+         {neighbours_, problem.neighbours, entries * sizeof(int)},
+         {neighbour_weights_, problem.neighbour_weights, entries * sizeof(double)}},
+        stream_);
     weights_ = {weight_diagonal_, offsets_, neighbours_, neighbour_weights_};
     for (int k = 0; k < 9; ++k) {
       space_.rgb_to_xyz[k] = problem.rgb_to_xyz[k];
@@ -1198,15 +1278,15 @@ class Loop {
     for (int c = 0; c < 3; ++c) space_.white[c] = problem.white_xyz[c];
     space_.lab = problem.lab ? 1 : 0;
     second_order_ = problem.lab && options.second_order;
-    // The desired colours, through the trial point's emittance as staging.
-    PROCAM_CUDA(cudaMemcpyAsync(trial_.emittance, problem.desired, bytes, cudaMemcpyHostToDevice, stream_));
+    // The desired colours, from their staging in the trial point's emittance.
     DesiredColourKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, trial_.emittance, desired_colour_);
     Launched("DesiredColourKernel");
     small_ = n_ < kSmallPatches;
     neumann_ = NeumannPreconditioner();
     graphs_ = !radiosity.iterative() && GraphsEnabled();
     if constexpr (std::is_same_v<P, float>) {
-      fused_blocks_ = small_ && FusedEnabled() && radiosity.DenseView(&inverse_view_) ? FusedBlocks() : 0;
+      product_count_ = small_ && options.fused ? radiosity.DenseProducts(products_) : 0;
+      fused_blocks_ = product_count_ > 0 ? FusedBlocks() : 0;
     }
   }
 
@@ -1382,7 +1462,8 @@ class Loop {
     args.neumann = neumann_;
     args.space = space_;
     args.weights = weights_;
-    args.inverse = inverse_view_;
+    for (int k = 0; k < product_count_; ++k) args.products[k] = products_[k];
+    args.product_count = product_count_;
     args.points[0] = current_;
     args.points[1] = trial_;
     args.lower = lower_, args.upper = upper_, args.desired_colour = desired_colour_, args.gradient = gradient_;
@@ -1401,15 +1482,21 @@ class Loop {
     const double launched = SecondsSince(start);
     PROCAM_CUDA(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&FusedLoopKernel), fused_blocks_, kThreads,
                                             parameters, 0, stream_));
+    // The records, the whole trace buffer and both points (the result is one of them), in one wait.
     FusedRecords records{};
-    PROCAM_CUDA(cudaMemcpyAsync(&records, records_, sizeof records, cudaMemcpyDeviceToHost, stream_));
-    PROCAM_CUDA(cudaStreamSynchronize(stream_));
-    std::vector<IterationRecord> trace(records.records);
-    PROCAM_CUDA(cudaMemcpyAsync(trace.data(), trace_, trace.size() * sizeof(IterationRecord), cudaMemcpyDeviceToHost,
-                                stream_));
-    const Point& result = records.result == 0 ? current_ : trial_;
-    Download(result.emittance, emittance);
-    if (radiosity != nullptr) Download(result.radiosity, radiosity);
+    std::vector<IterationRecord> trace(static_cast<size_t>(options_.max_iterations) + 1);
+    const size_t bytes = count_ * sizeof(double);
+    std::vector<double> points(4 * count_);  // emittance of points 0 and 1, then their radiosity
+    workspace_->DownloadAll({{&records, records_, sizeof records},
+                             {trace.data(), trace_, trace.size() * sizeof(IterationRecord)},
+                             {points.data(), current_.emittance, bytes},
+                             {points.data() + count_, trial_.emittance, bytes},
+                             {points.data() + 2 * count_, current_.radiosity, bytes},
+                             {points.data() + 3 * count_, trial_.radiosity, bytes}},
+                            stream_);
+    std::memcpy(emittance, points.data() + records.result * count_, bytes);
+    if (radiosity != nullptr) std::memcpy(radiosity, points.data() + (2 + records.result) * count_, bytes);
+    trace.resize(records.records);
     summary->termination = static_cast<TerminationType>(records.termination);
     if (summary->termination == TerminationType::kNumericalFailure) {
       summary->message = "objective is not finite at the start";
@@ -1425,6 +1512,7 @@ class Loop {
     summary->gradients = records.gradients;
     summary->hessian_products = records.hessian_products;
     summary->preconditioner_applications = records.preconditioner_applications;
+    summary->fused = true;
     for (IterationRecord& record : trace) record.seconds += launched;
     summary->trace = std::move(trace);
     if (options_.progress) {
@@ -1760,6 +1848,7 @@ class Loop {
 
   const ResidentOptions& options_;
   const DeviceRadiosity& radiosity_;
+  Workspace* workspace_;
   Profile profile_;
   // CUDA graphs of the sequences, per parity (which point buffer is current_).
   bool graphs_ = false;
@@ -1786,7 +1875,8 @@ class Loop {
   unsigned char* fixed_;
   // The fused loop (FusedLoop): its grid (0: not used), the dense K⁻¹ it reads, and its records.
   int fused_blocks_ = 0;
-  DenseInverseView inverse_view_{};
+  DenseProduct products_[3] = {};
+  int product_count_ = 0;
   FusedRecords* records_ = nullptr;
   IterationRecord* trace_ = nullptr;
 };

@@ -18,6 +18,14 @@ typedef struct CUstream_st* cudaStream_t;
 
 namespace procam::cuda {
 
+// One product of the dense K⁻¹ solves: `columns` channels from `first_channel` on (n×3 vectors,
+// channel-planar) with one K⁻¹.
+struct DenseProduct {
+  DenseInverseView inverse;
+  int first_channel = 0;
+  int columns = 3;
+};
+
 // K⁻¹ and K⁻ᵀ of one problem on device memory, as the resident loop uses them.
 class DeviceRadiosity {
  public:
@@ -37,9 +45,9 @@ class DeviceRadiosity {
   // True when a solve is itself iterative and reads its convergence on the host (the matrix-free
   // CG): the loop then enqueues no product whose result it might not need.
   virtual bool iterative() const = 0;
-  // The dense K⁻¹ behind the solves, where one K⁻¹ serves all three channels and the fused loop
-  // can run its products itself (InverseRadiosity::View); false otherwise.
-  virtual bool DenseView(DenseInverseView* /*view*/) const { return false; }
+  // The dense K⁻¹ products behind the solves, where the fused loop can form them itself
+  // (InverseRadiosity::View of every K⁻¹): how many (1 to 3) went into `products`; 0 otherwise.
+  virtual int DenseProducts(DenseProduct (& /*products*/)[3]) const { return 0; }
 };
 
 // The problem in the loop's terms (host memory, read during the call only).
@@ -72,6 +80,7 @@ struct ResidentOptions {
   double gradient_tolerance = 1e-9;
   double function_tolerance = 1e-12;
   double armijo = 1e-4;
+  bool fused = true;  // SolverOptions::device_fused
   std::function<void(int, double, double)> progress;
 };
 
@@ -89,6 +98,7 @@ struct ResidentSummary {
   int gradients = 0;
   int hessian_products = 0;
   int preconditioner_applications = 0;
+  bool fused = false;  // the loop ran in one cooperative kernel
   std::vector<IterationRecord> trace;
 };
 

@@ -39,6 +39,7 @@ CompensationObjective::CompensationObjective(const CompensationProblem& problem,
   weight_diagonal_ = problem.alpha * problem.area / mean_area;
   if (problem.patch_weight.size() == n) weight_diagonal_ = weight_diagonal_.cwiseProduct(problem.patch_weight);
   std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(2 * problem.adjacency.size() + n);
   Eigen::VectorXd diagonal = weight_diagonal_;
   for (const auto& pair : problem.adjacency) {
     const double w = 1.0 - problem.alpha;

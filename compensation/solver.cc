@@ -379,6 +379,7 @@ std::string SolverSummary::BriefReport() const {
       << final_cost << ", " << iterations << " iterations (" << inner_iterations << " inner, " << cg_iterations
       << " CG; " << evaluations << " evaluations, " << gradients << " gradients, " << hessian_products
       << " Hessian products, " << preconditioner_applications << " preconditioner applications), setup " << setup_seconds << " s, solve " << solve_seconds << " s";
+  if (device_fused) out << ", fused device loop";
   if (!message.empty()) out << " (" << message << ")";
   return out.str();
 }

@@ -56,6 +56,11 @@ struct SolverOptions {
   // the whole loop stays on the device (cuda_solver.h: own CG preconditioner, float64
   // values), for the linear and perceptual methods and both levels of multires.
   bool device_host_loop = false;
+  // kCuda, device loop only: problems below 4096 patches on the dense K⁻¹ (one K⁻¹ for all
+  // three channels) run the whole loop in one cooperative kernel, with no host round trip
+  // (cuda_solver.h; 2–3× faster there, docs/gpu.md). Off: one kernel per step with the host
+  // reading scalars in between, as larger problems run; for comparison.
+  bool device_fused = true;
   // Solve the coarse level first and start the fine solve from it (needs a coarse level).
   bool multires = false;
   // Outer (Gauss–Newton) iterations, ≥ 1.
@@ -114,6 +119,8 @@ struct SolverSummary {
   double solve_seconds = 0.0;     // everything after the setup
   double coarse_seconds = 0.0;    // part of solve_seconds spent on the coarse level
   int coarse_iterations = 0;
+  // kCuda: the (fine level's) loop ran fused in one kernel (SolverOptions::device_fused).
+  bool device_fused = false;
   std::vector<IterationRecord> trace;
 
   // One line: method, termination, costs, iterations, times.

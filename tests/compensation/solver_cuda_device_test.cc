@@ -8,9 +8,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -102,7 +104,8 @@ CompensationProblem ReadExportedProblem(const std::filesystem::path& directory) 
 
 // Every problem directory under $PROCAM_DEVICE_PROBLEMS (written on the build machine by
 // `procam compensate ROOM --export`: Embree's F, the projectors' bounds): solved on the CPU, the
-// resident loop and the host loop, objectives compared; one markdown row each with the solve
+// resident loop (fused below 4096 patches, and with a kernel per step) and the host loop,
+// objectives compared; one markdown row each with the solve
 // time (GPU: median of 3; scripts/bench_gpu.sh collects the rows into its table).
 TEST(SolveCudaExported, ResidentAndHostLoopMatchTheCpuOnRealRooms) {
   SKIP_WITHOUT_CUDA_DEVICE();
@@ -127,10 +130,16 @@ TEST(SolveCudaExported, ResidentAndHostLoopMatchTheCpuOnRealRooms) {
                     summary.final_cost, std::abs(summary.final_cost - reference.final_cost) / reference.final_cost);
       };
       row("CPU", reference, reference.solve_seconds);
-      for (const bool host_loop : {false, true}) {
+      struct Variant {
+        bool host_loop, fused;
+        const char* name;
+      };
+      for (const Variant& v : {Variant{false, true, "cuda resident"}, Variant{false, false, "cuda kernel per step"},
+                               Variant{true, false, "cuda host loop"}}) {
         SolverOptions gpu = cpu;
         gpu.device = Device::kCuda;
-        gpu.device_host_loop = host_loop;
+        gpu.device_host_loop = v.host_loop;
+        gpu.device_fused = v.fused;
         SolverSummary summary;
         CompensationSolution solution;
         std::vector<double> seconds;
@@ -139,7 +148,10 @@ TEST(SolveCudaExported, ResidentAndHostLoopMatchTheCpuOnRealRooms) {
           seconds.push_back(summary.solve_seconds);
         }
         std::sort(seconds.begin(), seconds.end());
-        row(host_loop ? "cuda host loop" : "cuda resident", summary, seconds[1]);
+        row(v.name, summary, seconds[1]);
+        if (!v.host_loop) {
+          EXPECT_EQ(summary.device_fused, v.fused && p.size() < 4096) << entry.path();
+        }
         const double relative = std::abs(summary.final_cost - reference.final_cost) / reference.final_cost;
         EXPECT_LT(relative, 1e-6) << entry.path() << " " << MethodName(method);
         EXPECT_TRUE(((solution.emittance - p.lower).array() >= 0.0).all());
@@ -429,14 +441,20 @@ TEST(SolveCudaAnalytic, MatchesTheCpuReference) {
     const double reference = objective.Value(cpu.emittance);
     EXPECT_GT(((cpu.emittance - problem.lower).array() == 0.0).count(), 0) << "no active bound";
     struct Variant {
-      bool host_loop, float32;
+      bool host_loop, float32, fused;
       const char* name;
     };
-    for (const Variant& v : {Variant{true, false, "host loop float64"}, Variant{true, true, "host loop float32"},
-                             Variant{false, false, "resident"}}) {
+    // The fused loop serves problems below 4096 patches: there the resident loop runs both ways.
+    const bool fusable = problem.size() < 4096;
+    for (const Variant& v :
+         {Variant{true, false, false, "host loop float64"}, Variant{true, true, false, "host loop float32"},
+          Variant{false, false, true, fusable ? "resident fused" : "resident"},
+          Variant{false, false, false, "resident, kernel per step"}}) {
+      if (!v.host_loop && !v.fused && !fusable) continue;  // the row above ran this already
       options.device = Device::kCuda;
       options.device_host_loop = v.host_loop;
       options.device_float32 = v.float32;
+      options.device_fused = v.fused;
       SolverSummary summary;
       const CompensationSolution gpu = Solve(options, problem, &summary, coarse);
       std::ostringstream label;
@@ -462,6 +480,7 @@ TEST(SolveCudaAnalytic, MatchesTheCpuReference) {
         EXPECT_LT(std::abs(summary.final_cost - cost), 1e-9 * cost) << label.str();
         EXPECT_NE(summary.termination, TerminationType::kNumericalFailure) << label.str();
         ExpectConsistentSummary(summary, label.str());
+        EXPECT_EQ(summary.device_fused, v.fused && fusable) << label.str();
         if (c.multires) {
           EXPECT_GT(summary.coarse_iterations, 0) << label.str();
         }
@@ -484,23 +503,46 @@ TEST(SolveCudaAnalytic, MatchesTheCpuReference) {
 TEST(SolveCudaAnalytic, ResidentStoppingRules) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const testing::AnalyticProblem test = testing::MakeAnalyticProblem(12, 0.5);
-  SolverOptions options;
-  options.device = Device::kCuda;
-  options.max_iterations = 2;
-  SolverSummary summary;
-  Solve(options, test.fine, &summary);
-  EXPECT_EQ(summary.termination, TerminationType::kMaxIterations) << summary.BriefReport();
-  EXPECT_EQ(summary.iterations, 2);
-  EXPECT_EQ(summary.trace.size(), 3u);
+  for (const bool fused : {true, false}) {
+    SCOPED_TRACE(fused ? "fused" : "kernel per step");
+    SolverOptions options;
+    options.device = Device::kCuda;
+    options.device_fused = fused;
+    options.max_iterations = 2;
+    // The progress callback gets every iteration once, in order, as the trace records it (the
+    // fused loop calls it after its kernel).
+    std::vector<std::pair<int, double>> progress;
+    options.progress = [&](int iteration, double cost, double) { progress.emplace_back(iteration, cost); };
+    SolverSummary summary;
+    Solve(options, test.fine, &summary);
+    EXPECT_EQ(summary.device_fused, fused);
+    EXPECT_EQ(summary.termination, TerminationType::kMaxIterations) << summary.BriefReport();
+    EXPECT_EQ(summary.iterations, 2);
+    ASSERT_EQ(summary.trace.size(), 3u);
+    ASSERT_EQ(progress.size(), 2u);
+    for (int k = 0; k < 2; ++k) {
+      EXPECT_EQ(progress[k].first, k + 1);
+      EXPECT_EQ(progress[k].second, summary.trace[k + 1].cost);
+    }
 
-  // Desired colours every patch can reach: the reverse-radiosity start is the optimum (f = 0).
-  CompensationProblem reachable = test.fine;
-  reachable.desired.setConstant(0.2);
-  reachable.upper.setConstant(10.0);
-  options.max_iterations = 100;
-  Solve(options, reachable, &summary);
-  EXPECT_LT(summary.final_cost, 1e-12) << summary.BriefReport();
-  EXPECT_NE(summary.termination, TerminationType::kNumericalFailure) << summary.BriefReport();
+    // Desired colours every patch can reach: the reverse-radiosity start is the optimum (f = 0).
+    CompensationProblem reachable = test.fine;
+    reachable.desired.setConstant(0.2);
+    reachable.upper.setConstant(10.0);
+    options.max_iterations = 100;
+    Solve(options, reachable, &summary);
+    EXPECT_LT(summary.final_cost, 1e-12) << summary.BriefReport();
+    EXPECT_NE(summary.termination, TerminationType::kNumericalFailure) << summary.BriefReport();
+
+    // A desired colour at the largest double: its XYZ overflows, so the objective is infinite at
+    // the start; the loop stops at once with a numerical failure and returns its (finite) start.
+    CompensationProblem broken = test.fine;
+    broken.desired.row(0).setConstant(std::numeric_limits<double>::max());
+    const CompensationSolution solution = Solve(options, broken, &summary);
+    EXPECT_EQ(summary.termination, TerminationType::kNumericalFailure) << summary.BriefReport();
+    EXPECT_EQ(summary.iterations, 0);
+    EXPECT_TRUE(solution.emittance.allFinite());
+  }
 }
 
 // Markdown rows: variables, patches, solver, setup s, solve s (median of `repeats`), loop s (the
@@ -530,6 +572,7 @@ TEST(SolveCudaAnalytic, DISABLED_Timings) {
       Device device;
       bool multires, float32, host_loop;
       CompensationMethod method;
+      bool fused = true;
     };
     constexpr auto kPerceptual = CompensationMethod::kPerceptual;
     constexpr auto kLinear = CompensationMethod::kLinear;
@@ -542,6 +585,8 @@ TEST(SolveCudaAnalytic, DISABLED_Timings) {
                          kPerceptual},
                         {"linear [cuda host loop]", Device::kCuda, false, false, true, kLinear},
                         {"perceptual [cuda resident]", Device::kCuda, false, false, false, kPerceptual},
+                        {"perceptual [cuda resident, kernel per step]", Device::kCuda, false, false, false,
+                         kPerceptual, false},
                         {"perceptual --multires [cuda resident]", Device::kCuda, true, false, false, kPerceptual},
                         {"linear [cuda resident]", Device::kCuda, false, false, false, kLinear}};
     double reference[2] = {0.0, 0.0};  // perceptual, linear: the first row's objective
@@ -558,6 +603,7 @@ TEST(SolveCudaAnalytic, DISABLED_Timings) {
       options.multires = row.multires;
       options.device_float32 = row.float32;
       options.device_host_loop = row.host_loop;
+      options.device_fused = row.fused;
       // PROCAM_BENCH_CG_TOLERANCE: the inexact-Newton forcing term of the GPU rows, to compare.
       if (const char* tolerance = std::getenv("PROCAM_BENCH_CG_TOLERANCE"); tolerance && row.device == Device::kCuda) {
         options.cg_tolerance = std::atof(tolerance);
