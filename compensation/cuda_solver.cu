@@ -1,15 +1,19 @@
 // cuda_solver_device.h on CUDA kernels: Alg. 1 and 2 (MinimiseBounded and SolveInnerQp of
 // solver.cc, step for step) with every vector on the device.
 //
-// Kernels run one thread per patch (colour, Jacobians, W products, 3×3 blocks) or per variable
-// (bounds, vector updates), with grid-stride loops over at most kMaxBlocks blocks. Reductions
-// (dot products, maxima) are formed in a fixed order (GridReduce) and land in one Scalars struct
-// on the device, which the host copies back where the algorithm branches: two or three times
-// per outer iteration plus about once per CG iteration. CG's own scalars (step, β, convergence)
-// stay on the device, and its kernels do nothing once CG has stopped, so that iterations can be
-// enqueued ahead of a read. On the dense path the fixed sequences are replayed as CUDA graphs
-// (PROCAM_CUDA_GRAPHS=0 turns that off); PROCAM_CUDA_SOLVER_PROFILE=1 prints where a solve's
-// time went.
+// Each step is a device function (a phase: ResidualPhase, CgUpdatePhase, …) run one thread per
+// patch (colour, Jacobians, W products, 3×3 blocks) or per variable (bounds, vector updates),
+// with grid-stride loops. Reductions (dot products, maxima) are formed in a fixed order
+// (GridReduce) and land in one Scalars struct on the device. Two loops run the phases:
+//   - a kernel per phase (Kernel<Phase>, at most kMaxBlocks blocks each), with the host copying
+//     the scalars back where the algorithm branches: two or three times per outer iteration plus
+//     about once per CG iteration. CG's own scalars (step, β, convergence) stay on the device,
+//     and its kernels do nothing once CG has stopped, so that iterations can be enqueued ahead
+//     of a read. On the dense path the fixed sequences are replayed as CUDA graphs
+//     (PROCAM_CUDA_GRAPHS=0 turns that off). Large problems and the matrix-free path run this.
+//   - the fused loop (FusedLoop): for small problems on the dense K⁻¹, every phase in one
+//     cooperative kernel, grid barriers between them and the control flow on the device.
+// PROCAM_CUDA_SOLVER_PROFILE=1 prints where a solve's time went.
 
 // The colour math of colour.h, compiled for the device as well (one definition for both sides).
 #define PROCAM_HOST_DEVICE __host__ __device__
@@ -1343,8 +1347,7 @@ class Loop {
       summary->termination = TerminationType::kNumericalFailure;
       summary->message = "objective is not finite at the start";
       summary->final_cost = cost;
-      Download(current_.emittance, emittance);
-      if (radiosity != nullptr) Download(current_.radiosity, radiosity);
+      DownloadResult(current_, emittance, radiosity);
       return;
     }
     // Products enqueued ahead of a read only where they are cheap (not matrix-free).
@@ -1437,8 +1440,7 @@ class Loop {
       }
     }
     summary->final_cost = cost;
-    Download(current_.emittance, emittance);
-    if (radiosity != nullptr) Download(current_.radiosity, radiosity);  // K⁻¹E, evaluated at acceptance
+    DownloadResult(current_, emittance, radiosity);  // its K⁻¹E, evaluated at acceptance
     if (ProfileEnabled()) PrintProfile(SecondsSince(start));
   }
 
@@ -1645,9 +1647,14 @@ class Loop {
                  1e3 * counted.capture_seconds, kernel[0], kernel[1], fast[0], fast[1], solve[0], solve[1], sync[1]);
   }
 
-  void Download(const double* device, double* host) {
-    PROCAM_CUDA(cudaMemcpyAsync(host, device, count_ * sizeof(double), cudaMemcpyDeviceToHost, stream_));
-    PROCAM_CUDA(cudaStreamSynchronize(stream_));
+  // The point's emittance and (if `radiosity` is not null) radiosity, in one wait.
+  void DownloadResult(const Point& point, double* emittance, double* radiosity) {
+    const size_t bytes = count_ * sizeof(double);
+    if (radiosity == nullptr) {
+      workspace_->DownloadAll({{emittance, point.emittance, bytes}}, stream_);
+    } else {
+      workspace_->DownloadAll({{emittance, point.emittance, bytes}, {radiosity, point.radiosity, bytes}}, stream_);
+    }
   }
 
   void SolveFast(const P* y, bool transposed, P* x) {

@@ -11,7 +11,11 @@
 //           gradient, projected gradient and active set, CG on the free variables, its
 //           preconditioner, Alg. 2's projected step and the Armijo trials;
 //   host    the control flow, reading back a few scalars per step (costs, slopes, CG's state),
-//           and the records of the summary.
+//           and the records of the summary; except for small problems on the dense K⁻¹
+//           (below 4096 patches, every K⁻¹ on the Cholesky path), where one cooperative kernel
+//           runs the whole loop, control flow included, and the host reads the result and the
+//           records once (SolverOptions::device_fused, on by default; SolverSummary::
+//           device_fused says which ran). The progress callback is then called after the kernel.
 // The algorithm and its stopping rules are MinimiseBounded's, with one difference: CG is
 // preconditioned by the inverses of the 3×3 diagonal blocks of M_FF with one Neumann term for
 // their coupling through W (z = D⁻¹r + D⁻¹ N D⁻¹ r; PROCAM_CUDA_PRECONDITIONER=jacobi drops the
