@@ -758,52 +758,48 @@ class Workspace {
   }
   Scalars* host_scalars() { return host_scalars_; }
 
+  // A copy between host and device memory: `bytes` from `from` to `to`.
+  struct Copy {
+    void* to;
+    const void* from;
+    size_t bytes;
+  };
+
   // Host-to-device copies enqueued on `stream` from pinned staging (kept, grown as needed), so
   // that they neither block the host nor wait for a bounce buffer; the staging is reused once the
   // last upload's copies have finished.
-  struct Upload {
-    void* device;
-    const void* host;
-    size_t bytes;
-  };
-  void UploadAll(std::initializer_list<Upload> copies, cudaStream_t stream) {
-    size_t total = 0;
-    for (const Upload& copy : copies) total += Aligned(copy.bytes);
-    char* staging = Staging(total);
-    for (const Upload& copy : copies) {
+  void UploadAll(std::initializer_list<Copy> copies, cudaStream_t stream) {
+    char* staging = Staging(copies);
+    for (const Copy& copy : copies) {
       if (copy.bytes == 0) continue;
-      std::memcpy(staging, copy.host, copy.bytes);
-      PROCAM_CUDA(cudaMemcpyAsync(copy.device, staging, copy.bytes, cudaMemcpyHostToDevice, stream));
+      std::memcpy(staging, copy.from, copy.bytes);
+      PROCAM_CUDA(cudaMemcpyAsync(copy.to, staging, copy.bytes, cudaMemcpyHostToDevice, stream));
       staging += Aligned(copy.bytes);
     }
     PROCAM_CUDA(cudaEventRecord(staged_, stream));
   }
 
   // Device-to-host copies through the same staging, waited for together.
-  struct Download {
-    void* host;
-    const void* device;
-    size_t bytes;
-  };
-  void DownloadAll(std::initializer_list<Download> copies, cudaStream_t stream) {
-    size_t total = 0;
-    for (const Download& copy : copies) total += Aligned(copy.bytes);
-    char* staging = Staging(total);
+  void DownloadAll(std::initializer_list<Copy> copies, cudaStream_t stream) {
+    char* const staging = Staging(copies);
     char* next = staging;
-    for (const Download& copy : copies) {
-      PROCAM_CUDA(cudaMemcpyAsync(next, copy.device, copy.bytes, cudaMemcpyDeviceToHost, stream));
+    for (const Copy& copy : copies) {
+      PROCAM_CUDA(cudaMemcpyAsync(next, copy.from, copy.bytes, cudaMemcpyDeviceToHost, stream));
       next += Aligned(copy.bytes);
     }
     PROCAM_CUDA(cudaEventRecord(staged_, stream));
     PROCAM_CUDA(cudaEventSynchronize(staged_));
-    for (const Download& copy : copies) {
-      std::memcpy(copy.host, staging, copy.bytes);
-      staging += Aligned(copy.bytes);
+    next = staging;
+    for (const Copy& copy : copies) {
+      std::memcpy(copy.to, next, copy.bytes);
+      next += Aligned(copy.bytes);
     }
   }
 
-  // The pinned staging, at least `bytes`, once the copies of its last use have finished.
-  char* Staging(size_t bytes) {
+  // The pinned staging, large enough for `copies`, once the copies of its last use have finished.
+  char* Staging(std::initializer_list<Copy> copies) {
+    size_t bytes = 0;
+    for (const Copy& copy : copies) bytes += Aligned(copy.bytes);
     if (staged_ == nullptr) PROCAM_CUDA(cudaEventCreateWithFlags(&staged_, cudaEventDisableTiming));
     PROCAM_CUDA(cudaEventSynchronize(staged_));
     if (bytes > pinned_capacity_) {
@@ -914,13 +910,12 @@ struct FusedRecords {
   double initial_cost, final_cost;
 };
 
-// Everything the fused kernel reads: ResidentOptions' numbers, the problem and the loop's arrays.
+// Everything the fused kernel reads: the options, the problem and the loop's arrays.
 struct FusedArgs {
   int n;
   long count;
-  int max_iterations, max_inner_iterations, max_cg_iterations;
-  double cg_tolerance, gradient_tolerance, function_tolerance, armijo;
-  bool second_order, neumann;
+  ResidentSettings options;
+  bool second_order, neumann;  // the loop's: the Lab model's second-order term, the preconditioner
   ColourSpace space;
   Weights weights;
   DenseProduct products[3];  // the K⁻¹ solves, `product_count` of them
@@ -963,12 +958,12 @@ class FusedLoop {
       Finish(&counts, cost, current);
       return;
     }
-    for (int iteration = 1; iteration <= a_.max_iterations; ++iteration) {
+    for (int iteration = 1; iteration <= a_.options.max_iterations; ++iteration) {
       const Point& point = a_.points[current];
       Gradient(point);
       ++counts.gradients;
       SetProjectedGradient(counts, s.projected_gradient);
-      if (s.projected_gradient <= a_.gradient_tolerance * (1.0 + cost)) {
+      if (s.projected_gradient <= a_.options.gradient_tolerance * (1.0 + cost)) {
         counts.termination = static_cast<int>(TerminationType::kGradientTolerance);
         break;
       }
@@ -997,7 +992,7 @@ class FusedLoop {
         if (halving > 0 || !first_trial_evaluated) LineTrial(point, trial, step);
         ++counts.evaluations;
         trial_cost = s.value;
-        if (ArmijoAccepts(trial_cost, cost, a_.armijo, step, slope)) {
+        if (ArmijoAccepts(trial_cost, cost, a_.options.armijo, step, slope)) {
           accepted = true;
           break;
         }
@@ -1011,7 +1006,7 @@ class FusedLoop {
       current ^= 1;
       cost = trial_cost;
       Record(&counts, iteration, cost, start, step, free_variables, cg);
-      if (previous - cost <= a_.function_tolerance * previous) {
+      if (previous - cost <= a_.options.function_tolerance * previous) {
         counts.termination = static_cast<int>(TerminationType::kFunctionTolerance);
         Gradient(a_.points[current]);
         SetProjectedGradient(counts, s.projected_gradient);
@@ -1110,7 +1105,7 @@ class FusedLoop {
 
   __device__ void Neumann(const Point& point, bool start) {
     NeumannPhase<float>(a_.n, start, a_.weights, point.jacobian, a_.preconditioner, a_.y, a_.r, a_.z, a_.p,
-                        a_.p_fast, a_.max_cg_iterations, a_.scalars, a_.reduction);
+                        a_.p_fast, a_.options.max_cg_iterations, a_.scalars, a_.reduction);
     Barrier();
   }
 
@@ -1120,7 +1115,7 @@ class FusedLoop {
     CgCurvaturePhase<float>(a_.count, a_.product_fast, a_.mask, a_.p, a_.hp, a_.scalars, a_.reduction);
     Barrier();
     CgUpdatePhase(a_.n, a_.neumann, a_.p, a_.hp, a_.preconditioner, a_.x, a_.r, a_.neumann ? a_.y : a_.z,
-                  a_.cg_tolerance, a_.max_cg_iterations, a_.scalars, a_.reduction);
+                  a_.options.cg_tolerance, a_.options.max_cg_iterations, a_.scalars, a_.reduction);
     Barrier();
     if (a_.neumann) Neumann(point, /*start=*/false);
     CgDirectionPhase<float>(a_.count, a_.z, a_.p, a_.p_fast, a_.scalars);
@@ -1131,13 +1126,13 @@ class FusedLoop {
   __device__ void SolveInnerQp(const Point& point, FusedRecords* counts, int* cg_total) {
     const Scalars& s = *a_.scalars;
     double first_norm = -1.0;
-    for (int inner = 0; inner < a_.max_inner_iterations; ++inner) {
+    for (int inner = 0; inner < a_.options.max_inner_iterations; ++inner) {
       InnerStartPhase(a_.count, inner == 0, a_.d, a_.hd, a_.gradient, point.emittance, a_.lower, a_.upper, a_.fixed,
                       a_.qg, a_.mask, a_.scalars, a_.reduction);
       Barrier();
       const double projected = s.inner_projected;
       if (first_norm < 0.0) first_norm = projected;
-      if (projected <= a_.cg_tolerance * first_norm || projected == 0.0) break;
+      if (projected <= a_.options.cg_tolerance * first_norm || projected == 0.0) break;
       ++counts->inner_iterations;
       CgStartPhase<float>(a_.n, a_.neumann, a_.qg, a_.mask, point.jacobian, a_.weights.diagonal, a_.x, a_.r, a_.b0,
                           a_.p, a_.preconditioner, a_.p_fast, a_.y, a_.scalars, a_.reduction);
@@ -1152,7 +1147,7 @@ class FusedLoop {
       counts->hessian_products += iterations;
       counts->preconditioner_applications += s.cg.preconditioner_applications;
       if (s.solution_nonfinite > 0.0 || s.solution_max == 0.0) break;
-      const bool last_inner = inner + 1 == a_.max_inner_iterations;
+      const bool last_inner = inner + 1 == a_.options.max_inner_iterations;
       const double curvature = s.solution_curvature;
       double alpha = s.alpha;
       bool accepted = false;
@@ -1453,13 +1448,7 @@ class Loop {
     FusedArgs args{};
     args.n = n_;
     args.count = count_;
-    args.max_iterations = options_.max_iterations;
-    args.max_inner_iterations = options_.max_inner_iterations;
-    args.max_cg_iterations = options_.max_cg_iterations;
-    args.cg_tolerance = options_.cg_tolerance;
-    args.gradient_tolerance = options_.gradient_tolerance;
-    args.function_tolerance = options_.function_tolerance;
-    args.armijo = options_.armijo;
+    args.options = options_;  // the plain settings, without the progress callback
     args.second_order = second_order_;
     args.neumann = neumann_;
     args.space = space_;

@@ -70,8 +70,9 @@ struct ResidentProblem {
   double linear_colour[9] = {};  // row-major
 };
 
-// SolverOptions' settings of Alg. 1 and 2 (solver.h documents each).
-struct ResidentOptions {
+// SolverOptions' settings of Alg. 1 and 2 (solver.h documents each): plain numbers, which the
+// fused loop's kernel takes as they are.
+struct ResidentSettings {
   int max_iterations = 100;
   int max_inner_iterations = 1;
   int max_cg_iterations = 200;
@@ -81,6 +82,8 @@ struct ResidentOptions {
   double function_tolerance = 1e-12;
   double armijo = 1e-4;
   bool fused = true;  // SolverOptions::device_fused
+};
+struct ResidentOptions : ResidentSettings {
   std::function<void(int, double, double)> progress;
 };
 
