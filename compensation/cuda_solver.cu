@@ -1210,8 +1210,8 @@ __global__ void __launch_bounds__(kThreads) FusedLoopKernel(const FusedArgs args
   FusedLoop(args).Run();
 }
 
-// The fused loop's grid as PROCAM_CUDA_FUSED_BLOCKS asks (blocks, for measurements; 0: the
-// default, one per multiprocessor).
+// The fused loop's grid as PROCAM_CUDA_FUSED_BLOCKS asks (blocks, for measurements and the
+// fallback's test; 0: the default, one per multiprocessor).
 int FusedBlocksWanted() {
   static const int blocks = [] {
     const char* value = std::getenv("PROCAM_CUDA_FUSED_BLOCKS");
@@ -1326,10 +1326,7 @@ class Loop {
   }
 
   void Run(double* emittance, double* radiosity, ResidentSummary* summary) {
-    if (fused_blocks_ > 0) {
-      RunFused(emittance, radiosity, summary);
-      return;
-    }
+    if (fused_blocks_ > 0 && RunFused(emittance, radiosity, summary)) return;
     const auto start = Clock::now();
     Evaluate(current_);
     Sync();
@@ -1442,8 +1439,9 @@ class Loop {
  private:
   // Run in one cooperative kernel (FusedLoop), then the summary from its records: the trace's
   // times are the device's, from the kernel's start, plus the host's time until the launch; the
-  // progress callback is called afterwards, once per iteration, with those records.
-  void RunFused(double* emittance, double* radiosity, ResidentSummary* summary) {
+  // progress callback is called afterwards, once per iteration, with those records. False (and
+  // nothing done) where the device cannot hold the grid at once.
+  bool RunFused(double* emittance, double* radiosity, ResidentSummary* summary) {
     const auto start = Clock::now();
     FusedArgs args{};
     args.n = n_;
@@ -1471,8 +1469,15 @@ class Loop {
     args.trace = trace_;
     void* parameters[] = {&args};
     const double launched = SecondsSince(start);
-    PROCAM_CUDA(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&FusedLoopKernel), fused_blocks_, kThreads,
-                                            parameters, 0, stream_));
+    const cudaError_t launch = cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&FusedLoopKernel),
+                                                           fused_blocks_, kThreads, parameters, 0, stream_);
+    if (launch == cudaErrorCooperativeLaunchTooLarge) {
+      // Fewer multiprocessors free than when the grid was sized (another context holds some, say):
+      // nothing ran, so the loop with a kernel per step starts from the same state.
+      cudaGetLastError();
+      return false;
+    }
+    Check(launch, "cudaLaunchCooperativeKernel(FusedLoopKernel)");
     // The records, the whole trace buffer and both points (the result is one of them), in one wait.
     FusedRecords records{};
     std::vector<IterationRecord> trace(static_cast<size_t>(options_.max_iterations) + 1);
@@ -1515,11 +1520,13 @@ class Loop {
       std::fprintf(stderr, "resident profile: %d patches, fused loop on %d blocks: %.3f ms (launched after %.3f ms)\n",
                    n_, fused_blocks_, 1e3 * SecondsSince(start), 1e3 * launched);
     }
+    return true;
   }
 
-  // The fused loop's grid: one wave of resident blocks, at most one per multiprocessor unless
-  // PROCAM_CUDA_FUSED_BLOCKS asks for more (and the device fits them); 0 where the device has no
-  // cooperative launch.
+  // The fused loop's grid: one block per multiprocessor (at most kMaxBlocks, what the reductions
+  // hold), or PROCAM_CUDA_FUSED_BLOCKS' count as asked, even past what the device holds at once:
+  // that launch fails and the loop with a kernel per step runs instead (a device test checks
+  // it). 0 where the device has no cooperative launch.
   static int FusedBlocks() {
     static const int blocks = [] {
       int device = 0, cooperative = 0, multiprocessors = 0, per_multiprocessor = 0;
@@ -1527,10 +1534,11 @@ class Loop {
       PROCAM_CUDA(cudaDeviceGetAttribute(&cooperative, cudaDevAttrCooperativeLaunch, device));
       PROCAM_CUDA(cudaDeviceGetAttribute(&multiprocessors, cudaDevAttrMultiProcessorCount, device));
       PROCAM_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_multiprocessor, FusedLoopKernel, kThreads, 0));
-      const int resident = std::min(kMaxBlocks, multiprocessors * per_multiprocessor);
+      const int resident = multiprocessors * per_multiprocessor;
       if (cooperative == 0 || resident == 0) return 0;
       const int wanted = FusedBlocksWanted();
-      return wanted > 0 ? std::min(wanted, resident) : std::min(multiprocessors, resident);
+      if (wanted > resident) return wanted;
+      return std::min(kMaxBlocks, wanted > 0 ? wanted : std::min(multiprocessors, resident));
     }();
     return blocks;
   }

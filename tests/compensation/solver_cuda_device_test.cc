@@ -547,6 +547,27 @@ TEST(SolveCudaAnalytic, ResidentStoppingRules) {
   }
 }
 
+// Where the device cannot hold the fused loop's grid at once (another context holding
+// multiprocessors, or PROCAM_CUDA_FUSED_BLOCKS past what fits, as scripts/bench_gpu.sh runs this
+// test with 100000), the cooperative launch fails and the loop with a kernel per step solves the
+// problem instead: same result as the CPU, device_fused false. Skipped without such a count.
+TEST(SolveCudaAnalytic, FusedLoopFallsBackWhereItsGridDoesNotFit) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const char* blocks = std::getenv("PROCAM_CUDA_FUSED_BLOCKS");
+  if (blocks == nullptr || std::atoi(blocks) < 100000) {
+    GTEST_SKIP() << "PROCAM_CUDA_FUSED_BLOCKS is not set to a grid no device holds (>= 100000)";
+  }
+  const testing::AnalyticProblem test = testing::MakeAnalyticProblem(16, 0.5);
+  SolverOptions options;
+  SolverSummary cpu_summary, summary;
+  Solve(options, test.fine, &cpu_summary);
+  options.device = Device::kCuda;
+  Solve(options, test.fine, &summary);
+  EXPECT_FALSE(summary.device_fused) << summary.BriefReport();
+  EXPECT_LT(std::abs(summary.final_cost - cpu_summary.final_cost), 1e-6 * cpu_summary.final_cost)
+      << summary.BriefReport();
+}
+
 // Markdown rows: variables, patches, solver, setup s, solve s (median of `repeats`), loop s (the
 // fine level's Alg. 1 alone: the trace's last time; solve s adds the reverse-radiosity start K·Bd
 // on the CPU, the objective's set-up, the coarse level and the final B = K⁻¹E), iterations,
