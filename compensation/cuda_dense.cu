@@ -305,7 +305,6 @@ class InverseRadiosityImpl : public InverseRadiosity {
     if (!cholesky_ || inverse_half_.size() == 0 || product_rows_ != kDoubleRows || half_rows_ != kHalfRows) {
       return false;
     }
-    view->n = n_;
     view->inverse = inverse_.get();
     view->half_quads = inverse_half_.get();
     view->half_post = half_post_;

@@ -32,7 +32,6 @@ bool DeviceAvailable(std::string* description);
 // quads of 2^k K⁻¹ (times 2^-k) with float32 vectors. Device pointers, owned by the
 // InverseRadiosity.
 struct DenseInverseView {
-  int n = 0;
   const double* inverse = nullptr;
   const void* half_quads = nullptr;  // cuda_product.cuh's HalfQuad
   float half_post = 1.0f;            // 2^-k
