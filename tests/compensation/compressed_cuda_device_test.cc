@@ -278,15 +278,6 @@ TEST(CompressedCuda, PerceptualSolveMatchesTheCpu) {
   }
 }
 
-std::vector<double> NumbersFromEnvironment(const char* name, std::vector<double> fallback) {
-  const char* text = std::getenv(name);
-  if (text == nullptr) return fallback;
-  std::vector<double> values;
-  std::stringstream stream(text);
-  for (std::string item; std::getline(stream, item, ',');) values.push_back(std::stod(item));
-  return values;
-}
-
 // Median wall time of `repeats` calls, in ms, with the device idle before and after each.
 template <typename Call>
 double MedianMilliseconds(int repeats, const Call& call) {
@@ -317,12 +308,13 @@ TEST(CompressedCuda, DISABLED_Timings) {
   std::string device;
   CudaAvailable(&device);
   std::vector<int> grids;
-  for (const double g : NumbersFromEnvironment("PROCAM_BENCH_COMPRESSED_GRIDS", {40, 120, 224})) {
+  for (const double g : testing::ListFromEnvironment<double>("PROCAM_BENCH_COMPRESSED_GRIDS", {40, 120, 224})) {
     grids.push_back(static_cast<int>(g));
   }
-  const double cpu_max_variables = NumbersFromEnvironment("PROCAM_BENCH_CPU_MAX_VARIABLES", {30000})[0];
-  const int repeats = static_cast<int>(NumbersFromEnvironment("PROCAM_BENCH_REPEATS", {5})[0]);
-  const int solve_repeats = static_cast<int>(NumbersFromEnvironment("PROCAM_BENCH_SOLVE_REPEATS", {3})[0]);
+  const double cpu_max_variables = testing::ListFromEnvironment<double>("PROCAM_BENCH_CPU_MAX_VARIABLES", {30000})[0];
+  const int repeats = static_cast<int>(testing::ListFromEnvironment<double>("PROCAM_BENCH_REPEATS", {5})[0]);
+  const int solve_repeats =
+      static_cast<int>(testing::ListFromEnvironment<double>("PROCAM_BENCH_SOLVE_REPEATS", {3})[0]);
   struct Comparison {
     int variables, patches;
     const char* name;
@@ -332,8 +324,9 @@ TEST(CompressedCuda, DISABLED_Timings) {
   };
   std::vector<Comparison> comparisons;
   ClusterOptions cluster_options;
-  cluster_options.leaf_size = static_cast<int>(NumbersFromEnvironment("PROCAM_BENCH_LEAF_SIZE", {32})[0]);
-  cluster_options.admissibility = NumbersFromEnvironment("PROCAM_BENCH_ADMISSIBILITY", {0.5})[0];
+  cluster_options.leaf_size =
+      static_cast<int>(testing::ListFromEnvironment<double>("PROCAM_BENCH_LEAF_SIZE", {32})[0]);
+  cluster_options.admissibility = testing::ListFromEnvironment<double>("PROCAM_BENCH_ADMISSIBILITY", {0.5})[0];
   std::printf("device: %s; leaf size %d, admissibility %g, rho 0.9, alpha 0.5\n\n"
               "| variables | patches | build s | near entries | far blocks | far values | GPU upload s | GPU product ms | "
               "GPU K⁻¹ solve ms | CG iterations | perceptual solve s (GPU) | iterations | objective | "

@@ -35,15 +35,6 @@
 namespace procam {
 namespace {
 
-std::vector<int> IntegersFromEnvironment(const char* name, std::vector<int> fallback) {
-  const char* text = std::getenv(name);
-  if (text == nullptr) return fallback;
-  std::vector<int> values;
-  std::stringstream stream(text);
-  for (std::string item; std::getline(stream, item, ',');) values.push_back(std::stoi(item));
-  return values;
-}
-
 // The summary's records agree with each other (as MinimiseBounded keeps them).
 // The trace, one line per outer iteration (printed where a check failed).
 void PrintTrace(const char* name, const SolverSummary& summary) {
@@ -298,7 +289,7 @@ TEST(SolveCudaAnalytic, DISABLED_ProductTimings) {
   const Variant variants[] = {{"cublas", "float32"}, {"4", "float32"}, {"8", "float32"}, {"4", "float16"}, {"8", "float16"}};
   std::printf("| patches | vectors | product | cuBLAS µs | 4 rows µs | 8 rows µs | 4 rows, float16 K⁻¹ µs | "
               "8 rows, float16 K⁻¹ µs |\n|---:|---|---|---:|---:|---:|---:|---:|\n");
-  for (const int g : IntegersFromEnvironment("PROCAM_BENCH_GRIDS", {22, 40, 70})) {
+  for (const int g : testing::ListFromEnvironment<int>("PROCAM_BENCH_GRIDS", {22, 40, 70})) {
     const CompensationProblem p = testing::PlatesProblem(g, 0.5, 0.9);
     const int n = p.size();
     const Eigen::VectorXd rho = p.reflectance.col(0);
@@ -579,9 +570,9 @@ TEST(SolveCudaAnalytic, DISABLED_Timings) {
   SKIP_WITHOUT_CUDA_DEVICE();
   std::string device;
   CudaAvailable(&device);
-  const std::vector<int> grids = IntegersFromEnvironment("PROCAM_BENCH_GRIDS", {22, 40, 70});
-  const int cpu_max_variables = IntegersFromEnvironment("PROCAM_BENCH_CPU_MAX_VARIABLES", {10000})[0];
-  const int repeats = IntegersFromEnvironment("PROCAM_BENCH_REPEATS", {5})[0];
+  const std::vector<int> grids = testing::ListFromEnvironment<int>("PROCAM_BENCH_GRIDS", {22, 40, 70});
+  const int cpu_max_variables = testing::ListFromEnvironment<int>("PROCAM_BENCH_CPU_MAX_VARIABLES", {10000})[0];
+  const int repeats = testing::ListFromEnvironment<int>("PROCAM_BENCH_REPEATS", {5})[0];
   std::printf("device: %s\n\n| variables | patches | solver | setup s | solve s | loop s | iterations | "
               "CG iterations | objective | relative to reference |\n"
               "|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|\n",
