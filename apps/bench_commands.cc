@@ -16,7 +16,7 @@
 #include "compensation/solver.h"
 #include "datasets_synthetic/rooms.h"
 #include "geometry/form_factors.h"
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {

@@ -31,7 +31,7 @@
 #include "datasets_synthetic/chessboard_views.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/synthetic_camera.h"
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {

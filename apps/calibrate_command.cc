@@ -19,7 +19,7 @@
 #include "calibration/photometric.h"
 #include "calibration/rig_directory.h"
 #include "capture/session.h"
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {

@@ -16,6 +16,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "base/camera_model.h"
 #include "apps/command_line.h"
 #include "apps/commands.h"
 #include "apps/geometry_stage.h"
@@ -24,7 +25,7 @@
 #include "calibration/structured_light.h"
 #include "capture/session.h"
 #include "datasets_synthetic/paper_scenes.h"
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {
@@ -183,7 +184,7 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& input) {
     throw IoError(camera_path.string() +
                   ": file not found (run `procam calibrate camera ... --out " + args.out +
                   "` first)");
-  const CameraModelFile camera = ReadCameraModelFile(camera_path);
+  const CameraModel camera = ReadCameraModelFile(camera_path);
   if (camera.lens_model != "LENSMODEL_PINHOLE" && camera.lens_model != "LENSMODEL_OPENCV4")
     throw IoError(camera_path.string() + ": lensmodel " + camera.lens_model +
                   ": projector calibration supports LENSMODEL_PINHOLE and LENSMODEL_OPENCV4");
@@ -370,7 +371,7 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& input) {
   ReadRigJson(out);
 
   for (const RoomProjector& p : calibration.projectors) {
-    CameraModelFile model_file;
+    CameraModel model_file;
     model_file.lens_model = p.lens_model;
     model_file.intrinsics = p.intrinsics;
     model_file.width = p.width;
@@ -380,7 +381,7 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& input) {
                          "procam projector model (procam calibrate projectors); extrinsics = "
                          "rt_proj_room, the room = the scene's frame");
   }
-  CameraModelFile camera_out = camera;
+  CameraModel camera_out = camera;
   camera_out.cam_from_ref = calibration.room_from_camera.inverse();
   if (args.options.refine_camera_intrinsics) camera_out.intrinsics = calibration.camera_intrinsics;
   WriteCameraModelFile(camera_path, camera_out,

@@ -11,7 +11,7 @@
 #include "calibration/camera_response.h"
 #include "calibration/rig_directory.h"
 #include "capture/session.h"
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {

@@ -18,7 +18,7 @@
 #include "capture/session.h"
 #include "calibration/structured_light.h"
 #include "datasets_synthetic/synthetic_camera.h"
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <sstream>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 

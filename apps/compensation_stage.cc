@@ -2,7 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 

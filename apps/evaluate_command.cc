@@ -10,7 +10,7 @@
 #include "apps/commands.h"
 #include "apps/evaluation.h"
 #include "apps/report.h"
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {

@@ -12,7 +12,7 @@
 #include "compensation/colour.h"
 #include "compensation/objective.h"
 #include "compensation/solver.h"
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 

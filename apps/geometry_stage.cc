@@ -11,7 +11,7 @@
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 

@@ -13,7 +13,7 @@
 #include "capture/camera.h"
 #include "capture/test_camera.h"
 #include "datasets_synthetic/synthetic_camera.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "projection/projector.h"
 
 namespace procam {

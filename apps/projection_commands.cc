@@ -19,7 +19,7 @@
 #include "apps/geometry_stage.h"
 #include "apps/rig_stage.h"
 #include "datasets_synthetic/rooms.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "geometry/patches.h"
 #include "geometry/scene.h"
 #include "procam/config.h"

@@ -6,7 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <spdlog/fmt/fmt.h>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 

@@ -10,7 +10,7 @@
 
 #include "calibration/rig_directory.h"
 #include "compensation/radiosity.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "geometry/ray_scene.h"
 #include "projection/projection_rig.h"
 

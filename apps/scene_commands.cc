@@ -10,6 +10,7 @@
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
+#include "base/camera_model.h"
 #include "apps/commands.h"
 #include "apps/compensation_stage.h"
 #include "apps/evaluation.h"
@@ -21,7 +22,7 @@
 #include "calibration/registration.h"
 #include "projection/projector_images.h"
 #include "compensation/problem.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "procam/config.h"
 
 namespace procam {
@@ -179,7 +180,7 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation, const Ev
                         {"max_error_percent", {max_error[0], max_error[1], max_error[2]}},
                         {"half_light_drive_error", gamma - true_gamma}});
   }
-  const CameraModelFile camera_model = ReadCameraModelFile(rig_dir / "camera.cameramodel");
+  const CameraModel camera_model = ReadCameraModelFile(rig_dir / "camera.cameramodel");
   const CameraGeometry& true_camera = evaluation.world->camera();
   const double camera_focal = 100.0 * (camera_model.intrinsics[0] / true_camera.intrinsics()[0] - 1.0);
   const double camera_position =

@@ -29,7 +29,7 @@
 #include "compensation/radiosity.h"
 #include "compensation/solver.h"
 #include "datasets_synthetic/synthetic_camera.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "geometry/ray_scene.h"
 #include "projection/projection_rig.h"
 #include "projection/projector_images.h"

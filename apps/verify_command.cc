@@ -7,7 +7,7 @@
 #include "apps/verification.h"
 #include "capture/camera.h"
 #include "capture/devices.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "procam/config.h"
 #if PROCAM_WITH_GLFW
 #include "projection/glfw_display.h"

@@ -7,12 +7,14 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "geometry/io.h"
+#include "base/camera_model.h"
+#include "base/io.h"
 
 extern "C" {
 #include <mrcal/mrcal.h>
@@ -97,24 +99,6 @@ std::string CameraCalibrationSummary::BriefReport() const {
 
 namespace {
 
-// A pose from mrcal's rt (Rodrigues rotation, then translation).
-Eigen::Isometry3d PoseFromRt(const mrcal_pose_t& rt) {
-  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  pose.linear() = RotationOf(Vec3(rt.r.x, rt.r.y, rt.r.z));
-  pose.translation() = Vec3(rt.t.x, rt.t.y, rt.t.z);
-  return pose;
-}
-
-bool ParseLens(const std::string& name, mrcal_lensmodel_t* lens) {
-  return mrcal_lensmodel_from_name(lens, name.c_str()) && mrcal_lensmodel_type_is_valid(lens->type);
-}
-
-std::string Number(double value) {
-  char text[40];
-  std::snprintf(text, sizeof(text), "%.17g", value);
-  return text;
-}
-
 // OpenCV's flags for the distortion terms of an mrcal OpenCV lens model.
 int SeedFlags(const std::string& lens_model) {
   if (lens_model == "LENSMODEL_OPENCV4") return cv::CALIB_FIX_K3;
@@ -123,18 +107,6 @@ int SeedFlags(const std::string& lens_model) {
 }
 
 }  // namespace
-
-bool ProjectWithLens(const std::string& lens_model, const std::vector<double>& intrinsics,
-                     const Vec3& p_in_cam, Vec2* pixel) {
-  mrcal_lensmodel_t lens;
-  if (!ParseLens(lens_model, &lens)) throw std::invalid_argument("unknown lens " + lens_model);
-  if (!(p_in_cam.z() > 0.0)) return false;
-  const mrcal_point3_t p{{p_in_cam.x(), p_in_cam.y(), p_in_cam.z()}};
-  mrcal_point2_t q;
-  mrcal_project(&q, nullptr, nullptr, &p, 1, &lens, intrinsics.data());
-  *pixel = Vec2(q.x, q.y);
-  return true;
-}
 
 bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSpec& board,
                      const std::vector<ChessboardView>& views, int width, int height,
@@ -191,8 +163,10 @@ bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSp
 
   // 2. Refine with mrcal: one camera at the reference, the board poses are mrcal's frames.
   mrcal_lensmodel_t lens;
-  if (!ParseLens(options.lens_model, &lens)) throw std::invalid_argument("unknown lens");
-  const int parameter_count = mrcal_lensmodel_num_params(&lens);
+  if (!mrcal_lensmodel_from_name(&lens, options.lens_model.c_str())) {
+    throw std::invalid_argument("unknown lens " + options.lens_model);
+  }
+  const int parameter_count = LensModel::ParameterCount(options.lens_model);
   std::vector<double> intrinsics(parameter_count, 0.0);
   intrinsics[0] = camera_matrix.at<double>(0, 0);
   intrinsics[1] = camera_matrix.at<double>(1, 1);
@@ -246,6 +220,13 @@ bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSp
   }
 
   // 3. Residual statistics over the inliers, by projecting the board with the result.
+  std::optional<LensModel> fitted;
+  try {
+    fitted.emplace(options.lens_model, intrinsics);
+  } catch (const std::invalid_argument& error) {
+    return finish(CameraCalibrationSummary::kSolverFailed, std::string("mrcal_optimize: ") + error.what());
+  }
+  const LensModel& lens_fitted = *fitted;
   calibration->lens_model = options.lens_model;
   calibration->intrinsics = intrinsics;
   calibration->width = width;
@@ -255,7 +236,7 @@ bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSp
   double sum_squares = 0.0;
   summary->view_rms.assign(view_count, 0.0);
   for (int v = 0; v < view_count; ++v) {
-    const Eigen::Isometry3d cam_from_board = PoseFromRt(frames[v]);
+    const Eigen::Isometry3d cam_from_board = PoseFromRt(&frames[v].r.x);
     calibration->cam_from_board[v] = cam_from_board;
     double view_squares = 0.0;
     int view_inliers = 0;
@@ -265,11 +246,12 @@ bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSp
         ++summary->outliers;
         continue;
       }
-      Vec2 pixel;
-      if (!ProjectWithLens(options.lens_model, intrinsics, cam_from_board * board.Corner(k), &pixel)) {
+      const Vec3 corner_in_cam = cam_from_board * board.Corner(k);
+      if (!(corner_in_cam.z() > 0.0)) {
         ++summary->outliers;
         continue;
       }
+      const Vec2 pixel = lens_fitted.Project(corner_in_cam);
       const double squared = (pixel - Vec2(observed.x, observed.y)).squaredNorm();
       norms.push_back(std::sqrt(squared));
       sum_squares += squared;
@@ -287,27 +269,20 @@ bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSp
   return finish(CameraCalibrationSummary::kConverged, "");
 }
 
-std::string CalibrationModelText(const CameraCalibration& calibration) {
-  std::string intrinsics = "[";
-  for (size_t k = 0; k < calibration.intrinsics.size(); ++k) {
-    intrinsics += (k ? ", " : " ") + Number(calibration.intrinsics[k]);
-  }
-  intrinsics += " ]";
-  return "# procam camera model (procam calibrate camera; mrcal_optimize); the camera is the "
-         "reference frame\n{\n  'lensmodel':  '" +
-         calibration.lens_model + "',\n  'intrinsics': " + intrinsics +
-         ",\n  'imagersize': [ " + std::to_string(calibration.width) + ", " +
-         std::to_string(calibration.height) + " ],\n  'extrinsics': [ 0, 0, 0, 0, 0, 0 ]\n}\n";
+CameraModel CameraCalibration::Model() const {
+  CameraModel model;
+  model.lens_model = lens_model;
+  model.intrinsics = intrinsics;
+  model.width = width;
+  model.height = height;
+  return model;  // the camera is the reference frame
 }
 
 void WriteCalibrationModel(const std::filesystem::path& path,
                            const CameraCalibration& calibration) {
-  const std::string text = CalibrationModelText(calibration);
-  mrcal_cameramodel_t* parsed =
-      mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size()));
-  if (!parsed) throw IoError(path.string() + ": libmrcal cannot parse the model text procam made");
-  mrcal_free_cameramodel(&parsed);
-  WriteFileAtomically(path, text);
+  WriteCameraModelFile(path, calibration.Model(),
+                       "procam camera model (procam calibrate camera; mrcal_optimize); the camera "
+                       "is the reference frame");
 }
 
 }  // namespace procam

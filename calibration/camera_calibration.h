@@ -19,6 +19,7 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "base/camera_model.h"
 #include "geometry/scene.h"
 
 namespace procam {
@@ -65,6 +66,8 @@ struct CameraCalibration {
   std::vector<double> intrinsics;  // mrcal order, pixels (distortion unitless)
   int width = 0, height = 0;
   std::vector<Eigen::Isometry3d> cam_from_board;
+  // As a .cameramodel: the camera is the reference frame (extrinsics zero).
+  CameraModel Model() const;
 };
 
 struct CameraCalibrationSummary {
@@ -97,15 +100,8 @@ bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSp
                      const std::vector<ChessboardView>& views, int width, int height,
                      CameraCalibration* calibration, CameraCalibrationSummary* summary);
 
-// Projects a point in the camera frame through the calibration's lens (mrcal_project); false
-// when it is behind the camera.
-bool ProjectWithLens(const std::string& lens_model, const std::vector<double>& intrinsics,
-                     const Vec3& p_in_cam, Vec2* pixel);
-
-// The mrcal .cameramodel text of a calibration (the camera is the reference frame: extrinsics
-// zero), every number with 17 significant digits.
-std::string CalibrationModelText(const CameraCalibration& calibration);
-// Writes it atomically after libmrcal has parsed the text back. Throws IoError.
+// Writes the calibration's .cameramodel (Model()) atomically after libmrcal has parsed it
+// back, every number with 17 significant digits. Throws IoError.
 void WriteCalibrationModel(const std::filesystem::path& path, const CameraCalibration& calibration);
 
 }  // namespace procam

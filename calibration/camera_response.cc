@@ -129,7 +129,7 @@ bool CalibrateCameraResponse(const std::vector<cv::Mat>& images,
 #include <fstream>
 #include <sstream>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 

@@ -49,22 +49,15 @@ bool UnprojectCameraPixel(const std::string& lens_model, const std::vector<doubl
   const Vec2 distorted((pixel.x() - cx) / fx, (pixel.y() - cy) / fy);
   Vec2 x = distorted;
   if (opencv4) {
-    const double k1 = intrinsics[4], k2 = intrinsics[5], p1 = intrinsics[6], p2 = intrinsics[7];
-    // Newton on D(x) = distorted, D the OpenCV model, numeric Jacobian (well conditioned for
-    // lenses that are invertible over the image).
-    auto distort = [&](const Vec2& u) {
-      const double r2 = u.squaredNorm();
-      const double radial = 1.0 + k1 * r2 + k2 * r2 * r2;
-      return Vec2(u.x() * radial + 2.0 * p1 * u.x() * u.y() + p2 * (r2 + 2.0 * u.x() * u.x()),
-                  u.y() * radial + p1 * (r2 + 2.0 * u.y() * u.y()) + 2.0 * p2 * u.x() * u.y());
-    };
+    // Newton on D(x) = distorted, D the OpenCV model (well conditioned for lenses that are
+    // invertible over the image).
+    const double* distortion = intrinsics.data() + 4;
     for (int iteration = 0; iteration < 50; ++iteration) {
-      const Vec2 error = distort(x) - distorted;
+      Vec2 value;
+      Eigen::Matrix<double, 2, 2, Eigen::RowMajor> jacobian;
+      DistortOpenCv4(distortion, x.x(), x.y(), &value.x(), &value.y(), jacobian.data());
+      const Vec2 error = value - distorted;
       if (error.norm() < 1e-14) break;
-      const double h = 1e-7;
-      Eigen::Matrix2d jacobian;
-      jacobian.col(0) = (distort(x + Vec2(h, 0.0)) - distort(x - Vec2(h, 0.0))) / (2.0 * h);
-      jacobian.col(1) = (distort(x + Vec2(0.0, h)) - distort(x - Vec2(0.0, h))) / (2.0 * h);
       x -= jacobian.inverse() * error;
     }
   }

@@ -18,7 +18,8 @@ extern "C" {
 #include <mrcal/mrcal.h>
 }
 
-#include "geometry/io.h"
+#include "base/camera_model.h"
+#include "base/io.h"
 #include "geometry/ray_scene.h"
 
 namespace procam {
@@ -303,21 +304,14 @@ struct RoomReprojectionFreeCamera {
     const T dy = (T(camera_pixel.y()) - camera_intrinsics[3]) / fy;
     T ray[3] = {dx, dy, T(1.0)};
     if (distorted) {
-      const double k1 = distortion[0], k2 = distortion[1], p1 = distortion[2], p2 = distortion[3];
       T x = T(ray0.x()), y = T(ray0.y());
       for (int step = 0; step < 2; ++step) {
-        const T r2 = x * x + y * y;
-        const T radial = T(1.0) + k1 * r2 + k2 * r2 * r2;
-        const T radial_dr2 = k1 + 2.0 * k2 * r2;  // ∂radial/∂r2
-        const T ex = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - dx;
-        const T ey = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - dy;
-        const T j00 = radial + 2.0 * x * x * radial_dr2 + 2.0 * p1 * y + 6.0 * p2 * x;
-        const T j01 = 2.0 * x * y * radial_dr2 + 2.0 * p1 * x + 2.0 * p2 * y;
-        const T j10 = 2.0 * x * y * radial_dr2 + 2.0 * p1 * x + 2.0 * p2 * y;
-        const T j11 = radial + 2.0 * y * y * radial_dr2 + 6.0 * p1 * y + 2.0 * p2 * x;
-        const T determinant = j00 * j11 - j01 * j10;
-        x -= (j11 * ex - j01 * ey) / determinant;
-        y -= (j00 * ey - j10 * ex) / determinant;
+        T distorted_x, distorted_y, j[4];
+        DistortOpenCv4(distortion, x, y, &distorted_x, &distorted_y, j);
+        const T ex = distorted_x - dx, ey = distorted_y - dy;
+        const T determinant = j[0] * j[3] - j[1] * j[2];
+        x -= (j[3] * ex - j[1] * ey) / determinant;
+        y -= (j[0] * ey - j[2] * ex) / determinant;
       }
       ray[0] = x;
       ray[1] = y;
@@ -975,58 +969,6 @@ std::vector<FittedPlane> FitPlanes(const PlaneFitOptions& options, const std::ve
     remaining.swap(rest);
   }
   return planes;
-}
-
-// ---------------------------------------------------------------------------------------------
-// .cameramodel files
-
-CameraModelFile ReadCameraModelFile(const std::filesystem::path& path) {
-  if (!std::filesystem::exists(path)) throw IoError(path.string() + ": file not found");
-  mrcal_cameramodel_t* parsed = mrcal_read_cameramodel_file(path.c_str());
-  if (!parsed) throw IoError(path.string() + ": not a valid mrcal .cameramodel");
-  CameraModelFile model;
-  char name[256];
-  if (!mrcal_lensmodel_name(name, sizeof(name), &parsed->lensmodel)) {
-    mrcal_free_cameramodel(&parsed);
-    throw IoError(path.string() + ": lensmodel: cannot be named");
-  }
-  model.lens_model = name;
-  const int count = mrcal_lensmodel_num_params(&parsed->lensmodel);
-  model.intrinsics.assign(parsed->intrinsics, parsed->intrinsics + count);
-  model.width = static_cast<int>(parsed->imagersize[0]);
-  model.height = static_cast<int>(parsed->imagersize[1]);
-  const Vec3 r(parsed->rt_cam_ref[0], parsed->rt_cam_ref[1], parsed->rt_cam_ref[2]);
-  model.cam_from_ref.linear() = RotationOf(r);
-  model.cam_from_ref.translation() =
-      Vec3(parsed->rt_cam_ref[3], parsed->rt_cam_ref[4], parsed->rt_cam_ref[5]);
-  mrcal_free_cameramodel(&parsed);
-  return model;
-}
-
-void WriteCameraModelFile(const std::filesystem::path& path, const CameraModelFile& model,
-                          const std::string& comment) {
-  auto number = [](double value) {
-    char text[40];
-    std::snprintf(text, sizeof(text), "%.17g", value);
-    return std::string(text);
-  };
-  auto list = [&](const std::vector<double>& values) {
-    std::string text = "[";
-    for (size_t k = 0; k < values.size(); ++k) text += (k ? ", " : " ") + number(values[k]);
-    return text + " ]";
-  };
-  const Vec3 r = AngleAxisOf(model.cam_from_ref.linear());
-  const Vec3& t = model.cam_from_ref.translation();
-  const std::string text = "# " + comment + "\n{\n  'lensmodel':  '" + model.lens_model +
-                           "',\n  'intrinsics': " + list(model.intrinsics) +
-                           ",\n  'imagersize': [ " + std::to_string(model.width) + ", " +
-                           std::to_string(model.height) + " ],\n  'extrinsics': " +
-                           list({r.x(), r.y(), r.z(), t.x(), t.y(), t.z()}) + "\n}\n";
-  mrcal_cameramodel_t* parsed =
-      mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size()));
-  if (!parsed) throw IoError(path.string() + ": libmrcal cannot parse the model text procam made");
-  mrcal_free_cameramodel(&parsed);
-  WriteFileAtomically(path, text);
 }
 
 }  // namespace procam

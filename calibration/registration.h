@@ -279,19 +279,4 @@ struct PlaneFitOptions {
 };
 std::vector<FittedPlane> FitPlanes(const PlaneFitOptions& options, const std::vector<Vec3>& points);
 
-// An mrcal .cameramodel as procam reads and writes it: lens, image size and pose
-// (`cam_from_ref` = mrcal's rt_cam_ref, ref = the room once registered).
-struct CameraModelFile {
-  std::string lens_model;
-  std::vector<double> intrinsics;
-  int width = 0, height = 0;
-  Eigen::Isometry3d cam_from_ref = Eigen::Isometry3d::Identity();
-};
-// Reads through libmrcal. Throws IoError naming the file.
-CameraModelFile ReadCameraModelFile(const std::filesystem::path& path);
-// Writes atomically (17 significant digits), after libmrcal has parsed the text back. Throws
-// IoError naming the file.
-void WriteCameraModelFile(const std::filesystem::path& path, const CameraModelFile& model,
-                          const std::string& comment);
-
 }  // namespace procam

@@ -3,7 +3,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 

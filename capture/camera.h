@@ -31,7 +31,7 @@
 #include <vector>
 
 #include "capture/pixel_format.h"
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 

@@ -9,7 +9,7 @@
 #include <set>
 #include <stdexcept>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {

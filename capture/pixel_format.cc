@@ -7,7 +7,7 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {

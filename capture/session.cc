@@ -6,7 +6,7 @@
 #include <ctime>
 #include <opencv2/imgcodecs.hpp>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {

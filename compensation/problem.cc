@@ -5,7 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "compensation/colour.h"
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 

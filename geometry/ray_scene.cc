@@ -5,7 +5,7 @@
 #include <limits>
 #include <string>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 

@@ -12,8 +12,8 @@
 #include <opencv2/imgproc.hpp>
 #include <tiny_obj_loader.h>
 
-#include "geometry/io.h"
-#include "geometry/json_fields.h"
+#include "base/io.h"
+#include "base/json_fields.h"
 #include "geometry/polygon.h"
 #include "geometry/srgb.h"
 

@@ -13,10 +13,9 @@
 #include <Eigen/Geometry>
 #include <opencv2/core/mat.hpp>
 
-namespace procam {
+#include "base/vector.h"
 
-using Vec3 = Eigen::Vector3d;
-using Vec2 = Eigen::Vector2d;
+namespace procam {
 
 // What a surface should look like: one sRGB colour, or a texture mapped through the surface's
 // UV coordinates (quads: u along corner 0→1, v along corner 0→3; UV (0,0) is the image's

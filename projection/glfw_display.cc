@@ -5,7 +5,7 @@
 #include <mutex>
 #include <opencv2/imgproc.hpp>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {

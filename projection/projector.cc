@@ -8,62 +8,21 @@
 #include <set>
 #include <stdexcept>
 
-#include "geometry/io.h"
-#include "geometry/json_fields.h"
+#include "base/camera_model.h"
+#include "base/io.h"
+#include "base/json_fields.h"
 
-extern "C" {
-#include <mrcal/mrcal.h>
-}
 
 namespace procam {
 
-// ---------------------------------------------------------------------------------------------
-// The mrcal adapter: everything that touches libmrcal types or its rt_cam_ref convention.
-
-struct ProjectorGeometry::Lens {
-  mrcal_lensmodel_t model;
-};
-
 namespace {
-
-static_assert(sizeof(mrcal_point2_t) == sizeof(Vec2) && sizeof(mrcal_point3_t) == sizeof(Vec3),
-              "Eigen fixed vectors and mrcal points must share their layout");
-
-const mrcal_point3_t* AsMrcal(const Vec3* p) { return reinterpret_cast<const mrcal_point3_t*>(p); }
-mrcal_point3_t* AsMrcal(Vec3* p) { return reinterpret_cast<mrcal_point3_t*>(p); }
-const mrcal_point2_t* AsMrcal(const Vec2* q) { return reinterpret_cast<const mrcal_point2_t*>(q); }
-mrcal_point2_t* AsMrcal(Vec2* q) { return reinterpret_cast<mrcal_point2_t*>(q); }
-
-// mrcal's rt_cam_ref (Rodrigues rotation, then translation) with ref = world.
-std::array<double, 6> RtFromPose(const Eigen::Isometry3d& proj_from_world) {
-  const Eigen::AngleAxisd rotation(proj_from_world.rotation());
-  const Vec3 r = rotation.axis() * rotation.angle();
-  const Vec3& t = proj_from_world.translation();
-  return {r.x(), r.y(), r.z(), t.x(), t.y(), t.z()};
-}
-
-Eigen::Isometry3d PoseFromRt(const double* rt) {
-  const Vec3 r(rt[0], rt[1], rt[2]);
-  const double angle = r.norm();
-  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  if (angle > 0.0) pose.linear() = Eigen::AngleAxisd(angle, r / angle).toRotationMatrix();
-  pose.translation() = Vec3(rt[3], rt[4], rt[5]);
-  return pose;
-}
 
 // Pixels per steradian from the projection Jacobian at a unit direction v: dq/dp has rows a, b
 // with a·v = b·v = 0 (q is invariant to scaling p), so the Jacobian restricted to the tangent
 // plane has determinant (a × b)·v.
-double DensityFromJacobian(const mrcal_point3_t* dq_dp, const Vec3& v) {
-  const Vec3 a(dq_dp[0].x, dq_dp[0].y, dq_dp[0].z);
-  const Vec3 b(dq_dp[1].x, dq_dp[1].y, dq_dp[1].z);
+double DensityFromJacobian(const ProjectionJacobian& dq_dp, const Vec3& v) {
+  const Vec3 a = dq_dp.row(0).transpose(), b = dq_dp.row(1).transpose();
   return std::abs(a.cross(b).dot(v));
-}
-
-std::string FormatNumber(double value) {
-  char buffer[40];
-  std::snprintf(buffer, sizeof(buffer), "%.17g", value);
-  return buffer;
 }
 
 }  // namespace
@@ -71,39 +30,15 @@ std::string FormatNumber(double value) {
 ProjectorGeometry::ProjectorGeometry(const std::string& lens_model, std::vector<double> intrinsics,
                                      int width, int height,
                                      const Eigen::Isometry3d& proj_from_world)
-    : lens_model_(lens_model),
-      intrinsics_(std::move(intrinsics)),
+    : lens_(lens_model, std::move(intrinsics)),
       width_(width),
       height_(height),
       proj_from_world_(proj_from_world) {
-  auto lens = std::make_shared<Lens>();
-  if (!mrcal_lensmodel_from_name(&lens->model, lens_model.c_str()) ||
-      !mrcal_lensmodel_type_is_valid(lens->model.type)) {
-    throw std::invalid_argument("unknown mrcal lens model '" + lens_model + "'");
-  }
-  if (lens->model.type == MRCAL_LENSMODEL_CAHVORE) {
-    throw std::invalid_argument("lens model " + lens_model + " cannot be unprojected by mrcal");
-  }
-  if (!mrcal_lensmodel_metadata(&lens->model).has_core) {
-    throw std::invalid_argument("lens model " + lens_model + " has no fx, fy, cx, cy core");
-  }
-  const int expected = mrcal_lensmodel_num_params(&lens->model);
-  if (static_cast<int>(intrinsics_.size()) != expected) {
-    throw std::invalid_argument(lens_model + " needs " + std::to_string(expected) +
-                                " intrinsics, got " + std::to_string(intrinsics_.size()));
-  }
-  for (const double value : intrinsics_) {
-    if (!std::isfinite(value)) throw std::invalid_argument("intrinsics must be finite");
-  }
-  if (!(intrinsics_[0] > 0.0 && intrinsics_[1] > 0.0)) {
-    throw std::invalid_argument("focal lengths fx, fy must be positive");
-  }
   if (width < 1 || height < 1 || width > 65536 || height > 65536) {
     throw std::invalid_argument("image size must be in [1, 65536], got " + std::to_string(width) +
                                 "x" + std::to_string(height));
   }
   if (!proj_from_world.matrix().allFinite()) throw std::invalid_argument("pose must be finite");
-  lens_ = std::move(lens);
   axis_density_ = PixelDensity(Vec3::UnitZ());
   if (!(axis_density_ > 0.0) || !std::isfinite(axis_density_)) {
     throw std::invalid_argument("the lens has no finite pixel density on its optical axis");
@@ -122,9 +57,8 @@ ProjectorGeometry ProjectorGeometry::Pinhole(double fx, double fy, double cx, do
 bool ProjectorGeometry::ProjectFromProj(const Vec3& p_in_proj, Vec2* pixel, double* density) const {
   if (!(p_in_proj.z() > 0.0)) return false;
   const Vec3 v = p_in_proj.normalized();
-  mrcal_point3_t dq_dp[2];
-  mrcal_project(AsMrcal(pixel), density ? dq_dp : nullptr, nullptr, AsMrcal(&v), 1, &lens_->model,
-                intrinsics_.data());
+  ProjectionJacobian dq_dp;
+  *pixel = lens_.Project(v, density ? &dq_dp : nullptr);
   if (density) *density = DensityFromJacobian(dq_dp, v);
   return pixel->allFinite();
 }
@@ -140,8 +74,7 @@ bool ProjectorGeometry::InImage(const Vec2& pixel) const {
 
 void ProjectorGeometry::Unproject(const Vec2* pixels, int count, Vec3* directions_in_proj) const {
   if (count <= 0) return;
-  if (!mrcal_unproject(AsMrcal(directions_in_proj), AsMrcal(pixels), count, &lens_->model,
-                       intrinsics_.data())) {
+  if (!lens_.Unproject(pixels, count, directions_in_proj)) {
     for (int k = 0; k < count; ++k) directions_in_proj[k] = Vec3::Constant(std::nan(""));
     return;
   }
@@ -156,9 +89,8 @@ Vec3 ProjectorGeometry::Unproject(const Vec2& pixel) const {
 
 double ProjectorGeometry::PixelDensity(const Vec3& direction_in_proj) const {
   const Vec3 v = direction_in_proj.normalized();
-  mrcal_point2_t q;
-  mrcal_point3_t dq_dp[2];
-  mrcal_project(&q, dq_dp, nullptr, AsMrcal(&v), 1, &lens_->model, intrinsics_.data());
+  ProjectionJacobian dq_dp;
+  lens_.Project(v, &dq_dp);
   return DensityFromJacobian(dq_dp, v);
 }
 
@@ -182,8 +114,6 @@ void ProjectorGeometry::UnprojectImage(std::vector<Vec3>* directions_in_proj,
 
   directions_in_proj->assign(static_cast<size_t>(width_) * height_, Vec3::Zero());
   densities->assign(static_cast<size_t>(width_) * height_, 0.0);
-  const mrcal_lensmodel_t* model = &lens_->model;
-  const double* intrinsics = intrinsics_.data();
 #pragma omp parallel for schedule(dynamic, 8)
   for (int y = 0; y < height_; ++y) {
     const int gy = std::min(y / kStep, ny - 2 < 0 ? 0 : ny - 2);
@@ -200,15 +130,14 @@ void ProjectorGeometry::UnprojectImage(std::vector<Vec3>* directions_in_proj,
       const Vec2 target(x, y);
       double density = std::nan("");
       for (int iteration = 0; iteration < 6 && v.allFinite(); ++iteration) {
-        mrcal_point2_t q;
-        mrcal_point3_t dq_dp[2];
-        mrcal_project(&q, dq_dp, nullptr, AsMrcal(&v), 1, model, intrinsics);
+        ProjectionJacobian dq_dp;
+        const Vec2 q = lens_.Project(v, &dq_dp);
         density = DensityFromJacobian(dq_dp, v);
-        const Vec2 error(q.x - target.x(), q.y - target.y());
+        const Vec2 error = q - target;
         if (error.norm() < 1e-9) break;
         // Newton step in the tangent plane of the unit sphere at v.
         const Vec3 t1 = v.unitOrthogonal(), t2 = v.cross(t1);
-        const Vec3 a(dq_dp[0].x, dq_dp[0].y, dq_dp[0].z), b(dq_dp[1].x, dq_dp[1].y, dq_dp[1].z);
+        const Vec3 a = dq_dp.row(0).transpose(), b = dq_dp.row(1).transpose();
         Eigen::Matrix2d jacobian;
         jacobian << a.dot(t1), a.dot(t2), b.dot(t1), b.dot(t2);
         const Vec2 step = jacobian.partialPivLu().solve(-error);
@@ -251,67 +180,38 @@ Eigen::Isometry3d ProjFromWorldLookingAt(const Vec3& centre, const Vec3& target,
   return proj_from_world;
 }
 
+CameraModel ProjectorGeometry::Model() const {
+  CameraModel model;
+  model.lens_model = lens_model();
+  model.intrinsics = intrinsics();
+  model.width = width_;
+  model.height = height_;
+  model.cam_from_ref = proj_from_world_;
+  return model;
+}
+
+ProjectorGeometry ProjectorGeometry::FromModel(const CameraModel& model) {
+  return ProjectorGeometry(model.lens_model, model.intrinsics, model.width, model.height,
+                           model.cam_from_ref);
+}
+
 std::string CameraModelText(const ProjectorGeometry& geometry) {
-  auto list = [](const auto& values) {
-    std::string text = "[";
-    for (size_t k = 0; k < values.size(); ++k) text += (k ? ", " : " ") + FormatNumber(values[k]);
-    return text + " ]";
-  };
-  const std::array<double, 6> rt = RtFromPose(geometry.proj_from_world());
-  return "# procam projector model; extrinsics = mrcal rt_cam_ref with ref = world\n{\n"
-         "  'lensmodel':  '" +
-         geometry.lens_model() +
-         "',\n"
-         "  'intrinsics': " +
-         list(geometry.intrinsics()) +
-         ",\n"
-         "  'imagersize': [ " +
-         std::to_string(geometry.width()) + ", " + std::to_string(geometry.height()) +
-         " ],\n"
-         "  'extrinsics': " +
-         list(rt) + "\n}\n";
+  return CameraModelText(geometry.Model(),
+                         "procam projector model; extrinsics = mrcal rt_cam_ref with ref = world");
 }
-
-namespace {
-
-ProjectorGeometry GeometryFromMrcal(const mrcal_cameramodel_t& model, const std::string& file) {
-  char name[1024];
-  if (!mrcal_lensmodel_name(name, sizeof(name), &model.lensmodel)) {
-    throw IoError(file + ": lens model name too long");
-  }
-  const int count = mrcal_lensmodel_num_params(&model.lensmodel);
-  std::vector<double> intrinsics(model.intrinsics, model.intrinsics + count);
-  try {
-    return ProjectorGeometry(name, std::move(intrinsics), static_cast<int>(model.imagersize[0]),
-                             static_cast<int>(model.imagersize[1]), PoseFromRt(model.rt_cam_ref));
-  } catch (const std::invalid_argument& error) {
-    throw IoError(file + ": " + error.what());
-  }
-}
-
-struct CameraModelDeleter {
-  void operator()(mrcal_cameramodel_t* model) const { mrcal_free_cameramodel(&model); }
-};
-
-}  // namespace
 
 ProjectorGeometry ReadCameraModel(const std::filesystem::path& path) {
-  const std::string file = path.string();
-  if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
-  const std::string text = ReadFile(path);
-  std::unique_ptr<mrcal_cameramodel_t, CameraModelDeleter> model(
-      mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
-  if (!model)
-    throw IoError(file + ": not a valid mrcal .cameramodel (libmrcal could not parse it)");
-  return GeometryFromMrcal(*model, file);
+  const CameraModel model = ReadCameraModelFile(path);
+  try {
+    return ProjectorGeometry::FromModel(model);
+  } catch (const std::invalid_argument& error) {
+    throw IoError(path.string() + ": " + error.what());
+  }
 }
 
 void WriteCameraModel(const std::filesystem::path& path, const ProjectorGeometry& geometry) {
-  const std::string text = CameraModelText(geometry);
-  std::unique_ptr<mrcal_cameramodel_t, CameraModelDeleter> check(
-      mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
-  if (!check) throw IoError(path.string() + ": libmrcal cannot parse the model text procam made");
-  WriteFileAtomically(path, text);
+  WriteCameraModelFile(path, geometry.Model(),
+                   "procam projector model; extrinsics = mrcal rt_cam_ref with ref = world");
 }
 
 // ---------------------------------------------------------------------------------------------

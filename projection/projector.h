@@ -9,7 +9,7 @@
 // - Projector frame: origin at the projection centre, x right, y down, z forward (out of the
 //   lens), metres. `proj_from_world` maps world points into it: p_in_proj = proj_from_world ·
 //   p_in_world (COLMAP naming). mrcal's `rt_cam_ref` appears only inside the mrcal adapter
-//   (projector.cc), with ref = world.
+//   (base/camera_model.h), with ref = world.
 // - Light: "output" is linear working RGB (the scene's radiosity units, sRGB/Rec. 709
 //   primaries by default) measured as the IRRADIANCE a projector delivers on a plane
 //   perpendicular to its optical axis, 1 m in front of it, where the axis meets that plane.
@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "base/camera_model.h"
 #include "geometry/scene.h"
 
 namespace procam {
@@ -47,11 +48,14 @@ class ProjectorGeometry {
   static ProjectorGeometry Pinhole(double fx, double fy, double cx, double cy, int width,
                                    int height, const Eigen::Isometry3d& proj_from_world);
 
-  const std::string& lens_model() const { return lens_model_; }
-  const std::vector<double>& intrinsics() const { return intrinsics_; }
+  const std::string& lens_model() const { return lens_.name(); }
+  const std::vector<double>& intrinsics() const { return lens_.intrinsics(); }
   int width() const { return width_; }
   int height() const { return height_; }
   const Eigen::Isometry3d& proj_from_world() const { return proj_from_world_; }
+  // As a .cameramodel (the reference frame is the world), and back (throws as the constructor).
+  CameraModel Model() const;
+  static ProjectorGeometry FromModel(const CameraModel& model);
   Vec3 CentreInWorld() const { return proj_from_world_.inverse().translation(); }
 
   // Pixel of a point in the projector frame (metres); false when the point is not in front of
@@ -82,12 +86,9 @@ class ProjectorGeometry {
   double Gain(const Vec3& p_in_world, const Vec3& normal, Vec2* pixel = nullptr) const;
 
  private:
-  struct Lens;  // the parsed mrcal model
-  std::string lens_model_;
-  std::vector<double> intrinsics_;
+  LensModel lens_;
   int width_ = 0, height_ = 0;
   Eigen::Isometry3d proj_from_world_ = Eigen::Isometry3d::Identity();
-  std::shared_ptr<const Lens> lens_;
   double axis_density_ = 1.0;
 };
 

@@ -10,7 +10,7 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
-#include "geometry/io.h"
+#include "base/io.h"
 #include "geometry/ray_scene.h"
 
 namespace procam {

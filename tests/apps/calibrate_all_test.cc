@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "base/camera_model.h"
 #include "apps/rig_stage.h"
 #include "calibration/registration.h"
 #include "datasets_synthetic/paper_scenes.h"
@@ -73,7 +74,7 @@ TEST(CalibrateAll, RecoversTheSyntheticRig) {
       EXPECT_LT(std::abs(found->photometry.black[c] / expected.photometry.black[c] - 1), 0.15);
     }
   }
-  const CameraModelFile model = ReadCameraModelFile(dir / "rig/camera.cameramodel");
+  const CameraModel model = ReadCameraModelFile(dir / "rig/camera.cameramodel");
   const CameraGeometry true_camera = CameraFromPlacement(truth.camera);
   const double camera_position =
       (model.cam_from_ref.inverse().translation() - true_camera.CentreInWorld()).norm();

@@ -23,7 +23,7 @@
 #include "datasets_synthetic/simulated_rig.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "geometry/form_factors.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "projection/projection_rig.h"
 #include "tests/testing/testing.h"
 

@@ -26,7 +26,7 @@
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "datasets_synthetic/synthetic_camera.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "geometry/patches.h"
 #include "projection/projector.h"
 #include "tests/testing/testing.h"

@@ -73,9 +73,9 @@ std::vector<ChessboardView> NoisyCorners(double sigma, uint32_t seed) {
     ChessboardView view;
     view.name = "pose" + std::to_string(index++);
     for (int k = 0; k < board.CornerCount(); ++k) {
-      Vec2 pixel;
-      EXPECT_TRUE(ProjectWithLens("LENSMODEL_OPENCV4", kTrueIntrinsics,
-                                  cam_from_board * board.Corner(k), &pixel));
+      const Vec3 corner_in_cam = cam_from_board * board.Corner(k);
+      EXPECT_GT(corner_in_cam.z(), 0.0);
+      const Vec2 pixel = LensModel("LENSMODEL_OPENCV4", kTrueIntrinsics).Project(corner_in_cam);
       EXPECT_TRUE(pixel.x() > 0 && pixel.x() < kWidth - 1 && pixel.y() > 0 &&
                   pixel.y() < kHeight - 1)
           << view.name << " corner " << k << " at " << pixel.transpose();
@@ -165,7 +165,7 @@ TEST(CameraCalibration, RenderedImagesDetectedAndRefined) {
     // Detection error against the truth; the grid may be reported from the other end.
     std::vector<Vec2> truth(board.CornerCount());
     for (int k = 0; k < board.CornerCount(); ++k) {
-      ProjectWithLens("LENSMODEL_OPENCV4", kTrueIntrinsics, poses[v] * board.Corner(k), &truth[k]);
+      truth[k] = LensModel("LENSMODEL_OPENCV4", kTrueIntrinsics).Project(poses[v] * board.Corner(k));
     }
     const bool reversed = (view.corners[0] - truth[0]).norm() > (view.corners[0] - truth.back()).norm();
     for (int k = 0; k < board.CornerCount(); ++k) {

@@ -13,9 +13,10 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "base/camera_model.h"
 #include "calibration/registration.h"
 #include "datasets_synthetic/synthetic_camera.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "tests/testing/testing.h"
 
 namespace procam {
@@ -61,7 +62,7 @@ class CalibrateProjectorsCommand : public ::testing::Test {
   static void WriteTrueCamera(const std::filesystem::path& rig) {
     std::filesystem::create_directories(rig);
     const CameraGeometry& camera = world_->rig->camera();
-    CameraModelFile model;
+    CameraModel model;
     model.lens_model = camera.lens_model();
     model.intrinsics = camera.intrinsics();
     model.width = camera.width();
@@ -90,7 +91,7 @@ TEST_F(CalibrateProjectorsCommand, RecoversTheSyntheticRig) {
 
   const SimulatedRig& truth = *world_->rig;
   const Eigen::Isometry3d room_from_camera = truth.camera().proj_from_world().inverse();
-  const CameraModelFile camera = ReadCameraModelFile(rig / "camera.cameramodel");
+  const CameraModel camera = ReadCameraModelFile(rig / "camera.cameramodel");
   EXPECT_EQ(camera.intrinsics, truth.camera().intrinsics());  // held fixed
   const Eigen::Isometry3d estimate = camera.cam_from_ref.inverse();
   const double camera_mm = 1e3 * (estimate.translation() - room_from_camera.translation()).norm();
@@ -112,7 +113,7 @@ TEST_F(CalibrateProjectorsCommand, RecoversTheSyntheticRig) {
       if (e["name"] == projector.name) entry = &e;
     ASSERT_NE(entry, nullptr) << projector.name;
     ASSERT_EQ((*entry)["model"], projector.name + ".cameramodel");
-    const CameraModelFile model = ReadCameraModelFile(rig / (projector.name + ".cameramodel"));
+    const CameraModel model = ReadCameraModelFile(rig / (projector.name + ".cameramodel"));
     const ProjectorGeometry& g = projector.geometry;
     const double fx = std::abs(model.intrinsics[0] / g.intrinsics()[0] - 1.0);
     const double fy = std::abs(model.intrinsics[1] / g.intrinsics()[1] - 1.0);

@@ -5,6 +5,7 @@
 // check, from the geometry itself. Targets of issue 7: projectors' focal length within 0.5%,
 // position within 5 mm, orientation within 0.1° (the c_shaped stage: devices 3–5 m from the
 // walls).
+#include "base/camera_model.h"
 #include "calibration/registration.h"
 
 #include <gtest/gtest.h>
@@ -17,7 +18,7 @@
 #include "calibration/structured_light.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "datasets_synthetic/synthetic_camera.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "geometry/ray_scene.h"
 #include "tests/testing/testing.h"
 
@@ -240,9 +241,9 @@ TEST(RoomModel, RaysAndClosestPoints) {
   EXPECT_LT((nearest - Vec3(0.5, 1.0, 1.0)).norm(), 1e-12);
 }
 
-TEST(CameraModelFile, WriteReadRoundTrip) {
+TEST(CameraModel, WriteReadRoundTrip) {
   testing::TempDir dir;
-  CameraModelFile model;
+  CameraModel model;
   model.lens_model = "LENSMODEL_OPENCV4";
   model.intrinsics = {700.25, 698.5, 479.5, 319.5, -0.05, 0.01, 0.001, -0.002};
   model.width = 960;
@@ -251,7 +252,7 @@ TEST(CameraModelFile, WriteReadRoundTrip) {
       Eigen::AngleAxisd(1.9, Vec3(0.2, -0.9, 0.3).normalized()).toRotationMatrix();
   model.cam_from_ref.translation() = Vec3(0.5, -1.25, 3.0);
   WriteCameraModelFile(dir / "x.cameramodel", model, "test");
-  const CameraModelFile back = ReadCameraModelFile(dir / "x.cameramodel");
+  const CameraModel back = ReadCameraModelFile(dir / "x.cameramodel");
   EXPECT_EQ(back.lens_model, model.lens_model);
   ASSERT_EQ(back.intrinsics.size(), 8u);
   for (int i = 0; i < 8; ++i) EXPECT_DOUBLE_EQ(back.intrinsics[i], model.intrinsics[i]);

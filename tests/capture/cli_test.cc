@@ -9,7 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "geometry/io.h"
+#include "base/io.h"
 #include "procam/config.h"
 #include "tests/testing/testing.h"
 

@@ -9,7 +9,7 @@
 #include "capture/display.h"
 #include "capture/sequencer.h"
 #include "capture/test_camera.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "tests/testing/testing.h"
 
 namespace procam {

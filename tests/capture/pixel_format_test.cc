@@ -9,7 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <vector>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 namespace {

@@ -8,7 +8,7 @@
 
 #include "capture/display.h"
 #include "capture/test_camera.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "tests/testing/testing.h"
 
 namespace procam {

@@ -28,7 +28,7 @@
 #include "compensation/colour.h"
 #include "compensation/cuda_dense.h"
 #include "compensation/cuda_radiosity.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "compensation/solver.h"
 #include "tests/compensation/analytic_problem.h"
 

@@ -3,7 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "geometry/form_factors.h"
-#include "geometry/io.h"
+#include "base/io.h"
 #include "geometry/patches.h"
 #include "geometry/polygon.h"
 

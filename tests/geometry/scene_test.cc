@@ -3,7 +3,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <gtest/gtest.h>
 
-#include "geometry/io.h"
+#include "base/io.h"
 #include "tests/testing/testing.h"
 
 namespace procam {

@@ -23,7 +23,7 @@
 #include <random>
 #include <thread>
 
-#include "geometry/io.h"
+#include "base/io.h"
 #include "projection/test_pattern.h"
 #include "tests/testing/testing.h"
 

@@ -13,7 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "geometry/io.h"
+#include "base/io.h"
 #include "projection/projection_rig.h"
 #include "tests/projection/stage.h"
 #include "tests/testing/testing.h"

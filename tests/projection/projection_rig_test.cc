@@ -8,7 +8,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "geometry/io.h"
+#include "base/io.h"
 #include "tests/projection/stage.h"
 #include "tests/testing/testing.h"
 

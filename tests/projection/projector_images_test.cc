@@ -13,7 +13,7 @@
 #include <opencv2/core.hpp>
 #include <random>
 
-#include "geometry/io.h"
+#include "base/io.h"
 #include "tests/projection/stage.h"
 #include "tests/testing/testing.h"
 

@@ -8,7 +8,7 @@
 #include <cmath>
 #include <random>
 
-#include "geometry/io.h"
+#include "base/io.h"
 #include "tests/testing/testing.h"
 
 namespace procam {

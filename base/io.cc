@@ -1,4 +1,4 @@
-#include "geometry/io.h"
+#include "base/io.h"
 
 #include <unistd.h>
 

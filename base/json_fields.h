@@ -9,7 +9,7 @@
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
-#include "geometry/io.h"
+#include "base/io.h"
 
 namespace procam {
 

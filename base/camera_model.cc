@@ -1,0 +1,164 @@
+#include "base/camera_model.h"
+
+#include <cmath>
+#include <cstdio>
+#include <mutex>
+#include <stdexcept>
+
+#include "base/io.h"
+
+extern "C" {
+#include <mrcal/mrcal.h>
+}
+
+namespace procam {
+
+namespace {
+
+static_assert(sizeof(mrcal_point2_t) == sizeof(Vec2) && sizeof(mrcal_point3_t) == sizeof(Vec3),
+              "Eigen fixed vectors and mrcal points must share their layout");
+static_assert(sizeof(ProjectionJacobian) == 2 * sizeof(mrcal_point3_t),
+              "ProjectionJacobian must have mrcal's dq_dp layout");
+
+std::string FormatNumber(double value) {
+  char text[40];
+  std::snprintf(text, sizeof(text), "%.17g", value);
+  return text;
+}
+
+struct CameraModelDeleter {
+  void operator()(mrcal_cameramodel_t* model) const { mrcal_free_cameramodel(&model); }
+};
+using ParsedCameraModel = std::unique_ptr<mrcal_cameramodel_t, CameraModelDeleter>;
+
+// libmrcal prints its own parser diagnostics on stderr before returning null; procam reports
+// one line of its own instead, so C's stderr stream points at /dev/null around the call (one
+// parse at a time: the stream is process-wide).
+ParsedCameraModel ParseCameraModel(const std::string& text) {
+  static std::mutex mutex;
+  const std::lock_guard<std::mutex> lock(mutex);
+  std::fflush(stderr);
+  FILE* saved = stderr;
+  FILE* null = std::fopen("/dev/null", "w");
+  if (null) stderr = null;
+  ParsedCameraModel model(mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
+  if (null) {
+    stderr = saved;
+    std::fclose(null);
+  }
+  return model;
+}
+
+}  // namespace
+
+CameraModel ReadCameraModelFile(const std::filesystem::path& path) {
+  const std::string file = path.string();
+  if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
+  const ParsedCameraModel parsed = ParseCameraModel(ReadFile(path));
+  if (!parsed) throw IoError(file + ": not a valid mrcal .cameramodel (libmrcal could not parse it)");
+  CameraModel model;
+  char name[1024];
+  if (!mrcal_lensmodel_name(name, sizeof(name), &parsed->lensmodel)) {
+    throw IoError(file + ": lensmodel: cannot be named");
+  }
+  model.lens_model = name;
+  const int count = mrcal_lensmodel_num_params(&parsed->lensmodel);
+  model.intrinsics.assign(parsed->intrinsics, parsed->intrinsics + count);
+  model.width = static_cast<int>(parsed->imagersize[0]);
+  model.height = static_cast<int>(parsed->imagersize[1]);
+  model.cam_from_ref = PoseFromRt(parsed->rt_cam_ref);
+  return model;
+}
+
+std::string CameraModelText(const CameraModel& model, const std::string& comment) {
+  auto list = [](const auto& values) {
+    std::string text = "[";
+    for (size_t k = 0; k < values.size(); ++k) text += (k ? ", " : " ") + FormatNumber(values[k]);
+    return text + " ]";
+  };
+  return "# " + comment + "\n{\n  'lensmodel':  '" + model.lens_model +
+         "',\n  'intrinsics': " + list(model.intrinsics) + ",\n  'imagersize': [ " +
+         std::to_string(model.width) + ", " + std::to_string(model.height) +
+         " ],\n  'extrinsics': " + list(RtFromPose(model.cam_from_ref)) + "\n}\n";
+}
+
+void WriteCameraModelFile(const std::filesystem::path& path, const CameraModel& model,
+                      const std::string& comment) {
+  const std::string text = CameraModelText(model, comment);
+  if (!ParseCameraModel(text)) {
+    throw IoError(path.string() + ": libmrcal cannot parse the model text procam made");
+  }
+  WriteFileAtomically(path, text);
+}
+
+std::array<double, 6> RtFromPose(const Eigen::Isometry3d& b_from_a) {
+  const Vec3 r = AngleAxisOf(b_from_a.linear());
+  const Vec3& t = b_from_a.translation();
+  return {r.x(), r.y(), r.z(), t.x(), t.y(), t.z()};
+}
+
+Eigen::Isometry3d PoseFromRt(const double* rt) {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear() = RotationOf(Vec3(rt[0], rt[1], rt[2]));
+  pose.translation() = Vec3(rt[3], rt[4], rt[5]);
+  return pose;
+}
+
+struct LensModel::Parsed {
+  mrcal_lensmodel_t model;
+};
+
+LensModel::LensModel() : LensModel("LENSMODEL_PINHOLE", {1.0, 1.0, 0.0, 0.0}) {}
+
+LensModel::LensModel(const std::string& name, std::vector<double> intrinsics)
+    : name_(name), intrinsics_(std::move(intrinsics)) {
+  auto parsed = std::make_shared<Parsed>();
+  if (!mrcal_lensmodel_from_name(&parsed->model, name.c_str()) ||
+      !mrcal_lensmodel_type_is_valid(parsed->model.type)) {
+    throw std::invalid_argument("unknown mrcal lens model '" + name + "'");
+  }
+  if (parsed->model.type == MRCAL_LENSMODEL_CAHVORE) {
+    throw std::invalid_argument("lens model " + name + " cannot be unprojected by mrcal");
+  }
+  if (!mrcal_lensmodel_metadata(&parsed->model).has_core) {
+    throw std::invalid_argument("lens model " + name + " has no fx, fy, cx, cy core");
+  }
+  const int expected = mrcal_lensmodel_num_params(&parsed->model);
+  if (static_cast<int>(intrinsics_.size()) != expected) {
+    throw std::invalid_argument(name + " needs " + std::to_string(expected) + " intrinsics, got " +
+                                std::to_string(intrinsics_.size()));
+  }
+  for (const double value : intrinsics_) {
+    if (!std::isfinite(value)) throw std::invalid_argument("intrinsics must be finite");
+  }
+  if (!(intrinsics_[0] > 0.0 && intrinsics_[1] > 0.0)) {
+    throw std::invalid_argument("focal lengths fx, fy must be positive");
+  }
+  parsed_ = std::move(parsed);
+}
+
+int LensModel::ParameterCount(const std::string& name) {
+  mrcal_lensmodel_t model;
+  if (!mrcal_lensmodel_from_name(&model, name.c_str()) || !mrcal_lensmodel_type_is_valid(model.type)) {
+    throw std::invalid_argument("unknown mrcal lens model '" + name + "'");
+  }
+  return mrcal_lensmodel_num_params(&model);
+}
+
+Vec2 LensModel::Project(const Vec3& p_in_cam, ProjectionJacobian* dq_dp) const {
+  Vec2 pixel;
+  mrcal_project(reinterpret_cast<mrcal_point2_t*>(&pixel),
+                reinterpret_cast<mrcal_point3_t*>(dq_dp ? dq_dp->data() : nullptr), nullptr,
+                reinterpret_cast<const mrcal_point3_t*>(&p_in_cam), 1, &parsed_->model,
+                intrinsics_.data());
+  return pixel;
+}
+
+bool LensModel::Unproject(const Vec2* pixels, int count, Vec3* directions_in_cam) const {
+  if (count <= 0) return true;
+  return mrcal_unproject(reinterpret_cast<mrcal_point3_t*>(directions_in_cam),
+                         reinterpret_cast<const mrcal_point2_t*>(pixels), count, &parsed_->model,
+                         intrinsics_.data());
+}
+
+}  // namespace procam
