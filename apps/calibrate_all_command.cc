@@ -23,8 +23,12 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "apps/commands.h"
-#include "apps/geometry_stage.h"
-#include "apps/rig_stage.h"
+#include "geometry/stage.h"
+#include "calibration/rig_directory.h"
+#include "calibration/photometric_transfer.h"
+#include "projection/camera_rays.h"
+#include "compensation/unit_light.h"
+#include "projection/projection_rig.h"
 #include "calibration/rig_directory.h"
 #include "capture/camera.h"
 #include "capture/session.h"
@@ -102,7 +106,7 @@ void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector
   const RigDirectory rig = ReadRigDirectory(out);
   const ProjectorGeometry camera = ReadCameraModel(out / "camera.cameramodel");
   const GeometryStage stage =
-      RunGeometryStage(LoadSceneArgument(scene), patches > 0 ? std::optional<int>(patches) : std::nullopt);
+      RunGeometryStage(scene, GeometryArguments(patches));
   std::vector<cv::Mat> transfers;
   cv::Mat black_field;
   int black_fields = 0;
@@ -125,7 +129,7 @@ void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector
     camera_black = entry.value("camera_black", 0.0);
     const CameraPixelLighting lighting =
         LightCameraPixels(stage.scene, stage.patches.fine, projector->geometry, camera);
-    const UnitLightModel model = ModelUnitLight(stage.patches.fine, stage.form_factors, *projector);
+    const UnitLightModel model = ModelUnitLight(stage.patches.fine, stage.form_factors, UnitLightExitance(stage.patches.fine, *projector));
     transfers.push_back(PhotometricTransfer(lighting, stage.patches.fine, model, scale));
     // The session's black fields (drive 0 on any channel): every projector dark.
     const CaptureSessionData session = CaptureSessionData::Load(captures / ("photometric_" + name));

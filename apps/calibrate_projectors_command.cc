@@ -19,7 +19,7 @@
 #include "base/camera_model.h"
 #include "apps/command_line.h"
 #include "apps/commands.h"
-#include "apps/geometry_stage.h"
+#include "geometry/stage.h"
 #include "calibration/registration.h"
 #include "calibration/rig_directory.h"
 #include "calibration/structured_light.h"

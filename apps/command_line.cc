@@ -3,6 +3,9 @@
 #include <cmath>
 #include <sstream>
 
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
+
 #include "base/io.h"
 
 namespace procam {
@@ -34,6 +37,53 @@ Eigen::Vector3d ParsePositiveRgb(const std::string& option, const std::string& t
     throw IoError(option + ": expected " + expected + ", got '" + text + "'");
   }
   return {values[0], values[1], values[2]};
+}
+
+ProgressCallback LogProgress() {
+  return [](const std::string& line) { spdlog::info("{}", line); };
+}
+
+GeometryOptions GeometryArguments(int patches, FormFactorStorage storage) {
+  GeometryOptions options;
+  options.patches = patches;
+  options.storage = storage;
+  options.progress = LogProgress();
+  return options;
+}
+
+std::string DescribeGeometry(const GeometryStage& stage) {
+  std::ostringstream out;
+  const Scene& scene = stage.scene;
+  out << "scene " << scene.name << (scene.path.empty() ? "" : " (" + scene.path.string() + ")") << "\n";
+  std::vector<int> fine_count(scene.surfaces.size(), 0), coarse_count(scene.surfaces.size(), 0);
+  for (const Patch& patch : stage.patches.fine.patches) ++fine_count[patch.surface];
+  for (const Patch& patch : stage.patches.coarse.patches) ++coarse_count[patch.surface];
+  out << fmt::format("  {:<20} {:>6} {:>10} {:>7} {:>7} {:>18} {}\n", "surface", "kind", "area m²",
+                     "fine", "coarse", "reflectance", "desired");
+  for (size_t s = 0; s < scene.surfaces.size(); ++s) {
+    const Surface& surface = scene.surfaces[s];
+    const std::string desired =
+        surface.desired.HasTexture()
+            ? "texture " + surface.desired.texture_path
+            : fmt::format("sRGB {:.2f} {:.2f} {:.2f}", surface.desired.srgb[0], surface.desired.srgb[1],
+                          surface.desired.srgb[2]);
+    out << fmt::format("  {:<20} {:>6} {:>10.3f} {:>7} {:>7}   {:.2f} {:.2f} {:.2f}   {}\n", surface.name,
+                       surface.kind == Surface::Kind::kQuad ? "quad" : "mesh", surface.Area(), fine_count[s],
+                       coarse_count[s], surface.reflectance[0], surface.reflectance[1],
+                       surface.reflectance[2], desired);
+  }
+  const Eigen::VectorXd areas = stage.patches.fine.Areas();
+  const FormFactorSummary& ff = stage.form_factor_summary;
+  out << fmt::format("  total area {:.3f} m², {} fine patches (target {}), {} coarse, {} adjacent pairs\n",
+                     scene.Area(), stage.patches.fine.size(), scene.target_patches,
+                     stage.patches.coarse.size(), stage.patches.fine.adjacency.size());
+  out << fmt::format("  patch area min {:.4g} mean {:.4g} max {:.4g} m² (max/min {:.2f})\n", areas.minCoeff(),
+                     areas.mean(), areas.maxCoeff(), areas.maxCoeff() / areas.minCoeff());
+  out << fmt::format("  form factor row sums min {:.5f} mean {:.5f} max {:.5f}; reciprocity error {:.1e}\n",
+                     ff.min_row_sum, ff.mean_row_sum, ff.max_row_sum, ff.max_reciprocity_error);
+  out << fmt::format("  form factors: {} facing pairs, {} shadow rays, {:.2f} s; subdivision {:.3f} s\n",
+                     ff.pairs_evaluated, ff.shadow_rays, ff.seconds, stage.subdivision_seconds);
+  return out.str();
 }
 
 }  // namespace procam

@@ -5,9 +5,9 @@
 #include <stdexcept>
 
 #include "apps/commands.h"
-#include "apps/compensation_stage.h"
-#include "apps/geometry_stage.h"
-#include "apps/rig_stage.h"
+#include "compensation/stage.h"
+#include "geometry/stage.h"
+#include "calibration/rig_directory.h"
 #include "projection/projection_rig.h"
 #include "projection/projector.h"
 
@@ -65,22 +65,24 @@ void AddCompensationCommands(CLI::App& app) {
       throw std::invalid_argument("--export writes the dense F.npy: not with --form-factors compressed");
     }
     GeometryStage stage =
-        RunGeometryStage(args->scene, args->patches > 0 ? std::optional<int>(args->patches) : std::nullopt,
-                         args->form_factors == "compressed" ? FormFactorStorage::kCompressed
-                                                            : FormFactorStorage::kDense);
+        RunGeometryStage(args->scene, GeometryArguments(args->patches, args->form_factors == "compressed"
+                                                                           ? FormFactorStorage::kCompressed
+                                                                           : FormFactorStorage::kDense));
     if (rig_dir) ApplyRigReflectance(*rig_dir, &stage.patches);
-    SolverOptions options;
-    ParseMethod(args->method, &options.method);
-    options.multires = args->multires;
-    options.device = device;
+    CompensationOptions options;
+    ParseMethod(args->method, &options.solver.method);
+    options.solver.multires = args->multires;
+    options.solver.device = device;
+    options.alpha = args->alpha;
+    options.progress = LogProgress();
     // With projectors in the scene, their light sets the bounds; otherwise the scene's "bounds".
-    std::unique_ptr<ProjectionRig> rig;
     std::vector<Projector> projectors = rig_dir ? rig_dir->projectors : ReadProjectors(stage.scene);
     if (!projectors.empty()) {
-      rig = std::make_unique<ProjectionRig>(
-          BuildProjectionRig(stage.patches.fine, std::move(projectors), ProjectionRigOptions()));
+      const ProjectionRig rig = BuildProjectionRig(stage.patches.fine, std::move(projectors), ProjectionRigOptions());
+      options.lower = rig.lower;
+      options.upper = rig.upper;
     }
-    const CompensationRun run = RunCompensation(stage, options, args->alpha, rig.get());
+    const CompensationRun run = RunCompensation(stage, options);
     nlohmann::json extra = nlohmann::json::object();
     if (rig_dir) extra["rig"] = rig_dir->Describe();
     WriteCompensation(stage, run, args->out, args->export_problem, extra);

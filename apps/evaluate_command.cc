@@ -8,8 +8,8 @@
 #include <spdlog/spdlog.h>
 
 #include "apps/commands.h"
-#include "apps/evaluation.h"
-#include "apps/report.h"
+#include "datasets_synthetic/evaluation.h"
+#include "base/html_report.h"
 #include "base/io.h"
 
 namespace procam {

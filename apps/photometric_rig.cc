@@ -7,8 +7,11 @@
 #include <optional>
 #include <sstream>
 
-#include "apps/geometry_stage.h"
-#include "apps/rig_stage.h"
+#include "geometry/stage.h"
+#include "calibration/photometric_transfer.h"
+#include "projection/camera_rays.h"
+#include "compensation/unit_light.h"
+#include "projection/projection_rig.h"
 #include "calibration/rig_directory.h"
 #include "capture/camera.h"
 #include "capture/test_camera.h"
@@ -160,11 +163,10 @@ PhotometricRigStage::PhotometricRigStage(const PhotometricRigArguments& args,
   ParseCameraScale(args, session_dir, hdr, full_scale, &s.camera_scale, &s.camera_black);
   if (args.camera_black >= 0.0) s.camera_black = args.camera_black;
 
-  s.stage = RunGeometryStage(std::filesystem::path(args.scene),
-                             args.patches > 0 ? std::optional<int>(args.patches) : std::nullopt);
+  s.stage = RunGeometryStage(args.scene, GeometryArguments(args.patches));
   const PatchLevel& level = s.stage->patches.fine;
   s.lighting = LightCameraPixels(s.stage->scene, level, s.projector.geometry, camera_geometry);
-  s.model = ModelUnitLight(level, s.stage->form_factors, s.projector);
+  s.model = ModelUnitLight(level, s.stage->form_factors, UnitLightExitance(level, s.projector));
   s.transfer = PhotometricTransfer(s.lighting, level, s.model, s.camera_scale);
 }
 

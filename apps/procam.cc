@@ -7,12 +7,16 @@
 #include <CLI/CLI.hpp>
 
 #include "apps/commands.h"
+#include "datasets_synthetic/synthetic_camera.h"
 #include "procam/config.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"procam: make a white room look like a desired scene with projectors, "
                "interreflections included (Sheng et al., EGSR 2011)"};
   app.set_version_flag("--version", PROCAM_VERSION);
+  // The simulated world (synthetic:NAME scenes and cameras) reaches the libraries through their
+  // registries; the libraries never include it.
+  procam::RegisterSyntheticWorld();
   app.require_subcommand(1);
   procam::AddDemoCommand(app);
   procam::AddSceneCommands(app);

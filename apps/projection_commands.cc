@@ -16,8 +16,8 @@
 #include <thread>
 
 #include "apps/commands.h"
-#include "apps/geometry_stage.h"
-#include "apps/rig_stage.h"
+#include "geometry/stage.h"
+#include "calibration/rig_directory.h"
 #include "datasets_synthetic/rooms.h"
 #include "base/io.h"
 #include "geometry/patches.h"

@@ -12,12 +12,12 @@
 
 #include "base/camera_model.h"
 #include "apps/commands.h"
-#include "apps/compensation_stage.h"
-#include "apps/evaluation.h"
-#include "apps/geometry_stage.h"
-#include "apps/report.h"
-#include "apps/rig_stage.h"
-#include "apps/verification.h"
+#include "compensation/stage.h"
+#include "datasets_synthetic/evaluation.h"
+#include "geometry/stage.h"
+#include "base/html_report.h"
+#include "calibration/rig_directory.h"
+#include "verification/verification.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "calibration/registration.h"
 #include "projection/projector_images.h"
@@ -27,10 +27,6 @@
 
 namespace procam {
 namespace {
-
-std::optional<int> OptionalPatches(int patches) {
-  return patches > 0 ? std::optional<int>(patches) : std::nullopt;
-}
 
 void ExportStage(const GeometryStage& stage, double alpha, const std::filesystem::path& out) {
   const CompensationProblem problem = MakeProblem(stage.scene, stage.patches.fine, stage.form_factors, alpha);
@@ -108,7 +104,7 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
 // A scene file without a camera: geometry and compensation, numbers per patch.
 void RunJsonDemo(const std::string& scene_path, int patches, const std::filesystem::path& out) {
   spdlog::info("procam demo on {}: stage 1/2 geometry", scene_path);
-  const GeometryStage stage = RunGeometryStage(scene_path, OptionalPatches(patches));
+  const GeometryStage stage = RunGeometryStage(scene_path, GeometryArguments(patches));
   ExportStage(stage, 0.5, out / "problem");
   WriteFormFactorImage(stage.form_factors, out / "form_factors.png");
   std::cout << DescribeGeometry(stage);
@@ -117,10 +113,11 @@ void RunJsonDemo(const std::string& scene_path, int patches, const std::filesyst
   std::cout << "\n  method        mean ΔE76  max ΔE76  mean ΔE2000  objective      solve s\n";
   for (const CompensationMethod method : {CompensationMethod::kNaive, CompensationMethod::kReverse,
                                           CompensationMethod::kLinear, CompensationMethod::kPerceptual}) {
-    SolverOptions options;
-    options.method = method;
-    options.multires = method == CompensationMethod::kPerceptual;
-    const CompensationRun run = RunCompensation(stage, options, 0.5);
+    CompensationOptions options;
+    options.solver.method = method;
+    options.solver.multires = method == CompensationMethod::kPerceptual;
+    options.progress = LogProgress();
+    const CompensationRun run = RunCompensation(stage, options);
     WriteCompensation(stage, run, out / MethodName(method), false);
     methods[MethodName(method)] = CompensationResultJson(stage, run);
     std::cout << fmt::format("  {:<12} {:>10.2f} {:>9.2f} {:>12.2f}  {:<13.6e} {:.3f}\n", MethodName(method),
@@ -201,10 +198,14 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation, const Ev
   ApplyRigReflectance(rig, &geometry.patches);
   const ProjectionRig recovered = BuildProjectionRig(geometry.patches.fine, rig.projectors, ProjectionRigOptions());
   MethodEvaluation& result = stage.perceptual;
-  SolverOptions solver;
-  solver.method = CompensationMethod::kPerceptual;
-  solver.multires = options.multires;
-  result.run = RunCompensation(geometry, solver, options.alpha, &recovered);
+  CompensationOptions compensation;
+  compensation.solver.method = CompensationMethod::kPerceptual;
+  compensation.solver.multires = options.multires;
+  compensation.alpha = options.alpha;
+  compensation.lower = recovered.lower;
+  compensation.upper = recovered.upper;
+  compensation.progress = LogProgress();
+  result.run = RunCompensation(geometry, compensation);
   result.images = RenderProjectorImages(recovered, result.run.solution.emittance, RenderOptions(), &result.render);
   result.radiance = evaluation.world->RenderRadiance(result.images);
   PixelDeltaE(result.radiance, evaluation.desired, evaluation.world->coverage(), result.run.fine.rgb_to_xyz,
@@ -336,7 +337,7 @@ void AddSceneCommands(CLI::App& app) {
   info->add_option("scene", args->scene, "Scene JSON")->required();
   info->add_option("--patches", args->patches, "Override the scene's target patch count");
   info->callback([args] {
-    const GeometryStage stage = RunGeometryStage(args->scene, OptionalPatches(args->patches));
+    const GeometryStage stage = RunGeometryStage(args->scene, GeometryArguments(args->patches));
     std::cout << DescribeGeometry(stage);
   });
 
@@ -348,7 +349,7 @@ void AddSceneCommands(CLI::App& app) {
       ->check(CLI::Range(1e-9, 1.0))
       ->capture_default_str();
   export_cmd->callback([args] {
-    const GeometryStage stage = RunGeometryStage(args->scene, OptionalPatches(args->patches));
+    const GeometryStage stage = RunGeometryStage(args->scene, GeometryArguments(args->patches));
     ExportStage(stage, args->alpha, args->out);
     std::cout << DescribeGeometry(stage) << "exported to " << args->out << "\n";
   });

@@ -3,8 +3,9 @@
 #include <iostream>
 #include <memory>
 
+#include "apps/command_line.h"
 #include "apps/commands.h"
-#include "apps/verification.h"
+#include "verification/verification.h"
 #include "capture/camera.h"
 #include "capture/devices.h"
 #include "base/io.h"
@@ -47,7 +48,8 @@ void RunVerify(VerifyArguments& args) {
   options.out = args.out;
   options.camera = args.camera;
   options.camera_response = args.camera_response;
-  options.camera_scale = args.camera_scale;
+  if (!args.camera_scale.empty()) options.camera_scale = ParsePositiveRgb("--camera-scale", args.camera_scale);
+  options.progress = LogProgress();
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("verify: " + why);
   if (!args.displays.empty() && CameraUri::Parse(options.camera).scheme() == "synthetic") {

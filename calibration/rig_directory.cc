@@ -59,4 +59,98 @@ nlohmann::json& RigProjectorEntry(nlohmann::json& rig, const std::string& name) 
   return projectors.back();
 }
 
+nlohmann::json RigDirectory::Describe() const {
+  nlohmann::json names = nlohmann::json::array();
+  for (const Projector& projector : projectors) names.push_back(projector.name);
+  nlohmann::json description = {{"dir", dir.string()}, {"projectors", names}};
+  description["reflectance"] = reflectance.rows() > 0;
+  return description;
+}
+
+RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir) {
+  const std::filesystem::path path = rig_dir / "rig.json";
+  const std::string file = path.string();
+  if (!std::filesystem::is_directory(rig_dir)) {
+    throw IoError(rig_dir.string() + ": not a directory (--rig takes a rig directory)");
+  }
+  if (!std::filesystem::exists(path)) {
+    throw IoError(file + ": file not found (the rig directory's rig.json, written by procam "
+                         "calibrate)");
+  }
+  RigDirectory rig;
+  rig.dir = rig_dir;
+  rig.json = ReadRigJson(rig_dir);
+  if (!rig.json.contains("projectors") || !rig.json["projectors"].is_array() ||
+      rig.json["projectors"].empty()) {
+    throw IoError(file + ": projectors: required key is missing (a non-empty array, run procam "
+                         "calibrate projectors and calibrate photometric)");
+  }
+  // Photometry still in camera units cannot light a scene: say so before the parser's plainer
+  // "max: required key is missing".
+  const nlohmann::json& photometric = rig.json.value("photometric", nlohmann::json::object());
+  const nlohmann::json& entries = rig.json["projectors"];
+  for (size_t k = 0; k < entries.size(); ++k) {
+    if (!entries[k].is_object() || !entries[k].contains("name") || !entries[k]["name"].is_string())
+      continue;
+    const std::string name = entries[k]["name"].get<std::string>();
+    if (!photometric.is_object() || !photometric.contains(name)) continue;
+    const nlohmann::json& info = photometric[name];
+    if (info.is_object() && info.value("units", "") == "camera" && !entries[k].contains("max")) {
+      throw IoError(file + ": projectors[" + std::to_string(k) + "].max: the photometry of '" +
+                    name +
+                    "' is in camera units (photometric." + name +
+                    ".units); compensate needs scene units: run procam calibrate photometric "
+                    "with --scene once the projector's geometry and the camera's registration "
+                    "are in the rig");
+    }
+  }
+  rig.projectors = ParseProjectors(entries.dump(), file, rig_dir);
+
+  if (rig.json.contains("reflectance")) {
+    const nlohmann::json& info = rig.json["reflectance"];
+    if (!info.is_object() || !info.contains("file") || !info["file"].is_string()) {
+      throw IoError(file + ": reflectance.file: required key is missing (a .npy file)");
+    }
+    if (!info.contains("target_patches") || !info["target_patches"].is_number_integer()) {
+      throw IoError(file + ": reflectance.target_patches: required key is missing (an integer)");
+    }
+    const std::filesystem::path npy = rig_dir / info["file"].get<std::string>();
+    if (!std::filesystem::exists(npy)) {
+      throw IoError(file + ": reflectance.file: " + npy.string() + ": file not found");
+    }
+    const NpyArray array = ReadNpy(npy);
+    if (array.shape.size() != 2 || array.shape[1] != 3 || array.shape[0] < 1) {
+      throw IoError(npy.string() + ": expected shape (n,3)");
+    }
+    rig.reflectance.resize(array.shape[0], 3);
+    for (int64_t i = 0; i < array.shape[0]; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        const double value = array.values[3 * i + c];
+        if (!(value >= 0.0 && value < 1.0)) {
+          throw IoError(npy.string() + ": row " + std::to_string(i) +
+                        ": reflectance must be in [0,1)");
+        }
+        rig.reflectance(i, c) = value;
+      }
+    }
+    rig.reflectance_target_patches = info["target_patches"].get<int>();
+  }
+  return rig;
+}
+
+void ApplyRigReflectance(const RigDirectory& rig, PatchHierarchy* patches) {
+  if (rig.reflectance.rows() == 0) return;
+  const int n = patches->fine.size();
+  if (rig.reflectance.rows() != n) {
+    throw IoError((rig.dir / "rig.json").string() + ": reflectance: estimated for " +
+                  std::to_string(rig.reflectance.rows()) + " patches (target " +
+                  std::to_string(rig.reflectance_target_patches) + "), this run has " +
+                  std::to_string(n) + ": give --patches " +
+                  std::to_string(rig.reflectance_target_patches));
+  }
+  patches->fine.reflectance = rig.reflectance;
+  patches->coarse.reflectance = CoarsenPatchValues(rig.reflectance, patches->fine.Areas(),
+                                              patches->coarse_of_fine, patches->coarse.size());
+}
+
 }  // namespace procam

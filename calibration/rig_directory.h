@@ -19,7 +19,11 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
 #include <nlohmann/json.hpp>
+
+#include "geometry/patches.h"
+#include "projection/projector.h"
 
 namespace procam {
 
@@ -42,5 +46,29 @@ void UpdateRigResult(const std::filesystem::path& rig_dir, const std::vector<std
 // The entry of projectors[] named `name` in `rig`, created (with "name") at the end of the array
 // when missing.
 nlohmann::json& RigProjectorEntry(nlohmann::json& rig, const std::string& name);
+
+// RIG_DIR/rig.json read for compensate and project.
+struct RigDirectory {
+  std::filesystem::path dir;
+  nlohmann::json json;                // rig.json as read
+  std::vector<Projector> projectors;  // rig.json's projectors[], paths relative to dir
+  // RIG_DIR/reflectance.npy (n,3) when rig.json has "reflectance", with the patch target it was
+  // estimated for; empty otherwise.
+  Eigen::MatrixX3d reflectance;
+  int reflectance_target_patches = 0;
+  // What result.json records about the rig.
+  nlohmann::json Describe() const;
+};
+
+// Reads RIG_DIR/rig.json. Throws IoError naming RIG_DIR/rig.json and the key: no file, no
+// non-empty "projectors", a projector whose photometry is in camera units ("photometric"
+// NAME.units, written by `calibrate photometric` without --scene), and every error of a scene
+// file's projectors (missing model file, no `max`, bad mixing, ...).
+RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir);
+
+// Replaces the fine level's reflectance by the rig's (and the coarse level's by the area-weighted
+// mean of its children). Throws IoError naming RIG_DIR/rig.json when the rig's reflectance was
+// estimated for another patch count. Does nothing when the rig has none.
+void ApplyRigReflectance(const RigDirectory& rig, PatchHierarchy* patches);
 
 }  // namespace procam

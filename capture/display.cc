@@ -3,6 +3,10 @@
 #include <cmath>
 #include <stdexcept>
 
+#include <opencv2/imgproc.hpp>
+
+#include "base/io.h"
+
 namespace procam {
 namespace {
 constexpr size_t kHistory = 8;
@@ -78,6 +82,66 @@ SceneView MakeLoopbackView(std::shared_ptr<const MemoryDisplay> display,
     }
     return radiance;
   };
+}
+
+DisplayWall::DisplayWall(std::vector<std::shared_ptr<PatternDisplay>> displays,
+                         std::vector<std::string> names)
+    : displays_(std::move(displays)), names_(std::move(names)) {
+  if (displays_.empty() || displays_.size() != names_.size())
+    throw std::invalid_argument("DisplayWall: one name per display, at least one display");
+}
+
+cv::Size DisplayWall::Resolution() const {
+  cv::Size size(0, 0);
+  for (const auto& display : displays_) {
+    size.width += display->Resolution().width;
+    size.height = std::max(size.height, display->Resolution().height);
+  }
+  return size;
+}
+
+std::string DisplayWall::Name() const {
+  std::string name;
+  for (const auto& display : displays_) {
+    if (!name.empty()) name += '+';
+    name += display->Name();
+  }
+  return name;
+}
+
+cv::Mat DisplayWall::Compose(const std::vector<cv::Mat>& images) const {
+  if (images.size() != displays_.size())
+    throw std::invalid_argument("DisplayWall: one image per display");
+  cv::Mat wall(Resolution(), CV_8UC3, cv::Scalar::all(0));
+  int x = 0;
+  for (size_t k = 0; k < displays_.size(); ++k) {
+    const cv::Size size = displays_[k]->Resolution();
+    if (images[k].size() != size || images[k].type() != CV_8UC3)
+      throw std::invalid_argument("DisplayWall: image " + std::to_string(k) + " does not fit");
+    images[k].copyTo(wall(cv::Rect(x, 0, size.width, size.height)));
+    x += size.width;
+  }
+  return wall;
+}
+
+void DisplayWall::Show(const cv::Mat& pattern) {
+  if (pattern.size() != Resolution())
+    throw IoError("display wall " + Name() + ": pattern of the wrong size");
+  cv::Mat colour = pattern;
+  if (pattern.type() == CV_8UC1) cv::cvtColor(pattern, colour, cv::COLOR_GRAY2BGR);
+  int x = 0;
+  for (size_t k = 0; k < displays_.size(); ++k) {
+    const cv::Size size = displays_[k]->Resolution();
+    try {
+      displays_[k]->Show(colour(cv::Rect(x, 0, size.width, size.height)).clone());
+    } catch (const std::exception& error) {
+      // Displays' own messages usually start with their name (capture/display.h).
+      const std::string display = displays_[k]->Name(), what = error.what();
+      throw IoError("projector '" + names_[k] + "'" +
+                    (what.rfind(display, 0) == 0 ? "" : " (display " + display + ")") + ": " + what);
+    }
+    x += size.width;
+  }
 }
 
 }  // namespace procam

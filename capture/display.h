@@ -9,6 +9,7 @@
 #include <mutex>
 #include <opencv2/core.hpp>
 #include <string>
+#include <vector>
 
 #include "capture/camera.h"
 
@@ -66,5 +67,22 @@ struct LoopbackOptions {
 // options.Check() fails.
 SceneView MakeLoopbackView(std::shared_ptr<const MemoryDisplay> display,
                            const LoopbackOptions& options = {});
+
+// A set of displays shown as one: a pattern is the displays' images side by side (left to
+// right, top-aligned, width = Σ widths, height = the tallest), so the capture sequencer shows
+// every projector's image at once. Show() throws IoError naming the projector and its display.
+class DisplayWall : public PatternDisplay {
+ public:
+  DisplayWall(std::vector<std::shared_ptr<PatternDisplay>> displays, std::vector<std::string> names);
+  cv::Size Resolution() const override;
+  std::string Name() const override;
+  void Show(const cv::Mat& pattern) override;
+  // The displays' images (CV_8UC3 B, G, R, each its display's size) as one pattern.
+  cv::Mat Compose(const std::vector<cv::Mat>& images) const;
+
+ private:
+  std::vector<std::shared_ptr<PatternDisplay>> displays_;
+  std::vector<std::string> names_;
+};
 
 }  // namespace procam

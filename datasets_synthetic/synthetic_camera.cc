@@ -8,6 +8,9 @@
 #include <utility>
 
 #include "datasets_synthetic/paper_scenes.h"
+#include "base/io.h"
+#include "geometry/stage.h"
+#include "verification/verification.h"
 
 namespace procam {
 namespace {
@@ -263,6 +266,67 @@ CameraBackend SyntheticCameraBackend() {
 void RegisterSyntheticCameraBackend() {
   static std::once_flag once;
   std::call_once(once, [] { RegisterCameraBackend(SyntheticCameraBackend()); });
+}
+
+namespace {
+
+// The synthetic camera's k: radiance_scale × full scale × exposure / reference × gain, per DN
+// (one exposure) or per full scale per second (HDR), as calibrate photometric derives it.
+CameraColour SyntheticColour(const CameraUri& uri, const SyntheticWorld& world,
+                             const nlohmann::json& manifest, bool hdr, double full_scale,
+                             double black_override) {
+  const TestCameraOptions camera = TestCameraOptionsFromUri(uri);
+  const nlohmann::json settings = manifest.value("camera", nlohmann::json::object())
+                                      .value("settings", nlohmann::json::object());
+  const double gain = std::pow(10.0, settings.value("gain", 0.0) / 20.0);
+  const double full = full_scale > 0.0 ? full_scale : 255.0;
+  const double black = black_override >= 0 ? black_override : camera.black_level;
+  double k = 0.0;
+  CameraColour colour;
+  if (hdr) {
+    k = world.radiance_scale * full / (full - black) * gain /
+        (camera.reference_exposure_us * 1e-6);
+    colour.black = 0.0;
+  } else {
+    const double exposure = settings.value("exposure_us", camera.exposure_us);
+    k = world.radiance_scale * full * exposure / camera.reference_exposure_us * gain;
+    colour.black = black;
+  }
+  colour.to_exitance = Eigen::Matrix3d::Identity() / k;
+  colour.source = "synthetic camera URI";
+  return colour;
+}
+
+}  // namespace
+
+void RegisterSyntheticWorld() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    RegisterSyntheticCameraBackend();
+    SceneSource source;
+    source.names = SyntheticSceneNames;
+    source.make = [](const std::string& name) {
+      std::string known;
+      for (const std::string& scene : SyntheticSceneNames()) {
+        if (scene == name) return MakeSyntheticScene(name).scene;
+        known += (known.empty() ? "" : ", ") + scene;
+      }
+      throw IoError("synthetic:" + name + ": no such synthetic scene (" + known + ")");
+    };
+    RegisterSceneSource("synthetic", std::move(source));
+    RegisterSimulatedCameraSource("synthetic", [](const std::string& text) {
+      const CameraUri uri = CameraUri::Parse(text);
+      const std::shared_ptr<SyntheticWorld> world = OpenSyntheticWorld(uri);
+      SimulatedCamera camera;
+      camera.displays.assign(world->displays.begin(), world->displays.end());
+      camera.black_level = TestCameraOptionsFromUri(uri).black_level;
+      camera.colour = [uri, world](const nlohmann::json& manifest, bool hdr, double full_scale,
+                                   double black_override) {
+        return SyntheticColour(uri, *world, manifest, hdr, full_scale, black_override);
+      };
+      return camera;
+    });
+  });
 }
 
 }  // namespace procam

@@ -108,5 +108,10 @@ class SyntheticCamera : public TestCamera {
 CameraBackend SyntheticCameraBackend();
 // Registers SyntheticCameraBackend() with the camera registry. Further calls do nothing.
 void RegisterSyntheticCameraBackend();
+// The synthetic world as the product reaches it, through registries: the "synthetic" camera
+// backend and the "synthetic" scene source (synthetic:NAME, geometry/stage.h; patch target 1000
+// until a stage overrides it). Called by the command line, tests and benchmarks; the libraries
+// never include datasets_synthetic. Further calls do nothing.
+void RegisterSyntheticWorld();
 
 }  // namespace procam

@@ -228,6 +228,21 @@ std::vector<std::array<int, 2>> FindAdjacency(const std::vector<Patch>& patches,
   return adjacency;
 }
 
+Eigen::MatrixX3d CoarsenPatchValues(const Eigen::MatrixX3d& fine_values,
+                               const Eigen::VectorXd& fine_area,
+                               const std::vector<int>& coarse_of_fine, int coarse_count) {
+  Eigen::MatrixX3d flux = Eigen::MatrixX3d::Zero(coarse_count, 3);
+  Eigen::VectorXd area = Eigen::VectorXd::Zero(coarse_count);
+  for (int i = 0; i < static_cast<int>(coarse_of_fine.size()); ++i) {
+    flux.row(coarse_of_fine[i]) += fine_area[i] * fine_values.row(i);
+    area[coarse_of_fine[i]] += fine_area[i];
+  }
+  for (int i = 0; i < coarse_count; ++i) {
+    if (area[i] > 0.0) flux.row(i) /= area[i];
+  }
+  return flux;
+}
+
 PatchHierarchy SubdividePatches(const Scene& scene, const SubdivisionOptions& options) {
   PatchHierarchy hierarchy;
   const double total_area = scene.Area();

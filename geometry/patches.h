@@ -55,6 +55,13 @@ struct SubdivisionOptions {
 
 PatchHierarchy SubdividePatches(const Scene& scene, const SubdivisionOptions& options);
 
+// Per-patch values of the coarse level from the fine one: each coarse patch gets the area-weighted
+// mean of its children's, which is exact for quantities per unit area (exitance bounds: a coarse
+// patch receives its children's flux; reflectance under even light). Rows whose children have no
+// area are 0.
+Eigen::MatrixX3d CoarsenPatchValues(const Eigen::MatrixX3d& fine_values, const Eigen::VectorXd& fine_area,
+                               const std::vector<int>& coarse_of_fine, int coarse_count);
+
 // A quadrature point on a patch: position, texture coordinate and the area it stands for.
 struct PatchSample {
   Vec3 point;

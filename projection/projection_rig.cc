@@ -374,19 +374,11 @@ bool SetBoundsFromProjectors(const Scene& scene, const PatchLevel& level, Eigen:
   return true;
 }
 
-Eigen::MatrixX3d CoarsenBounds(const Eigen::MatrixX3d& fine_bounds,
-                               const Eigen::VectorXd& fine_area,
-                               const std::vector<int>& coarse_of_fine, int coarse_count) {
-  Eigen::MatrixX3d flux = Eigen::MatrixX3d::Zero(coarse_count, 3);
-  Eigen::VectorXd area = Eigen::VectorXd::Zero(coarse_count);
-  for (int i = 0; i < static_cast<int>(coarse_of_fine.size()); ++i) {
-    flux.row(coarse_of_fine[i]) += fine_area[i] * fine_bounds.row(i);
-    area[coarse_of_fine[i]] += fine_area[i];
-  }
-  for (int i = 0; i < coarse_count; ++i) {
-    if (area[i] > 0.0) flux.row(i) /= area[i];
-  }
-  return flux;
+Eigen::MatrixX3d UnitLightExitance(const PatchLevel& level, const Projector& projector) {
+  Projector unit = projector;
+  unit.photometry.black = Vec3::Zero();
+  unit.photometry.max = Vec3::Ones();
+  return BuildProjectionRig(level, {unit}, ProjectionRigOptions()).upper;
 }
 
 }  // namespace procam

@@ -115,11 +115,9 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
 bool SetBoundsFromProjectors(const Scene& scene, const PatchLevel& level, Eigen::MatrixX3d* lower,
                              Eigen::MatrixX3d* upper, const ProjectionRigOptions& options = {});
 
-// Bounds of the coarse level from the fine one: a coarse patch receives the flux of its
-// children, so its exitance bound is the area-weighted mean of theirs (exact).
-Eigen::MatrixX3d CoarsenBounds(const Eigen::MatrixX3d& fine_bounds,
-                               const Eigen::VectorXd& fine_area,
-                               const std::vector<int>& coarse_of_fine, int coarse_count);
+// The direct exitance ρ ⊙ Ḡ per patch (n,3) of one projector at unit output (black 0, max 1):
+// the upper bound a rig of that projector alone gives (compensation/unit_light.h).
+Eigen::MatrixX3d UnitLightExitance(const PatchLevel& level, const Projector& projector);
 
 // Texture coordinate of a point on (or within single precision of) a patch: the corners' uv
 // interpolated barycentrically in the corner triangle that contains the point, a quad being the

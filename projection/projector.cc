@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <stdexcept>
@@ -274,7 +275,7 @@ std::string ProjectorPhotometry::Validate() const {
   for (int r = 0; r < 3; ++r) {
     if (std::abs(mixing.row(r).sum() - 1.0) > 1e-6) {
       return "mixing: row " + std::to_string(r) + " must sum to 1 (it sums to " +
-             FormatNumber(mixing.row(r).sum()) + ")";
+             fmt::format("{:.17g}", mixing.row(r).sum()) + ")";
     }
   }
   // Rows of non-negative entries summing to 1 have norms in [1/√3, 1], so |det| is a fair

@@ -580,4 +580,13 @@ ProjectorImage ReadProjectorImage(const std::filesystem::path& path, int bits) {
   return image;
 }
 
+cv::Mat PatternFromImage(const ProjectorImage& image) {
+  cv::Mat codes = image.codes;
+  if (image.bits != 8) codes.convertTo(codes, CV_16UC3, 255.0 / ((1 << image.bits) - 1));
+  cv::Mat rgb8, bgr8;
+  codes.convertTo(rgb8, CV_8UC3);
+  cv::cvtColor(rgb8, bgr8, cv::COLOR_RGB2BGR);
+  return bgr8;
+}
+
 }  // namespace procam

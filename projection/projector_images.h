@@ -130,4 +130,8 @@ std::vector<std::string> EncodeProjectorImages(const std::vector<ProjectorImage>
 // file if it cannot be read or its depth does not fit.
 ProjectorImage ReadProjectorImage(const std::filesystem::path& path, int bits);
 
+// An image as a display pattern: its codes at 8 bits (scaled from the image's bit depth), B, G, R
+// (CV_8UC3), as capture's PatternDisplay shows patterns.
+cv::Mat PatternFromImage(const ProjectorImage& image);
+
 }  // namespace procam

@@ -9,7 +9,7 @@
 #include <filesystem>
 
 #include "base/camera_model.h"
-#include "apps/rig_stage.h"
+#include "calibration/rig_directory.h"
 #include "calibration/registration.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/simulated_rig.h"

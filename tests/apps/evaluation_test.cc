@@ -1,5 +1,5 @@
 // The lowest mean ΔE bound of procam evaluate (apps/evaluation.h).
-#include "apps/evaluation.h"
+#include "datasets_synthetic/evaluation.h"
 
 #include <gtest/gtest.h>
 

@@ -17,7 +17,11 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "apps/rig_stage.h"
+#include "calibration/rig_directory.h"
+#include "calibration/photometric_transfer.h"
+#include "projection/camera_rays.h"
+#include "compensation/unit_light.h"
+#include "projection/projection_rig.h"
 #include "calibration/photometric.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/simulated_rig.h"
@@ -285,7 +289,7 @@ TEST_F(ScenePhotometry, BlackAndMaxInSceneUnitsAndPerPatchReflectance) {
   }
   const CameraPixelLighting lighting =
       LightCameraPixels(*scene_, *level_, truth_->geometry, rig_->camera());
-  const UnitLightModel model = ModelUnitLight(*level_, *form_factors_, *truth_);
+  const UnitLightModel model = ModelUnitLight(*level_, *form_factors_, UnitLightExitance(*level_, *truth_));
   PhotometricCalibrationOptions options;
   options.transfer = PhotometricTransfer(lighting, *level_, model, Eigen::Vector3d::Ones());
   const PhotometricModel fit = CalibratePhotometry(fields, options);

@@ -19,7 +19,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "apps/verification.h"
+#include "verification/verification.h"
 #include "capture/camera.h"
 #include "capture/display.h"
 #include "capture/session.h"

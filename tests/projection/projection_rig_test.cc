@@ -137,9 +137,9 @@ TEST(ProjectionRig, CoarseBoundsAreTheAreaWeightedFineBounds) {
   const Stage stage = MakeStage({});
   const ProjectionRig fine = BuildProjectionRig(stage.patches.fine, stage.projectors, {});
   const ProjectionRig coarse = BuildProjectionRig(stage.patches.coarse, stage.projectors, {});
-  const Eigen::MatrixX3d upper = CoarsenBounds(fine.upper, fine.area, stage.patches.coarse_of_fine,
+  const Eigen::MatrixX3d upper = CoarsenPatchValues(fine.upper, fine.area, stage.patches.coarse_of_fine,
                                                stage.patches.coarse.size());
-  const Eigen::MatrixX3d lower = CoarsenBounds(fine.lower, fine.area, stage.patches.coarse_of_fine,
+  const Eigen::MatrixX3d lower = CoarsenPatchValues(fine.lower, fine.area, stage.patches.coarse_of_fine,
                                                stage.patches.coarse.size());
   // Same pixels, same hit points, and the children tile their parent; what differs is where
   // the pixel count is rescaled to exact areas (projection_rig.h): per child or per parent, and

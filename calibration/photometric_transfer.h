@@ -1,11 +1,7 @@
 #pragma once
-// The rig directory (calibration/rig_directory.h) as the commands consume it, and the
-// photometry in the scene's units (issue 7):
+// Photometry in the scene's units: what a registered camera's photo of a flat field says about
+// a projector's black and max and the room's per-patch reflectance.
 //
-// - `--rig RIG_DIR` for compensate and project: rig.json's projectors[] replace the scene's
-//   (parsed by the projection module exactly as scene projectors, model paths relative to
-//   RIG_DIR), and RIG_DIR/reflectance.npy, when rig.json names it, replaces the scene's
-//   per-patch reflectance.
 // - Absolute photometry: a flat field photographed by a camera registered in the room frame is,
 //   per camera pixel p (channel c) seeing a point x of fine patch i,
 //
@@ -27,83 +23,16 @@
 // reflectances found afterwards are relative to that scale (their area-weighted mean follows
 // the nominal one).
 
-#include <filesystem>
-#include <string>
 #include <vector>
 
 #include <Eigen/Core>
-#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "compensation/unit_light.h"
 #include "geometry/patches.h"
-#include "geometry/scene.h"
-#include "projection/projector.h"
+#include "projection/camera_rays.h"
 
 namespace procam {
-
-// RIG_DIR/rig.json read for compensate and project.
-struct RigDirectory {
-  std::filesystem::path dir;
-  nlohmann::json json;                // rig.json as read
-  std::vector<Projector> projectors;  // rig.json's projectors[], paths relative to dir
-  // RIG_DIR/reflectance.npy (n,3) when rig.json has "reflectance", with the patch target it was
-  // estimated for; empty otherwise.
-  Eigen::MatrixX3d reflectance;
-  int reflectance_target_patches = 0;
-  // What result.json records about the rig.
-  nlohmann::json Describe() const;
-};
-
-// Reads RIG_DIR/rig.json. Throws IoError naming RIG_DIR/rig.json and the key: no file, no
-// non-empty "projectors", a projector whose photometry is in camera units ("photometric"
-// NAME.units, written by `calibrate photometric` without --scene), and every error of a scene
-// file's projectors (missing model file, no `max`, bad mixing, ...).
-RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir);
-
-// Replaces the fine level's reflectance by the rig's (and the coarse level's by the area-weighted
-// mean of its children). Throws IoError naming RIG_DIR/rig.json when the rig's reflectance was
-// estimated for another patch count. Does nothing when the rig has none.
-void ApplyRigReflectance(const RigDirectory& rig, PatchHierarchy* patches);
-
-// What a camera pixel sees and how one projector lights it.
-struct CameraPixelLighting {
-  int width = 0, height = 0;
-  std::vector<int> patch;    // fine patch seen (row-major), −1 for none (or its unlit side)
-  std::vector<double> gain;  // the projector's geometric gain G at the point (1/m²), 0 if unlit
-};
-
-// What every camera pixel sees and how each projector lights it, keeping the projector pixel
-// that lights the point: the cast of LightCameraPixels for every projector at once.
-struct CameraPixelRays {
-  int width = 0, height = 0, projectors = 0;
-  std::vector<int> patch;  // fine patch seen (row-major), −1 for none (or its unlit side)
-  // Per (camera pixel, projector), index pixel · projectors + k: the geometric gain G_k at the
-  // point (1/m²; 0 where k does not light it: outside its image, facing away, occluded) and
-  // the projector pixel whose area holds the point's projection (row · width + column; −1
-  // where unlit).
-  std::vector<float> gain;
-  std::vector<int32_t> projector_pixel;
-};
-CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
-                                 const std::vector<Projector>& projectors,
-                                 const ProjectorGeometry& camera, double ray_margin = 1e-4);
-
-// Casts every camera pixel's ray (camera = a ProjectorGeometry whose proj_from_world is
-// cam_from_room) against the fine patches, and lights the hit from the projector: in its image,
-// facing it and unoccluded (shadow ray against the scene's surfaces, `ray_margin` metres).
-CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& level,
-                                      const ProjectorGeometry& projector,
-                                      const ProjectorGeometry& camera, double ray_margin = 1e-4);
-
-// The radiosity model of one projector at unit output (black 0, max 1 on every channel):
-// Ḡ (n,3, mean direct irradiance per patch, = the projection rig's upper bound / ρ) and
-// bounce = F·b (n,3, bounce irradiance per patch), b = K⁻¹(ρ ⊙ Ḡ).
-struct UnitLightModel {
-  Eigen::MatrixX3d direct_irradiance;
-  Eigen::MatrixX3d bounce_irradiance;
-};
-UnitLightModel ModelUnitLight(const PatchLevel& level, const Eigen::MatrixXd& form_factors,
-                              const Projector& projector);
 
 // Per-pixel transfer (CV_32FC3, camera B, G, R: camera value per unit projector output) for
 // PhotometricCalibrationOptions::transfer: k_c ρ_i,c (G_p + bounce_i,c); 0 where the pixel sees
@@ -129,10 +58,6 @@ ReflectanceEstimate EstimatePatchReflectance(const CameraPixelLighting& lighting
                                              const cv::Mat& mask, const Eigen::Vector3d& output,
                                              const Eigen::Vector3d& camera_scale,
                                              int min_pixels = 4);
-
-}  // namespace procam
-
-namespace procam {
 
 // Each projector's black level when all of them show black at once (the only state a rig can
 // photograph: a projector showing black still emits its black). The black field m (camera B, G,

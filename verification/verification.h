@@ -1,17 +1,18 @@
 #pragma once
-// Verification with photos, and the closed loop (issue 8).
+// Verification with photos, and the closed loop.
 //
 // One iteration: the solution's emittance E becomes one image per projector (the projection
 // module's renderer, with the rig's projectors as the model knows them); every projector shows
 // its image at once; the camera photographs the room through the capture sequencer (averaged
 // frames, HDR when exposures are bracketed), each photo written into a capture session as it is
 // taken; camera pixels become patches by casting each pixel's ray from the registered camera
-// (LightCameraPixels, apps/rig_stage.h); camera values become exitance in the scene's units
+// (CastCameraPixels, projection/camera_rays.h); camera values become exitance in the scene's units
 // through the camera's colour calibration (x = M · (camera RGB − black), M = diag(1/k) for a
 // per-channel scale k); and the photo is compared in CIE L*a*b* (the problem's T and white)
 // with the predicted appearance and with the desired appearance: ΔE76 and CIEDE2000 per pixel
 // and per patch. Predicted per patch: the solution's radiosity B. Predicted per pixel: the
-// light at the point x of patch i the pixel sees, split as rig_stage.h's transfer splits it,
+// light at the point x of patch i the pixel sees, split as calibration/photometric_transfer.h's
+// transfer splits it (PredictPixels, projection/camera_rays.h),
 //     x_p = ρ_i ⊙ (Σ_k G_k(x) · output_k(code_k(x)) + (F B')_i),
 // the direct light of every projector k that lights x (geometric gain G_k, the code its image
 // shows at the projector pixel that lights x, its photometry as the model knows it) plus the
@@ -19,15 +20,7 @@
 // shown deliver to each patch.
 //
 // The closed loop updates the model from measured minus predicted and solves again:
-//   1. projector response: per projector and primary j, an exponent p (response r_j(d) →
-//      r_j(d)^p, i.e. gamma γ → γ·p) fitted to the measured radiosity of the seen patches:
-//      B_i,c = s_c ρ_i,c (D_i,c(p) + (F B)_i,c), D the direct irradiance the shown codes deliver
-//      by the rig's flux bookkeeping (code histograms per patch), F B the bounce irradiance
-//      from the measured B (the model's on unseen patches), s_c a common reflectance scale per
-//      channel; least squares on log B by coordinate descent (golden section on each p);
-//   2. reflectance: per seen patch ρ = B / (D(p) + F B) (the radiosity equation solved for ρ
-//      with the measured B), damped (ρ ← ρ_old (ρ/ρ_old)^step), the ratio bounded to
-//      [1/2, 2] and ρ to [0.01, 0.99]; unseen patches scale by s;
+//   1. projector response and 2. reflectance, fitted to the photo (calibration/model_fit.h);
 //   3. RunCompensation with the updated model (method, alpha and multires of the solution).
 // It stops when the measured mean ΔE76 (photo vs desired, per pixel) improves by less than
 // `min_improvement`, or after `iterations` photos, and keeps the best iteration (the lowest
@@ -44,6 +37,7 @@
 // Everything is written atomically as it is produced, so a fault keeps what was done.
 
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -53,7 +47,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core/mat.hpp>
 
-#include "apps/report.h"
+#include "base/html_report.h"
 #include "capture/display.h"
 #include "capture/sequencer.h"
 #include "geometry/scene.h"
@@ -75,11 +69,11 @@ struct VerificationOptions {
   std::optional<Scene> scene;
   SequencerOptions sequencer;          // frames, exposures (several: HDR), settle, retries
   std::string camera_response;         // camera_response.json: linearise (needs bracketing)
-  // Camera colour calibration, camera value per unit exitance (scene units) per channel: a
-  // number, "R,G,B", or empty: the synthetic camera's own (from its URI and the session's
-  // exposure and gain), else rig.json camera.colour ({"scale": [R,G,B]} or {"matrix": 3×3}).
-  // For bracketed (HDR) photos the units are full scale per second.
-  std::string camera_scale;
+  // Camera colour calibration, camera value per unit exitance (scene units) per channel (R, G,
+  // B, each > 0), or unset: rig.json camera.colour ({"scale": [R,G,B]} or {"matrix": 3×3}),
+  // else a simulated camera's own (from its URI and the session's exposure and gain). For
+  // bracketed (HDR) photos the units are full scale per second.
+  std::optional<Eigen::Vector3d> camera_scale;
   double camera_black = -1.0;  // camera black level, DN (< 0: the synthetic URI's, else 0)
   double gain = -1.0;          // camera gain to set (< 0: leave it)
   int iterations = 4;          // photos at most (iteration 0 is the solution as given), [1, 50]
@@ -88,6 +82,7 @@ struct VerificationOptions {
   bool fit_response = true;       // fit the projectors' response exponents
   bool fit_reflectance = true;    // update the per-patch reflectance
   int min_patch_pixels = 4;       // camera pixels a patch needs to count as seen, ≥ 1
+  ProgressCallback progress;      // a line per stage and iteration (ΔE, the model update)
   bool Check(std::string* why) const;
 };
 
@@ -116,6 +111,31 @@ struct VerificationIteration {
   cv::Mat photo, predicted, delta_e76, model_delta_e76;
 };
 
+// Camera colour calibration: exitance (working RGB, scene units) = to_exitance · (camera RGB −
+// black) for single exposures; HDR merges have the black removed already.
+struct CameraColour {
+  Eigen::Matrix3d to_exitance = Eigen::Matrix3d::Identity();
+  double black = 0.0;
+  std::string source;  // where it came from, for result.json
+  nlohmann::json Json() const;
+};
+
+// What verification needs of a simulated camera that it cannot read off a real one: the
+// displays its world shows the projectors' images on, and its colour calibration for a photo
+// taken with a session's settings (`manifest`: session.json; `hdr`: bracketed exposures merged;
+// `full_scale`: the frames' full scale; `black_override` ≥ 0: the black level to assume).
+struct SimulatedCamera {
+  std::vector<std::shared_ptr<PatternDisplay>> displays;
+  double black_level = 0.0;  // the camera's black level, DN (what the HDR merge subtracts)
+  std::function<CameraColour(const nlohmann::json& manifest, bool hdr, double full_scale,
+                             double black_override)>
+      colour;
+};
+// For camera URIs of `scheme`: the simulated camera behind a URI, or an IoError naming it. The
+// synthetic world registers "synthetic"; a URI of any other scheme is a real camera.
+using SimulatedCameraSource = std::function<SimulatedCamera(const std::string& camera_uri)>;
+void RegisterSimulatedCameraSource(const std::string& scheme, SimulatedCameraSource source);
+
 struct VerificationSummary {
   std::vector<VerificationIteration> iterations;
   int best = -1;            // index of the iteration with the lowest measured mean ΔE76
@@ -128,9 +148,9 @@ struct VerificationSummary {
   std::string BriefReport() const;  // one line
 };
 
-// Runs the loop. Camera URIs are opened through the camera registry: the synthetic backend is
-// registered here; callers register the device backends (RegisterDeviceBackends) for real
-// cameras. Throws IoError (naming the file, key, camera or projector) for bad input
+// Runs the loop. Camera URIs are opened through the camera registry: callers register the
+// backends they use (RegisterDeviceBackends for real cameras; the synthetic world's, with its
+// simulated-camera source below, through RegisterSyntheticWorld of datasets_synthetic). Throws IoError (naming the file, key, camera or projector) for bad input
 // before anything is captured; a camera or projector lost mid-run writes result.json and
 // report.html with the iterations done (complete = false) and then throws IoError saying so.
 VerificationSummary RunVerification(const VerificationOptions& options);
@@ -138,22 +158,5 @@ VerificationSummary RunVerification(const VerificationOptions& options);
 // Appends the verification's sections (table, convergence plot, per-iteration pictures) to a
 // report, e.g. the demo's.
 void AddVerificationReport(const VerificationSummary& summary, HtmlReport* report);
-
-// A set of displays shown as one: a pattern is the displays' images side by side (left to
-// right, top-aligned, width = Σ widths, height = the tallest), so the capture sequencer shows
-// every projector's image at once. Show() throws IoError naming the projector and its display.
-class DisplayWall : public PatternDisplay {
- public:
-  DisplayWall(std::vector<std::shared_ptr<PatternDisplay>> displays, std::vector<std::string> names);
-  cv::Size Resolution() const override;
-  std::string Name() const override;
-  void Show(const cv::Mat& pattern) override;
-  // The displays' images (CV_8UC3 B, G, R, each its display's size) as one pattern.
-  cv::Mat Compose(const std::vector<cv::Mat>& images) const;
-
- private:
-  std::vector<std::shared_ptr<PatternDisplay>> displays_;
-  std::vector<std::string> names_;
-};
 
 }  // namespace procam

@@ -1,10 +1,10 @@
-#include "apps/report.h"
+#include "base/html_report.h"
 
 #include <algorithm>
 #include <cmath>
 
 #include <opencv2/imgcodecs.hpp>
-#include <spdlog/fmt/fmt.h>
+#include <fmt/format.h>
 
 #include "base/io.h"
 

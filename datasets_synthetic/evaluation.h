@@ -11,8 +11,9 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core/mat.hpp>
 
-#include "apps/compensation_stage.h"
-#include "apps/geometry_stage.h"
+#include "base/progress.h"
+#include "compensation/stage.h"
+#include "geometry/stage.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "projection/projector_images.h"
 
@@ -51,6 +52,7 @@ struct EvaluationOptions {
   bool multires = true;  // for the perceptual method
   int world_factor = 4;  // world mesh patches per solver patch
   double albedo_variation = 0.05;  // the simulated room's uneven paint (SimulatedRigOptions)
+  ProgressCallback progress;       // what is being evaluated, ΔE per method
   bool Check(std::string* why) const;
 };
 
@@ -71,11 +73,6 @@ double LowestMeanDeltaE(const CompensationProblem& problem, const Eigen::VectorX
 // T and white, within `mask`; means and maxima over the mask.
 void PixelDeltaE(const cv::Mat& result, const cv::Mat& desired, const cv::Mat& mask, const Eigen::Matrix3d& rgb_to_xyz,
                  const Eigen::Vector3d& white_xyz, MethodEvaluation* evaluation);
-
-// Linear RGB (CV_32FC3, RGB) → displayable 8-bit sRGB (CV_8UC3, BGR for OpenCV writers).
-cv::Mat LinearToDisplay(const cv::Mat& linear);
-// ΔE (CV_32FC1) → colour heat map 0..max_value with a labelled colour bar on the right (BGR).
-cv::Mat HeatMapWithColourBar(const cv::Mat& delta_e, double max_value, const std::string& label);
 
 // Writes desired.png, <method>.png, <method>_delta_e76.png, <method>_delta_e2000.png,
 // <method>/projector_<k>.png into `directory`; returns the file names by role.

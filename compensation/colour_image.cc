@@ -1,0 +1,96 @@
+#include "compensation/colour_image.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+#include <opencv2/imgproc.hpp>
+
+#include "geometry/srgb.h"
+
+namespace procam {
+
+cv::Mat LabImage(const cv::Mat& linear_rgb, const LabConverter& lab) {
+  CV_Assert(linear_rgb.type() == CV_32FC3);
+  cv::Mat result(linear_rgb.rows, linear_rgb.cols, CV_64FC3);
+  for (int row = 0; row < linear_rgb.rows; ++row) {
+    for (int col = 0; col < linear_rgb.cols; ++col) {
+      const cv::Vec3f& v = linear_rgb.at<cv::Vec3f>(row, col);
+      const Eigen::Vector3d value = lab.Lab(Eigen::Vector3d(v[0], v[1], v[2]));
+      result.at<cv::Vec3d>(row, col) = cv::Vec3d(value[0], value[1], value[2]);
+    }
+  }
+  return result;
+}
+
+ImageDeltaE CompareLabImages(const cv::Mat& lab_a, const cv::Mat& lab_b, const cv::Mat& mask) {
+  CV_Assert(lab_a.type() == CV_64FC3 && lab_b.type() == CV_64FC3 && lab_a.size() == lab_b.size());
+  CV_Assert(mask.empty() || (mask.type() == CV_8UC1 && mask.size() == lab_a.size()));
+  ImageDeltaE result;
+  result.delta_e76 = cv::Mat::zeros(lab_a.rows, lab_a.cols, CV_32FC1);
+  result.delta_e2000 = cv::Mat::zeros(lab_a.rows, lab_a.cols, CV_32FC1);
+  double sum76 = 0, sum2000 = 0;
+  for (int row = 0; row < lab_a.rows; ++row) {
+    for (int col = 0; col < lab_a.cols; ++col) {
+      if (!mask.empty() && mask.at<uchar>(row, col) == 0) continue;
+      const cv::Vec3d& a = lab_a.at<cv::Vec3d>(row, col);
+      const cv::Vec3d& b = lab_b.at<cv::Vec3d>(row, col);
+      const Eigen::Vector3d lab1(a[0], a[1], a[2]), lab2(b[0], b[1], b[2]);
+      const double e76 = DeltaE76(lab1, lab2), e2000 = DeltaE2000(lab1, lab2);
+      result.delta_e76.at<float>(row, col) = static_cast<float>(e76);
+      result.delta_e2000.at<float>(row, col) = static_cast<float>(e2000);
+      sum76 += e76;
+      sum2000 += e2000;
+      result.max76 = std::max(result.max76, e76);
+      result.max2000 = std::max(result.max2000, e2000);
+      ++result.pixels;
+    }
+  }
+  if (result.pixels > 0) {
+    result.mean76 = sum76 / result.pixels;
+    result.mean2000 = sum2000 / result.pixels;
+  }
+  return result;
+}
+
+cv::Mat LinearToDisplay(const cv::Mat& linear) {
+  cv::Mat display(linear.rows, linear.cols, CV_8UC3);
+  for (int row = 0; row < linear.rows; ++row) {
+    for (int col = 0; col < linear.cols; ++col) {
+      const cv::Vec3f& v = linear.at<cv::Vec3f>(row, col);
+      cv::Vec3b& out = display.at<cv::Vec3b>(row, col);
+      for (int c = 0; c < 3; ++c) {
+        out[2 - c] = static_cast<uchar>(std::lround(255.0 * LinearToSrgb(std::clamp(double(v[c]), 0.0, 1.0))));
+      }
+    }
+  }
+  return display;
+}
+
+cv::Mat HeatMapWithColourBar(const cv::Mat& delta_e, double max_value, const std::string& label) {
+  cv::Mat scaled;
+  delta_e.convertTo(scaled, CV_8UC1, 255.0 / max_value);
+  cv::Mat heat;
+  cv::applyColorMap(scaled, heat, cv::COLORMAP_INFERNO);
+  const int bar_width = 70, bar_left = 12, bar_thickness = 18;
+  cv::Mat canvas(heat.rows, heat.cols + bar_width, CV_8UC3, cv::Scalar(255, 255, 255));
+  heat.copyTo(canvas(cv::Rect(0, 0, heat.cols, heat.rows)));
+  const int top = 20, bottom = heat.rows - 20;
+  cv::Mat ramp(bottom - top, 1, CV_8UC1);
+  for (int k = 0; k < ramp.rows; ++k) ramp.at<uchar>(k, 0) = static_cast<uchar>(255 - 255 * k / std::max(1, ramp.rows - 1));
+  cv::Mat ramp_colour;
+  cv::applyColorMap(ramp, ramp_colour, cv::COLORMAP_INFERNO);
+  cv::resize(ramp_colour, ramp_colour, cv::Size(bar_thickness, ramp.rows), 0, 0, cv::INTER_NEAREST);
+  ramp_colour.copyTo(canvas(cv::Rect(heat.cols + bar_left, top, bar_thickness, ramp.rows)));
+  const double font = 0.35;
+  for (int tick = 0; tick <= 4; ++tick) {
+    const int y = bottom - (bottom - top) * tick / 4;
+    cv::putText(canvas, fmt::format("{:.0f}", max_value * tick / 4), cv::Point(heat.cols + bar_left + bar_thickness + 3, y + 4),
+                cv::FONT_HERSHEY_SIMPLEX, font, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+  }
+  cv::putText(canvas, label, cv::Point(heat.cols + 4, 12), cv::FONT_HERSHEY_SIMPLEX, font, cv::Scalar(0, 0, 0), 1,
+              cv::LINE_AA);
+  return canvas;
+}
+
+}  // namespace procam

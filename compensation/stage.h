@@ -1,0 +1,78 @@
+#pragma once
+// The compensation stage: the fine and coarse problems from the geometry stage, the solve, the
+// colour differences per patch, and the solution directory (docs/solution_format.md).
+
+#include <filesystem>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "base/progress.h"
+#include "compensation/problem.h"
+#include "compensation/solver.h"
+#include "geometry/stage.h"
+
+namespace procam {
+
+struct CompensationRun {
+  CompensationProblem fine, coarse;
+  CompensationSolution solution;
+  SolverSummary summary;
+  double perceptual_objective = 0.0;  // f in L*a*b* of the solution, whatever the method
+  Eigen::VectorXd delta_e76, delta_e2000;  // per fine patch
+  double mean_delta_e76 = 0.0, max_delta_e76 = 0.0;      // area-weighted mean, max
+  double mean_delta_e2000 = 0.0, max_delta_e2000 = 0.0;
+};
+
+struct CompensationOptions {
+  SolverOptions solver;  // method, multires, device, tolerances (solver.h)
+  double alpha = 0.5;    // weight of the absolute term of the objective, (0, 1]
+  // The fine patches' direct-light limits (n,3), e.g. a projection rig's lower and upper
+  // (projection/projection_rig.h); empty: the scene's "bounds".
+  Eigen::MatrixX3d lower, upper;
+  // A line per solver iteration and the solver's brief report (when solver.progress is unset).
+  ProgressCallback progress;
+  bool Check(std::string* why) const;
+};
+
+// Builds the fine and coarse problems (coarse F aggregated from the fine one, coarse bounds
+// area-weighted from the fine ones) and solves. Throws std::invalid_argument for bad options.
+// A numerical failure is run.summary.termination, not an exception.
+CompensationRun RunCompensation(const GeometryStage& geometry, const CompensationOptions& options);
+
+// result.json content for a run (docs/solution_format.md).
+nlohmann::json CompensationResultJson(const GeometryStage& geometry, const CompensationRun& run);
+
+// The solution directory: what `procam compensate` writes and `project`, `verify` and the demo
+// read. result.json (format version kSolutionFormatVersion) with the run's numbers, E.npy and
+// B.npy (n,3), and with `--export` the whole problem (ExportProblem). Schema:
+// docs/solution_format.md.
+constexpr int kSolutionFormatVersion = 1;
+
+// Writes result.json, E.npy, B.npy (and with `export_problem` the whole problem) into `out`,
+// each atomically. `extra` keys (e.g. "rig") are added to result.json.
+void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run,
+                       const std::filesystem::path& out, bool export_problem,
+                       const nlohmann::json& extra = nlohmann::json::object());
+
+// A solution directory as read back.
+struct SolutionDirectory {
+  std::filesystem::path dir;
+  nlohmann::json result;  // result.json as read: every key, the typed ones below included
+  // The scene as compensate named it (a file, or PREFIX:NAME): a relative file path that does
+  // not exist from here but does from `dir` is made relative to `dir`.
+  std::string scene;
+  int patches = 0;         // fine patches
+  int target_patches = 0;  // the patch target that subdivides the scene into them
+  CompensationMethod method = CompensationMethod::kPerceptual;
+  bool multires = false;
+  double alpha = 0.5;
+  std::filesystem::path rig_dir;  // the rig directory compensate used (--rig); empty if none
+  Eigen::MatrixX3d emittance, radiosity;  // E.npy, B.npy
+};
+// Reads and checks a solution directory. Throws IoError naming the file and the key (or the
+// .npy and its shape): no result.json, a format version other than kSolutionFormatVersion, a
+// missing or mistyped key, arrays of the wrong shape or with non-finite values.
+SolutionDirectory ReadSolutionDirectory(const std::filesystem::path& dir);
+
+}  // namespace procam

@@ -1,0 +1,62 @@
+#pragma once
+// Camera pixels cast into the room: which fine patch each pixel of a registered camera sees, and
+// how each projector lights the point it sees (geometric gain, the projector pixel whose area
+// holds the point's projection, occlusion by the scene's surfaces). The camera is a
+// ProjectorGeometry whose proj_from_world is cam_from_room (the same lens model and pixel
+// convention as a projector, projector.h).
+
+#include <cstdint>
+#include <vector>
+
+#include "geometry/patches.h"
+#include "geometry/scene.h"
+#include "projection/projection_rig.h"
+#include "projection/projector.h"
+#include "projection/projector_images.h"
+
+namespace procam {
+
+// What a camera pixel sees and how one projector lights it.
+struct CameraPixelLighting {
+  int width = 0, height = 0;
+  std::vector<int> patch;    // fine patch seen (row-major), −1 for none (or its unlit side)
+  std::vector<double> gain;  // the projector's geometric gain G at the point (1/m²), 0 if unlit
+};
+
+// What every camera pixel sees and how each projector lights it, keeping the projector pixel
+// that lights the point: the cast of LightCameraPixels for every projector at once.
+struct CameraPixelRays {
+  int width = 0, height = 0, projectors = 0;
+  std::vector<int> patch;  // fine patch seen (row-major), −1 for none (or its unlit side)
+  // Per (camera pixel, projector), index pixel · projectors + k: the geometric gain G_k at the
+  // point (1/m²; 0 where k does not light it: outside its image, facing away, occluded) and
+  // the projector pixel whose area holds the point's projection (row · width + column; −1
+  // where unlit).
+  std::vector<float> gain;
+  std::vector<int32_t> projector_pixel;
+};
+CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
+                                 const std::vector<Projector>& projectors,
+                                 const ProjectorGeometry& camera, double ray_margin = 1e-4);
+
+// Casts every camera pixel's ray (camera = a ProjectorGeometry whose proj_from_world is
+// cam_from_room) against the fine patches, and lights the hit from the projector: in its image,
+// facing it and unoccluded (shadow ray against the scene's surfaces, `ray_margin` metres).
+CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& level,
+                                      const ProjectorGeometry& projector,
+                                      const ProjectorGeometry& camera, double ray_margin = 1e-4);
+
+// The predicted exitance of every camera pixel (CV_32FC3, working R, G, B, scene units; 0 where
+// the pixel sees nothing) for the images shown, by the model's split of the light at the point
+// x of patch i the pixel sees (calibration/photometric_transfer.h's transfer):
+//     x_p = ρ_i ⊙ (Σ_k G_k(x) · output_k(code_k) + (F B)_i),
+// code_k the code of the projector pixel that lights x, output_k the projector's photometry as
+// the model knows it, and B = K⁻¹(ρ ⊙ D) the radiosity of the direct irradiance D the shown
+// images deliver to each patch (the renderer's flux bookkeeping), so the bounce term is the one
+// of the light actually shown. `shown_radiosity` (optional) receives that B.
+cv::Mat PredictPixels(const CameraPixelRays& rays, const ProjectionRig& rig,
+                      const std::vector<ProjectorImage>& images,
+                      const Eigen::MatrixXd& form_factors,
+                      Eigen::MatrixX3d* shown_radiosity = nullptr);
+
+}  // namespace procam

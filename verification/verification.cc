@@ -1,0 +1,864 @@
+#include "verification/verification.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <mutex>
+
+#include <fmt/format.h>
+
+#include "base/image_io.h"
+#include "base/io.h"
+#include "calibration/camera_response.h"
+#include "calibration/model_fit.h"
+#include "calibration/rig_directory.h"
+#include "capture/camera.h"
+#include "capture/patterns.h"
+#include "capture/pixel_format.h"
+#include "capture/session.h"
+#include "capture/test_camera.h"
+#include "compensation/colour.h"
+#include "compensation/problem.h"
+#include "compensation/stage.h"
+#include "geometry/stage.h"
+#include "projection/camera_rays.h"
+#include "projection/projection_rig.h"
+#include "projection/projector_images.h"
+
+namespace procam {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+nlohmann::json Json3(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
+
+void CreateDirectories(const std::filesystem::path& dir) {
+  std::error_code error;
+  std::filesystem::create_directories(dir, error);
+  if (error) throw IoError(dir.string() + ": cannot create directory: " + error.message());
+}
+
+struct SimulatedCameraSources {
+  std::mutex mutex;
+  std::map<std::string, SimulatedCameraSource> sources;
+};
+SimulatedCameraSources& SimulatedSources() {
+  static SimulatedCameraSources sources;
+  return sources;
+}
+
+// The simulated camera behind `uri`, when its scheme has a registered source.
+std::optional<SimulatedCamera> FindSimulatedCamera(const CameraUri& uri, const std::string& text) {
+  SimulatedCameraSource source;
+  {
+    SimulatedCameraSources& registry = SimulatedSources();
+    const std::lock_guard<std::mutex> lock(registry.mutex);
+    const auto found = registry.sources.find(uri.scheme());
+    if (found == registry.sources.end()) return std::nullopt;
+    source = found->second;
+  }
+  return source(text);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Camera colour
+
+// What the rig or the options say (the synthetic camera's is derived per photo).
+struct ColourSource {
+  bool simulated = false;
+  Eigen::Matrix3d matrix = Eigen::Matrix3d::Identity();  // per unit camera value
+  double black = 0.0;
+  std::string source;
+};
+
+ColourSource ResolveColourSource(const VerificationOptions& options, const nlohmann::json& rig_json,
+                                 const std::string& rig_file, bool simulated) {
+  ColourSource c;
+  c.black = std::max(0.0, options.camera_black);
+  if (options.camera_scale) {
+    c.matrix = options.camera_scale->cwiseInverse().asDiagonal();
+    c.source = "--camera-scale";
+    return c;
+  }
+  const nlohmann::json camera = rig_json.value("camera", nlohmann::json::object());
+  if (camera.is_object() && camera.contains("colour")) {
+    const nlohmann::json& colour = camera["colour"];
+    const std::string key = rig_file + ": camera.colour";
+    if (colour.is_object() && colour.contains("scale") && colour["scale"].is_array() &&
+        colour["scale"].size() == 3) {
+      Eigen::Vector3d k;
+      for (int i = 0; i < 3; ++i) {
+        if (!colour["scale"][i].is_number() || !(colour["scale"][i].get<double>() > 0))
+          throw IoError(key + ".scale: three positive numbers (camera value per unit exitance)");
+        k[i] = colour["scale"][i].get<double>();
+      }
+      c.matrix = k.cwiseInverse().asDiagonal();
+    } else if (colour.is_object() && colour.contains("matrix") && colour["matrix"].is_array() &&
+               colour["matrix"].size() == 3) {
+      for (int r = 0; r < 3; ++r) {
+        const nlohmann::json& row = colour["matrix"][r];
+        if (!row.is_array() || row.size() != 3)
+          throw IoError(key + ".matrix: 3 rows of 3 numbers (camera RGB → exitance)");
+        for (int j = 0; j < 3; ++j) {
+          if (!row[j].is_number()) throw IoError(key + ".matrix: numbers only");
+          c.matrix(r, j) = row[j].get<double>();
+        }
+      }
+      if (std::abs(c.matrix.determinant()) < 1e-300) throw IoError(key + ".matrix: singular");
+    } else {
+      throw IoError(key + ": expected {\"scale\": [R,G,B]} or {\"matrix\": [[..],[..],[..]]}");
+    }
+    if (options.camera_black < 0) c.black = colour.value("black", 0.0);
+    c.source = "rig.json camera.colour";
+    return c;
+  }
+  if (simulated) {
+    c.simulated = true;
+    c.source = "simulated camera";
+    return c;
+  }
+  throw IoError(rig_file +
+                ": camera.colour: required key is missing for camera '" + options.camera +
+                "' (the camera's value per unit exitance: {\"scale\": [R,G,B]} or {\"matrix\": "
+                "3x3}), or give --camera-scale");
+}
+
+// Linear working RGB (CV_32FC3, R, G, B) in scene units from the camera's linear photo (B, G, R).
+cv::Mat PhotoToExitance(const cv::Mat& photo, const CameraColour& colour) {
+  cv::Mat exitance(photo.rows, photo.cols, CV_32FC3);
+  for (int row = 0; row < photo.rows; ++row) {
+    for (int col = 0; col < photo.cols; ++col) {
+      const cv::Vec3f& v = photo.at<cv::Vec3f>(row, col);
+      const Eigen::Vector3d camera(v[2] - colour.black, v[1] - colour.black, v[0] - colour.black);
+      const Eigen::Vector3d x = colour.to_exitance * camera;
+      exitance.at<cv::Vec3f>(row, col) = cv::Vec3f(float(x[0]), float(x[1]), float(x[2]));
+    }
+  }
+  return exitance;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Photo against desired and predicted
+
+struct Comparison {
+  PhotoDeltaE measured, model;
+  double predicted_mean76 = 0, predicted_mean2000 = 0;
+  double model_constant_mean76 = 0;  // per pixel, photo vs its patch's B (constant per patch)
+  Eigen::MatrixX3d patch_exitance;  // mean measured exitance per patch (NaN where unseen)
+  std::vector<bool> seen;
+  int seen_pixels = 0, seen_patches = 0;
+  cv::Mat delta_e76, delta_e2000, model_delta_e76, predicted;  // per pixel
+};
+
+// Per pixel: the photo against the desired appearance of the patch each pixel sees and against
+// the per-pixel prediction `predicted_pixels` (PredictPixels), ΔE maps and means over the seen
+// pixels (colour_image.h); and against its patch's B (constant over the patch).
+void ComparePixels(const cv::Mat& exitance, const std::vector<int>& pixel_patch, const LabConverter& lab,
+                   const std::vector<Eigen::Vector3d>& lab_desired, const std::vector<Eigen::Vector3d>& lab_predicted,
+                   const cv::Mat& predicted_pixels, Comparison* result) {
+  const int rows = exitance.rows, cols = exitance.cols;
+  cv::Mat seen(rows, cols, CV_8UC1, cv::Scalar(0));
+  cv::Mat desired(rows, cols, CV_64FC3, cv::Scalar::all(0));
+  const cv::Mat lab_measured = LabImage(exitance, lab);
+  double constant76 = 0;
+  for (int row = 0; row < rows; ++row) {
+    for (int col = 0; col < cols; ++col) {
+      const int i = pixel_patch[static_cast<size_t>(row) * cols + col];
+      if (i < 0) continue;
+      seen.at<uchar>(row, col) = 255;
+      desired.at<cv::Vec3d>(row, col) = cv::Vec3d(lab_desired[i][0], lab_desired[i][1], lab_desired[i][2]);
+      const cv::Vec3d& m = lab_measured.at<cv::Vec3d>(row, col);
+      constant76 += DeltaE76(Eigen::Vector3d(m[0], m[1], m[2]), lab_predicted[i]);
+    }
+  }
+  const ImageDeltaE against_desired = CompareLabImages(lab_measured, desired, seen);
+  const ImageDeltaE against_model = CompareLabImages(lab_measured, LabImage(predicted_pixels, lab), seen);
+  result->delta_e76 = against_desired.delta_e76;
+  result->delta_e2000 = against_desired.delta_e2000;
+  result->model_delta_e76 = against_model.delta_e76;
+  result->predicted = predicted_pixels;
+  result->measured.mean76 = against_desired.mean76;
+  result->measured.max76 = against_desired.max76;
+  result->measured.mean2000 = against_desired.mean2000;
+  result->measured.max2000 = against_desired.max2000;
+  result->model.mean76 = against_model.mean76;
+  result->model.max76 = against_model.max76;
+  result->model.mean2000 = against_model.mean2000;
+  result->model.max2000 = against_model.max2000;
+  result->seen_pixels = static_cast<int>(against_desired.pixels);
+  result->model_constant_mean76 = constant76 / std::max(1, result->seen_pixels);
+}
+
+// Per patch: the mean exitance of its interior pixels (away from patch borders, where projector
+// pixels straddling two patches spill light), or of all its pixels when too few are interior;
+// patches with fewer than `min_pixels` pixels are unseen. ΔE area-weighted over the seen ones.
+void ComparePatches(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
+                    const std::vector<bool>& interior, const CompensationProblem& problem, const LabConverter& lab,
+                    const std::vector<Eigen::Vector3d>& lab_desired, const std::vector<Eigen::Vector3d>& lab_predicted,
+                    int min_pixels, Comparison* result) {
+  const int n = problem.size();
+  Eigen::MatrixX3d sum_all = Eigen::MatrixX3d::Zero(n, 3), sum_interior = sum_all;
+  std::vector<int> count_all(n, 0), count_interior(n, 0);
+  for (int row = 0; row < exitance.rows; ++row) {
+    for (int col = 0; col < exitance.cols; ++col) {
+      const size_t index = static_cast<size_t>(row) * exitance.cols + col;
+      const int i = pixel_patch[index];
+      if (i < 0) continue;
+      const cv::Vec3f& v = exitance.at<cv::Vec3f>(row, col);
+      const Eigen::RowVector3d x(v[0], v[1], v[2]);
+      sum_all.row(i) += x;
+      ++count_all[i];
+      if (interior[index]) {
+        sum_interior.row(i) += x;
+        ++count_interior[i];
+      }
+    }
+  }
+  result->patch_exitance = Eigen::MatrixX3d::Constant(n, 3, std::numeric_limits<double>::quiet_NaN());
+  result->seen.assign(n, false);
+  double area = 0, patch76 = 0, patch2000 = 0, model_patch76 = 0, model_patch2000 = 0, predicted76 = 0,
+         predicted2000 = 0;
+  for (int i = 0; i < n; ++i) {
+    if (count_all[i] < min_pixels) continue;
+    result->seen[i] = true;
+    ++result->seen_patches;
+    result->patch_exitance.row(i) = count_interior[i] >= min_pixels
+                                        ? Eigen::RowVector3d(sum_interior.row(i) / count_interior[i])
+                                        : Eigen::RowVector3d(sum_all.row(i) / count_all[i]);
+    const Eigen::Vector3d lab_measured = lab.Lab(result->patch_exitance.row(i).transpose());
+    const double a = problem.area[i];
+    area += a;
+    patch76 += a * DeltaE76(lab_measured, lab_desired[i]);
+    patch2000 += a * DeltaE2000(lab_measured, lab_desired[i]);
+    model_patch76 += a * DeltaE76(lab_measured, lab_predicted[i]);
+    model_patch2000 += a * DeltaE2000(lab_measured, lab_predicted[i]);
+    predicted76 += a * DeltaE76(lab_predicted[i], lab_desired[i]);
+    predicted2000 += a * DeltaE2000(lab_predicted[i], lab_desired[i]);
+  }
+  if (area > 0) {
+    result->measured.patch_mean76 = patch76 / area;
+    result->measured.patch_mean2000 = patch2000 / area;
+    result->model.patch_mean76 = model_patch76 / area;
+    result->model.patch_mean2000 = model_patch2000 / area;
+    result->predicted_mean76 = predicted76 / area;
+    result->predicted_mean2000 = predicted2000 / area;
+  }
+}
+
+// Photo vs desired and vs predicted, per pixel (against the per-pixel prediction) and per patch
+// (against the solution's radiosity B), as the header comment says.
+Comparison Compare(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
+                   const std::vector<bool>& interior, const CompensationProblem& problem,
+                   const Eigen::MatrixX3d& radiosity, const cv::Mat& predicted_pixels, int min_pixels) {
+  const int n = problem.size();
+  const LabConverter lab{problem.rgb_to_xyz, problem.white_xyz};
+  std::vector<Eigen::Vector3d> lab_desired(n), lab_predicted(n);
+  for (int i = 0; i < n; ++i) {
+    lab_desired[i] = lab.Lab(problem.desired.row(i).transpose());
+    lab_predicted[i] = lab.Lab(radiosity.row(i).transpose());
+  }
+  Comparison result;
+  ComparePixels(exitance, pixel_patch, lab, lab_desired, lab_predicted, predicted_pixels, &result);
+  ComparePatches(exitance, pixel_patch, interior, problem, lab, lab_desired, lab_predicted, min_pixels, &result);
+  return result;
+}
+
+double SolverMeanDeltaE76(const CompensationProblem& problem, const Eigen::MatrixX3d& radiosity) {
+  const LabConverter lab{problem.rgb_to_xyz, problem.white_xyz};
+  double sum = 0;
+  for (int i = 0; i < problem.size(); ++i) {
+    sum += problem.area[i] * DeltaE76(lab.Lab(radiosity.row(i).transpose()),
+                                      lab.Lab(problem.desired.row(i).transpose()));
+  }
+  return sum / problem.area.sum();
+}
+
+nlohmann::json DeltaEJson(const PhotoDeltaE& d) {
+  return {{"pixel_mean76", d.mean76},         {"pixel_max76", d.max76},
+          {"pixel_mean2000", d.mean2000},     {"pixel_max2000", d.max2000},
+          {"patch_mean76", d.patch_mean76}, {"patch_mean2000", d.patch_mean2000}};
+}
+
+nlohmann::json IterationJson(const VerificationIteration& it) {
+  nlohmann::json exponents = nlohmann::json::array();
+  for (const Eigen::Vector3d& e : it.response_exponent) exponents.push_back(Json3(e));
+  nlohmann::json json = {
+      {"iteration", it.index},
+      {"directory", it.directory.string()},
+      {"measured_vs_desired", DeltaEJson(it.measured)},
+      {"measured_vs_predicted", DeltaEJson(it.model)},
+      {"measured_vs_patch_radiosity_pixel_mean76", it.model_constant_mean76},
+      {"predicted_vs_desired", {{"patch_mean76", it.predicted_mean76},
+                                {"patch_mean2000", it.predicted_mean2000},
+                                {"solver_mean76_all_patches", it.solver_mean76}}},
+      {"seen_pixels", it.seen_pixels},
+      {"seen_patches", it.seen_patches},
+      {"seconds", {{"capture", it.capture_seconds}, {"solve", it.solve_seconds}, {"total", it.seconds}}}};
+  if (!it.response_exponent.empty()) {
+    json["update"] = {{"response_exponent", exponents},
+                      {"reflectance_scale", Json3(it.reflectance_scale)}};
+  }
+  return json;
+}
+
+nlohmann::json DeltaEJson(const PhotoDeltaE& d) {
+  return {{"pixel_mean76", d.mean76},         {"pixel_max76", d.max76},
+          {"pixel_mean2000", d.mean2000},     {"pixel_max2000", d.max2000},
+          {"patch_mean76", d.patch_mean76}, {"patch_mean2000", d.patch_mean2000}};
+}
+
+nlohmann::json IterationJson(const VerificationIteration& it) {
+  nlohmann::json exponents = nlohmann::json::array();
+  for (const Eigen::Vector3d& e : it.response_exponent) exponents.push_back(Json3(e));
+  nlohmann::json json = {
+      {"iteration", it.index},
+      {"directory", it.directory.string()},
+      {"measured_vs_desired", DeltaEJson(it.measured)},
+      {"measured_vs_predicted", DeltaEJson(it.model)},
+      {"measured_vs_patch_radiosity_pixel_mean76", it.model_constant_mean76},
+      {"predicted_vs_desired", {{"patch_mean76", it.predicted_mean76},
+                                {"patch_mean2000", it.predicted_mean2000},
+                                {"solver_mean76_all_patches", it.solver_mean76}}},
+      {"seen_pixels", it.seen_pixels},
+      {"seen_patches", it.seen_patches},
+      {"seconds", {{"capture", it.capture_seconds}, {"solve", it.solve_seconds}, {"total", it.seconds}}}};
+  if (!it.response_exponent.empty()) {
+    json["update"] = {{"response_exponent", exponents},
+                      {"reflectance_scale", Json3(it.reflectance_scale)}};
+  }
+  return json;
+}
+
+}  // namespace
+
+void RegisterSimulatedCameraSource(const std::string& scheme, SimulatedCameraSource source) {
+  SimulatedCameraSources& registry = SimulatedSources();
+  const std::lock_guard<std::mutex> lock(registry.mutex);
+  registry.sources[scheme] = std::move(source);
+}
+
+nlohmann::json CameraColour::Json() const {
+  nlohmann::json m = nlohmann::json::array();
+  for (int r = 0; r < 3; ++r) m.push_back(Json3(to_exitance.row(r).transpose()));
+  return {{"to_exitance", m}, {"black", black}, {"source", source}};
+}
+
+// ---------------------------------------------------------------------------------------------
+
+bool VerificationOptions::Check(std::string* why) const {
+  auto fail = [why](const std::string& text) {
+    if (why) *why = text;
+    return false;
+  };
+  if (rig_dir.empty()) return fail("the rig directory is required");
+  if (solution_dir.empty()) return fail("the solution directory is required");
+  if (out.empty()) return fail("--out is required");
+  if (camera.empty()) return fail("--camera is required");
+  if (iterations < 1 || iterations > 50) return fail("--iterations must be in [1, 50]");
+  if (!(min_improvement >= 0.0 && min_improvement < 1.0))
+    return fail("--min-improvement must be in [0, 1)");
+  if (!(reflectance_step > 0.0 && reflectance_step <= 1.0))
+    return fail("--reflectance-step must be in (0, 1]");
+  if (min_patch_pixels < 1) return fail("--min-patch-pixels must be ≥ 1");
+  std::string sequencer_why;
+  if (!sequencer.Check(&sequencer_why)) return fail(sequencer_why);
+  if (!camera_response.empty() && sequencer.exposures_us.size() < 2)
+    return fail("--camera-response needs bracketed exposures (--exposure-us a,b,...)");
+  return true;
+}
+
+nlohmann::json VerificationSummary::Json() const {
+  nlohmann::json list = nlohmann::json::array();
+  for (const VerificationIteration& it : iterations) list.push_back(IterationJson(it));
+  nlohmann::json json = {{"command", "verify"},
+                         {"iterations", list},
+                         {"best", best},
+                         {"complete", complete},
+                         {"termination", termination},
+                         {"seconds", seconds}};
+  if (!error.empty()) json["error"] = error;
+  if (!iterations.empty() && best >= 0) {
+    const double first = iterations.front().measured.mean76;
+    const double kept = iterations[best].measured.mean76;
+    json["initial_mean76"] = first;
+    json["best_mean76"] = kept;
+    json["improvement"] = first > 0 ? (first - kept) / first : 0.0;
+  }
+  return json;
+}
+
+std::string VerificationSummary::BriefReport() const {
+  if (iterations.empty()) return "verify: no photo taken (" + termination + ")";
+  std::string text = "verify: " + std::to_string(iterations.size()) + " photo(s), measured mean ΔE76";
+  for (const VerificationIteration& it : iterations) text += fmt::format(" {:.2f}", it.measured.mean76);
+  if (best >= 0) {
+    text += fmt::format("; best iteration {} ({:.2f}, model error {:.2f}, predicted {:.2f}), {}",
+                        best, iterations[best].measured.mean76, iterations[best].model.mean76,
+                        iterations[best].predicted_mean76, termination);
+  }
+  return text;
+}
+
+namespace {
+
+// A camera or projector fault while photographing: the loop keeps what it did and says so.
+class PhotoFault : public IoError {
+ public:
+  using IoError::IoError;
+};
+
+// Everything the loop reads, checked before anything is shown or written.
+struct VerificationInputs {
+  RigDirectory rig;
+  std::string rig_file;
+  std::filesystem::path camera_model_path;
+  ProjectorGeometry camera_geometry;
+  SolutionDirectory solution;
+  std::optional<SimulatedCamera> simulated;
+  ColourSource colour_source;
+  std::vector<std::shared_ptr<PatternDisplay>> displays;
+  std::vector<std::string> names;  // the rig's projectors, in rig.json's order
+};
+
+VerificationInputs ReadInputs(const VerificationOptions& options) {
+  VerificationInputs in;
+  in.rig = ReadRigDirectory(options.rig_dir);
+  in.rig_file = (options.rig_dir / "rig.json").string();
+  const nlohmann::json camera_json = in.rig.json.value("camera", nlohmann::json::object());
+  if (!camera_json.is_object() || !camera_json.contains("model") || !camera_json["model"].is_string()) {
+    throw IoError(in.rig_file + ": camera.model: required key is missing (the camera registered in "
+                                "the room, from procam calibrate projectors)");
+  }
+  in.camera_model_path = options.rig_dir / camera_json["model"].get<std::string>();
+  if (!std::filesystem::exists(in.camera_model_path)) {
+    throw IoError(in.rig_file + ": camera.model: " + in.camera_model_path.string() + ": file not found");
+  }
+  in.camera_geometry = ReadCameraModel(in.camera_model_path);
+  in.solution = ReadSolutionDirectory(options.solution_dir);
+
+  in.simulated = FindSimulatedCamera(CameraUri::Parse(options.camera), options.camera);
+  in.colour_source = ResolveColourSource(options, in.rig.json, in.rig_file, in.simulated.has_value());
+  in.displays = options.displays;
+  if (in.simulated && in.displays.empty()) in.displays = in.simulated->displays;
+  if (in.displays.size() != in.rig.projectors.size()) {
+    throw IoError(in.rig_file + ": projectors: the rig has " + std::to_string(in.rig.projectors.size()) +
+                  " projector(s) but " + std::to_string(in.displays.size()) +
+                  " display(s) were given (one --display glfw:N|NAME per projector, in rig.json's order)");
+  }
+  for (size_t k = 0; k < in.displays.size(); ++k) {
+    const Projector& projector = in.rig.projectors[k];
+    in.names.push_back(projector.name);
+    const cv::Size size(projector.geometry.width(), projector.geometry.height());
+    const cv::Size display = in.displays[k]->Resolution();
+    if (display != size) {
+      throw IoError(in.rig_file + ": projectors[" + std::to_string(k) + "] ('" + projector.name + "') is " +
+                    std::to_string(size.width) + "x" + std::to_string(size.height) + " but its display " +
+                    in.displays[k]->Name() + " is " + std::to_string(display.width) + "x" +
+                    std::to_string(display.height));
+    }
+  }
+  return in;
+}
+
+// The model the loop refines: geometry with the rig's reflectance, the projection rig (8-bit
+// displays), the camera's rays, and the problem as solved.
+struct VerificationModel {
+  GeometryStage geometry;
+  std::vector<Projector> projectors;
+  ProjectionRig rig;
+  CameraPixelRays lighting;
+  std::vector<bool> interior;  // pixels whose four neighbours see the same patch
+  CompensationProblem problem;
+};
+
+VerificationModel BuildModel(const VerificationOptions& options, const VerificationInputs& in) {
+  VerificationModel model;
+  GeometryOptions geometry_options;
+  geometry_options.patches = in.solution.target_patches;
+  geometry_options.progress = options.progress;
+  model.geometry = options.scene ? RunGeometryStage(*options.scene, geometry_options)
+                                 : RunGeometryStage(in.solution.scene, geometry_options);
+  if (model.geometry.patches.fine.size() != in.solution.patches) {
+    throw IoError((options.solution_dir / "result.json").string() + ": the solution has " +
+                  std::to_string(in.solution.patches) + " patches but its scene subdivides into " +
+                  std::to_string(model.geometry.patches.fine.size()) + " for target " +
+                  std::to_string(in.solution.target_patches));
+  }
+  ApplyRigReflectance(in.rig, &model.geometry.patches);
+  model.projectors = in.rig.projectors;
+  for (Projector& projector : model.projectors) {
+    if (projector.photometry.bits != 8) {
+      Report(options.progress, fmt::format("verify: projector '{}' is {}-bit; the displays show 8 bits, "
+                                           "rendering at 8",
+                                           projector.name, projector.photometry.bits));
+      projector.photometry.bits = 8;
+    }
+  }
+  model.rig = BuildProjectionRig(model.geometry.patches.fine, model.projectors, ProjectionRigOptions());
+  if (in.camera_geometry.width() <= 0) throw IoError(in.camera_model_path.string() + ": bad size");
+  Report(options.progress, fmt::format("verify: casting the camera's {}x{} rays", in.camera_geometry.width(),
+                                       in.camera_geometry.height()));
+  // The geometry is fixed; the photometry the loop refines is applied per photo (PredictPixels).
+  model.lighting = CastCameraPixels(model.geometry.scene, model.geometry.patches.fine, model.projectors,
+                                    in.camera_geometry);
+  const CameraPixelRays& rays = model.lighting;
+  model.interior.assign(rays.patch.size(), false);
+  for (int row = 1; row + 1 < rays.height; ++row) {
+    for (int col = 1; col + 1 < rays.width; ++col) {
+      const size_t index = static_cast<size_t>(row) * rays.width + col;
+      const int i = rays.patch[index];
+      model.interior[index] = i >= 0 && rays.patch[index - 1] == i && rays.patch[index + 1] == i &&
+                              rays.patch[index - rays.width] == i && rays.patch[index + rays.width] == i;
+    }
+  }
+  model.problem = MakeProblem(model.geometry.scene, model.geometry.patches.fine, model.geometry.form_factors,
+                              in.solution.alpha);
+  model.problem.lower = model.rig.lower;
+  model.problem.upper = model.rig.upper;
+  return model;
+}
+
+// The desired appearance as the camera sees it (8-bit BGR): each pixel its patch's desired colour.
+cv::Mat DesiredPicture(const VerificationModel& model) {
+  const CameraPixelRays& rays = model.lighting;
+  const double white = model.geometry.scene.white;
+  cv::Mat desired = cv::Mat::zeros(rays.height, rays.width, CV_32FC3);
+  for (int row = 0; row < rays.height; ++row) {
+    for (int col = 0; col < rays.width; ++col) {
+      const int i = rays.patch[static_cast<size_t>(row) * rays.width + col];
+      if (i < 0) continue;
+      desired.at<cv::Vec3f>(row, col) =
+          cv::Vec3f(float(model.problem.desired(i, 0) / white), float(model.problem.desired(i, 1) / white),
+                    float(model.problem.desired(i, 2) / white));
+    }
+  }
+  return LinearToDisplay(desired);
+}
+
+// The loop's state from one iteration to the next.
+class VerificationLoop {
+ public:
+  VerificationLoop(const VerificationOptions& options, const VerificationInputs& in, VerificationModel* model)
+      : options_(options), in_(in), model_(*model), wall_(in.displays, in.names) {
+    camera_ = OpenCamera(options.camera, OpenCameraOptions());
+    if (!IsColour(camera_->Settings().pixel_format)) {
+      throw IoError("camera '" + options.camera + "': delivers grey images; verification needs colour");
+    }
+    if (options.gain >= 0) camera_->SetGain(options.gain);
+    sequencer_ = options.sequencer;
+    if (!options.camera_response.empty()) {
+      sequencer_.hdr.inverse_response = ReadInverseResponse(options.camera_response, 3);
+    }
+    hdr_ = sequencer_.exposures_us.size() >= 2;
+    // The HDR merge subtracts the camera's black level: the option's, the simulated camera's,
+    // or rig.json's.
+    if (options.camera_black >= 0) {
+      sequencer_.hdr.black_level = options.camera_black;
+    } else if (in.simulated) {
+      sequencer_.hdr.black_level = in.simulated->black_level;
+    } else {
+      sequencer_.hdr.black_level = in.colour_source.black;
+    }
+    emittance_ = in.solution.emittance;
+    radiosity_ = in.solution.radiosity;
+  }
+
+  const SequencerOptions& sequencer() const { return sequencer_; }
+  bool hdr() const { return hdr_; }
+
+  // Shows the current solution, photographs it, compares; writes the iteration's files. Throws
+  // PhotoFault on a camera or projector fault (the caller keeps what was done).
+  VerificationIteration Photograph(int k, nlohmann::json* json);
+  // Fits the model to the iteration's photo and solves again (calibration/model_fit.h).
+  void UpdateAndSolve(VerificationIteration* it);
+
+ private:
+  CameraColour ColourOf(const CaptureSessionData& session) const;
+
+  const VerificationOptions& options_;
+  const VerificationInputs& in_;
+  VerificationModel& model_;
+  DisplayWall wall_;
+  std::unique_ptr<Camera> camera_;
+  SequencerOptions sequencer_;
+  bool hdr_ = false;
+  Eigen::MatrixX3d emittance_, radiosity_;
+  double heat_scale_ = 0.0;
+  // What the last photo said, for the update.
+  std::vector<ProjectorImage> images_;
+  Comparison comparison_;
+};
+
+CameraColour VerificationLoop::ColourOf(const CaptureSessionData& session) const {
+  if (in_.colour_source.simulated) {
+    const nlohmann::json& manifest = session.manifest();
+    const double full_scale = manifest["patterns"][0]["captured"].value("full_scale", 255.0);
+    return in_.simulated->colour(manifest, hdr_, full_scale, options_.camera_black);
+  }
+  CameraColour colour;
+  colour.to_exitance = in_.colour_source.matrix;
+  colour.black = hdr_ ? 0.0 : in_.colour_source.black;
+  colour.source = in_.colour_source.source;
+  return colour;
+}
+
+VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) {
+  VerificationIteration it;
+  it.index = k;
+  it.directory = options_.out / "iterations" / std::to_string(k);
+  CreateDirectories(it.directory);
+  RenderSummary render;
+  images_ = RenderProjectorImages(model_.rig, model_.geometry.scene, emittance_, RenderOptions(), &render);
+  std::vector<cv::Mat> patterns;
+  for (size_t p = 0; p < images_.size(); ++p) {
+    WriteProjectorImage(it.directory / (in_.names[p] + ".png"), images_[p]);
+    patterns.push_back(PatternFromImage(images_[p]));
+  }
+  WriteNpy(it.directory / "E.npy", RowMatrixXd(emittance_));
+  WriteNpy(it.directory / "B.npy", RowMatrixXd(radiosity_));
+  WriteNpy(it.directory / "reflectance.npy", RowMatrixXd(model_.rig.reflectance));
+
+  // Show and photograph: the session keeps the photo the moment it is taken.
+  CaptureSequence sequence;
+  sequence.kind = "verify";
+  const cv::Mat pattern = wall_.Compose(patterns);
+  sequence.parameters = {{"iteration", k}, {"projectors", in_.names}, {"checksum", PatternChecksum(pattern)}};
+  sequence.patterns.push_back({"solution", pattern, {{"kind", "verify"}, {"iteration", k}}});
+  CaptureSessionOptions session_options;
+  session_options.directory = it.directory / "session";
+  session_options.sequencer = sequencer_;
+  const auto capture_start = Clock::now();
+  try {
+    RunCaptureSession(session_options, sequence, *camera_, wall_);
+  } catch (const std::exception& error) {
+    throw PhotoFault(error.what());
+  }
+  it.capture_seconds = SecondsSince(capture_start);
+  const CaptureSessionData session = CaptureSessionData::Load(session_options.directory);
+  const cv::Mat photo = hdr_ ? session.Hdr(0) : session.Mean(0);
+  const CameraPixelRays& rays = model_.lighting;
+  if (photo.channels() != 3) throw IoError(session_options.directory.string() + ": the photo is not colour");
+  if (photo.cols != rays.width || photo.rows != rays.height) {
+    throw IoError("camera '" + options_.camera + "' delivers " + std::to_string(photo.cols) + "x" +
+                  std::to_string(photo.rows) + " photos but " + in_.camera_model_path.string() + " is " +
+                  std::to_string(rays.width) + "x" + std::to_string(rays.height));
+  }
+  const CameraColour colour = ColourOf(session);
+  cv::Mat photo32;
+  photo.convertTo(photo32, CV_32FC3);
+  const cv::Mat exitance = PhotoToExitance(photo32, colour);
+  const cv::Mat predicted = PredictPixels(rays, model_.rig, images_, model_.geometry.form_factors);
+  comparison_ = Compare(exitance, rays.patch, model_.interior, model_.problem, radiosity_, predicted,
+                        options_.min_patch_pixels);
+  it.measured = comparison_.measured;
+  it.model = comparison_.model;
+  it.predicted_mean76 = comparison_.predicted_mean76;
+  it.predicted_mean2000 = comparison_.predicted_mean2000;
+  it.solver_mean76 = SolverMeanDeltaE76(model_.problem, radiosity_);
+  it.seen_pixels = comparison_.seen_pixels;
+  it.seen_patches = comparison_.seen_patches;
+  it.model_constant_mean76 = comparison_.model_constant_mean76;
+  if (k == 0) heat_scale_ = std::max(10.0, 10.0 * std::ceil(3.0 * it.measured.mean76 / 10.0));
+  const double white = model_.geometry.scene.white;
+  it.photo = LinearToDisplay(exitance / white);
+  it.predicted = LinearToDisplay(comparison_.predicted / white);
+  it.delta_e76 = HeatMapWithColourBar(comparison_.delta_e76, heat_scale_, "dE76");
+  it.model_delta_e76 = HeatMapWithColourBar(comparison_.model_delta_e76, heat_scale_, "dE76");
+  WritePng(it.directory / "photo.png", it.photo);
+  WritePng(it.directory / "predicted.png", it.predicted);
+  WritePng(it.directory / "delta_e76.png", it.delta_e76);
+  WritePng(it.directory / "delta_e2000.png", HeatMapWithColourBar(comparison_.delta_e2000, heat_scale_ / 2, "dE00"));
+  WritePng(it.directory / "model_delta_e76.png", it.model_delta_e76);
+  WriteNpy(it.directory / "measured_B.npy", RowMatrixXd(comparison_.patch_exitance));
+  Report(options_.progress, fmt::format("verify: iteration {}: measured ΔE76 {:.2f} (max {:.1f}), model error "
+                                        "{:.2f}, predicted {:.2f}, {} patches seen",
+                                        k, it.measured.mean76, it.measured.max76, it.model.mean76,
+                                        it.predicted_mean76, it.seen_patches));
+  if (it.seen_patches == 0) {
+    throw IoError("camera '" + options_.camera + "': " + in_.camera_model_path.string() +
+                  " sees no patch of the scene (is the camera registered in the room frame?)");
+  }
+  *json = {{"colour", colour.Json()},
+           {"render",
+            {{"patches_below_lower", render.patches_below_lower},
+             {"patches_above_upper", render.patches_above_upper},
+             {"max_relative_error", render.max_relative_error}}}};
+  return it;
+}
+
+void VerificationLoop::UpdateAndSolve(VerificationIteration* it) {
+  const auto solve_start = Clock::now();
+  ModelFitOptions fit;
+  fit.fit_response = options_.fit_response;
+  fit.fit_reflectance = options_.fit_reflectance;
+  fit.reflectance_step = options_.reflectance_step;
+  const ModelUpdate update = FitModel(fit, model_.rig, images_, model_.geometry.form_factors,
+                                      comparison_.patch_exitance, comparison_.seen, radiosity_);
+  it->response_exponent = update.exponent;
+  it->reflectance_scale = update.scale;
+  Report(options_.progress, fmt::format("verify: model update: reflectance scale ({:.3f}, {:.3f}, {:.3f}), fit "
+                                        "rms {:.4f} → {:.4f}",
+                                        update.scale[0], update.scale[1], update.scale[2], update.rms_before,
+                                        update.rms_after));
+  for (size_t p = 0; p < update.exponent.size(); ++p) {
+    Report(options_.progress, fmt::format("verify:   projector '{}': response exponent ({:.3f}, {:.3f}, {:.3f})",
+                                          in_.names[p], update.exponent[p][0], update.exponent[p][1],
+                                          update.exponent[p][2]));
+  }
+  ApplyModelUpdate(update, &model_.rig, &model_.geometry.patches);
+  CompensationOptions compensation;
+  compensation.solver.method = in_.solution.method;
+  compensation.solver.multires = in_.solution.multires;
+  compensation.alpha = in_.solution.alpha;
+  compensation.lower = model_.rig.lower;
+  compensation.upper = model_.rig.upper;
+  compensation.progress = options_.progress;
+  const CompensationRun run = RunCompensation(model_.geometry, compensation);
+  emittance_ = run.solution.emittance;
+  radiosity_ = run.solution.radiosity;
+  model_.problem = run.fine;
+  it->solve_seconds = SecondsSince(solve_start);
+}
+
+// The projectors' response after the iteration's update, for its result.json.
+nlohmann::json ProjectorResponses(const ProjectionRig& rig, const std::vector<std::string>& names) {
+  nlohmann::json model = nlohmann::json::array();
+  for (size_t p = 0; p < rig.projectors.size(); ++p) {
+    nlohmann::json gamma = nlohmann::json::array();
+    for (int j = 0; j < 3; ++j) {
+      const ResponseCurve& curve = rig.projectors[p].photometry.response[j];
+      gamma.push_back(curve.is_table() ? nlohmann::json("table") : nlohmann::json(curve.gamma()));
+    }
+    model.push_back({{"name", names[p]}, {"gamma_after_update", gamma}});
+  }
+  return model;
+}
+
+}  // namespace
+
+VerificationSummary RunVerification(const VerificationOptions& options) {
+  const auto start = Clock::now();
+  std::string why;
+  if (!options.Check(&why)) throw IoError("verify: " + why);
+  const VerificationInputs in = ReadInputs(options);
+  VerificationModel model = BuildModel(options, in);
+  VerificationLoop loop(options, in, &model);
+
+  CreateDirectories(options.out);
+  VerificationSummary summary;
+  summary.termination = "max_iterations";
+  auto write_summary = [&] {
+    nlohmann::json json = summary.Json();
+    json["rig"] = in.rig.Describe();
+    json["solution"] = options.solution_dir.string();
+    json["camera"] = options.camera;
+    json["colour_source"] = in.colour_source.source;
+    json["hdr"] = loop.hdr();
+    json["exposures_us"] = loop.sequencer().exposures_us;
+    WriteFileAtomically(options.out / "result.json", json.dump(2) + "\n");
+    HtmlReport report("procam verify");
+    AddVerificationReport(summary, &report);
+    report.Write(options.out / "report.html");
+  };
+  summary.desired = DesiredPicture(model);
+  WritePng(options.out / "desired.png", summary.desired);
+
+  double best_mean = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < options.iterations; ++k) {
+    const auto iteration_start = Clock::now();
+    VerificationIteration it;
+    nlohmann::json extra;
+    try {
+      it = loop.Photograph(k, &extra);
+    } catch (const PhotoFault& error) {
+      summary.complete = false;
+      summary.termination = "fault";
+      summary.error = error.what();
+      summary.seconds = SecondsSince(start);
+      write_summary();
+      throw IoError("verify: iteration " + std::to_string(k) + ": " + error.what() + " (kept " +
+                    std::to_string(k) + " complete iteration(s) and the photos taken in " + options.out.string() +
+                    ", see result.json)");
+    }
+    const bool improved = it.measured.mean76 < best_mean * (1.0 - options.min_improvement);
+    if (it.measured.mean76 < best_mean) {
+      best_mean = it.measured.mean76;
+      summary.best = k;
+    }
+    const bool last = k + 1 == options.iterations || (k > 0 && !improved);
+    if (!last) loop.UpdateAndSolve(&it);  // update the model from this photo and solve again
+    it.seconds = SecondsSince(iteration_start);
+    nlohmann::json json = IterationJson(it);
+    json.update(extra);
+    json["projectors"] = ProjectorResponses(model.rig, in.names);
+    WriteFileAtomically(it.directory / "result.json", json.dump(2) + "\n");
+    summary.iterations.push_back(std::move(it));
+    summary.seconds = SecondsSince(start);
+    write_summary();
+    if (last) {
+      if (k + 1 < options.iterations) summary.termination = "converged";
+      break;
+    }
+  }
+  summary.complete = true;
+  summary.seconds = SecondsSince(start);
+  write_summary();
+  return summary;
+}
+
+void AddVerificationReport(const VerificationSummary& summary, HtmlReport* report) {
+  report->Heading("Verification with photos and the closed loop");
+  report->Paragraph(
+      "Each iteration shows the solution's projector images, photographs the room and compares "
+      "the photo in CIE L*a*b* with the desired appearance (measured ΔE) and with what the model "
+      "predicts (model error); then the model (projector response exponents, per-patch "
+      "reflectance) is updated from measured minus predicted and the problem solved again. "
+      "Predicted: the solver's radiosity against the desired, on the patches the camera sees.");
+  std::vector<std::vector<std::string>> rows;
+  std::vector<std::pair<double, double>> measured, model, predicted;
+  for (const VerificationIteration& it : summary.iterations) {
+    std::string update = "—";
+    if (!it.response_exponent.empty()) {
+      update = fmt::format("ρ scale ({:.3f}, {:.3f}, {:.3f})", it.reflectance_scale[0],
+                           it.reflectance_scale[1], it.reflectance_scale[2]);
+      for (const Eigen::Vector3d& e : it.response_exponent)
+        update += fmt::format("; γ × ({:.3f}, {:.3f}, {:.3f})", e[0], e[1], e[2]);
+    }
+    rows.push_back({std::to_string(it.index) + (it.index == summary.best ? " (best)" : ""),
+                    fmt::format("{:.2f} ({:.1f})", it.measured.mean76, it.measured.max76),
+                    fmt::format("{:.2f}", it.measured.mean2000),
+                    fmt::format("{:.2f}", it.model.mean76),
+                    fmt::format("{:.2f}", it.predicted_mean76), std::to_string(it.seen_patches),
+                    update, fmt::format("{:.1f}", it.seconds)});
+    measured.emplace_back(it.index, std::max(1e-3, it.measured.mean76));
+    model.emplace_back(it.index, std::max(1e-3, it.model.mean76));
+    predicted.emplace_back(it.index, std::max(1e-3, it.predicted_mean76));
+  }
+  report->Table({"iteration", "measured ΔE76 mean (max)", "measured CIEDE2000 mean",
+                 "model error ΔE76 mean", "predicted ΔE76 mean", "patches seen",
+                 "model update after it", "seconds"},
+                rows);
+  if (!summary.complete) report->Paragraph("Stopped by a fault: " + summary.error);
+  if (!summary.iterations.empty()) {
+    report->Plot("Convergence", "iteration", "mean ΔE76",
+                 {{"measured (photo vs desired)", measured},
+                  {"model error (photo vs predicted)", model},
+                  {"predicted (solver vs desired)", predicted}});
+  }
+  if (!summary.desired.empty()) report->Figures({{"desired (per patch, as the camera sees it)", summary.desired}});
+  for (const VerificationIteration& it : summary.iterations) {
+    report->Heading(fmt::format("Iteration {}", it.index), 3);
+    report->Figures({{"photo", it.photo},
+                     {"predicted", it.predicted},
+                     {"ΔE76 photo vs desired", it.delta_e76},
+                     {"ΔE76 photo vs predicted", it.model_delta_e76}});
+  }
+}
+
+}  // namespace procam
