@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "apps/command_line.h"
 #include "apps/commands.h"
 #include "geometry/stage.h"
 #include "calibration/rig_directory.h"

@@ -1,6 +1,7 @@
 #include "apps/command_line.h"
 
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 
 #include <spdlog/fmt/fmt.h>
@@ -10,37 +11,15 @@
 
 namespace procam {
 
-std::vector<double> ParseNumberList(const std::string& option, const std::string& text,
-                                    const std::string& expected, size_t count) {
-  const IoError error(option + ": expected " + expected + ", got '" + text + "'");
-  std::vector<double> values;
-  std::stringstream stream(text);
-  std::string item;
-  while (std::getline(stream, item, ',')) {
-    try {
-      size_t used = 0;
-      values.push_back(std::stod(item, &used));
-      if (used != item.size() || !std::isfinite(values.back())) throw error;
-    } catch (const std::exception&) {
-      throw error;
-    }
-  }
-  if (values.empty() || (count > 0 && values.size() != count)) throw error;
-  return values;
-}
-
-Eigen::Vector3d ParsePositiveRgb(const std::string& option, const std::string& text) {
-  const std::string expected = "one positive number or three (R,G,B)";
-  std::vector<double> values = ParseNumberList(option, text, expected);
-  if (values.size() == 1) values = {values[0], values[0], values[0]};
-  if (values.size() != 3 || !(values[0] > 0 && values[1] > 0 && values[2] > 0)) {
-    throw IoError(option + ": expected " + expected + ", got '" + text + "'");
-  }
-  return {values[0], values[1], values[2]};
-}
-
 ProgressCallback LogProgress() {
   return [](const std::string& line) { spdlog::info("{}", line); };
+}
+
+ProgressCallback PrintProgress() {
+  return [](const std::string& line) {
+    std::printf("%s\n", line.c_str());
+    std::fflush(stdout);
+  };
 }
 
 GeometryOptions GeometryArguments(int patches, FormFactorStorage storage) {
@@ -84,6 +63,18 @@ std::string DescribeGeometry(const GeometryStage& stage) {
   out << fmt::format("  form factors: {} facing pairs, {} shadow rays, {:.2f} s; subdivision {:.3f} s\n",
                      ff.pairs_evaluated, ff.shadow_rays, ff.seconds, stage.subdivision_seconds);
   return out.str();
+}
+
+ChessboardSpec ParseChessboard(const std::string& corners, double square) {
+  ChessboardSpec board;
+  char separator = 0;
+  if (std::sscanf(corners.c_str(), "%d%c%d", &board.corners_x, &separator, &board.corners_y) != 3 ||
+      separator != 'x') {
+    throw std::invalid_argument("--corners: expected COLUMNSxROWS of inner corners, e.g. 9x6, got '" + corners +
+                                "'");
+  }
+  board.square_size = square;
+  return board;
 }
 
 }  // namespace procam

@@ -5,24 +5,24 @@
 #include <string>
 #include <vector>
 
+#include "base/parse.h"
 #include "base/progress.h"
+#include "calibration/camera_calibration.h"
 #include "geometry/stage.h"
 
 namespace procam {
 
-// Comma-separated finite numbers, e.g. "0.5,-1.4,0.8". `count` > 0 demands exactly that many.
-// Throws IoError "OPTION: expected EXPECTED, got 'TEXT'".
-std::vector<double> ParseNumberList(const std::string& option, const std::string& text,
-                                    const std::string& expected, size_t count = 0);
-
-// One positive number for every channel, or three (R, G, B). Throws IoError naming `option`.
-Eigen::Vector3d ParsePositiveRgb(const std::string& option, const std::string& text);
-
-// A stage's progress lines as the command line shows them: logged (spdlog, info).
+// A stage's progress lines as the command line shows them: logged (spdlog, info), or printed on
+// stdout as they are (the calibration stages' reports).
 ProgressCallback LogProgress();
+ProgressCallback PrintProgress();
 
 // The geometry stage's options from --patches (0: the scene's) and the storage, logging progress.
 GeometryOptions GeometryArguments(int patches, FormFactorStorage storage = FormFactorStorage::kDense);
+
+// A chessboard from --corners COLUMNSxROWS (inner corners) and --square (metres). Throws
+// std::invalid_argument naming --corners.
+ChessboardSpec ParseChessboard(const std::string& corners, double square);
 
 // Human-readable summary: surfaces, areas, patch counts, form-factor statistics.
 std::string DescribeGeometry(const GeometryStage& stage);

@@ -4,6 +4,7 @@
 #include <optional>
 #include <stdexcept>
 
+#include "apps/command_line.h"
 #include "apps/commands.h"
 #include "compensation/stage.h"
 #include "geometry/stage.h"

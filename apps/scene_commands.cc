@@ -11,6 +11,7 @@
 #include <spdlog/spdlog.h>
 
 #include "base/camera_model.h"
+#include "apps/command_line.h"
 #include "apps/commands.h"
 #include "compensation/stage.h"
 #include "datasets_synthetic/evaluation.h"

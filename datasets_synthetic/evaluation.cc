@@ -46,7 +46,9 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
   GeometryOptions geometry;
   geometry.patches = options.patches;
   geometry.progress = options.progress;
-  evaluation.geometry = RunGeometryStage(synthetic.scene, geometry);
+  Scene scene = synthetic.scene;
+  scene.path = "synthetic:" + name;  // what solutions record, so that later stages can rebuild it
+  evaluation.geometry = RunGeometryStage(std::move(scene), geometry);
   std::vector<Projector> projectors;
   for (const DevicePlacement& placement : synthetic.projectors) projectors.push_back(ProjectorFromPlacement(placement));
   evaluation.rig = std::make_unique<ProjectionRig>(

@@ -10,7 +10,7 @@
 #include "datasets_synthetic/paper_scenes.h"
 #include "base/io.h"
 #include "geometry/stage.h"
-#include "verification/verification.h"
+#include "capture/simulated_camera.h"
 
 namespace procam {
 namespace {

@@ -44,28 +44,6 @@ void CreateDirectories(const std::filesystem::path& dir) {
   if (error) throw IoError(dir.string() + ": cannot create directory: " + error.message());
 }
 
-struct SimulatedCameraSources {
-  std::mutex mutex;
-  std::map<std::string, SimulatedCameraSource> sources;
-};
-SimulatedCameraSources& SimulatedSources() {
-  static SimulatedCameraSources sources;
-  return sources;
-}
-
-// The simulated camera behind `uri`, when its scheme has a registered source.
-std::optional<SimulatedCamera> FindSimulatedCamera(const CameraUri& uri, const std::string& text) {
-  SimulatedCameraSource source;
-  {
-    SimulatedCameraSources& registry = SimulatedSources();
-    const std::lock_guard<std::mutex> lock(registry.mutex);
-    const auto found = registry.sources.find(uri.scheme());
-    if (found == registry.sources.end()) return std::nullopt;
-    source = found->second;
-  }
-  return source(text);
-}
-
 // ---------------------------------------------------------------------------------------------
 // Camera colour
 
@@ -307,47 +285,7 @@ nlohmann::json IterationJson(const VerificationIteration& it) {
   return json;
 }
 
-nlohmann::json DeltaEJson(const PhotoDeltaE& d) {
-  return {{"pixel_mean76", d.mean76},         {"pixel_max76", d.max76},
-          {"pixel_mean2000", d.mean2000},     {"pixel_max2000", d.max2000},
-          {"patch_mean76", d.patch_mean76}, {"patch_mean2000", d.patch_mean2000}};
-}
-
-nlohmann::json IterationJson(const VerificationIteration& it) {
-  nlohmann::json exponents = nlohmann::json::array();
-  for (const Eigen::Vector3d& e : it.response_exponent) exponents.push_back(Json3(e));
-  nlohmann::json json = {
-      {"iteration", it.index},
-      {"directory", it.directory.string()},
-      {"measured_vs_desired", DeltaEJson(it.measured)},
-      {"measured_vs_predicted", DeltaEJson(it.model)},
-      {"measured_vs_patch_radiosity_pixel_mean76", it.model_constant_mean76},
-      {"predicted_vs_desired", {{"patch_mean76", it.predicted_mean76},
-                                {"patch_mean2000", it.predicted_mean2000},
-                                {"solver_mean76_all_patches", it.solver_mean76}}},
-      {"seen_pixels", it.seen_pixels},
-      {"seen_patches", it.seen_patches},
-      {"seconds", {{"capture", it.capture_seconds}, {"solve", it.solve_seconds}, {"total", it.seconds}}}};
-  if (!it.response_exponent.empty()) {
-    json["update"] = {{"response_exponent", exponents},
-                      {"reflectance_scale", Json3(it.reflectance_scale)}};
-  }
-  return json;
-}
-
 }  // namespace
-
-void RegisterSimulatedCameraSource(const std::string& scheme, SimulatedCameraSource source) {
-  SimulatedCameraSources& registry = SimulatedSources();
-  const std::lock_guard<std::mutex> lock(registry.mutex);
-  registry.sources[scheme] = std::move(source);
-}
-
-nlohmann::json CameraColour::Json() const {
-  nlohmann::json m = nlohmann::json::array();
-  for (int r = 0; r < 3; ++r) m.push_back(Json3(to_exitance.row(r).transpose()));
-  return {{"to_exitance", m}, {"black", black}, {"source", source}};
-}
 
 // ---------------------------------------------------------------------------------------------
 
@@ -442,7 +380,7 @@ VerificationInputs ReadInputs(const VerificationOptions& options) {
   in.camera_geometry = ReadCameraModel(in.camera_model_path);
   in.solution = ReadSolutionDirectory(options.solution_dir);
 
-  in.simulated = FindSimulatedCamera(CameraUri::Parse(options.camera), options.camera);
+  in.simulated = FindSimulatedCamera(options.camera);
   in.colour_source = ResolveColourSource(options, in.rig.json, in.rig_file, in.simulated.has_value());
   in.displays = options.displays;
   if (in.simulated && in.displays.empty()) in.displays = in.simulated->displays;

@@ -48,8 +48,11 @@
 #include <opencv2/core/mat.hpp>
 
 #include "base/html_report.h"
+#include "base/progress.h"
 #include "capture/display.h"
 #include "capture/sequencer.h"
+#include "capture/simulated_camera.h"
+#include "compensation/colour_image.h"
 #include "geometry/scene.h"
 
 namespace procam {
@@ -110,31 +113,6 @@ struct VerificationIteration {
   // Pictures for the report (8-bit BGR): photo, prediction, ΔE76 heat maps.
   cv::Mat photo, predicted, delta_e76, model_delta_e76;
 };
-
-// Camera colour calibration: exitance (working RGB, scene units) = to_exitance · (camera RGB −
-// black) for single exposures; HDR merges have the black removed already.
-struct CameraColour {
-  Eigen::Matrix3d to_exitance = Eigen::Matrix3d::Identity();
-  double black = 0.0;
-  std::string source;  // where it came from, for result.json
-  nlohmann::json Json() const;
-};
-
-// What verification needs of a simulated camera that it cannot read off a real one: the
-// displays its world shows the projectors' images on, and its colour calibration for a photo
-// taken with a session's settings (`manifest`: session.json; `hdr`: bracketed exposures merged;
-// `full_scale`: the frames' full scale; `black_override` ≥ 0: the black level to assume).
-struct SimulatedCamera {
-  std::vector<std::shared_ptr<PatternDisplay>> displays;
-  double black_level = 0.0;  // the camera's black level, DN (what the HDR merge subtracts)
-  std::function<CameraColour(const nlohmann::json& manifest, bool hdr, double full_scale,
-                             double black_override)>
-      colour;
-};
-// For camera URIs of `scheme`: the simulated camera behind a URI, or an IoError naming it. The
-// synthetic world registers "synthetic"; a URI of any other scheme is a real camera.
-using SimulatedCameraSource = std::function<SimulatedCamera(const std::string& camera_uri)>;
-void RegisterSimulatedCameraSource(const std::string& scheme, SimulatedCameraSource source);
 
 struct VerificationSummary {
   std::vector<VerificationIteration> iterations;

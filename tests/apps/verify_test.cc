@@ -291,7 +291,7 @@ TEST(Verify, ProjectorLostMidRunKeepsWhatWasDone) {
   const std::string uri = "synthetic:tiny_box?patches=150&black=8&noise=1";
   // The world the camera photographs (shared while held): its second projector shows the first
   // iteration's image and then fails.
-  RegisterSyntheticCameraBackend();
+  RegisterSyntheticWorld();  // the synthetic camera and its colour calibration, as the CLI registers them
   const std::shared_ptr<SyntheticWorld> world = OpenSyntheticWorld(CameraUri::Parse(uri));
   ASSERT_EQ(world->displays.size(), 2u);
   const std::string lost = ProjectorFromPlacement(MakeSyntheticScene("tiny_box", kPatches).projectors[1]).name;

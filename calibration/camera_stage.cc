@@ -1,0 +1,111 @@
+#include "calibration/camera_stage.h"
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "base/io.h"
+#include "calibration/rig_directory.h"
+
+namespace procam {
+namespace {
+
+// The images to read: a capture session's frames/ (16-bit PNG means, float TIFF HDR), or every
+// image in the folder itself, in name order.
+std::vector<std::filesystem::path> ChessboardImages(const std::filesystem::path& session) {
+  if (!std::filesystem::is_directory(session)) {
+    throw IoError(session.string() + ": not a directory");
+  }
+  const std::filesystem::path folder =
+      std::filesystem::is_directory(session / "frames") ? session / "frames" : session;
+  std::vector<std::filesystem::path> images;
+  for (const auto& entry : std::filesystem::directory_iterator(folder)) {
+    std::string extension = entry.path().extension().string();
+    std::transform(extension.begin(), extension.end(), extension.begin(), ::tolower);
+    if (entry.is_regular_file() && (extension == ".png" || extension == ".jpg" ||
+                                    extension == ".jpeg" || extension == ".tif" ||
+                                    extension == ".tiff" || extension == ".bmp")) {
+      images.push_back(entry.path());
+    }
+  }
+  std::sort(images.begin(), images.end());
+  if (images.empty()) throw IoError(folder.string() + ": no images (png, jpg, tiff, bmp)");
+  return images;
+}
+
+}  // namespace
+
+CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
+  const ChessboardSpec& board = args.board;
+  std::string why;
+  if (!board.Check(&why)) throw std::invalid_argument(why);
+  if (!args.options.Check(&why)) throw std::invalid_argument(why);
+
+  std::vector<ChessboardView> views;
+  nlohmann::json skipped = nlohmann::json::array();
+  int width = 0, height = 0;
+  for (const std::filesystem::path& path : ChessboardImages(args.images)) {
+    const cv::Mat image = cv::imread(path.string(), cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+    if (image.empty()) throw IoError(path.string() + ": cannot read the image");
+    if (width == 0) {
+      width = image.cols;
+      height = image.rows;
+    } else if (image.cols != width || image.rows != height) {
+      throw IoError(path.string() + ": " + std::to_string(image.cols) + "x" +
+                    std::to_string(image.rows) + ", the first image is " + std::to_string(width) +
+                    "x" + std::to_string(height));
+    }
+    ChessboardView view;
+    view.name = path.filename().string();
+    if (DetectChessboard(image, board, &view.corners)) {
+      views.push_back(std::move(view));
+    } else {
+      skipped.push_back(view.name);
+    }
+  }
+  Report(args.progress, fmt::format("chessboard {}x{} found in {} of {} images", board.corners_x,
+                                     board.corners_y, views.size(), views.size() + skipped.size()));
+
+  CameraStageSummary stage;
+  CameraCalibration& calibration = stage.calibration;
+  CameraCalibrationSummary& summary = stage.summary;
+  const bool converged =
+      CalibrateCamera(args.options, board, views, width, height, &calibration, &summary);
+  Report(args.progress, summary.BriefReport());
+  if (!converged) throw std::runtime_error("calibration failed: " + summary.BriefReport());
+
+  const std::filesystem::path out(args.out);
+  std::filesystem::create_directories(out);
+  WriteCalibrationModel(out / "camera.cameramodel", calibration);
+  nlohmann::json result;
+  result["lens_model"] = calibration.lens_model;
+  result["intrinsics"] = calibration.intrinsics;
+  result["imagersize"] = {width, height};
+  result["board"] = {{"corners_x", board.corners_x},
+                     {"corners_y", board.corners_y},
+                     {"square_size_m", board.square_size}};
+  nlohmann::json view_list = nlohmann::json::array();
+  for (size_t v = 0; v < views.size(); ++v) {
+    view_list.push_back({{"image", views[v].name}, {"rms_px", summary.view_rms[v]}});
+  }
+  result["views"] = view_list;
+  result["skipped_images"] = skipped;
+  result["residuals"] = {{"rms_px_per_coordinate", summary.rms},
+                         {"rms_norm_px", summary.rms_norm},
+                         {"median_norm_px", summary.median_norm},
+                         {"max_norm_px", summary.max_norm},
+                         {"seed_rms_px", summary.seed_rms},
+                         {"corners", summary.corners},
+                         {"outliers", summary.outliers}};
+  UpdateRigResult(out, {"camera"}, result);
+  Report(args.progress, "wrote " + (out / "camera.cameramodel").string() + " and " +
+                            (out / "result.json").string() + " (section camera)");
+  return stage;
+}
+
+}  // namespace procam

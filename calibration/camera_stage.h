@@ -1,0 +1,33 @@
+#pragma once
+// The camera stage of calibration: camera intrinsics from chessboard photos, written into a rig
+// directory (RIG_DIR/camera.cameramodel and the "camera" section of RIG_DIR/result.json;
+// docs/calibration.md). What `procam calibrate camera` runs.
+
+#include <filesystem>
+
+#include "base/progress.h"
+#include "calibration/camera_calibration.h"
+
+namespace procam {
+
+struct CameraStageOptions {
+  // A capture session (its frames/) or a folder of chessboard photos (png, jpg, tiff, bmp), read
+  // in name order.
+  std::filesystem::path images;
+  std::filesystem::path out;  // the rig directory (created)
+  ChessboardSpec board;       // inner corners and square size
+  CameraCalibrationOptions options;
+  ProgressCallback progress;  // boards found, the calibration's brief report, files written
+};
+
+struct CameraStageSummary {
+  CameraCalibration calibration;
+  CameraCalibrationSummary summary;  // termination, residuals: summary.BriefReport()
+};
+
+// Detects the board in every photo, calibrates, and writes the model and the result section.
+// Throws IoError naming the image or folder (unreadable, sizes differ, no images),
+// std::invalid_argument for bad options, std::runtime_error when the calibration fails.
+CameraStageSummary RunCameraStage(const CameraStageOptions& options);
+
+}  // namespace procam

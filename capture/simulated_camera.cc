@@ -1,0 +1,49 @@
+#include "capture/simulated_camera.h"
+
+#include <map>
+#include <mutex>
+
+#include "capture/camera.h"
+
+namespace procam {
+namespace {
+
+nlohmann::json Json3(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
+
+struct SimulatedCameraSources {
+  std::mutex mutex;
+  std::map<std::string, SimulatedCameraSource> sources;
+};
+SimulatedCameraSources& SimulatedSources() {
+  static SimulatedCameraSources sources;
+  return sources;
+}
+
+}  // namespace
+
+std::optional<SimulatedCamera> FindSimulatedCamera(const std::string& text) {
+  const CameraUri uri = CameraUri::Parse(text);
+  SimulatedCameraSource source;
+  {
+    SimulatedCameraSources& registry = SimulatedSources();
+    const std::lock_guard<std::mutex> lock(registry.mutex);
+    const auto found = registry.sources.find(uri.scheme());
+    if (found == registry.sources.end()) return std::nullopt;
+    source = found->second;
+  }
+  return source(text);
+}
+
+void RegisterSimulatedCameraSource(const std::string& scheme, SimulatedCameraSource source) {
+  SimulatedCameraSources& registry = SimulatedSources();
+  const std::lock_guard<std::mutex> lock(registry.mutex);
+  registry.sources[scheme] = std::move(source);
+}
+
+nlohmann::json CameraColour::Json() const {
+  nlohmann::json m = nlohmann::json::array();
+  for (int r = 0; r < 3; ++r) m.push_back(Json3(to_exitance.row(r).transpose()));
+  return {{"to_exitance", m}, {"black", black}, {"source", source}};
+}
+
+}  // namespace procam

@@ -1,0 +1,50 @@
+#pragma once
+// Simulated cameras as the product reaches them: what the pipeline needs of a camera that only
+// a simulation can tell (the displays its world shows projector images on, its colour
+// calibration), registered per URI scheme by the simulation itself. The synthetic world
+// (datasets_synthetic) registers "synthetic"; a URI of any other scheme is a real camera, whose
+// colour calibration comes from the rig (rig.json camera.colour) or the user.
+
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include "capture/display.h"
+
+namespace procam {
+
+// Camera colour calibration: exitance (working RGB, scene units) = to_exitance · (camera RGB −
+// black) for single exposures; HDR merges have the black removed already.
+struct CameraColour {
+  Eigen::Matrix3d to_exitance = Eigen::Matrix3d::Identity();
+  double black = 0.0;
+  std::string source;  // where it came from, for result.json
+  nlohmann::json Json() const;
+};
+
+// What verification needs of a simulated camera that it cannot read off a real one: the
+// displays its world shows the projectors' images on, and its colour calibration for a photo
+// taken with a session's settings (`manifest`: session.json; `hdr`: bracketed exposures merged;
+// `full_scale`: the frames' full scale; `black_override` ≥ 0: the black level to assume).
+struct SimulatedCamera {
+  std::vector<std::shared_ptr<PatternDisplay>> displays;
+  double black_level = 0.0;  // the camera's black level, DN (what the HDR merge subtracts)
+  std::function<CameraColour(const nlohmann::json& manifest, bool hdr, double full_scale,
+                             double black_override)>
+      colour;
+};
+// For camera URIs of `scheme`: the simulated camera behind a URI, or an IoError naming it. The
+// synthetic world registers "synthetic"; a URI of any other scheme is a real camera.
+using SimulatedCameraSource = std::function<SimulatedCamera(const std::string& camera_uri)>;
+void RegisterSimulatedCameraSource(const std::string& scheme, SimulatedCameraSource source);
+
+// The simulated camera behind `camera_uri` when its scheme has a registered source (which throws
+// IoError naming the URI when it cannot open it); nullopt for any other camera.
+std::optional<SimulatedCamera> FindSimulatedCamera(const std::string& camera_uri);
+
+}  // namespace procam
