@@ -1,31 +1,14 @@
-// procam calibrate projectors SESSION_DIR... --scene SCENE --out RIG_DIR: every projector's
-// intrinsics and pose and the camera's pose in the room, from one structured-light capture
-// session per projector and the scene model (issue 7, calibration/registration.h). The camera's
-// intrinsics come from RIG_DIR/camera.cameramodel (`procam calibrate camera`) and are held
-// fixed, or with --refine-camera refined jointly (focal length with the aspect ratio kept, cx,
-// cy; --refine-camera-aspect frees fy too; distortion kept). Writes RIG_DIR/NAME.cameramodel per
-// projector, rewrites RIG_DIR/camera.cameramodel with its pose in the room (and the refined
-// intrinsics), and updates RIG_DIR/rig.json and RIG_DIR/result.json.
-#include <cctype>
-#include <cmath>
-#include <cstdio>
+// procam calibrate projectors SESSION_DIR... --scene SCENE --out RIG_DIR
+// (calibration/projectors_stage.h).
 #include <filesystem>
-#include <fstream>
-#include <nlohmann/json.hpp>
-#include <set>
-#include <sstream>
-#include <stdexcept>
+#include <string>
+#include <vector>
 
-#include "base/camera_model.h"
 #include "apps/command_line.h"
 #include "apps/commands.h"
-#include "geometry/stage.h"
-#include "calibration/registration.h"
-#include "calibration/rig_directory.h"
-#include "calibration/structured_light.h"
-#include "capture/session.h"
-#include "datasets_synthetic/paper_scenes.h"
 #include "base/io.h"
+#include "calibration/projectors_stage.h"
+#include "geometry/stage.h"
 
 namespace procam {
 namespace {
@@ -41,368 +24,29 @@ struct CalibrateProjectorsArguments {
   RoomCalibrationOptions options;
 };
 
-
-// room_from_camera of a camera at `centre` looking at `target`, image up as close to `up` as
-// possible (camera x right, y down, z forward).
-Eigen::Isometry3d LookAt(const Vec3& centre, const Vec3& target, const Vec3& up) {
-  const Vec3 forward = (target - centre).normalized();
-  const Vec3 right = forward.cross(up);
-  if (!((target - centre).norm() > 1e-9) || right.norm() < 1e-6)
-    throw std::invalid_argument(
-        "--camera-guess: the camera must look at a point away from it and not along --camera-up");
-  Eigen::Isometry3d room_from_camera = Eigen::Isometry3d::Identity();
-  room_from_camera.linear().col(0) = right.normalized();
-  room_from_camera.linear().col(1) = forward.cross(right.normalized());
-  room_from_camera.linear().col(2) = forward;
-  room_from_camera.translation() = centre;
-  return room_from_camera;
-}
-
 // A scene file, or a synthetic scene by name ("c_shaped" or "synthetic:c_shaped").
-Scene ResolveScene(const std::string& text) {
-  if (std::filesystem::is_regular_file(text)) return LoadScene(text);
+std::string ResolveScene(const std::string& text) {
+  if (std::filesystem::is_regular_file(text)) return text;
+  const std::string named = text.rfind("synthetic:", 0) == 0 ? text : "synthetic:" + text;
   try {
-    return LoadSceneArgument(text.rfind("synthetic:", 0) == 0 ? text : "synthetic:" + text);
+    LoadSceneArgument(named);
   } catch (const IoError& error) {
     throw IoError("--scene " + text + ": no such file, nor a synthetic scene (" + error.what() + ")");
   }
+  return named;
 }
 
-bool ValidName(const std::string& name) {
-  if (name.empty()) return false;
-  for (const char c : name)
-    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-' && c != '.')
-      return false;
-  return true;
-}
-
-// Decoded correspondences of one structured-light session.
-ProjectorObservations ReadSession(const std::filesystem::path& directory, int camera_width,
-                                  int camera_height, const std::filesystem::path& camera_model,
-                                  std::string name) {
-  if (!std::filesystem::is_directory(directory))
-    throw IoError(directory.string() + ": not a directory");
-  const CaptureSessionData data = CaptureSessionData::Load(directory);
-  const std::string manifest = (directory / "session.json").string();
-  const nlohmann::json& sequence = data.manifest().value("sequence", nlohmann::json::object());
-  const std::string kind = sequence.value("kind", "");
-  if (kind != "structured_light")
-    throw IoError(manifest + ": a '" + kind +
-                  "' session; projector calibration needs one captured with --sequence "
-                  "structured_light");
-  const nlohmann::json& parameters = sequence.value("parameters", nlohmann::json::object());
-  StructuredLightOptions options;
-  try {
-    options.width = parameters.at("width").get<int>();
-    options.height = parameters.at("height").get<int>();
-    options.columns = parameters.at("columns").get<bool>();
-    options.rows = parameters.at("rows").get<bool>();
-    options.phase_period = parameters.at("phase_period").get<int>();
-    options.phase_steps = parameters.at("phase_steps").get<int>();
-    options.xor_codes = parameters.at("xor_codes").get<bool>();
-    options.pattern_gamma = parameters.at("pattern_gamma").get<double>();
-  } catch (const nlohmann::json::exception& error) {
-    throw IoError(manifest + ": sequence.parameters: " + error.what());
-  }
-  std::string why;
-  if (!options.Check(&why)) throw IoError(manifest + ": sequence.parameters: " + why);
-  if (!options.columns || !options.rows)
-    throw IoError(manifest + ": sequence.parameters: both columns and rows must be encoded");
-  std::vector<cv::Mat> captured;
-  for (int p = 0; p < data.pattern_count(); ++p) {
-    if (!data.captured(p))
-      throw IoError(manifest + ": pattern " + data.pattern_name(p) +
-                    " is not captured (run the same capture command again to resume)");
-    cv::Mat image = data.Hdr(p);
-    if (image.empty()) image = data.Mean(p, 0);
-    if (image.cols != camera_width || image.rows != camera_height)
-      throw IoError(manifest + ": pattern " + data.pattern_name(p) + " is " +
-                    std::to_string(image.cols) + "x" + std::to_string(image.rows) + ", " +
-                    camera_model.string() + " is " + std::to_string(camera_width) + "x" +
-                    std::to_string(camera_height));
-    captured.push_back(image);
-  }
-  StructuredLightMap map;
-  try {
-    map = DecodeStructuredLight(options, captured);
-  } catch (const std::invalid_argument& error) {
-    throw IoError(manifest + ": " + error.what());
-  }
-  ProjectorObservations out;
-  if (name.empty()) {
-    // The display's name, after its last '/' ("synthetic:tiny_box/left" → "left").
-    const std::string display = data.manifest().value("display", nlohmann::json::object())
-                                    .value("name", "");
-    name = display.substr(display.find_last_of("/:") == std::string::npos
-                              ? 0
-                              : display.find_last_of("/:") + 1);
-  }
-  out.name = name;
-  out.width = options.width;
-  out.height = options.height;
-  for (int row = 0; row < map.mask.rows; ++row)
-    for (int col = 0; col < map.mask.cols; ++col) {
-      if (!map.mask.at<uint8_t>(row, col)) continue;
-      out.camera_pixels.push_back(Vec2(col, row));
-      out.projector_pixels.push_back(
-          Vec2(map.column.at<float>(row, col), map.row.at<float>(row, col)));
-    }
-  std::printf("%s: %dx%d projector, %zu camera pixels decoded (%lld shadowed, %lld ambiguous, "
-              "%lld weak phase, %lld out of range)\n",
-              directory.c_str(), options.width, options.height, out.camera_pixels.size(),
-              map.shadowed, map.ambiguous, map.weak_phase, map.out_of_range);
-  return out;
-}
-
-nlohmann::json Json(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
-
-nlohmann::json PoseJson(const Eigen::Isometry3d& pose) {
-  nlohmann::json matrix = nlohmann::json::array();
-  for (int r = 0; r < 4; ++r)
-    matrix.push_back({pose(r, 0), pose(r, 1), pose(r, 2), pose(r, 3)});
-  return matrix;
-}
-
-nlohmann::json StatsJson(const DistanceStats& stats) {
-  return {{"points", stats.points},
-          {"rms_mm", stats.rms_mm},
-          {"median_mm", stats.median_mm},
-          {"p95_mm", stats.p95_mm},
-          {"max_mm", stats.max_mm}};
-}
-
-void RunCalibrateProjectors(const CalibrateProjectorsArguments& input) {
-  CalibrateProjectorsArguments args = input;
-  if (args.refine_camera_aspect && !args.options.refine_camera_intrinsics)
-    throw std::invalid_argument("--refine-camera-aspect: needs --refine-camera");
-  args.options.keep_camera_aspect_ratio = !args.refine_camera_aspect;
-  std::string why;
-  if (!args.options.Check(&why)) throw std::invalid_argument(why);
-  const std::filesystem::path out(args.out);
-  const std::filesystem::path camera_path = out / "camera.cameramodel";
-  if (!std::filesystem::exists(camera_path))
-    throw IoError(camera_path.string() +
-                  ": file not found (run `procam calibrate camera ... --out " + args.out +
-                  "` first)");
-  const CameraModel camera = ReadCameraModelFile(camera_path);
-  if (camera.lens_model != "LENSMODEL_PINHOLE" && camera.lens_model != "LENSMODEL_OPENCV4")
-    throw IoError(camera_path.string() + ": lensmodel " + camera.lens_model +
-                  ": projector calibration supports LENSMODEL_PINHOLE and LENSMODEL_OPENCV4");
-  if (!args.names.empty() && args.names.size() != args.sessions.size())
-    throw std::invalid_argument("--names: " + std::to_string(args.names.size()) + " names for " +
-                                std::to_string(args.sessions.size()) + " sessions");
-
-  // The guess: --camera-guess, else the pose camera.cameramodel already holds.
-  Eigen::Isometry3d guess;
-  std::string guess_source;
-  if (!args.camera_guess.empty()) {
-    const std::vector<double> v = ParseNumberList(
-        "--camera-guess", args.camera_guess, "x,y,z,look_x,look_y,look_z in the room (metres)", 6);
-    const std::vector<double> up =
-        ParseNumberList("--camera-up", args.camera_up, "x,y,z (the room's up direction)", 3);
-    guess = LookAt(Vec3(v[0], v[1], v[2]), Vec3(v[3], v[4], v[5]), Vec3(up[0], up[1], up[2]));
-    guess_source = "--camera-guess";
-  } else if (!camera.cam_from_ref.isApprox(Eigen::Isometry3d::Identity(), 1e-12)) {
-    guess = camera.cam_from_ref.inverse();
-    guess_source = camera_path.string() + " extrinsics";
-  } else {
-    throw std::invalid_argument(
-        "--camera-guess: required: " + camera_path.string() +
-        " has no pose in the room yet; give the camera's position and a point it looks at, "
-        "x,y,z,look_x,look_y,look_z in the scene's frame (a few cm and degrees suffice)");
-  }
-  const Scene scene = ResolveScene(args.scene);
-  const RoomModel model(scene);
-  const char* const intrinsics_treatment =
-      !args.options.refine_camera_intrinsics ? "intrinsics held fixed"
-      : args.refine_camera_aspect            ? "fx, fy, cx, cy refined, distortion held"
-                                             : "focal length (aspect kept), cx, cy refined, "
-                                               "distortion held";
-  std::printf("scene %s: %zu surfaces, %zu planar facets; camera %s %dx%d (%s); guess from %s: "
-              "camera at (%.3f, %.3f, %.3f)\n",
-              args.scene.c_str(), scene.surfaces.size(), model.facets().size(),
-              camera.lens_model.c_str(), camera.width, camera.height, intrinsics_treatment,
-              guess_source.c_str(),
-              guess.translation().x(), guess.translation().y(), guess.translation().z());
-
-  RoomCalibrationProblem problem;
-  problem.camera_lens_model = camera.lens_model;
-  problem.camera_intrinsics = camera.intrinsics;
-  std::set<std::string> names;
-  for (size_t k = 0; k < args.sessions.size(); ++k) {
-    ProjectorObservations observations =
-        ReadSession(args.sessions[k], camera.width, camera.height, camera_path,
-                    args.names.empty() ? "" : args.names[k]);
-    if (!ValidName(observations.name)) observations.name = "projector" + std::to_string(k);
-    if (!names.insert(observations.name).second)
-      throw std::invalid_argument("projector name '" + observations.name + "' of " +
-                                  args.sessions[k] + " is used twice (name them with --names)");
-    problem.projectors.push_back(std::move(observations));
-  }
-
-  RoomCalibration calibration;
-  RoomCalibrationSummary summary;
-  const bool converged = CalibrateRoom(args.options, model, problem, guess, &calibration, &summary);
-  std::printf("%s\n", summary.BriefReport().c_str());
-  if (!converged) throw std::runtime_error("projector calibration failed: " + summary.BriefReport());
-
-  // Independent check: triangulate, register the model to the cloud from the same guess.
-  const std::vector<TriangulatedPoint> triangulated = Triangulate(problem, calibration);
-  std::vector<Vec3> cloud;
-  std::vector<double> gaps;
-  for (const TriangulatedPoint& p : triangulated) {
-    cloud.push_back(p.p_in_cam);
-    gaps.push_back(p.gap);
-  }
-  const DistanceStats gap = ComputeDistanceStats(gaps);
-  std::printf("triangulated %zu points: ray gap median %.2f mm, 95%% %.2f mm\n", cloud.size(),
-              gap.median_mm, gap.p95_mm);
-  Eigen::Isometry3d registered = guess;
-  RegistrationSummary registration;
-  const bool registered_ok = RegisterModelToCloud(RegistrationOptions(), model, cloud, guess,
-                                                  &registered, &registration);
-  std::printf("%s\n", registration.BriefReport().c_str());
-  const double icp_vs_joint_mm =
-      1e3 * (registered.translation() - calibration.room_from_camera.translation()).norm();
-  const double icp_vs_joint_deg =
-      Eigen::AngleAxisd(registered.linear() * calibration.room_from_camera.linear().transpose())
-          .angle() * 180.0 / 3.14159265358979323846;
-  std::printf("ICP vs joint refinement: camera %.2f mm, %.4f deg apart\n", icp_vs_joint_mm,
-              icp_vs_joint_deg);
-  std::vector<Vec3> thinned;
-  const size_t stride = std::max<size_t>(1, cloud.size() / 30000);
-  for (size_t i = 0; i < cloud.size(); i += stride) thinned.push_back(cloud[i]);
-  const std::vector<FittedPlane> planes = FitPlanes(PlaneFitOptions(), thinned);
-  std::printf("RANSAC: %zu planes in the scan\n", planes.size());
-
-  // Everything is computed: build the outputs, then write.
-  nlohmann::json registration_json;
-  registration_json["room_from_camera"] = PoseJson(calibration.room_from_camera);
-  registration_json["camera_centre_m"] = Json(calibration.room_from_camera.translation());
-  registration_json["camera_guess"] = {{"source", guess_source},
-                                       {"room_from_camera", PoseJson(guess)},
-                                       {"moved_mm", summary.camera_moved_mm},
-                                       {"turned_deg", summary.camera_turned_deg}};
-  if (args.options.refine_camera_intrinsics) {
-    registration_json["camera_intrinsics"] = {
-        {"refined",
-         args.refine_camera_aspect ? "fx, fy, cx, cy" : "focal length (fy / fx kept), cx, cy"},
-        {"lens_model", camera.lens_model},
-        {"before", camera.intrinsics},
-        {"after", calibration.camera_intrinsics},
-        {"moved_px", std::vector<double>(summary.camera_intrinsics_moved,
-                                         summary.camera_intrinsics_moved + 4)},
-        {"sigma_px", std::vector<double>(summary.camera_sigma, summary.camera_sigma + 4)},
-        {"sigma_what", "1 sigma of fx, fy, cx, cy from the joint solve's covariance (decoding "
-                       "noise only; the walls' flatness and the model's accuracy come on top)"}};
-  } else {
-    registration_json["camera_intrinsics"] = "held fixed (from camera.cameramodel)";
-  }
-  registration_json["termination"] = summary.termination == RoomCalibrationSummary::kConverged
-                                         ? "converged"
-                                         : "facets not settled";
-  nlohmann::json per_projector = nlohmann::json::array();
-  for (size_t k = 0; k < calibration.projectors.size(); ++k) {
-    const RoomProjectorSummary& s = summary.projectors[k];
-    per_projector.push_back({{"name", calibration.projectors[k].name},
-                             {"correspondences", s.correspondences},
-                             {"used", s.used},
-                             {"on_model", s.points},
-                             {"inliers", s.points - s.outliers},
-                             {"outliers", s.outliers},
-                             {"seed_rms_px", s.seed_rms},
-                             {"rms_px_per_coordinate", s.rms},
-                             {"max_norm_px", s.max_norm}});
-  }
-  registration_json["projectors"] = per_projector;
-  nlohmann::json per_surface = nlohmann::json::array();
-  for (size_t s = 0; s < registration.per_surface.size(); ++s) {
-    nlohmann::json entry = StatsJson(registration.per_surface[s]);
-    entry["surface"] = scene.surfaces[s].name;
-    per_surface.push_back(entry);
-  }
-  registration_json["residual"] = {
-      {"what", "triangulated camera-projector points vs the scene model after ICP from the "
-               "guess (distance to the nearest surface)"},
-      {"ok", registered_ok},
-      {"icp_room_from_camera", PoseJson(registered)},
-      {"icp_vs_joint_mm", icp_vs_joint_mm},
-      {"icp_vs_joint_deg", icp_vs_joint_deg},
-      {"points", registration.points},
-      {"inlier_distance_mm", 1e3 * RegistrationOptions().inlier_distance},
-      {"inlier_fraction", registration.inlier_fraction},
-      {"inliers", StatsJson(registration.inliers)},
-      {"all", StatsJson(registration.all)},
-      {"per_surface", per_surface},
-      {"ray_gap", StatsJson(gap)}};
-
-  nlohmann::json planes_json = nlohmann::json::array();
-  for (const FittedPlane& plane : planes) {
-    const Vec3 normal = calibration.room_from_camera.linear() * plane.normal;
-    planes_json.push_back(
-        {{"normal_room", Json(normal)},
-         {"offset_room_m", plane.offset - normal.dot(calibration.room_from_camera.translation())},
-         {"centroid_room_m", Json(calibration.room_from_camera * plane.centroid)},
-         {"inliers", plane.inliers},
-         {"rms_mm", plane.rms_mm},
-         {"extent_m", {plane.extent.x(), plane.extent.y()}}});
-  }
-
-  nlohmann::json result_section;
-  result_section["sessions"] = args.sessions;
-  result_section["scene"] = args.scene;
-  result_section["registration"] = registration_json;
-  result_section["planes_from_scan"] = {
-      {"what", "sequential RANSAC planes of the triangulated cloud (room frame through the joint "
-               "pose), normal . p + offset = 0"},
-      {"distance_mm", 1e3 * PlaneFitOptions().distance},
-      {"planes", planes_json}};
-  nlohmann::json projectors_json = nlohmann::json::array();
-  for (const RoomProjector& p : calibration.projectors)
-    projectors_json.push_back({{"name", p.name},
-                               {"model", p.name + ".cameramodel"},
-                               {"lens_model", p.lens_model},
-                               {"intrinsics", p.intrinsics},
-                               {"imagersize", {p.width, p.height}},
-                               {"centre_room_m", Json(p.proj_from_room.inverse().translation())}});
-  result_section["projectors"] = projectors_json;
-
-  // rig.json is read before anything is written, so a malformed one stops here.
-  ReadRigJson(out);
-
-  for (const RoomProjector& p : calibration.projectors) {
-    CameraModel model_file;
-    model_file.lens_model = p.lens_model;
-    model_file.intrinsics = p.intrinsics;
-    model_file.width = p.width;
-    model_file.height = p.height;
-    model_file.cam_from_ref = p.proj_from_room;
-    WriteCameraModelFile(out / (p.name + ".cameramodel"), model_file,
-                         "procam projector model (procam calibrate projectors); extrinsics = "
-                         "rt_proj_room, the room = the scene's frame");
-  }
-  CameraModel camera_out = camera;
-  camera_out.cam_from_ref = calibration.room_from_camera.inverse();
-  if (args.options.refine_camera_intrinsics) camera_out.intrinsics = calibration.camera_intrinsics;
-  WriteCameraModelFile(camera_path, camera_out,
-                       args.options.refine_camera_intrinsics
-                           ? "procam camera model (procam calibrate camera; fx, fy, cx, cy and "
-                             "pose by procam calibrate projectors --refine-camera); extrinsics "
-                             "= rt_cam_room, the room = the scene's frame"
-                           : "procam camera model (procam calibrate camera; pose by procam "
-                             "calibrate projectors); extrinsics = rt_cam_room, the room = the "
-                             "scene's frame");
-  UpdateRigJson(out, [&](nlohmann::json& rig) {
-    rig["camera"]["model"] = "camera.cameramodel";
-    for (const RoomProjector& p : calibration.projectors)
-      RigProjectorEntry(rig, p.name)["model"] = p.name + ".cameramodel";
-    rig["registration"] = registration_json;
-  });
-  UpdateRigResult(out, {"projectors"}, result_section);
-  std::printf("wrote %zu projector models, camera.cameramodel (pose in the room%s), rig.json and "
-              "result.json in %s\n",
-              calibration.projectors.size(),
-              args.options.refine_camera_intrinsics ? ", refined intrinsics" : "", out.c_str());
+void RunCalibrateProjectors(const CalibrateProjectorsArguments& args) {
+  ProjectorsStageOptions options;
+  options.sessions.assign(args.sessions.begin(), args.sessions.end());
+  options.scene = ResolveScene(args.scene);
+  options.out = args.out;
+  if (!args.camera_guess.empty()) options.room_from_camera_guess = RoomFromCameraGuess(args.camera_guess, args.camera_up);
+  options.names = args.names;
+  options.refine_camera_aspect = args.refine_camera_aspect;
+  options.options = args.options;
+  options.progress = PrintProgress();
+  RunProjectorsStage(options);
 }
 
 }  // namespace

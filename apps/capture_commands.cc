@@ -5,20 +5,14 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "apps/command_line.h"
 #include "apps/commands.h"
-#include "calibration/camera_response.h"
+#include "calibration/capture_stage.h"
 #include "capture/camera.h"
 #include "capture/devices.h"
-#include "capture/display.h"
-#include "procam/config.h"
-#if PROCAM_WITH_GLFW
-#include "projection/glfw_display.h"
-#endif
-#include "capture/patterns.h"
-#include "capture/session.h"
-#include "calibration/structured_light.h"
-#include "datasets_synthetic/synthetic_camera.h"
+#include "capture/simulated_camera.h"
 #include "base/io.h"
+#include "procam/config.h"
 
 namespace procam {
 namespace {
@@ -57,166 +51,44 @@ cv::Size ParseSize(const std::string& text) {
   return {width, height};
 }
 
-CaptureSequence MakeSequence(const CaptureArguments& args, cv::Size projector) {
-  if (args.sequence == "graycode") {
-    GrayCodeOptions options;
-    options.width = projector.width;
-    options.height = projector.height;
-    options.columns = args.axes != "rows";
-    options.rows = args.axes != "columns";
-    return MakeGrayCodeSequence(options);
+// --display: memory (nothing but test cameras sees it), else a projector's monitor.
+std::shared_ptr<PatternDisplay> CaptureDisplay(const std::string& text, const std::string& camera) {
+  if (text == "memory") return nullptr;
+  if (FindSimulatedCamera(camera)) {
+    throw IoError("display '" + text + "': camera '" + camera +
+                  "' photographs the simulated room, whose projectors show the patterns (choose one with --projector)");
   }
-  if (args.sequence == "structured_light") {  // XOR Gray + phase, the robust default
-    StructuredLightOptions options;
-    options.width = projector.width;
-    options.height = projector.height;
-    options.columns = args.axes != "rows";
-    options.rows = args.axes != "columns";
-    options.pattern_gamma = args.pattern_gamma;
-    std::string why;
-    if (!options.Check(&why)) throw std::invalid_argument("structured_light sequence: " + why);
-    return MakeStructuredLightSequence(options);
+  if (text.rfind("glfw:", 0) != 0) {
+    throw IoError("display '" + text + "': unknown; use memory or glfw:N|NAME (procam show --list)");
   }
-  if (args.sequence == "photometric") {
-    PhotometricOptions options;
-    options.width = projector.width;
-    options.height = projector.height;
-    options.levels = args.levels;
-    options.channels = args.channels;
-    std::string why;
-    if (!options.Check(&why)) throw std::invalid_argument("photometric sequence: " + why);
-    return MakePhotometricSequence(options);
-  }
-  std::vector<std::filesystem::path> images(args.images.begin(), args.images.end());
-  if (images.empty())
-    throw std::invalid_argument(
-        "--sequence verify needs the images to show (positional arguments)");
-  return MakeVerifySequence(images, projector);
-}
-
-// The display of projector `index` of the synthetic world a "synthetic:" camera URI names.
-std::shared_ptr<MemoryDisplay> SyntheticProjectorDisplay(const CaptureArguments& args,
-                                                         const SyntheticWorld& world) {
-  if (args.display != "memory") {
-    throw IoError("display '" + args.display + "': camera '" + args.camera +
-                  "' photographs the simulated room, whose projectors show the patterns "
-                  "(choose one with --projector)");
-  }
-  const int count = static_cast<int>(world.displays.size());
-  if (args.projector < 0 || args.projector >= count) {
-    std::string names;
-    for (const Projector& projector : world.rig->projectors())
-      names += (names.empty() ? "" : ", ") + projector.name;
-    throw IoError("--projector " + std::to_string(args.projector) + ": synthetic scene '" +
-                  world.scene + "' has " + std::to_string(count) + " projectors (0.." +
-                  std::to_string(count - 1) + ": " + names + ")");
-  }
-  const std::shared_ptr<MemoryDisplay>& display = world.displays[args.projector];
-  if (!args.projector_size.empty() && ParseSize(args.projector_size) != display->Resolution()) {
-    throw IoError("--projector-size " + args.projector_size + ": projector " +
-                  std::to_string(args.projector) + " of synthetic scene '" + world.scene + "' is " +
-                  std::to_string(display->Resolution().width) + "x" +
-                  std::to_string(display->Resolution().height));
-  }
-  return display;
+  return OpenMonitorDisplay(text);
 }
 
 void RunCapture(const CaptureArguments& args) {
   RegisterDeviceBackends();
-  RegisterSyntheticCameraBackend();
-  std::string why;
-  if (!args.sequencer.Check(&why)) throw std::invalid_argument("capture: " + why);
-  const CameraUri camera_uri = CameraUri::Parse(args.camera);
-  // A synthetic camera photographs the simulated room: the patterns go to one of its
-  // projectors, whose display the camera (sharing the world) looks at.
-  std::shared_ptr<SyntheticWorld> world;
-  std::shared_ptr<MemoryDisplay> display;
-  if (camera_uri.scheme() == "synthetic") {
-    world = OpenSyntheticWorld(camera_uri);
-    display = SyntheticProjectorDisplay(args, *world);
-  }
-  // A real projector: a fullscreen GLFW window on the monitor "glfw:N|NAME" names.
-  std::shared_ptr<PatternDisplay> output;
-  if (args.display.rfind("glfw:", 0) == 0) {
-    if (world) throw IoError("display '" + args.display + "': a synthetic camera looks at its own projectors");
-#if PROCAM_WITH_GLFW
-    try {
-      output = std::make_shared<GlfwDisplay>(FindMonitor(args.display.substr(5)));
-    } catch (const IoError& error) {
-      throw IoError("display '" + args.display + "': " + error.what());
-    }
-#else
-    throw IoError("display '" + args.display +
-                  "': this build has no GLFW output backend (reconfigure with -DPROCAM_WITH_GLFW=ON; "
-                  "apt-get install libglfw3-dev libgl-dev)");
-#endif
-  } else if (args.display != "memory") {
-    throw IoError("display '" + args.display + "': unknown; use memory or glfw:N|NAME (procam show --list)");
-  }
-  const cv::Size projector =
-      display ? display->Resolution()
-              : output ? output->Resolution()
-                       : ParseSize(args.projector_size.empty() ? "1024x768" : args.projector_size);
-  // The memory display shows patterns nowhere but to test cameras, which look at it.
-  if (!display) display = std::make_shared<MemoryDisplay>(projector, "memory");
-  if (!output) output = display;
-  LoopbackOptions loopback;
-  loopback.projector_gamma = args.projector_gamma;
-  OpenCameraOptions open_options;
-  open_options.scene_view = MakeLoopbackView(display, loopback);
-  std::unique_ptr<Camera> camera = OpenCamera(args.camera, open_options);
-  if (camera->Info().backend != "test" && !world && output == display) {
-    std::fprintf(
-        stderr,
-        "procam: warning: display 'memory' shows the patterns nowhere; camera %s photographs the "
-        "room as it is (use --display glfw:N to show them on a projector)\n",
-        camera->Info().uri.c_str());
-  }
-  if (args.gain >= 0) camera->SetGain(args.gain);
-  const CaptureSequence sequence = MakeSequence(args, projector);
-
-  CaptureSessionOptions options;
-  options.directory = args.out;
+  CaptureStageOptions options;
+  options.camera = args.camera;
+  options.sequence = args.sequence;
+  options.out = args.out;
+  options.display = CaptureDisplay(args.display, args.camera);
+  options.projector = args.projector;
+  if (!args.projector_size.empty()) options.projector_size = ParseSize(args.projector_size);
   options.sequencer = args.sequencer;
-  if (!args.camera_response.empty()) {  // a camera that is not linear (procam calibrate response)
-    options.sequencer.hdr.inverse_response = ReadInverseResponse(
-        args.camera_response, IsColour(camera->Settings().pixel_format) ? 3 : 1);
-  }
-  const std::filesystem::path result_path = std::filesystem::path(args.out) / "result.json";
-  CaptureSummary summary;
-  try {
-    summary = RunCaptureSession(options, sequence, *camera, *output);
-  } catch (const CaptureFault& fault) {  // the session keeps what was captured: say so, then fail
-    const nlohmann::json result = {
-        {"command", "capture"},
-        {"sequence", sequence.kind},
-        {"camera", camera->Info().uri},
-        {"manifest", (std::filesystem::path(args.out) / "session.json").string()},
-        {"complete", false},
-        {"error", fault.what()}};
-    WriteFileAtomically(result_path, result.dump(2) + "\n");
-    throw;
-  }
-  std::cout << "capture " << sequence.kind << " with " << camera->Info().uri << " into " << args.out
-            << ": " << summary.BriefReport() << "\n";
-
-  nlohmann::json result = {{"command", "capture"},
-                           {"sequence", sequence.kind},
-                           {"camera", camera->Info().uri},
-                           {"manifest", summary.manifest.string()},
-                           {"complete", true},
-                           {"patterns_total", summary.patterns_total},
-                           {"patterns_before", summary.patterns_before},
-                           {"patterns_captured", summary.patterns_captured},
-                           {"retries", summary.retries},
-                           {"stale_dropped", summary.stale_dropped},
-                           {"seconds", summary.seconds}};
-  WriteFileAtomically(result_path, result.dump(2) + "\n");
+  options.gain = args.gain;
+  options.axes = args.axes;
+  options.pattern_gamma = args.pattern_gamma;
+  options.levels = args.levels;
+  options.channels = args.channels;
+  options.images.assign(args.images.begin(), args.images.end());
+  options.projector_gamma = args.projector_gamma;
+  options.camera_response = args.camera_response;
+  options.progress = [](const std::string& line) { std::fprintf(stderr, "procam: %s\n", line.c_str()); };
+  const CaptureSummary summary = RunCaptureStage(options);
+  std::cout << CaptureLine(options, summary) << "\n";
 }
 
 void RunCameras(const CamerasArguments& args) {
   RegisterDeviceBackends();
-  RegisterSyntheticCameraBackend();
   ListCamerasOptions options;
   options.gige_discovery = !args.no_gige;
   options.include_virtual = args.include_virtual;

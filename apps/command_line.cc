@@ -8,6 +8,10 @@
 #include <spdlog/spdlog.h>
 
 #include "base/io.h"
+#include "procam/config.h"
+#if PROCAM_WITH_GLFW
+#include "projection/glfw_display.h"
+#endif
 
 namespace procam {
 
@@ -75,6 +79,24 @@ ChessboardSpec ParseChessboard(const std::string& corners, double square) {
   }
   board.square_size = square;
   return board;
+}
+
+
+std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text) {
+  if (text.rfind("glfw:", 0) != 0) {
+    throw IoError("display '" + text + "': unknown; use glfw:N|NAME (procam show --list)");
+  }
+#if PROCAM_WITH_GLFW
+  try {
+    return std::make_shared<GlfwDisplay>(FindMonitor(text.substr(5)));
+  } catch (const IoError& error) {
+    throw IoError("display '" + text + "': " + error.what());
+  }
+#else
+  throw IoError("display '" + text +
+                "': this build has no GLFW output backend (reconfigure with -DPROCAM_WITH_GLFW=ON; "
+                "apt-get install libglfw3-dev libgl-dev)");
+#endif
 }
 
 }  // namespace procam

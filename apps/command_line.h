@@ -2,12 +2,15 @@
 // Values the commands read from their options (and rig.json keys) beyond what CLI11 parses.
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "base/parse.h"
 #include "base/progress.h"
 #include "calibration/camera_calibration.h"
+#include "capture/display.h"
 #include "geometry/stage.h"
 
 namespace procam {
@@ -23,6 +26,10 @@ GeometryOptions GeometryArguments(int patches, FormFactorStorage storage = FormF
 // A chessboard from --corners COLUMNSxROWS (inner corners) and --square (metres). Throws
 // std::invalid_argument naming --corners.
 ChessboardSpec ParseChessboard(const std::string& corners, double square);
+
+// A projector's monitor, "glfw:N|NAME" (procam show --list), as a fullscreen window. Throws
+// IoError naming the display: not glfw:..., no such monitor, a build without GLFW.
+std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text);
 
 // Human-readable summary: surfaces, areas, patch counts, form-factor statistics.
 std::string DescribeGeometry(const GeometryStage& stage);

@@ -21,9 +21,6 @@ void AddVerifyCommand(CLI::App& app);         // verify
 void AddCalibrateCommands(CLI::App& app);     // calibrate camera, photometric, ...
 void AddCalibrateResponseCommand(CLI::App& calibrate);  // calibrate response (the group)
 void AddCalibrateAllCommand(CLI::App& calibrate);       // calibrate all (the group)
-// Runs one capture, calibrate, compensate, project or verify command in this process, as
-// `procam ARGUMENTS...` would (its output on stdout); errors propagate as exceptions.
-void RunProcamCommand(const std::vector<std::string>& arguments);
 void AddCalibrateProjectorsCommand(CLI::App& calibrate);  // calibrate projectors (the group)
 
 }  // namespace procam

@@ -15,7 +15,9 @@
 #include <random>
 #include <thread>
 
+#include "apps/command_line.h"
 #include "apps/commands.h"
+#include "projection/stage.h"
 #include "geometry/stage.h"
 #include "calibration/rig_directory.h"
 #include "datasets_synthetic/rooms.h"
@@ -50,219 +52,19 @@ struct ProjectArguments {
   bool detail = false;
 };
 
-// What `procam compensate SCENE --out DIR` left in DIR, checked against the scene it names.
-struct Solution {
-  Scene scene;
-  PatchHierarchy patches;
-  Eigen::MatrixX3d emittance;
-};
-
-std::filesystem::path ResolveScenePath(const std::string& written,
-                                       const std::filesystem::path& solution_dir) {
-  const std::filesystem::path path(written);
-  if (path.is_absolute() || std::filesystem::exists(path)) return path;
-  // compensate records the path as it was given; try it relative to the solution too.
-  if (std::filesystem::exists(solution_dir / path)) return solution_dir / path;
-  return path;
-}
-
-Solution LoadSolution(const std::filesystem::path& dir, int patches_override) {
-  const std::filesystem::path result_path = dir / "result.json";
-  const std::string file = result_path.string();
-  if (!std::filesystem::exists(result_path)) {
-    throw IoError(
-        file +
-        ": file not found (SOLUTION_DIR must be what `procam compensate SCENE --out DIR` wrote)");
-  }
-  nlohmann::json result;
-  try {
-    result = nlohmann::json::parse(ReadFile(result_path));
-  } catch (const nlohmann::json::exception&) {
-    throw IoError(file + ": invalid JSON");
-  }
-  if (!result.is_object() || !result.contains("scene") || !result["scene"].is_string()) {
-    throw IoError(file + ": scene: required key is missing (a string: the scene file)");
-  }
-  if (!result.contains("patches") || !result["patches"].is_number_integer() ||
-      result["patches"].get<int64_t>() < 1) {
-    throw IoError(file + ": patches: required key is missing (a positive integer)");
-  }
-  const int n = result["patches"].get<int>();
-  Solution solution;
-  solution.scene =
-      LoadSceneArgument(ResolveScenePath(result["scene"].get<std::string>(), dir).string());
-
-  const std::filesystem::path e_path = dir / "E.npy";
-  const NpyArray e = ReadNpy(e_path);
-  if (e.shape.size() != 2 || e.shape[0] != n || e.shape[1] != 3) {
-    std::string shape;
-    for (const int64_t extent : e.shape) {
-      if (!shape.empty()) shape += ",";
-      shape += std::to_string(extent);
-    }
-    throw IoError(e_path.string() + ": shape (" + shape + "), but result.json says " +
-                  std::to_string(n) + " patches: expected (" + std::to_string(n) + ",3)");
-  }
-  solution.emittance.resize(n, 3);
-  for (int i = 0; i < n; ++i) {
-    for (int c = 0; c < 3; ++c) solution.emittance(i, c) = e.values[3 * i + c];
-  }
-  if (!solution.emittance.allFinite()) throw IoError(e_path.string() + ": non-finite values");
-
-  // SubdividePatches is deterministic: the target that gave n fine patches gives them again.
-  std::vector<int> targets;
-  if (patches_override > 0) {
-    targets = {patches_override};
-  } else {
-    if (result.contains("target_patches") && result["target_patches"].is_number_integer()) {
-      targets.push_back(result["target_patches"].get<int>());
-    }
-    targets.push_back(solution.scene.target_patches);
-    targets.push_back(n);
-  }
-  std::string tried;
-  for (const int target : targets) {
-    SubdivisionOptions subdivision;
-    subdivision.target_patches = std::max(target, 4);
-    solution.patches = SubdividePatches(solution.scene, subdivision);
-    if (solution.patches.fine.size() == n) {
-      solution.scene.target_patches = target;
-      return solution;
-    }
-    tried += (tried.empty() ? "" : ", ") + std::to_string(solution.patches.fine.size()) +
-             " for target " + std::to_string(target);
-  }
-  throw IoError(file + ": the solution has " + std::to_string(n) + " patches but " +
-                solution.scene.path.string() + " subdivides into " + tried +
-                ": the scene changed since `procam compensate` ran (or give --patches as it was "
-                "given to compensate)");
-}
-
 void RunProject(const ProjectArguments& args) {
   const auto start = Clock::now();
-  DitherMethod dither;
-  if (!ParseDither(args.dither, &dither))
-    throw std::invalid_argument("--dither: unknown method " + args.dither);
-  Solution solution = LoadSolution(args.solution, args.patches);
-  // The projectors: --rig, else the rig the solution was computed with, else the scene's.
-  std::string rig_path = args.rig;
-  if (rig_path.empty()) {
-    const nlohmann::json result = nlohmann::json::parse(
-        ReadFile(std::filesystem::path(args.solution) / "result.json"));
-    if (result.contains("rig") && result["rig"].is_object() && result["rig"].contains("dir") &&
-        result["rig"]["dir"].is_string()) {
-      rig_path = ResolveScenePath(result["rig"]["dir"].get<std::string>(), args.solution).string();
-    }
-  }
-  std::optional<RigDirectory> rig_dir;
-  if (!rig_path.empty()) {
-    rig_dir = ReadRigDirectory(rig_path);
-    ApplyRigReflectance(*rig_dir, &solution.patches);
-  }
-  std::vector<Projector> projectors = rig_dir ? rig_dir->projectors : ReadProjectors(solution.scene);
-  if (projectors.empty()) {
-    throw IoError(solution.scene.path.string() +
-                  ": projectors: the scene lists no projectors (add a \"projectors\" array: "
-                  "docs/scene_format.md)");
-  }
-  const double load_seconds = SecondsSince(start);
-  ProjectionRigOptions rig_options;
-  rig_options.feather = args.feather;
-  rig_options.texture_coordinates = args.detail;
-  ProjectionRigSummary rig_summary;
-  spdlog::info("project: casting rays for {} projector(s) over {} patches", projectors.size(),
-               solution.patches.fine.size());
-  const ProjectionRig rig =
-      BuildProjectionRig(solution.patches.fine, std::move(projectors), rig_options, &rig_summary);
-  RenderOptions render_options;
-  render_options.dither = dither;
-  render_options.detail = args.detail;
-  RenderSummary summary;
-  const std::vector<ProjectorImage> images =
-      RenderProjectorImages(rig, solution.scene, solution.emittance, render_options, &summary);
-
-  const auto write_start = Clock::now();
-  const std::filesystem::path out(args.out);
-  std::error_code error;
-  std::filesystem::create_directories(out, error);
-  if (error) throw IoError(out.string() + ": cannot create directory: " + error.message());
-  const std::vector<std::string> encoded = EncodeProjectorImages(images);
-  nlohmann::json projector_json = nlohmann::json::array();
-  for (size_t k = 0; k < images.size(); ++k) {
-    const Projector& projector = rig.projectors[k];
-    const std::string image_name = projector.name + ".png";
-    WriteFileAtomically(out / image_name, encoded[k]);
-    projector_json.push_back({{"name", projector.name},
-                              {"image", image_name},
-                              {"model", projector.model_path.string()},
-                              {"width", projector.geometry.width()},
-                              {"height", projector.geometry.height()},
-                              {"bits", images[k].bits},
-                              {"lit_pixels", rig.maps[k].lit_pixels},
-                              {"patches_reached", rig.maps[k].patches_reached},
-                              {"saturated_pixels", summary.saturated_pixels[k]},
-                              {"detail_saturated_pixels", summary.detail_saturated_pixels[k]},
-                              {"clipped_pixels", summary.clipped_pixels[k]}});
-  }
-  WriteNpy(out / "E_delivered.npy", RowMatrixXd(summary.delivered));
-  WriteNpy(out / "lower.npy", RowMatrixXd(rig.lower));
-  WriteNpy(out / "upper.npy", RowMatrixXd(rig.upper));
-  const double write_seconds = SecondsSince(write_start);
-  nlohmann::json result = {{"solution", args.solution},
-                                 {"scene", solution.scene.path.string()},
-                                 {"patches", rig.size()},
-                                 {"target_patches", solution.scene.target_patches},
-                                 {"projectors", projector_json},
-                                 {"dither", DitherName(dither)},
-                                 {"feather", args.feather},
-                                 {"detail", args.detail},
-                                 {"detail_pixels", summary.detail_pixels},
-                                 {"patches_reached", rig_summary.patches_reached},
-                                 {"patches_unreached", summary.patches_unreached},
-                                 {"patches_below_lower", summary.patches_below_lower},
-                                 {"patches_above_upper", summary.patches_above_upper},
-                                 {"level_passes", summary.level_passes},
-                                 {"max_relative_error", summary.max_relative_error},
-                                 {"seconds",
-                                  {{"load", load_seconds},
-                                   {"maps", rig_summary.seconds},
-                                   {"render", summary.seconds},
-                                   {"write", write_seconds},
-                                   {"total", SecondsSince(start)}}}};
-  if (rig_dir) result["rig"] = rig_dir->Describe();
-  WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
-
-  for (size_t k = 0; k < images.size(); ++k) {
-    std::printf("%-12s %dx%d, %d-bit: %d lit pixels, %d patches, %lld saturated\n",
-                rig.projectors[k].name.c_str(), rig.projectors[k].geometry.width(),
-                rig.projectors[k].geometry.height(), images[k].bits, rig.maps[k].lit_pixels,
-                rig.maps[k].patches_reached, summary.saturated_pixels[k]);
-  }
-  std::printf(
-      "patches: %d, %d reached by no projector; E outside the projectors' bounds on %d (below) / "
-      "%d (above)\n",
-      rig.size(), summary.patches_unreached, summary.patches_below_lower,
-      summary.patches_above_upper);
-  if (summary.patches_below_lower + summary.patches_above_upper > 0) {
-    std::printf(
-        "  (clipped: was the solution computed with the scene's `bounds` instead of its "
-        "projectors?)\n");
-  }
-  if (args.detail) {
-    long long clipped = 0;
-    for (const long long count : summary.detail_saturated_pixels) clipped += count;
-    std::printf(
-        "detail: %lld lit pixels on textured surfaces, %lld with highlights clipped at full "
-        "drive\n",
-        summary.detail_pixels, clipped);
-    if (summary.detail_pixels == 0)
-      std::printf("  (no surface the projectors light has a texture)\n");
-  }
-  std::printf(
-      "largest error of the delivered emittance %.2e (relative to the largest upper bound)\n",
-      summary.max_relative_error);
-  std::printf("maps %.3f s, images %.3f s, writing %.3f s\nwrote %s/result.json and %zu image(s)\n",
-              rig_summary.seconds, summary.seconds, write_seconds, args.out.c_str(), images.size());
+  ProjectionStageOptions options;
+  if (!ParseDither(args.dither, &options.dither)) throw std::invalid_argument("--dither: unknown method " + args.dither);
+  const SolutionDirectory solution = ReadSolutionDirectory(args.solution);
+  SolutionGeometry geometry = ReadSolutionGeometry(solution, args.patches);
+  SolutionProjectors projectors = ProjectorsForSolution(solution, args.rig, geometry.scene, &geometry.patches);
+  options.out = args.out;
+  options.feather = args.feather;
+  options.detail = args.detail;
+  options.load_seconds = SecondsSince(start);
+  options.progress = PrintProgress();
+  RunProjectionStage(solution, geometry, std::move(projectors.projectors), projectors.rig_description, options);
 }
 
 struct BenchProjectionArguments {

@@ -13,6 +13,10 @@
 #include "base/camera_model.h"
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "calibration/calibrate_all_stage.h"
+#include "capture/devices.h"
+#include "projection/stage.h"
+#include <fmt/ranges.h>
 #include "compensation/stage.h"
 #include "datasets_synthetic/evaluation.h"
 #include "geometry/stage.h"
@@ -60,47 +64,83 @@ struct RigDemoArguments {
   int iterations = 4;
 };
 
-// calibrate → compensate → project → photograph → verify → refine, each stage the command a user
-// would run (printed as `$ procam ...`), on whatever the camera URI names.
+// calibrate → compensate → project → photograph → verify → refine, each stage a library call
+// printed as the command a user would run (`$ procam ...`), on whatever the camera URI names.
 void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& rig,
                 const std::filesystem::path& out) {
-  const std::string rig_dir = (out / "rig").string(), solution = (out / "solution").string();
-  const std::string patch_count = std::to_string(patches);
-  std::vector<std::string> calibrate = {"calibrate", "all", "--camera", rig.camera, "--scene", scene,
-                                        "--out", rig_dir, "--patches", patch_count,
-                                        "--frames", std::to_string(rig.frames), "--settle-ms",
-                                        fmt::format("{}", rig.settle_ms)};
-  const auto add = [](std::vector<std::string>* command, const char* option, const std::string& value) {
-    if (!value.empty()) command->insert(command->end(), {option, value});
-  };
-  std::string displays, names;
-  for (const std::string& d : rig.displays) displays += (displays.empty() ? "" : ",") + d;
-  for (const std::string& n : rig.names) names += (names.empty() ? "" : ",") + n;
-  add(&calibrate, "--display", displays);
-  add(&calibrate, "--names", names);
-  add(&calibrate, "--chessboard", rig.chessboard);
-  add(&calibrate, "--camera-model", rig.camera_model);
-  add(&calibrate, "--camera-scale", rig.camera_scale);
-  add(&calibrate, "--camera-guess", rig.camera_guess);
+  RegisterDeviceBackends();
+  const std::filesystem::path rig_dir = out / "rig", solution_dir = out / "solution", images = out / "images";
   spdlog::info("demo on a rig: stage 1/4 calibration");
-  RunProcamCommand(calibrate);
+  CalibrateAllOptions calibrate;
+  calibrate.camera = rig.camera;
+  calibrate.scene = scene;
+  calibrate.out = rig_dir;
+  calibrate.patches = patches;
+  calibrate.frames = rig.frames;
+  calibrate.settle_ms = rig.settle_ms;
+  calibrate.chessboard = rig.chessboard;
+  calibrate.camera_model = rig.camera_model;
+  calibrate.camera_scale = rig.camera_scale;
+  calibrate.camera_guess = rig.camera_guess;
+  calibrate.names = rig.names;
+  std::vector<std::shared_ptr<PatternDisplay>> displays;
+  for (const std::string& display : rig.displays) displays.push_back(OpenMonitorDisplay(display));
+  calibrate.displays = displays;
+  calibrate.display_names = rig.displays;
+  calibrate.progress = PrintProgress();
+  std::printf("\n$ procam calibrate all --camera %s --scene %s --out %s --patches %d --frames %d --settle-ms %g%s\n",
+              rig.camera.c_str(), scene.c_str(), rig_dir.c_str(), patches, rig.frames, rig.settle_ms,
+              rig.displays.empty() ? "" : (" --display " + fmt::format("{}", fmt::join(rig.displays, ","))).c_str());
+  RunCalibrateAll(calibrate);
+
   spdlog::info("stage 2/4 compensation with the calibrated rig");
-  RunProcamCommand({"compensate", scene, "--method", "perceptual", "--multires", "--patches", patch_count, "--rig",
-                    rig_dir, "--out", solution});
+  std::printf("\n$ procam compensate %s --method perceptual --multires --patches %d --rig %s --out %s\n",
+              scene.c_str(), patches, rig_dir.c_str(), solution_dir.c_str());
+  const RigDirectory rig_directory = ReadRigDirectory(rig_dir);
+  GeometryStage geometry = RunGeometryStage(scene, GeometryArguments(patches));
+  ApplyRigReflectance(rig_directory, &geometry.patches);
+  const ProjectionRig projection_rig =
+      BuildProjectionRig(geometry.patches.fine, rig_directory.projectors, ProjectionRigOptions());
+  CompensationOptions compensation;
+  compensation.solver.method = CompensationMethod::kPerceptual;
+  compensation.solver.multires = true;
+  compensation.lower = projection_rig.lower;
+  compensation.upper = projection_rig.upper;
+  compensation.progress = LogProgress();
+  const CompensationRun run = RunCompensation(geometry, compensation);
+  WriteCompensation(geometry, run, solution_dir, false, {{"rig", rig_directory.Describe()}});
+
   spdlog::info("stage 3/4 projector images");
-  RunProcamCommand({"project", solution, "--out", (out / "images").string()});
+  std::printf("\n$ procam project %s --out %s\n", solution_dir.c_str(), images.c_str());
+  const SolutionDirectory solution = ReadSolutionDirectory(solution_dir);
+  SolutionGeometry solution_geometry = ReadSolutionGeometry(solution);
+  SolutionProjectors projectors = ProjectorsForSolution(solution, {}, solution_geometry.scene, &solution_geometry.patches);
+  ProjectionStageOptions projection;
+  projection.out = images;
+  projection.progress = PrintProgress();
+  RunProjectionStage(solution, solution_geometry, std::move(projectors.projectors), projectors.rig_description,
+                     projection);
+
   spdlog::info("stage 4/4 photographs, verification and the closed loop");
-  std::vector<std::string> verify = {"verify", rig_dir, solution, "--camera", rig.camera,
-                                     "--out", (out / "verify").string(), "--iterations",
-                                     std::to_string(rig.iterations), "--frames", std::to_string(rig.frames),
-                                     "--settle-ms", fmt::format("{}", rig.settle_ms)};
-  for (const std::string& d : rig.displays) verify.insert(verify.end(), {"--display", d});
-  add(&verify, "--camera-scale", rig.camera_scale);
-  RunProcamCommand(verify);
+  std::printf("\n$ procam verify %s %s --camera %s --out %s --iterations %d --frames %d --settle-ms %g\n",
+              rig_dir.c_str(), solution_dir.c_str(), rig.camera.c_str(), (out / "verify").c_str(), rig.iterations,
+              rig.frames, rig.settle_ms);
+  VerificationOptions verify;
+  verify.rig_dir = rig_dir;
+  verify.solution_dir = solution_dir;
+  verify.out = out / "verify";
+  verify.camera = rig.camera;
+  verify.displays = displays;
+  verify.iterations = rig.iterations;
+  verify.sequencer.frames_per_pattern = rig.frames;
+  verify.sequencer.settle_ms = rig.settle_ms;
+  if (!rig.camera_scale.empty()) verify.camera_scale = ParsePositiveRgb("--camera-scale", rig.camera_scale);
+  verify.progress = LogProgress();
+  const VerificationSummary verified = RunVerification(verify);
+  std::cout << verified.BriefReport() << "\n";
   std::cout << "\nwrote " << out.string() << "/: rig/ (the calibration), solution/ (E.npy, B.npy), images/ (one PNG "
             << "per projector), verify/report.html (photos, ΔE per iteration)\n";
 }
-
 
 // A scene file without a camera: geometry and compensation, numbers per patch.
 void RunJsonDemo(const std::string& scene_path, int patches, const std::filesystem::path& out) {
@@ -148,8 +188,16 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation, const Ev
   const std::string camera = stage.camera = fmt::format(
       "synthetic:{}?patches={}&albedo={}&fps=500&exposure_us=1000&reference_exposure_us=1000&black=8&noise=1",
       evaluation.name, options.patches, options.albedo_variation);
-  RunProcamCommand({"calibrate", "all", "--camera", camera, "--out", rig_dir.string(), "--frames", "2",
-                    "--settle-ms", "1", "--levels", "0,32,64,128,192,255"});
+  std::printf("\n$ procam calibrate all --camera %s --out %s --frames 2 --settle-ms 1 --levels 0,32,64,128,192,255\n",
+              camera.c_str(), rig_dir.c_str());
+  CalibrateAllOptions calibrate;
+  calibrate.camera = camera;
+  calibrate.out = rig_dir;
+  calibrate.frames = 2;
+  calibrate.settle_ms = 1;
+  calibrate.levels = {0, 32, 64, 128, 192, 255};
+  calibrate.progress = PrintProgress();
+  RunCalibrateAll(calibrate);
   const RigDirectory rig = ReadRigDirectory(rig_dir);
 
   // Accuracy against the world's true projectors and camera.

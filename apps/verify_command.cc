@@ -23,23 +23,6 @@ struct VerifyArguments {
   VerificationOptions options;
 };
 
-std::shared_ptr<PatternDisplay> OpenDisplay(const std::string& text) {
-  if (text.rfind("glfw:", 0) != 0) {
-    throw IoError("display '" + text + "': unknown; use glfw:N|NAME (procam show --list)");
-  }
-#if PROCAM_WITH_GLFW
-  try {
-    return std::make_shared<GlfwDisplay>(FindMonitor(text.substr(5)));
-  } catch (const IoError& error) {
-    throw IoError("display '" + text + "': " + error.what());
-  }
-#else
-  throw IoError("display '" + text +
-                "': this build has no GLFW output backend (reconfigure with -DPROCAM_WITH_GLFW=ON; "
-                "apt-get install libglfw3-dev libgl-dev)");
-#endif
-}
-
 void RunVerify(VerifyArguments& args) {
   RegisterDeviceBackends();
   VerificationOptions options = args.options;
@@ -56,7 +39,7 @@ void RunVerify(VerifyArguments& args) {
     throw IoError("--display: camera '" + options.camera +
                   "' photographs the simulated room, whose own projectors show the images");
   }
-  for (const std::string& display : args.displays) options.displays.push_back(OpenDisplay(display));
+  for (const std::string& display : args.displays) options.displays.push_back(OpenMonitorDisplay(display));
   const VerificationSummary summary = RunVerification(options);
   std::cout << summary.BriefReport() << "\nwrote " << args.out << "/result.json, report.html, iterations/\n";
 }

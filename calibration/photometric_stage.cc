@@ -93,10 +93,9 @@ void ParseCameraScale(const PhotometricStageOptions& args, const std::filesystem
       throw IoError("--camera-scale: " + text + " is not the camera of " +
                     (session / "session.json").string() + " (" + recorded + ")");
     }
-    // Black override < 0: the camera's own black level (the HDR merge has removed it).
-    const CameraColour colour = simulated->colour(manifest, hdr, full_scale, -1.0);
-    *scale = colour.to_exitance.diagonal().cwiseInverse();
-    *black = colour.black;
+    *scale = simulated->value_per_exitance(manifest, hdr, full_scale);
+    // The camera's own black level (the HDR merge has removed it).
+    *black = simulated->colour(manifest, hdr, full_scale, -1.0).black;
     return;
   }
   *scale = ParsePositiveRgb("--camera-scale", text);

@@ -153,4 +153,19 @@ void ApplyRigReflectance(const RigDirectory& rig, PatchHierarchy* patches) {
                                               patches->coarse_of_fine, patches->coarse.size());
 }
 
+SolutionProjectors ProjectorsForSolution(const SolutionDirectory& solution, const std::filesystem::path& rig_dir,
+                                         const Scene& scene, PatchHierarchy* patches) {
+  SolutionProjectors result;
+  const std::filesystem::path dir = rig_dir.empty() ? solution.rig_dir : rig_dir;
+  if (dir.empty()) {
+    result.projectors = ReadProjectors(scene);
+    return result;
+  }
+  const RigDirectory rig = ReadRigDirectory(dir);
+  ApplyRigReflectance(rig, patches);
+  result.projectors = rig.projectors;
+  result.rig_description = rig.Describe();
+  return result;
+}
+
 }  // namespace procam

@@ -22,6 +22,7 @@
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
+#include "compensation/stage.h"
 #include "geometry/patches.h"
 #include "projection/projector.h"
 
@@ -70,5 +71,16 @@ RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir);
 // mean of its children). Throws IoError naming RIG_DIR/rig.json when the rig's reflectance was
 // estimated for another patch count. Does nothing when the rig has none.
 void ApplyRigReflectance(const RigDirectory& rig, PatchHierarchy* patches);
+
+// The projectors that show a solution, and what result files record about their rig: `rig_dir`
+// when given, else the rig the solution was computed with (its result.json "rig"), else the
+// scene's own projectors (rig_description null). A rig's per-patch reflectance replaces the
+// patches' (ApplyRigReflectance). Throws IoError like ReadRigDirectory and ReadProjectors.
+struct SolutionProjectors {
+  std::vector<Projector> projectors;
+  nlohmann::json rig_description;  // RigDirectory::Describe(), or null
+};
+SolutionProjectors ProjectorsForSolution(const SolutionDirectory& solution, const std::filesystem::path& rig_dir,
+                                         const Scene& scene, PatchHierarchy* patches);
 
 }  // namespace procam

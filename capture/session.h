@@ -48,6 +48,7 @@ struct CaptureSummary {
   int stale_dropped = 0;      // frames dropped because they were exposed before a pattern settled
   double seconds = 0.0;
   std::filesystem::path manifest;
+  std::string camera;  // the camera's URI as it names itself (set by callers that opened it)
   std::string BriefReport() const;  // one line
 };
 

@@ -5,6 +5,7 @@
 // (datasets_synthetic) registers "synthetic"; a URI of any other scheme is a real camera, whose
 // colour calibration comes from the rig (rig.json camera.colour) or the user.
 
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -32,11 +33,26 @@ struct CameraColour {
 // taken with a session's settings (`manifest`: session.json; `hdr`: bracketed exposures merged;
 // `full_scale`: the frames' full scale; `black_override` ≥ 0: the black level to assume).
 struct SimulatedCamera {
+  std::string description;  // for messages, e.g. "synthetic scene 'tiny_box'"
+  std::vector<std::string> projector_names;  // one per display
   std::vector<std::shared_ptr<PatternDisplay>> displays;
   double black_level = 0.0;  // the camera's black level, DN (what the HDR merge subtracts)
   std::function<CameraColour(const nlohmann::json& manifest, bool hdr, double full_scale,
                              double black_override)>
       colour;
+  // The same calibration as camera value per unit exitance k per channel (colour's
+  // to_exitance is diag(1/k)), for the photometric calibration's transfer.
+  std::function<Eigen::Vector3d(const nlohmann::json& manifest, bool hdr, double full_scale)> value_per_exitance;
+  // What a whole-rig calibration needs: the room the camera looks at (a scene text such as
+  // "synthetic:c_shaped", geometry/stage.h) and its patch target; a tape-measure guess of the
+  // camera's pose ("x,y,z,look_x,look_y,look_z" in the room, metres); and chessboard photos of
+  // the camera (a board of corners_x × corners_y inner corners, `square` metres, held in several
+  // poses), written as PNGs into `folder`, returning how many.
+  std::string scene;
+  int patches = 0;
+  std::string camera_guess;
+  std::function<int(int corners_x, int corners_y, double square, const std::filesystem::path& folder)>
+      render_chessboard;
 };
 // For camera URIs of `scheme`: the simulated camera behind a URI, or an IoError naming it. The
 // synthetic world registers "synthetic"; a URI of any other scheme is a real camera.

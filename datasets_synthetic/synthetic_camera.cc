@@ -7,6 +7,12 @@
 #include <stdexcept>
 #include <utility>
 
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "base/image_io.h"
+#include "datasets_synthetic/chessboard_views.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "base/io.h"
 #include "geometry/stage.h"
@@ -272,29 +278,54 @@ namespace {
 
 // The synthetic camera's k: radiance_scale × full scale × exposure / reference × gain, per DN
 // (one exposure) or per full scale per second (HDR), as calibrate photometric derives it.
-CameraColour SyntheticColour(const CameraUri& uri, const SyntheticWorld& world,
-                             const nlohmann::json& manifest, bool hdr, double full_scale,
-                             double black_override) {
+double SyntheticValuePerExitance(const CameraUri& uri, const SyntheticWorld& world, const nlohmann::json& manifest,
+                                 bool hdr, double full_scale, double black) {
   const TestCameraOptions camera = TestCameraOptionsFromUri(uri);
   const nlohmann::json settings = manifest.value("camera", nlohmann::json::object())
                                       .value("settings", nlohmann::json::object());
   const double gain = std::pow(10.0, settings.value("gain", 0.0) / 20.0);
   const double full = full_scale > 0.0 ? full_scale : 255.0;
-  const double black = black_override >= 0 ? black_override : camera.black_level;
-  double k = 0.0;
-  CameraColour colour;
-  if (hdr) {
-    k = world.radiance_scale * full / (full - black) * gain /
-        (camera.reference_exposure_us * 1e-6);
-    colour.black = 0.0;
-  } else {
-    const double exposure = settings.value("exposure_us", camera.exposure_us);
-    k = world.radiance_scale * full * exposure / camera.reference_exposure_us * gain;
-    colour.black = black;
+  if (hdr) {  // the HDR merge: (DN − black) / (full − black) per second
+    return world.radiance_scale * full / (full - black) * gain / (camera.reference_exposure_us * 1e-6);
   }
-  colour.to_exitance = Eigen::Matrix3d::Identity() / k;
+  const double exposure = settings.value("exposure_us", camera.exposure_us);
+  return world.radiance_scale * full * exposure / camera.reference_exposure_us * gain;
+}
+
+CameraColour SyntheticColour(const CameraUri& uri, const SyntheticWorld& world,
+                             const nlohmann::json& manifest, bool hdr, double full_scale,
+                             double black_override) {
+  const double black = black_override >= 0 ? black_override : TestCameraOptionsFromUri(uri).black_level;
+  CameraColour colour;
+  colour.black = hdr ? 0.0 : black;
+  colour.to_exitance = Eigen::Matrix3d::Identity() / SyntheticValuePerExitance(uri, world, manifest, hdr, full_scale, black);
   colour.source = "synthetic camera URI";
   return colour;
+}
+
+// The synthetic camera's chessboard photos: the rig's own camera (its lens, not its pose) sees
+// a board of `board` held in ten poses. Written as 8-bit PNGs into `folder`.
+int RenderSyntheticChessboard(const SyntheticWorld& world, const ChessboardSpec& board,
+                              const std::filesystem::path& folder) {
+  std::filesystem::create_directories(folder);
+  const CameraGeometry& camera = world.rig->camera();
+  const std::vector<Eigen::Isometry3d> poses = ChessboardPoses(camera, board);
+  for (size_t v = 0; v < poses.size(); ++v) {
+    const cv::Mat image = RenderChessboard(camera, board, poses[v], 0.01, 100 + v);
+    WritePng(folder / fmt::format("{:03d}_board.png", v), image);
+  }
+  return static_cast<int>(poses.size());
+}
+
+// A tape-measure guess of the synthetic camera's pose: its position rounded to 5 cm and the
+// point it aims at rounded to 25 cm (what someone standing in the room would write down).
+std::string SyntheticCameraGuess(const std::string& scene) {
+  const DevicePlacement camera = MakeSyntheticScene(scene, 100).camera;
+  const auto round = [](double value, double step) { return std::round(value / step) * step; };
+  return fmt::format("{},{},{},{},{},{}", round(camera.centre.x(), 0.05),
+                     round(camera.centre.y(), 0.05), round(camera.centre.z(), 0.05),
+                     round(camera.target.x(), 0.25), round(camera.target.y(), 0.25),
+                     round(camera.target.z(), 0.25));
 }
 
 }  // namespace
@@ -318,8 +349,25 @@ void RegisterSyntheticWorld() {
       const CameraUri uri = CameraUri::Parse(text);
       const std::shared_ptr<SyntheticWorld> world = OpenSyntheticWorld(uri);
       SimulatedCamera camera;
+      camera.description = "synthetic scene '" + world->scene + "'";
+      for (const Projector& projector : world->rig->projectors()) camera.projector_names.push_back(projector.name);
       camera.displays.assign(world->displays.begin(), world->displays.end());
       camera.black_level = TestCameraOptionsFromUri(uri).black_level;
+      camera.scene = "synthetic:" + world->scene;
+      camera.patches = world->patches;
+      camera.camera_guess = SyntheticCameraGuess(world->scene);
+      camera.render_chessboard = [world](int corners_x, int corners_y, double square,
+                                         const std::filesystem::path& folder) {
+        ChessboardSpec board;
+        board.corners_x = corners_x;
+        board.corners_y = corners_y;
+        board.square_size = square;
+        return RenderSyntheticChessboard(*world, board, folder);
+      };
+      camera.value_per_exitance = [uri, world](const nlohmann::json& manifest, bool hdr, double full_scale) {
+        const double black = TestCameraOptionsFromUri(uri).black_level;
+        return Eigen::Vector3d::Constant(SyntheticValuePerExitance(uri, *world, manifest, hdr, full_scale, black));
+      };
       camera.colour = [uri, world](const nlohmann::json& manifest, bool hdr, double full_scale,
                                    double black_override) {
         return SyntheticColour(uri, *world, manifest, hdr, full_scale, black_override);

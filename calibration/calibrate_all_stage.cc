@@ -1,0 +1,326 @@
+#include "calibration/calibrate_all_stage.h"
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+#include <stdexcept>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "base/io.h"
+#include "calibration/camera_stage.h"
+#include "calibration/capture_stage.h"
+#include "calibration/photometric_stage.h"
+#include "calibration/photometric_transfer.h"
+#include "calibration/projectors_stage.h"
+#include "calibration/rig_directory.h"
+#include "capture/session.h"
+#include "capture/simulated_camera.h"
+#include "compensation/unit_light.h"
+#include "geometry/stage.h"
+#include "projection/camera_rays.h"
+#include "projection/projection_rig.h"
+
+namespace procam {
+namespace {
+
+std::string Join(const std::vector<std::string>& items, const char* separator) {
+  std::string text;
+  for (size_t k = 0; k < items.size(); ++k) text += (k ? separator : "") + items[k];
+  return text;
+}
+
+// A step as the command a user would type for it.
+void ShowCommand(const ProgressCallback& progress, const std::vector<std::string>& arguments) {
+  Report(progress, "\n$ procam " + Join(arguments, " "));
+}
+
+// What the steps share, resolved from the options and the simulated world (if any).
+struct RigPlan {
+  std::optional<SimulatedCamera> simulated;
+  std::vector<std::string> names;
+  std::string scene;
+  int patches = 0;
+  std::filesystem::path captures;
+};
+
+RigPlan Plan(const CalibrateAllOptions& args) {
+  RigPlan plan;
+  plan.simulated = FindSimulatedCamera(args.camera);
+  const bool simulated = plan.simulated.has_value();
+  const size_t count = simulated ? plan.simulated->displays.size() : args.displays.size();
+  if (count == 0) {
+    throw std::invalid_argument("--display: a real rig needs one per projector, e.g. --display "
+                                "glfw:1,glfw:2 (procam show --list)");
+  }
+  if (simulated && !args.displays.empty()) {
+    throw std::invalid_argument("--display: a synthetic camera looks at its own projectors");
+  }
+  if (!simulated && args.display_names.size() != args.displays.size()) {
+    throw std::invalid_argument("display_names: one per display");
+  }
+  plan.names = args.names;
+  if (plan.names.empty()) {
+    for (size_t k = 0; k < count; ++k) {
+      plan.names.push_back(simulated ? plan.simulated->projector_names[k] : fmt::format("projector{}", k));
+    }
+  }
+  if (plan.names.size() != count) {
+    throw std::invalid_argument("--names: " + std::to_string(plan.names.size()) + " names for " +
+                                std::to_string(count) + " projectors");
+  }
+  plan.scene = args.scene;
+  if (plan.scene.empty()) {
+    if (!simulated) throw std::invalid_argument("--scene: required for a real rig (the room model)");
+    plan.scene = plan.simulated->scene;
+  }
+  plan.patches = args.patches > 0 ? args.patches : simulated ? plan.simulated->patches : 0;
+  if (args.camera_model.empty() && args.chessboard.empty() && !simulated) {
+    throw std::invalid_argument(
+        "--chessboard: a real camera needs chessboard photos (--chessboard DIR) or a "
+        "calibrated model (--camera-model FILE)");
+  }
+  if (!args.camera_model.empty() && !std::filesystem::exists(args.camera_model))
+    throw IoError(args.camera_model.string() + ": file not found (--camera-model)");
+  if (args.camera_scale.empty() && !simulated) {
+    throw std::invalid_argument(
+        "--camera-scale: required for a real camera (camera value per unit exitance, "
+        "docs/calibration.md)");
+  }
+  plan.captures = args.out / "captures";
+  return plan;
+}
+
+// 1. Camera intrinsics.
+void CalibrateCameraStep(const CalibrateAllOptions& args, const RigPlan& plan) {
+  Report(args.progress, "\n== 1/4 camera intrinsics");
+  if (!args.camera_model.empty()) {
+    std::filesystem::copy_file(args.camera_model, args.out / "camera.cameramodel",
+                               std::filesystem::copy_options::overwrite_existing);
+    UpdateRigJson(args.out, [](nlohmann::json& rig) { rig["camera"]["model"] = "camera.cameramodel"; });
+    Report(args.progress, "camera model from " + args.camera_model.string());
+    return;
+  }
+  CameraStageOptions camera;
+  camera.images = args.chessboard;
+  camera.out = args.out;
+  camera.board = args.board;
+  camera.progress = args.progress;
+  if (camera.images.empty()) {  // a simulated camera photographs a simulated board
+    camera.board.square_size = 0.06;
+    camera.images = plan.captures / "chessboard";
+    const int photos = plan.simulated->render_chessboard(camera.board.corners_x, camera.board.corners_y,
+                                                         camera.board.square_size, camera.images);
+    Report(args.progress, fmt::format("rendered {} chessboard photos of the synthetic camera into {}", photos,
+                                      camera.images.string()));
+  }
+  ShowCommand(args.progress, {"calibrate", "camera", camera.images.string(), "--out", args.out.string(), "--corners",
+                              fmt::format("{}x{}", camera.board.corners_x, camera.board.corners_y), "--square",
+                              fmt::format("{}", camera.board.square_size)});
+  RunCameraStage(camera);
+}
+
+// 2. Captures, per projector: structured light, then flat fields.
+std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args, const RigPlan& plan) {
+  Report(args.progress, "\n== 2/4 structured light and flat fields, per projector");
+  std::vector<std::filesystem::path> sessions;
+  for (size_t k = 0; k < plan.names.size(); ++k) {
+    CaptureStageOptions capture;
+    capture.camera = args.camera;
+    capture.sequencer.frames_per_pattern = args.frames;
+    capture.sequencer.settle_ms = args.settle_ms;
+    capture.sequencer.exposures_us = args.exposures_us;
+    capture.progress = args.progress;
+    std::vector<std::string> common = {"--camera", args.camera, "--frames", std::to_string(args.frames),
+                                       "--settle-ms", fmt::format("{}", args.settle_ms)};
+    if (plan.simulated) {
+      capture.projector = static_cast<int>(k);
+      common.insert(common.end(), {"--projector", std::to_string(k)});
+    } else {
+      capture.display = args.displays[k];
+      common.insert(common.end(), {"--display", args.display_names[k]});
+    }
+    if (!args.exposures_us.empty()) {
+      std::vector<std::string> exposures;
+      for (double e : args.exposures_us) exposures.push_back(fmt::format("{}", e));
+      common.insert(common.end(), {"--exposure-us", Join(exposures, ",")});
+    }
+    capture.sequence = "structured_light";
+    capture.out = plan.captures / ("structured_light_" + plan.names[k]);
+    std::vector<std::string> command = {"capture", "--sequence", "structured_light", "--out", capture.out.string()};
+    command.insert(command.end(), common.begin(), common.end());
+    ShowCommand(args.progress, command);
+    Report(args.progress, CaptureLine(capture, RunCaptureStage(capture)));
+    sessions.push_back(capture.out);
+
+    capture.sequence = "photometric";
+    capture.levels = args.levels;
+    capture.channels = "rgb";
+    capture.out = plan.captures / ("photometric_" + plan.names[k]);
+    std::vector<std::string> levels;
+    for (int level : args.levels) levels.push_back(std::to_string(level));
+    command = {"capture", "--sequence", "photometric", "--levels", Join(levels, ","), "--channels", "rgb", "--out",
+               capture.out.string()};
+    command.insert(command.end(), common.begin(), common.end());
+    ShowCommand(args.progress, command);
+    Report(args.progress, CaptureLine(capture, RunCaptureStage(capture)));
+    // The projector goes dark again, so its last flat field does not light the next one's
+    // captures (on a real rig: every projector but the one being captured must show black).
+    const std::shared_ptr<PatternDisplay>& display = plan.simulated ? plan.simulated->displays[k] : args.displays[k];
+    display->Show(cv::Mat(display->Resolution(), CV_8UC3, cv::Scalar::all(0)));
+  }
+  return sessions;
+}
+
+// 3. Geometry: every projector and the camera's pose in the room, jointly.
+void ProjectorsStep(const CalibrateAllOptions& args, const RigPlan& plan,
+                    const std::vector<std::filesystem::path>& sessions) {
+  Report(args.progress, "\n== 3/4 projectors and registration");
+  ProjectorsStageOptions projectors;
+  projectors.sessions = sessions;
+  projectors.scene = plan.scene;
+  projectors.out = args.out;
+  projectors.names = plan.names;
+  projectors.progress = args.progress;
+  std::vector<std::string> command = {"calibrate", "projectors"};
+  for (const std::filesystem::path& session : sessions) command.push_back(session.string());
+  command.insert(command.end(), {"--scene", plan.scene, "--out", args.out.string(), "--names", Join(plan.names, ",")});
+  std::string guess = args.camera_guess;
+  if (guess.empty() && plan.simulated) guess = plan.simulated->camera_guess;
+  if (!guess.empty()) {
+    command.insert(command.end(), {"--camera-guess", guess});
+    projectors.room_from_camera_guess = RoomFromCameraGuess(guess);
+  }
+  ShowCommand(args.progress, command);
+  RunProjectorsStage(projectors);
+}
+
+// 4. Photometry in the scene's units and per-patch reflectance.
+void PhotometryStep(const CalibrateAllOptions& args, const RigPlan& plan) {
+  Report(args.progress, "\n== 4/4 photometry, per projector");
+  const std::string camera_scale = args.camera_scale.empty() ? args.camera : args.camera_scale;
+  for (const std::string& name : plan.names) {
+    PhotometricStageOptions photometric;
+    photometric.session = plan.captures / ("photometric_" + name);
+    photometric.out = args.out;
+    photometric.projector = name;
+    photometric.scene = plan.scene;
+    photometric.camera_scale = camera_scale;
+    photometric.patches = plan.patches;
+    photometric.progress = args.progress;
+    std::vector<std::string> command = {"calibrate", "photometric", photometric.session.string(), "--out",
+                                        args.out.string(), "--projector", name, "--scene", plan.scene,
+                                        "--camera-scale", camera_scale};
+    if (plan.patches > 0) command.insert(command.end(), {"--patches", std::to_string(plan.patches)});
+    ShowCommand(args.progress, command);
+    RunPhotometricStage(photometric);
+  }
+}
+
+// Every photometric session's black field shows all projectors at black, so each projector's
+// fitted black is the sum of all of them there. Separates them (SeparateBlackLevels) and moves
+// each max by the same amount (the fit's max − black is unbiased), in rig.json and in a
+// `black_levels` section of result.json.
+void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector<std::string>& names,
+                             const std::filesystem::path& captures, const std::string& scene,
+                             int patches, const ProgressCallback& progress) {
+  Report(progress, "\n== black levels, jointly");
+  const nlohmann::json rig_json = ReadRigJson(out);
+  const RigDirectory rig = ReadRigDirectory(out);
+  const ProjectorGeometry camera = ReadCameraModel(out / "camera.cameramodel");
+  GeometryOptions geometry;
+  geometry.patches = patches;
+  geometry.progress = progress;
+  const GeometryStage stage = RunGeometryStage(scene, geometry);
+  std::vector<cv::Mat> transfers;
+  cv::Mat black_field;
+  int black_fields = 0;
+  double camera_black = 0.0;
+  for (const std::string& name : names) {
+    const auto projector = std::find_if(rig.projectors.begin(), rig.projectors.end(),
+                                        [&](const Projector& p) { return p.name == name; });
+    if (projector == rig.projectors.end()) throw IoError((out / "rig.json").string() + ": no projector " + name);
+    // Written by step 4 for every projector; .at() names what is missing otherwise.
+    Eigen::Vector3d scale;
+    nlohmann::json entry;
+    try {
+      entry = rig_json.at("photometric").at(name);
+      const nlohmann::json& k = entry.at("camera_scale");
+      scale = Eigen::Vector3d(k.at(0).get<double>(), k.at(1).get<double>(), k.at(2).get<double>());
+    } catch (const nlohmann::json::exception&) {
+      throw IoError((out / "rig.json").string() + ": photometric." + name +
+                    ".camera_scale: missing (calibrate photometric --scene did not run for it)");
+    }
+    camera_black = entry.value("camera_black", 0.0);
+    const CameraPixelLighting lighting =
+        LightCameraPixels(stage.scene, stage.patches.fine, projector->geometry, camera);
+    const UnitLightModel model = ModelUnitLight(stage.patches.fine, stage.form_factors, UnitLightExitance(stage.patches.fine, *projector));
+    transfers.push_back(PhotometricTransfer(lighting, stage.patches.fine, model, scale));
+    // The session's black fields (drive 0 on any channel): every projector dark.
+    const CaptureSessionData session = CaptureSessionData::Load(captures / ("photometric_" + name));
+    if (!session.Hdr(0).empty()) {
+      Report(progress, "HDR sessions: black levels left as fitted (not separated)");
+      return;
+    }
+    for (int p = 0; p < session.pattern_count(); ++p) {
+      const nlohmann::json& info = session.manifest()["patterns"][p].value("info", nlohmann::json());
+      if (!info.is_object() || info.value("kind", "") != "flat" || info.value("level", -1) != 0) continue;
+      const cv::Mat mean = session.Mean(p, 0);
+      if (black_field.empty()) black_field = cv::Mat::zeros(mean.size(), CV_32FC3);
+      black_field += mean;
+      ++black_fields;
+    }
+  }
+  if (black_fields == 0) {
+    Report(progress, "no black fields: black levels left as fitted");
+    return;
+  }
+  black_field /= black_fields;
+  const std::vector<Eigen::Vector3d> black = SeparateBlackLevels(transfers, black_field, camera_black);
+  nlohmann::json report = nlohmann::json::object();
+  UpdateRigJson(out, [&](nlohmann::json& json) {
+    for (size_t j = 0; j < names.size(); ++j) {
+      nlohmann::json& entry = RigProjectorEntry(json, names[j]);
+      nlohmann::json fitted_black = entry["black"], fitted_max = entry["max"];
+      nlohmann::json new_black = nlohmann::json::array(), new_max = nlohmann::json::array();
+      for (int c = 0; c < 3; ++c) {
+        const double shift = fitted_black[c].get<double>() - black[j][c];
+        new_black.push_back(std::max(0.0, black[j][c]));
+        new_max.push_back(fitted_max[c].get<double>() - shift);
+      }
+      report[names[j]] = {{"fitted_black", fitted_black}, {"black", new_black}, {"max", new_max}};
+      Report(progress, fmt::format("{}: black ({:.5f}, {:.5f}, {:.5f}) (fitted alone: {:.5f}, {:.5f}, {:.5f})", names[j],
+                                   new_black[0].get<double>(), new_black[1].get<double>(), new_black[2].get<double>(),
+                                   fitted_black[0].get<double>(), fitted_black[1].get<double>(),
+                                   fitted_black[2].get<double>()));
+      entry["black"] = new_black;
+      entry["max"] = new_max;
+    }
+  });
+  UpdateRigResult(out, {"black_levels"},
+                  {{"what", "each projector's black separated from the black fields (all projectors dark) "
+                            "by least squares over the projectors' transfers; max moved by the same amount"},
+                   {"black_fields", black_fields},
+                   {"projectors", report}});
+}
+
+}  // namespace
+
+void RunCalibrateAll(const CalibrateAllOptions& args) {
+  const RigPlan plan = Plan(args);
+  std::filesystem::create_directories(plan.captures);
+  Report(args.progress, fmt::format("calibrating {} projector(s) ({}) with camera {} into {}", plan.names.size(),
+                                    Join(plan.names, ", "), args.camera, args.out.string()));
+  CalibrateCameraStep(args, plan);
+  const std::vector<std::filesystem::path> sessions = CaptureStep(args, plan);
+  ProjectorsStep(args, plan, sessions);
+  PhotometryStep(args, plan);
+  SeparateProjectorBlacks(args.out, plan.names, plan.captures, plan.scene, plan.patches, args.progress);
+  Report(args.progress,
+         fmt::format("\nrig calibrated: {} (rig.json, camera.cameramodel, {}, reflectance.npy); use it "
+                     "with `procam compensate SCENE --rig {}`",
+                     args.out.string(), Join(plan.names, ".cameramodel, ").append(".cameramodel"), args.out.string()));
+}
+
+}  // namespace procam

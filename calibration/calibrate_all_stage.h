@@ -1,0 +1,59 @@
+#pragma once
+// A whole rig calibrated end to end: the camera, then per projector its captures, then every
+// projector and the camera's pose jointly, then the photometry in the scene's units. Each step is
+// a stage of its own (camera_stage.h, capture_stage.h, projectors_stage.h, photometric_stage.h)
+// writing its part of the rig directory; the progress shows each as the `procam` command line a
+// user would type for it:
+//
+//   1. camera intrinsics: the camera stage on chessboard photos, or a given camera model copied;
+//      a simulated camera photographs a simulated chessboard held in front of it;
+//   2. per projector: a structured-light and a photometric capture into RIG_DIR/captures/;
+//   3. the projectors stage on every structured-light session (joint refinement, registration);
+//   4. per projector: the photometric stage in the scene's units (per-patch reflectance);
+//   5. the projectors' black levels separated from one another (every black field shows all
+//      projectors at black).
+// What `procam calibrate all` and the demo run.
+
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "base/progress.h"
+#include "calibration/camera_calibration.h"
+#include "capture/display.h"
+#include "capture/sequencer.h"
+
+namespace procam {
+
+struct CalibrateAllOptions {
+  std::string camera;  // camera URI; a simulated camera's world supplies what a real rig needs
+  // The room model (a scene file or PREFIX:NAME); empty: a simulated camera's own scene.
+  std::string scene;
+  std::filesystem::path out;  // the rig directory
+  int patches = 0;  // patch target of the reflectance (0: the scene's; simulated: its world's)
+  std::filesystem::path chessboard;    // chessboard photos (a folder or a capture session)
+  std::filesystem::path camera_model;  // a calibrated camera.cameramodel instead
+  ChessboardSpec board;                // of the chessboard photos
+  // Real rigs: each projector's display (its monitor), in order, and how to name it in the
+  // command lines shown ("glfw:1").
+  std::vector<std::shared_ptr<PatternDisplay>> displays;
+  std::vector<std::string> display_names;
+  std::vector<std::string> names;  // projector names; empty: the simulated world's, or projectorK
+  // The camera's pose guess, "x,y,z,look_x,look_y,look_z" (metres, the scene's frame); empty: a
+  // simulated camera's tape-measure guess.
+  std::string camera_guess;
+  // Camera value per unit exitance (a number or "R,G,B"); empty: a simulated camera's own.
+  std::string camera_scale;
+  int frames = 4;             // averaged per pattern
+  double settle_ms = 150.0;   // wait after each pattern
+  std::vector<double> exposures_us;  // several: bracketed and merged to HDR
+  std::vector<int> levels = {0, 32, 64, 96, 128, 160, 192, 224, 255};  // photometric drives
+  ProgressCallback progress;  // each step's command line and its report
+};
+
+// Runs the five steps. Checks what the later steps need before anything is captured or written.
+// Throws IoError naming the option, file or device, std::invalid_argument for bad options.
+void RunCalibrateAll(const CalibrateAllOptions& options);
+
+}  // namespace procam

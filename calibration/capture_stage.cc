@@ -1,0 +1,151 @@
+#include "calibration/capture_stage.h"
+
+#include <nlohmann/json.hpp>
+
+#include "base/io.h"
+#include "calibration/camera_response.h"
+#include "calibration/structured_light.h"
+#include "capture/camera.h"
+#include "capture/simulated_camera.h"
+#include "capture/test_camera.h"
+
+namespace procam {
+namespace {
+
+std::string SizeText(cv::Size size) { return std::to_string(size.width) + "x" + std::to_string(size.height); }
+
+CaptureSequence MakeSequence(const CaptureStageOptions& args, cv::Size projector) {
+  if (args.sequence == "graycode") {
+    GrayCodeOptions options;
+    options.width = projector.width;
+    options.height = projector.height;
+    options.columns = args.axes != "rows";
+    options.rows = args.axes != "columns";
+    return MakeGrayCodeSequence(options);
+  }
+  if (args.sequence == "structured_light") {  // XOR Gray + phase, the robust default
+    StructuredLightOptions options;
+    options.width = projector.width;
+    options.height = projector.height;
+    options.columns = args.axes != "rows";
+    options.rows = args.axes != "columns";
+    options.pattern_gamma = args.pattern_gamma;
+    std::string why;
+    if (!options.Check(&why)) throw std::invalid_argument("structured_light sequence: " + why);
+    return MakeStructuredLightSequence(options);
+  }
+  if (args.sequence == "photometric") {
+    PhotometricOptions options;
+    options.width = projector.width;
+    options.height = projector.height;
+    options.levels = args.levels;
+    options.channels = args.channels;
+    std::string why;
+    if (!options.Check(&why)) throw std::invalid_argument("photometric sequence: " + why);
+    return MakePhotometricSequence(options);
+  }
+  if (args.sequence != "verify") {
+    throw std::invalid_argument("--sequence: '" + args.sequence + "': graycode, structured_light, photometric or verify");
+  }
+  const std::vector<std::filesystem::path>& images = args.images;
+  if (images.empty())
+    throw std::invalid_argument(
+        "--sequence verify needs the images to show (positional arguments)");
+  return MakeVerifySequence(images, projector);
+}
+
+// The display of projector `options.projector` of a simulated camera's world.
+std::shared_ptr<PatternDisplay> SimulatedProjectorDisplay(const CaptureStageOptions& options,
+                                                          const SimulatedCamera& simulated) {
+  if (options.display) {
+    throw IoError("display '" + options.display->Name() + "': camera '" + options.camera +
+                  "' photographs the simulated room, whose projectors show the patterns (choose one with "
+                  "--projector)");
+  }
+  const int count = static_cast<int>(simulated.displays.size());
+  if (options.projector < 0 || options.projector >= count) {
+    std::string names;
+    for (const std::string& name : simulated.projector_names) names += (names.empty() ? "" : ", ") + name;
+    throw IoError("--projector " + std::to_string(options.projector) + ": " + simulated.description + " has " +
+                  std::to_string(count) + " projectors (0.." + std::to_string(count - 1) + ": " + names + ")");
+  }
+  const std::shared_ptr<PatternDisplay>& display = simulated.displays[options.projector];
+  if (options.projector_size && *options.projector_size != display->Resolution()) {
+    throw IoError("--projector-size " + SizeText(*options.projector_size) + ": projector " +
+                  std::to_string(options.projector) + " of " + simulated.description + " is " +
+                  SizeText(display->Resolution()));
+  }
+  return display;
+}
+
+nlohmann::json CaptureResult(const CaptureSequence& sequence, const Camera& camera) {
+  return {{"command", "capture"}, {"sequence", sequence.kind}, {"camera", camera.Info().uri}};
+}
+
+}  // namespace
+
+CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
+  std::string why;
+  if (!args.sequencer.Check(&why)) throw std::invalid_argument("capture: " + why);
+  // A simulated camera photographs its room: the patterns go to one of its projectors, whose
+  // display the camera (sharing the world) looks at.
+  const std::optional<SimulatedCamera> simulated = FindSimulatedCamera(args.camera);
+  std::shared_ptr<PatternDisplay> watched;  // what the camera looks at
+  if (simulated) watched = SimulatedProjectorDisplay(args, *simulated);
+  std::shared_ptr<PatternDisplay> output = args.display;
+  const cv::Size projector = watched  ? watched->Resolution()
+                             : output ? output->Resolution()
+                                      : args.projector_size.value_or(cv::Size(1024, 768));
+  // The memory display shows patterns nowhere but to test cameras, which look at it.
+  std::shared_ptr<MemoryDisplay> memory;
+  if (!watched) watched = memory = std::make_shared<MemoryDisplay>(projector, "memory");
+  if (!output) output = watched;
+  LoopbackOptions loopback;
+  loopback.projector_gamma = args.projector_gamma;
+  OpenCameraOptions open_options;
+  if (memory) open_options.scene_view = MakeLoopbackView(memory, loopback);
+  std::unique_ptr<Camera> camera = OpenCamera(args.camera, open_options);
+  if (camera->Info().backend != "test" && !simulated && output == watched) {
+    Report(args.progress, "warning: display 'memory' shows the patterns nowhere; camera " + camera->Info().uri +
+                              " photographs the room as it is (use --display glfw:N to show them on a projector)");
+  }
+  if (args.gain >= 0) camera->SetGain(args.gain);
+  const CaptureSequence sequence = MakeSequence(args, projector);
+
+  CaptureSessionOptions options;
+  options.directory = args.out;
+  options.sequencer = args.sequencer;
+  if (!args.camera_response.empty()) {  // a camera that is not linear (procam calibrate response)
+    options.sequencer.hdr.inverse_response =
+        ReadInverseResponse(args.camera_response.string(), IsColour(camera->Settings().pixel_format) ? 3 : 1);
+  }
+  const std::filesystem::path result_path = args.out / "result.json";
+  CaptureSummary summary;
+  try {
+    summary = RunCaptureSession(options, sequence, *camera, *output);
+  } catch (const CaptureFault& fault) {  // the session keeps what was captured: say so, then fail
+    nlohmann::json result = CaptureResult(sequence, *camera);
+    result.update({{"manifest", (args.out / "session.json").string()}, {"complete", false}, {"error", fault.what()}});
+    WriteFileAtomically(result_path, result.dump(2) + "\n");
+    throw;
+  }
+  summary.camera = camera->Info().uri;
+  nlohmann::json result = CaptureResult(sequence, *camera);
+  result.update({{"manifest", summary.manifest.string()},
+                 {"complete", true},
+                 {"patterns_total", summary.patterns_total},
+                 {"patterns_before", summary.patterns_before},
+                 {"patterns_captured", summary.patterns_captured},
+                 {"retries", summary.retries},
+                 {"stale_dropped", summary.stale_dropped},
+                 {"seconds", summary.seconds}});
+  WriteFileAtomically(result_path, result.dump(2) + "\n");
+  return summary;
+}
+
+std::string CaptureLine(const CaptureStageOptions& options, const CaptureSummary& summary) {
+  return "capture " + options.sequence + " with " + summary.camera + " into " + options.out.string() + ": " +
+         summary.BriefReport();
+}
+
+}  // namespace procam

@@ -1,0 +1,55 @@
+#pragma once
+// The capture stage: one pattern sequence shown and photographed into a capture session
+// (capture/session.h), resumable. The sequences calibration and verification use: Gray code,
+// structured light (XOR Gray code with phase shifting), photometric flat fields, or given
+// images. What `procam capture` runs, and `calibrate all` per projector.
+
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "base/progress.h"
+#include "capture/display.h"
+#include "capture/patterns.h"
+#include "capture/sequencer.h"
+#include "capture/session.h"
+
+namespace procam {
+
+struct CaptureStageOptions {
+  std::string camera;    // camera URI (camera.h): v4l2:..., aravis:..., test:..., synthetic:...
+  std::string sequence;  // "graycode", "structured_light", "photometric" or "verify"
+  std::filesystem::path out;  // the session directory (created, or resumed)
+  // Where the patterns are shown, e.g. a fullscreen window on a projector's monitor. Unset: a
+  // simulated camera's projector `projector` (capture/simulated_camera.h), else the memory
+  // display, which only test cameras see.
+  std::shared_ptr<PatternDisplay> display;
+  int projector = 0;  // simulated cameras: which of their world's projectors shows the patterns
+  // The projector's resolution with the memory display (unset: 1024x768); a display's own
+  // resolution wins; given with a simulated projector, it must match the projector's.
+  std::optional<cv::Size> projector_size;
+  SequencerOptions sequencer;     // frames, exposures (several: HDR), settle, retries
+  double gain = -1.0;             // camera gain to set (< 0: leave it)
+  std::string axes = "both";      // graycode, structured_light: "columns", "rows" or "both"
+  double pattern_gamma = 1.0;     // structured_light: sinusoids pre-distorted for this gamma
+  std::vector<int> levels = PhotometricOptions().levels;      // photometric: 8-bit levels
+  std::string channels = PhotometricOptions().channels;       // photometric: of r, g, b, w
+  std::vector<std::filesystem::path> images;  // verify: the images to show
+  double projector_gamma = 1.0;   // memory display: the response the test camera sees
+  std::filesystem::path camera_response;  // camera_response.json: linearise before HDR merges
+  ProgressCallback progress;      // a warning when nothing shows the patterns
+};
+
+// Captures what the session does not hold yet and writes OUT/result.json (also when the camera
+// fails: complete false and the error; then the CaptureFault is rethrown). Throws IoError naming
+// the camera, display, option or file for bad input, before anything is shown.
+CaptureSummary RunCaptureStage(const CaptureStageOptions& options);
+
+// The line `procam capture` prints: what was captured with which camera into where.
+std::string CaptureLine(const CaptureStageOptions& options, const CaptureSummary& summary);
+
+}  // namespace procam

@@ -1,0 +1,55 @@
+#pragma once
+// The projection stage: a compensation solution (compensation/stage.h) → one image per projector,
+// blended where projectors overlap and dithered (projector_images.h), written into an images
+// directory: NAME.png per projector, E_delivered.npy (the emittance the images deliver),
+// lower.npy / upper.npy (the projectors' bounds) and result.json. What `procam project` runs.
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "base/progress.h"
+#include "compensation/stage.h"
+#include "geometry/patches.h"
+#include "geometry/scene.h"
+#include "projection/projection_rig.h"
+#include "projection/projector_images.h"
+
+namespace procam {
+
+// The scene and patches a solution was computed on: its scene (LoadSceneArgument) subdivided by
+// the patch target that gives the solution's patch count (`patches_override` > 0: that target;
+// else the solution's target_patches, the scene's, or the count itself).
+struct SolutionGeometry {
+  Scene scene;
+  PatchHierarchy patches;
+};
+// Throws IoError naming the solution's result.json when no target reproduces its patches (the
+// scene changed since), and every error of the scene.
+SolutionGeometry ReadSolutionGeometry(const SolutionDirectory& solution, int patches_override = 0);
+
+struct ProjectionStageOptions {
+  std::filesystem::path out;  // the images directory (created)
+  DitherMethod dither = DitherMethod::kOrdered;
+  double feather = 0.1;   // blending ramp at the edge of each projector's image, (0, 1]
+  bool detail = false;    // the desired texture's detail within patches (projector_images.h)
+  double load_seconds = 0.0;  // what reading the inputs took, for result.json
+  ProgressCallback progress;  // per projector: pixels lit, patches, saturation; bounds; times
+};
+
+struct ProjectionStageSummary {
+  ProjectionRigSummary rig;
+  RenderSummary render;
+  std::vector<ProjectorImage> images;  // in the projectors' order
+};
+
+// Renders `solution.emittance` with `projectors` on `geometry` (whose fine reflectance the
+// projectors' bounds use) and writes the images directory. `rig_description` (may be null) is
+// recorded in result.json as "rig". Throws IoError naming the projector or the file.
+ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution, const SolutionGeometry& geometry,
+                                          std::vector<Projector> projectors, const nlohmann::json& rig_description,
+                                          const ProjectionStageOptions& options);
+
+}  // namespace procam
