@@ -169,6 +169,11 @@ Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const Compen
   resident_options.function_tolerance = options.function_tolerance;
   resident_options.armijo = options.armijo;
   resident_options.fused = options.device_fused;
+  resident_options.neumann =
+      options.device_preconditioner == SolverOptions::DevicePreconditioner::kBlockJacobiNeumann;
+  resident_options.graphs = options.device_graphs;
+  resident_options.fused_blocks = options.device_fused_blocks;
+  resident_options.profile = options.device_profile;
   resident_options.progress = options.progress;
 
   cuda::ResidentSummary resident;
@@ -190,6 +195,10 @@ Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const Compen
   summary->hessian_products += resident.hessian_products;
   summary->preconditioner_applications += resident.preconditioner_applications;
   summary->device_fused = resident.fused;
+  summary->device_fused_blocks = resident.fused_blocks;
+  summary->device_loop = true;
+  summary->device_preconditioner = options.device_preconditioner;
+  summary->device_cg_matrix = options.device_cg_matrix;
   summary->trace.insert(summary->trace.end(), resident.trace.begin(), resident.trace.end());
   return emittance;
 }

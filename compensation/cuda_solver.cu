@@ -10,10 +10,11 @@
 //     about once per CG iteration. CG's own scalars (step, β, convergence) stay on the device,
 //     and its kernels do nothing once CG has stopped, so that iterations can be enqueued ahead
 //     of a read. On the dense path the fixed sequences are replayed as CUDA graphs
-//     (PROCAM_CUDA_GRAPHS=0 turns that off). Large problems and the matrix-free path run this.
+//     (SolverOptions::device_graphs = false turns that off). Large problems and the matrix-free
+//     path run this.
 //   - the fused loop (FusedLoop): for small problems on the dense K⁻¹, every phase in one
 //     cooperative kernel, grid barriers between them and the control flow on the device.
-// PROCAM_CUDA_SOLVER_PROFILE=1 prints where a solve's time went.
+// SolverOptions::device_profile prints where a solve's time went.
 
 // The colour math of colour.h, compiled for the device as well (one definition for both sides).
 #define PROCAM_HOST_DEVICE __host__ __device__
@@ -843,17 +844,6 @@ double SecondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
-// Opt-in diagnostics: with PROCAM_CUDA_SOLVER_PROFILE=1 every resident solve prints to stderr
-// where its time went (enqueueing on the host, waiting for the device) and the unit costs of its
-// operations, measured after the solve. Off: nothing is counted or timed.
-bool ProfileEnabled() {
-  static const bool enabled = [] {
-    const char* value = std::getenv("PROCAM_CUDA_SOLVER_PROFILE");
-    return value != nullptr && std::string(value) != "0";
-  }();
-  return enabled;
-}
-
 // Everything the objective knows at one point (ObjectivePoint).
 struct Point {
   double* emittance;
@@ -863,29 +853,6 @@ struct Point {
   double* gradient_b;  // J_iᵀ (2 W r)_i
   double* curvature;   // second-order term, diagonal in XYZ
 };
-
-// Whether the dense path replays its fixed sequences as CUDA graphs (PROCAM_CUDA_GRAPHS=0: plain
-// launches, for comparison).
-bool GraphsEnabled() {
-  static const bool enabled = [] {
-    const char* value = std::getenv("PROCAM_CUDA_GRAPHS");
-    return value == nullptr || std::string(value) != "0";
-  }();
-  return enabled;
-}
-
-// CG's preconditioner: PROCAM_CUDA_PRECONDITIONER = neumann (NeumannPhase, the default) or
-// jacobi (the 3×3 diagonal blocks alone).
-bool NeumannPreconditioner() {
-  static const bool neumann = [] {
-    const char* choice = std::getenv("PROCAM_CUDA_PRECONDITIONER");
-    if (choice == nullptr || *choice == '\0' || std::string(choice) == "neumann") return true;
-    if (std::string(choice) == "jacobi") return false;
-    throw std::invalid_argument(std::string("PROCAM_CUDA_PRECONDITIONER: '") + choice +
-                                "' is not neumann or jacobi");
-  }();
-  return neumann;
-}
 
 // ---------------------------------------------------------------------------------------------
 // The fused loop: Loop::Run in one cooperative kernel, for small problems on the dense K⁻¹.
@@ -1210,16 +1177,6 @@ __global__ void __launch_bounds__(kThreads) FusedLoopKernel(const FusedArgs args
   FusedLoop(args).Run();
 }
 
-// The fused loop's grid as PROCAM_CUDA_FUSED_BLOCKS asks (blocks, for measurements and the
-// fallback's test; 0: the default, one per multiprocessor).
-int FusedBlocksWanted() {
-  static const int blocks = [] {
-    const char* value = std::getenv("PROCAM_CUDA_FUSED_BLOCKS");
-    return value != nullptr && *value != '\0' ? std::atoi(value) : 0;
-  }();
-  return blocks;
-}
-
 // The loop's fixed sequences of device work, each replayed as one CUDA graph.
 enum class Sequence {
   kHead,         // gradient, its check, Alg. 2's start and CG's start
@@ -1281,11 +1238,11 @@ class Loop {
     DesiredColourKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, trial_.emittance, desired_colour_);
     Launched("DesiredColourKernel");
     small_ = n_ < kSmallPatches;
-    neumann_ = NeumannPreconditioner();
-    graphs_ = !radiosity.iterative() && GraphsEnabled();
+    neumann_ = options.neumann;
+    graphs_ = !radiosity.iterative() && options.graphs;
     if constexpr (std::is_same_v<P, float>) {
       product_count_ = small_ && options.fused ? radiosity.DenseProducts(products_) : 0;
-      fused_blocks_ = product_count_ > 0 ? FusedBlocks() : 0;
+      fused_blocks_ = product_count_ > 0 ? FusedBlocks(options.fused_blocks) : 0;
     }
   }
 
@@ -1433,7 +1390,7 @@ class Loop {
     }
     summary->final_cost = cost;
     DownloadResult(current_, emittance, radiosity);  // its K⁻¹E, evaluated at acceptance
-    if (ProfileEnabled()) PrintProfile(SecondsSince(start));
+    if (options_.profile) PrintProfile(SecondsSince(start));
   }
 
  private:
@@ -1509,6 +1466,7 @@ class Loop {
     summary->hessian_products = records.hessian_products;
     summary->preconditioner_applications = records.preconditioner_applications;
     summary->fused = true;
+    summary->fused_blocks = fused_blocks_;
     for (IterationRecord& record : trace) record.seconds += launched;
     summary->trace = std::move(trace);
     if (options_.progress) {
@@ -1516,7 +1474,7 @@ class Loop {
         if (record.iteration > 0) options_.progress(record.iteration, record.cost, record.seconds);
       }
     }
-    if (ProfileEnabled()) {
+    if (options_.profile) {
       std::fprintf(stderr, "resident profile: %d patches, fused loop on %d blocks: %.3f ms (launched after %.3f ms)\n",
                    n_, fused_blocks_, 1e3 * SecondsSince(start), 1e3 * launched);
     }
@@ -1524,23 +1482,24 @@ class Loop {
   }
 
   // The fused loop's grid: one block per multiprocessor (at most kMaxBlocks, what the reductions
-  // hold), or PROCAM_CUDA_FUSED_BLOCKS' count as asked, even past what the device holds at once:
-  // that launch fails and the loop with a kernel per step runs instead (a device test checks
+  // hold), or `wanted` blocks (ResidentSettings::fused_blocks), even past what the device holds at
+  // once: that launch fails and the loop with a kernel per step runs instead (a device test checks
   // it). 0 where the device has no cooperative launch.
-  static int FusedBlocks() {
-    static const int blocks = [] {
-      int device = 0, cooperative = 0, multiprocessors = 0, per_multiprocessor = 0;
-      PROCAM_CUDA(cudaGetDevice(&device));
-      PROCAM_CUDA(cudaDeviceGetAttribute(&cooperative, cudaDevAttrCooperativeLaunch, device));
-      PROCAM_CUDA(cudaDeviceGetAttribute(&multiprocessors, cudaDevAttrMultiProcessorCount, device));
+  static int FusedBlocks(int wanted) {
+    struct Device {
+      int multiprocessors = 0, resident = 0;
+    };
+    static const Device device = [] {
+      int ordinal = 0, cooperative = 0, multiprocessors = 0, per_multiprocessor = 0;
+      PROCAM_CUDA(cudaGetDevice(&ordinal));
+      PROCAM_CUDA(cudaDeviceGetAttribute(&cooperative, cudaDevAttrCooperativeLaunch, ordinal));
+      PROCAM_CUDA(cudaDeviceGetAttribute(&multiprocessors, cudaDevAttrMultiProcessorCount, ordinal));
       PROCAM_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_multiprocessor, FusedLoopKernel, kThreads, 0));
-      const int resident = multiprocessors * per_multiprocessor;
-      if (cooperative == 0 || resident == 0) return 0;
-      const int wanted = FusedBlocksWanted();
-      if (wanted > resident) return wanted;
-      return std::min(kMaxBlocks, wanted > 0 ? wanted : std::min(multiprocessors, resident));
+      return cooperative == 0 ? Device{} : Device{multiprocessors, multiprocessors * per_multiprocessor};
     }();
-    return blocks;
+    if (device.resident == 0) return 0;
+    if (wanted > device.resident) return wanted;
+    return std::min(kMaxBlocks, wanted > 0 ? wanted : std::min(device.multiprocessors, device.resident));
   }
 
   void Launched(const char* name) {
@@ -1614,7 +1573,7 @@ class Loop {
     return ok;
   }
 
-  // PROCAM_CUDA_SOLVER_PROFILE: the solve's counts, then unit costs in µs (time to enqueue one,
+  // ResidentSettings::profile: the solve's counts, then unit costs in µs (time to enqueue one,
   // and per operation until the device has finished a run of them).
   void PrintProfile(double loop_seconds) {
     const Profile counted = profile_;

@@ -18,8 +18,9 @@
 //           device_fused says which ran). The progress callback is then called after the kernel.
 // The algorithm and its stopping rules are MinimiseBounded's, with one difference: CG is
 // preconditioned by the inverses of the 3×3 diagonal blocks of M_FF with one Neumann term for
-// their coupling through W (z = D⁻¹r + D⁻¹ N D⁻¹ r; PROCAM_CUDA_PRECONDITIONER=jacobi drops the
-// term) instead of a sparse factorisation of M_FF, whatever SolverOptions::preconditioner says.
+// their coupling through W (z = D⁻¹r + D⁻¹ N D⁻¹ r; SolverOptions::device_preconditioner =
+// kBlockJacobi drops the term) instead of a sparse factorisation of M_FF, whatever
+// SolverOptions::preconditioner says.
 // Values, gradients and line searches are float64; the Hessian products of CG use
 // reduced-precision solves (the dense K⁻¹ in float16 with float32 vectors and sums; the
 // matrix-free CG at its fast tolerance). SolverOptions::device_float32 is not used (the host

@@ -81,7 +81,11 @@ struct ResidentSettings {
   double gradient_tolerance = 1e-9;
   double function_tolerance = 1e-12;
   double armijo = 1e-4;
-  bool fused = true;  // SolverOptions::device_fused
+  bool fused = true;         // SolverOptions::device_fused
+  bool neumann = true;       // device_preconditioner: kBlockJacobiNeumann (else kBlockJacobi)
+  bool graphs = true;        // device_graphs
+  int fused_blocks = 0;      // device_fused_blocks
+  bool profile = false;      // device_profile
 };
 struct ResidentOptions : ResidentSettings {
   std::function<void(int, double, double)> progress;
@@ -101,7 +105,8 @@ struct ResidentSummary {
   int gradients = 0;
   int hessian_products = 0;
   int preconditioner_applications = 0;
-  bool fused = false;  // the loop ran in one cooperative kernel
+  bool fused = false;  // the loop ran in one cooperative kernel ...
+  int fused_blocks = 0;  // ... of this many blocks
   std::vector<IterationRecord> trace;
 };
 

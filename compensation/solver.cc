@@ -54,7 +54,9 @@ std::shared_ptr<const RadiositySystem> MakeRadiositySystem(const SolverOptions& 
 #if PROCAM_WITH_CUDA
   return std::make_shared<const RadiositySystem>(
       problem.form_factors, problem.area, problem.reflectance,
-      MakeCudaRadiosityBackend(problem.form_factors, problem.area, problem.reflectance, options.device_float32));
+      MakeCudaRadiosityBackend(problem.form_factors, problem.area, problem.reflectance, options.device_float32,
+                               {options.device_product_rows,
+                                options.device_cg_matrix == SolverOptions::DeviceCgMatrix::kFloat16}));
 #else
   throw std::runtime_error("--device cuda: this build of procam has no CUDA backend (PROCAM_WITH_CUDA is OFF: "
                            "no nvcc was found when it was configured)");
@@ -370,7 +372,32 @@ bool SolverOptions::Check(std::string* why) const {
     *why = "armijo must be in (0, 0.5)";
     return false;
   }
+  const int rows = device_product_rows;
+  if (rows != -1 && rows != 0 && rows != 1 && rows != 2 && rows != 4 && rows != 8) {
+    *why = "device_product_rows must be -1 (default), 0 (cuBLAS), 1, 2, 4 or 8";
+    return false;
+  }
+  if (device_fused_blocks < 0) {
+    *why = "device_fused_blocks must be >= 0";
+    return false;
+  }
   return true;
+}
+
+const char* DevicePreconditionerName(SolverOptions::DevicePreconditioner preconditioner) {
+  switch (preconditioner) {
+    case SolverOptions::DevicePreconditioner::kBlockJacobiNeumann: return "block_jacobi_neumann";
+    case SolverOptions::DevicePreconditioner::kBlockJacobi: return "block_jacobi";
+  }
+  return "?";
+}
+
+const char* DeviceCgMatrixName(SolverOptions::DeviceCgMatrix matrix) {
+  switch (matrix) {
+    case SolverOptions::DeviceCgMatrix::kFloat16: return "float16";
+    case SolverOptions::DeviceCgMatrix::kFloat32: return "float32";
+  }
+  return "?";
 }
 
 std::string SolverSummary::BriefReport() const {
@@ -379,7 +406,11 @@ std::string SolverSummary::BriefReport() const {
       << final_cost << ", " << iterations << " iterations (" << inner_iterations << " inner, " << cg_iterations
       << " CG; " << evaluations << " evaluations, " << gradients << " gradients, " << hessian_products
       << " Hessian products, " << preconditioner_applications << " preconditioner applications), setup " << setup_seconds << " s, solve " << solve_seconds << " s";
-  if (device_fused) out << ", fused device loop";
+  if (device_loop) {
+    out << ", device loop (CG preconditioner " << DevicePreconditionerName(device_preconditioner) << ", CG matrix "
+        << DeviceCgMatrixName(device_cg_matrix) << ")";
+  }
+  if (device_fused) out << ", fused device loop on " << device_fused_blocks << " blocks";
   if (!message.empty()) out << " (" << message << ")";
   return out.str();
 }

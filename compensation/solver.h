@@ -61,6 +61,33 @@ struct SolverOptions {
   // (cuda_solver.h; 2–3× faster there, docs/gpu.md). Off: one kernel per step with the host
   // reading scalars in between, as larger problems run; for comparison.
   bool device_fused = true;
+  // kCuda, device loop only: CG's preconditioner (the CPU's `preconditioner` below is not used
+  // there; docs/gpu.md compares the two):
+  //   kBlockJacobiNeumann  the inverse 3×3 diagonal blocks D of M_FF with one Neumann term for
+  //                        their coupling N through W: z = D⁻¹r + D⁻¹ N D⁻¹ r (SPD, docs/gpu.md).
+  //   kBlockJacobi         z = D⁻¹r alone (more CG iterations; for comparison).
+  enum class DevicePreconditioner { kBlockJacobiNeumann, kBlockJacobi };
+  DevicePreconditioner device_preconditioner = DevicePreconditioner::kBlockJacobiNeumann;
+  // kCuda, dense F, device loop only: the copy of K⁻¹ that CG's Hessian products (float32
+  // vectors) read: kFloat16, 2^k K⁻¹ in float16 (half the bytes, within 2^-11 relative), or
+  // kFloat32. kFloat32 keeps the loop from fusing (the fused kernel reads the float16 copy).
+  enum class DeviceCgMatrix { kFloat16, kFloat32 };
+  DeviceCgMatrix device_cg_matrix = DeviceCgMatrix::kFloat16;
+  // kCuda, dense F: outputs per block of the device's own K⁻¹ product kernel, one of 1, 2, 4, 8;
+  // 0: cuBLAS's GEMM instead; -1 (default): 4 for float64 and float32 K⁻¹, 8 for the float16
+  // copy (measured best, docs/gpu.md). Any value but -1 keeps the loop from fusing. Products only:
+  // the solver's steps are the same (sums in another order).
+  int device_product_rows = -1;
+  // kCuda, dense F, loop with a kernel per step: replay its fixed sequences of kernels as CUDA
+  // graphs (fewer launch costs); off: plain launches, the same arithmetic.
+  bool device_graphs = true;
+  // kCuda, fused loop: blocks of its cooperative grid, ≥ 0; 0 (default): one per multiprocessor
+  // (at most 1024). A count past what the device holds at once makes the cooperative launch fail
+  // before anything ran, and the loop with a kernel per step solves the problem instead.
+  int device_fused_blocks = 0;
+  // kCuda, device loop: print to stderr after each solve where its time went (host reads of the
+  // scalars, launches, graph captures, unit costs of its operations). Diagnostics only.
+  bool device_profile = false;
   // Solve the coarse level first and start the fine solve from it (needs a coarse level).
   bool multires = false;
   // Outer (Gauss–Newton) iterations, ≥ 1.
@@ -98,6 +125,9 @@ struct SolverOptions {
 
   bool Check(std::string* why) const;
 };
+// "block_jacobi_neumann", "block_jacobi"; "float16", "float32".
+const char* DevicePreconditionerName(SolverOptions::DevicePreconditioner preconditioner);
+const char* DeviceCgMatrixName(SolverOptions::DeviceCgMatrix matrix);
 
 struct SolverSummary {
   CompensationMethod method = CompensationMethod::kPerceptual;
@@ -119,8 +149,15 @@ struct SolverSummary {
   double solve_seconds = 0.0;     // everything after the setup
   double coarse_seconds = 0.0;    // part of solve_seconds spent on the coarse level
   int coarse_iterations = 0;
-  // kCuda: the (fine level's) loop ran fused in one kernel (SolverOptions::device_fused).
+  // kCuda: the (fine level's) loop ran fused in one kernel (SolverOptions::device_fused), on
+  // this many blocks.
   bool device_fused = false;
+  int device_fused_blocks = 0;
+  // kCuda, device loop (not the host loop): it ran, with this CG preconditioner and, on the dense
+  // F, this copy of K⁻¹ for CG's products (SolverOptions' fields of the same names).
+  bool device_loop = false;
+  SolverOptions::DevicePreconditioner device_preconditioner = SolverOptions::DevicePreconditioner::kBlockJacobiNeumann;
+  SolverOptions::DeviceCgMatrix device_cg_matrix = SolverOptions::DeviceCgMatrix::kFloat16;
   std::vector<IterationRecord> trace;
 
   // One line: method, termination, costs, iterations, times.

@@ -201,16 +201,6 @@ Eigen::MatrixXd DeviceProduct(const cuda::InverseRadiosity& inverse, const Eigen
   return output.template cast<double>();
 }
 
-// Sets an environment variable for one scope (the dense backend reads its choices at Create).
-class ScopedEnvironment {
- public:
-  ScopedEnvironment(const char* name, const char* value) : name_(name) { setenv(name, value, 1); }
-  ~ScopedEnvironment() { unsetenv(name_); }
-
- private:
-  const char* name_;
-};
-
 // InverseRadiosity::ApplyOnDevice (own product kernel, both directions, float64 and float32 with
 // the float32 or the float16 copy of K⁻¹, 1–3 columns) against K⁻¹x and K⁻ᵀx solved on the CPU by
 // LU of K = I − diag(ρ)F, on rooms whose areas differ (the kernel's K⁻¹x goes through s² = ρ/A)
@@ -226,9 +216,10 @@ TEST(SolveCudaAnalytic, DenseProductsOnTheDeviceMatchTheCpu) {
       const Eigen::PartialPivLU<Eigen::MatrixXd> lu(k);
       const Eigen::PartialPivLU<Eigen::MatrixXd> lu_transposed(k.transpose());
       for (const char* cg_matrix : {"float32", "float16"}) {
-        const ScopedEnvironment choice("PROCAM_CUDA_CG_MATRIX", cg_matrix);
+        cuda::DenseProductSettings settings;
+        settings.half_cg_matrix = std::string(cg_matrix) == "float16";
         const auto inverse = cuda::InverseRadiosity::Create(room.form_factors.data(), room.area.data(),
-                                                            room.reflectance.data(), n);
+                                                            room.reflectance.data(), n, settings);
         EXPECT_EQ(inverse->cholesky(), black < 0) << n;
         // float16 entries keep 11 significant bits: each product within 2^-11 of the truth in
         // the worst case (measured ~1e-4; float32 ~1e-7).
@@ -277,16 +268,16 @@ double MedianMicroseconds(int warmup, int runs, const Work& work) {
 
 // Microseconds per K⁻¹ product with three columns (median of 200, CUDA events, inputs rotated
 // over 4 buffers): cuBLAS GEMM against TransposedProductKernel with 4 and 8 outputs per block
-// (PROCAM_CUDA_DENSE_PRODUCT), float64, and float32 vectors with the float32 or the float16 copy
-// of K⁻¹ (PROCAM_CUDA_CG_MATRIX); K⁻¹x and K⁻ᵀx. Sizes: PROCAM_BENCH_GRIDS. GB/s: the matrix's
+// (DenseProductSettings::rows), float64, and float32 vectors with the float32 or the float16 copy
+// of K⁻¹ (DenseProductSettings::half_cg_matrix); K⁻¹x and K⁻ᵀx. Sizes: PROCAM_BENCH_GRIDS. GB/s: the matrix's
 // bytes over the best time.
 TEST(SolveCudaAnalytic, DISABLED_ProductTimings) {
   SKIP_WITHOUT_CUDA_DEVICE();
   struct Variant {
-    const char* rows;
+    int rows;  // 0: cuBLAS
     const char* cg_matrix;
   };
-  const Variant variants[] = {{"cublas", "float32"}, {"4", "float32"}, {"8", "float32"}, {"4", "float16"}, {"8", "float16"}};
+  const Variant variants[] = {{0, "float32"}, {4, "float32"}, {8, "float32"}, {4, "float16"}, {8, "float16"}};
   std::printf("| patches | vectors | product | cuBLAS µs | 4 rows µs | 8 rows µs | 4 rows, float16 K⁻¹ µs | "
               "8 rows, float16 K⁻¹ µs |\n|---:|---|---|---:|---:|---:|---:|---:|\n");
   for (const int g : testing::ListFromEnvironment<int>("PROCAM_BENCH_GRIDS", {22, 40, 70})) {
@@ -295,9 +286,11 @@ TEST(SolveCudaAnalytic, DISABLED_ProductTimings) {
     const Eigen::VectorXd rho = p.reflectance.col(0);
     std::vector<std::unique_ptr<cuda::InverseRadiosity>> inverses;
     for (const Variant& variant : variants) {
-      const ScopedEnvironment rows("PROCAM_CUDA_DENSE_PRODUCT", variant.rows);
-      const ScopedEnvironment cg_matrix("PROCAM_CUDA_CG_MATRIX", variant.cg_matrix);
-      inverses.push_back(cuda::InverseRadiosity::Create(p.form_factors.data(), p.area.data(), rho.data(), n));
+      cuda::DenseProductSettings settings;
+      settings.rows = variant.rows;
+      settings.half_cg_matrix = std::string(variant.cg_matrix) == "float16";
+      inverses.push_back(
+          cuda::InverseRadiosity::Create(p.form_factors.data(), p.area.data(), rho.data(), n, settings));
     }
     const size_t count = 3 * static_cast<size_t>(n);
     const Eigen::VectorXd x = Eigen::VectorXd::Random(4 * count);
@@ -539,20 +532,17 @@ TEST(SolveCudaAnalytic, ResidentStoppingRules) {
 }
 
 // Where the device cannot hold the fused loop's grid at once (another context holding
-// multiprocessors, or PROCAM_CUDA_FUSED_BLOCKS past what fits, as scripts/bench_gpu.sh runs this
-// test with 100000), the cooperative launch fails and the loop with a kernel per step solves the
-// problem instead: same result as the CPU, device_fused false. Skipped without such a count.
+// multiprocessors, or SolverOptions::device_fused_blocks past what fits, as here), the cooperative
+// launch fails and the loop with a kernel per step solves the problem instead: same result as the
+// CPU, device_fused false.
 TEST(SolveCudaAnalytic, FusedLoopFallsBackWhereItsGridDoesNotFit) {
   SKIP_WITHOUT_CUDA_DEVICE();
-  const char* blocks = std::getenv("PROCAM_CUDA_FUSED_BLOCKS");
-  if (blocks == nullptr || std::atoi(blocks) < 100000) {
-    GTEST_SKIP() << "PROCAM_CUDA_FUSED_BLOCKS is not set to a grid no device holds (>= 100000)";
-  }
   const testing::AnalyticProblem test = testing::MakeAnalyticProblem(16, 0.5);
   SolverOptions options;
   SolverSummary cpu_summary, summary;
   Solve(options, test.fine, &cpu_summary);
   options.device = Device::kCuda;
+  options.device_fused_blocks = 100000;  // no device holds this many blocks at once
   Solve(options, test.fine, &summary);
   EXPECT_FALSE(summary.device_fused) << summary.BriefReport();
   EXPECT_LT(std::abs(summary.final_cost - cpu_summary.final_cost), 1e-6 * cpu_summary.final_cost)
