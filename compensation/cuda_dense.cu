@@ -9,6 +9,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <mutex>
 #include <type_traits>
 #include <vector>
 
@@ -47,6 +48,13 @@ struct Handles {
   void* device_blas_workspace = nullptr;
   cusolverDnHandle_t solver = nullptr;
 };
+// cuBLAS and cuSOLVER handles may not be used from two threads at once (a stream set by one
+// thread would carry the other's work): every use holds this lock. The products of the resident
+// loops run the own kernel and take it only on the LU path's K⁻¹x.
+std::mutex& HandlesMutex() {
+  static std::mutex* mutex = new std::mutex;
+  return *mutex;
+}
 const Handles& GetHandles() {
   static const Handles* handles = [] {
     auto* h = new Handles;
@@ -161,6 +169,7 @@ class InverseRadiosityImpl : public InverseRadiosity {
   InverseRadiosityImpl(const double* form_factors, const double* area, const double* reflectance, int n,
                        const DenseProductSettings& settings)
       : n_(n) {
+    const std::lock_guard<std::mutex> lock(HandlesMutex());
     const int rows = settings.rows;
     if (rows != -1 && rows != 0 && rows != 1 && rows != 2 && rows != 4 && rows != 8) {
       throw std::invalid_argument("InverseRadiosity: product rows " + std::to_string(settings.rows) +
@@ -272,6 +281,7 @@ class InverseRadiosityImpl : public InverseRadiosity {
 
   void Apply(const double* x, int columns, bool transposed, bool single, double* y) const override {
     if (columns < 1 || columns > 3) throw std::invalid_argument("InverseRadiosity::Apply: 1 to 3 columns");
+    const std::lock_guard<std::mutex> lock(HandlesMutex());
     const Handles& handles = GetHandles();
     const long count = static_cast<long>(n_) * columns;
     const cublasOperation_t op = transposed ? CUBLAS_OP_T : CUBLAS_OP_N;
@@ -341,6 +351,7 @@ class InverseRadiosityImpl : public InverseRadiosity {
       return;
     }
     if constexpr (std::is_same_v<S, T>) {
+      const std::lock_guard<std::mutex> lock(HandlesMutex());
       const Handles& handles = GetHandles();
       PROCAM_CUDA(cublasSetStream(handles.device_blas, stream));
       const T one = 1, zero = 0;
@@ -412,6 +423,7 @@ class DeviceMatrixImpl : public DeviceMatrix {
   void Apply(const double* x, int columns, double* y) const override {
     if (columns < 1 || columns > 3) throw std::invalid_argument("DeviceMatrix::Apply: 1 to 3 columns");
     const size_t bytes = static_cast<size_t>(n_) * columns * sizeof(double);
+    const std::lock_guard<std::mutex> lock(HandlesMutex());
     std::memcpy(staging_, x, bytes);
     PROCAM_CUDA(cudaMemcpy(in_.get(), staging_, bytes, cudaMemcpyHostToDevice));
     const double one = 1.0, zero = 0.0;

@@ -68,7 +68,7 @@ class InverseRadiosity {
   // resident solver, cuda_solver.h): float64 with the float64 K⁻¹; float32 vectors (CG's Hessian
   // products) with a float16 copy of 2^k K⁻¹ (half the bytes; within 2^-11 relative, measured
   // ~5e-6), or the float32 copy where settings.half_cg_matrix is false. x and y must not overlap.
-  // Products of several threads at once are not supported.
+  // Callable from several threads at once (the cuBLAS path, K⁻¹x on the LU path, takes a lock).
   virtual void ApplyOnDevice(const double* x, int columns, bool transposed, double* y, cudaStream_t stream) const = 0;
   virtual void ApplyOnDevice(const float* x, int columns, bool transposed, float* y, cudaStream_t stream) const = 0;
   // Whether the Cholesky path was taken (else LU).

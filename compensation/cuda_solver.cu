@@ -708,7 +708,7 @@ __global__ void __launch_bounds__(kThreads) Kernel(Args... args) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Device memory, kept between calls.
+// Device memory, kept between calls (a pool of workspaces, one per solve in flight).
 
 // One region carved into the loop's arrays; grown (never shrunk) when a larger problem comes.
 // Carving runs twice: once measuring (Measure, then Take returns null), once for real (after
@@ -828,16 +828,51 @@ class Workspace {
   unsigned* counter_ = nullptr;
 };
 
-// Never destroyed (the runtime may be torn down before static destructors run), as the handles
-// of cuda_dense.cu.
-Workspace& SharedWorkspace() {
-  static Workspace* workspace = new Workspace;
-  return *workspace;
-}
-std::mutex& WorkspaceMutex() {
-  static std::mutex* mutex = new std::mutex;
-  return *mutex;
-}
+// The workspaces of the process: a solve takes one for its duration (a new one where every one is
+// in use) and gives it back, so that solves from several threads run at once, each on its own
+// device memory, stream and pinned staging, while a thread that solves again and again reuses one
+// (no allocation per solve: cudaMallocHost alone costs about as much as a small solve's loop).
+// Never destroyed (the runtime may be torn down before static destructors run), as the handles of
+// cuda_dense.cu; the pool holds as many workspaces as solves ever ran at once.
+class WorkspacePool {
+ public:
+  // A workspace for one solve, back in the pool when the lease ends (an exception included: each
+  // solve resets the state it reads, so a failed one leaves nothing behind).
+  class Lease {
+   public:
+    Lease(WorkspacePool* pool, Workspace* workspace) : pool_(pool), workspace_(workspace) {}
+    ~Lease() { pool_->Give(workspace_); }
+    Lease(const Lease&) = delete;
+    Lease& operator=(const Lease&) = delete;
+    Workspace* get() const { return workspace_; }
+
+   private:
+    WorkspacePool* pool_;
+    Workspace* workspace_;
+  };
+
+  static WorkspacePool& Get() {
+    static WorkspacePool* pool = new WorkspacePool;
+    return *pool;
+  }
+
+  Lease Take() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (idle_.empty()) return Lease(this, new Workspace);
+    Workspace* workspace = idle_.back();
+    idle_.pop_back();
+    return Lease(this, workspace);
+  }
+
+ private:
+  void Give(Workspace* workspace) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    idle_.push_back(workspace);
+  }
+
+  std::mutex mutex_;
+  std::vector<Workspace*> idle_;
+};
 
 using Clock = std::chrono::steady_clock;
 double SecondsSince(Clock::time_point start) {
@@ -1849,12 +1884,11 @@ class Loop {
 void MinimiseResident(const ResidentOptions& options, const ResidentProblem& problem, const DeviceRadiosity& radiosity,
                       double* emittance, double* radiosity_out, ResidentSummary* summary) {
   if (problem.patches <= 0) throw std::invalid_argument("resident GPU solve: no patches");
-  std::lock_guard<std::mutex> lock(WorkspaceMutex());
-  Workspace& workspace = SharedWorkspace();
+  const WorkspacePool::Lease workspace = WorkspacePool::Get().Take();
   if (radiosity.single()) {
-    Loop<float>(options, problem, radiosity, &workspace).Run(emittance, radiosity_out, summary);
+    Loop<float>(options, problem, radiosity, workspace.get()).Run(emittance, radiosity_out, summary);
   } else {
-    Loop<double>(options, problem, radiosity, &workspace).Run(emittance, radiosity_out, summary);
+    Loop<double>(options, problem, radiosity, workspace.get()).Run(emittance, radiosity_out, summary);
   }
 }
 

@@ -37,9 +37,11 @@ namespace procam {
 // (trace, counters, termination), added to `summary` as MinimiseBounded adds them.
 // `objective.radiosity()` must have been built with a CUDA backend (MakeCudaRadiosityBackend or
 // MakeCudaCompressedRadiosityBackend), else std::invalid_argument. Throws std::runtime_error at
-// device errors (naming the CUDA call). Calls from several threads are serialised. `radiosity`
-// (if not null) gets the result's K⁻¹E from the device (its last evaluation), which spares the
-// caller a product.
+// device errors (naming the CUDA call). Calls from several threads run at once, each on
+// device memory and a stream of its own (cuda_solver_device.h); they may share a RadiositySystem
+// with the dense backend, not one with the matrix-free backend (whose CG keeps its vectors in the
+// backend). `radiosity` (if not null) gets the result's K⁻¹E from the device (its last
+// evaluation), which spares the caller a product.
 Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const CompensationObjective& objective,
                                       const Eigen::MatrixX3d& initial, SolverSummary* summary,
                                       Eigen::MatrixX3d* radiosity = nullptr);

@@ -116,8 +116,12 @@ struct ResidentSummary {
 // variables' colour Hessian M_FF, the projected step of Alg. 2 and the Armijo search. The host
 // reads back a few scalars per step. `emittance` (n×3 column-major, host) gets the result and
 // `radiosity_out` (if not null) its radiosity K⁻¹E, as the last evaluation formed it.
-// Throws std::runtime_error at device errors. Calls are serialised (one device workspace per
-// process, grown as needed and kept between calls).
+// Throws std::runtime_error at device errors. Calls from several threads run at once: each takes
+// a device workspace (the loop's arrays, stream, scalars and pinned staging) from a process-wide
+// pool for its duration, so that concurrent calls share nothing, and a thread that solves again
+// reuses one (grown as needed, kept between calls, never freed). `radiosity` is only read, but
+// its solves must be safe to call from several threads at once where two calls share it (the
+// dense K⁻¹'s are; the matrix-free CG keeps its vectors in the backend).
 void MinimiseResident(const ResidentOptions& options, const ResidentProblem& problem, const DeviceRadiosity& radiosity,
                       double* emittance, double* radiosity_out, ResidentSummary* summary);
 

@@ -7,11 +7,13 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <fstream>
 #include <limits>
 #include <memory>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -547,6 +549,54 @@ TEST(SolveCudaAnalytic, FusedLoopFallsBackWhereItsGridDoesNotFit) {
   EXPECT_FALSE(summary.device_fused) << summary.BriefReport();
   EXPECT_LT(std::abs(summary.final_cost - cpu_summary.final_cost), 1e-6 * cpu_summary.final_cost)
       << summary.BriefReport();
+}
+
+// Solves from two threads at once (each resident solve takes a device workspace of its own from
+// a pool) give exactly what the same solves give one at a time: the fused loop, the loop with a
+// kernel per step, and the two at once, on two problems; the reductions are deterministic, so the
+// results must be equal to the last bit.
+TEST(SolveCudaAnalytic, SolvesFromTwoThreadsAtOnceMatchOneAtATime) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const testing::AnalyticProblem problems[2] = {testing::MakeAnalyticProblem(16, 0.5),
+                                                testing::MakeAnalyticProblem(22, 0.3)};
+  for (const bool fused_first : {true, false}) {
+    for (const bool fused_second : {true, false}) {
+      SCOPED_TRACE(std::string(fused_first ? "fused" : "kernel per step") + " and " +
+                   (fused_second ? "fused" : "kernel per step"));
+      SolverOptions options[2];
+      options[0].device = options[1].device = Device::kCuda;
+      options[0].device_fused = fused_first;
+      options[1].device_fused = fused_second;
+      SolverSummary alone[2], together[2];
+      CompensationSolution alone_solution[2], together_solution[2];
+      for (int k = 0; k < 2; ++k) alone_solution[k] = Solve(options[k], problems[k].fine, &alone[k]);
+      // Several rounds, so that the two loops overlap on the device at least once.
+      for (int round = 0; round < 3; ++round) {
+        std::exception_ptr failure[2];
+        std::vector<std::thread> threads;
+        for (int k = 0; k < 2; ++k) {
+          threads.emplace_back([&, k] {
+            try {
+              together_solution[k] = Solve(options[k], problems[k].fine, &together[k]);
+            } catch (...) {
+              failure[k] = std::current_exception();
+            }
+          });
+        }
+        for (std::thread& thread : threads) thread.join();
+        for (int k = 0; k < 2; ++k) {
+          ASSERT_FALSE(failure[k]) << "solve " << k << " threw";
+          EXPECT_EQ(together[k].device_fused, alone[k].device_fused) << k;
+          EXPECT_EQ(together[k].final_cost, alone[k].final_cost) << k << ": " << together[k].BriefReport();
+          EXPECT_EQ(together[k].iterations, alone[k].iterations) << k;
+          EXPECT_EQ(together[k].cg_iterations, alone[k].cg_iterations) << k;
+          EXPECT_EQ(together[k].termination, alone[k].termination) << k;
+          EXPECT_TRUE(together_solution[k].emittance == alone_solution[k].emittance) << k;
+          EXPECT_TRUE(together_solution[k].radiosity == alone_solution[k].radiosity) << k;
+        }
+      }
+    }
+  }
 }
 
 // Markdown rows: variables, patches, solver, setup s, solve s (median of `repeats`), loop s (the
