@@ -23,6 +23,7 @@
 
 #include "compensation/objective.h"
 #include "compensation/problem.h"
+#include "compensation/solver_driver.h"
 #include "compensation/solver_records.h"
 
 namespace procam {
@@ -41,7 +42,9 @@ bool ParseDevice(const std::string& name, Device* device);
 // `description` gets the device, or one line saying what is missing.
 bool CudaAvailable(std::string* description);
 
-struct SolverOptions {
+// The algorithm's numbers (iteration limits, tolerances, the Armijo constant, the second-order
+// term) are AlgorithmSettings' (solver_driver.h documents each); the rest is here.
+struct SolverOptions : AlgorithmSettings {
   CompensationMethod method = CompensationMethod::kPerceptual;
   // kCpu: the CPU factorisation and kernels of radiosity.h (the reference). kCuda: K⁻¹ formed
   // once on the GPU and every solve one matrix product (cuda_radiosity.h); the algorithm is the
@@ -90,18 +93,6 @@ struct SolverOptions {
   bool device_profile = false;
   // Solve the coarse level first and start the fine solve from it (needs a coarse level).
   bool multires = false;
-  // Outer (Gauss–Newton) iterations, ≥ 1.
-  int max_iterations = 100;
-  // Inner projected-Newton iterations per outer iteration (Alg. 2), ≥ 1. The paper runs
-  // Alg. 2 to convergence; one iteration (the outer loop then updates the active set) was
-  // measured 2–5× faster to the same optimum on our benchmark rooms (docs/solver.md).
-  int max_inner_iterations = 1;
-  // Conjugate-gradient iterations per Newton system, ≥ 1.
-  int max_cg_iterations = 200;
-  // Relative CG residual at which a Newton system counts as solved, in (0, 1) (an inexact
-  // Newton forcing term; also the inner solver's relative stopping tolerance). 0.3 reached the
-  // benchmark's target 10–30% sooner than 0.1 with multires (docs/solver.md).
-  double cg_tolerance = 0.3;
   // Preconditioner of the free-variable Newton systems H_FF d = −g_F (H = K⁻ᵀ M K⁻¹):
   //   kInverseHessian   (K M⁻¹ Kᵀ)_FF: the exact inverse when no bound is active; two products
   //                     with F per application.
@@ -109,17 +100,6 @@ struct SolverOptions {
   //                     LDLᵀ) once per outer iteration; exact when K = I, no products with F.
   enum class Preconditioner { kInverseHessian, kFreeColourHessian };
   Preconditioner preconditioner = Preconditioner::kFreeColourHessian;
-  // Add the second-order term of the colour transform (block diagonal in B, so the same cost
-  // per product) to the Gauss–Newton model, making it the exact Hessian; CG stops at negative
-  // curvature and the preconditioner stays Gauss–Newton. Off: the paper's pure Gauss–Newton,
-  // which converges only linearly on large-residual problems (unreachable desired colours).
-  bool second_order = true;
-  // Stop when ‖E − P(E − ∇f)‖∞ ≤ gradient_tolerance · (1 + f) (first-order optimality), ≥ 0.
-  double gradient_tolerance = 1e-9;
-  // Stop when an iteration lowers f by less than function_tolerance · f, ≥ 0.
-  double function_tolerance = 1e-12;
-  // Armijo sufficient-decrease constant, in (0, 0.5).
-  double armijo = 1e-4;
   // Called after every outer iteration with (iteration, cost, seconds since start).
   std::function<void(int, double, double)> progress;
 
@@ -163,6 +143,11 @@ struct SolverSummary {
   // One line: method, termination, costs, iterations, times.
   std::string BriefReport() const;
 };
+
+// Adds what one run of MinimiseBoundedDriver counted to `summary` as MinimiseBounded adds its
+// records: the counters added, the termination, costs and last iteration set, the message where
+// the termination has one (the trace is the executor's to append).
+void AddDriverRecords(const DriverRecords& records, SolverSummary* summary);
 
 // A coarser patch level for multires: its problem and each fine patch's parent.
 struct CoarseLevel {
