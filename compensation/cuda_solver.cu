@@ -1,15 +1,16 @@
-// cuda_solver_device.h on CUDA kernels: Alg. 1 and 2 (MinimiseBounded and SolveInnerQp of
-// solver.cc, step for step) with every vector on the device.
+// cuda_solver_device.h on CUDA kernels: Alg. 1 and 2 (MinimiseBoundedDriver of solver_driver.h,
+// the control flow the CPU runs too) with every vector on the device.
 //
 // Each step is a device function (a phase: ResidualPhase, CgUpdatePhase, …) run one thread per
 // patch (colour, Jacobians, W products, 3×3 blocks) or per variable (bounds, vector updates),
 // with grid-stride loops. Reductions (dot products, maxima) are formed in a fixed order
-// (GridReduce) and land in one Scalars struct on the device. Two loops run the phases:
-//   - a kernel per phase (Kernel<Phase>, at most kMaxBlocks blocks each), with the host copying
-//     the scalars back where the algorithm branches: two or three times per outer iteration plus
-//     about once per CG iteration. CG's own scalars (step, β, convergence) stay on the device,
-//     and its kernels do nothing once CG has stopped, so that iterations can be enqueued ahead
-//     of a read. On the dense path the fixed sequences are replayed as CUDA graphs
+// (GridReduce) and land in one Scalars struct on the device. Two executors of the driver run the
+// phases:
+//   - Loop, a kernel per phase (Kernel<Phase>, at most kMaxBlocks blocks each), with the host
+//     copying the scalars back where the algorithm branches: two or three times per outer
+//     iteration plus about once per CG iteration. CG's own scalars (step, β, convergence) stay
+//     on the device, and its kernels do nothing once CG has stopped, so that iterations can be
+//     enqueued ahead of a read. On the dense path the fixed sequences are replayed as CUDA graphs
 //     (SolverOptions::device_graphs = false turns that off). Large problems and the matrix-free
 //     path run this.
 //   - the fused loop (FusedLoop): for small problems on the dense K⁻¹, every phase in one
@@ -324,7 +325,7 @@ __device__ void GradientCheckPhase(long count, const double* x, const double* g,
 }
 
 // ---------------------------------------------------------------------------------------------
-// Alg. 2 (SolveInnerQp) on q(d) = gᵀd + ½ dᵀHd, lo = l − x ≤ d ≤ hi = u − x.
+// Alg. 2 (solver_driver.h's SolveInnerQp) on q(d) = gᵀd + ½ dᵀHd, l − x ≤ d ≤ u − x.
 
 // ∇q = g + Hd, the mask of the free variables, and q's projected gradient at d. `first`: d = 0
 // and Hd = 0 (both written).
@@ -888,17 +889,17 @@ struct Point {
 };
 
 // ---------------------------------------------------------------------------------------------
-// The fused loop: Loop::Run in one cooperative kernel, for small problems on the dense K⁻¹.
+// The fused loop: the driver in one cooperative kernel, for small problems on the dense K⁻¹.
 //
 // Below a few thousand patches every kernel of the host-driven loop is launch-bound, and each of
 // its ~45 host reads per solve leaves the device idle: the solve is paid in latency, not
 // arithmetic. Here the same phases (the same device functions) run in the same order inside one
-// kernel launched cooperatively, with a grid-wide barrier after each; the control flow of Run
-// and SolveInnerQp runs in every thread on the scalars the reductions wrote, so every block takes
-// the same branch. A reduction's last block writes its scalars only after every block has entered
-// the phase, so every read of a scalar (right after a barrier) precedes the next write of it. The
-// grid is one wave of resident blocks; the K⁻¹ products loop over their groups of outputs
-// (cuda_product.cuh, as the standalone kernel forms them).
+// kernel launched cooperatively, with a grid-wide barrier after each; MinimiseBoundedDriver runs
+// in every thread on the scalars the reductions wrote, so every block takes the same branch. A
+// reduction's last block writes its scalars only after every block has entered the phase, so
+// every read of a scalar (right after a barrier) precedes the next write of it. The grid is one
+// wave of resident blocks; the K⁻¹ products loop over their groups of outputs (cuda_product.cuh,
+// as the standalone kernel forms them).
 
 // The fused loop's summary, in device memory beside its trace.
 struct FusedRecords {
@@ -1100,7 +1101,7 @@ class FusedLoop {
         y, transposed, x);
   }
 
-  // H v (Loop::Product).
+  // H v (as Loop::Product forms it).
   __device__ void HessianProduct(const Point& point, const float* v, float* result) {
     SolveFast(v, false, a_.u_fast);
     WeightedProductPhase<float>(a_.n, a_.space, a_.weights, a_.second_order, point.jacobian, point.curvature,
@@ -1133,7 +1134,7 @@ class FusedLoop {
     Barrier();
   }
 
-  // Loop::CgIteration.
+  // One CG iteration (as Loop::CgIteration enqueues it).
   __device__ void CgIteration(const Point& point) {
     HessianProduct(point, a_.p_fast, a_.product_fast);
     CgCurvaturePhase<float>(a_.count, a_.product_fast, a_.mask, a_.p, a_.hp, a_.scalars, a_.reduction);

@@ -10,15 +10,17 @@
 //           and second-order term, products with W (the adjacency in CSR form), objective,
 //           gradient, projected gradient and active set, CG on the free variables, its
 //           preconditioner, Alg. 2's projected step and the Armijo trials;
-//   host    the control flow, reading back a few scalars per step (costs, slopes, CG's state),
+//   host    the control flow (MinimiseBoundedDriver, solver_driver.h, the CPU's as well),
+//           reading back a few scalars per step (costs, slopes, CG's state),
 //           and the records of the summary; except for small problems on the dense K⁻¹
 //           (below 4096 patches, every K⁻¹ on the Cholesky path), where one cooperative kernel
 //           runs the whole loop, control flow included, and the host reads the result and the
 //           records once (SolverOptions::device_fused, on by default; SolverSummary::
-//           device_fused says which ran). The progress callback is then called after the kernel.
-// The algorithm and its stopping rules are MinimiseBounded's, with one difference: CG is
-// preconditioned by the inverses of the 3×3 diagonal blocks of M_FF with one Neumann term for
-// their coupling through W (z = D⁻¹r + D⁻¹ N D⁻¹ r; SolverOptions::device_preconditioner =
+//           device_fused says which ran): the same driver then runs in every thread of the
+//           kernel. The progress callback is then called after the kernel.
+// The algorithm and its stopping rules are MinimiseBounded's (one driver), with one difference:
+// CG is preconditioned by the inverses of the 3×3 diagonal blocks of M_FF with one Neumann term
+// for their coupling through W (z = D⁻¹r + D⁻¹ N D⁻¹ r; SolverOptions::device_preconditioner =
 // kBlockJacobi drops the term) instead of a sparse factorisation of M_FF, whatever
 // SolverOptions::preconditioner says.
 // Values, gradients and line searches are float64; the Hessian products of CG use

@@ -271,8 +271,8 @@ double MedianMicroseconds(int warmup, int runs, const Work& work) {
 // Microseconds per K⁻¹ product with three columns (median of 200, CUDA events, inputs rotated
 // over 4 buffers): cuBLAS GEMM against TransposedProductKernel with 4 and 8 outputs per block
 // (DenseProductSettings::rows), float64, and float32 vectors with the float32 or the float16 copy
-// of K⁻¹ (DenseProductSettings::half_cg_matrix); K⁻¹x and K⁻ᵀx. Sizes: PROCAM_BENCH_GRIDS. GB/s: the matrix's
-// bytes over the best time.
+// of K⁻¹ (DenseProductSettings::half_cg_matrix); K⁻¹x and K⁻ᵀx. Sizes: PROCAM_BENCH_GRIDS. GB/s:
+// the matrix's bytes over the best time.
 TEST(SolveCudaAnalytic, DISABLED_ProductTimings) {
   SKIP_WITHOUT_CUDA_DEVICE();
   struct Variant {
