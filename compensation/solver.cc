@@ -104,7 +104,6 @@ class NewtonSystem {
   }
 
   Eigen::MatrixX3d Product(const Eigen::MatrixX3d& v) const {
-    ++products_;
     return objective_.GaussNewtonProduct(point_, v, /*fast=*/true);
   }
 
@@ -229,8 +228,7 @@ class NewtonSystem {
   mutable Eigen::MatrixX3d factorised_mask_;        // ... factorised for this mask at this point
 
  public:
-  mutable int products_ = 0;
-  mutable int preconditioner_applications_ = 0;
+  mutable int preconditioner_applications_ = 0;  // Precondition calls, all systems together
 };
 
 // MinimiseBoundedDriver's executor on the CPU: Eigen vectors, the objective's K⁻¹ solves, and CG
