@@ -7,11 +7,8 @@
 
 #include <Eigen/Core>
 
+#include "compensation/host_device.h"
 #include "geometry/srgb.h"
-
-#ifndef PROCAM_HOST_DEVICE
-#define PROCAM_HOST_DEVICE
-#endif
 
 namespace procam {
 

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
@@ -47,6 +48,13 @@ struct Handles {
   void* device_blas_workspace = nullptr;
   cusolverDnHandle_t solver = nullptr;
 };
+// cuBLAS and cuSOLVER handles may not be used from two threads at once (a stream set by one
+// thread would carry the other's work): every use holds this lock. The products of the resident
+// loops run the own kernel and take it only on the LU path's K⁻¹x.
+std::mutex& HandlesMutex() {
+  static std::mutex* mutex = new std::mutex;
+  return *mutex;
+}
 const Handles& GetHandles() {
   static const Handles* handles = [] {
     auto* h = new Handles;
@@ -158,7 +166,15 @@ void TransposedProduct(int n, int columns, int rows, const HalfQuad* matrix, con
 
 class InverseRadiosityImpl : public InverseRadiosity {
  public:
-  InverseRadiosityImpl(const double* form_factors, const double* area, const double* reflectance, int n) : n_(n) {
+  InverseRadiosityImpl(const double* form_factors, const double* area, const double* reflectance, int n,
+                       const DenseProductSettings& settings)
+      : n_(n) {
+    const std::lock_guard<std::mutex> lock(HandlesMutex());
+    const int rows = settings.rows;
+    if (rows != -1 && rows != 0 && rows != 1 && rows != 2 && rows != 4 && rows != 8) {
+      throw std::invalid_argument("InverseRadiosity: product rows " + std::to_string(settings.rows) +
+                                  " is not -1 (default), 0 (cuBLAS), 1, 2, 4 or 8");
+    }
     const Handles& handles = GetHandles();
     const size_t n2 = static_cast<size_t>(n) * n;
     size_t free_bytes = 0, total_bytes = 0;
@@ -236,12 +252,12 @@ class InverseRadiosityImpl : public InverseRadiosity {
       square_single_ = Upload(std::vector<float>(square.begin(), square.end()));
       inverse_square_single_ = Upload(std::vector<float>(inverse_square.begin(), inverse_square.end()));
     }
-    product_rows_ = ProductRows(kDoubleRows);
-    half_rows_ = ProductRows(kHalfRows);
+    product_rows_ = settings.rows < 0 ? kDoubleRows : settings.rows;
+    half_rows_ = settings.rows < 0 ? kHalfRows : settings.rows;
     inverse_single_ = DeviceArray<float>(n2);
     ConvertKernel<<<Blocks(n2), kThreads>>>(inverse_.get(), static_cast<long>(n2), inverse_single_.get());
     PROCAM_CUDA_LAUNCHED("ConvertKernel");
-    if (product_rows_ > 0 && HalfProducts()) {
+    if (product_rows_ > 0 && settings.half_cg_matrix) {
       // K⁻¹ · 2^k in float16, 2^k the largest power of two that keeps max |K⁻¹| under 2^15 (the
       // format's largest is 65504): entries down to 6e-5 · 2^-k keep 11 significant bits.
       int64_t largest = 0;
@@ -265,6 +281,7 @@ class InverseRadiosityImpl : public InverseRadiosity {
 
   void Apply(const double* x, int columns, bool transposed, bool single, double* y) const override {
     if (columns < 1 || columns > 3) throw std::invalid_argument("InverseRadiosity::Apply: 1 to 3 columns");
+    const std::lock_guard<std::mutex> lock(HandlesMutex());
     const Handles& handles = GetHandles();
     const long count = static_cast<long>(n_) * columns;
     const cublasOperation_t op = transposed ? CUBLAS_OP_T : CUBLAS_OP_N;
@@ -317,12 +334,12 @@ class InverseRadiosityImpl : public InverseRadiosity {
 
  private:
   // Whether TransposedProductKernel serves this direction: K⁻ᵀx always, K⁻¹x on the Cholesky path
-  // (K⁻¹ = diag(s²) K⁻ᵀ diag(s⁻²)); not where PROCAM_CUDA_DENSE_PRODUCT=cublas.
+  // (K⁻¹ = diag(s²) K⁻ᵀ diag(s⁻²)); not where DenseProductSettings::rows is 0 (cuBLAS).
   bool OwnKernel(bool transposed) const { return product_rows_ > 0 && (transposed || cholesky_); }
 
   // y = K⁻¹x or K⁻ᵀx with `inverse` (post · K⁻¹ stored as S) and the Cholesky path's s², s⁻² in
   // T: own kernel, or cuBLAS's GEMM (S = T) for K⁻¹x on the LU path and where
-  // PROCAM_CUDA_DENSE_PRODUCT=cublas.
+  // DenseProductSettings::rows is 0.
   template <typename S, typename T>
   void ApplyOnDevice(const S* inverse, T post, const T* square, const T* inverse_square, const T* x, int columns,
                      bool transposed, T* y, cudaStream_t stream) const {
@@ -334,6 +351,7 @@ class InverseRadiosityImpl : public InverseRadiosity {
       return;
     }
     if constexpr (std::is_same_v<S, T>) {
+      const std::lock_guard<std::mutex> lock(HandlesMutex());
       const Handles& handles = GetHandles();
       PROCAM_CUDA(cublasSetStream(handles.device_blas, stream));
       const T one = 1, zero = 0;
@@ -348,29 +366,6 @@ class InverseRadiosityImpl : public InverseRadiosity {
     } else {
       throw std::logic_error("InverseRadiosity: K^-1 x on the LU path needs the float32 or float64 copy");
     }
-  }
-
-  // Outputs per block of TransposedProductKernel; 0: cuBLAS. PROCAM_CUDA_DENSE_PRODUCT (for
-  // benchmarks): cublas, or 1/2/4/8 rows; else `fallback` (4 for float64/float32 K⁻¹, 8 for the
-  // float16 quads).
-  static int ProductRows(int fallback) {
-    const char* choice = std::getenv("PROCAM_CUDA_DENSE_PRODUCT");
-    if (choice == nullptr || *choice == '\0') return fallback;
-    const std::string text = choice;
-    if (text == "cublas") return 0;
-    if (text == "1" || text == "2" || text == "4" || text == "8") return std::stoi(text);
-    throw std::invalid_argument("PROCAM_CUDA_DENSE_PRODUCT: '" + text + "' is not cublas, 1, 2, 4 or 8");
-  }
-
-  // Whether the float32 products (CG's Hessian products) read a float16 copy of K⁻¹: half the
-  // bytes of the bandwidth-bound product. PROCAM_CUDA_CG_MATRIX = float16 (default) or float32.
-  static bool HalfProducts() {
-    const char* choice = std::getenv("PROCAM_CUDA_CG_MATRIX");
-    if (choice == nullptr || *choice == '\0') return true;
-    const std::string text = choice;
-    if (text == "float16") return true;
-    if (text == "float32") return false;
-    throw std::invalid_argument("PROCAM_CUDA_CG_MATRIX: '" + text + "' is not float16 or float32");
   }
 
   int n_ = 0;
@@ -428,6 +423,7 @@ class DeviceMatrixImpl : public DeviceMatrix {
   void Apply(const double* x, int columns, double* y) const override {
     if (columns < 1 || columns > 3) throw std::invalid_argument("DeviceMatrix::Apply: 1 to 3 columns");
     const size_t bytes = static_cast<size_t>(n_) * columns * sizeof(double);
+    const std::lock_guard<std::mutex> lock(HandlesMutex());
     std::memcpy(staging_, x, bytes);
     PROCAM_CUDA(cudaMemcpy(in_.get(), staging_, bytes, cudaMemcpyHostToDevice));
     const double one = 1.0, zero = 0.0;
@@ -453,8 +449,9 @@ std::unique_ptr<DeviceMatrix> DeviceMatrix::Create(const double* matrix, int n) 
 }
 
 std::unique_ptr<InverseRadiosity> InverseRadiosity::Create(const double* form_factors, const double* area,
-                                                           const double* reflectance, int n) {
-  return std::make_unique<InverseRadiosityImpl>(form_factors, area, reflectance, n);
+                                                           const double* reflectance, int n,
+                                                           const DenseProductSettings& settings) {
+  return std::make_unique<InverseRadiosityImpl>(form_factors, area, reflectance, n, settings);
 }
 
 }  // namespace procam::cuda

@@ -41,28 +41,41 @@ struct DenseInverseView {
   const float* inverse_square_single = nullptr;
 };
 
+// How ApplyOnDevice forms its products (SolverOptions::device_product_rows and device_cg_matrix;
+// the defaults are the measured best, docs/gpu.md).
+struct DenseProductSettings {
+  // Outputs per block of the own product kernel: 1, 2, 4 or 8; 0: cuBLAS's GEMM instead; -1: the
+  // default (4 for float64 and float32 K⁻¹, 8 for the float16 copy).
+  int rows = -1;
+  // CG's float32 products read a float16 copy of 2^k K⁻¹ (half the bytes); false: the float32
+  // copy. Not used where `rows` is 0 (cuBLAS has no float16 quads).
+  bool half_cg_matrix = true;
+};
+
 class InverseRadiosity {
  public:
   virtual ~InverseRadiosity() = default;
   // K⁻¹ of one channel: `form_factors` n×n column-major, `area` and `reflectance` n, host
-  // memory. Throws std::runtime_error naming the CUDA call that failed (or the memory needed).
+  // memory. Throws std::runtime_error naming the CUDA call that failed (or the memory needed),
+  // std::invalid_argument where `settings.rows` is none of -1, 0, 1, 2, 4, 8.
   static std::unique_ptr<InverseRadiosity> Create(const double* form_factors, const double* area,
-                                                  const double* reflectance, int n);
+                                                  const double* reflectance, int n,
+                                                  const DenseProductSettings& settings = {});
   // y = K⁻¹ x (K⁻ᵀ x when `transposed`); x and y are n×columns, column-major, host memory.
   // `single`: with the float32 copy of K⁻¹ (float32 arithmetic), else float64.
   virtual void Apply(const double* x, int columns, bool transposed, bool single, double* y) const = 0;
   // The same on device memory, enqueued on `stream` without copies or synchronisation (the
   // resident solver, cuda_solver.h): float64 with the float64 K⁻¹; float32 vectors (CG's Hessian
   // products) with a float16 copy of 2^k K⁻¹ (half the bytes; within 2^-11 relative, measured
-  // ~5e-6), or the float32 copy where PROCAM_CUDA_CG_MATRIX=float32. x and y must not overlap.
-  // Products of several threads at once are not supported.
+  // ~5e-6), or the float32 copy where settings.half_cg_matrix is false. x and y must not overlap.
+  // Callable from several threads at once (the cuBLAS path, K⁻¹x on the LU path, takes a lock).
   virtual void ApplyOnDevice(const double* x, int columns, bool transposed, double* y, cudaStream_t stream) const = 0;
   virtual void ApplyOnDevice(const float* x, int columns, bool transposed, float* y, cudaStream_t stream) const = 0;
   // Whether the Cholesky path was taken (else LU).
   virtual bool cholesky() const = 0;
   // Fills `view` and returns true where ApplyOnDevice runs the own product kernel at its default
-  // shape in both directions with the float16 copy for float32 vectors (the Cholesky path, no
-  // PROCAM_CUDA_DENSE_PRODUCT or PROCAM_CUDA_CG_MATRIX override); else false.
+  // shape in both directions with the float16 copy for float32 vectors (the Cholesky path, the
+  // default DenseProductSettings); else false.
   virtual bool View(DenseInverseView* view) const = 0;
 };
 

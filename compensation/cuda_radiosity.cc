@@ -11,7 +11,7 @@ namespace {
 class CudaRadiosity : public RadiosityBackend {
  public:
   CudaRadiosity(const Eigen::MatrixXd& form_factors, const Eigen::VectorXd& area,
-                const Eigen::MatrixX3d& reflectance, bool float32)
+                const Eigen::MatrixX3d& reflectance, bool float32, const cuda::DenseProductSettings& products)
       : float32_(float32) {
     std::string why;
     if (!cuda::DeviceAvailable(&why)) throw std::runtime_error("--device cuda: " + why);
@@ -22,7 +22,7 @@ class CudaRadiosity : public RadiosityBackend {
     for (const std::vector<int>& channels : groups_) {
       const Eigen::VectorXd rho = reflectance.col(channels.front());
       inverses_.push_back(cuda::InverseRadiosity::Create(f.data(), area.data(), rho.data(),
-                                                         static_cast<int>(area.size())));
+                                                         static_cast<int>(area.size()), products));
     }
     form_factors_ = cuda::DeviceMatrix::Create(f.data(), static_cast<int>(area.size()));
   }
@@ -72,8 +72,9 @@ bool CudaDeviceAvailable(std::string* description) { return cuda::DeviceAvailabl
 std::shared_ptr<const RadiosityBackend> MakeCudaRadiosityBackend(const Eigen::MatrixXd& form_factors,
                                                                  const Eigen::VectorXd& area,
                                                                  const Eigen::MatrixX3d& reflectance,
-                                                                 bool float32) {
-  return std::make_shared<const CudaRadiosity>(form_factors, area, reflectance, float32);
+                                                                 bool float32,
+                                                                 const cuda::DenseProductSettings& products) {
+  return std::make_shared<const CudaRadiosity>(form_factors, area, reflectance, float32, products);
 }
 
 bool CudaInverseRadiosities(const RadiosityBackend& backend, std::vector<const cuda::InverseRadiosity*>* inverses,

@@ -15,13 +15,10 @@
 
 #include <Eigen/Core>
 
+#include "compensation/cuda_dense.h"
 #include "compensation/radiosity.h"
 
 namespace procam {
-
-namespace cuda {
-class InverseRadiosity;
-}  // namespace cuda
 
 // True when a CUDA device can be used (also creates its context and library handles, so that
 // later timings exclude them); `description` gets the device, or why there is none.
@@ -29,11 +26,14 @@ bool CudaDeviceAvailable(std::string* description);
 
 // The backend for F (n×n), area (n) and reflectance (n×3). `float32`: the solves for objective
 // values, gradients and line searches also use the float32 K⁻¹ (the Fast solves always do).
-// Throws std::runtime_error at device errors (no device, too little device memory).
+// `products`: how the device products are formed (SolverOptions::device_product_rows and
+// device_cg_matrix). Throws std::runtime_error at device errors (no device, too little device
+// memory).
 std::shared_ptr<const RadiosityBackend> MakeCudaRadiosityBackend(const Eigen::MatrixXd& form_factors,
                                                                  const Eigen::VectorXd& area,
                                                                  const Eigen::MatrixX3d& reflectance,
-                                                                 bool float32);
+                                                                 bool float32,
+                                                                 const cuda::DenseProductSettings& products = {});
 
 // The device K⁻¹ of a backend made by MakeCudaRadiosityBackend, for the resident solver
 // (cuda_solver.h): one per group of channels sharing a reflectance, with the group's channels

@@ -160,15 +160,13 @@ Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const Compen
   }
 
   cuda::ResidentOptions resident_options;
-  resident_options.max_iterations = options.max_iterations;
-  resident_options.max_inner_iterations = options.max_inner_iterations;
-  resident_options.max_cg_iterations = options.max_cg_iterations;
-  resident_options.cg_tolerance = options.cg_tolerance;
-  resident_options.second_order = options.second_order;
-  resident_options.gradient_tolerance = options.gradient_tolerance;
-  resident_options.function_tolerance = options.function_tolerance;
-  resident_options.armijo = options.armijo;
+  static_cast<AlgorithmSettings&>(resident_options) = options;
   resident_options.fused = options.device_fused;
+  resident_options.neumann =
+      options.device_preconditioner == SolverOptions::DevicePreconditioner::kBlockJacobiNeumann;
+  resident_options.graphs = options.device_graphs;
+  resident_options.fused_blocks = options.device_fused_blocks;
+  resident_options.profile = options.device_profile;
   resident_options.progress = options.progress;
 
   cuda::ResidentSummary resident;
@@ -177,20 +175,13 @@ Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const Compen
   cuda::MinimiseResident(resident_options, resident_problem, *radiosity, emittance.data(),
                          radiosity_out != nullptr ? radiosity_out->data() : nullptr, &resident);
 
-  // As MinimiseBounded writes its summary: counters and the trace added, the rest set.
-  summary->termination = resident.termination;
-  if (!resident.message.empty()) summary->message = resident.message;
-  summary->initial_cost = resident.initial_cost;
-  summary->final_cost = resident.final_cost;
-  if (resident.iterations > 0) summary->iterations = resident.iterations;
-  summary->inner_iterations += resident.inner_iterations;
-  summary->cg_iterations += resident.cg_iterations;
-  summary->evaluations += resident.evaluations;
-  summary->gradients += resident.gradients;
-  summary->hessian_products += resident.hessian_products;
-  summary->preconditioner_applications += resident.preconditioner_applications;
-  summary->device_fused = resident.fused;
+  AddDriverRecords(resident.records, summary);
   summary->trace.insert(summary->trace.end(), resident.trace.begin(), resident.trace.end());
+  summary->device_fused = resident.fused;
+  summary->device_fused_blocks = resident.fused_blocks;
+  summary->device_loop = true;
+  summary->device_preconditioner = options.device_preconditioner;
+  summary->device_cg_matrix = options.device_cg_matrix;
   return emittance;
 }
 

@@ -1,22 +1,23 @@
-// cuda_solver_device.h on CUDA kernels: Alg. 1 and 2 (MinimiseBounded and SolveInnerQp of
-// solver.cc, step for step) with every vector on the device.
+// cuda_solver_device.h on CUDA kernels: Alg. 1 and 2 (MinimiseBoundedDriver of solver_driver.h,
+// the control flow the CPU runs too) with every vector on the device.
 //
 // Each step is a device function (a phase: ResidualPhase, CgUpdatePhase, …) run one thread per
 // patch (colour, Jacobians, W products, 3×3 blocks) or per variable (bounds, vector updates),
 // with grid-stride loops. Reductions (dot products, maxima) are formed in a fixed order
-// (GridReduce) and land in one Scalars struct on the device. Two loops run the phases:
-//   - a kernel per phase (Kernel<Phase>, at most kMaxBlocks blocks each), with the host copying
-//     the scalars back where the algorithm branches: two or three times per outer iteration plus
-//     about once per CG iteration. CG's own scalars (step, β, convergence) stay on the device,
-//     and its kernels do nothing once CG has stopped, so that iterations can be enqueued ahead
-//     of a read. On the dense path the fixed sequences are replayed as CUDA graphs
-//     (PROCAM_CUDA_GRAPHS=0 turns that off). Large problems and the matrix-free path run this.
+// (GridReduce) and land in one Scalars struct on the device. Two executors of the driver run the
+// phases:
+//   - Loop, a kernel per phase (Kernel<Phase>, at most kMaxBlocks blocks each), with the host
+//     copying the scalars back where the algorithm branches: two or three times per outer
+//     iteration plus about once per CG iteration. CG's own scalars (step, β, convergence) stay
+//     on the device, and its kernels do nothing once CG has stopped, so that iterations can be
+//     enqueued ahead of a read. On the dense path the fixed sequences are replayed as CUDA graphs
+//     (SolverOptions::device_graphs = false turns that off). Large problems and the matrix-free
+//     path run this.
 //   - the fused loop (FusedLoop): for small problems on the dense K⁻¹, every phase in one
 //     cooperative kernel, grid barriers between them and the control flow on the device.
-// PROCAM_CUDA_SOLVER_PROFILE=1 prints where a solve's time went.
+// SolverOptions::device_profile prints where a solve's time went.
 
 // The colour math of colour.h, compiled for the device as well (one definition for both sides).
-#define PROCAM_HOST_DEVICE __host__ __device__
 #include "compensation/colour.h"
 
 #include <algorithm>
@@ -324,7 +325,7 @@ __device__ void GradientCheckPhase(long count, const double* x, const double* g,
 }
 
 // ---------------------------------------------------------------------------------------------
-// Alg. 2 (SolveInnerQp) on q(d) = gᵀd + ½ dᵀHd, lo = l − x ≤ d ≤ hi = u − x.
+// Alg. 2 (solver_driver.h's SolveInnerQp) on q(d) = gᵀd + ½ dᵀHd, l − x ≤ d ≤ u − x.
 
 // ∇q = g + Hd, the mask of the free variables, and q's projected gradient at d. `first`: d = 0
 // and Hd = 0 (both written).
@@ -595,8 +596,7 @@ __device__ void CgFinishPhase(long count, const double* x, const double* b0, con
     scalars->solution_max = value[1];
     scalars->solution_nonfinite = value[2];
     scalars->solution_slope = value[3];
-    const double minimiser = -value[3] / curvature;
-    scalars->alpha = curvature > 0.0 ? Max(minimiser, 0.0) : 1.0;
+    scalars->alpha = InnerStepLength(value[3], curvature);
   }
 }
 
@@ -707,7 +707,7 @@ __global__ void __launch_bounds__(kThreads) Kernel(Args... args) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Device memory, kept between calls.
+// Device memory, kept between calls (a pool of workspaces, one per solve in flight).
 
 // One region carved into the loop's arrays; grown (never shrunk) when a larger problem comes.
 // Carving runs twice: once measuring (Measure, then Take returns null), once for real (after
@@ -827,31 +827,55 @@ class Workspace {
   unsigned* counter_ = nullptr;
 };
 
-// Never destroyed (the runtime may be torn down before static destructors run), as the handles
-// of cuda_dense.cu.
-Workspace& SharedWorkspace() {
-  static Workspace* workspace = new Workspace;
-  return *workspace;
-}
-std::mutex& WorkspaceMutex() {
-  static std::mutex* mutex = new std::mutex;
-  return *mutex;
-}
+// The workspaces of the process: a solve takes one for its duration (a new one where every one is
+// in use) and gives it back, so that solves from several threads run at once, each on its own
+// device memory, stream and pinned staging, while a thread that solves again and again reuses one
+// (no allocation per solve: cudaMallocHost alone costs about as much as a small solve's loop).
+// Never destroyed (the runtime may be torn down before static destructors run), as the handles of
+// cuda_dense.cu; the pool holds as many workspaces as solves ever ran at once.
+class WorkspacePool {
+ public:
+  // A workspace for one solve, back in the pool when the lease ends (an exception included: each
+  // solve resets the state it reads, so a failed one leaves nothing behind).
+  class Lease {
+   public:
+    Lease(WorkspacePool* pool, Workspace* workspace) : pool_(pool), workspace_(workspace) {}
+    ~Lease() { pool_->Give(workspace_); }
+    Lease(const Lease&) = delete;
+    Lease& operator=(const Lease&) = delete;
+    Workspace* get() const { return workspace_; }
+
+   private:
+    WorkspacePool* pool_;
+    Workspace* workspace_;
+  };
+
+  static WorkspacePool& Get() {
+    static WorkspacePool* pool = new WorkspacePool;
+    return *pool;
+  }
+
+  Lease Take() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (idle_.empty()) return Lease(this, new Workspace);
+    Workspace* workspace = idle_.back();
+    idle_.pop_back();
+    return Lease(this, workspace);
+  }
+
+ private:
+  void Give(Workspace* workspace) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    idle_.push_back(workspace);
+  }
+
+  std::mutex mutex_;
+  std::vector<Workspace*> idle_;
+};
 
 using Clock = std::chrono::steady_clock;
 double SecondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-// Opt-in diagnostics: with PROCAM_CUDA_SOLVER_PROFILE=1 every resident solve prints to stderr
-// where its time went (enqueueing on the host, waiting for the device) and the unit costs of its
-// operations, measured after the solve. Off: nothing is counted or timed.
-bool ProfileEnabled() {
-  static const bool enabled = [] {
-    const char* value = std::getenv("PROCAM_CUDA_SOLVER_PROFILE");
-    return value != nullptr && std::string(value) != "0";
-  }();
-  return enabled;
 }
 
 // Everything the objective knows at one point (ObjectivePoint).
@@ -864,50 +888,24 @@ struct Point {
   double* curvature;   // second-order term, diagonal in XYZ
 };
 
-// Whether the dense path replays its fixed sequences as CUDA graphs (PROCAM_CUDA_GRAPHS=0: plain
-// launches, for comparison).
-bool GraphsEnabled() {
-  static const bool enabled = [] {
-    const char* value = std::getenv("PROCAM_CUDA_GRAPHS");
-    return value == nullptr || std::string(value) != "0";
-  }();
-  return enabled;
-}
-
-// CG's preconditioner: PROCAM_CUDA_PRECONDITIONER = neumann (NeumannPhase, the default) or
-// jacobi (the 3×3 diagonal blocks alone).
-bool NeumannPreconditioner() {
-  static const bool neumann = [] {
-    const char* choice = std::getenv("PROCAM_CUDA_PRECONDITIONER");
-    if (choice == nullptr || *choice == '\0' || std::string(choice) == "neumann") return true;
-    if (std::string(choice) == "jacobi") return false;
-    throw std::invalid_argument(std::string("PROCAM_CUDA_PRECONDITIONER: '") + choice +
-                                "' is not neumann or jacobi");
-  }();
-  return neumann;
-}
-
 // ---------------------------------------------------------------------------------------------
-// The fused loop: Loop::Run in one cooperative kernel, for small problems on the dense K⁻¹.
+// The fused loop: the driver in one cooperative kernel, for small problems on the dense K⁻¹.
 //
 // Below a few thousand patches every kernel of the host-driven loop is launch-bound, and each of
 // its ~45 host reads per solve leaves the device idle: the solve is paid in latency, not
 // arithmetic. Here the same phases (the same device functions) run in the same order inside one
-// kernel launched cooperatively, with a grid-wide barrier after each; the control flow of Run
-// and SolveInnerQp runs in every thread on the scalars the reductions wrote, so every block takes
-// the same branch. A reduction's last block writes its scalars only after every block has entered
-// the phase, so every read of a scalar (right after a barrier) precedes the next write of it. The
-// grid is one wave of resident blocks; the K⁻¹ products loop over their groups of outputs
-// (cuda_product.cuh, as the standalone kernel forms them).
+// kernel launched cooperatively, with a grid-wide barrier after each; MinimiseBoundedDriver runs
+// in every thread on the scalars the reductions wrote, so every block takes the same branch. A
+// reduction's last block writes its scalars only after every block has entered the phase, so
+// every read of a scalar (right after a barrier) precedes the next write of it. The grid is one
+// wave of resident blocks; the K⁻¹ products loop over their groups of outputs (cuda_product.cuh,
+// as the standalone kernel forms them).
 
 // The fused loop's summary, in device memory beside its trace.
 struct FusedRecords {
-  int termination;  // TerminationType
-  int iterations, inner_iterations, cg_iterations, evaluations, gradients, hessian_products;
-  int preconditioner_applications;
+  DriverRecords driver;
   int records;  // trace entries written
   int result;   // the point (0 or 1) that holds the result
-  double initial_cost, final_cost;
 };
 
 // Everything the fused kernel reads: the options, the problem and the loop's arrays.
@@ -937,88 +935,127 @@ __device__ unsigned long long GlobalNanoseconds() {
   return t;
 }
 
+// MinimiseBoundedDriver's executor in one cooperative kernel: every operation runs its phases
+// over the grid with a barrier after each and returns the scalars the reductions wrote, read by
+// every thread right after the barrier.
 class FusedLoop {
  public:
   __device__ explicit FusedLoop(const FusedArgs& a) : a_(a), grid_(cooperative_groups::this_grid()) {}
 
-  // Run's outer loop (Alg. 1 with the Armijo search), step for step.
   __device__ void Run() {
-    const unsigned long long start = GlobalNanoseconds();
-    const Scalars& s = *a_.scalars;
-    FusedRecords counts = {};
-    counts.termination = static_cast<int>(TerminationType::kMaxIterations);
-    int current = 0;
-    Evaluate(a_.points[0]);
-    counts.evaluations = 1;
-    double cost = s.value;
-    counts.initial_cost = cost;
-    Record(&counts, 0, cost, start, 0.0, 3 * a_.n, 0);
-    if (!isfinite(cost)) {
-      counts.termination = static_cast<int>(TerminationType::kNumericalFailure);
-      Finish(&counts, cost, current);
-      return;
-    }
-    for (int iteration = 1; iteration <= a_.options.max_iterations; ++iteration) {
-      const Point& point = a_.points[current];
-      Gradient(point);
-      ++counts.gradients;
-      SetProjectedGradient(counts, s.projected_gradient);
-      if (s.projected_gradient <= a_.options.gradient_tolerance * (1.0 + cost)) {
-        counts.termination = static_cast<int>(TerminationType::kGradientTolerance);
-        break;
-      }
-      const int free_variables = static_cast<int>(s.free_variables);
-      int cg = 0;
-      SolveInnerQp(point, &counts, &cg);
-      counts.cg_iterations += cg;
+    start_ = GlobalNanoseconds();
+    DriverRecords records;
+    MinimiseBoundedDriver(a_.options, *this, &records);
+    if (Leader()) *a_.records = {records, records_, current_};
+  }
 
-      // The direction's slope and the Armijo search's first trial (a = 1).
-      const Point& trial = a_.points[current ^ 1];
-      DirectionSlopePhase(a_.count, a_.gradient, a_.d, a_.scalars, a_.reduction);
-      Barrier();
-      LineTrial(point, trial, 1.0);
-      double slope = s.direction_slope;
-      bool first_trial_evaluated = true;
-      if (s.direction_nonfinite > 0.0 || !(slope < 0.0)) {
-        SteepestDirectionPhase(a_.count, point.emittance, a_.gradient, a_.lower, a_.upper, a_.d, a_.scalars,
-                               a_.reduction);
-        Barrier();
-        slope = s.direction_slope;
-        first_trial_evaluated = false;
-      }
-      double step = 1.0, trial_cost = 0.0;
-      bool accepted = false;
-      for (int halving = 0; halving < 40; ++halving, step *= 0.5) {
-        if (halving > 0 || !first_trial_evaluated) LineTrial(point, trial, step);
-        ++counts.evaluations;
-        trial_cost = s.value;
-        if (ArmijoAccepts(trial_cost, cost, a_.options.armijo, step, slope)) {
-          accepted = true;
-          break;
-        }
-      }
-      counts.iterations = iteration;
-      if (!accepted) {
-        counts.termination = static_cast<int>(TerminationType::kLineSearchFailure);
-        break;
-      }
-      const double previous = cost;
-      current ^= 1;
-      cost = trial_cost;
-      Record(&counts, iteration, cost, start, step, free_variables, cg);
-      if (previous - cost <= a_.options.function_tolerance * previous) {
-        counts.termination = static_cast<int>(TerminationType::kFunctionTolerance);
-        Gradient(a_.points[current]);
-        SetProjectedGradient(counts, s.projected_gradient);
-        break;
-      }
+  // The executor's operations (solver_driver.h).
+  __device__ int Variables() const { return static_cast<int>(a_.count); }
+
+  __device__ double Evaluate() {
+    EvaluateAt(Current());
+    return scalars().value;
+  }
+
+  __device__ GradientCheck Gradient() {
+    GradientAt(Current());
+    return {scalars().projected_gradient, static_cast<int>(scalars().free_variables)};
+  }
+
+  __device__ double InnerStart(bool first) {
+    InnerStartPhase(a_.count, first, a_.d, a_.hd, a_.gradient, Current().emittance, a_.lower, a_.upper, a_.fixed,
+                    a_.qg, a_.mask, a_.scalars, a_.reduction);
+    Barrier();
+    return scalars().inner_projected;
+  }
+
+  __device__ NewtonStep SolveNewton() {
+    const Point& point = Current();
+    CgStartPhase<float>(a_.n, a_.neumann, a_.qg, a_.mask, point.jacobian, a_.weights.diagonal, a_.x, a_.r, a_.b0,
+                        a_.p, a_.preconditioner, a_.p_fast, a_.y, a_.scalars, a_.reduction);
+    Barrier();
+    if (a_.neumann) Neumann(point, /*start=*/true);
+    while (!scalars().cg.done) CgIteration(point);
+    CgFinishPhase(a_.count, a_.x, a_.b0, a_.r, a_.p, a_.qg, a_.solution, a_.scalars, a_.reduction);
+    Barrier();
+    const Scalars& s = scalars();
+    return {s.cg.iterations, s.cg.preconditioner_applications, !(s.solution_nonfinite > 0.0), s.solution_max,
+            s.solution_slope, s.solution_curvature};
+  }
+
+  __device__ TrialStep StepTrial(double alpha) {
+    StepTrialPhase(a_.count, a_.d, a_.solution, Current().emittance, a_.lower, a_.upper, a_.qg, alpha, nullptr,
+                   a_.step_trial, a_.delta, a_.scalars, a_.reduction);
+    Barrier();
+    return {scalars().cut > 0.0, scalars().delta_slope};
+  }
+
+  __device__ double StepCurvature() {
+    ToPrecisionPhase<float>(a_.count, a_.delta, a_.p_fast);
+    Barrier();
+    HessianProduct(Current(), a_.p_fast, a_.product_fast);
+    QuadraticPhase<float>(a_.count, a_.delta, a_.product_fast, a_.scalars, a_.reduction);
+    Barrier();
+    return scalars().quadratic;
+  }
+
+  __device__ void AcceptStep(bool accumulate) {
+    AcceptStepPhase<float>(a_.count, a_.step_trial, a_.product_fast, accumulate, a_.d, a_.hd);
+    Barrier();
+  }
+
+  __device__ SearchDirection Direction() {
+    DirectionSlopePhase(a_.count, a_.gradient, a_.d, a_.scalars, a_.reduction);
+    Barrier();
+    return {!(scalars().direction_nonfinite > 0.0), scalars().direction_slope};
+  }
+
+  __device__ double SteepestDirection() {
+    SteepestDirectionPhase(a_.count, Current().emittance, a_.gradient, a_.lower, a_.upper, a_.d, a_.scalars,
+                           a_.reduction);
+    Barrier();
+    return scalars().direction_slope;
+  }
+
+  __device__ double LineTrial(double step) {
+    const Point& trial = a_.points[current_ ^ 1];
+    LineTrialPhase(a_.count, Current().emittance, a_.d, step, a_.lower, a_.upper, trial.emittance);
+    Barrier();
+    EvaluateAt(trial);
+    return scalars().value;
+  }
+
+  __device__ void AcceptTrial() { current_ ^= 1; }
+
+  __device__ double FinalProjectedGradient() {
+    GradientAt(Current());
+    return scalars().projected_gradient;
+  }
+
+  // Trace entry records_ (the leader writes it).
+  __device__ void Record(int iteration, double cost, double step, int free_variables, int cg_iterations) {
+    if (Leader()) {
+      IterationRecord& record = a_.trace[records_];
+      record.iteration = iteration;
+      record.cost = cost;
+      record.seconds = 1e-9 * static_cast<double>(GlobalNanoseconds() - start_);
+      record.step = step;
+      record.free_variables = free_variables;
+      record.cg_iterations = cg_iterations;
+      record.projected_gradient = 0.0;
     }
-    Finish(&counts, cost, current);
+    ++records_;
+  }
+
+  __device__ void SetProjectedGradient(double projected) {
+    if (Leader()) a_.trace[records_ - 1].projected_gradient = projected;
   }
 
  private:
   __device__ bool Leader() const { return blockIdx.x == 0 && threadIdx.x == 0; }
   __device__ void Barrier() { grid_.sync(); }
+  __device__ const Scalars& scalars() const { return *a_.scalars; }
+  __device__ const Point& Current() const { return a_.points[current_]; }
 
   // What one K⁻¹ product reads: the stored K⁻¹ (S), the Cholesky path's s² and s⁻² and the
   // factor the stored copy is scaled by, in the vectors' precision T.
@@ -1064,7 +1101,7 @@ class FusedLoop {
         y, transposed, x);
   }
 
-  // H v (Loop::Product).
+  // H v (as Loop::Product forms it).
   __device__ void HessianProduct(const Point& point, const float* v, float* result) {
     SolveFast(v, false, a_.u_fast);
     WeightedProductPhase<float>(a_.n, a_.space, a_.weights, a_.second_order, point.jacobian, point.curvature,
@@ -1073,7 +1110,8 @@ class FusedLoop {
     SolveFast(a_.back_fast, true, result);
   }
 
-  __device__ void Evaluate(const Point& point) {
+  // f and everything the objective knows at point.emittance; f lands in the scalars.
+  __device__ void EvaluateAt(const Point& point) {
     Solve(point.emittance, false, point.radiosity);
     ResidualPhase(a_.n, a_.space, point.radiosity, a_.desired_colour, point.residual, point.jacobian);
     Barrier();
@@ -1082,24 +1120,11 @@ class FusedLoop {
     Barrier();
   }
 
-  // The gradient and its check.
-  __device__ void Gradient(const Point& point) {
+  // The gradient at `point` and its check.
+  __device__ void GradientAt(const Point& point) {
     Solve(point.gradient_b, true, a_.gradient);
     GradientCheckPhase(a_.count, point.emittance, a_.gradient, a_.lower, a_.upper, a_.fixed, a_.scalars,
                        a_.reduction);
-    Barrier();
-  }
-
-  // trial = P(x + step d), evaluated.
-  __device__ void LineTrial(const Point& point, const Point& trial, double step) {
-    LineTrialPhase(a_.count, point.emittance, a_.d, step, a_.lower, a_.upper, trial.emittance);
-    Barrier();
-    Evaluate(trial);
-  }
-
-  __device__ void StepTrial(const Point& point, double alpha, const double* alpha_on_device) {
-    StepTrialPhase(a_.count, a_.d, a_.solution, point.emittance, a_.lower, a_.upper, a_.qg, alpha, alpha_on_device,
-                   a_.step_trial, a_.delta, a_.scalars, a_.reduction);
     Barrier();
   }
 
@@ -1109,7 +1134,7 @@ class FusedLoop {
     Barrier();
   }
 
-  // Loop::CgIteration.
+  // One CG iteration (as Loop::CgIteration enqueues it).
   __device__ void CgIteration(const Point& point) {
     HessianProduct(point, a_.p_fast, a_.product_fast);
     CgCurvaturePhase<float>(a_.count, a_.product_fast, a_.mask, a_.p, a_.hp, a_.scalars, a_.reduction);
@@ -1122,102 +1147,15 @@ class FusedLoop {
     Barrier();
   }
 
-  // Loop::SolveInnerQp: Alg. 2 from d = 0, leaving the step in d.
-  __device__ void SolveInnerQp(const Point& point, FusedRecords* counts, int* cg_total) {
-    const Scalars& s = *a_.scalars;
-    double first_norm = -1.0;
-    for (int inner = 0; inner < a_.options.max_inner_iterations; ++inner) {
-      InnerStartPhase(a_.count, inner == 0, a_.d, a_.hd, a_.gradient, point.emittance, a_.lower, a_.upper, a_.fixed,
-                      a_.qg, a_.mask, a_.scalars, a_.reduction);
-      Barrier();
-      const double projected = s.inner_projected;
-      if (first_norm < 0.0) first_norm = projected;
-      if (projected <= a_.options.cg_tolerance * first_norm || projected == 0.0) break;
-      ++counts->inner_iterations;
-      CgStartPhase<float>(a_.n, a_.neumann, a_.qg, a_.mask, point.jacobian, a_.weights.diagonal, a_.x, a_.r, a_.b0,
-                          a_.p, a_.preconditioner, a_.p_fast, a_.y, a_.scalars, a_.reduction);
-      Barrier();
-      if (a_.neumann) Neumann(point, /*start=*/true);
-      while (!s.cg.done) CgIteration(point);
-      CgFinishPhase(a_.count, a_.x, a_.b0, a_.r, a_.p, a_.qg, a_.solution, a_.scalars, a_.reduction);
-      Barrier();
-      StepTrial(point, 0.0, &a_.scalars->alpha);
-      const int iterations = s.cg.iterations;
-      *cg_total += iterations;
-      counts->hessian_products += iterations;
-      counts->preconditioner_applications += s.cg.preconditioner_applications;
-      if (s.solution_nonfinite > 0.0 || s.solution_max == 0.0) break;
-      const bool last_inner = inner + 1 == a_.options.max_inner_iterations;
-      const double curvature = s.solution_curvature;
-      double alpha = s.alpha;
-      bool accepted = false;
-      for (int halving = 0; halving < 30 && alpha > 0.0; ++halving, alpha *= 0.5) {
-        if (halving > 0) StepTrial(point, alpha, nullptr);
-        const bool cut = s.cut > 0.0;
-        const double delta_slope = s.delta_slope;
-        double quadratic = alpha * alpha * curvature;
-        if (cut || !last_inner) {
-          ToPrecisionPhase<float>(a_.count, a_.delta, a_.p_fast);
-          Barrier();
-          HessianProduct(point, a_.p_fast, a_.product_fast);
-          ++counts->hessian_products;
-          QuadraticPhase<float>(a_.count, a_.delta, a_.product_fast, a_.scalars, a_.reduction);
-          Barrier();
-          if (cut) quadratic = s.quadratic;
-        }
-        const double change = delta_slope + 0.5 * quadratic;
-        if (change <= 1e-4 * delta_slope && change < 0.0) {
-          AcceptStepPhase<float>(a_.count, a_.step_trial, a_.product_fast, !last_inner, a_.d, a_.hd);
-          Barrier();
-          accepted = true;
-          break;
-        }
-      }
-      if (!accepted) break;
-    }
-  }
-
-  // Trace entry counts->records (the leader writes it).
-  __device__ void Record(FusedRecords* counts, int iteration, double cost, unsigned long long start, double step,
-                         int free_variables, int cg) {
-    if (Leader()) {
-      IterationRecord& record = a_.trace[counts->records];
-      record.iteration = iteration;
-      record.cost = cost;
-      record.seconds = 1e-9 * static_cast<double>(GlobalNanoseconds() - start);
-      record.step = step;
-      record.free_variables = free_variables;
-      record.cg_iterations = cg;
-      record.projected_gradient = 0.0;
-    }
-    ++counts->records;
-  }
-  __device__ void SetProjectedGradient(const FusedRecords& counts, double projected) {
-    if (Leader()) a_.trace[counts.records - 1].projected_gradient = projected;
-  }
-
-  __device__ void Finish(FusedRecords* counts, double cost, int current) {
-    counts->final_cost = cost;
-    counts->result = current;
-    if (Leader()) *a_.records = *counts;
-  }
-
   const FusedArgs a_;
   cooperative_groups::grid_group grid_;
+  unsigned long long start_ = 0;  // %globaltimer at the kernel's start
+  int current_ = 0;               // the point (0 or 1) that holds the iterate
+  int records_ = 0;               // trace entries written
 };
 
 __global__ void __launch_bounds__(kThreads) FusedLoopKernel(const FusedArgs args) {
   FusedLoop(args).Run();
-}
-
-// The fused loop's grid as PROCAM_CUDA_FUSED_BLOCKS asks (blocks, for measurements and the
-// fallback's test; 0: the default, one per multiprocessor).
-int FusedBlocksWanted() {
-  static const int blocks = [] {
-    const char* value = std::getenv("PROCAM_CUDA_FUSED_BLOCKS");
-    return value != nullptr && *value != '\0' ? std::atoi(value) : 0;
-  }();
-  return blocks;
 }
 
 // The loop's fixed sequences of device work, each replayed as one CUDA graph.
@@ -1281,11 +1219,12 @@ class Loop {
     DesiredColourKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, trial_.emittance, desired_colour_);
     Launched("DesiredColourKernel");
     small_ = n_ < kSmallPatches;
-    neumann_ = NeumannPreconditioner();
-    graphs_ = !radiosity.iterative() && GraphsEnabled();
+    neumann_ = options.neumann;
+    graphs_ = !radiosity.iterative() && options.graphs;
+    ahead_ = !radiosity.iterative();
     if constexpr (std::is_same_v<P, float>) {
       product_count_ = small_ && options.fused ? radiosity.DenseProducts(products_) : 0;
-      fused_blocks_ = product_count_ > 0 ? FusedBlocks() : 0;
+      fused_blocks_ = product_count_ > 0 ? FusedBlocks(options.fused_blocks) : 0;
     }
   }
 
@@ -1325,116 +1264,156 @@ class Loop {
     trace_ = workspace->Take<IterationRecord>(static_cast<size_t>(options_.max_iterations) + 1);
   }
 
+  // Alg. 1 and 2 (MinimiseBoundedDriver): in one cooperative kernel (FusedLoop) where the loop
+  // is fused and its grid fits, else with this loop as the executor, a kernel per step.
   void Run(double* emittance, double* radiosity, ResidentSummary* summary) {
     if (fused_blocks_ > 0 && RunFused(emittance, radiosity, summary)) return;
-    const auto start = Clock::now();
-    Evaluate(current_);
+    start_ = Clock::now();
+    summary_ = summary;
+    MinimiseBoundedDriver(options_, *this, &summary->records);
+    DownloadResult(current_, emittance, radiosity);  // its K⁻¹E, evaluated at acceptance
+    if (options_.profile) PrintProfile(SecondsSince(start_));
+  }
+
+  // The executor's operations (solver_driver.h). Each enqueues its kernels and reads the scalars
+  // back (Sync), except where the work was enqueued ahead and read with an earlier operation's
+  // scalars: Alg. 2's first start and (where products are cheap, `ahead_`) CG with a guess of its
+  // iterations, its finish and the first trial step go with the gradient; the line search's
+  // first trial (step 1) goes with the direction's slope.
+  int Variables() const { return static_cast<int>(count_); }
+
+  double Evaluate() {
+    EnqueueEvaluation(current_);
     Sync();
-    ++summary->evaluations;
-    double cost = host_->value;
-    summary->initial_cost = cost;
-    summary->trace.push_back({0, cost, SecondsSince(start), 0.0, 3 * n_, 0, 0.0});
-    summary->termination = TerminationType::kMaxIterations;
-    if (!std::isfinite(cost)) {
-      summary->termination = TerminationType::kNumericalFailure;
-      summary->message = "objective is not finite at the start";
-      summary->final_cost = cost;
-      DownloadResult(current_, emittance, radiosity);
-      return;
+    return host_->value;
+  }
+
+  GradientCheck Gradient() {
+    Enqueue(Sequence::kHead, [&] {
+      EnqueueGradient(current_);
+      EnqueueGradientCheck();
+      EnqueueInnerStart(/*first=*/true);
+      if (ahead_) CgStart();
+    });
+    if (ahead_) {
+      CgIterations(FirstBatch(expected_cg_));
+      CgFinish();
     }
-    // Products enqueued ahead of a read only where they are cheap (not matrix-free).
-    const bool ahead = !radiosity_.iterative();
-    int expected_cg = 1;  // CG iterations of the last Newton system
-    for (int iteration = 1; iteration <= options_.max_iterations; ++iteration) {
-      // The gradient, and Alg. 2's first inner iteration with CG started (and run ahead) before
-      // the host knows whether the gradient test stops the loop.
-      Enqueue(Sequence::kHead, [&] {
-        Gradient(current_);
-        GradientCheck();
-        InnerStart(/*first=*/true);
-        if (ahead) CgStart();
-      });
-      ++summary->gradients;
-      if (ahead) {
-        CgIterations(FirstBatch(expected_cg));
+    Sync();
+    newton_enqueued_ = ahead_;
+    return {host_->projected_gradient, static_cast<int>(host_->free_variables)};
+  }
+
+  double InnerStart(bool first) {
+    first_step_trial_ready_ = false;
+    if (!first) {  // the first start went with the gradient
+      EnqueueInnerStart(/*first=*/false);
+      if (ahead_) {
+        CgStart();
+        CgIterations(FirstBatch(expected_cg_));
         CgFinish();
       }
       Sync();
-      const double projected = host_->projected_gradient;
-      summary->trace.back().projected_gradient = projected;
-      if (projected <= options_.gradient_tolerance * (1.0 + cost)) {
-        summary->termination = TerminationType::kGradientTolerance;
-        break;
-      }
-      const int free_variables = static_cast<int>(host_->free_variables);
-      int cg = 0;
-      int products = 0;
-      int preconditioner_applications = 0;
-      SolveInnerQp(ahead, &expected_cg, summary, &cg, &products, &preconditioner_applications);
-      summary->cg_iterations += cg;
-      summary->hessian_products += products;
-      summary->preconditioner_applications += preconditioner_applications;
-
-      // The direction's slope and the Armijo search's first trial (a = 1), read together.
-      Enqueue(Sequence::kFirstTrial, [&] {
-        Kernel<DirectionSlopePhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, gradient_, d_, scalars_, reduction_);
-        Launched("DirectionSlopePhase");
-        LineTrial(1.0);
-        Evaluate(trial_);
-      });
-      Sync();
-      double slope = host_->direction_slope;
-      bool first_trial_evaluated = true;
-      if (host_->direction_nonfinite > 0.0 || !(slope < 0.0)) {
-        // Fall back to the projected steepest-descent step.
-        Kernel<SteepestDirectionPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, gradient_,
-                                                                          lower_, upper_, d_, scalars_, reduction_);
-        Launched("SteepestDirectionPhase");
-        Sync();
-        slope = host_->direction_slope;
-        first_trial_evaluated = false;
-      }
-      double step = 1.0;
-      double trial_cost = 0.0;
-      bool accepted = false;
-      for (int halving = 0; halving < 40; ++halving, step *= 0.5) {
-        if (halving > 0 || !first_trial_evaluated) {
-          LineTrial(step);
-          Evaluate(trial_);
-          Sync();
-        }
-        ++summary->evaluations;
-        trial_cost = host_->value;
-        if (ArmijoAccepts(trial_cost, cost, options_.armijo, step, slope)) {
-          accepted = true;
-          break;
-        }
-      }
-      summary->iterations = iteration;
-      if (!accepted) {
-        summary->termination = TerminationType::kLineSearchFailure;
-        summary->message = kNoArmijoStep;
-        break;
-      }
-      const double previous = cost;
-      std::swap(current_, trial_);
-      parity_ ^= 1;
-      cost = trial_cost;
-      summary->trace.push_back({iteration, cost, SecondsSince(start), step, free_variables, cg, 0.0});
-      if (options_.progress) options_.progress(iteration, cost, SecondsSince(start));
-      if (previous - cost <= options_.function_tolerance * previous) {
-        summary->termination = TerminationType::kFunctionTolerance;
-        Gradient(current_);
-        GradientCheck();
-        Sync();
-        summary->trace.back().projected_gradient = host_->projected_gradient;
-        break;
-      }
+      newton_enqueued_ = ahead_;
     }
-    summary->final_cost = cost;
-    DownloadResult(current_, emittance, radiosity);  // its K⁻¹E, evaluated at acceptance
-    if (ProfileEnabled()) PrintProfile(SecondsSince(start));
+    return host_->inner_projected;
   }
+
+  NewtonStep SolveNewton() {
+    if (!newton_enqueued_) {
+      CgStart();
+      CgFinish();
+      Sync();
+    }
+    newton_enqueued_ = false;
+    while (!host_->cg.done) {
+      CgIterations(1);
+      CgFinish();
+      Sync();
+    }
+    expected_cg_ = std::max(1, host_->cg.iterations);
+    first_step_trial_ready_ = true;  // CgFinish's, with the step length the driver forms
+    return {host_->cg.iterations, host_->cg.preconditioner_applications, !(host_->solution_nonfinite > 0.0),
+            host_->solution_max, host_->solution_slope, host_->solution_curvature};
+  }
+
+  TrialStep StepTrial(double alpha) {
+    if (!first_step_trial_ready_) {
+      EnqueueStepTrial(alpha, nullptr);
+      Sync();
+    }
+    first_step_trial_ready_ = false;
+    return {host_->cut > 0.0, host_->delta_slope};
+  }
+
+  double StepCurvature() {
+    // δ in the products' precision, through CG's p (CG is done with it).
+    Kernel<ToPrecisionPhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, p_fast_);
+    Launched("ToPrecisionPhase");
+    Product(p_fast_, product_fast_, nullptr);
+    Kernel<QuadraticPhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, product_fast_, scalars_,
+                                                                  reduction_);
+    Launched("QuadraticPhase");
+    Sync();
+    return host_->quadratic;
+  }
+
+  void AcceptStep(bool accumulate) {
+    Kernel<AcceptStepPhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, step_trial_, product_fast_,
+                                                                   accumulate, d_, hd_);
+    Launched("AcceptStepPhase");
+  }
+
+  SearchDirection Direction() {
+    Enqueue(Sequence::kFirstTrial, [&] {
+      Kernel<DirectionSlopePhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, gradient_, d_, scalars_,
+                                                                        reduction_);
+      Launched("DirectionSlopePhase");
+      EnqueueLineTrial(1.0);
+      EnqueueEvaluation(trial_);
+    });
+    Sync();
+    first_line_trial_ready_ = true;
+    return {!(host_->direction_nonfinite > 0.0), host_->direction_slope};
+  }
+
+  double SteepestDirection() {
+    Kernel<SteepestDirectionPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, gradient_,
+                                                                       lower_, upper_, d_, scalars_, reduction_);
+    Launched("SteepestDirectionPhase");
+    Sync();
+    first_line_trial_ready_ = false;  // the trial went along the other direction
+    return host_->direction_slope;
+  }
+
+  double LineTrial(double step) {
+    if (!first_line_trial_ready_) {
+      EnqueueLineTrial(step);
+      EnqueueEvaluation(trial_);
+      Sync();
+    }
+    first_line_trial_ready_ = false;
+    return host_->value;
+  }
+
+  void AcceptTrial() {
+    std::swap(current_, trial_);
+    parity_ ^= 1;
+  }
+
+  double FinalProjectedGradient() {
+    EnqueueGradient(current_);
+    EnqueueGradientCheck();
+    Sync();
+    return host_->projected_gradient;
+  }
+
+  void Record(int iteration, double cost, double step, int free_variables, int cg_iterations) {
+    summary_->trace.push_back({iteration, cost, SecondsSince(start_), step, free_variables, cg_iterations, 0.0});
+    if (iteration > 0 && options_.progress) options_.progress(iteration, cost, SecondsSince(start_));
+  }
+
+  void SetProjectedGradient(double projected) { summary_->trace.back().projected_gradient = projected; }
 
  private:
   // Run in one cooperative kernel (FusedLoop), then the summary from its records: the trace's
@@ -1493,22 +1472,9 @@ class Loop {
     std::memcpy(emittance, points.data() + records.result * count_, bytes);
     if (radiosity != nullptr) std::memcpy(radiosity, points.data() + (2 + records.result) * count_, bytes);
     trace.resize(records.records);
-    summary->termination = static_cast<TerminationType>(records.termination);
-    if (summary->termination == TerminationType::kNumericalFailure) {
-      summary->message = "objective is not finite at the start";
-    } else if (summary->termination == TerminationType::kLineSearchFailure) {
-      summary->message = kNoArmijoStep;
-    }
-    summary->initial_cost = records.initial_cost;
-    summary->final_cost = records.final_cost;
-    summary->iterations = records.iterations;
-    summary->inner_iterations = records.inner_iterations;
-    summary->cg_iterations = records.cg_iterations;
-    summary->evaluations = records.evaluations;
-    summary->gradients = records.gradients;
-    summary->hessian_products = records.hessian_products;
-    summary->preconditioner_applications = records.preconditioner_applications;
+    summary->records = records.driver;
     summary->fused = true;
+    summary->fused_blocks = fused_blocks_;
     for (IterationRecord& record : trace) record.seconds += launched;
     summary->trace = std::move(trace);
     if (options_.progress) {
@@ -1516,7 +1482,7 @@ class Loop {
         if (record.iteration > 0) options_.progress(record.iteration, record.cost, record.seconds);
       }
     }
-    if (ProfileEnabled()) {
+    if (options_.profile) {
       std::fprintf(stderr, "resident profile: %d patches, fused loop on %d blocks: %.3f ms (launched after %.3f ms)\n",
                    n_, fused_blocks_, 1e3 * SecondsSince(start), 1e3 * launched);
     }
@@ -1524,23 +1490,24 @@ class Loop {
   }
 
   // The fused loop's grid: one block per multiprocessor (at most kMaxBlocks, what the reductions
-  // hold), or PROCAM_CUDA_FUSED_BLOCKS' count as asked, even past what the device holds at once:
-  // that launch fails and the loop with a kernel per step runs instead (a device test checks
+  // hold), or `wanted` blocks (ResidentSettings::fused_blocks), even past what the device holds at
+  // once: that launch fails and the loop with a kernel per step runs instead (a device test checks
   // it). 0 where the device has no cooperative launch.
-  static int FusedBlocks() {
-    static const int blocks = [] {
-      int device = 0, cooperative = 0, multiprocessors = 0, per_multiprocessor = 0;
-      PROCAM_CUDA(cudaGetDevice(&device));
-      PROCAM_CUDA(cudaDeviceGetAttribute(&cooperative, cudaDevAttrCooperativeLaunch, device));
-      PROCAM_CUDA(cudaDeviceGetAttribute(&multiprocessors, cudaDevAttrMultiProcessorCount, device));
+  static int FusedBlocks(int wanted) {
+    struct Device {
+      int multiprocessors = 0, resident = 0;
+    };
+    static const Device device = [] {
+      int ordinal = 0, cooperative = 0, multiprocessors = 0, per_multiprocessor = 0;
+      PROCAM_CUDA(cudaGetDevice(&ordinal));
+      PROCAM_CUDA(cudaDeviceGetAttribute(&cooperative, cudaDevAttrCooperativeLaunch, ordinal));
+      PROCAM_CUDA(cudaDeviceGetAttribute(&multiprocessors, cudaDevAttrMultiProcessorCount, ordinal));
       PROCAM_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_multiprocessor, FusedLoopKernel, kThreads, 0));
-      const int resident = multiprocessors * per_multiprocessor;
-      if (cooperative == 0 || resident == 0) return 0;
-      const int wanted = FusedBlocksWanted();
-      if (wanted > resident) return wanted;
-      return std::min(kMaxBlocks, wanted > 0 ? wanted : std::min(multiprocessors, resident));
+      return cooperative == 0 ? Device{} : Device{multiprocessors, multiprocessors * per_multiprocessor};
     }();
-    return blocks;
+    if (device.resident == 0) return 0;
+    if (wanted > device.resident) return wanted;
+    return std::min(kMaxBlocks, wanted > 0 ? wanted : std::min(device.multiprocessors, device.resident));
   }
 
   void Launched(const char* name) {
@@ -1614,7 +1581,7 @@ class Loop {
     return ok;
   }
 
-  // PROCAM_CUDA_SOLVER_PROFILE: the solve's counts, then unit costs in µs (time to enqueue one,
+  // ResidentSettings::profile: the solve's counts, then unit costs in µs (time to enqueue one,
   // and per operation until the device has finished a run of them).
   void PrintProfile(double loop_seconds) {
     const Profile counted = profile_;
@@ -1671,7 +1638,7 @@ class Loop {
   }
 
   // Fills `point` at point.emittance; f lands in the scalars.
-  void Evaluate(const Point& point) {
+  void EnqueueEvaluation(const Point& point) {
     radiosity_.Solve(point.emittance, false, point.radiosity, stream_);
     ++profile_.solves;
     Kernel<ResidualPhase><<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, point.radiosity, desired_colour_, point.residual,
@@ -1683,40 +1650,29 @@ class Loop {
     Launched("WeightedResidualPhase");
   }
 
-  void Gradient(const Point& point) {
+  void EnqueueGradient(const Point& point) {
     radiosity_.Solve(point.gradient_b, true, gradient_, stream_);
     ++profile_.solves;
   }
 
-  void GradientCheck() {
+  void EnqueueGradientCheck() {
     Kernel<GradientCheckPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, gradient_, lower_,
                                                                    upper_, fixed_, scalars_, reduction_);
     Launched("GradientCheckPhase");
   }
 
-  void LineTrial(double step) {
+  void EnqueueLineTrial(double step) {
     Kernel<LineTrialPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, current_.emittance, d_, step, lower_, upper_,
                                                                trial_.emittance);
     Launched("LineTrialPhase");
   }
 
   // ∇q, the mask and q's projected gradient (first: at d = 0).
-  void InnerStart(bool first) {
+  void EnqueueInnerStart(bool first) {
     Kernel<InnerStartPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, first, d_, hd_, gradient_,
                                                                 current_.emittance, lower_, upper_, fixed_, qg_,
                                                                 mask_, scalars_, reduction_);
     Launched("InnerStartPhase");
-  }
-
-  // Alg. 2's later inner iterations: InnerStart, and with `ahead` CG started and `iterations` of
-  // it enqueued with its finish and first trial step (all read at the next Sync).
-  void StartInner(bool first, bool ahead, int iterations) {
-    InnerStart(first);
-    if (ahead) {
-      CgStart();
-      CgIterations(FirstBatch(iterations));
-      CgFinish();
-    }
   }
 
   // CG iterations enqueued before the first read of CG's state, given the last system's count.
@@ -1765,83 +1721,14 @@ class Loop {
     Kernel<CgFinishPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, x_, b0_, r_, p_, qg_, solution_, scalars_,
                                                               reduction_);
     Launched("CgFinishPhase");
-    StepTrial(0.0, &scalars_->alpha);
+    EnqueueStepTrial(0.0, &scalars_->alpha);
   }
 
-  void StepTrial(double alpha, const double* alpha_on_device) {
+  void EnqueueStepTrial(double alpha, const double* alpha_on_device) {
     Kernel<StepTrialPhase><<<Blocks(count_), kThreads, 0, stream_>>>(count_, d_, solution_, current_.emittance, lower_,
                                                                upper_, qg_, alpha, alpha_on_device, step_trial_,
                                                                delta_, scalars_, reduction_);
     Launched("StepTrialPhase");
-  }
-
-  // Alg. 2 (SolveInnerQp) from d = 0: leaves the step in d_. The first inner iteration's start
-  // is already enqueued and read (StartInner(true, ...) before the last Sync).
-  void SolveInnerQp(bool ahead, int* expected_cg, ResidentSummary* summary, int* cg_total, int* products,
-                    int* preconditioner_applications) {
-    double first_norm = -1.0;
-    for (int inner = 0; inner < options_.max_inner_iterations; ++inner) {
-      if (inner > 0) {
-        StartInner(/*first=*/false, ahead, *expected_cg);
-        Sync();
-      }
-      const double projected = host_->inner_projected;
-      if (first_norm < 0.0) first_norm = projected;
-      if (projected <= options_.cg_tolerance * first_norm || projected == 0.0) break;
-      ++summary->inner_iterations;
-      if (!ahead) {
-        CgStart();
-        CgFinish();
-        Sync();
-      }
-      while (!host_->cg.done) {
-        CgIterations(1);
-        CgFinish();
-        Sync();
-      }
-      const int iterations = host_->cg.iterations;
-      *cg_total += iterations;
-      *products += iterations;
-      *preconditioner_applications += host_->cg.preconditioner_applications;
-      *expected_cg = std::max(1, iterations);
-      if (host_->solution_nonfinite > 0.0 || host_->solution_max == 0.0) break;
-      // The minimiser along the step, then projection; halve until q decreases enough (the
-      // first trial is CgFinish's).
-      const bool last_inner = inner + 1 == options_.max_inner_iterations;
-      const double curvature = host_->solution_curvature;
-      double alpha = host_->alpha;
-      bool accepted = false;
-      for (int halving = 0; halving < 30 && alpha > 0.0; ++halving, alpha *= 0.5) {
-        if (halving > 0) {
-          StepTrial(alpha, nullptr);
-          Sync();
-        }
-        const bool cut = host_->cut > 0.0;
-        const double delta_slope = host_->delta_slope;
-        double quadratic = alpha * alpha * curvature;
-        if (cut || !last_inner) {
-          // δ in the products' precision, through CG's p (CG is done with it).
-          Kernel<ToPrecisionPhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, p_fast_);
-          Launched("ToPrecisionPhase");
-          Product(p_fast_, product_fast_, nullptr);
-          ++*products;
-          Kernel<QuadraticPhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, delta_, product_fast_, scalars_,
-                                                                        reduction_);
-          Launched("QuadraticPhase");
-          Sync();
-          if (cut) quadratic = host_->quadratic;
-        }
-        const double change = delta_slope + 0.5 * quadratic;
-        if (change <= 1e-4 * delta_slope && change < 0.0) {
-          Kernel<AcceptStepPhase<P>><<<Blocks(count_), kThreads, 0, stream_>>>(count_, step_trial_, product_fast_,
-                                                                         !last_inner, d_, hd_);
-          Launched("AcceptStepPhase");
-          accepted = true;
-          break;
-        }
-      }
-      if (!accepted) break;
-    }
   }
 
   struct Profile {
@@ -1854,6 +1741,14 @@ class Loop {
   const DeviceRadiosity& radiosity_;
   Workspace* workspace_;
   Profile profile_;
+  // The driver's run: its start, where the trace goes, and the work enqueued ahead of it.
+  Clock::time_point start_;
+  ResidentSummary* summary_ = nullptr;
+  bool ahead_ = false;                   // CG enqueued ahead of reads (products are cheap: not matrix-free)
+  int expected_cg_ = 1;                  // CG iterations of the last Newton system
+  bool newton_enqueued_ = false;         // CG started (and run ahead) with the last InnerStart
+  bool first_step_trial_ready_ = false;  // Alg. 2's first trial step, read with CG's finish
+  bool first_line_trial_ready_ = false;  // the line search's trial at step 1, read with the slope
   // CUDA graphs of the sequences, per parity (which point buffer is current_).
   bool graphs_ = false;
   int parity_ = 0;
@@ -1890,12 +1785,11 @@ class Loop {
 void MinimiseResident(const ResidentOptions& options, const ResidentProblem& problem, const DeviceRadiosity& radiosity,
                       double* emittance, double* radiosity_out, ResidentSummary* summary) {
   if (problem.patches <= 0) throw std::invalid_argument("resident GPU solve: no patches");
-  std::lock_guard<std::mutex> lock(WorkspaceMutex());
-  Workspace& workspace = SharedWorkspace();
+  const WorkspacePool::Lease workspace = WorkspacePool::Get().Take();
   if (radiosity.single()) {
-    Loop<float>(options, problem, radiosity, &workspace).Run(emittance, radiosity_out, summary);
+    Loop<float>(options, problem, radiosity, workspace.get()).Run(emittance, radiosity_out, summary);
   } else {
-    Loop<double>(options, problem, radiosity, &workspace).Run(emittance, radiosity_out, summary);
+    Loop<double>(options, problem, radiosity, workspace.get()).Run(emittance, radiosity_out, summary);
   }
 }
 

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "compensation/cuda_dense.h"
+#include "compensation/solver_driver.h"
 #include "compensation/solver_records.h"
 
 // The CUDA runtime's stream handle (driver_types.h declares it the same way).
@@ -70,49 +71,41 @@ struct ResidentProblem {
   double linear_colour[9] = {};  // row-major
 };
 
-// SolverOptions' settings of Alg. 1 and 2 (solver.h documents each): plain numbers, which the
+// SolverOptions' settings of the loop: Alg. 1 and 2's (solver_driver.h documents them) and the
+// device's own (solver.h documents each under its SolverOptions name): plain numbers, which the
 // fused loop's kernel takes as they are.
-struct ResidentSettings {
-  int max_iterations = 100;
-  int max_inner_iterations = 1;
-  int max_cg_iterations = 200;
-  double cg_tolerance = 0.3;
-  bool second_order = true;
-  double gradient_tolerance = 1e-9;
-  double function_tolerance = 1e-12;
-  double armijo = 1e-4;
-  bool fused = true;  // SolverOptions::device_fused
+struct ResidentSettings : AlgorithmSettings {
+  bool fused = true;     // device_fused
+  bool neumann = true;   // device_preconditioner: kBlockJacobiNeumann (else kBlockJacobi)
+  bool graphs = true;    // device_graphs
+  int fused_blocks = 0;  // device_fused_blocks
+  bool profile = false;  // device_profile
 };
 struct ResidentOptions : ResidentSettings {
   std::function<void(int, double, double)> progress;
 };
 
-// SolverSummary's records of the loop (solver.h documents each field; the termination and the
-// trace are solver_records.h's own types).
+// What the loop ran: the driver's records, whether it was fused and the trace.
 struct ResidentSummary {
-  TerminationType termination = TerminationType::kMaxIterations;
-  std::string message;
-  double initial_cost = 0.0;
-  double final_cost = 0.0;
-  int iterations = 0;
-  int inner_iterations = 0;
-  int cg_iterations = 0;
-  int evaluations = 0;
-  int gradients = 0;
-  int hessian_products = 0;
-  int preconditioner_applications = 0;
-  bool fused = false;  // the loop ran in one cooperative kernel
+  DriverRecords records;
+  bool fused = false;    // the loop ran in one cooperative kernel ...
+  int fused_blocks = 0;  // ... of this many blocks
   std::vector<IterationRecord> trace;
 };
 
-// Alg. 1 with Alg. 2 (as MinimiseBounded, solver.cc) with every vector on the device: the
+// Alg. 1 with Alg. 2 (MinimiseBoundedDriver, as MinimiseBounded runs it) with every vector on the
+// device: the
 // per-patch colour, residual, Jacobian and second-order term, W products (CSR), gradient, active
 // set, conjugate gradients preconditioned by the inverse 3×3 diagonal blocks of the free
 // variables' colour Hessian M_FF, the projected step of Alg. 2 and the Armijo search. The host
 // reads back a few scalars per step. `emittance` (n×3 column-major, host) gets the result and
 // `radiosity_out` (if not null) its radiosity K⁻¹E, as the last evaluation formed it.
-// Throws std::runtime_error at device errors. Calls are serialised (one device workspace per
-// process, grown as needed and kept between calls).
+// Throws std::runtime_error at device errors. Calls from several threads run at once: each takes
+// a device workspace (the loop's arrays, stream, scalars and pinned staging) from a process-wide
+// pool for its duration, so that concurrent calls share nothing, and a thread that solves again
+// reuses one (grown as needed, kept between calls, never freed). `radiosity` is only read, but
+// its solves must be safe to call from several threads at once where two calls share it (the
+// dense K⁻¹'s are; the matrix-free CG keeps its vectors in the backend).
 void MinimiseResident(const ResidentOptions& options, const ResidentProblem& problem, const DeviceRadiosity& radiosity,
                       double* emittance, double* radiosity_out, ResidentSummary* summary);
 

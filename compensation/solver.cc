@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -54,7 +55,9 @@ std::shared_ptr<const RadiositySystem> MakeRadiositySystem(const SolverOptions& 
 #if PROCAM_WITH_CUDA
   return std::make_shared<const RadiositySystem>(
       problem.form_factors, problem.area, problem.reflectance,
-      MakeCudaRadiosityBackend(problem.form_factors, problem.area, problem.reflectance, options.device_float32));
+      MakeCudaRadiosityBackend(problem.form_factors, problem.area, problem.reflectance, options.device_float32,
+                               {options.device_product_rows,
+                                options.device_cg_matrix == SolverOptions::DeviceCgMatrix::kFloat16}));
 #else
   throw std::runtime_error("--device cuda: this build of procam has no CUDA backend (PROCAM_WITH_CUDA is OFF: "
                            "no nvcc was found when it was configured)");
@@ -101,7 +104,6 @@ class NewtonSystem {
   }
 
   Eigen::MatrixX3d Product(const Eigen::MatrixX3d& v) const {
-    ++products_;
     return objective_.GaussNewtonProduct(point_, v, /*fast=*/true);
   }
 
@@ -226,70 +228,139 @@ class NewtonSystem {
   mutable Eigen::MatrixX3d factorised_mask_;        // ... factorised for this mask at this point
 
  public:
-  mutable int products_ = 0;
-  mutable int preconditioner_applications_ = 0;
+  mutable int preconditioner_applications_ = 0;  // Precondition calls, all systems together
 };
 
-// Alg. 2 (modified projected Newton) on the Gauss–Newton model
-//   q(d) = gᵀd + ½ dᵀHd,  lo ≤ d ≤ hi,  d fixed at 0 where `fixed` is 1.
-// Rows and columns of bound variables are dropped from H (not diagonalised), as in the paper.
-Eigen::MatrixX3d SolveInnerQp(const SolverOptions& options, const NewtonSystem& system,
-                              const Eigen::MatrixX3d& gradient, const Eigen::MatrixX3d& lo,
-                              const Eigen::MatrixX3d& hi, const Eigen::MatrixX3d& fixed,
-                              SolverSummary* summary, int* cg_total) {
-  const int n = static_cast<int>(gradient.rows());
-  Eigen::MatrixX3d d = Eigen::MatrixX3d::Zero(n, 3);
-  Eigen::MatrixX3d hd = Eigen::MatrixX3d::Zero(n, 3);
-  double q = 0.0;
-  double first_norm = -1.0;
-  for (int inner = 0; inner < options.max_inner_iterations; ++inner) {
-    const Eigen::MatrixX3d q_gradient = gradient + hd;
-    const double eps = 1e-13;
-    Eigen::MatrixX3d mask(n, 3);
-    for (int i = 0; i < n; ++i) {
+// MinimiseBoundedDriver's executor on the CPU: Eigen vectors, the objective's K⁻¹ solves, and CG
+// with the sparse preconditioner of NewtonSystem.
+class CpuExecutor {
+ public:
+  CpuExecutor(const SolverOptions& options, const CompensationObjective& objective, const Eigen::MatrixX3d& start,
+              SolverSummary* summary)
+      : options_(options), objective_(objective), lower_(objective.problem().lower),
+        upper_(objective.problem().upper), n_(objective.patches()), x_(start), summary_(summary),
+        start_time_(Clock::now()) {}
+
+  const Eigen::MatrixX3d& x() const { return x_; }
+
+  int Variables() const { return 3 * n_; }
+
+  double Evaluate() { return objective_.Evaluate(x_, &point_); }
+
+  GradientCheck Gradient() {
+    gradient_ = objective_.Gradient(point_);
+    // Eq. 12: variables on a bound whose gradient points out of the box stay there.
+    fixed_ = Eigen::MatrixX3d::Zero(n_, 3);
+    int free_variables = 0;
+    for (int i = 0; i < n_; ++i) {
       for (int c = 0; c < 3; ++c) {
-        const bool at_lo = d(i, c) <= lo(i, c) + eps * (1.0 + std::abs(lo(i, c)));
-        const bool at_hi = d(i, c) >= hi(i, c) - eps * (1.0 + std::abs(hi(i, c)));
-        const bool bound = fixed(i, c) != 0.0 || (at_lo && q_gradient(i, c) > 0.0) || (at_hi && q_gradient(i, c) < 0.0);
-        mask(i, c) = bound ? 0.0 : 1.0;
+        const bool at_lower = x_(i, c) <= lower_(i, c) && gradient_(i, c) > 0.0;
+        const bool at_upper = x_(i, c) >= upper_(i, c) && gradient_(i, c) < 0.0;
+        fixed_(i, c) = (at_lower || at_upper) ? 1.0 : 0.0;
+        free_variables += (at_lower || at_upper) ? 0 : 1;
       }
     }
-    const double projected = ((d - q_gradient).cwiseMax(lo).cwiseMin(hi) - d).cwiseProduct(Eigen::MatrixX3d::Ones(n, 3) - fixed).cwiseAbs().maxCoeff();
-    if (first_norm < 0.0) first_norm = projected;
-    if (projected <= options.cg_tolerance * first_norm || projected == 0.0) break;
-    ++summary->inner_iterations;
-    Eigen::MatrixX3d step;
-    double curvature = 0.0;
-    *cg_total += system.SolveMasked(-q_gradient, mask, options.max_cg_iterations, options.cg_tolerance, &step,
-                                    &curvature);
-    if (!step.allFinite() || step.cwiseAbs().maxCoeff() == 0.0) break;
-    // Exact minimiser along the step, then projection; halve until q decreases enough. Where the
-    // projection cuts nothing, δᵀHδ = α² stepᵀH step comes from CG; H δ itself is only needed
-    // when another inner iteration follows.
-    const bool last_inner = inner + 1 == options.max_inner_iterations;
-    const double slope = Dot(q_gradient, step);
-    double alpha = curvature > 0.0 ? std::max(-slope / curvature, 0.0) : 1.0;
-    bool accepted = false;
-    for (int halving = 0; halving < 30 && alpha > 0.0; ++halving, alpha *= 0.5) {
-      const Eigen::MatrixX3d trial = (d + alpha * step).cwiseMax(lo).cwiseMin(hi);
-      const Eigen::MatrixX3d delta = trial - d;
-      const bool cut = (delta - alpha * step).cwiseAbs().maxCoeff() > 0.0;
-      Eigen::MatrixX3d h_delta;
-      if (cut || !last_inner) h_delta = system.Product(delta);
-      const double quadratic = cut ? Dot(delta, h_delta) : alpha * alpha * curvature;
-      const double change = Dot(q_gradient, delta) + 0.5 * quadratic;
-      if (change <= 1e-4 * Dot(q_gradient, delta) && change < 0.0) {
-        d = trial;
-        if (!last_inner) hd += h_delta;
-        q += change;
-        accepted = true;
-        break;
-      }
-    }
-    if (!accepted) break;
+    return {ProjectedGradientNorm(x_, gradient_, lower_, upper_), free_variables};
   }
-  return d;
-}
+
+  // Alg. 2 on q(d) = gᵀd + ½ dᵀHd, lo = l − x ≤ d ≤ hi = u − x, d fixed at 0 where `fixed_` is 1.
+  // Rows and columns of bound variables are dropped from H (not diagonalised), as in the paper.
+  double InnerStart(bool first) {
+    if (first) {
+      if (options_.second_order) objective_.AddSecondOrder(&point_);
+      system_.emplace(objective_, point_, options_.preconditioner, &free_colour_hessian_);
+      lo_ = lower_ - x_;
+      hi_ = upper_ - x_;
+      d_ = Eigen::MatrixX3d::Zero(n_, 3);
+      hd_ = Eigen::MatrixX3d::Zero(n_, 3);
+    }
+    q_gradient_ = gradient_ + hd_;
+    const double eps = 1e-13;
+    mask_.resize(n_, 3);
+    for (int i = 0; i < n_; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        const bool at_lo = d_(i, c) <= lo_(i, c) + eps * (1.0 + std::abs(lo_(i, c)));
+        const bool at_hi = d_(i, c) >= hi_(i, c) - eps * (1.0 + std::abs(hi_(i, c)));
+        const bool bound =
+            fixed_(i, c) != 0.0 || (at_lo && q_gradient_(i, c) > 0.0) || (at_hi && q_gradient_(i, c) < 0.0);
+        mask_(i, c) = bound ? 0.0 : 1.0;
+      }
+    }
+    return ((d_ - q_gradient_).cwiseMax(lo_).cwiseMin(hi_) - d_)
+        .cwiseProduct(Eigen::MatrixX3d::Ones(n_, 3) - fixed_)
+        .cwiseAbs()
+        .maxCoeff();
+  }
+
+  NewtonStep SolveNewton() {
+    const int applications = system_->preconditioner_applications_;
+    double curvature = 0.0;
+    const int iterations = system_->SolveMasked(-q_gradient_, mask_, options_.max_cg_iterations,
+                                                options_.cg_tolerance, &step_, &curvature);
+    const bool finite = step_.allFinite();
+    return {iterations, system_->preconditioner_applications_ - applications, finite,
+            finite ? step_.cwiseAbs().maxCoeff() : 0.0, finite ? Dot(q_gradient_, step_) : 0.0, curvature};
+  }
+
+  TrialStep StepTrial(double alpha) {
+    trial_step_ = (d_ + alpha * step_).cwiseMax(lo_).cwiseMin(hi_);
+    delta_ = trial_step_ - d_;
+    return {(delta_ - alpha * step_).cwiseAbs().maxCoeff() > 0.0, Dot(q_gradient_, delta_)};
+  }
+
+  double StepCurvature() {
+    h_delta_ = system_->Product(delta_);
+    return Dot(delta_, h_delta_);
+  }
+
+  void AcceptStep(bool accumulate) {
+    d_ = trial_step_;
+    if (accumulate) hd_ += h_delta_;
+  }
+
+  SearchDirection Direction() {
+    direction_ = d_;
+    return {direction_.allFinite(), Dot(gradient_, direction_)};
+  }
+
+  double SteepestDirection() {
+    direction_ = Clamp(x_ - gradient_, lower_, upper_) - x_;
+    return Dot(gradient_, direction_);
+  }
+
+  double LineTrial(double step) { return objective_.Evaluate(Clamp(x_ + step * direction_, lower_, upper_), &trial_); }
+
+  void AcceptTrial() {
+    point_ = std::move(trial_);
+    x_ = point_.emittance;
+  }
+
+  double FinalProjectedGradient() { return ProjectedGradientNorm(x_, objective_.Gradient(point_), lower_, upper_); }
+
+  void Record(int iteration, double cost, double step, int free_variables, int cg_iterations) {
+    const double seconds = SecondsSince(start_time_);
+    summary_->trace.push_back({iteration, cost, seconds, step, free_variables, cg_iterations, 0.0});
+    if (iteration > 0 && options_.progress) options_.progress(iteration, cost, SecondsSince(start_time_));
+  }
+
+  void SetProjectedGradient(double projected) { summary_->trace.back().projected_gradient = projected; }
+
+ private:
+  const SolverOptions& options_;
+  const CompensationObjective& objective_;
+  const Eigen::MatrixX3d& lower_;
+  const Eigen::MatrixX3d& upper_;
+  const int n_;
+  Eigen::MatrixX3d x_;
+  SolverSummary* summary_;
+  const Clock::time_point start_time_;
+  ObjectivePoint point_, trial_;
+  Eigen::MatrixX3d gradient_, fixed_, direction_;
+  // Alg. 2's state within one outer iteration.
+  FreeColourHessian free_colour_hessian_;
+  std::optional<NewtonSystem> system_;
+  Eigen::MatrixX3d lo_, hi_, d_, hd_, q_gradient_, mask_, step_, trial_step_, delta_, h_delta_;
+};
 
 }  // namespace
 
@@ -370,7 +441,32 @@ bool SolverOptions::Check(std::string* why) const {
     *why = "armijo must be in (0, 0.5)";
     return false;
   }
+  const int rows = device_product_rows;
+  if (rows != -1 && rows != 0 && rows != 1 && rows != 2 && rows != 4 && rows != 8) {
+    *why = "device_product_rows must be -1 (default), 0 (cuBLAS), 1, 2, 4 or 8";
+    return false;
+  }
+  if (device_fused_blocks < 0) {
+    *why = "device_fused_blocks must be >= 0";
+    return false;
+  }
   return true;
+}
+
+const char* DevicePreconditionerName(SolverOptions::DevicePreconditioner preconditioner) {
+  switch (preconditioner) {
+    case SolverOptions::DevicePreconditioner::kBlockJacobiNeumann: return "block_jacobi_neumann";
+    case SolverOptions::DevicePreconditioner::kBlockJacobi: return "block_jacobi";
+  }
+  return "?";
+}
+
+const char* DeviceCgMatrixName(SolverOptions::DeviceCgMatrix matrix) {
+  switch (matrix) {
+    case SolverOptions::DeviceCgMatrix::kFloat16: return "float16";
+    case SolverOptions::DeviceCgMatrix::kFloat32: return "float32";
+  }
+  return "?";
 }
 
 std::string SolverSummary::BriefReport() const {
@@ -379,7 +475,11 @@ std::string SolverSummary::BriefReport() const {
       << final_cost << ", " << iterations << " iterations (" << inner_iterations << " inner, " << cg_iterations
       << " CG; " << evaluations << " evaluations, " << gradients << " gradients, " << hessian_products
       << " Hessian products, " << preconditioner_applications << " preconditioner applications), setup " << setup_seconds << " s, solve " << solve_seconds << " s";
-  if (device_fused) out << ", fused device loop";
+  if (device_loop) {
+    out << ", device loop (CG preconditioner " << DevicePreconditionerName(device_preconditioner) << ", CG matrix "
+        << DeviceCgMatrixName(device_cg_matrix) << ")";
+  }
+  if (device_fused) out << ", fused device loop on " << device_fused_blocks << " blocks";
   if (!message.empty()) out << " (" << message << ")";
   return out.str();
 }
@@ -390,93 +490,29 @@ double ProjectedGradientNorm(const Eigen::MatrixX3d& emittance, const Eigen::Mat
   return (Clamp(emittance - gradient, lower, upper) - emittance).cwiseAbs().maxCoeff();
 }
 
+void AddDriverRecords(const DriverRecords& records, SolverSummary* summary) {
+  summary->termination = records.termination;
+  const std::string message = TerminationMessage(records.termination);
+  if (!message.empty()) summary->message = message;
+  summary->initial_cost = records.initial_cost;
+  summary->final_cost = records.final_cost;
+  if (records.iterations > 0) summary->iterations = records.iterations;
+  summary->inner_iterations += records.inner_iterations;
+  summary->cg_iterations += records.cg_iterations;
+  summary->evaluations += records.evaluations;
+  summary->gradients += records.gradients;
+  summary->hessian_products += records.hessian_products;
+  summary->preconditioner_applications += records.preconditioner_applications;
+}
+
 Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const CompensationObjective& objective,
                                  const Eigen::MatrixX3d& initial, SolverSummary* summary) {
-  const auto start = Clock::now();
-  const Eigen::MatrixX3d& lower = objective.problem().lower;
-  const Eigen::MatrixX3d& upper = objective.problem().upper;
-  const int n = objective.patches();
-  Eigen::MatrixX3d x = Clamp(initial, lower, upper);
-  ObjectivePoint point;
-  double cost = objective.Evaluate(x, &point);
-  ++summary->evaluations;
-  summary->initial_cost = cost;
-  summary->trace.push_back({0, cost, SecondsSince(start), 0.0, 3 * n, 0, 0.0});
-  summary->termination = TerminationType::kMaxIterations;
-  if (!std::isfinite(cost)) {
-    summary->termination = TerminationType::kNumericalFailure;
-    summary->message = "objective is not finite at the start";
-    summary->final_cost = cost;
-    return x;
-  }
-  FreeColourHessian free_colour_hessian;
-  for (int iteration = 1; iteration <= options.max_iterations; ++iteration) {
-    const Eigen::MatrixX3d gradient = objective.Gradient(point);
-    ++summary->gradients;
-    const double projected = ProjectedGradientNorm(x, gradient, lower, upper);
-    summary->trace.back().projected_gradient = projected;
-    if (projected <= options.gradient_tolerance * (1.0 + cost)) {
-      summary->termination = TerminationType::kGradientTolerance;
-      break;
-    }
-    // Eq. 12: variables on a bound whose gradient points out of the box stay there.
-    Eigen::MatrixX3d fixed = Eigen::MatrixX3d::Zero(n, 3);
-    int free_variables = 0;
-    for (int i = 0; i < n; ++i) {
-      for (int c = 0; c < 3; ++c) {
-        const bool at_lower = x(i, c) <= lower(i, c) && gradient(i, c) > 0.0;
-        const bool at_upper = x(i, c) >= upper(i, c) && gradient(i, c) < 0.0;
-        fixed(i, c) = (at_lower || at_upper) ? 1.0 : 0.0;
-        free_variables += (at_lower || at_upper) ? 0 : 1;
-      }
-    }
-    if (options.second_order) objective.AddSecondOrder(&point);
-    const NewtonSystem system(objective, point, options.preconditioner, &free_colour_hessian);
-    int cg = 0;
-    Eigen::MatrixX3d direction =
-        SolveInnerQp(options, system, gradient, lower - x, upper - x, fixed, summary, &cg);
-    summary->cg_iterations += cg;
-    summary->hessian_products += system.products_;
-    summary->preconditioner_applications += system.preconditioner_applications_;
-    double slope = Dot(gradient, direction);
-    if (!direction.allFinite() || !(slope < 0.0)) {
-      // Fall back to the projected steepest-descent step.
-      direction = Clamp(x - gradient, lower, upper) - x;
-      slope = Dot(gradient, direction);
-    }
-    // Armijo along the (feasible) segment x + a·d, a ∈ (0, 1].
-    double step = 1.0;
-    ObjectivePoint trial;
-    bool accepted = false;
-    for (int halving = 0; halving < 40; ++halving, step *= 0.5) {
-      const double trial_cost = objective.Evaluate(Clamp(x + step * direction, lower, upper), &trial);
-      ++summary->evaluations;
-      if (ArmijoAccepts(trial_cost, cost, options.armijo, step, slope)) {
-        accepted = true;
-        break;
-      }
-    }
-    summary->iterations = iteration;
-    if (!accepted) {
-      summary->termination = TerminationType::kLineSearchFailure;
-      summary->message = kNoArmijoStep;
-      break;
-    }
-    const double previous = cost;
-    point = std::move(trial);
-    x = point.emittance;
-    cost = point.value;
-    summary->trace.push_back({iteration, cost, SecondsSince(start), step, free_variables, cg, 0.0});
-    if (options.progress) options.progress(iteration, cost, SecondsSince(start));
-    if (previous - cost <= options.function_tolerance * previous) {
-      summary->termination = TerminationType::kFunctionTolerance;
-      summary->trace.back().projected_gradient =
-          ProjectedGradientNorm(x, objective.Gradient(point), lower, upper);
-      break;
-    }
-  }
-  summary->final_cost = cost;
-  return x;
+  const CompensationProblem& problem = objective.problem();
+  CpuExecutor executor(options, objective, Clamp(initial, problem.lower, problem.upper), summary);
+  DriverRecords records;
+  MinimiseBoundedDriver(options, executor, &records);
+  AddDriverRecords(records, summary);
+  return executor.x();
 }
 
 CompensationSolution Solve(const SolverOptions& options, const CompensationProblem& problem,

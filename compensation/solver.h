@@ -23,6 +23,7 @@
 
 #include "compensation/objective.h"
 #include "compensation/problem.h"
+#include "compensation/solver_driver.h"
 #include "compensation/solver_records.h"
 
 namespace procam {
@@ -41,7 +42,9 @@ bool ParseDevice(const std::string& name, Device* device);
 // `description` gets the device, or one line saying what is missing.
 bool CudaAvailable(std::string* description);
 
-struct SolverOptions {
+// The algorithm's numbers (iteration limits, tolerances, the Armijo constant, the second-order
+// term) are AlgorithmSettings' (solver_driver.h documents each); the rest is here.
+struct SolverOptions : AlgorithmSettings {
   CompensationMethod method = CompensationMethod::kPerceptual;
   // kCpu: the CPU factorisation and kernels of radiosity.h (the reference). kCuda: K⁻¹ formed
   // once on the GPU and every solve one matrix product (cuda_radiosity.h); the algorithm is the
@@ -61,20 +64,35 @@ struct SolverOptions {
   // (cuda_solver.h; 2–3× faster there, docs/gpu.md). Off: one kernel per step with the host
   // reading scalars in between, as larger problems run; for comparison.
   bool device_fused = true;
+  // kCuda, device loop only: CG's preconditioner (the CPU's `preconditioner` below is not used
+  // there; docs/gpu.md compares the two):
+  //   kBlockJacobiNeumann  the inverse 3×3 diagonal blocks D of M_FF with one Neumann term for
+  //                        their coupling N through W: z = D⁻¹r + D⁻¹ N D⁻¹ r (SPD, docs/gpu.md).
+  //   kBlockJacobi         z = D⁻¹r alone (more CG iterations; for comparison).
+  enum class DevicePreconditioner { kBlockJacobiNeumann, kBlockJacobi };
+  DevicePreconditioner device_preconditioner = DevicePreconditioner::kBlockJacobiNeumann;
+  // kCuda, dense F, device loop only: the copy of K⁻¹ that CG's Hessian products (float32
+  // vectors) read: kFloat16, 2^k K⁻¹ in float16 (half the bytes, within 2^-11 relative), or
+  // kFloat32. kFloat32 keeps the loop from fusing (the fused kernel reads the float16 copy).
+  enum class DeviceCgMatrix { kFloat16, kFloat32 };
+  DeviceCgMatrix device_cg_matrix = DeviceCgMatrix::kFloat16;
+  // kCuda, dense F: outputs per block of the device's own K⁻¹ product kernel, one of 1, 2, 4, 8;
+  // 0: cuBLAS's GEMM instead; -1 (default): 4 for float64 and float32 K⁻¹, 8 for the float16
+  // copy (measured best, docs/gpu.md). Any value but -1 keeps the loop from fusing. Products only:
+  // the solver's steps are the same (sums in another order).
+  int device_product_rows = -1;
+  // kCuda, dense F, loop with a kernel per step: replay its fixed sequences of kernels as CUDA
+  // graphs (fewer launch costs); off: plain launches, the same arithmetic.
+  bool device_graphs = true;
+  // kCuda, fused loop: blocks of its cooperative grid, ≥ 0; 0 (default): one per multiprocessor
+  // (at most 1024). A count past what the device holds at once makes the cooperative launch fail
+  // before anything ran, and the loop with a kernel per step solves the problem instead.
+  int device_fused_blocks = 0;
+  // kCuda, device loop: print to stderr after each solve where its time went (host reads of the
+  // scalars, launches, graph captures, unit costs of its operations). Diagnostics only.
+  bool device_profile = false;
   // Solve the coarse level first and start the fine solve from it (needs a coarse level).
   bool multires = false;
-  // Outer (Gauss–Newton) iterations, ≥ 1.
-  int max_iterations = 100;
-  // Inner projected-Newton iterations per outer iteration (Alg. 2), ≥ 1. The paper runs
-  // Alg. 2 to convergence; one iteration (the outer loop then updates the active set) was
-  // measured 2–5× faster to the same optimum on our benchmark rooms (docs/solver.md).
-  int max_inner_iterations = 1;
-  // Conjugate-gradient iterations per Newton system, ≥ 1.
-  int max_cg_iterations = 200;
-  // Relative CG residual at which a Newton system counts as solved, in (0, 1) (an inexact
-  // Newton forcing term; also the inner solver's relative stopping tolerance). 0.3 reached the
-  // benchmark's target 10–30% sooner than 0.1 with multires (docs/solver.md).
-  double cg_tolerance = 0.3;
   // Preconditioner of the free-variable Newton systems H_FF d = −g_F (H = K⁻ᵀ M K⁻¹):
   //   kInverseHessian   (K M⁻¹ Kᵀ)_FF: the exact inverse when no bound is active; two products
   //                     with F per application.
@@ -82,22 +100,14 @@ struct SolverOptions {
   //                     LDLᵀ) once per outer iteration; exact when K = I, no products with F.
   enum class Preconditioner { kInverseHessian, kFreeColourHessian };
   Preconditioner preconditioner = Preconditioner::kFreeColourHessian;
-  // Add the second-order term of the colour transform (block diagonal in B, so the same cost
-  // per product) to the Gauss–Newton model, making it the exact Hessian; CG stops at negative
-  // curvature and the preconditioner stays Gauss–Newton. Off: the paper's pure Gauss–Newton,
-  // which converges only linearly on large-residual problems (unreachable desired colours).
-  bool second_order = true;
-  // Stop when ‖E − P(E − ∇f)‖∞ ≤ gradient_tolerance · (1 + f) (first-order optimality), ≥ 0.
-  double gradient_tolerance = 1e-9;
-  // Stop when an iteration lowers f by less than function_tolerance · f, ≥ 0.
-  double function_tolerance = 1e-12;
-  // Armijo sufficient-decrease constant, in (0, 0.5).
-  double armijo = 1e-4;
   // Called after every outer iteration with (iteration, cost, seconds since start).
   std::function<void(int, double, double)> progress;
 
   bool Check(std::string* why) const;
 };
+// "block_jacobi_neumann", "block_jacobi"; "float16", "float32".
+const char* DevicePreconditionerName(SolverOptions::DevicePreconditioner preconditioner);
+const char* DeviceCgMatrixName(SolverOptions::DeviceCgMatrix matrix);
 
 struct SolverSummary {
   CompensationMethod method = CompensationMethod::kPerceptual;
@@ -119,13 +129,25 @@ struct SolverSummary {
   double solve_seconds = 0.0;     // everything after the setup
   double coarse_seconds = 0.0;    // part of solve_seconds spent on the coarse level
   int coarse_iterations = 0;
-  // kCuda: the (fine level's) loop ran fused in one kernel (SolverOptions::device_fused).
+  // kCuda: the (fine level's) loop ran fused in one kernel (SolverOptions::device_fused), on
+  // this many blocks.
   bool device_fused = false;
+  int device_fused_blocks = 0;
+  // kCuda, device loop (not the host loop): it ran, with this CG preconditioner and, on the dense
+  // F, this copy of K⁻¹ for CG's products (SolverOptions' fields of the same names).
+  bool device_loop = false;
+  SolverOptions::DevicePreconditioner device_preconditioner = SolverOptions::DevicePreconditioner::kBlockJacobiNeumann;
+  SolverOptions::DeviceCgMatrix device_cg_matrix = SolverOptions::DeviceCgMatrix::kFloat16;
   std::vector<IterationRecord> trace;
 
   // One line: method, termination, costs, iterations, times.
   std::string BriefReport() const;
 };
+
+// Adds what one run of MinimiseBoundedDriver counted to `summary` as MinimiseBounded adds its
+// records: the counters added, the termination, costs and last iteration set, the message where
+// the termination has one (the trace is the executor's to append).
+void AddDriverRecords(const DriverRecords& records, SolverSummary* summary);
 
 // A coarser patch level for multires: its problem and each fine patch's parent.
 struct CoarseLevel {

@@ -5,10 +5,7 @@
 
 #include <cmath>
 
-// ArmijoAccepts is compiled for the device as well where cuda_solver.cu defines this.
-#ifndef PROCAM_HOST_DEVICE
-#define PROCAM_HOST_DEVICE
-#endif
+#include "compensation/host_device.h"
 
 namespace procam {
 

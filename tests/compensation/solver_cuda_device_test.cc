@@ -7,11 +7,13 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <fstream>
 #include <limits>
 #include <memory>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -201,16 +203,6 @@ Eigen::MatrixXd DeviceProduct(const cuda::InverseRadiosity& inverse, const Eigen
   return output.template cast<double>();
 }
 
-// Sets an environment variable for one scope (the dense backend reads its choices at Create).
-class ScopedEnvironment {
- public:
-  ScopedEnvironment(const char* name, const char* value) : name_(name) { setenv(name, value, 1); }
-  ~ScopedEnvironment() { unsetenv(name_); }
-
- private:
-  const char* name_;
-};
-
 // InverseRadiosity::ApplyOnDevice (own product kernel, both directions, float64 and float32 with
 // the float32 or the float16 copy of K⁻¹, 1–3 columns) against K⁻¹x and K⁻ᵀx solved on the CPU by
 // LU of K = I − diag(ρ)F, on rooms whose areas differ (the kernel's K⁻¹x goes through s² = ρ/A)
@@ -226,9 +218,10 @@ TEST(SolveCudaAnalytic, DenseProductsOnTheDeviceMatchTheCpu) {
       const Eigen::PartialPivLU<Eigen::MatrixXd> lu(k);
       const Eigen::PartialPivLU<Eigen::MatrixXd> lu_transposed(k.transpose());
       for (const char* cg_matrix : {"float32", "float16"}) {
-        const ScopedEnvironment choice("PROCAM_CUDA_CG_MATRIX", cg_matrix);
+        cuda::DenseProductSettings settings;
+        settings.half_cg_matrix = std::string(cg_matrix) == "float16";
         const auto inverse = cuda::InverseRadiosity::Create(room.form_factors.data(), room.area.data(),
-                                                            room.reflectance.data(), n);
+                                                            room.reflectance.data(), n, settings);
         EXPECT_EQ(inverse->cholesky(), black < 0) << n;
         // float16 entries keep 11 significant bits: each product within 2^-11 of the truth in
         // the worst case (measured ~1e-4; float32 ~1e-7).
@@ -277,16 +270,16 @@ double MedianMicroseconds(int warmup, int runs, const Work& work) {
 
 // Microseconds per K⁻¹ product with three columns (median of 200, CUDA events, inputs rotated
 // over 4 buffers): cuBLAS GEMM against TransposedProductKernel with 4 and 8 outputs per block
-// (PROCAM_CUDA_DENSE_PRODUCT), float64, and float32 vectors with the float32 or the float16 copy
-// of K⁻¹ (PROCAM_CUDA_CG_MATRIX); K⁻¹x and K⁻ᵀx. Sizes: PROCAM_BENCH_GRIDS. GB/s: the matrix's
-// bytes over the best time.
+// (DenseProductSettings::rows), float64, and float32 vectors with the float32 or the float16 copy
+// of K⁻¹ (DenseProductSettings::half_cg_matrix); K⁻¹x and K⁻ᵀx. Sizes: PROCAM_BENCH_GRIDS. GB/s:
+// the matrix's bytes over the best time.
 TEST(SolveCudaAnalytic, DISABLED_ProductTimings) {
   SKIP_WITHOUT_CUDA_DEVICE();
   struct Variant {
-    const char* rows;
+    int rows;  // 0: cuBLAS
     const char* cg_matrix;
   };
-  const Variant variants[] = {{"cublas", "float32"}, {"4", "float32"}, {"8", "float32"}, {"4", "float16"}, {"8", "float16"}};
+  const Variant variants[] = {{0, "float32"}, {4, "float32"}, {8, "float32"}, {4, "float16"}, {8, "float16"}};
   std::printf("| patches | vectors | product | cuBLAS µs | 4 rows µs | 8 rows µs | 4 rows, float16 K⁻¹ µs | "
               "8 rows, float16 K⁻¹ µs |\n|---:|---|---|---:|---:|---:|---:|---:|\n");
   for (const int g : testing::ListFromEnvironment<int>("PROCAM_BENCH_GRIDS", {22, 40, 70})) {
@@ -295,9 +288,11 @@ TEST(SolveCudaAnalytic, DISABLED_ProductTimings) {
     const Eigen::VectorXd rho = p.reflectance.col(0);
     std::vector<std::unique_ptr<cuda::InverseRadiosity>> inverses;
     for (const Variant& variant : variants) {
-      const ScopedEnvironment rows("PROCAM_CUDA_DENSE_PRODUCT", variant.rows);
-      const ScopedEnvironment cg_matrix("PROCAM_CUDA_CG_MATRIX", variant.cg_matrix);
-      inverses.push_back(cuda::InverseRadiosity::Create(p.form_factors.data(), p.area.data(), rho.data(), n));
+      cuda::DenseProductSettings settings;
+      settings.rows = variant.rows;
+      settings.half_cg_matrix = std::string(variant.cg_matrix) == "float16";
+      inverses.push_back(
+          cuda::InverseRadiosity::Create(p.form_factors.data(), p.area.data(), rho.data(), n, settings));
     }
     const size_t count = 3 * static_cast<size_t>(n);
     const Eigen::VectorXd x = Eigen::VectorXd::Random(4 * count);
@@ -539,24 +534,69 @@ TEST(SolveCudaAnalytic, ResidentStoppingRules) {
 }
 
 // Where the device cannot hold the fused loop's grid at once (another context holding
-// multiprocessors, or PROCAM_CUDA_FUSED_BLOCKS past what fits, as scripts/bench_gpu.sh runs this
-// test with 100000), the cooperative launch fails and the loop with a kernel per step solves the
-// problem instead: same result as the CPU, device_fused false. Skipped without such a count.
+// multiprocessors, or SolverOptions::device_fused_blocks past what fits, as here), the cooperative
+// launch fails and the loop with a kernel per step solves the problem instead: same result as the
+// CPU, device_fused false.
 TEST(SolveCudaAnalytic, FusedLoopFallsBackWhereItsGridDoesNotFit) {
   SKIP_WITHOUT_CUDA_DEVICE();
-  const char* blocks = std::getenv("PROCAM_CUDA_FUSED_BLOCKS");
-  if (blocks == nullptr || std::atoi(blocks) < 100000) {
-    GTEST_SKIP() << "PROCAM_CUDA_FUSED_BLOCKS is not set to a grid no device holds (>= 100000)";
-  }
   const testing::AnalyticProblem test = testing::MakeAnalyticProblem(16, 0.5);
   SolverOptions options;
   SolverSummary cpu_summary, summary;
   Solve(options, test.fine, &cpu_summary);
   options.device = Device::kCuda;
+  options.device_fused_blocks = 100000;  // no device holds this many blocks at once
   Solve(options, test.fine, &summary);
   EXPECT_FALSE(summary.device_fused) << summary.BriefReport();
   EXPECT_LT(std::abs(summary.final_cost - cpu_summary.final_cost), 1e-6 * cpu_summary.final_cost)
       << summary.BriefReport();
+}
+
+// Solves from two threads at once (each resident solve takes a device workspace of its own from
+// a pool) give exactly what the same solves give one at a time: the fused loop, the loop with a
+// kernel per step, and the two at once, on two problems; the reductions are deterministic, so the
+// results must be equal to the last bit.
+TEST(SolveCudaAnalytic, SolvesFromTwoThreadsAtOnceMatchOneAtATime) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const testing::AnalyticProblem problems[2] = {testing::MakeAnalyticProblem(16, 0.5),
+                                                testing::MakeAnalyticProblem(22, 0.3)};
+  for (const bool fused_first : {true, false}) {
+    for (const bool fused_second : {true, false}) {
+      SCOPED_TRACE(std::string(fused_first ? "fused" : "kernel per step") + " and " +
+                   (fused_second ? "fused" : "kernel per step"));
+      SolverOptions options[2];
+      options[0].device = options[1].device = Device::kCuda;
+      options[0].device_fused = fused_first;
+      options[1].device_fused = fused_second;
+      SolverSummary alone[2], together[2];
+      CompensationSolution alone_solution[2], together_solution[2];
+      for (int k = 0; k < 2; ++k) alone_solution[k] = Solve(options[k], problems[k].fine, &alone[k]);
+      // Several rounds, so that the two loops overlap on the device at least once.
+      for (int round = 0; round < 3; ++round) {
+        std::exception_ptr failure[2];
+        std::vector<std::thread> threads;
+        for (int k = 0; k < 2; ++k) {
+          threads.emplace_back([&, k] {
+            try {
+              together_solution[k] = Solve(options[k], problems[k].fine, &together[k]);
+            } catch (...) {
+              failure[k] = std::current_exception();
+            }
+          });
+        }
+        for (std::thread& thread : threads) thread.join();
+        for (int k = 0; k < 2; ++k) {
+          ASSERT_FALSE(failure[k]) << "solve " << k << " threw";
+          EXPECT_EQ(together[k].device_fused, alone[k].device_fused) << k;
+          EXPECT_EQ(together[k].final_cost, alone[k].final_cost) << k << ": " << together[k].BriefReport();
+          EXPECT_EQ(together[k].iterations, alone[k].iterations) << k;
+          EXPECT_EQ(together[k].cg_iterations, alone[k].cg_iterations) << k;
+          EXPECT_EQ(together[k].termination, alone[k].termination) << k;
+          EXPECT_TRUE(together_solution[k].emittance == alone_solution[k].emittance) << k;
+          EXPECT_TRUE(together_solution[k].radiosity == alone_solution[k].radiosity) << k;
+        }
+      }
+    }
+  }
 }
 
 // Markdown rows: variables, patches, solver, setup s, solve s (median of `repeats`), loop s (the

@@ -390,6 +390,22 @@ TEST(Solve, RejectsBadInputWithAClearMessage) {
   options = SolverOptions();
   options.multires = true;
   EXPECT_NE(message(test.fine, options).find("coarse level"), std::string::npos);
+  // The GPU settings are checked on every device (here before any device is asked for).
+  for (const int rows : {-2, 3, 16}) {
+    options = SolverOptions();
+    options.device_product_rows = rows;
+    EXPECT_NE(message(test.fine, options).find("device_product_rows"), std::string::npos) << rows;
+  }
+  options = SolverOptions();
+  options.device_fused_blocks = -1;
+  EXPECT_NE(message(test.fine, options).find("device_fused_blocks"), std::string::npos);
+  std::string why;
+  for (const int rows : {-1, 0, 1, 2, 4, 8}) {
+    options = SolverOptions();
+    options.device_product_rows = rows;
+    options.device_fused_blocks = 100000;
+    EXPECT_TRUE(options.Check(&why)) << rows << ": " << why;
+  }
 }
 
 TEST(Methods, NamesRoundTrip) {
