@@ -42,8 +42,8 @@ void CalibrateAll(const CalibrateAllArguments& args) {
   options.chessboard = args.chessboard;
   options.camera_model = args.camera_model;
   options.board = ParseChessboard(args.corners, args.square);
-  for (const std::string& display : args.displays) options.displays.push_back(OpenMonitorDisplay(display));
   options.display_names = args.displays;
+  options.open_display = OpenMonitorDisplay;
   options.names = args.names;
   options.camera_guess = args.camera_guess;
   options.camera_scale = args.camera_scale;

@@ -43,22 +43,20 @@ struct RigPlan {
   std::string scene;
   int patches = 0;
   std::filesystem::path captures;
+  std::vector<std::shared_ptr<PatternDisplay>> displays;  // one per projector
 };
 
 RigPlan Plan(const CalibrateAllOptions& args) {
   RigPlan plan;
   plan.simulated = FindSimulatedCamera(args.camera);
   const bool simulated = plan.simulated.has_value();
-  const size_t count = simulated ? plan.simulated->displays.size() : args.displays.size();
+  const size_t count = simulated ? plan.simulated->displays.size() : args.display_names.size();
   if (count == 0) {
     throw std::invalid_argument("--display: a real rig needs one per projector, e.g. --display "
                                 "glfw:1,glfw:2 (procam show --list)");
   }
-  if (simulated && !args.displays.empty()) {
+  if (simulated && !args.display_names.empty()) {
     throw std::invalid_argument("--display: a synthetic camera looks at its own projectors");
-  }
-  if (!simulated && args.display_names.size() != args.displays.size()) {
-    throw std::invalid_argument("display_names: one per display");
   }
   plan.names = args.names;
   if (plan.names.empty()) {
@@ -89,6 +87,12 @@ RigPlan Plan(const CalibrateAllOptions& args) {
         "docs/calibration.md)");
   }
   plan.captures = args.out / "captures";
+  if (!simulated) {  // checked: now the monitors are opened
+    if (!args.open_display) throw std::invalid_argument("open_display: required for a real rig");
+    for (const std::string& name : args.display_names) plan.displays.push_back(args.open_display(name));
+  } else {
+    plan.displays = plan.simulated->displays;
+  }
   return plan;
 }
 
@@ -138,7 +142,7 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args, 
       capture.projector = static_cast<int>(k);
       common.insert(common.end(), {"--projector", std::to_string(k)});
     } else {
-      capture.display = args.displays[k];
+      capture.display = plan.displays[k];
       common.insert(common.end(), {"--display", args.display_names[k]});
     }
     if (!args.exposures_us.empty()) {
@@ -167,7 +171,7 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args, 
     Report(args.progress, CaptureLine(capture, RunCaptureStage(capture)));
     // The projector goes dark again, so its last flat field does not light the next one's
     // captures (on a real rig: every projector but the one being captured must show black).
-    const std::shared_ptr<PatternDisplay>& display = plan.simulated ? plan.simulated->displays[k] : args.displays[k];
+    const std::shared_ptr<PatternDisplay>& display = plan.displays[k];
     display->Show(cv::Mat(display->Resolution(), CV_8UC3, cv::Scalar::all(0)));
   }
   return sessions;

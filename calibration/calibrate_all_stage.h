@@ -15,6 +15,7 @@
 // What `procam calibrate all` and the demo run.
 
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -35,10 +36,10 @@ struct CalibrateAllOptions {
   std::filesystem::path chessboard;    // chessboard photos (a folder or a capture session)
   std::filesystem::path camera_model;  // a calibrated camera.cameramodel instead
   ChessboardSpec board;                // of the chessboard photos
-  // Real rigs: each projector's display (its monitor), in order, and how to name it in the
-  // command lines shown ("glfw:1").
-  std::vector<std::shared_ptr<PatternDisplay>> displays;
+  // Real rigs: each projector's display (its monitor, e.g. "glfw:1"), in order, and how to open
+  // one; displays are opened once the options have been checked.
   std::vector<std::string> display_names;
+  std::function<std::shared_ptr<PatternDisplay>(const std::string& name)> open_display;
   std::vector<std::string> names;  // projector names; empty: the simulated world's, or projectorK
   // The camera's pose guess, "x,y,z,look_x,look_y,look_z" (metres, the scene's frame); empty: a
   // simulated camera's tape-measure guess.

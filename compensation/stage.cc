@@ -150,7 +150,10 @@ Eigen::MatrixX3d ReadPatchMatrix(const std::filesystem::path& path, int n) {
   const NpyArray array = ReadNpy(path);
   if (array.shape.size() != 2 || array.shape[0] != n || array.shape[1] != 3) {
     std::string shape;
-    for (const int64_t extent : array.shape) shape += (shape.empty() ? "" : ",") + std::to_string(extent);
+    for (const int64_t extent : array.shape) {
+      if (!shape.empty()) shape += ",";  // (not `"," + ...`: GCC 12 warns a false -Wrestrict)
+      shape += std::to_string(extent);
+    }
     throw IoError(path.string() + ": shape (" + shape + "), but result.json says " + std::to_string(n) +
                   " patches: expected (" + std::to_string(n) + ",3)");
   }
@@ -232,6 +235,18 @@ SolutionDirectory ReadSolutionDirectory(const std::filesystem::path& dir) {
   s.emittance = ReadPatchMatrix(dir / "E.npy", s.patches);
   s.radiosity = ReadPatchMatrix(dir / "B.npy", s.patches);
   return s;
+}
+
+void ExportGeometryProblem(const GeometryStage& stage, double alpha, const std::filesystem::path& out) {
+  const CompensationProblem problem = MakeProblem(stage.scene, stage.patches.fine, stage.form_factors, alpha);
+  const std::string invalid = problem.Validate();
+  if (!invalid.empty()) throw IoError(stage.scene.path.string() + ": " + invalid);
+  nlohmann::json settings;
+  settings["scene"] = stage.scene.path.string();
+  settings["scene_name"] = stage.scene.name;
+  settings["white"] = stage.scene.white;
+  settings["form_factor_seconds"] = stage.form_factor_summary.seconds;
+  ExportProblem(problem, stage.patches.fine, stage.patches.coarse_of_fine, out, settings.dump());
 }
 
 }  // namespace procam

@@ -55,6 +55,11 @@ void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run
                        const std::filesystem::path& out, bool export_problem,
                        const nlohmann::json& extra = nlohmann::json::object());
 
+// `procam scene export`: the fine level's problem of `stage` with weight `alpha`, written as
+// NumPy files and problem.json (ExportProblem) into `out`. Throws IoError naming the scene when
+// the problem is invalid.
+void ExportGeometryProblem(const GeometryStage& stage, double alpha, const std::filesystem::path& out);
+
 // A solution directory as read back.
 struct SolutionDirectory {
   std::filesystem::path dir;

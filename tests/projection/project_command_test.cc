@@ -14,6 +14,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "base/io.h"
+#include "compensation/stage.h"
 #include "projection/projection_rig.h"
 #include "tests/projection/stage.h"
 #include "tests/testing/testing.h"
@@ -58,10 +59,17 @@ class ProjectCommand : public ::testing::Test {
 
   void WriteSolution(int patches, const Eigen::MatrixX3d& emittance) {
     std::filesystem::create_directories(dir_ / "solution");
-    const nlohmann::json result = {
-        {"method", "naive"}, {"scene", scene_path_.string()}, {"patches", patches}};
+    // A solution directory as compensate writes it (docs/solution_format.md); B is not used by
+    // project, E is.
+    const nlohmann::json result = {{"format_version", kSolutionFormatVersion},
+                                   {"method", "naive"},
+                                   {"multires", false},
+                                   {"alpha", 0.5},
+                                   {"scene", scene_path_.string()},
+                                   {"patches", patches}};
     WriteFileAtomically(dir_ / "solution" / "result.json", result.dump(2));
     WriteNpy(dir_ / "solution" / "E.npy", RowMatrixXd(emittance));
+    WriteNpy(dir_ / "solution" / "B.npy", RowMatrixXd(emittance));
   }
 
   std::string Project() {
