@@ -106,6 +106,52 @@ int SeedFlags(const std::string& lens_model) {
   return 0;  // OPENCV5: k1, k2, p1, p2, k3
 }
 
+// The calibration's residuals over the inliers (pool weight ≥ 0), by projecting the board at
+// mrcal's frames through the fitted lens: per view and overall. Sets the board poses. False when
+// every corner is an outlier.
+bool ResidualStatistics(const ChessboardSpec& board, const LensModel& lens_fitted,
+                        const std::vector<mrcal_pose_t>& frames, const std::vector<mrcal_point3_t>& pool,
+                        CameraCalibration* calibration, CameraCalibrationSummary* summary) {
+  const int view_count = static_cast<int>(frames.size());
+  const int per_board = board.CornerCount();
+  calibration->cam_from_board.resize(view_count);
+  std::vector<double> norms;
+  double sum_squares = 0.0;
+  summary->view_rms.assign(view_count, 0.0);
+  for (int v = 0; v < view_count; ++v) {
+    const Eigen::Isometry3d cam_from_board = PoseFromRt(&frames[v].r.x);
+    calibration->cam_from_board[v] = cam_from_board;
+    double view_squares = 0.0;
+    int view_inliers = 0;
+    for (int k = 0; k < per_board; ++k) {
+      const mrcal_point3_t& observed = pool[v * per_board + k];
+      if (observed.z < 0.0) {
+        ++summary->outliers;
+        continue;
+      }
+      const Vec3 corner_in_cam = cam_from_board * board.Corner(k);
+      if (!(corner_in_cam.z() > 0.0)) {
+        ++summary->outliers;
+        continue;
+      }
+      const Vec2 pixel = lens_fitted.Project(corner_in_cam);
+      const double squared = (pixel - Vec2(observed.x, observed.y)).squaredNorm();
+      norms.push_back(std::sqrt(squared));
+      sum_squares += squared;
+      view_squares += squared;
+      ++view_inliers;
+    }
+    summary->view_rms[v] = view_inliers ? std::sqrt(view_squares / (2.0 * view_inliers)) : 0.0;
+  }
+  if (norms.empty()) return false;
+  summary->rms_norm = std::sqrt(sum_squares / norms.size());
+  summary->rms = summary->rms_norm / std::sqrt(2.0);
+  std::sort(norms.begin(), norms.end());
+  summary->median_norm = norms[norms.size() / 2];
+  summary->max_norm = norms.back();
+  return true;
+}
+
 }  // namespace
 
 bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSpec& board,
@@ -231,41 +277,9 @@ bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSp
   calibration->intrinsics = intrinsics;
   calibration->width = width;
   calibration->height = height;
-  calibration->cam_from_board.resize(view_count);
-  std::vector<double> norms;
-  double sum_squares = 0.0;
-  summary->view_rms.assign(view_count, 0.0);
-  for (int v = 0; v < view_count; ++v) {
-    const Eigen::Isometry3d cam_from_board = PoseFromRt(&frames[v].r.x);
-    calibration->cam_from_board[v] = cam_from_board;
-    double view_squares = 0.0;
-    int view_inliers = 0;
-    for (int k = 0; k < per_board; ++k) {
-      const mrcal_point3_t& observed = pool[v * per_board + k];
-      if (observed.z < 0.0) {
-        ++summary->outliers;
-        continue;
-      }
-      const Vec3 corner_in_cam = cam_from_board * board.Corner(k);
-      if (!(corner_in_cam.z() > 0.0)) {
-        ++summary->outliers;
-        continue;
-      }
-      const Vec2 pixel = lens_fitted.Project(corner_in_cam);
-      const double squared = (pixel - Vec2(observed.x, observed.y)).squaredNorm();
-      norms.push_back(std::sqrt(squared));
-      sum_squares += squared;
-      view_squares += squared;
-      ++view_inliers;
-    }
-    summary->view_rms[v] = view_inliers ? std::sqrt(view_squares / (2.0 * view_inliers)) : 0.0;
+  if (!ResidualStatistics(board, lens_fitted, frames, pool, calibration, summary)) {
+    return finish(CameraCalibrationSummary::kSolverFailed, "every corner is an outlier");
   }
-  if (norms.empty()) return finish(CameraCalibrationSummary::kSolverFailed, "every corner is an outlier");
-  summary->rms_norm = std::sqrt(sum_squares / norms.size());
-  summary->rms = summary->rms_norm / std::sqrt(2.0);
-  std::sort(norms.begin(), norms.end());
-  summary->median_norm = norms[norms.size() / 2];
-  summary->max_norm = norms.back();
   return finish(CameraCalibrationSummary::kConverged, "");
 }
 
