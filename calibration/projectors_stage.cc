@@ -96,7 +96,6 @@ ProjectorObservations ReadSession(const std::filesystem::path& directory, int ca
   } catch (const std::invalid_argument& error) {
     throw IoError(manifest + ": " + error.what());
   }
-  ProjectorObservations out;
   if (name.empty()) {
     // The display's name, after its last '/' ("synthetic:tiny_box/left" → "left").
     const std::string display = data.manifest().value("display", nlohmann::json::object())
@@ -105,16 +104,7 @@ ProjectorObservations ReadSession(const std::filesystem::path& directory, int ca
                               ? 0
                               : display.find_last_of("/:") + 1);
   }
-  out.name = name;
-  out.width = options.width;
-  out.height = options.height;
-  for (int row = 0; row < map.mask.rows; ++row)
-    for (int col = 0; col < map.mask.cols; ++col) {
-      if (!map.mask.at<uint8_t>(row, col)) continue;
-      out.camera_pixels.push_back(Vec2(col, row));
-      out.projector_pixels.push_back(
-          Vec2(map.column.at<float>(row, col), map.row.at<float>(row, col)));
-    }
+  const ProjectorObservations out = ObservationsFromMap(map, name, options.width, options.height);
   Report(progress, fmt::format("{}: {}x{} projector, {} camera pixels decoded ({} shadowed, {} ambiguous, "
                                "{} weak phase, {} out of range)",
                                directory.string(), options.width, options.height, out.camera_pixels.size(),

@@ -971,4 +971,19 @@ std::vector<FittedPlane> FitPlanes(const PlaneFitOptions& options, const std::ve
   return planes;
 }
 
+ProjectorObservations ObservationsFromMap(const StructuredLightMap& map, std::string name, int width, int height) {
+  ProjectorObservations out;
+  out.name = std::move(name);
+  out.width = width;
+  out.height = height;
+  for (int row = 0; row < map.mask.rows; ++row) {
+    for (int col = 0; col < map.mask.cols; ++col) {
+      if (!map.mask.at<uint8_t>(row, col)) continue;
+      out.camera_pixels.push_back(Vec2(col, row));
+      out.projector_pixels.push_back(Vec2(map.column.at<float>(row, col), map.row.at<float>(row, col)));
+    }
+  }
+  return out;
+}
+
 }  // namespace procam

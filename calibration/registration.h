@@ -53,6 +53,7 @@
 #include <vector>
 
 #include "calibration/projector_calibration.h"
+#include "calibration/structured_light.h"
 #include "geometry/scene.h"
 
 namespace procam {
@@ -98,6 +99,10 @@ struct ProjectorObservations {
   std::vector<Vec2> camera_pixels;  // camera pixel of each correspondence
   std::vector<Vec2> projector_pixels;  // decoded projector pixel (same order)
 };
+
+// The correspondences of a decoded structured-light capture: every camera pixel of `map.mask`
+// with the projector pixel it decoded to, for a `width` × `height` projector named `name`.
+ProjectorObservations ObservationsFromMap(const StructuredLightMap& map, std::string name, int width, int height);
 
 struct RoomCalibrationProblem {
   // The camera's lens: "LENSMODEL_PINHOLE" (4 intrinsics) or "LENSMODEL_OPENCV4" (8). Held fixed,

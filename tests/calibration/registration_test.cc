@@ -110,18 +110,7 @@ ProjectorObservations DecodedObservations(const SimulatedRig& rig, int k) {
     captured.push_back(rig.PhotographLinear(images, ++seed));
   }
   const StructuredLightMap map = DecodeStructuredLight(options, captured);
-  ProjectorObservations out;
-  out.name = rig.projectors()[k].name;
-  out.width = geometry.width();
-  out.height = geometry.height();
-  for (int row = 0; row < map.mask.rows; ++row)
-    for (int col = 0; col < map.mask.cols; ++col) {
-      if (!map.mask.at<uint8_t>(row, col)) continue;
-      out.camera_pixels.push_back(Vec2(col, row));
-      out.projector_pixels.push_back(
-          Vec2(map.column.at<float>(row, col), map.row.at<float>(row, col)));
-    }
-  return out;
+  return ObservationsFromMap(map, rig.projectors()[k].name, geometry.width(), geometry.height());
 }
 
 struct Errors {

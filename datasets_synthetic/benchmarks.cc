@@ -1,0 +1,346 @@
+#include "datasets_synthetic/benchmarks.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdarg>
+#include <cstdio>
+#include <sstream>
+#include <stdexcept>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "base/io.h"
+#include "compensation/objective.h"
+#include "compensation/peers.h"
+#include "compensation/radiosity.h"
+#include "compensation/solver.h"
+#include "datasets_synthetic/rooms.h"
+#include "geometry/form_factors.h"
+
+namespace procam {
+namespace {
+
+// A printf-style line (without its trailing newline) to the progress callback.
+void Line(const ProgressCallback& progress, const char* format, ...) __attribute__((format(printf, 2, 3)));
+void Line(const ProgressCallback& progress, const char* format, ...) {
+  va_list arguments;
+  va_start(arguments, format);
+  va_list copy;
+  va_copy(copy, arguments);
+  const int size = std::vsnprintf(nullptr, 0, format, copy);
+  va_end(copy);
+  std::string text(size > 0 ? size : 0, '\0');
+  if (size > 0) std::vsnprintf(text.data(), text.size() + 1, format, arguments);
+  va_end(arguments);
+  while (!text.empty() && text.back() == '\n') text.pop_back();
+  Report(progress, text);
+}
+
+// One solver's row of the table.
+struct BenchRow {
+  std::string solver;
+  double seconds = 0.0;            // whole solve, excluding the shared factorisation of K
+  double seconds_to_target = -1.0; // first time the objective was within the target, -1 never
+  int iterations = 0;
+  double objective = 0.0;
+  std::string termination;
+  std::vector<std::pair<double, double>> trace;  // (seconds, objective)
+};
+
+double TimeToTarget(const std::vector<std::pair<double, double>>& trace, double target) {
+  for (const auto& [seconds, cost] : trace) {
+    if (cost <= target) return seconds;
+  }
+  return -1.0;
+}
+
+BenchRow OurSolver(const std::string& name, const SolverOptions& options, const CompensationProblem& problem,
+                   const CoarseLevel& coarse) {
+  SolverSummary summary;
+  Solve(options, problem, &summary, coarse);
+  BenchRow row;
+  row.solver = name;
+  row.seconds = summary.solve_seconds;
+  row.iterations = summary.iterations;
+  row.objective = summary.final_cost;
+  row.termination = TerminationName(summary.termination);
+  // The trace's clock starts at the fine level; the coarse solve came first.
+  for (const IterationRecord& record : summary.trace) {
+    row.trace.emplace_back(summary.coarse_seconds + record.seconds, record.cost);
+  }
+  return row;
+}
+
+BenchRow Peer(const char* name, const PeerResult& result) {
+  BenchRow row;
+  row.solver = name;
+  row.seconds = result.seconds;
+  row.iterations = result.iterations;
+  row.objective = result.cost;
+  row.termination = result.termination;
+  row.trace = result.trace;
+  return row;
+}
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Median seconds of `repeats` calls.
+template <typename Call>
+double MedianSeconds(int repeats, Call call) {
+  std::vector<double> seconds;
+  for (int k = 0; k < repeats; ++k) {
+    const auto start = std::chrono::steady_clock::now();
+    call();
+    seconds.push_back(SecondsSince(start));
+  }
+  std::sort(seconds.begin(), seconds.end());
+  return seconds[seconds.size() / 2];
+}
+
+}  // namespace
+
+void RunFormFactorBenchmark(const BenchmarkOptions& args) {
+  const SubdividedRoom room = MakeSubdividedBoxRoom(args.patches);  // closed, with an occluder
+  const Scene& scene = room.scene;
+  const PatchHierarchy& hierarchy = room.patches;
+  FormFactorOptions options;
+  options.threads = args.threads;
+  FormFactorSummary summary;
+  ComputeFormFactors(scene, hierarchy.fine, options, &summary);
+  Line(args.progress, "form factors, closed room with occluder: %d patches, %lld facing pairs, %lld shadow rays\n",
+              hierarchy.fine.size(), static_cast<long long>(summary.pairs_evaluated),
+              static_cast<long long>(summary.shadow_rays));
+  Line(args.progress, "  time %.3f s (threads: %s); row sums min %.5f mean %.5f max %.5f; largest row cut %.4f\n",
+              summary.seconds, args.threads > 0 ? std::to_string(args.threads).c_str() : "all cores",
+              summary.min_row_sum, summary.mean_row_sum, summary.max_row_sum, summary.max_row_correction);
+  if (!args.json.empty()) {
+    const nlohmann::json result = {{"benchmark", "form_factors"}, {"patches", hierarchy.fine.size()},
+                                   {"seconds", summary.seconds}, {"threads", args.threads},
+                                   {"pairs", summary.pairs_evaluated}, {"shadow_rays", summary.shadow_rays},
+                                   {"min_row_sum", summary.min_row_sum}, {"max_row_sum", summary.max_row_sum}};
+    WriteFileAtomically(args.json, result.dump(2) + "\n");
+  }
+}
+
+void RunSolverBenchmark(const BenchmarkOptions& args) {
+  const bool run_gpu = args.device != "cpu";
+  std::string device_description = "none";
+  if (run_gpu && !CudaAvailable(&device_description)) {
+    throw std::runtime_error("bench solver --device " + args.device + ": " + device_description);
+  }
+  if (run_gpu) Line(args.progress, "CUDA device: %s\n", device_description.c_str());
+  nlohmann::json sizes = nlohmann::json::array();
+  Line(args.progress, "%s", fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11} {:>6}  {:<16} {}\n", "variables", "patches", "solver",
+                       "to target s", "total s", "iters", "objective", "termination").c_str());
+  for (const int target_patches : args.sizes) {
+    std::ostringstream table;
+    const SubdividedRoom room = MakeSubdividedBoxRoom(target_patches);
+    const Scene& scene = room.scene;
+    const PatchHierarchy& patches = room.patches;
+    FormFactorSummary ff;
+    Eigen::MatrixXd f = ComputeFormFactors(scene, patches.fine, FormFactorOptions(), &ff);
+    const Eigen::MatrixXd coarse_f =
+        AggregateFormFactors(f, patches.fine.Areas(), patches.coarse_of_fine, patches.coarse.size());
+    const CompensationProblem problem = MakeProblem(scene, patches.fine, std::move(f), args.alpha);
+    const CompensationProblem coarse_problem = MakeProblem(scene, patches.coarse, coarse_f, args.alpha);
+    const CoarseLevel coarse{&coarse_problem, &patches.coarse_of_fine};
+    const int n = problem.size();
+    Report(args.progress, fmt::format("bench solver: {} patches, {} variables (form factors {:.2f} s)", n, 3 * n, ff.seconds));
+
+    const bool run_cpu = args.device != "cuda" && 3 * n <= args.cpu_max_variables;
+    double setup = -1.0, gpu_setup = -1.0;
+    std::vector<BenchRow> rows;
+    if (run_cpu) {
+      const auto setup_start = std::chrono::steady_clock::now();
+      const RadiositySystem radiosity(problem.form_factors, problem.area, problem.reflectance);
+      setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_start).count();
+      const CompensationObjective objective(problem, radiosity, ColourModel::kLab);
+      const Eigen::MatrixX3d start =
+          radiosity.Multiply(problem.desired).cwiseMax(problem.lower).cwiseMin(problem.upper);
+      SolverOptions perceptual;
+      rows.push_back(OurSolver("perceptual", perceptual, problem, coarse));
+      perceptual.multires = true;
+      rows.push_back(OurSolver("perceptual --multires", perceptual, problem, coarse));
+      PeerOptions peer;
+      peer.max_iterations = 5000;
+      rows.push_back(Peer("L-BFGS-B (LBFGSpp)", SolveWithLbfgsb(objective, start, peer)));
+      if (3 * n <= args.ceres_max_variables) {
+        rows.push_back(Peer("Ceres LM", SolveWithCeres(objective, start, peer)));
+      }
+    }
+    if (run_gpu) {
+      // The same solver with every K⁻¹/K⁻ᵀ on the GPU; its setup (K⁻¹ formed on the device,
+      // F uploaded) is listed apart, as the CPU's factorisation is.
+      SolverOptions perceptual;
+      perceptual.device = Device::kCuda;
+      SolverSummary gpu_summary;
+      Solve(perceptual, problem, &gpu_summary);  // setup timing, and warms the device up
+      gpu_setup = gpu_summary.setup_seconds;
+      rows.push_back(OurSolver("perceptual [cuda]", perceptual, problem, coarse));
+      perceptual.multires = true;
+      rows.push_back(OurSolver("perceptual --multires [cuda]", perceptual, problem, coarse));
+      perceptual.device_float32 = true;
+      rows.push_back(OurSolver("... [cuda float32]", perceptual, problem, coarse));
+    }
+    if (rows.empty()) continue;  // --device cpu above --cpu-max-variables
+    // The float32 rows' own objective values are float32 evaluations: not a reference.
+    double best = rows.front().objective;
+    for (const BenchRow& row : rows) {
+      if (row.solver.find("float32") == std::string::npos) best = std::min(best, row.objective);
+    }
+    const double target = best * (1.0 + 1e-6);
+    for (BenchRow& row : rows) row.seconds_to_target = TimeToTarget(row.trace, target);
+    for (const Device device : {Device::kCpu, Device::kCuda}) {
+      if (device == Device::kCpu ? !run_cpu : !run_gpu) continue;
+      SolverOptions linear_options;
+      linear_options.method = CompensationMethod::kLinear;
+      linear_options.device = device;
+      BenchRow linear = OurSolver(device == Device::kCpu ? "linear (own objective)" : "linear [cuda]",
+                                  linear_options, problem, coarse);
+      linear.seconds_to_target = -1.0;
+      rows.push_back(linear);
+    }
+
+    nlohmann::json size_json = {{"patches", n}, {"variables", 3 * n}, {"factorisation_seconds", setup},
+                                {"cuda_setup_seconds", gpu_setup},
+                                {"form_factor_seconds", ff.seconds}, {"target_objective", target}};
+    if (run_cpu) {
+      table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16} {}\n", 3 * n, n,
+                           "(factorise K once)", "", setup, "", "", "");
+    }
+    if (run_gpu) {
+      table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16} {}\n", 3 * n, n,
+                           "(invert K on cuda once)", "", gpu_setup, "", "", "");
+    }
+    for (const BenchRow& row : rows) {
+      const std::string to_target = row.seconds_to_target < 0 ? "-" : fmt::format("{:.4f}", row.seconds_to_target);
+      table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16.10g} {}\n", 3 * n, n, row.solver,
+                           to_target, row.seconds, row.iterations, row.objective, row.termination);
+      size_json["solvers"].push_back({{"solver", row.solver},
+                                      {"seconds", row.seconds},
+                                      {"seconds_to_target", row.seconds_to_target},
+                                      {"iterations", row.iterations},
+                                      {"objective", row.objective},
+                                      {"termination", row.termination}});
+    }
+    sizes.push_back(size_json);
+    Line(args.progress, "%s", table.str().c_str());  // each size as it finishes: long runs show progress
+  }
+  if (!args.json.empty()) {
+    const nlohmann::json result = {{"benchmark", "solver"},
+                                   {"cuda_device", device_description},
+                                   {"scene", "box room with occluder, bounds [0, 1], alpha " + std::to_string(args.alpha)},
+                                   {"target", "best final objective among perceptual solvers, +1e-6 relative"},
+                                   {"sizes", sizes}};
+    WriteFileAtomically(args.json, result.dump(2) + "\n");
+    Line(args.progress, "wrote %s\n", args.json.c_str());
+  }
+}
+
+// The matrix-free path: compressed form factors, their products, K⁻¹ by conjugate
+// gradients and the perceptual solver on them, per room size; beside the dense F where it fits.
+void RunScaleBenchmark(const BenchmarkOptions& args) {
+  const bool run_gpu = args.device != "cpu";
+  std::string device_description = "none";
+  if (run_gpu && !CudaAvailable(&device_description)) {
+    throw std::runtime_error("bench scale --device " + args.device + ": " + device_description);
+  }
+  nlohmann::json sizes = nlohmann::json::array();
+  Line(args.progress, "%s", fmt::format("{:>9} {:>8} {:>9} {:>10} {:>10} {:>9} {:>9} {:>10} {:>9} {:>6}  {:<22} {:>9} {:>6} {}\n",
+                                "variables", "patches", "build s", "MB", "dense MB", "F x ms", "error",
+                                "K⁻¹ ms", "CG iters", "", "solver", "solve s", "iters", "objective").c_str());
+  for (const int target_patches : args.scale_sizes) {
+    const SubdividedRoom room = MakeSubdividedBoxRoom(target_patches);
+    const Scene& scene = room.scene;
+    const PatchHierarchy& patches = room.patches;
+    const int n = patches.fine.size();
+    FormFactorOptions ff_options;
+    ff_options.threads = args.threads;
+    int last_percent = -10;
+    ff_options.progress = [&](double fraction) {
+      const int percent = static_cast<int>(100 * fraction);
+      if (percent >= last_percent + 10) {
+        last_percent = percent;
+        Report(args.progress, fmt::format("bench scale: {} patches, near pairs {}%", n, percent));
+      }
+    };
+    CompressedBuildSummary build;
+    auto compressed = std::make_shared<const CompressedFormFactors>(
+        ComputeCompressedFormFactors(scene, patches.fine, ff_options, args.clusters, &build));
+    const Eigen::MatrixXd x = Eigen::MatrixXd::Random(n, 3).cwiseAbs();
+    const double product = MedianSeconds(5, [&] { compressed->Multiply(x); });
+    double error = -1.0, dense_seconds = -1.0;
+    Eigen::MatrixXd dense;
+    if (n <= args.dense_max_patches) {
+      FormFactorSummary ff;
+      ff_options.progress = nullptr;
+      dense = ComputeFormFactors(scene, patches.fine, ff_options, &ff);
+      dense_seconds = ff.seconds;
+      const Eigen::MatrixXd exact = dense * x;
+      error = (compressed->Multiply(x) - exact).norm() / exact.norm();
+    }
+    const RadiositySystem radiosity(compressed, patches.fine.reflectance);
+    const double solve = MedianSeconds(3, [&] { radiosity.Solve(Eigen::MatrixX3d::Ones(n, 3)); });
+    const int cg = static_cast<int>(radiosity.solve_iterations() / 3);
+    CompensationProblem problem = MakeProblem(scene, patches.fine, Eigen::MatrixXd(), args.alpha);
+    problem.compressed_form_factors = compressed;
+    nlohmann::json size_json = {{"patches", n},
+                                {"variables", 3 * n},
+                                {"build_seconds", build.seconds},
+                                {"bytes", build.bytes},
+                                {"dense_bytes", 8.0 * n * n},
+                                {"near_entries", build.near_entries},
+                                {"far_blocks", build.far_blocks},
+                                {"far_values", build.far_values},
+                                {"product_seconds", product},
+                                {"product_relative_error", error},
+                                {"dense_form_factor_seconds", dense_seconds},
+                                {"k_inverse_seconds", solve},
+                                {"cg_iterations", cg}};
+    const auto line = [&](const std::string& solver, double seconds, int iterations, double objective) {
+      Line(args.progress, "%s", fmt::format("{:>9} {:>8} {:>9.2f} {:>10.1f} {:>10.1f} {:>9.2f} {:>9} {:>10.2f} {:>9} {:>6}  "
+                                    "{:<22} {:>9.3f} {:>6} {:.10g}\n",
+                                    3 * n, n, build.seconds, build.bytes / 1e6, 8.0 * n * n / 1e6, 1e3 * product,
+                                    error < 0 ? std::string("-") : fmt::format("{:.2e}", error), 1e3 * solve, cg, "",
+                                    solver, seconds, iterations, objective).c_str());
+      std::fflush(stdout);
+      size_json["solvers"].push_back(
+          {{"solver", solver}, {"seconds", seconds}, {"iterations", iterations}, {"objective", objective}});
+    };
+    std::vector<Device> devices;
+    if (args.device != "cuda" && 3 * n <= args.cpu_max_variables) devices.push_back(Device::kCpu);
+    if (run_gpu) devices.push_back(Device::kCuda);
+    for (const Device device : devices) {
+      SolverOptions options;
+      options.device = device;
+      SolverSummary summary;
+      Solve(options, problem, &summary);
+      line(device == Device::kCpu ? "perceptual (matrix-free)" : "perceptual [cuda, m-free]",
+           summary.setup_seconds + summary.solve_seconds, summary.iterations, summary.final_cost);
+    }
+    if (dense.size() != 0 && args.device != "cuda" && 3 * n <= args.cpu_max_variables) {
+      const CompensationProblem dense_problem = MakeProblem(scene, patches.fine, std::move(dense), args.alpha);
+      SolverSummary summary;
+      Solve(SolverOptions(), dense_problem, &summary);
+      line("perceptual (dense F)", summary.setup_seconds + summary.solve_seconds, summary.iterations,
+           summary.final_cost);
+    }
+    if (devices.empty()) line("(no solve)", 0.0, 0, 0.0);
+    sizes.push_back(size_json);
+  }
+  if (!args.json.empty()) {
+    const nlohmann::json result = {{"benchmark", "scale"},
+                                   {"cuda_device", device_description},
+                                   {"scene", "box room with occluder, bounds [0, 1], alpha " + std::to_string(args.alpha)},
+                                   {"leaf_size", args.clusters.leaf_size},
+                                   {"admissibility", args.clusters.admissibility},
+                                   {"sizes", sizes}};
+    WriteFileAtomically(args.json, result.dump(2) + "\n");
+    Line(args.progress, "wrote %s\n", args.json.c_str());
+  }
+}
+
+}  // namespace procam

@@ -1,0 +1,40 @@
+#pragma once
+// procam's benchmarks on generated rooms (rooms.h: a closed box room with an occluder), as
+// `procam bench formfactors|solver|scale` runs them: the table goes to the progress callback a
+// line per room size as it finishes, JSON to `json` when given. Timings are measurements for
+// people to read (docs/solver.md, docs/scale.md, docs/gpu.md), never asserted.
+
+#include <string>
+#include <vector>
+
+#include "base/progress.h"
+#include "geometry/compressed_form_factors.h"
+
+namespace procam {
+
+struct BenchmarkOptions {
+  int patches = 4096;  // bench formfactors: target patch count
+  int threads = 0;
+  std::string json;
+  std::vector<int> sizes = {100, 333, 1000, 3333};  // bench solver: room sizes, patches
+  int ceres_max_variables = 1100;  // Ceres takes ~2 min at 1044 variables, hours at 3000
+  double alpha = 0.5;
+  std::string device = "cpu";       // cpu | cuda | both: which devices' rows to run
+  int cpu_max_variables = 1 << 30;  // skip the CPU rows (and peers) above this many variables
+  // bench scale
+  std::vector<int> scale_sizes = {1000, 3333, 10000};
+  int dense_max_patches = 5000;  // also the dense F (and its error) up to here
+  ClusterOptions clusters;
+  ProgressCallback progress;  // the table, a line per size as it finishes
+};
+
+// The form factors of one room: time, pairs, shadow rays, row sums.
+void RunFormFactorBenchmark(const BenchmarkOptions& options);
+// The solvers (perceptual, multires, L-BFGS-B, Ceres, linear; CPU and/or CUDA) per room size:
+// time to the best objective (+1e-6 relative), total time, iterations.
+void RunSolverBenchmark(const BenchmarkOptions& options);
+// The matrix-free path per room size: compressed F, its products, K⁻¹ by CG and the solver on
+// them, beside the dense F where it fits.
+void RunScaleBenchmark(const BenchmarkOptions& options);
+
+}  // namespace procam
