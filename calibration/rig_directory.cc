@@ -17,6 +17,14 @@ nlohmann::json ReadRigJson(const std::filesystem::path& rig_dir) {
   nlohmann::json rig = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
   if (rig.is_discarded()) throw IoError(path.string() + ": not valid JSON");
   if (!rig.is_object()) throw IoError(path.string() + ": expected a JSON object");
+  if (!rig.contains("format_version") || !rig["format_version"].is_number_integer()) {
+    throw IoError(path.string() + ": format_version: required key is missing (an integer; written by an older "
+                                  "procam? calibrate the rig again)");
+  }
+  if (rig["format_version"].get<int64_t>() != kRigFormatVersion) {
+    throw IoError(path.string() + ": format_version: " + rig["format_version"].dump() +
+                  " is not supported (this procam reads version " + std::to_string(kRigFormatVersion) + ")");
+  }
   return rig;
 }
 
@@ -24,6 +32,7 @@ void UpdateRigJson(const std::filesystem::path& rig_dir,
                    const std::function<void(nlohmann::json&)>& update) {
   nlohmann::json rig = ReadRigJson(rig_dir);
   update(rig);
+  rig["format_version"] = kRigFormatVersion;
   std::filesystem::create_directories(rig_dir);
   WriteFileAtomically(rig_dir / "rig.json", rig.dump(2) + "\n");
 }

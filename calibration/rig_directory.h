@@ -28,12 +28,17 @@
 
 namespace procam {
 
+// rig.json's format (docs/rig_format.md); written into every rig.json, required when one is read.
+constexpr int kRigFormatVersion = 1;
+
 // rig.json of `rig_dir` as JSON; an empty object when the file does not exist. Throws IoError
-// naming the file when it exists but is not a JSON object.
+// naming the file (and the key) when it exists but is not a JSON object, or its format_version is
+// missing or not kRigFormatVersion. The one reader of rig.json.
 nlohmann::json ReadRigJson(const std::filesystem::path& rig_dir);
 
-// Reads rig.json (or {}), lets `update` change it, writes it back atomically (creating
-// `rig_dir`). Nothing is written when `update` throws.
+// Reads rig.json (or {}), lets `update` change it, writes it back atomically with its
+// format_version (creating `rig_dir`). Nothing is written when `update` throws. The one writer of
+// rig.json.
 void UpdateRigJson(const std::filesystem::path& rig_dir,
                    const std::function<void(nlohmann::json&)>& update);
 

@@ -122,7 +122,8 @@ TEST(RigDirectory, TrueProjectorsInARigGiveTheScenesResults) {
   const std::filesystem::path with = WriteTinyBoxScene(dir, "with.json", scene_entries);
   const std::filesystem::path without = WriteTinyBoxScene(dir, "without.json", nullptr);
   std::filesystem::create_directories(dir / "rig");
-  const nlohmann::json rig = {{"camera", {{"model", "camera.cameramodel"}}},
+  const nlohmann::json rig = {{"format_version", kRigFormatVersion},
+                              {"camera", {{"model", "camera.cameramodel"}}},
                               {"projectors", ProjectorEntries(projectors, dir / "rig")},
                               {"registration", nlohmann::json::object()}};
   dir.Write("rig/rig.json", rig.dump(2));
@@ -190,13 +191,17 @@ TEST(RigDirectory, BadRigJsonGetsOneLineNamingTheFileAndKey) {
   const std::filesystem::path scene = WriteTinyBoxScene(dir, "scene.json", nullptr);
   const std::vector<Projector> projectors = TrueProjectors();
   std::filesystem::create_directories(dir / "rig");
-  const nlohmann::json good = {{"projectors", ProjectorEntries(projectors, dir / "rig")}};
+  const nlohmann::json good = {{"format_version", kRigFormatVersion},
+                               {"projectors", ProjectorEntries(projectors, dir / "rig")}};
   struct Case {
     std::string name;
     nlohmann::json rig;  // null: no rig.json
     std::string expected;
   };
   nlohmann::json no_max = good, missing_model = good, camera_units = good, bad_mixing = good;
+  nlohmann::json unversioned = good, future = good;
+  unversioned.erase("format_version");
+  future["format_version"] = kRigFormatVersion + 1;
   no_max["projectors"][1].erase("max");
   missing_model["projectors"][0]["model"] = "nowhere.cameramodel";
   camera_units["projectors"][0].erase("max");
@@ -205,7 +210,9 @@ TEST(RigDirectory, BadRigJsonGetsOneLineNamingTheFileAndKey) {
   bad_mixing["projectors"][0]["mixing"][0] = {0.5, 0.2, 0.2};
   const Case cases[] = {
       {"none", nullptr, "rig.json: file not found"},
-      {"empty", nlohmann::json::object(), "rig.json: projectors: required key is missing"},
+      {"empty", {{"format_version", kRigFormatVersion}}, "rig.json: projectors: required key is missing"},
+      {"unversioned", unversioned, "rig.json: format_version: required key is missing"},
+      {"future", future, "rig.json: format_version: 2 is not supported"},
       {"no_max", no_max, "rig.json: projectors[1].max"},
       {"missing_model", missing_model, "rig.json: projectors[0].model"},
       {"camera_units", camera_units, "rig.json: projectors[0].max: the photometry of 'left' is in camera units"},
@@ -371,6 +378,7 @@ TEST(ScenePhotometryCommand, FillsTheRigInSceneUnits) {
   WriteCameraModel(rig / "camera.cameramodel", world->rig->camera());
   WriteCameraModel(rig / "left.cameramodel", truth.geometry);
   const nlohmann::json rig_json = {
+      {"format_version", kRigFormatVersion},
       {"camera", {{"model", "camera.cameramodel"}}},
       {"projectors", {{{"name", "left"}, {"model", "left.cameramodel"}}}},
       {"registration", {{"note", "the true pose (test)"}}}};

@@ -27,6 +27,7 @@
 #include "datasets_synthetic/simulated_rig.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "base/io.h"
+#include "calibration/rig_directory.h"
 #include "geometry/patches.h"
 #include "projection/projector.h"
 #include "tests/testing/testing.h"
@@ -97,7 +98,9 @@ std::filesystem::path WriteRig(const testing::TempDir& dir, const std::string& n
                        {"max", Triplet(p.max)},
                        {"gamma", {gamma, gamma, gamma}}});
   }
-  nlohmann::json json = {{"camera", {{"model", "camera.cameramodel"}}}, {"projectors", entries}};
+  nlohmann::json json = {{"format_version", kRigFormatVersion},
+                         {"camera", {{"model", "camera.cameramodel"}}},
+                         {"projectors", entries}};
   if (reflectance_factor != 1.0) {
     SubdivisionOptions subdivision;
     subdivision.target_patches = kPatches;

@@ -81,7 +81,7 @@ TEST_F(CalibrateProjectorsCommand, RecoversTheSyntheticRig) {
   // Keys other commands wrote survive.
   {
     std::ofstream file(rig / "rig.json");
-    file << R"({"projectors": [{"name": "right", "black": 0.01}], "other": 1})";
+    file << R"({"format_version": 1, "projectors": [{"name": "right", "black": 0.01}], "other": 1})";
   }
   const CommandRun run = RunProcam("calibrate projectors " + Session(0) + " " + Session(1) +
                                    " --scene synthetic:tiny_box --out " + rig.string() +
