@@ -237,10 +237,12 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig,
   return RenderProjectorImages(rig, Scene(), emittance, options, summary);
 }
 
-std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, const Scene& scene,
-                                                  const Eigen::MatrixX3d& emittance,
-                                                  const RenderOptions& options,
-                                                  RenderSummary* summary) {
+namespace {
+
+// RenderProjectorImages's inputs: the options, E's shape and values, and for detail the rig's
+// texture coordinates and the scene's surfaces. Throws std::invalid_argument.
+void CheckRenderInputs(const ProjectionRig& rig, const Scene& scene, const Eigen::MatrixX3d& emittance,
+                       const RenderOptions& options) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("RenderOptions: " + why);
   const int n = rig.size();
@@ -266,44 +268,17 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
       }
     }
   }
-  const auto start = std::chrono::steady_clock::now();
+}
+
+// Step 2 of RenderProjectorImages, per patch: Newton from below on Σ_p min(w a τ, Ω Δ) = Φ (each
+// evaluation one pass over the patch's pixels; the first one is all most patches need). Raises
+// `level` (τ per patch and channel) where pixels saturate; returns the most passes a patch took.
+int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& tables,
+                 const std::vector<std::vector<Eigen::Vector3f>>& detail, const Eigen::MatrixX3d& flux,
+                 const RenderOptions& options, Eigen::MatrixX3d* level_out) {
+  Eigen::MatrixX3d& level = *level_out;
+  const int n = rig.size();
   const int projector_count = static_cast<int>(rig.projectors.size());
-  RenderSummary local;
-  RenderSummary& s = summary ? *summary : local;
-  s = RenderSummary();
-  s.saturated_pixels.assign(projector_count, 0);
-  s.clipped_pixels.assign(projector_count, 0);
-  s.detail_saturated_pixels.assign(projector_count, 0);
-  // d per lit pixel (in pixels_by_patch order) and channel; none without detail (d = 1).
-  std::vector<std::vector<Eigen::Vector3f>> detail;
-  if (options.detail) detail = DetailFactors(rig, scene, options, &s.detail_pixels);
-  std::vector<ProjectorTables> tables;
-  tables.reserve(projector_count);
-  for (const Projector& projector : rig.projectors) tables.emplace_back(projector);
-
-  // Step 1: the flux above black each patch needs, and the first guess of its level τ.
-  const Eigen::MatrixX3d target = emittance.cwiseMax(rig.lower).cwiseMin(rig.upper);
-  Eigen::MatrixX3d flux(n, 3), level(n, 3);
-  for (int i = 0; i < n; ++i) {
-    if ((emittance.row(i).array() < rig.lower.row(i).array() - 1e-12).any())
-      ++s.patches_below_lower;
-    if ((emittance.row(i).array() > rig.upper.row(i).array() + 1e-12).any())
-      ++s.patches_above_upper;
-    if (!(rig.blended_area[i] > 0.0)) ++s.patches_unreached;
-    for (int c = 0; c < 3; ++c) {
-      const double rho = rig.reflectance(i, c);
-      level(i, c) = 0.0;
-      flux(i, c) = 0.0;
-      if (!(rig.blended_area[i] > 0.0) || !(rho > 0.0)) continue;
-      flux(i, c) = rig.area[i] * (target(i, c) - rig.lower(i, c)) / rho;
-      const double capacity = rig.area[i] * (rig.upper(i, c) - rig.lower(i, c)) / rho;
-      level(i, c) =
-          flux(i, c) >= capacity * (1.0 - 1e-12) ? kInfinity : flux(i, c) / rig.blended_area[i];
-    }
-  }
-
-  // Step 2, per patch: Newton from below on Σ_p min(w a τ, Ω Δ) = Φ (each evaluation one pass
-  // over the patch's pixels; the first one is all most patches need).
   int most_passes = 0;
 #pragma omp parallel for schedule(dynamic, 16) reduction(max : most_passes)
   for (int i = 0; i < n; ++i) {
@@ -342,7 +317,84 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
       if (!changed) break;
     }
   }
-  s.level_passes = most_passes;
+  return most_passes;
+}
+
+// The flux each patch receives from the codes of the images (per patch and channel: the pixels'
+// light, mixed, times their solid angle and the patch's coverage).
+Eigen::MatrixX3d FluxOfCodes(const ProjectionRig& rig, const std::vector<ProjectorTables>& tables,
+                             const std::vector<ProjectorImage>& images) {
+  const int n = rig.size();
+  const int projector_count = static_cast<int>(rig.projectors.size());
+  Eigen::MatrixX3d delivered_flux = Eigen::MatrixX3d::Zero(n, 3);
+#pragma omp parallel for schedule(dynamic, 16)
+  for (int i = 0; i < n; ++i) {
+    Vec3 patch_flux = Vec3::Zero();
+    for (int k = 0; k < projector_count; ++k) {
+      const ProjectorMap& map = rig.maps[k];
+      const ProjectorTables& table = tables[k];
+      const auto* codes = reinterpret_cast<const cv::Vec3w*>(images[k].codes.data);
+      Vec3 projector_light = Vec3::Zero();
+      for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+        const cv::Vec3w& code = codes[map.pixels_by_patch[position]];
+        for (int c = 0; c < 3; ++c) projector_light[c] += table.codes[c].Light(code[c]);
+      }
+      const Vec3 mixed = table.identity_mixing ? projector_light
+                                               : Vec3(table.photometry.mixing * projector_light);
+      patch_flux +=
+          rig.coverage_scale(i, k) * map.pixel_solid_angle * table.delta.cwiseProduct(mixed);
+    }
+    delivered_flux.row(i) = patch_flux.transpose();
+  }
+  return delivered_flux;
+}
+
+}  // namespace
+
+std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, const Scene& scene,
+                                                  const Eigen::MatrixX3d& emittance,
+                                                  const RenderOptions& options,
+                                                  RenderSummary* summary) {
+  CheckRenderInputs(rig, scene, emittance, options);
+  const int n = rig.size();
+  const auto start = std::chrono::steady_clock::now();
+  const int projector_count = static_cast<int>(rig.projectors.size());
+  RenderSummary local;
+  RenderSummary& s = summary ? *summary : local;
+  s = RenderSummary();
+  s.saturated_pixels.assign(projector_count, 0);
+  s.clipped_pixels.assign(projector_count, 0);
+  s.detail_saturated_pixels.assign(projector_count, 0);
+  // d per lit pixel (in pixels_by_patch order) and channel; none without detail (d = 1).
+  std::vector<std::vector<Eigen::Vector3f>> detail;
+  if (options.detail) detail = DetailFactors(rig, scene, options, &s.detail_pixels);
+  std::vector<ProjectorTables> tables;
+  tables.reserve(projector_count);
+  for (const Projector& projector : rig.projectors) tables.emplace_back(projector);
+
+  // Step 1: the flux above black each patch needs, and the first guess of its level τ.
+  const Eigen::MatrixX3d target = emittance.cwiseMax(rig.lower).cwiseMin(rig.upper);
+  Eigen::MatrixX3d flux(n, 3), level(n, 3);
+  for (int i = 0; i < n; ++i) {
+    if ((emittance.row(i).array() < rig.lower.row(i).array() - 1e-12).any())
+      ++s.patches_below_lower;
+    if ((emittance.row(i).array() > rig.upper.row(i).array() + 1e-12).any())
+      ++s.patches_above_upper;
+    if (!(rig.blended_area[i] > 0.0)) ++s.patches_unreached;
+    for (int c = 0; c < 3; ++c) {
+      const double rho = rig.reflectance(i, c);
+      level(i, c) = 0.0;
+      flux(i, c) = 0.0;
+      if (!(rig.blended_area[i] > 0.0) || !(rho > 0.0)) continue;
+      flux(i, c) = rig.area[i] * (target(i, c) - rig.lower(i, c)) / rho;
+      const double capacity = rig.area[i] * (rig.upper(i, c) - rig.lower(i, c)) / rho;
+      level(i, c) =
+          flux(i, c) >= capacity * (1.0 - 1e-12) ? kInfinity : flux(i, c) / rig.blended_area[i];
+    }
+  }
+
+  // Step 2, per patch: Newton from below on Σ_p min(w a τ, Ω Δ) = Φ.
+  s.level_passes = RefineLevels(rig, tables, detail, flux, options, &level);
 
   // Step 3: per pixel relative output → light → dithered codes; the flux they deliver.
   std::vector<ProjectorImage> images(projector_count);
@@ -435,25 +487,7 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
 #pragma omp parallel for schedule(static, 1)
     for (int k = 0; k < projector_count; ++k)
       QuantiseErrorDiffusion(rig.maps[k], tables[k], light[k], &images[k].codes);
-#pragma omp parallel for schedule(dynamic, 16)
-    for (int i = 0; i < n; ++i) {
-      Vec3 patch_flux = Vec3::Zero();
-      for (int k = 0; k < projector_count; ++k) {
-        const ProjectorMap& map = rig.maps[k];
-        const ProjectorTables& table = tables[k];
-        const auto* codes = reinterpret_cast<const cv::Vec3w*>(images[k].codes.data);
-        Vec3 projector_light = Vec3::Zero();
-        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
-          const cv::Vec3w& code = codes[map.pixels_by_patch[position]];
-          for (int c = 0; c < 3; ++c) projector_light[c] += table.codes[c].Light(code[c]);
-        }
-        const Vec3 mixed = table.identity_mixing ? projector_light
-                                                 : Vec3(table.photometry.mixing * projector_light);
-        patch_flux +=
-            rig.coverage_scale(i, k) * map.pixel_solid_angle * table.delta.cwiseProduct(mixed);
-      }
-      delivered_flux.row(i) = patch_flux.transpose();
-    }
+    delivered_flux = FluxOfCodes(rig, tables, images);
   }
   s.saturated_pixels = saturated;
   s.clipped_pixels = clipped;
