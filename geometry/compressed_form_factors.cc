@@ -225,6 +225,80 @@ int64_t CompressedFormFactors::bytes() const {
          static_cast<int64_t>(far_.values.size()) * sizeof(double);
 }
 
+namespace {
+
+// Pivot of each cluster: the position (in `order`) of the patch nearest its area centroid.
+std::vector<int> ClusterPivots(const std::vector<ClusterPatch>& patches, const std::vector<Node>& nodes,
+                               const std::vector<int>& order, int thread_count) {
+  const int cluster_count = static_cast<int>(nodes.size());
+  std::vector<int> pivot(cluster_count, 0);
+#pragma omp parallel for schedule(dynamic, 64) num_threads(thread_count)
+  for (int k = 1; k < cluster_count; ++k) {
+    double best = 1e300;
+    for (int p = nodes[k].begin; p < nodes[k].end; ++p) {
+      const double d = (patches[order[p]].centroid - nodes[k].centre).squaredNorm();
+      if (d < best) {
+        best = d;
+        pivot[k] = p;
+      }
+    }
+  }
+  return pivot;
+}
+
+// The near part of F: every patch pair of the near cluster pairs by `exchange` (both orders, each
+// divided by its row patch's area), in parallel over blocks; progress weighted by pairs.
+CompressedFormFactors::SparseRows NearBlocks(const std::vector<ClusterPatch>& patches, const std::vector<Node>& nodes,
+                                             const std::vector<int>& order,
+                                             const std::vector<std::array<int, 2>>& near_pairs,
+                                             const PairExchange& exchange, int thread_count,
+                                             const std::function<void(double)>& progress) {
+  int64_t total_pairs = 0;
+  for (const auto& [a, b] : near_pairs) {
+    const int64_t ca = nodes[a].end - nodes[a].begin, cb = nodes[b].end - nodes[b].begin;
+    total_pairs += a == b ? ca * (ca - 1) / 2 : ca * cb;
+  }
+  std::vector<std::vector<Eigen::Triplet<double, int>>> near_triplets(thread_count);
+  std::atomic<int64_t> pairs_done{0};
+#pragma omp parallel num_threads(thread_count)
+  {
+    std::vector<Eigen::Triplet<double, int>>& mine = near_triplets[omp_get_thread_num()];
+#pragma omp for schedule(dynamic, 4)
+    for (int64_t block = 0; block < static_cast<int64_t>(near_pairs.size()); ++block) {
+      const auto [a, b] = near_pairs[block];
+      int64_t local = 0;
+      for (int p = nodes[a].begin; p < nodes[a].end; ++p) {
+        const int q0 = a == b ? p + 1 : nodes[b].begin;
+        for (int q = q0; q < nodes[b].end; ++q) {
+          const int i = order[p], j = order[q];
+          ++local;
+          const double g = exchange(i, j);
+          if (g <= 0.0) continue;
+          mine.emplace_back(i, j, g / patches[i].area);
+          mine.emplace_back(j, i, g / patches[j].area);
+        }
+      }
+      const int64_t done = pairs_done += local;
+      if (progress && omp_get_thread_num() == 0) progress(static_cast<double>(done) / std::max<int64_t>(1, total_pairs));
+    }
+  }
+  if (progress) progress(1.0);
+  size_t near_count = 0;
+  for (const auto& part : near_triplets) near_count += part.size();
+  std::vector<Eigen::Triplet<double, int>> all_near;
+  all_near.reserve(near_count);
+  for (auto& part : near_triplets) {
+    all_near.insert(all_near.end(), part.begin(), part.end());
+    std::vector<Eigen::Triplet<double, int>>().swap(part);
+  }
+  const int n = static_cast<int>(patches.size());
+  CompressedFormFactors::SparseRows near(n, n);
+  near.setFromTriplets(all_near.begin(), all_near.end());
+  return near;
+}
+
+}  // namespace
+
 CompressedFormFactors BuildCompressedFormFactors(const std::vector<ClusterPatch>& patches,
                                                  const ClusterOptions& options, const PairExchange& exchange,
                                                  const Visibility& visible, int threads,
@@ -244,20 +318,8 @@ CompressedFormFactors BuildCompressedFormFactors(const std::vector<ClusterPatch>
   for (const Node& node : nodes) all.extend(node.box);
   const double margin = std::max(1e-9, 1e-7 * all.diagonal().norm());
 
-  // Pivot of each cluster: the position of the patch nearest its area centroid.
   const int thread_count = threads > 0 ? threads : omp_get_max_threads();
-  std::vector<int> pivot(cluster_count, 0);
-#pragma omp parallel for schedule(dynamic, 64) num_threads(thread_count)
-  for (int k = 1; k < cluster_count; ++k) {
-    double best = 1e300;
-    for (int p = nodes[k].begin; p < nodes[k].end; ++p) {
-      const double d = (patches[order[p]].centroid - nodes[k].centre).squaredNorm();
-      if (d < best) {
-        best = d;
-        pivot[k] = p;
-      }
-    }
-  }
+  const std::vector<int> pivot = ClusterPivots(patches, nodes, order, thread_count);
   // Centroid-to-centroid exchange area of the patches at positions p and q (0 when they do not
   // face each other); `blocked` is set when they face each other but a ray between them is cut.
   const auto point_exchange = [&](int p, int q, bool* blocked) {
@@ -370,47 +432,9 @@ CompressedFormFactors BuildCompressedFormFactors(const std::vector<ClusterPatch>
     }
   }
 
-  // Near pairs, patch by patch, in parallel over blocks; progress weighted by pairs.
-  int64_t total_pairs = 0;
-  for (const auto& [a, b] : near_pairs) {
-    const int64_t ca = nodes[a].end - nodes[a].begin, cb = nodes[b].end - nodes[b].begin;
-    total_pairs += a == b ? ca * (ca - 1) / 2 : ca * cb;
-  }
-  std::vector<std::vector<Eigen::Triplet<double, int>>> near_triplets(thread_count);
-  std::atomic<int64_t> pairs_done{0};
-#pragma omp parallel num_threads(thread_count)
-  {
-    std::vector<Eigen::Triplet<double, int>>& mine = near_triplets[omp_get_thread_num()];
-#pragma omp for schedule(dynamic, 4)
-    for (int64_t block = 0; block < static_cast<int64_t>(near_pairs.size()); ++block) {
-      const auto [a, b] = near_pairs[block];
-      int64_t local = 0;
-      for (int p = nodes[a].begin; p < nodes[a].end; ++p) {
-        const int q0 = a == b ? p + 1 : nodes[b].begin;
-        for (int q = q0; q < nodes[b].end; ++q) {
-          const int i = order[p], j = order[q];
-          ++local;
-          const double g = exchange(i, j);
-          if (g <= 0.0) continue;
-          mine.emplace_back(i, j, g / patches[i].area);
-          mine.emplace_back(j, i, g / patches[j].area);
-        }
-      }
-      const int64_t done = pairs_done += local;
-      if (progress && omp_get_thread_num() == 0) progress(static_cast<double>(done) / std::max<int64_t>(1, total_pairs));
-    }
-  }
-  if (progress) progress(1.0);
-  size_t near_count = 0;
-  for (const auto& part : near_triplets) near_count += part.size();
-  std::vector<Eigen::Triplet<double, int>> all_near;
-  all_near.reserve(near_count);
-  for (auto& part : near_triplets) {
-    all_near.insert(all_near.end(), part.begin(), part.end());
-    std::vector<Eigen::Triplet<double, int>>().swap(part);
-  }
-  CompressedFormFactors::SparseRows near(n, n);
-  near.setFromTriplets(all_near.begin(), all_near.end());
+  // Near pairs, patch by patch, in parallel over blocks.
+  CompressedFormFactors::SparseRows near = NearBlocks(patches, nodes, order, near_pairs, exchange, thread_count,
+                                                      progress);
   std::vector<int> begin(cluster_count), end(cluster_count);
   for (int k = 0; k < cluster_count; ++k) {
     begin[k] = nodes[k].begin;
