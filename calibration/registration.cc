@@ -373,11 +373,10 @@ int Associate(const RoomModel& model, const PoseBlock& camera,
 
 }  // namespace
 
-bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model,
-                   const RoomCalibrationProblem& problem,
-                   const Eigen::Isometry3d& room_from_camera_guess, RoomCalibration* calibration,
-                   RoomCalibrationSummary* summary) {
-  const auto start = std::chrono::steady_clock::now();
+namespace {
+
+// CalibrateRoom's inputs. Throws std::invalid_argument.
+void CheckRoomProblem(const RoomCalibrationOptions& options, const RoomCalibrationProblem& problem) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("RoomCalibrationOptions: " + why);
   Vec3 probe;
@@ -395,6 +394,194 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
       throw std::invalid_argument("CalibrateRoom: projector '" + p.name +
                                   "': camera and projector pixel counts differ");
   }
+}
+
+// Every projector's correspondences, thinned evenly to options.max_correspondences, with the
+// camera ray of each at the problem's lens (pixels whose ray cannot be found are left out).
+std::vector<std::vector<Correspondence>> SampleCorrespondences(const RoomCalibrationOptions& options,
+                                                               const RoomCalibrationProblem& problem,
+                                                               RoomCalibrationSummary* summary) {
+  const int projector_count = static_cast<int>(problem.projectors.size());
+  std::vector<std::vector<Correspondence>> correspondences(projector_count);
+  for (int k = 0; k < projector_count; ++k) {
+    const ProjectorObservations& p = problem.projectors[k];
+    summary->projectors[k].correspondences = static_cast<int>(p.camera_pixels.size());
+    const size_t stride = std::max<size_t>(
+        1, (p.camera_pixels.size() + options.max_correspondences - 1) / options.max_correspondences);
+    for (size_t i = 0; i < p.camera_pixels.size(); i += stride) {
+      Correspondence c;
+      if (!p.camera_pixels[i].allFinite() || !p.projector_pixels[i].allFinite() ||
+          !UnprojectCameraPixel(problem.camera_lens_model, problem.camera_intrinsics,
+                                p.camera_pixels[i], &c.ray_in_cam))
+        continue;
+      c.camera_pixel = p.camera_pixels[i];
+      c.observed = p.projector_pixels[i];
+      correspondences[k].push_back(c);
+    }
+    summary->projectors[k].used = static_cast<int>(correspondences[k].size());
+  }
+  return correspondences;
+}
+
+// 1σ of the camera's fx, fy, cx, cy from (JᵀJ)⁻¹ s² at the solution of `ceres_problem`, whose
+// parameter blocks are listed in `blocks` with the camera's intrinsics third (`camera_aspect` >
+// 0: fy tied to fx). NaN where the normal matrix is singular.
+void EstimateCameraSigma(ceres::Problem& ceres_problem, const std::vector<double*>& blocks, double cost,
+                         double camera_aspect, double* camera_sigma) {
+  ceres::Problem::EvaluateOptions evaluate;
+  evaluate.parameter_blocks = blocks;
+  evaluate.apply_loss_function = false;
+  ceres::CRSMatrix jacobian;
+  std::fill(camera_sigma, camera_sigma + 4, std::numeric_limits<double>::quiet_NaN());
+  if (!ceres_problem.Evaluate(evaluate, nullptr, nullptr, nullptr, &jacobian)) return;
+  const int n = jacobian.num_cols;
+  Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(n, n);
+  for (int row = 0; row < jacobian.num_rows; ++row)
+    for (int a = jacobian.rows[row]; a < jacobian.rows[row + 1]; ++a)
+      for (int b = a; b < jacobian.rows[row + 1]; ++b) {
+        const double product = jacobian.values[a] * jacobian.values[b];
+        normal(jacobian.cols[a], jacobian.cols[b]) += product;
+        if (jacobian.cols[a] != jacobian.cols[b])
+          normal(jacobian.cols[b], jacobian.cols[a]) += product;
+      }
+  // Scaled to unit diagonal first: radians, metres and pixels differ by orders of magnitude.
+  const Eigen::VectorXd scale = normal.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
+  const Eigen::MatrixXd scaled = scale.asDiagonal() * normal * scale.asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(scaled);
+  if (eigen.info() != Eigen::Success ||
+      !(eigen.eigenvalues()(0) > 1e-12 * eigen.eigenvalues()(n - 1)))
+    return;
+  const Eigen::MatrixXd inverse = scale.asDiagonal() * eigen.eigenvectors() *
+                                  eigen.eigenvalues().cwiseInverse().asDiagonal() *
+                                  eigen.eigenvectors().transpose() * scale.asDiagonal();
+  const int degrees_of_freedom = jacobian.num_rows - n;
+  if (degrees_of_freedom < 1) return;
+  const double variance = 2.0 * cost / degrees_of_freedom;
+  // Columns 6… are the camera's fx, fy, cx, cy, or fx, cx, cy with fy held (tied to fx).
+  const int fx = 6, fy = camera_aspect > 0.0 ? -1 : 7, cx = fy < 0 ? 7 : 8, cy = cx + 1;
+  camera_sigma[0] = std::sqrt(variance * inverse(fx, fx));
+  camera_sigma[1] =
+      fy < 0 ? camera_aspect * camera_sigma[0] : std::sqrt(variance * inverse(fy, fy));
+  camera_sigma[2] = std::sqrt(variance * inverse(cx, cx));
+  camera_sigma[3] = std::sqrt(variance * inverse(cy, cy));
+}
+
+// Projector k alone against the model's planes as the guess puts them in the camera: the seed of
+// its intrinsics and pose. False (with `failure`) when its own calibration fails.
+bool SeedProjector(const RoomCalibrationOptions& options, const RoomModel& model, const RoomCalibrationProblem& problem,
+                   int k, const std::vector<Correspondence>& correspondences,
+                   const Eigen::Isometry3d& room_from_camera_guess, ProjectorState* projector,
+                   RoomProjectorSummary* projector_summary, std::string* failure) {
+  const Eigen::Isometry3d cam_from_room_guess = room_from_camera_guess.inverse();
+  ProjectorCalibrationProblem seed_problem;
+  seed_problem.camera_lens_model = problem.camera_lens_model;
+  seed_problem.camera_intrinsics = problem.camera_intrinsics;
+  seed_problem.projector_width = problem.projectors[k].width;
+  seed_problem.projector_height = problem.projectors[k].height;
+  for (const ModelFacet& facet : model.facets()) {
+    PlaneInCam plane;
+    plane.normal = cam_from_room_guess.linear() * facet.normal;
+    plane.offset = facet.offset + facet.normal.dot(room_from_camera_guess.translation());
+    seed_problem.planes.push_back(plane);
+  }
+  const ProjectorObservations& p = problem.projectors[k];
+  for (const Correspondence& c : correspondences)
+    if (c.facet >= 0) seed_problem.correspondences.push_back({c.camera_pixel, c.observed, c.facet});
+  ProjectorCalibrationOptions seed_options;
+  seed_options.refine_distortion = options.refine_distortion;
+  seed_options.loss_scale = options.loss_scale;
+  seed_options.outlier_threshold = options.outlier_threshold;
+  seed_options.max_iterations = options.max_iterations;
+  seed_options.min_correspondences = options.min_correspondences;
+  ProjectorCalibration seed;
+  ProjectorCalibrationSummary seed_summary;
+  if (!CalibrateProjector(seed_options, seed_problem, &seed, &seed_summary)) {
+    *failure = "projector '" + p.name + "': " + seed_summary.BriefReport();
+    return false;
+  }
+  projector_summary->seed_rms = seed_summary.rms;
+  for (int i = 0; i < 4; ++i) projector->intrinsics[i] = seed.intrinsics[i];
+  if (seed.intrinsics.size() >= 6) {
+    projector->intrinsics[4] = seed.intrinsics[4];
+    projector->intrinsics[5] = seed.intrinsics[5];
+  }
+  projector->proj_from_room = PoseBlock(seed.proj_from_cam * cam_from_room_guess);
+  return true;
+}
+
+// Correspondences of one projector on a facet (and inliers only when asked).
+int CountPoints(const std::vector<Correspondence>& correspondences, bool inliers_only) {
+  int n = 0;
+  for (const Correspondence& c : correspondences)
+    if (c.facet >= 0 && (!inliers_only || c.inlier)) ++n;
+  return n;
+}
+
+// The solve's results: the calibration (camera pose and lens, every projector's model) and the
+// per-projector residuals. False (with `failure`) where a value is not finite.
+bool CollectRoomResults(const RoomCalibrationOptions& options, const RoomModel& model,
+                        const RoomCalibrationProblem& problem, const PoseBlock& camera,
+                        const std::vector<double>& camera_intrinsics, const std::vector<ProjectorState>& projectors,
+                        const std::vector<std::vector<Correspondence>>& correspondences, RoomCalibration* calibration,
+                        RoomCalibrationSummary* summary, std::string* failure) {
+  const int projector_count = static_cast<int>(projectors.size());
+  *calibration = RoomCalibration();
+  calibration->room_from_camera = camera.Pose();
+  calibration->camera_lens_model = problem.camera_lens_model;
+  calibration->camera_intrinsics = camera_intrinsics;
+  for (int i = 0; i < 4; ++i)
+    summary->camera_intrinsics_moved[i] = camera_intrinsics[i] - problem.camera_intrinsics[i];
+  for (int k = 0; k < projector_count; ++k) {
+    const ProjectorState& state = projectors[k];
+    RoomProjector out;
+    out.name = problem.projectors[k].name;
+    out.width = problem.projectors[k].width;
+    out.height = problem.projectors[k].height;
+    out.intrinsics.assign(state.intrinsics, state.intrinsics + 4);
+    if (options.refine_distortion) {
+      out.lens_model = "LENSMODEL_OPENCV4";
+      out.intrinsics.insert(out.intrinsics.end(),
+                            {state.intrinsics[4], state.intrinsics[5], 0.0, 0.0});
+    } else {
+      out.lens_model = "LENSMODEL_PINHOLE";
+    }
+    out.proj_from_room = state.proj_from_room.Pose();
+    for (const double value : out.intrinsics)
+      if (!std::isfinite(value)) {
+        *failure = "NaN";
+        return false;
+      }
+    if (!state.proj_from_room.Finite()) {
+      *failure = "non-finite pose";
+      return false;
+    }
+    calibration->projectors.push_back(out);
+
+    RoomProjectorSummary& s = summary->projectors[k];
+    s.points = CountPoints(correspondences[k], false);
+    s.outliers = s.points - CountPoints(correspondences[k], true);
+    double sq = 0.0;
+    int n = 0;
+    for (const Correspondence& c : correspondences[k]) {
+      if (c.facet < 0 || !c.inlier) continue;
+      const double norm = Residual(c, model.facets()[c.facet], camera, state).norm();
+      sq += norm * norm;
+      ++n;
+      s.max_norm = std::max(s.max_norm, norm);
+    }
+    s.rms = n ? std::sqrt(sq / (2.0 * n)) : 0.0;
+  }
+  return true;
+}
+
+}  // namespace
+
+bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model,
+                   const RoomCalibrationProblem& problem,
+                   const Eigen::Isometry3d& room_from_camera_guess, RoomCalibration* calibration,
+                   RoomCalibrationSummary* summary) {
+  const auto start = std::chrono::steady_clock::now();
+  CheckRoomProblem(options, problem);
   const int projector_count = static_cast<int>(problem.projectors.size());
   *summary = RoomCalibrationSummary();
   summary->projectors.resize(projector_count);
@@ -421,63 +608,18 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
       options.keep_camera_aspect_ratio ? camera_intrinsics[1] / camera_intrinsics[0] : 0.0;
 
   // Camera rays at the problem's lens; re-computed after every solve when the lens is refined.
-  std::vector<std::vector<Correspondence>> correspondences(projector_count);
-  for (int k = 0; k < projector_count; ++k) {
-    const ProjectorObservations& p = problem.projectors[k];
-    summary->projectors[k].correspondences = static_cast<int>(p.camera_pixels.size());
-    const size_t stride = std::max<size_t>(
-        1, (p.camera_pixels.size() + options.max_correspondences - 1) / options.max_correspondences);
-    for (size_t i = 0; i < p.camera_pixels.size(); i += stride) {
-      Correspondence c;
-      if (!p.camera_pixels[i].allFinite() || !p.projector_pixels[i].allFinite() ||
-          !UnprojectCameraPixel(problem.camera_lens_model, problem.camera_intrinsics,
-                                p.camera_pixels[i], &c.ray_in_cam))
-        continue;
-      c.camera_pixel = p.camera_pixels[i];
-      c.observed = p.projector_pixels[i];
-      correspondences[k].push_back(c);
-    }
-    summary->projectors[k].used = static_cast<int>(correspondences[k].size());
-  }
+  std::vector<std::vector<Correspondence>> correspondences = SampleCorrespondences(options, problem, summary);
   PoseBlock camera(room_from_camera_guess);
   Associate(model, camera, &correspondences);
 
   // Seed: each projector alone against the model's planes as the guess puts them in the camera.
-  const Eigen::Isometry3d cam_from_room_guess = room_from_camera_guess.inverse();
   std::vector<ProjectorState> projectors(projector_count);
   for (int k = 0; k < projector_count; ++k) {
-    ProjectorCalibrationProblem seed_problem;
-    seed_problem.camera_lens_model = problem.camera_lens_model;
-    seed_problem.camera_intrinsics = problem.camera_intrinsics;
-    seed_problem.projector_width = problem.projectors[k].width;
-    seed_problem.projector_height = problem.projectors[k].height;
-    for (const ModelFacet& facet : model.facets()) {
-      PlaneInCam plane;
-      plane.normal = cam_from_room_guess.linear() * facet.normal;
-      plane.offset = facet.offset + facet.normal.dot(room_from_camera_guess.translation());
-      seed_problem.planes.push_back(plane);
+    std::string failure;
+    if (!SeedProjector(options, model, problem, k, correspondences[k], room_from_camera_guess, &projectors[k],
+                       &summary->projectors[k], &failure)) {
+      return finish(RoomCalibrationSummary::kSeedFailed, failure);
     }
-    const ProjectorObservations& p = problem.projectors[k];
-    for (const Correspondence& c : correspondences[k])
-      if (c.facet >= 0) seed_problem.correspondences.push_back({c.camera_pixel, c.observed, c.facet});
-    ProjectorCalibrationOptions seed_options;
-    seed_options.refine_distortion = options.refine_distortion;
-    seed_options.loss_scale = options.loss_scale;
-    seed_options.outlier_threshold = options.outlier_threshold;
-    seed_options.max_iterations = options.max_iterations;
-    seed_options.min_correspondences = options.min_correspondences;
-    ProjectorCalibration seed;
-    ProjectorCalibrationSummary seed_summary;
-    if (!CalibrateProjector(seed_options, seed_problem, &seed, &seed_summary))
-      return finish(RoomCalibrationSummary::kSeedFailed,
-                    "projector '" + p.name + "': " + seed_summary.BriefReport());
-    summary->projectors[k].seed_rms = seed_summary.rms;
-    for (int i = 0; i < 4; ++i) projectors[k].intrinsics[i] = seed.intrinsics[i];
-    if (seed.intrinsics.size() >= 6) {
-      projectors[k].intrinsics[4] = seed.intrinsics[4];
-      projectors[k].intrinsics[5] = seed.intrinsics[5];
-    }
-    projectors[k].proj_from_room = PoseBlock(seed.proj_from_cam * cam_from_room_guess);
   }
 
   // With the camera's lens refined: the rays at the current fx, fy, cx, cy (a ray whose
@@ -493,48 +635,6 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
           c.ray_in_cam = ray;
       }
   };
-  // 1σ of the camera's fx, fy, cx, cy from (JᵀJ)⁻¹ s² at the solution of `ceres_problem`, whose
-  // parameter blocks are listed in `blocks` with the camera's intrinsics third.
-  auto estimate_camera_sigma = [&](ceres::Problem& ceres_problem,
-                                   const std::vector<double*>& blocks, double cost) {
-    ceres::Problem::EvaluateOptions evaluate;
-    evaluate.parameter_blocks = blocks;
-    evaluate.apply_loss_function = false;
-    ceres::CRSMatrix jacobian;
-    for (double& sigma : summary->camera_sigma) sigma = std::numeric_limits<double>::quiet_NaN();
-    if (!ceres_problem.Evaluate(evaluate, nullptr, nullptr, nullptr, &jacobian)) return;
-    const int n = jacobian.num_cols;
-    Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(n, n);
-    for (int row = 0; row < jacobian.num_rows; ++row)
-      for (int a = jacobian.rows[row]; a < jacobian.rows[row + 1]; ++a)
-        for (int b = a; b < jacobian.rows[row + 1]; ++b) {
-          const double product = jacobian.values[a] * jacobian.values[b];
-          normal(jacobian.cols[a], jacobian.cols[b]) += product;
-          if (jacobian.cols[a] != jacobian.cols[b])
-            normal(jacobian.cols[b], jacobian.cols[a]) += product;
-        }
-    // Scaled to unit diagonal first: radians, metres and pixels differ by orders of magnitude.
-    const Eigen::VectorXd scale = normal.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
-    const Eigen::MatrixXd scaled = scale.asDiagonal() * normal * scale.asDiagonal();
-    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(scaled);
-    if (eigen.info() != Eigen::Success ||
-        !(eigen.eigenvalues()(0) > 1e-12 * eigen.eigenvalues()(n - 1)))
-      return;
-    const Eigen::MatrixXd inverse = scale.asDiagonal() * eigen.eigenvectors() *
-                                    eigen.eigenvalues().cwiseInverse().asDiagonal() *
-                                    eigen.eigenvectors().transpose() * scale.asDiagonal();
-    const int degrees_of_freedom = jacobian.num_rows - n;
-    if (degrees_of_freedom < 1) return;
-    const double variance = 2.0 * cost / degrees_of_freedom;
-    // Columns 6… are the camera's fx, fy, cx, cy, or fx, cx, cy with fy held (tied to fx).
-    const int fx = 6, fy = camera_aspect > 0.0 ? -1 : 7, cx = fy < 0 ? 7 : 8, cy = cx + 1;
-    summary->camera_sigma[0] = std::sqrt(variance * inverse(fx, fx));
-    summary->camera_sigma[1] =
-        fy < 0 ? camera_aspect * summary->camera_sigma[0] : std::sqrt(variance * inverse(fy, fy));
-    summary->camera_sigma[2] = std::sqrt(variance * inverse(cx, cx));
-    summary->camera_sigma[3] = std::sqrt(variance * inverse(cy, cy));
-  };
-
   // Joint solves: robust until the facets settle, then least squares on the inliers.
   auto solve = [&](bool robust, ceres::Solver::Summary* ceres_summary) {
     ceres::Problem ceres_problem;
@@ -575,20 +675,16 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
     bool usable = ceres_summary->IsSolutionUsable() && camera.Finite();
     for (const double value : camera_k) usable = usable && std::isfinite(value) && value != 0.0;
     if (usable && options.refine_camera_intrinsics) {
-      if (!robust) estimate_camera_sigma(ceres_problem, blocks, ceres_summary->final_cost);
+      if (!robust) {
+        EstimateCameraSigma(ceres_problem, blocks, ceres_summary->final_cost, camera_aspect, summary->camera_sigma);
+      }
       update_rays();
     }
     return usable;
   };
-  auto count_points = [&](int k, bool inliers_only) {
-    int n = 0;
-    for (const Correspondence& c : correspondences[k])
-      if (c.facet >= 0 && (!inliers_only || c.inlier)) ++n;
-    return n;
-  };
   auto check_counts = [&](bool inliers_only) {
     for (int k = 0; k < projector_count; ++k)
-      if (count_points(k, inliers_only) < options.min_correspondences) return k;
+      if (CountPoints(correspondences[k], inliers_only) < options.min_correspondences) return k;
     return -1;
   };
 
@@ -622,46 +718,10 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
   }
   settled = settled && !changed;
 
-  *calibration = RoomCalibration();
-  calibration->room_from_camera = camera.Pose();
-  calibration->camera_lens_model = problem.camera_lens_model;
-  calibration->camera_intrinsics = camera_intrinsics;
-  for (int i = 0; i < 4; ++i)
-    summary->camera_intrinsics_moved[i] = camera_intrinsics[i] - problem.camera_intrinsics[i];
-  for (int k = 0; k < projector_count; ++k) {
-    const ProjectorState& state = projectors[k];
-    RoomProjector out;
-    out.name = problem.projectors[k].name;
-    out.width = problem.projectors[k].width;
-    out.height = problem.projectors[k].height;
-    out.intrinsics.assign(state.intrinsics, state.intrinsics + 4);
-    if (options.refine_distortion) {
-      out.lens_model = "LENSMODEL_OPENCV4";
-      out.intrinsics.insert(out.intrinsics.end(),
-                            {state.intrinsics[4], state.intrinsics[5], 0.0, 0.0});
-    } else {
-      out.lens_model = "LENSMODEL_PINHOLE";
-    }
-    out.proj_from_room = state.proj_from_room.Pose();
-    for (const double value : out.intrinsics)
-      if (!std::isfinite(value)) return finish(RoomCalibrationSummary::kSolverFailed, "NaN");
-    if (!state.proj_from_room.Finite())
-      return finish(RoomCalibrationSummary::kSolverFailed, "non-finite pose");
-    calibration->projectors.push_back(out);
-
-    RoomProjectorSummary& s = summary->projectors[k];
-    s.points = count_points(k, false);
-    s.outliers = s.points - count_points(k, true);
-    double sq = 0.0;
-    int n = 0;
-    for (const Correspondence& c : correspondences[k]) {
-      if (c.facet < 0 || !c.inlier) continue;
-      const double norm = Residual(c, model.facets()[c.facet], camera, state).norm();
-      sq += norm * norm;
-      ++n;
-      s.max_norm = std::max(s.max_norm, norm);
-    }
-    s.rms = n ? std::sqrt(sq / (2.0 * n)) : 0.0;
+  std::string failure;
+  if (!CollectRoomResults(options, model, problem, camera, camera_intrinsics, projectors, correspondences,
+                          calibration, summary, &failure)) {
+    return finish(RoomCalibrationSummary::kSolverFailed, failure);
   }
   summary->camera_moved_mm =
       1e3 * (calibration->room_from_camera.translation() - room_from_camera_guess.translation())
