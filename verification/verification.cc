@@ -314,7 +314,8 @@ bool VerificationOptions::Check(std::string* why) const {
 nlohmann::json VerificationSummary::Json() const {
   nlohmann::json list = nlohmann::json::array();
   for (const VerificationIteration& it : iterations) list.push_back(IterationJson(it));
-  nlohmann::json json = {{"command", "verify"},
+  nlohmann::json json = {{"format_version", kVerificationFormatVersion},
+                         {"command", "verify"},
                          {"iterations", list},
                          {"best", best},
                          {"complete", complete},

@@ -114,6 +114,9 @@ struct VerificationIteration {
   cv::Mat photo, predicted, delta_e76, model_delta_e76;
 };
 
+// The format version of a verification run's result.json (docs/verification.md).
+constexpr int kVerificationFormatVersion = 1;
+
 struct VerificationSummary {
   std::vector<VerificationIteration> iterations;
   int best = -1;            // index of the iteration with the lowest measured mean ΔE76

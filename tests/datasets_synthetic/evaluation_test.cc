@@ -1,4 +1,4 @@
-// The lowest mean ΔE bound of procam evaluate (apps/evaluation.h).
+// The lowest mean ΔE bound of procam evaluate (datasets_synthetic/evaluation.h).
 #include "datasets_synthetic/evaluation.h"
 
 #include <gtest/gtest.h>

@@ -1,5 +1,5 @@
 // The rig directory as compensate and project consume it (--rig), and photometry in the
-// scene's units (apps/rig_stage.h, `calibrate photometric --scene`), against the synthetic
+// scene's units (calibration/photometric_transfer.h, `calibrate photometric --scene`), against the synthetic
 // tiny box's ground truth:
 //   - closed loop: a rig directory written from the scene's TRUE projectors gives the same
 //     compensation and projector images as the scene's own projectors;
