@@ -41,7 +41,8 @@ ParsedCameraModel ParseCameraModel(const std::string& text) {
   FILE* saved = stderr;
   FILE* null = std::fopen("/dev/null", "w");
   if (null) stderr = null;
-  ParsedCameraModel model(mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
+  ParsedCameraModel model(
+      mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
   if (null) {
     stderr = saved;
     std::fclose(null);
@@ -55,7 +56,8 @@ CameraModel ReadCameraModelFile(const std::filesystem::path& path) {
   const std::string file = path.string();
   if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
   const ParsedCameraModel parsed = ParseCameraModel(ReadFile(path));
-  if (!parsed) throw IoError(file + ": not a valid mrcal .cameramodel (libmrcal could not parse it)");
+  if (!parsed)
+    throw IoError(file + ": not a valid mrcal .cameramodel (libmrcal could not parse it)");
   CameraModel model;
   char name[1024];
   if (!mrcal_lensmodel_name(name, sizeof(name), &parsed->lensmodel)) {
@@ -83,7 +85,7 @@ std::string CameraModelText(const CameraModel& model, const std::string& comment
 }
 
 void WriteCameraModelFile(const std::filesystem::path& path, const CameraModel& model,
-                      const std::string& comment) {
+                          const std::string& comment) {
   const std::string text = CameraModelText(model, comment);
   if (!ParseCameraModel(text)) {
     throw IoError(path.string() + ": libmrcal cannot parse the model text procam made");
@@ -139,7 +141,8 @@ LensModel::LensModel(const std::string& name, std::vector<double> intrinsics)
 
 int LensModel::ParameterCount(const std::string& name) {
   mrcal_lensmodel_t model;
-  if (!mrcal_lensmodel_from_name(&model, name.c_str()) || !mrcal_lensmodel_type_is_valid(model.type)) {
+  if (!mrcal_lensmodel_from_name(&model, name.c_str()) ||
+      !mrcal_lensmodel_type_is_valid(model.type)) {
     throw std::invalid_argument("unknown mrcal lens model '" + name + "'");
   }
   return mrcal_lensmodel_num_params(&model);

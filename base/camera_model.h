@@ -8,14 +8,13 @@
 // Pixel convention (mrcal's and OpenCV's): the CENTRE of the top-left pixel is (0, 0), x to the
 // right, y down. Camera frame: x right, y down, z forward (out of the lens), metres.
 
+#include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <array>
 #include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <Eigen/Geometry>
 
 #include "base/vector.h"
 
@@ -84,10 +83,9 @@ class LensModel {
 // (x, y): radial 1 + k1 r² + k2 r⁴ plus the tangential terms. `T` and the coefficients' type `K`
 // may be Ceres Jets. With `jacobian` (row-major 2×2, d(distorted)/d(x, y)) also its derivative.
 template <typename T, typename K>
-void DistortOpenCv4(const K* k1_k2_p1_p2, const T& x, const T& y, T* distorted_x,
-                    T* distorted_y, T* jacobian = nullptr) {
-  const K &k1 = k1_k2_p1_p2[0], &k2 = k1_k2_p1_p2[1], &p1 = k1_k2_p1_p2[2],
-          &p2 = k1_k2_p1_p2[3];
+void DistortOpenCv4(const K* k1_k2_p1_p2, const T& x, const T& y, T* distorted_x, T* distorted_y,
+                    T* jacobian = nullptr) {
+  const K &k1 = k1_k2_p1_p2[0], &k2 = k1_k2_p1_p2[1], &p1 = k1_k2_p1_p2[2], &p2 = k1_k2_p1_p2[3];
   const T r2 = x * x + y * y;
   const T radial = T(1.0) + k1 * r2 + k2 * r2 * r2;
   *distorted_x = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);

@@ -1,9 +1,8 @@
 #include "base/image_io.h"
 
+#include <opencv2/imgcodecs.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/imgcodecs.hpp>
 
 #include "base/io.h"
 

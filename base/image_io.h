@@ -2,7 +2,6 @@
 // Pictures procam writes: 8-bit or 16-bit PNG through OpenCV, atomically (io.h).
 
 #include <filesystem>
-
 #include <opencv2/core/mat.hpp>
 
 namespace procam {

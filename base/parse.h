@@ -2,11 +2,10 @@
 // Values people type into options and files beyond what JSON and the option parser check:
 // comma-separated numbers, one or three positive numbers for R, G, B.
 
+#include <Eigen/Core>
 #include <cstddef>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 namespace procam {
 

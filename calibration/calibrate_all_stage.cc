@@ -1,12 +1,12 @@
 #include "calibration/calibrate_all_stage.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <stdexcept>
-
-#include <fmt/format.h>
-#include <nlohmann/json.hpp>
 
 #include "base/io.h"
 #include "calibration/camera_stage.h"
@@ -52,8 +52,9 @@ RigPlan Plan(const CalibrateAllOptions& args) {
   const bool simulated = plan.simulated.has_value();
   const size_t count = simulated ? plan.simulated->displays.size() : args.display_names.size();
   if (count == 0) {
-    throw std::invalid_argument("--display: a real rig needs one per projector, e.g. --display "
-                                "glfw:1,glfw:2 (procam show --list)");
+    throw std::invalid_argument(
+        "--display: a real rig needs one per projector, e.g. --display "
+        "glfw:1,glfw:2 (procam show --list)");
   }
   if (simulated && !args.display_names.empty()) {
     throw std::invalid_argument("--display: a synthetic camera looks at its own projectors");
@@ -61,7 +62,8 @@ RigPlan Plan(const CalibrateAllOptions& args) {
   plan.names = args.names;
   if (plan.names.empty()) {
     for (size_t k = 0; k < count; ++k) {
-      plan.names.push_back(simulated ? plan.simulated->projector_names[k] : fmt::format("projector{}", k));
+      plan.names.push_back(simulated ? plan.simulated->projector_names[k]
+                                     : fmt::format("projector{}", k));
     }
   }
   if (plan.names.size() != count) {
@@ -70,7 +72,8 @@ RigPlan Plan(const CalibrateAllOptions& args) {
   }
   plan.scene = args.scene;
   if (plan.scene.empty()) {
-    if (!simulated) throw std::invalid_argument("--scene: required for a real rig (the room model)");
+    if (!simulated)
+      throw std::invalid_argument("--scene: required for a real rig (the room model)");
     plan.scene = plan.simulated->scene;
   }
   plan.patches = args.patches > 0 ? args.patches : simulated ? plan.simulated->patches : 0;
@@ -89,7 +92,8 @@ RigPlan Plan(const CalibrateAllOptions& args) {
   plan.captures = args.out / "captures";
   if (!simulated) {  // checked: now the monitors are opened
     if (!args.open_display) throw std::invalid_argument("open_display: required for a real rig");
-    for (const std::string& name : args.display_names) plan.displays.push_back(args.open_display(name));
+    for (const std::string& name : args.display_names)
+      plan.displays.push_back(args.open_display(name));
   } else {
     plan.displays = plan.simulated->displays;
   }
@@ -102,7 +106,8 @@ void CalibrateCameraStep(const CalibrateAllOptions& args, const RigPlan& plan) {
   if (!args.camera_model.empty()) {
     std::filesystem::copy_file(args.camera_model, args.out / "camera.cameramodel",
                                std::filesystem::copy_options::overwrite_existing);
-    UpdateRigJson(args.out, [](nlohmann::json& rig) { rig["camera"]["model"] = "camera.cameramodel"; });
+    UpdateRigJson(args.out,
+                  [](nlohmann::json& rig) { rig["camera"]["model"] = "camera.cameramodel"; });
     Report(args.progress, "camera model from " + args.camera_model.string());
     return;
   }
@@ -114,19 +119,22 @@ void CalibrateCameraStep(const CalibrateAllOptions& args, const RigPlan& plan) {
   if (camera.images.empty()) {  // a simulated camera photographs a simulated board
     camera.board.square_size = 0.06;
     camera.images = plan.captures / "chessboard";
-    const int photos = plan.simulated->render_chessboard(camera.board.corners_x, camera.board.corners_y,
-                                                         camera.board.square_size, camera.images);
-    Report(args.progress, fmt::format("rendered {} chessboard photos of the synthetic camera into {}", photos,
-                                      camera.images.string()));
+    const int photos = plan.simulated->render_chessboard(
+        camera.board.corners_x, camera.board.corners_y, camera.board.square_size, camera.images);
+    Report(args.progress,
+           fmt::format("rendered {} chessboard photos of the synthetic camera into {}", photos,
+                       camera.images.string()));
   }
-  ShowCommand(args.progress, {"calibrate", "camera", camera.images.string(), "--out", args.out.string(), "--corners",
-                              fmt::format("{}x{}", camera.board.corners_x, camera.board.corners_y), "--square",
-                              fmt::format("{}", camera.board.square_size)});
+  ShowCommand(args.progress,
+              {"calibrate", "camera", camera.images.string(), "--out", args.out.string(),
+               "--corners", fmt::format("{}x{}", camera.board.corners_x, camera.board.corners_y),
+               "--square", fmt::format("{}", camera.board.square_size)});
   RunCameraStage(camera);
 }
 
 // 2. Captures, per projector: structured light, then flat fields.
-std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args, const RigPlan& plan) {
+std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args,
+                                               const RigPlan& plan) {
   Report(args.progress, "\n== 2/4 structured light and flat fields, per projector");
   std::vector<std::filesystem::path> sessions;
   for (size_t k = 0; k < plan.names.size(); ++k) {
@@ -136,7 +144,8 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args, 
     capture.sequencer.settle_ms = args.settle_ms;
     capture.sequencer.exposures_us = args.exposures_us;
     capture.progress = args.progress;
-    std::vector<std::string> common = {"--camera", args.camera, "--frames", std::to_string(args.frames),
+    std::vector<std::string> common = {"--camera",    args.camera,
+                                       "--frames",    std::to_string(args.frames),
                                        "--settle-ms", fmt::format("{}", args.settle_ms)};
     if (plan.simulated) {
       capture.projector = static_cast<int>(k);
@@ -152,7 +161,8 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args, 
     }
     capture.sequence = "structured_light";
     capture.out = plan.captures / ("structured_light_" + plan.names[k]);
-    std::vector<std::string> command = {"capture", "--sequence", "structured_light", "--out", capture.out.string()};
+    std::vector<std::string> command = {"capture", "--sequence", "structured_light", "--out",
+                                        capture.out.string()};
     command.insert(command.end(), common.begin(), common.end());
     ShowCommand(args.progress, command);
     Report(args.progress, CaptureLine(capture, RunCaptureStage(capture)));
@@ -164,8 +174,8 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args, 
     capture.out = plan.captures / ("photometric_" + plan.names[k]);
     std::vector<std::string> levels;
     for (int level : args.levels) levels.push_back(std::to_string(level));
-    command = {"capture", "--sequence", "photometric", "--levels", Join(levels, ","), "--channels", "rgb", "--out",
-               capture.out.string()};
+    command = {"capture",    "--sequence", "photometric", "--levels",          Join(levels, ","),
+               "--channels", "rgb",        "--out",       capture.out.string()};
     command.insert(command.end(), common.begin(), common.end());
     ShowCommand(args.progress, command);
     Report(args.progress, CaptureLine(capture, RunCaptureStage(capture)));
@@ -189,7 +199,8 @@ void ProjectorsStep(const CalibrateAllOptions& args, const RigPlan& plan,
   projectors.progress = args.progress;
   std::vector<std::string> command = {"calibrate", "projectors"};
   for (const std::filesystem::path& session : sessions) command.push_back(session.string());
-  command.insert(command.end(), {"--scene", plan.scene, "--out", args.out.string(), "--names", Join(plan.names, ",")});
+  command.insert(command.end(), {"--scene", plan.scene, "--out", args.out.string(), "--names",
+                                 Join(plan.names, ",")});
   std::string guess = args.camera_guess;
   if (guess.empty() && plan.simulated) guess = plan.simulated->camera_guess;
   if (!guess.empty()) {
@@ -213,10 +224,19 @@ void PhotometryStep(const CalibrateAllOptions& args, const RigPlan& plan) {
     photometric.camera_scale = camera_scale;
     photometric.patches = plan.patches;
     photometric.progress = args.progress;
-    std::vector<std::string> command = {"calibrate", "photometric", photometric.session.string(), "--out",
-                                        args.out.string(), "--projector", name, "--scene", plan.scene,
-                                        "--camera-scale", camera_scale};
-    if (plan.patches > 0) command.insert(command.end(), {"--patches", std::to_string(plan.patches)});
+    std::vector<std::string> command = {"calibrate",
+                                        "photometric",
+                                        photometric.session.string(),
+                                        "--out",
+                                        args.out.string(),
+                                        "--projector",
+                                        name,
+                                        "--scene",
+                                        plan.scene,
+                                        "--camera-scale",
+                                        camera_scale};
+    if (plan.patches > 0)
+      command.insert(command.end(), {"--patches", std::to_string(plan.patches)});
     ShowCommand(args.progress, command);
     RunPhotometricStage(photometric);
   }
@@ -226,7 +246,8 @@ void PhotometryStep(const CalibrateAllOptions& args, const RigPlan& plan) {
 // fitted black is the sum of all of them there. Separates them (SeparateBlackLevels) and moves
 // each max by the same amount (the fit's max − black is unbiased), in rig.json and in a
 // `black_levels` section of result.json.
-void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector<std::string>& names,
+void SeparateProjectorBlacks(const std::filesystem::path& out,
+                             const std::vector<std::string>& names,
                              const std::filesystem::path& captures, const std::string& scene,
                              int patches, const ProgressCallback& progress) {
   Report(progress, "\n== black levels, jointly");
@@ -244,7 +265,8 @@ void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector
   for (const std::string& name : names) {
     const auto projector = std::find_if(rig.projectors.begin(), rig.projectors.end(),
                                         [&](const Projector& p) { return p.name == name; });
-    if (projector == rig.projectors.end()) throw IoError((out / "rig.json").string() + ": no projector " + name);
+    if (projector == rig.projectors.end())
+      throw IoError((out / "rig.json").string() + ": no projector " + name);
     // Written by step 4 for every projector; .at() names what is missing otherwise.
     Eigen::Vector3d scale;
     nlohmann::json entry;
@@ -259,7 +281,8 @@ void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector
     camera_black = entry.value("camera_black", 0.0);
     const CameraPixelLighting lighting =
         LightCameraPixels(stage.scene, stage.patches.fine, projector->geometry, camera);
-    const UnitLightModel model = ModelUnitLight(stage.patches.fine, stage.form_factors, UnitLightExitance(stage.patches.fine, *projector));
+    const UnitLightModel model = ModelUnitLight(stage.patches.fine, stage.form_factors,
+                                                UnitLightExitance(stage.patches.fine, *projector));
     transfers.push_back(PhotometricTransfer(lighting, stage.patches.fine, model, scale));
     // The session's black fields (drive 0 on any channel): every projector dark.
     const CaptureSessionData session = CaptureSessionData::Load(captures / ("photometric_" + name));
@@ -268,8 +291,10 @@ void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector
       return;
     }
     for (int p = 0; p < session.pattern_count(); ++p) {
-      const nlohmann::json& info = session.manifest()["patterns"][p].value("info", nlohmann::json());
-      if (!info.is_object() || info.value("kind", "") != "flat" || info.value("level", -1) != 0) continue;
+      const nlohmann::json& info =
+          session.manifest()["patterns"][p].value("info", nlohmann::json());
+      if (!info.is_object() || info.value("kind", "") != "flat" || info.value("level", -1) != 0)
+        continue;
       const cv::Mat mean = session.Mean(p, 0);
       if (black_field.empty()) black_field = cv::Mat::zeros(mean.size(), CV_32FC3);
       black_field += mean;
@@ -281,7 +306,8 @@ void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector
     return;
   }
   black_field /= black_fields;
-  const std::vector<Eigen::Vector3d> black = SeparateBlackLevels(transfers, black_field, camera_black);
+  const std::vector<Eigen::Vector3d> black =
+      SeparateBlackLevels(transfers, black_field, camera_black);
   nlohmann::json report = nlohmann::json::object();
   UpdateRigJson(out, [&](nlohmann::json& json) {
     for (size_t j = 0; j < names.size(); ++j) {
@@ -294,19 +320,23 @@ void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector
         new_max.push_back(fitted_max[c].get<double>() - shift);
       }
       report[names[j]] = {{"fitted_black", fitted_black}, {"black", new_black}, {"max", new_max}};
-      Report(progress, fmt::format("{}: black ({:.5f}, {:.5f}, {:.5f}) (fitted alone: {:.5f}, {:.5f}, {:.5f})", names[j],
-                                   new_black[0].get<double>(), new_black[1].get<double>(), new_black[2].get<double>(),
-                                   fitted_black[0].get<double>(), fitted_black[1].get<double>(),
-                                   fitted_black[2].get<double>()));
+      Report(
+          progress,
+          fmt::format("{}: black ({:.5f}, {:.5f}, {:.5f}) (fitted alone: {:.5f}, {:.5f}, {:.5f})",
+                      names[j], new_black[0].get<double>(), new_black[1].get<double>(),
+                      new_black[2].get<double>(), fitted_black[0].get<double>(),
+                      fitted_black[1].get<double>(), fitted_black[2].get<double>()));
       entry["black"] = new_black;
       entry["max"] = new_max;
     }
   });
-  UpdateRigResult(out, {"black_levels"},
-                  {{"what", "each projector's black separated from the black fields (all projectors dark) "
-                            "by least squares over the projectors' transfers; max moved by the same amount"},
-                   {"black_fields", black_fields},
-                   {"projectors", report}});
+  UpdateRigResult(
+      out, {"black_levels"},
+      {{"what",
+        "each projector's black separated from the black fields (all projectors dark) "
+        "by least squares over the projectors' transfers; max moved by the same amount"},
+       {"black_fields", black_fields},
+       {"projectors", report}});
 }
 
 }  // namespace
@@ -314,17 +344,21 @@ void SeparateProjectorBlacks(const std::filesystem::path& out, const std::vector
 void RunCalibrateAll(const CalibrateAllOptions& args) {
   const RigPlan plan = Plan(args);
   std::filesystem::create_directories(plan.captures);
-  Report(args.progress, fmt::format("calibrating {} projector(s) ({}) with camera {} into {}", plan.names.size(),
-                                    Join(plan.names, ", "), args.camera, args.out.string()));
+  Report(args.progress,
+         fmt::format("calibrating {} projector(s) ({}) with camera {} into {}", plan.names.size(),
+                     Join(plan.names, ", "), args.camera, args.out.string()));
   CalibrateCameraStep(args, plan);
   const std::vector<std::filesystem::path> sessions = CaptureStep(args, plan);
   ProjectorsStep(args, plan, sessions);
   PhotometryStep(args, plan);
-  SeparateProjectorBlacks(args.out, plan.names, plan.captures, plan.scene, plan.patches, args.progress);
+  SeparateProjectorBlacks(args.out, plan.names, plan.captures, plan.scene, plan.patches,
+                          args.progress);
   Report(args.progress,
-         fmt::format("\nrig calibrated: {} (rig.json, camera.cameramodel, {}, reflectance.npy); use it "
-                     "with `procam compensate SCENE --rig {}`",
-                     args.out.string(), Join(plan.names, ".cameramodel, ").append(".cameramodel"), args.out.string()));
+         fmt::format(
+             "\nrig calibrated: {} (rig.json, camera.cameramodel, {}, reflectance.npy); use it "
+             "with `procam compensate SCENE --rig {}`",
+             args.out.string(), Join(plan.names, ".cameramodel, ").append(".cameramodel"),
+             args.out.string()));
 }
 
 }  // namespace procam

@@ -1,13 +1,13 @@
 #include "calibration/camera_stage.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
 #include <string>
 #include <vector>
-
-#include <fmt/format.h>
-#include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 
 #include "base/io.h"
 #include "calibration/rig_directory.h"
@@ -27,9 +27,9 @@ std::vector<std::filesystem::path> ChessboardImages(const std::filesystem::path&
   for (const auto& entry : std::filesystem::directory_iterator(folder)) {
     std::string extension = entry.path().extension().string();
     std::transform(extension.begin(), extension.end(), extension.begin(), ::tolower);
-    if (entry.is_regular_file() && (extension == ".png" || extension == ".jpg" ||
-                                    extension == ".jpeg" || extension == ".tif" ||
-                                    extension == ".tiff" || extension == ".bmp")) {
+    if (entry.is_regular_file() &&
+        (extension == ".png" || extension == ".jpg" || extension == ".jpeg" ||
+         extension == ".tif" || extension == ".tiff" || extension == ".bmp")) {
       images.push_back(entry.path());
     }
   }
@@ -69,7 +69,7 @@ CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
     }
   }
   Report(args.progress, fmt::format("chessboard {}x{} found in {} of {} images", board.corners_x,
-                                     board.corners_y, views.size(), views.size() + skipped.size()));
+                                    board.corners_y, views.size(), views.size() + skipped.size()));
 
   CameraStageSummary stage;
   CameraCalibration& calibration = stage.calibration;
@@ -95,12 +95,9 @@ CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
   }
   result["views"] = view_list;
   result["skipped_images"] = skipped;
-  result["residuals"] = {{"rms_px_per_coordinate", summary.rms},
-                         {"rms_norm_px", summary.rms_norm},
-                         {"median_norm_px", summary.median_norm},
-                         {"max_norm_px", summary.max_norm},
-                         {"seed_rms_px", summary.seed_rms},
-                         {"corners", summary.corners},
+  result["residuals"] = {{"rms_px_per_coordinate", summary.rms},  {"rms_norm_px", summary.rms_norm},
+                         {"median_norm_px", summary.median_norm}, {"max_norm_px", summary.max_norm},
+                         {"seed_rms_px", summary.seed_rms},       {"corners", summary.corners},
                          {"outliers", summary.outliers}};
   UpdateRigResult(out, {"camera"}, result);
   Report(args.progress, "wrote " + (out / "camera.cameramodel").string() + " and " +

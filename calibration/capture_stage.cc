@@ -12,7 +12,9 @@
 namespace procam {
 namespace {
 
-std::string SizeText(cv::Size size) { return std::to_string(size.width) + "x" + std::to_string(size.height); }
+std::string SizeText(cv::Size size) {
+  return std::to_string(size.width) + "x" + std::to_string(size.height);
+}
 
 CaptureSequence MakeSequence(const CaptureStageOptions& args, cv::Size projector) {
   if (args.sequence == "graycode") {
@@ -45,7 +47,8 @@ CaptureSequence MakeSequence(const CaptureStageOptions& args, cv::Size projector
     return MakePhotometricSequence(options);
   }
   if (args.sequence != "verify") {
-    throw std::invalid_argument("--sequence: '" + args.sequence + "': graycode, structured_light, photometric or verify");
+    throw std::invalid_argument("--sequence: '" + args.sequence +
+                                "': graycode, structured_light, photometric or verify");
   }
   const std::vector<std::filesystem::path>& images = args.images;
   if (images.empty())
@@ -58,16 +61,19 @@ CaptureSequence MakeSequence(const CaptureStageOptions& args, cv::Size projector
 std::shared_ptr<PatternDisplay> SimulatedProjectorDisplay(const CaptureStageOptions& options,
                                                           const SimulatedCamera& simulated) {
   if (options.display) {
-    throw IoError("display '" + options.display->Name() + "': camera '" + options.camera +
-                  "' photographs the simulated room, whose projectors show the patterns (choose one with "
-                  "--projector)");
+    throw IoError(
+        "display '" + options.display->Name() + "': camera '" + options.camera +
+        "' photographs the simulated room, whose projectors show the patterns (choose one with "
+        "--projector)");
   }
   const int count = static_cast<int>(simulated.displays.size());
   if (options.projector < 0 || options.projector >= count) {
     std::string names;
-    for (const std::string& name : simulated.projector_names) names += (names.empty() ? "" : ", ") + name;
-    throw IoError("--projector " + std::to_string(options.projector) + ": " + simulated.description + " has " +
-                  std::to_string(count) + " projectors (0.." + std::to_string(count - 1) + ": " + names + ")");
+    for (const std::string& name : simulated.projector_names)
+      names += (names.empty() ? "" : ", ") + name;
+    throw IoError("--projector " + std::to_string(options.projector) + ": " +
+                  simulated.description + " has " + std::to_string(count) + " projectors (0.." +
+                  std::to_string(count - 1) + ": " + names + ")");
   }
   const std::shared_ptr<PatternDisplay>& display = simulated.displays[options.projector];
   if (options.projector_size && *options.projector_size != display->Resolution()) {
@@ -106,8 +112,9 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
   if (memory) open_options.scene_view = MakeLoopbackView(memory, loopback);
   std::unique_ptr<Camera> camera = OpenCamera(args.camera, open_options);
   if (camera->Info().backend != "test" && !simulated && output == watched) {
-    Report(args.progress, "warning: display 'memory' shows the patterns nowhere; camera " + camera->Info().uri +
-                              " photographs the room as it is (use --display glfw:N to show them on a projector)");
+    Report(args.progress,
+           "warning: display 'memory' shows the patterns nowhere; camera " + camera->Info().uri +
+               " photographs the room as it is (use --display glfw:N to show them on a projector)");
   }
   if (args.gain >= 0) camera->SetGain(args.gain);
   const CaptureSequence sequence = MakeSequence(args, projector);
@@ -116,8 +123,8 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
   options.directory = args.out;
   options.sequencer = args.sequencer;
   if (!args.camera_response.empty()) {  // a camera that is not linear (procam calibrate response)
-    options.sequencer.hdr.inverse_response =
-        ReadInverseResponse(args.camera_response.string(), IsColour(camera->Settings().pixel_format) ? 3 : 1);
+    options.sequencer.hdr.inverse_response = ReadInverseResponse(
+        args.camera_response.string(), IsColour(camera->Settings().pixel_format) ? 3 : 1);
   }
   const std::filesystem::path result_path = args.out / "result.json";
   CaptureSummary summary;
@@ -125,7 +132,9 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
     summary = RunCaptureSession(options, sequence, *camera, *output);
   } catch (const CaptureFault& fault) {  // the session keeps what was captured: say so, then fail
     nlohmann::json result = CaptureResult(sequence, *camera);
-    result.update({{"manifest", (args.out / "session.json").string()}, {"complete", false}, {"error", fault.what()}});
+    result.update({{"manifest", (args.out / "session.json").string()},
+                   {"complete", false},
+                   {"error", fault.what()}});
     WriteFileAtomically(result_path, result.dump(2) + "\n");
     throw;
   }
@@ -144,8 +153,8 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
 }
 
 std::string CaptureLine(const CaptureStageOptions& options, const CaptureSummary& summary) {
-  return "capture " + options.sequence + " with " + summary.camera + " into " + options.out.string() + ": " +
-         summary.BriefReport();
+  return "capture " + options.sequence + " with " + summary.camera + " into " +
+         options.out.string() + ": " + summary.BriefReport();
 }
 
 }  // namespace procam

@@ -6,11 +6,10 @@
 
 #include <filesystem>
 #include <memory>
+#include <opencv2/core.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "base/progress.h"
 #include "capture/display.h"
@@ -32,16 +31,16 @@ struct CaptureStageOptions {
   // The projector's resolution with the memory display (unset: 1024x768); a display's own
   // resolution wins; given with a simulated projector, it must match the projector's.
   std::optional<cv::Size> projector_size;
-  SequencerOptions sequencer;     // frames, exposures (several: HDR), settle, retries
-  double gain = -1.0;             // camera gain to set (< 0: leave it)
-  std::string axes = "both";      // graycode, structured_light: "columns", "rows" or "both"
-  double pattern_gamma = 1.0;     // structured_light: sinusoids pre-distorted for this gamma
-  std::vector<int> levels = PhotometricOptions().levels;      // photometric: 8-bit levels
-  std::string channels = PhotometricOptions().channels;       // photometric: of r, g, b, w
-  std::vector<std::filesystem::path> images;  // verify: the images to show
-  double projector_gamma = 1.0;   // memory display: the response the test camera sees
+  SequencerOptions sequencer;  // frames, exposures (several: HDR), settle, retries
+  double gain = -1.0;          // camera gain to set (< 0: leave it)
+  std::string axes = "both";   // graycode, structured_light: "columns", "rows" or "both"
+  double pattern_gamma = 1.0;  // structured_light: sinusoids pre-distorted for this gamma
+  std::vector<int> levels = PhotometricOptions().levels;  // photometric: 8-bit levels
+  std::string channels = PhotometricOptions().channels;   // photometric: of r, g, b, w
+  std::vector<std::filesystem::path> images;              // verify: the images to show
+  double projector_gamma = 1.0;           // memory display: the response the test camera sees
   std::filesystem::path camera_response;  // camera_response.json: linearise before HDR merges
-  ProgressCallback progress;      // a warning when nothing shows the patterns
+  ProgressCallback progress;              // a warning when nothing shows the patterns
 };
 
 // Captures what the session does not hold yet and writes OUT/result.json (also when the camera

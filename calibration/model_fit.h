@@ -12,9 +12,8 @@
 //      with the measured B), damped (ρ ← ρ_old (ρ/ρ_old)^step), the ratio bounded to
 //      [1/2, 2] and ρ to [0.01, 0.99]; unseen patches scale by s.
 
-#include <vector>
-
 #include <Eigen/Core>
+#include <vector>
 
 #include "geometry/patches.h"
 #include "projection/projection_rig.h"
@@ -33,7 +32,7 @@ struct ModelUpdate {
   Eigen::Vector3d scale = Eigen::Vector3d::Ones();  // common reflectance scale s per channel
   Eigen::MatrixX3d reflectance;                     // (n,3) the updated reflectance (step 2)
   int fit_patches = 0;                              // patch-channels fitted on
-  double rms_before = 0, rms_after = 0;  // log residual of the fit
+  double rms_before = 0, rms_after = 0;             // log residual of the fit
 };
 
 // Fits steps 1 and 2 to `measured` (n,3, the photo's exitance per patch, used where `seen`)

@@ -1,17 +1,17 @@
 #include "calibration/photometric_stage.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <memory>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
 #include <optional>
 #include <set>
 #include <stdexcept>
 #include <vector>
-
-#include <fmt/format.h>
-#include <nlohmann/json.hpp>
-#include <opencv2/core.hpp>
 
 #include "base/io.h"
 #include "base/parse.h"
@@ -58,7 +58,6 @@ class PhotometricRigStage {
   struct State;
   std::unique_ptr<State> state_;
 };
-
 
 struct PhotometricRigStage::State {
   PhotometricStageOptions args;
@@ -133,8 +132,9 @@ PhotometricRigStage::PhotometricRigStage(const PhotometricStageOptions& args,
   const nlohmann::json rig = ReadRigJson(rig_dir);
   const nlohmann::json camera = rig.value("camera", nlohmann::json::object());
   if (!camera.is_object() || !camera.contains("model") || !camera["model"].is_string()) {
-    throw IoError(s.rig_file + ": camera.model: required key is missing (procam calibrate "
-                               "camera), needed for --scene");
+    throw IoError(s.rig_file +
+                  ": camera.model: required key is missing (procam calibrate "
+                  "camera), needed for --scene");
   }
   if (!rig.contains("registration")) {
     throw IoError(s.rig_file +
@@ -144,7 +144,8 @@ PhotometricRigStage::PhotometricRigStage(const PhotometricStageOptions& args,
   const nlohmann::json* entry = nullptr;
   if (rig.contains("projectors") && rig["projectors"].is_array()) {
     for (const nlohmann::json& candidate : rig["projectors"]) {
-      if (candidate.is_object() && candidate.value("name", "") == args.projector) entry = &candidate;
+      if (candidate.is_object() && candidate.value("name", "") == args.projector)
+        entry = &candidate;
     }
   }
   if (entry == nullptr || !entry->contains("model") || !(*entry)["model"].is_string()) {
@@ -239,12 +240,12 @@ void PhotometricRigStage::Prepare(const PhotometricModel& model,
       for (int c = 0; c < 3; ++c) difference += as_float(full[c]->image) - as_float(black->image);
     }
     const PatchLevel& level = s.stage->patches.fine;
-    s.reflectance =
-        EstimatePatchReflectance(s.lighting, level, s.stage->form_factors, s.model, difference,
-                                 mask, model.max - model.black, s.camera_scale,
-                                 s.args.min_patch_pixels);
-    Report(s.args.progress, fmt::format("reflectance: {} of {} patches seen by the camera (≥ {} pixels)",
-                                        s.reflectance.patches_seen, level.size(), s.args.min_patch_pixels));
+    s.reflectance = EstimatePatchReflectance(s.lighting, level, s.stage->form_factors, s.model,
+                                             difference, mask, model.max - model.black,
+                                             s.camera_scale, s.args.min_patch_pixels);
+    Report(s.args.progress,
+           fmt::format("reflectance: {} of {} patches seen by the camera (≥ {} pixels)",
+                       s.reflectance.patches_seen, level.size(), s.args.min_patch_pixels));
     (*result)["reflectance"] = {{"file", "reflectance.npy"},
                                 {"patches", level.size()},
                                 {"patches_seen", s.reflectance.patches_seen},
@@ -297,7 +298,6 @@ void PhotometricRigStage::Commit() const {
 }
 
 namespace {
-
 
 // The flat fields of a photometric capture session, drives from each pattern's channel and level.
 // Throws IoError naming session.json (or the frame file) when the session is of another kind,
@@ -439,9 +439,9 @@ PhotometricModel RunPhotometricStage(const PhotometricStageOptions& args) {
                                     session.fields.size(), model.pixels, clipped));
   Report(args.progress, model.BriefReport());
 
-  const std::string units =
-      session.hdr ? "camera units: the HDR merge's full scale per second"
-                  : "camera units: mean digital numbers at the session's exposure";
+  const std::string units = session.hdr
+                                ? "camera units: the HDR merge's full scale per second"
+                                : "camera units: mean digital numbers at the session's exposure";
   const std::string note =
       "no camera-to-output factor (transfer) was applied: black and max are in camera units, "
       "relative to this camera, its exposure and where it looks; gamma, lut, mixing and the "

@@ -17,10 +17,10 @@
 namespace procam {
 
 struct PhotometricStageOptions {
-  std::filesystem::path session;  // the photometric capture session
-  std::filesystem::path out;      // the rig directory (created)
+  std::filesystem::path session;          // the photometric capture session
+  std::filesystem::path out;              // the rig directory (created)
   PhotometricCalibrationOptions options;  // min_contrast, table_size
-  double clip = 0.99;  // fraction of the camera's full scale at which a pixel counts as clipped
+  double clip = 0.99;     // fraction of the camera's full scale at which a pixel counts as clipped
   std::string projector;  // rig.json projectors[] entry to fill; empty: rig.json untouched
   std::string scene;      // a scene (file or PREFIX:NAME): scene units; needs the rig's geometry
   int patches = 0;        // patch target for the scene (0: the scene's)

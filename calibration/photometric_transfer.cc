@@ -1,11 +1,10 @@
 #include "calibration/photometric_transfer.h"
 
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
-
-#include <Eigen/Cholesky>
-#include <Eigen/LU>
 
 namespace procam {
 
@@ -32,8 +31,7 @@ ReflectanceEstimate EstimatePatchReflectance(const CameraPixelLighting& lighting
                                              const Eigen::MatrixXd& form_factors,
                                              const UnitLightModel& model, const cv::Mat& difference,
                                              const cv::Mat& mask, const Eigen::Vector3d& output,
-                                             const Eigen::Vector3d& camera_scale,
-                                             int min_pixels) {
+                                             const Eigen::Vector3d& camera_scale, int min_pixels) {
   const int n = level.size();
   CV_Assert(difference.type() == CV_32FC3 && difference.rows == lighting.height &&
             difference.cols == lighting.width);

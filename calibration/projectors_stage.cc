@@ -1,19 +1,19 @@
 #include "calibration/projectors_stage.h"
 
+#include <fmt/format.h>
+
 #include <cctype>
 #include <cmath>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <stdexcept>
 
-#include <fmt/format.h>
-#include <nlohmann/json.hpp>
-
 #include "base/camera_model.h"
 #include "base/io.h"
+#include "base/parse.h"
 #include "calibration/rig_directory.h"
 #include "calibration/structured_light.h"
 #include "capture/session.h"
-#include "base/parse.h"
 #include "geometry/stage.h"
 #include "projection/projector.h"
 
@@ -30,11 +30,13 @@ struct ScanCheck {
   std::vector<FittedPlane> planes;
 };
 
-ScanCheck CheckAgainstScan(const RoomCalibrationProblem& problem, const RoomCalibration& calibration,
-                           const RoomModel& model, const Eigen::Isometry3d& guess, const ProgressCallback& progress);
+ScanCheck CheckAgainstScan(const RoomCalibrationProblem& problem,
+                           const RoomCalibration& calibration, const RoomModel& model,
+                           const Eigen::Isometry3d& guess, const ProgressCallback& progress);
 void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraModel& camera,
-                            const Eigen::Isometry3d& guess, const std::string& guess_source, const Scene& scene,
-                            const ProjectorsStageSummary& stage, const ScanCheck& check);
+                            const Eigen::Isometry3d& guess, const std::string& guess_source,
+                            const Scene& scene, const ProjectorsStageSummary& stage,
+                            const ScanCheck& check);
 
 bool ValidName(const std::string& name) {
   if (name.empty()) return false;
@@ -98,17 +100,17 @@ ProjectorObservations ReadSession(const std::filesystem::path& directory, int ca
   }
   if (name.empty()) {
     // The display's name, after its last '/' ("synthetic:tiny_box/left" → "left").
-    const std::string display = data.manifest().value("display", nlohmann::json::object())
-                                    .value("name", "");
-    name = display.substr(display.find_last_of("/:") == std::string::npos
-                              ? 0
-                              : display.find_last_of("/:") + 1);
+    const std::string display =
+        data.manifest().value("display", nlohmann::json::object()).value("name", "");
+    name = display.substr(
+        display.find_last_of("/:") == std::string::npos ? 0 : display.find_last_of("/:") + 1);
   }
   const ProjectorObservations out = ObservationsFromMap(map, name, options.width, options.height);
-  Report(progress, fmt::format("{}: {}x{} projector, {} camera pixels decoded ({} shadowed, {} ambiguous, "
-                               "{} weak phase, {} out of range)",
-                               directory.string(), options.width, options.height, out.camera_pixels.size(),
-                               map.shadowed, map.ambiguous, map.weak_phase, map.out_of_range));
+  Report(progress,
+         fmt::format("{}: {}x{} projector, {} camera pixels decoded ({} shadowed, {} ambiguous, "
+                     "{} weak phase, {} out of range)",
+                     directory.string(), options.width, options.height, out.camera_pixels.size(),
+                     map.shadowed, map.ambiguous, map.weak_phase, map.out_of_range));
   return out;
 }
 
@@ -157,11 +159,13 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
       : args.refine_camera_aspect            ? "fx, fy, cx, cy refined, distortion held"
                                              : "focal length (aspect kept), cx, cy refined, "
                                                "distortion held";
-  Report(args.progress, fmt::format("scene {}: {} surfaces, {} planar facets; camera {} {}x{} ({}); guess from {}: "
-                                    "camera at ({:.3f}, {:.3f}, {:.3f})",
-                                    args.scene, scene.surfaces.size(), model.facets().size(), camera.lens_model,
-                                    camera.width, camera.height, intrinsics_treatment, guess_source,
-                                    guess.translation().x(), guess.translation().y(), guess.translation().z()));
+  Report(
+      args.progress,
+      fmt::format("scene {}: {} surfaces, {} planar facets; camera {} {}x{} ({}); guess from {}: "
+                  "camera at ({:.3f}, {:.3f}, {:.3f})",
+                  args.scene, scene.surfaces.size(), model.facets().size(), camera.lens_model,
+                  camera.width, camera.height, intrinsics_treatment, guess_source,
+                  guess.translation().x(), guess.translation().y(), guess.translation().z()));
 
   RoomCalibrationProblem problem;
   problem.camera_lens_model = camera.lens_model;
@@ -174,7 +178,8 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
     if (!ValidName(observations.name)) observations.name = "projector" + std::to_string(k);
     if (!names.insert(observations.name).second)
       throw std::invalid_argument("projector name '" + observations.name + "' of " +
-                                  args.sessions[k].string() + " is used twice (name them with --names)");
+                                  args.sessions[k].string() +
+                                  " is used twice (name them with --names)");
     problem.projectors.push_back(std::move(observations));
   }
 
@@ -183,7 +188,8 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
   RoomCalibrationSummary& summary = stage.summary;
   const bool converged = CalibrateRoom(args.options, model, problem, guess, &calibration, &summary);
   Report(args.progress, summary.BriefReport());
-  if (!converged) throw std::runtime_error("projector calibration failed: " + summary.BriefReport());
+  if (!converged)
+    throw std::runtime_error("projector calibration failed: " + summary.BriefReport());
 
   const ScanCheck check = CheckAgainstScan(problem, calibration, model, guess, args.progress);
   WriteProjectorsOutputs(args, camera, guess, guess_source, scene, stage, check);
@@ -193,8 +199,9 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
 namespace {
 
 // Independent check: triangulate, register the model to the cloud from the same guess.
-ScanCheck CheckAgainstScan(const RoomCalibrationProblem& problem, const RoomCalibration& calibration,
-                           const RoomModel& model, const Eigen::Isometry3d& guess, const ProgressCallback& progress) {
+ScanCheck CheckAgainstScan(const RoomCalibrationProblem& problem,
+                           const RoomCalibration& calibration, const RoomModel& model,
+                           const Eigen::Isometry3d& guess, const ProgressCallback& progress) {
   ScanCheck check;
   const std::vector<TriangulatedPoint> triangulated = Triangulate(problem, calibration);
   std::vector<Vec3> cloud;
@@ -204,19 +211,20 @@ ScanCheck CheckAgainstScan(const RoomCalibrationProblem& problem, const RoomCali
     gaps.push_back(p.gap);
   }
   check.gap = ComputeDistanceStats(gaps);
-  Report(progress, fmt::format("triangulated {} points: ray gap median {:.2f} mm, 95% {:.2f} mm", cloud.size(),
-                               check.gap.median_mm, check.gap.p95_mm));
+  Report(progress, fmt::format("triangulated {} points: ray gap median {:.2f} mm, 95% {:.2f} mm",
+                               cloud.size(), check.gap.median_mm, check.gap.p95_mm));
   check.registered = guess;
-  check.registered_ok =
-      RegisterModelToCloud(RegistrationOptions(), model, cloud, guess, &check.registered, &check.registration);
+  check.registered_ok = RegisterModelToCloud(RegistrationOptions(), model, cloud, guess,
+                                             &check.registered, &check.registration);
   Report(progress, check.registration.BriefReport());
   check.icp_vs_joint_mm =
       1e3 * (check.registered.translation() - calibration.room_from_camera.translation()).norm();
-  check.icp_vs_joint_deg =
-      Eigen::AngleAxisd(check.registered.linear() * calibration.room_from_camera.linear().transpose())
-          .angle() * 180.0 / 3.14159265358979323846;
-  Report(progress, fmt::format("ICP vs joint refinement: camera {:.2f} mm, {:.4f} deg apart", check.icp_vs_joint_mm,
-                               check.icp_vs_joint_deg));
+  check.icp_vs_joint_deg = Eigen::AngleAxisd(check.registered.linear() *
+                                             calibration.room_from_camera.linear().transpose())
+                               .angle() *
+                           180.0 / 3.14159265358979323846;
+  Report(progress, fmt::format("ICP vs joint refinement: camera {:.2f} mm, {:.4f} deg apart",
+                               check.icp_vs_joint_mm, check.icp_vs_joint_deg));
   std::vector<Vec3> thinned;
   const size_t stride = std::max<size_t>(1, cloud.size() / 30000);
   for (size_t i = 0; i < cloud.size(); i += stride) thinned.push_back(cloud[i]);
@@ -229,8 +237,7 @@ nlohmann::json Json(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 
 nlohmann::json PoseJson(const Eigen::Isometry3d& pose) {
   nlohmann::json matrix = nlohmann::json::array();
-  for (int r = 0; r < 4; ++r)
-    matrix.push_back({pose(r, 0), pose(r, 1), pose(r, 2), pose(r, 3)});
+  for (int r = 0; r < 4; ++r) matrix.push_back({pose(r, 0), pose(r, 1), pose(r, 2), pose(r, 3)});
   return matrix;
 }
 
@@ -244,8 +251,9 @@ nlohmann::json StatsJson(const DistanceStats& stats) {
 
 // The "registration" entry of rig.json.
 nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const CameraModel& camera,
-                                const Eigen::Isometry3d& guess, const std::string& guess_source, const Scene& scene,
-                                const ProjectorsStageSummary& stage, const ScanCheck& check) {
+                                const Eigen::Isometry3d& guess, const std::string& guess_source,
+                                const Scene& scene, const ProjectorsStageSummary& stage,
+                                const ScanCheck& check) {
   const RoomCalibration& calibration = stage.calibration;
   const RoomCalibrationSummary& summary = stage.summary;
   const RegistrationSummary& registration = check.registration;
@@ -263,11 +271,12 @@ nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const Camera
         {"lens_model", camera.lens_model},
         {"before", camera.intrinsics},
         {"after", calibration.camera_intrinsics},
-        {"moved_px", std::vector<double>(summary.camera_intrinsics_moved,
-                                         summary.camera_intrinsics_moved + 4)},
+        {"moved_px",
+         std::vector<double>(summary.camera_intrinsics_moved, summary.camera_intrinsics_moved + 4)},
         {"sigma_px", std::vector<double>(summary.camera_sigma, summary.camera_sigma + 4)},
-        {"sigma_what", "1 sigma of fx, fy, cx, cy from the joint solve's covariance (decoding "
-                       "noise only; the walls' flatness and the model's accuracy come on top)"}};
+        {"sigma_what",
+         "1 sigma of fx, fy, cx, cy from the joint solve's covariance (decoding "
+         "noise only; the walls' flatness and the model's accuracy come on top)"}};
   } else {
     registration_json["camera_intrinsics"] = "held fixed (from camera.cameramodel)";
   }
@@ -295,8 +304,9 @@ nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const Camera
     per_surface.push_back(entry);
   }
   registration_json["residual"] = {
-      {"what", "triangulated camera-projector points vs the scene model after ICP from the "
-               "guess (distance to the nearest surface)"},
+      {"what",
+       "triangulated camera-projector points vs the scene model after ICP from the "
+       "guess (distance to the nearest surface)"},
       {"ok", check.registered_ok},
       {"icp_room_from_camera", PoseJson(check.registered)},
       {"icp_vs_joint_mm", check.icp_vs_joint_mm},
@@ -312,7 +322,8 @@ nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const Camera
 }
 
 // RIG_DIR/result.json's "projectors" section.
-nlohmann::json ResultSection(const ProjectorsStageOptions& args, const nlohmann::json& registration_json,
+nlohmann::json ResultSection(const ProjectorsStageOptions& args,
+                             const nlohmann::json& registration_json,
                              const ProjectorsStageSummary& stage, const ScanCheck& check) {
   const RoomCalibration& calibration = stage.calibration;
 
@@ -335,8 +346,9 @@ nlohmann::json ResultSection(const ProjectorsStageOptions& args, const nlohmann:
   result_section["scene"] = args.scene;
   result_section["registration"] = registration_json;
   result_section["planes_from_scan"] = {
-      {"what", "sequential RANSAC planes of the triangulated cloud (room frame through the joint "
-               "pose), normal . p + offset = 0"},
+      {"what",
+       "sequential RANSAC planes of the triangulated cloud (room frame through the joint "
+       "pose), normal . p + offset = 0"},
       {"distance_mm", 1e3 * PlaneFitOptions().distance},
       {"planes", planes_json}};
   nlohmann::json projectors_json = nlohmann::json::array();
@@ -352,12 +364,14 @@ nlohmann::json ResultSection(const ProjectorsStageOptions& args, const nlohmann:
 }
 
 void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraModel& camera,
-                            const Eigen::Isometry3d& guess, const std::string& guess_source, const Scene& scene,
-                            const ProjectorsStageSummary& stage, const ScanCheck& check) {
+                            const Eigen::Isometry3d& guess, const std::string& guess_source,
+                            const Scene& scene, const ProjectorsStageSummary& stage,
+                            const ScanCheck& check) {
   const RoomCalibration& calibration = stage.calibration;
   const std::filesystem::path& out = args.out;
   const std::filesystem::path camera_path = out / "camera.cameramodel";
-  const nlohmann::json registration_json = RegistrationJson(args, camera, guess, guess_source, scene, stage, check);
+  const nlohmann::json registration_json =
+      RegistrationJson(args, camera, guess, guess_source, scene, stage, check);
   const nlohmann::json result_section = ResultSection(args, registration_json, stage, check);
   // rig.json is read before anything is written, so a malformed one stops here.
   ReadRigJson(out);
@@ -391,23 +405,28 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
     rig["registration"] = registration_json;
   });
   UpdateRigResult(out, {"projectors"}, result_section);
-  Report(args.progress, fmt::format("wrote {} projector models, camera.cameramodel (pose in the room{}), rig.json "
-                                    "and result.json in {}",
-                                    calibration.projectors.size(),
-                                    args.options.refine_camera_intrinsics ? ", refined intrinsics" : "",
-                                    out.string()));
+  Report(args.progress,
+         fmt::format("wrote {} projector models, camera.cameramodel (pose in the room{}), rig.json "
+                     "and result.json in {}",
+                     calibration.projectors.size(),
+                     args.options.refine_camera_intrinsics ? ", refined intrinsics" : "",
+                     out.string()));
 }
 
 }  // namespace
 
 Eigen::Isometry3d RoomFromCameraGuess(const std::string& guess, const std::string& up) {
-  const std::vector<double> v =
-      ParseNumberList("--camera-guess", guess, "x,y,z,look_x,look_y,look_z in the room (metres)", 6);
-  const std::vector<double> u = ParseNumberList("--camera-up", up, "x,y,z (the room's up direction)", 3);
+  const std::vector<double> v = ParseNumberList(
+      "--camera-guess", guess, "x,y,z,look_x,look_y,look_z in the room (metres)", 6);
+  const std::vector<double> u =
+      ParseNumberList("--camera-up", up, "x,y,z (the room's up direction)", 3);
   try {
-    return ProjFromWorldLookingAt(Vec3(v[0], v[1], v[2]), Vec3(v[3], v[4], v[5]), Vec3(u[0], u[1], u[2])).inverse();
+    return ProjFromWorldLookingAt(Vec3(v[0], v[1], v[2]), Vec3(v[3], v[4], v[5]),
+                                  Vec3(u[0], u[1], u[2]))
+        .inverse();
   } catch (const std::invalid_argument&) {
-    throw IoError("--camera-guess: the camera must look at a point away from it and not along --camera-up");
+    throw IoError(
+        "--camera-guess: the camera must look at a point away from it and not along --camera-up");
   }
 }
 

@@ -9,12 +9,11 @@
 // rewrites RIG_DIR/camera.cameramodel with its pose in the room (and refined intrinsics), and
 // updates RIG_DIR/rig.json and RIG_DIR/result.json. What `procam calibrate projectors` runs.
 
+#include <Eigen/Geometry>
 #include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "base/progress.h"
 #include "calibration/registration.h"
@@ -23,12 +22,12 @@ namespace procam {
 
 struct ProjectorsStageOptions {
   std::vector<std::filesystem::path> sessions;  // structured-light sessions, one per projector
-  std::string scene;                             // the room model: a scene file or PREFIX:NAME
-  std::filesystem::path out;                     // the rig directory holding camera.cameramodel
+  std::string scene;                            // the room model: a scene file or PREFIX:NAME
+  std::filesystem::path out;                    // the rig directory holding camera.cameramodel
   // The camera's pose in the room to start from (a few cm and degrees off is fine); unset:
   // the pose camera.cameramodel already holds (an error if it holds none).
   std::optional<Eigen::Isometry3d> room_from_camera_guess;
-  std::vector<std::string> names;  // one per session; empty: each session's display name
+  std::vector<std::string> names;     // one per session; empty: each session's display name
   bool refine_camera_aspect = false;  // with options.refine_camera_intrinsics: fx, fy free
   RoomCalibrationOptions options;
   ProgressCallback progress;  // decoding per session, the solve, the scan check, files written

@@ -5,15 +5,14 @@
 // (datasets_synthetic) registers "synthetic"; a URI of any other scheme is a real camera, whose
 // colour calibration comes from the rig (rig.json camera.colour) or the user.
 
+#include <Eigen/Core>
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <nlohmann/json.hpp>
 
 #include "capture/display.h"
 
@@ -33,7 +32,7 @@ struct CameraColour {
 // taken with a session's settings (`manifest`: session.json; `hdr`: bracketed exposures merged;
 // `full_scale`: the frames' full scale; `black_override` ≥ 0: the black level to assume).
 struct SimulatedCamera {
-  std::string description;  // for messages, e.g. "synthetic scene 'tiny_box'"
+  std::string description;                   // for messages, e.g. "synthetic scene 'tiny_box'"
   std::vector<std::string> projector_names;  // one per display
   std::vector<std::shared_ptr<PatternDisplay>> displays;
   double black_level = 0.0;  // the camera's black level, DN (what the HDR merge subtracts)
@@ -42,7 +41,8 @@ struct SimulatedCamera {
       colour;
   // The same calibration as camera value per unit exitance k per channel (colour's
   // to_exitance is diag(1/k)), for the photometric calibration's transfer.
-  std::function<Eigen::Vector3d(const nlohmann::json& manifest, bool hdr, double full_scale)> value_per_exitance;
+  std::function<Eigen::Vector3d(const nlohmann::json& manifest, bool hdr, double full_scale)>
+      value_per_exitance;
   // What a whole-rig calibration needs: the room the camera looks at (a scene text such as
   // "synthetic:c_shaped", geometry/stage.h) and its patch target; a tape-measure guess of the
   // camera's pose ("x,y,z,look_x,look_y,look_z" in the room, metres); and chessboard photos of
@@ -51,7 +51,8 @@ struct SimulatedCamera {
   std::string scene;
   int patches = 0;
   std::string camera_guess;
-  std::function<int(int corners_x, int corners_y, double square, const std::filesystem::path& folder)>
+  std::function<int(int corners_x, int corners_y, double square,
+                    const std::filesystem::path& folder)>
       render_chessboard;
 };
 // For camera URIs of `scheme`: the simulated camera behind a URI, or an IoError naming it. The

@@ -1,9 +1,9 @@
 #include "compensation/colour_image.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
-
-#include <fmt/format.h>
 #include <opencv2/imgproc.hpp>
 
 #include "geometry/srgb.h"
@@ -60,7 +60,8 @@ cv::Mat LinearToDisplay(const cv::Mat& linear) {
       const cv::Vec3f& v = linear.at<cv::Vec3f>(row, col);
       cv::Vec3b& out = display.at<cv::Vec3b>(row, col);
       for (int c = 0; c < 3; ++c) {
-        out[2 - c] = static_cast<uchar>(std::lround(255.0 * LinearToSrgb(std::clamp(double(v[c]), 0.0, 1.0))));
+        out[2 - c] = static_cast<uchar>(
+            std::lround(255.0 * LinearToSrgb(std::clamp(double(v[c]), 0.0, 1.0))));
       }
     }
   }
@@ -77,7 +78,8 @@ cv::Mat HeatMapWithColourBar(const cv::Mat& delta_e, double max_value, const std
   heat.copyTo(canvas(cv::Rect(0, 0, heat.cols, heat.rows)));
   const int top = 20, bottom = heat.rows - 20;
   cv::Mat ramp(bottom - top, 1, CV_8UC1);
-  for (int k = 0; k < ramp.rows; ++k) ramp.at<uchar>(k, 0) = static_cast<uchar>(255 - 255 * k / std::max(1, ramp.rows - 1));
+  for (int k = 0; k < ramp.rows; ++k)
+    ramp.at<uchar>(k, 0) = static_cast<uchar>(255 - 255 * k / std::max(1, ramp.rows - 1));
   cv::Mat ramp_colour;
   cv::applyColorMap(ramp, ramp_colour, cv::COLORMAP_INFERNO);
   cv::resize(ramp_colour, ramp_colour, cv::Size(bar_thickness, ramp.rows), 0, 0, cv::INTER_NEAREST);
@@ -85,11 +87,12 @@ cv::Mat HeatMapWithColourBar(const cv::Mat& delta_e, double max_value, const std
   const double font = 0.35;
   for (int tick = 0; tick <= 4; ++tick) {
     const int y = bottom - (bottom - top) * tick / 4;
-    cv::putText(canvas, fmt::format("{:.0f}", max_value * tick / 4), cv::Point(heat.cols + bar_left + bar_thickness + 3, y + 4),
+    cv::putText(canvas, fmt::format("{:.0f}", max_value * tick / 4),
+                cv::Point(heat.cols + bar_left + bar_thickness + 3, y + 4),
                 cv::FONT_HERSHEY_SIMPLEX, font, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
   }
-  cv::putText(canvas, label, cv::Point(heat.cols + 4, 12), cv::FONT_HERSHEY_SIMPLEX, font, cv::Scalar(0, 0, 0), 1,
-              cv::LINE_AA);
+  cv::putText(canvas, label, cv::Point(heat.cols + 4, 12), cv::FONT_HERSHEY_SIMPLEX, font,
+              cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
   return canvas;
 }
 

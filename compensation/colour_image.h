@@ -7,9 +7,8 @@
 // colour.h); L*a*b* as CV_64FC3; ΔE as CV_32FC1; masks as CV_8UC1 (non-zero = compared).
 
 #include <cstdint>
-#include <string>
-
 #include <opencv2/core/mat.hpp>
+#include <string>
 
 #include "compensation/colour.h"
 
@@ -20,9 +19,9 @@ cv::Mat LabImage(const cv::Mat& linear_rgb, const LabConverter& lab);
 
 // ΔE76 and CIEDE2000 per pixel of two L*a*b* images, within a mask.
 struct ImageDeltaE {
-  cv::Mat delta_e76, delta_e2000;  // CV_32FC1, 0 outside the mask
+  cv::Mat delta_e76, delta_e2000;                           // CV_32FC1, 0 outside the mask
   double mean76 = 0, max76 = 0, mean2000 = 0, max2000 = 0;  // over the mask (0 if it is empty)
-  int64_t pixels = 0;  // in the mask
+  int64_t pixels = 0;                                       // in the mask
 };
 // `mask` empty = every pixel. The sums run in row-major order in double precision.
 ImageDeltaE CompareLabImages(const cv::Mat& lab_a, const cv::Mat& lab_b, const cv::Mat& mask);

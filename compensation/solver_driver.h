@@ -89,9 +89,12 @@ struct DriverRecords {
 // SolverSummary::message for a termination the driver reports ("" for the others).
 inline const char* TerminationMessage(TerminationType termination) {
   switch (termination) {
-    case TerminationType::kNumericalFailure: return "objective is not finite at the start";
-    case TerminationType::kLineSearchFailure: return kNoArmijoStep;
-    default: return "";
+    case TerminationType::kNumericalFailure:
+      return "objective is not finite at the start";
+    case TerminationType::kLineSearchFailure:
+      return kNoArmijoStep;
+    default:
+      return "";
   }
 }
 
@@ -101,12 +104,12 @@ struct GradientCheck {
   int free_variables;         // not fixed by Eq. 12
 };
 struct NewtonStep {
-  int iterations;                   // CG iterations, one Hessian product each
+  int iterations;  // CG iterations, one Hessian product each
   int preconditioner_applications;
-  bool finite;                      // every entry of s is finite
-  double max_abs;                   // max |s_k|
-  double slope;                     // ∇qᵀs
-  double curvature;                 // sᵀHs (from CG's residual where it converged)
+  bool finite;       // every entry of s is finite
+  double max_abs;    // max |s_k|
+  double slope;      // ∇qᵀs
+  double curvature;  // sᵀHs (from CG's residual where it converged)
 };
 struct TrialStep {
   bool cut;      // the projection moved some entry: δ ≠ α s
@@ -129,8 +132,8 @@ PROCAM_HOST_DEVICE inline double InnerStepLength(double slope, double curvature)
 // Alg. 2 from d = 0: leaves the step in the executor's d. `cg_total` gets the CG iterations.
 PROCAM_HOST_DEVICE_TEMPLATE
 template <typename Executor>
-PROCAM_HOST_DEVICE void SolveInnerQp(const AlgorithmSettings& settings, Executor& executor, DriverRecords* records,
-                                     int* cg_total) {
+PROCAM_HOST_DEVICE void SolveInnerQp(const AlgorithmSettings& settings, Executor& executor,
+                                     DriverRecords* records, int* cg_total) {
   double first_norm = -1.0;
   for (int inner = 0; inner < settings.max_inner_iterations; ++inner) {
     const double projected = executor.InnerStart(inner == 0);
@@ -195,7 +198,8 @@ PROCAM_HOST_DEVICE void MinimiseBoundedDriver(const AlgorithmSettings& settings,
     records->cg_iterations += cg;
     const SearchDirection direction = executor.Direction();
     double slope = direction.slope;
-    if (!direction.finite || !(slope < 0.0)) slope = executor.SteepestDirection();  // projected steepest descent
+    if (!direction.finite || !(slope < 0.0))
+      slope = executor.SteepestDirection();  // projected steepest descent
     // Armijo along the (feasible) segment x + a·d, a ∈ (0, 1].
     double step = 1.0, trial_cost = 0.0;
     bool accepted = false;

@@ -1,10 +1,11 @@
 #include "compensation/stage.h"
 
+#include <fmt/format.h>
+
 #include <cmath>
 #include <stdexcept>
 
 #include "base/io.h"
-#include <fmt/format.h>
 
 namespace procam {
 
@@ -20,7 +21,8 @@ bool CompensationOptions::Check(std::string* why) const {
   return solver.Check(why);
 }
 
-CompensationRun RunCompensation(const GeometryStage& geometry, const CompensationOptions& compensation) {
+CompensationRun RunCompensation(const GeometryStage& geometry,
+                                const CompensationOptions& compensation) {
   std::string why;
   if (!compensation.Check(&why)) throw std::invalid_argument(why);
   const SolverOptions& options = compensation.solver;
@@ -33,8 +35,9 @@ CompensationRun RunCompensation(const GeometryStage& geometry, const Compensatio
     // The coarse level is only needed to start from: compressed too, computed for it directly.
     run.coarse = MakeProblem(geometry.scene, patches.coarse, Eigen::MatrixXd(), alpha);
     if (options.multires) {
-      run.coarse.compressed_form_factors = std::make_shared<const CompressedFormFactors>(ComputeCompressedFormFactors(
-          geometry.scene, patches.coarse, FormFactorOptions(), ClusterOptions(), nullptr));
+      run.coarse.compressed_form_factors =
+          std::make_shared<const CompressedFormFactors>(ComputeCompressedFormFactors(
+              geometry.scene, patches.coarse, FormFactorOptions(), ClusterOptions(), nullptr));
     }
   } else {
     run.coarse = MakeProblem(geometry.scene, patches.coarse,
@@ -50,19 +53,24 @@ CompensationRun RunCompensation(const GeometryStage& geometry, const Compensatio
     run.fine.lower = compensation.lower;
     run.fine.upper = compensation.upper;
     const Eigen::VectorXd area = patches.fine.Areas();
-    run.coarse.lower = CoarsenPatchValues(compensation.lower, area, patches.coarse_of_fine, patches.coarse.size());
-    run.coarse.upper = CoarsenPatchValues(compensation.upper, area, patches.coarse_of_fine, patches.coarse.size());
+    run.coarse.lower =
+        CoarsenPatchValues(compensation.lower, area, patches.coarse_of_fine, patches.coarse.size());
+    run.coarse.upper =
+        CoarsenPatchValues(compensation.upper, area, patches.coarse_of_fine, patches.coarse.size());
   }
   SolverOptions logged = options;
   const ProgressCallback& progress = compensation.progress;
   if (!logged.progress && progress) {
     logged.progress = [&progress](int iteration, double cost, double seconds) {
-      progress(fmt::format("  iteration {:3d}  objective {:.6e}  {:.3f} s", iteration, cost, seconds));
+      progress(
+          fmt::format("  iteration {:3d}  objective {:.6e}  {:.3f} s", iteration, cost, seconds));
     };
   }
-  Report(progress, fmt::format("compensate: {} on {} patches ({} variables){}", MethodName(options.method),
-                               run.fine.size(), 3 * run.fine.size(), options.multires ? ", multires" : ""));
-  run.solution = Solve(logged, run.fine, &run.summary, CoarseLevel{&run.coarse, &patches.coarse_of_fine});
+  Report(progress,
+         fmt::format("compensate: {} on {} patches ({} variables){}", MethodName(options.method),
+                     run.fine.size(), 3 * run.fine.size(), options.multires ? ", multires" : ""));
+  run.solution =
+      Solve(logged, run.fine, &run.summary, CoarseLevel{&run.coarse, &patches.coarse_of_fine});
   Report(progress, run.summary.BriefReport());
   const CompensationObjective lab(run.fine, *run.solution.radiosity_system, ColourModel::kLab);
   run.perceptual_objective = lab.Value(run.solution.emittance);
@@ -80,12 +88,15 @@ namespace {
 nlohmann::json FormFactorJson(const GeometryStage& geometry) {
   const int n = geometry.patches.fine.size();
   if (!geometry.compressed) {
-    return {{"storage", "dense"}, {"bytes", 8.0 * n * n}, {"seconds", geometry.form_factor_summary.seconds}};
+    return {{"storage", "dense"},
+            {"bytes", 8.0 * n * n},
+            {"seconds", geometry.form_factor_summary.seconds}};
   }
   const CompressedBuildSummary& c = geometry.compressed_summary;
-  return {{"storage", "compressed"}, {"bytes", c.bytes},          {"dense_bytes", 8.0 * n * n},
-          {"seconds", c.seconds},     {"near_entries", c.near_entries}, {"far_blocks", c.far_blocks},
-          {"far_values", c.far_values}, {"clusters", c.clusters}};
+  return {{"storage", "compressed"},        {"bytes", c.bytes},
+          {"dense_bytes", 8.0 * n * n},     {"seconds", c.seconds},
+          {"near_entries", c.near_entries}, {"far_blocks", c.far_blocks},
+          {"far_values", c.far_values},     {"clusters", c.clusters}};
 }
 
 }  // namespace
@@ -94,8 +105,11 @@ nlohmann::json CompensationResultJson(const GeometryStage& geometry, const Compe
   const SolverSummary& s = run.summary;
   nlohmann::json trace = nlohmann::json::array();
   for (const IterationRecord& record : s.trace) {
-    trace.push_back({{"iteration", record.iteration}, {"objective", record.cost}, {"seconds", record.seconds},
-                     {"step", record.step}, {"free_variables", record.free_variables},
+    trace.push_back({{"iteration", record.iteration},
+                     {"objective", record.cost},
+                     {"seconds", record.seconds},
+                     {"step", record.step},
+                     {"free_variables", record.free_variables},
                      {"cg_iterations", record.cg_iterations}});
   }
   return {{"format_version", kSolutionFormatVersion},
@@ -131,10 +145,13 @@ void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run
   if (error) throw IoError(out.string() + ": cannot create directory: " + error.message());
   if (export_problem) {
     if (run.fine.compressed()) {
-      throw std::invalid_argument("--export writes the dense F.npy: not with compressed form factors");
+      throw std::invalid_argument(
+          "--export writes the dense F.npy: not with compressed form factors");
     }
-    nlohmann::json settings = {{"scene", geometry.scene.path.string()}, {"method", MethodName(run.summary.method)}};
-    ExportProblem(run.fine, geometry.patches.fine, geometry.patches.coarse_of_fine, out, settings.dump());
+    nlohmann::json settings = {{"scene", geometry.scene.path.string()},
+                               {"method", MethodName(run.summary.method)}};
+    ExportProblem(run.fine, geometry.patches.fine, geometry.patches.coarse_of_fine, out,
+                  settings.dump());
   }
   WriteNpy(out / "E.npy", RowMatrixXd(run.solution.emittance));
   WriteNpy(out / "B.npy", RowMatrixXd(run.solution.radiosity));
@@ -154,8 +171,8 @@ Eigen::MatrixX3d ReadPatchMatrix(const std::filesystem::path& path, int n) {
       if (!shape.empty()) shape += ",";  // (not `"," + ...`: GCC 12 warns a false -Wrestrict)
       shape += std::to_string(extent);
     }
-    throw IoError(path.string() + ": shape (" + shape + "), but result.json says " + std::to_string(n) +
-                  " patches: expected (" + std::to_string(n) + ",3)");
+    throw IoError(path.string() + ": shape (" + shape + "), but result.json says " +
+                  std::to_string(n) + " patches: expected (" + std::to_string(n) + ",3)");
   }
   Eigen::MatrixX3d matrix(n, 3);
   for (int i = 0; i < n; ++i) {
@@ -179,7 +196,9 @@ SolutionDirectory ReadSolutionDirectory(const std::filesystem::path& dir) {
   const std::filesystem::path path = dir / "result.json";
   const std::string file = path.string();
   if (!std::filesystem::is_regular_file(path)) {
-    throw IoError(file + ": file not found (SOLUTION_DIR must be what `procam compensate SCENE --out DIR` wrote)");
+    throw IoError(
+        file +
+        ": file not found (SOLUTION_DIR must be what `procam compensate SCENE --out DIR` wrote)");
   }
   SolutionDirectory s;
   s.dir = dir;
@@ -194,14 +213,16 @@ SolutionDirectory ReadSolutionDirectory(const std::filesystem::path& dir) {
     return IoError(file + ": " + key + ": required key is missing (" + what + ")");
   };
   if (!r.contains("format_version") || !r["format_version"].is_number_integer()) {
-    throw missing("format_version", "an integer; written by an older procam? run procam compensate again");
+    throw missing("format_version",
+                  "an integer; written by an older procam? run procam compensate again");
   }
   if (r["format_version"].get<int64_t>() != kSolutionFormatVersion) {
-    throw IoError(file + ": format_version: " + r["format_version"].dump() + " is not supported (this procam " +
-                  "reads version " + std::to_string(kSolutionFormatVersion) + ")");
+    throw IoError(file + ": format_version: " + r["format_version"].dump() +
+                  " is not supported (this procam " + "reads version " +
+                  std::to_string(kSolutionFormatVersion) + ")");
   }
-  if (!r.contains("patches") || !r["patches"].is_number_integer() || r["patches"].get<int64_t>() < 1 ||
-      r["patches"].get<int64_t>() > (1 << 26)) {
+  if (!r.contains("patches") || !r["patches"].is_number_integer() ||
+      r["patches"].get<int64_t>() < 1 || r["patches"].get<int64_t>() > (1 << 26)) {
     throw missing("patches", "a positive integer");
   }
   s.patches = r["patches"].get<int>();
@@ -221,7 +242,8 @@ SolutionDirectory ReadSolutionDirectory(const std::filesystem::path& dir) {
   if (!ParseMethod(r["method"].get<std::string>(), &s.method)) {
     throw IoError(file + ": method: unknown method '" + r["method"].get<std::string>() + "'");
   }
-  if (!r.contains("multires") || !r["multires"].is_boolean()) throw missing("multires", "true or false");
+  if (!r.contains("multires") || !r["multires"].is_boolean())
+    throw missing("multires", "true or false");
   s.multires = r["multires"].get<bool>();
   if (!r.contains("alpha") || !r["alpha"].is_number()) throw missing("alpha", "a number in (0,1]");
   s.alpha = r["alpha"].get<double>();
@@ -237,8 +259,10 @@ SolutionDirectory ReadSolutionDirectory(const std::filesystem::path& dir) {
   return s;
 }
 
-void ExportGeometryProblem(const GeometryStage& stage, double alpha, const std::filesystem::path& out) {
-  const CompensationProblem problem = MakeProblem(stage.scene, stage.patches.fine, stage.form_factors, alpha);
+void ExportGeometryProblem(const GeometryStage& stage, double alpha,
+                           const std::filesystem::path& out) {
+  const CompensationProblem problem =
+      MakeProblem(stage.scene, stage.patches.fine, stage.form_factors, alpha);
   const std::string invalid = problem.Validate();
   if (!invalid.empty()) throw IoError(stage.scene.path.string() + ": " + invalid);
   nlohmann::json settings;

@@ -3,9 +3,8 @@
 // colour differences per patch, and the solution directory (docs/solution_format.md).
 
 #include <filesystem>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "base/progress.h"
 #include "compensation/problem.h"
@@ -18,9 +17,9 @@ struct CompensationRun {
   CompensationProblem fine, coarse;
   CompensationSolution solution;
   SolverSummary summary;
-  double perceptual_objective = 0.0;  // f in L*a*b* of the solution, whatever the method
+  double perceptual_objective = 0.0;       // f in L*a*b* of the solution, whatever the method
   Eigen::VectorXd delta_e76, delta_e2000;  // per fine patch
-  double mean_delta_e76 = 0.0, max_delta_e76 = 0.0;      // area-weighted mean, max
+  double mean_delta_e76 = 0.0, max_delta_e76 = 0.0;  // area-weighted mean, max
   double mean_delta_e2000 = 0.0, max_delta_e2000 = 0.0;
 };
 
@@ -58,7 +57,8 @@ void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run
 // `procam scene export`: the fine level's problem of `stage` with weight `alpha`, written as
 // NumPy files and problem.json (ExportProblem) into `out`. Throws IoError naming the scene when
 // the problem is invalid.
-void ExportGeometryProblem(const GeometryStage& stage, double alpha, const std::filesystem::path& out);
+void ExportGeometryProblem(const GeometryStage& stage, double alpha,
+                           const std::filesystem::path& out);
 
 // A solution directory as read back.
 struct SolutionDirectory {

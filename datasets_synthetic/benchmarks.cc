@@ -1,14 +1,14 @@
 #include "datasets_synthetic/benchmarks.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdarg>
 #include <cstdio>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>
-
-#include <fmt/format.h>
-#include <nlohmann/json.hpp>
 
 #include "base/io.h"
 #include "compensation/objective.h"
@@ -22,7 +22,8 @@ namespace procam {
 namespace {
 
 // A printf-style line (without its trailing newline) to the progress callback.
-void Line(const ProgressCallback& progress, const char* format, ...) __attribute__((format(printf, 2, 3)));
+void Line(const ProgressCallback& progress, const char* format, ...)
+    __attribute__((format(printf, 2, 3)));
 void Line(const ProgressCallback& progress, const char* format, ...) {
   va_list arguments;
   va_start(arguments, format);
@@ -40,8 +41,8 @@ void Line(const ProgressCallback& progress, const char* format, ...) {
 // One solver's row of the table.
 struct BenchRow {
   std::string solver;
-  double seconds = 0.0;            // whole solve, excluding the shared factorisation of K
-  double seconds_to_target = -1.0; // first time the objective was within the target, -1 never
+  double seconds = 0.0;             // whole solve, excluding the shared factorisation of K
+  double seconds_to_target = -1.0;  // first time the objective was within the target, -1 never
   int iterations = 0;
   double objective = 0.0;
   std::string termination;
@@ -55,8 +56,8 @@ double TimeToTarget(const std::vector<std::pair<double, double>>& trace, double 
   return -1.0;
 }
 
-BenchRow OurSolver(const std::string& name, const SolverOptions& options, const CompensationProblem& problem,
-                   const CoarseLevel& coarse) {
+BenchRow OurSolver(const std::string& name, const SolverOptions& options,
+                   const CompensationProblem& problem, const CoarseLevel& coarse) {
   SolverSummary summary;
   Solve(options, problem, &summary, coarse);
   BenchRow row;
@@ -110,17 +111,20 @@ void RunFormFactorBenchmark(const BenchmarkOptions& args) {
   options.threads = args.threads;
   FormFactorSummary summary;
   ComputeFormFactors(scene, hierarchy.fine, options, &summary);
-  Line(args.progress, "form factors, closed room with occluder: %d patches, %lld facing pairs, %lld shadow rays\n",
-              hierarchy.fine.size(), static_cast<long long>(summary.pairs_evaluated),
-              static_cast<long long>(summary.shadow_rays));
-  Line(args.progress, "  time %.3f s (threads: %s); row sums min %.5f mean %.5f max %.5f; largest row cut %.4f\n",
-              summary.seconds, args.threads > 0 ? std::to_string(args.threads).c_str() : "all cores",
-              summary.min_row_sum, summary.mean_row_sum, summary.max_row_sum, summary.max_row_correction);
+  Line(args.progress,
+       "form factors, closed room with occluder: %d patches, %lld facing pairs, %lld shadow rays\n",
+       hierarchy.fine.size(), static_cast<long long>(summary.pairs_evaluated),
+       static_cast<long long>(summary.shadow_rays));
+  Line(args.progress,
+       "  time %.3f s (threads: %s); row sums min %.5f mean %.5f max %.5f; largest row cut %.4f\n",
+       summary.seconds, args.threads > 0 ? std::to_string(args.threads).c_str() : "all cores",
+       summary.min_row_sum, summary.mean_row_sum, summary.max_row_sum, summary.max_row_correction);
   if (!args.json.empty()) {
-    const nlohmann::json result = {{"benchmark", "form_factors"}, {"patches", hierarchy.fine.size()},
-                                   {"seconds", summary.seconds}, {"threads", args.threads},
-                                   {"pairs", summary.pairs_evaluated}, {"shadow_rays", summary.shadow_rays},
-                                   {"min_row_sum", summary.min_row_sum}, {"max_row_sum", summary.max_row_sum}};
+    const nlohmann::json result = {
+        {"benchmark", "form_factors"},        {"patches", hierarchy.fine.size()},
+        {"seconds", summary.seconds},         {"threads", args.threads},
+        {"pairs", summary.pairs_evaluated},   {"shadow_rays", summary.shadow_rays},
+        {"min_row_sum", summary.min_row_sum}, {"max_row_sum", summary.max_row_sum}};
     WriteFileAtomically(args.json, result.dump(2) + "\n");
   }
 }
@@ -133,8 +137,10 @@ void RunSolverBenchmark(const BenchmarkOptions& args) {
   }
   if (run_gpu) Line(args.progress, "CUDA device: %s\n", device_description.c_str());
   nlohmann::json sizes = nlohmann::json::array();
-  Line(args.progress, "%s", fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11} {:>6}  {:<16} {}\n", "variables", "patches", "solver",
-                       "to target s", "total s", "iters", "objective", "termination").c_str());
+  Line(args.progress, "%s",
+       fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11} {:>6}  {:<16} {}\n", "variables", "patches",
+                   "solver", "to target s", "total s", "iters", "objective", "termination")
+           .c_str());
   for (const int target_patches : args.sizes) {
     std::ostringstream table;
     const SubdividedRoom room = MakeSubdividedBoxRoom(target_patches);
@@ -142,13 +148,16 @@ void RunSolverBenchmark(const BenchmarkOptions& args) {
     const PatchHierarchy& patches = room.patches;
     FormFactorSummary ff;
     Eigen::MatrixXd f = ComputeFormFactors(scene, patches.fine, FormFactorOptions(), &ff);
-    const Eigen::MatrixXd coarse_f =
-        AggregateFormFactors(f, patches.fine.Areas(), patches.coarse_of_fine, patches.coarse.size());
+    const Eigen::MatrixXd coarse_f = AggregateFormFactors(
+        f, patches.fine.Areas(), patches.coarse_of_fine, patches.coarse.size());
     const CompensationProblem problem = MakeProblem(scene, patches.fine, std::move(f), args.alpha);
-    const CompensationProblem coarse_problem = MakeProblem(scene, patches.coarse, coarse_f, args.alpha);
+    const CompensationProblem coarse_problem =
+        MakeProblem(scene, patches.coarse, coarse_f, args.alpha);
     const CoarseLevel coarse{&coarse_problem, &patches.coarse_of_fine};
     const int n = problem.size();
-    Report(args.progress, fmt::format("bench solver: {} patches, {} variables (form factors {:.2f} s)", n, 3 * n, ff.seconds));
+    Report(args.progress,
+           fmt::format("bench solver: {} patches, {} variables (form factors {:.2f} s)", n, 3 * n,
+                       ff.seconds));
 
     const bool run_cpu = args.device != "cuda" && 3 * n <= args.cpu_max_variables;
     double setup = -1.0, gpu_setup = -1.0;
@@ -198,15 +207,19 @@ void RunSolverBenchmark(const BenchmarkOptions& args) {
       SolverOptions linear_options;
       linear_options.method = CompensationMethod::kLinear;
       linear_options.device = device;
-      BenchRow linear = OurSolver(device == Device::kCpu ? "linear (own objective)" : "linear [cuda]",
-                                  linear_options, problem, coarse);
+      BenchRow linear =
+          OurSolver(device == Device::kCpu ? "linear (own objective)" : "linear [cuda]",
+                    linear_options, problem, coarse);
       linear.seconds_to_target = -1.0;
       rows.push_back(linear);
     }
 
-    nlohmann::json size_json = {{"patches", n}, {"variables", 3 * n}, {"factorisation_seconds", setup},
+    nlohmann::json size_json = {{"patches", n},
+                                {"variables", 3 * n},
+                                {"factorisation_seconds", setup},
                                 {"cuda_setup_seconds", gpu_setup},
-                                {"form_factor_seconds", ff.seconds}, {"target_objective", target}};
+                                {"form_factor_seconds", ff.seconds},
+                                {"target_objective", target}};
     if (run_cpu) {
       table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16} {}\n", 3 * n, n,
                            "(factorise K once)", "", setup, "", "", "");
@@ -216,9 +229,11 @@ void RunSolverBenchmark(const BenchmarkOptions& args) {
                            "(invert K on cuda once)", "", gpu_setup, "", "", "");
     }
     for (const BenchRow& row : rows) {
-      const std::string to_target = row.seconds_to_target < 0 ? "-" : fmt::format("{:.4f}", row.seconds_to_target);
-      table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16.10g} {}\n", 3 * n, n, row.solver,
-                           to_target, row.seconds, row.iterations, row.objective, row.termination);
+      const std::string to_target =
+          row.seconds_to_target < 0 ? "-" : fmt::format("{:.4f}", row.seconds_to_target);
+      table << fmt::format("{:>9} {:>8}  {:<22} {:>12} {:>11.4f} {:>6}  {:<16.10g} {}\n", 3 * n, n,
+                           row.solver, to_target, row.seconds, row.iterations, row.objective,
+                           row.termination);
       size_json["solvers"].push_back({{"solver", row.solver},
                                       {"seconds", row.seconds},
                                       {"seconds_to_target", row.seconds_to_target},
@@ -227,14 +242,16 @@ void RunSolverBenchmark(const BenchmarkOptions& args) {
                                       {"termination", row.termination}});
     }
     sizes.push_back(size_json);
-    Line(args.progress, "%s", table.str().c_str());  // each size as it finishes: long runs show progress
+    Line(args.progress, "%s",
+         table.str().c_str());  // each size as it finishes: long runs show progress
   }
   if (!args.json.empty()) {
-    const nlohmann::json result = {{"benchmark", "solver"},
-                                   {"cuda_device", device_description},
-                                   {"scene", "box room with occluder, bounds [0, 1], alpha " + std::to_string(args.alpha)},
-                                   {"target", "best final objective among perceptual solvers, +1e-6 relative"},
-                                   {"sizes", sizes}};
+    const nlohmann::json result = {
+        {"benchmark", "solver"},
+        {"cuda_device", device_description},
+        {"scene", "box room with occluder, bounds [0, 1], alpha " + std::to_string(args.alpha)},
+        {"target", "best final objective among perceptual solvers, +1e-6 relative"},
+        {"sizes", sizes}};
     WriteFileAtomically(args.json, result.dump(2) + "\n");
     Line(args.progress, "wrote %s\n", args.json.c_str());
   }
@@ -249,9 +266,13 @@ void RunScaleBenchmark(const BenchmarkOptions& args) {
     throw std::runtime_error("bench scale --device " + args.device + ": " + device_description);
   }
   nlohmann::json sizes = nlohmann::json::array();
-  Line(args.progress, "%s", fmt::format("{:>9} {:>8} {:>9} {:>10} {:>10} {:>9} {:>9} {:>10} {:>9} {:>6}  {:<22} {:>9} {:>6} {}\n",
-                                "variables", "patches", "build s", "MB", "dense MB", "F x ms", "error",
-                                "K⁻¹ ms", "CG iters", "", "solver", "solve s", "iters", "objective").c_str());
+  Line(
+      args.progress, "%s",
+      fmt::format(
+          "{:>9} {:>8} {:>9} {:>10} {:>10} {:>9} {:>9} {:>10} {:>9} {:>6}  {:<22} {:>9} {:>6} {}\n",
+          "variables", "patches", "build s", "MB", "dense MB", "F x ms", "error", "K⁻¹ ms",
+          "CG iters", "", "solver", "solve s", "iters", "objective")
+          .c_str());
   for (const int target_patches : args.scale_sizes) {
     const SubdividedRoom room = MakeSubdividedBoxRoom(target_patches);
     const Scene& scene = room.scene;
@@ -300,15 +321,21 @@ void RunScaleBenchmark(const BenchmarkOptions& args) {
                                 {"dense_form_factor_seconds", dense_seconds},
                                 {"k_inverse_seconds", solve},
                                 {"cg_iterations", cg}};
-    const auto line = [&](const std::string& solver, double seconds, int iterations, double objective) {
-      Line(args.progress, "%s", fmt::format("{:>9} {:>8} {:>9.2f} {:>10.1f} {:>10.1f} {:>9.2f} {:>9} {:>10.2f} {:>9} {:>6}  "
-                                    "{:<22} {:>9.3f} {:>6} {:.10g}\n",
-                                    3 * n, n, build.seconds, build.bytes / 1e6, 8.0 * n * n / 1e6, 1e3 * product,
-                                    error < 0 ? std::string("-") : fmt::format("{:.2e}", error), 1e3 * solve, cg, "",
-                                    solver, seconds, iterations, objective).c_str());
+    const auto line = [&](const std::string& solver, double seconds, int iterations,
+                          double objective) {
+      Line(args.progress, "%s",
+           fmt::format(
+               "{:>9} {:>8} {:>9.2f} {:>10.1f} {:>10.1f} {:>9.2f} {:>9} {:>10.2f} {:>9} {:>6}  "
+               "{:<22} {:>9.3f} {:>6} {:.10g}\n",
+               3 * n, n, build.seconds, build.bytes / 1e6, 8.0 * n * n / 1e6, 1e3 * product,
+               error < 0 ? std::string("-") : fmt::format("{:.2e}", error), 1e3 * solve, cg, "",
+               solver, seconds, iterations, objective)
+               .c_str());
       std::fflush(stdout);
-      size_json["solvers"].push_back(
-          {{"solver", solver}, {"seconds", seconds}, {"iterations", iterations}, {"objective", objective}});
+      size_json["solvers"].push_back({{"solver", solver},
+                                      {"seconds", seconds},
+                                      {"iterations", iterations},
+                                      {"objective", objective}});
     };
     std::vector<Device> devices;
     if (args.device != "cuda" && 3 * n <= args.cpu_max_variables) devices.push_back(Device::kCpu);
@@ -322,22 +349,24 @@ void RunScaleBenchmark(const BenchmarkOptions& args) {
            summary.setup_seconds + summary.solve_seconds, summary.iterations, summary.final_cost);
     }
     if (dense.size() != 0 && args.device != "cuda" && 3 * n <= args.cpu_max_variables) {
-      const CompensationProblem dense_problem = MakeProblem(scene, patches.fine, std::move(dense), args.alpha);
+      const CompensationProblem dense_problem =
+          MakeProblem(scene, patches.fine, std::move(dense), args.alpha);
       SolverSummary summary;
       Solve(SolverOptions(), dense_problem, &summary);
-      line("perceptual (dense F)", summary.setup_seconds + summary.solve_seconds, summary.iterations,
-           summary.final_cost);
+      line("perceptual (dense F)", summary.setup_seconds + summary.solve_seconds,
+           summary.iterations, summary.final_cost);
     }
     if (devices.empty()) line("(no solve)", 0.0, 0, 0.0);
     sizes.push_back(size_json);
   }
   if (!args.json.empty()) {
-    const nlohmann::json result = {{"benchmark", "scale"},
-                                   {"cuda_device", device_description},
-                                   {"scene", "box room with occluder, bounds [0, 1], alpha " + std::to_string(args.alpha)},
-                                   {"leaf_size", args.clusters.leaf_size},
-                                   {"admissibility", args.clusters.admissibility},
-                                   {"sizes", sizes}};
+    const nlohmann::json result = {
+        {"benchmark", "scale"},
+        {"cuda_device", device_description},
+        {"scene", "box room with occluder, bounds [0, 1], alpha " + std::to_string(args.alpha)},
+        {"leaf_size", args.clusters.leaf_size},
+        {"admissibility", args.clusters.admissibility},
+        {"sizes", sizes}};
     WriteFileAtomically(args.json, result.dump(2) + "\n");
     Line(args.progress, "wrote %s\n", args.json.c_str());
   }

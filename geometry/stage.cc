@@ -1,12 +1,12 @@
 #include "geometry/stage.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <map>
 #include <mutex>
-
-#include <fmt/format.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -39,7 +39,7 @@ std::vector<std::string> SceneSourceNames(const std::string& prefix) {
   const std::lock_guard<std::mutex> lock(registry.mutex);
   const auto found = registry.sources.find(prefix);
   return found == registry.sources.end() || !found->second.names ? std::vector<std::string>()
-                                                                  : found->second.names();
+                                                                 : found->second.names();
 }
 
 Scene LoadSceneArgument(const std::string& text) {
@@ -56,11 +56,13 @@ Scene LoadSceneArgument(const std::string& text) {
     const std::lock_guard<std::mutex> lock(registry.mutex);
     const auto found = registry.sources.find(prefix);
     if (found != registry.sources.end()) source = found->second;
-    for (const auto& entry : registry.sources) known += (known.empty() ? "" : ", ") + entry.first + ":";
+    for (const auto& entry : registry.sources)
+      known += (known.empty() ? "" : ", ") + entry.first + ":";
   }
   if (!source.make) {
-    throw IoError(text + ": no such scene file, and no scene source '" + prefix + ":'" +
-                  (known.empty() ? std::string(" (none is registered)") : " (registered: " + known + ")"));
+    throw IoError(
+        text + ": no such scene file, and no scene source '" + prefix + ":'" +
+        (known.empty() ? std::string(" (none is registered)") : " (registered: " + known + ")"));
   }
   Scene scene = source.make(text.substr(colon + 1));
   scene.path = text;  // what results record, so that later commands can rebuild it
@@ -77,11 +79,12 @@ bool GeometryOptions::Check(std::string* why) const {
 
 std::string GeometryStage::BriefReport() const {
   const FormFactorSummary& ff = form_factor_summary;
-  return fmt::format("{}: {} fine patches ({} coarse), {} adjacent pairs; form factors {}, row sums "
-                     "{:.5f}..{:.5f}, {:.2f} s; subdivision {:.3f} s",
-                     scene.name, patches.fine.size(), patches.coarse.size(), patches.fine.adjacency.size(),
-                     compressed ? "compressed" : "dense", ff.min_row_sum, ff.max_row_sum, ff.seconds,
-                     subdivision_seconds);
+  return fmt::format(
+      "{}: {} fine patches ({} coarse), {} adjacent pairs; form factors {}, row sums "
+      "{:.5f}..{:.5f}, {:.2f} s; subdivision {:.3f} s",
+      scene.name, patches.fine.size(), patches.coarse.size(), patches.fine.adjacency.size(),
+      compressed ? "compressed" : "dense", ff.min_row_sum, ff.max_row_sum, ff.seconds,
+      subdivision_seconds);
 }
 
 GeometryStage RunGeometryStage(const std::string& scene, const GeometryOptions& options) {
@@ -100,10 +103,12 @@ GeometryStage RunGeometryStage(Scene scene, const GeometryOptions& options) {
   if (!subdivision.Check(&why)) throw IoError("--patches: " + why);
   const auto start = std::chrono::steady_clock::now();
   stage.patches = SubdividePatches(stage.scene, subdivision);
-  stage.subdivision_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  Report(options.progress, fmt::format("{}: {} fine patches ({} coarse), {} adjacent pairs", stage.scene.name,
-                                       stage.patches.fine.size(), stage.patches.coarse.size(),
-                                       stage.patches.fine.adjacency.size()));
+  stage.subdivision_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  Report(options.progress,
+         fmt::format("{}: {} fine patches ({} coarse), {} adjacent pairs", stage.scene.name,
+                     stage.patches.fine.size(), stage.patches.coarse.size(),
+                     stage.patches.fine.adjacency.size()));
   FormFactorOptions form_factor_options;
   int last_percent = -1;
   form_factor_options.progress = [&](double fraction) {
@@ -119,11 +124,13 @@ GeometryStage RunGeometryStage(Scene scene, const GeometryOptions& options) {
         stage.scene, stage.patches.fine, form_factor_options, clusters, &stage.compressed_summary));
     const CompressedBuildSummary& c = stage.compressed_summary;
     const int n = stage.patches.fine.size();
-    Report(options.progress,
-           fmt::format("form factors (compressed, leaf {}, admissibility {}): {} near entries, {} far blocks, "
-                       "{:.1f} MB ({:.1f}% of dense), {:.2f} s",
-                       clusters.leaf_size, clusters.admissibility, c.near_entries, c.far_blocks, c.bytes / 1e6,
-                       100.0 * c.bytes / (8.0 * n * n), c.seconds));
+    Report(
+        options.progress,
+        fmt::format(
+            "form factors (compressed, leaf {}, admissibility {}): {} near entries, {} far blocks, "
+            "{:.1f} MB ({:.1f}% of dense), {:.2f} s",
+            clusters.leaf_size, clusters.admissibility, c.near_entries, c.far_blocks, c.bytes / 1e6,
+            100.0 * c.bytes / (8.0 * n * n), c.seconds));
     const Eigen::VectorXd rows = stage.compressed->RowSums();
     FormFactorSummary& summary = stage.form_factor_summary;
     summary.seconds = c.seconds;
@@ -133,11 +140,12 @@ GeometryStage RunGeometryStage(Scene scene, const GeometryOptions& options) {
     summary.max_row_sum = rows.maxCoeff();
     return stage;
   }
-  stage.form_factors =
-      ComputeFormFactors(stage.scene, stage.patches.fine, form_factor_options, &stage.form_factor_summary);
-  Report(options.progress, fmt::format("form factors: {} pairs, {} shadow rays, {:.2f} s",
-                                       stage.form_factor_summary.pairs_evaluated,
-                                       stage.form_factor_summary.shadow_rays, stage.form_factor_summary.seconds));
+  stage.form_factors = ComputeFormFactors(stage.scene, stage.patches.fine, form_factor_options,
+                                          &stage.form_factor_summary);
+  Report(options.progress,
+         fmt::format("form factors: {} pairs, {} shadow rays, {:.2f} s",
+                     stage.form_factor_summary.pairs_evaluated,
+                     stage.form_factor_summary.shadow_rays, stage.form_factor_summary.seconds));
   return stage;
 }
 
@@ -151,7 +159,8 @@ void WriteFormFactorImage(const Eigen::MatrixXd& form_factors, const std::filesy
       if (value <= 0.0) continue;
       // log10 F from 1e-6 (dark) to 1e-1 (bright); block maximum when downsampling.
       const double level = std::clamp((std::log10(value) + 6.0) / 5.0, 0.0, 1.0);
-      uchar& pixel = gray.at<uchar>(static_cast<int>(int64_t(i) * size / n), static_cast<int>(int64_t(j) * size / n));
+      uchar& pixel = gray.at<uchar>(static_cast<int>(int64_t(i) * size / n),
+                                    static_cast<int>(int64_t(j) * size / n));
       pixel = std::max(pixel, static_cast<uchar>(1 + 254 * level));
     }
   }

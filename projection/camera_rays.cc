@@ -50,8 +50,10 @@ CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
         if (gain <= 0.0 || !projector.InImage(pixel)) continue;
         if (surfaces.Occluded(point, projector.CentreInWorld(), ray_margin)) continue;
         // Pixel (c, r) covers [c − ½, c + ½] × [r − ½, r + ½] (projector.h).
-        const int x = std::clamp(static_cast<int>(std::floor(pixel.x() + 0.5)), 0, projector.width() - 1);
-        const int y = std::clamp(static_cast<int>(std::floor(pixel.y() + 0.5)), 0, projector.height() - 1);
+        const int x =
+            std::clamp(static_cast<int>(std::floor(pixel.x() + 0.5)), 0, projector.width() - 1);
+        const int y =
+            std::clamp(static_cast<int>(std::floor(pixel.y() + 0.5)), 0, projector.height() - 1);
         rays.gain[index * rays.projectors + k] = static_cast<float>(gain);
         rays.projector_pixel[index * rays.projectors + k] = y * projector.width() + x;
       }
@@ -84,8 +86,7 @@ CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& leve
 // of the light actually shown. `shown_radiosity` (optional) receives that B.
 cv::Mat PredictPixels(const CameraPixelRays& rays, const ProjectionRig& rig,
                       const std::vector<ProjectorImage>& images,
-                      const Eigen::MatrixXd& form_factors,
-                      Eigen::MatrixX3d* shown_radiosity) {
+                      const Eigen::MatrixXd& form_factors, Eigen::MatrixX3d* shown_radiosity) {
   const Eigen::MatrixX3d direct = DirectLightModel(rig, images).Irradiance();
   const RadiositySystem system(form_factors, rig.area, rig.reflectance);
   const Eigen::MatrixX3d radiosity = system.Solve(rig.reflectance.cwiseProduct(direct));
@@ -99,9 +100,9 @@ cv::Mat PredictPixels(const CameraPixelRays& rays, const ProjectionRig& rig,
     light[k].resize(max_code + 1);
     for (int code = 0; code <= max_code; ++code) {
       const double drive = double(code) / max_code;
-      light[k][code] = Eigen::Vector3d(photometry.response[0].Light(drive),
-                                       photometry.response[1].Light(drive),
-                                       photometry.response[2].Light(drive));
+      light[k][code] =
+          Eigen::Vector3d(photometry.response[0].Light(drive), photometry.response[1].Light(drive),
+                          photometry.response[2].Light(drive));
     }
   }
   cv::Mat predicted(rays.height, rays.width, CV_32FC3, cv::Scalar::all(0));

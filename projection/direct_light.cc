@@ -5,7 +5,8 @@
 
 namespace procam {
 
-DirectLightModel::DirectLightModel(const ProjectionRig& rig, const std::vector<ProjectorImage>& images)
+DirectLightModel::DirectLightModel(const ProjectionRig& rig,
+                                   const std::vector<ProjectorImage>& images)
     : rig_(rig) {
   const int n = rig.size();
   const int projectors = static_cast<int>(rig.projectors.size());

@@ -5,10 +5,9 @@
 // each projector and primary can be bent by an exponent (r(d) → r(d)^p), which is how the closed
 // loop fits a projector's response to photos (calibration/model_fit.h).
 
+#include <Eigen/Core>
 #include <array>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "projection/projection_rig.h"
 #include "projection/projector_images.h"
@@ -35,8 +34,8 @@ class DirectLightModel {
   const ProjectionRig& rig_;
   std::vector<std::array<Eigen::MatrixXf, 3>> counts_;     // per patch, pixels per code
   std::vector<std::array<std::vector<double>, 3>> light_;  // response per code
-  std::vector<Eigen::VectorXd> lit_;                        // lit pixels per patch
-  std::vector<std::array<Eigen::VectorXd, 3>> sums_;        // Σ light^p per patch
+  std::vector<Eigen::VectorXd> lit_;                       // lit pixels per patch
+  std::vector<std::array<Eigen::VectorXd, 3>> sums_;       // Σ light^p per patch
   std::vector<Eigen::Vector3d> exponent_;
 };
 

@@ -1,9 +1,9 @@
 #include "projection/stage.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <chrono>
-
-#include <fmt/format.h>
 
 #include "base/io.h"
 #include "geometry/stage.h"
@@ -44,15 +44,17 @@ SolutionGeometry ReadSolutionGeometry(const SolutionDirectory& solution, int pat
     tried += (tried.empty() ? "" : ", ") + std::to_string(geometry.patches.fine.size()) +
              " for target " + std::to_string(target);
   }
-  throw IoError((solution.dir / "result.json").string() + ": the solution has " + std::to_string(n) + " patches but " +
-                geometry.scene.path.string() + " subdivides into " + tried +
+  throw IoError((solution.dir / "result.json").string() + ": the solution has " +
+                std::to_string(n) + " patches but " + geometry.scene.path.string() +
+                " subdivides into " + tried +
                 ": the scene changed since `procam compensate` ran (or give --patches as it was "
                 "given to compensate)");
 }
 
-
-ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution, const SolutionGeometry& geometry,
-                                          std::vector<Projector> projectors, const nlohmann::json& rig_description,
+ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
+                                          const SolutionGeometry& geometry,
+                                          std::vector<Projector> projectors,
+                                          const nlohmann::json& rig_description,
                                           const ProjectionStageOptions& args) {
   const auto start = Clock::now();
   if (projectors.empty()) {
@@ -65,8 +67,8 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution, con
   rig_options.feather = args.feather;
   rig_options.texture_coordinates = args.detail;
   ProjectionRigSummary& rig_summary = result_summary.rig;
-  Report(args.progress, fmt::format("project: casting rays for {} projector(s) over {} patches", projectors.size(),
-                                    geometry.patches.fine.size()));
+  Report(args.progress, fmt::format("project: casting rays for {} projector(s) over {} patches",
+                                    projectors.size(), geometry.patches.fine.size()));
   const ProjectionRig rig =
       BuildProjectionRig(geometry.patches.fine, std::move(projectors), rig_options, &rig_summary);
   RenderOptions render_options;
@@ -104,60 +106,71 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution, con
   WriteNpy(out / "upper.npy", RowMatrixXd(rig.upper));
   const double write_seconds = SecondsSince(write_start);
   nlohmann::json result = {{"solution", solution.dir.string()},
-                                 {"scene", geometry.scene.path.string()},
-                                 {"patches", rig.size()},
-                                 {"target_patches", geometry.scene.target_patches},
-                                 {"projectors", projector_json},
-                                 {"dither", DitherName(args.dither)},
-                                 {"feather", args.feather},
-                                 {"detail", args.detail},
-                                 {"detail_pixels", summary.detail_pixels},
-                                 {"patches_reached", rig_summary.patches_reached},
-                                 {"patches_unreached", summary.patches_unreached},
-                                 {"patches_below_lower", summary.patches_below_lower},
-                                 {"patches_above_upper", summary.patches_above_upper},
-                                 {"level_passes", summary.level_passes},
-                                 {"max_relative_error", summary.max_relative_error},
-                                 {"seconds",
-                                  {{"load", args.load_seconds},
-                                   {"maps", rig_summary.seconds},
-                                   {"render", summary.seconds},
-                                   {"write", write_seconds},
-                                   {"total", args.load_seconds + SecondsSince(start)}}}};
+                           {"scene", geometry.scene.path.string()},
+                           {"patches", rig.size()},
+                           {"target_patches", geometry.scene.target_patches},
+                           {"projectors", projector_json},
+                           {"dither", DitherName(args.dither)},
+                           {"feather", args.feather},
+                           {"detail", args.detail},
+                           {"detail_pixels", summary.detail_pixels},
+                           {"patches_reached", rig_summary.patches_reached},
+                           {"patches_unreached", summary.patches_unreached},
+                           {"patches_below_lower", summary.patches_below_lower},
+                           {"patches_above_upper", summary.patches_above_upper},
+                           {"level_passes", summary.level_passes},
+                           {"max_relative_error", summary.max_relative_error},
+                           {"seconds",
+                            {{"load", args.load_seconds},
+                             {"maps", rig_summary.seconds},
+                             {"render", summary.seconds},
+                             {"write", write_seconds},
+                             {"total", args.load_seconds + SecondsSince(start)}}}};
   if (!rig_description.is_null()) result["rig"] = rig_description;
   WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
 
   for (size_t k = 0; k < images.size(); ++k) {
-    Report(args.progress, fmt::format("{:<12} {}x{}, {}-bit: {} lit pixels, {} patches, {} saturated",
-                                      rig.projectors[k].name, rig.projectors[k].geometry.width(),
-                                      rig.projectors[k].geometry.height(), images[k].bits, rig.maps[k].lit_pixels,
-                                      rig.maps[k].patches_reached, summary.saturated_pixels[k]));
+    Report(args.progress,
+           fmt::format("{:<12} {}x{}, {}-bit: {} lit pixels, {} patches, {} saturated",
+                       rig.projectors[k].name, rig.projectors[k].geometry.width(),
+                       rig.projectors[k].geometry.height(), images[k].bits, rig.maps[k].lit_pixels,
+                       rig.maps[k].patches_reached, summary.saturated_pixels[k]));
   }
-  Report(args.progress, fmt::format("patches: {}, {} reached by no projector; E outside the projectors' bounds on {} "
-                                    "(below) / {} (above)",
-                                    rig.size(), summary.patches_unreached, summary.patches_below_lower,
-                                    summary.patches_above_upper));
+  Report(
+      args.progress,
+      fmt::format("patches: {}, {} reached by no projector; E outside the projectors' bounds on {} "
+                  "(below) / {} (above)",
+                  rig.size(), summary.patches_unreached, summary.patches_below_lower,
+                  summary.patches_above_upper));
   if (summary.patches_below_lower + summary.patches_above_upper > 0) {
-    Report(args.progress, "  (clipped: was the solution computed with the scene's `bounds` instead of its projectors?)");
+    Report(args.progress,
+           "  (clipped: was the solution computed with the scene's `bounds` instead of its "
+           "projectors?)");
   }
   if (args.detail) {
     long long clipped = 0;
     for (const long long count : summary.detail_saturated_pixels) clipped += count;
-    Report(args.progress, fmt::format("detail: {} lit pixels on textured surfaces, {} with highlights clipped at full "
-                                      "drive",
-                                      summary.detail_pixels, clipped));
-    if (summary.detail_pixels == 0) Report(args.progress, "  (no surface the projectors light has a texture)");
+    Report(args.progress,
+           fmt::format(
+               "detail: {} lit pixels on textured surfaces, {} with highlights clipped at full "
+               "drive",
+               summary.detail_pixels, clipped));
+    if (summary.detail_pixels == 0)
+      Report(args.progress, "  (no surface the projectors light has a texture)");
   }
-  Report(args.progress, fmt::format("largest error of the delivered emittance {:.2e} (relative to the largest upper "
-                                    "bound)",
-                                    summary.max_relative_error));
-  Report(args.progress, fmt::format("maps {:.3f} s, images {:.3f} s, writing {:.3f} s\nwrote {}/result.json and {} "
-                                    "image(s)",
-                                    rig_summary.seconds, summary.seconds, write_seconds, args.out.string(),
-                                    images.size()));
+  Report(
+      args.progress,
+      fmt::format("largest error of the delivered emittance {:.2e} (relative to the largest upper "
+                  "bound)",
+                  summary.max_relative_error));
+  Report(
+      args.progress,
+      fmt::format("maps {:.3f} s, images {:.3f} s, writing {:.3f} s\nwrote {}/result.json and {} "
+                  "image(s)",
+                  rig_summary.seconds, summary.seconds, write_seconds, args.out.string(),
+                  images.size()));
   result_summary.images = images;
   return result_summary;
 }
-
 
 }  // namespace procam

@@ -5,10 +5,9 @@
 // lower.npy / upper.npy (the projectors' bounds) and result.json. What `procam project` runs.
 
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "base/progress.h"
 #include "compensation/stage.h"
@@ -33,8 +32,8 @@ SolutionGeometry ReadSolutionGeometry(const SolutionDirectory& solution, int pat
 struct ProjectionStageOptions {
   std::filesystem::path out;  // the images directory (created)
   DitherMethod dither = DitherMethod::kOrdered;
-  double feather = 0.1;   // blending ramp at the edge of each projector's image, (0, 1]
-  bool detail = false;    // the desired texture's detail within patches (projector_images.h)
+  double feather = 0.1;       // blending ramp at the edge of each projector's image, (0, 1]
+  bool detail = false;        // the desired texture's detail within patches (projector_images.h)
   double load_seconds = 0.0;  // what reading the inputs took, for result.json
   ProgressCallback progress;  // per projector: pixels lit, patches, saturation; bounds; times
 };
@@ -48,8 +47,10 @@ struct ProjectionStageSummary {
 // Renders `solution.emittance` with `projectors` on `geometry` (whose fine reflectance the
 // projectors' bounds use) and writes the images directory. `rig_description` (may be null) is
 // recorded in result.json as "rig". Throws IoError naming the projector or the file.
-ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution, const SolutionGeometry& geometry,
-                                          std::vector<Projector> projectors, const nlohmann::json& rig_description,
+ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
+                                          const SolutionGeometry& geometry,
+                                          std::vector<Projector> projectors,
+                                          const nlohmann::json& rig_description,
                                           const ProjectionStageOptions& options);
 
 }  // namespace procam

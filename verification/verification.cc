@@ -1,13 +1,13 @@
 #include "verification/verification.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <map>
 #include <mutex>
-
-#include <fmt/format.h>
 
 #include "base/image_io.h"
 #include "base/io.h"
@@ -101,8 +101,8 @@ ColourSource ResolveColourSource(const VerificationOptions& options, const nlohm
     c.source = "simulated camera";
     return c;
   }
-  throw IoError(rig_file +
-                ": camera.colour: required key is missing for camera '" + options.camera +
+  throw IoError(rig_file + ": camera.colour: required key is missing for camera '" +
+                options.camera +
                 "' (the camera's value per unit exitance: {\"scale\": [R,G,B]} or {\"matrix\": "
                 "3x3}), or give --camera-scale");
 }
@@ -128,7 +128,7 @@ struct Comparison {
   PhotoDeltaE measured, model;
   double predicted_mean76 = 0, predicted_mean2000 = 0;
   double model_constant_mean76 = 0;  // per pixel, photo vs its patch's B (constant per patch)
-  Eigen::MatrixX3d patch_exitance;  // mean measured exitance per patch (NaN where unseen)
+  Eigen::MatrixX3d patch_exitance;   // mean measured exitance per patch (NaN where unseen)
   std::vector<bool> seen;
   int seen_pixels = 0, seen_patches = 0;
   cv::Mat delta_e76, delta_e2000, model_delta_e76, predicted;  // per pixel
@@ -137,8 +137,9 @@ struct Comparison {
 // Per pixel: the photo against the desired appearance of the patch each pixel sees and against
 // the per-pixel prediction `predicted_pixels` (PredictPixels), ΔE maps and means over the seen
 // pixels (colour_image.h); and against its patch's B (constant over the patch).
-void ComparePixels(const cv::Mat& exitance, const std::vector<int>& pixel_patch, const LabConverter& lab,
-                   const std::vector<Eigen::Vector3d>& lab_desired, const std::vector<Eigen::Vector3d>& lab_predicted,
+void ComparePixels(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
+                   const LabConverter& lab, const std::vector<Eigen::Vector3d>& lab_desired,
+                   const std::vector<Eigen::Vector3d>& lab_predicted,
                    const cv::Mat& predicted_pixels, Comparison* result) {
   const int rows = exitance.rows, cols = exitance.cols;
   cv::Mat seen(rows, cols, CV_8UC1, cv::Scalar(0));
@@ -150,13 +151,15 @@ void ComparePixels(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
       const int i = pixel_patch[static_cast<size_t>(row) * cols + col];
       if (i < 0) continue;
       seen.at<uchar>(row, col) = 255;
-      desired.at<cv::Vec3d>(row, col) = cv::Vec3d(lab_desired[i][0], lab_desired[i][1], lab_desired[i][2]);
+      desired.at<cv::Vec3d>(row, col) =
+          cv::Vec3d(lab_desired[i][0], lab_desired[i][1], lab_desired[i][2]);
       const cv::Vec3d& m = lab_measured.at<cv::Vec3d>(row, col);
       constant76 += DeltaE76(Eigen::Vector3d(m[0], m[1], m[2]), lab_predicted[i]);
     }
   }
   const ImageDeltaE against_desired = CompareLabImages(lab_measured, desired, seen);
-  const ImageDeltaE against_model = CompareLabImages(lab_measured, LabImage(predicted_pixels, lab), seen);
+  const ImageDeltaE against_model =
+      CompareLabImages(lab_measured, LabImage(predicted_pixels, lab), seen);
   result->delta_e76 = against_desired.delta_e76;
   result->delta_e2000 = against_desired.delta_e2000;
   result->model_delta_e76 = against_model.delta_e76;
@@ -177,9 +180,10 @@ void ComparePixels(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
 // pixels straddling two patches spill light), or of all its pixels when too few are interior;
 // patches with fewer than `min_pixels` pixels are unseen. ΔE area-weighted over the seen ones.
 void ComparePatches(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
-                    const std::vector<bool>& interior, const CompensationProblem& problem, const LabConverter& lab,
-                    const std::vector<Eigen::Vector3d>& lab_desired, const std::vector<Eigen::Vector3d>& lab_predicted,
-                    int min_pixels, Comparison* result) {
+                    const std::vector<bool>& interior, const CompensationProblem& problem,
+                    const LabConverter& lab, const std::vector<Eigen::Vector3d>& lab_desired,
+                    const std::vector<Eigen::Vector3d>& lab_predicted, int min_pixels,
+                    Comparison* result) {
   const int n = problem.size();
   Eigen::MatrixX3d sum_all = Eigen::MatrixX3d::Zero(n, 3), sum_interior = sum_all;
   std::vector<int> count_all(n, 0), count_interior(n, 0);
@@ -198,17 +202,19 @@ void ComparePatches(const cv::Mat& exitance, const std::vector<int>& pixel_patch
       }
     }
   }
-  result->patch_exitance = Eigen::MatrixX3d::Constant(n, 3, std::numeric_limits<double>::quiet_NaN());
+  result->patch_exitance =
+      Eigen::MatrixX3d::Constant(n, 3, std::numeric_limits<double>::quiet_NaN());
   result->seen.assign(n, false);
-  double area = 0, patch76 = 0, patch2000 = 0, model_patch76 = 0, model_patch2000 = 0, predicted76 = 0,
-         predicted2000 = 0;
+  double area = 0, patch76 = 0, patch2000 = 0, model_patch76 = 0, model_patch2000 = 0,
+         predicted76 = 0, predicted2000 = 0;
   for (int i = 0; i < n; ++i) {
     if (count_all[i] < min_pixels) continue;
     result->seen[i] = true;
     ++result->seen_patches;
-    result->patch_exitance.row(i) = count_interior[i] >= min_pixels
-                                        ? Eigen::RowVector3d(sum_interior.row(i) / count_interior[i])
-                                        : Eigen::RowVector3d(sum_all.row(i) / count_all[i]);
+    result->patch_exitance.row(i) =
+        count_interior[i] >= min_pixels
+            ? Eigen::RowVector3d(sum_interior.row(i) / count_interior[i])
+            : Eigen::RowVector3d(sum_all.row(i) / count_all[i]);
     const Eigen::Vector3d lab_measured = lab.Lab(result->patch_exitance.row(i).transpose());
     const double a = problem.area[i];
     area += a;
@@ -233,7 +239,8 @@ void ComparePatches(const cv::Mat& exitance, const std::vector<int>& pixel_patch
 // (against the solution's radiosity B), as the header comment says.
 Comparison Compare(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
                    const std::vector<bool>& interior, const CompensationProblem& problem,
-                   const Eigen::MatrixX3d& radiosity, const cv::Mat& predicted_pixels, int min_pixels) {
+                   const Eigen::MatrixX3d& radiosity, const cv::Mat& predicted_pixels,
+                   int min_pixels) {
   const int n = problem.size();
   const LabConverter lab{problem.rgb_to_xyz, problem.white_xyz};
   std::vector<Eigen::Vector3d> lab_desired(n), lab_predicted(n);
@@ -243,7 +250,8 @@ Comparison Compare(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
   }
   Comparison result;
   ComparePixels(exitance, pixel_patch, lab, lab_desired, lab_predicted, predicted_pixels, &result);
-  ComparePatches(exitance, pixel_patch, interior, problem, lab, lab_desired, lab_predicted, min_pixels, &result);
+  ComparePatches(exitance, pixel_patch, interior, problem, lab, lab_desired, lab_predicted,
+                 min_pixels, &result);
   return result;
 }
 
@@ -258,8 +266,8 @@ double SolverMeanDeltaE76(const CompensationProblem& problem, const Eigen::Matri
 }
 
 nlohmann::json DeltaEJson(const PhotoDeltaE& d) {
-  return {{"pixel_mean76", d.mean76},         {"pixel_max76", d.max76},
-          {"pixel_mean2000", d.mean2000},     {"pixel_max2000", d.max2000},
+  return {{"pixel_mean76", d.mean76},       {"pixel_max76", d.max76},
+          {"pixel_mean2000", d.mean2000},   {"pixel_max2000", d.max2000},
           {"patch_mean76", d.patch_mean76}, {"patch_mean2000", d.patch_mean2000}};
 }
 
@@ -272,12 +280,14 @@ nlohmann::json IterationJson(const VerificationIteration& it) {
       {"measured_vs_desired", DeltaEJson(it.measured)},
       {"measured_vs_predicted", DeltaEJson(it.model)},
       {"measured_vs_patch_radiosity_pixel_mean76", it.model_constant_mean76},
-      {"predicted_vs_desired", {{"patch_mean76", it.predicted_mean76},
-                                {"patch_mean2000", it.predicted_mean2000},
-                                {"solver_mean76_all_patches", it.solver_mean76}}},
+      {"predicted_vs_desired",
+       {{"patch_mean76", it.predicted_mean76},
+        {"patch_mean2000", it.predicted_mean2000},
+        {"solver_mean76_all_patches", it.solver_mean76}}},
       {"seen_pixels", it.seen_pixels},
       {"seen_patches", it.seen_patches},
-      {"seconds", {{"capture", it.capture_seconds}, {"solve", it.solve_seconds}, {"total", it.seconds}}}};
+      {"seconds",
+       {{"capture", it.capture_seconds}, {"solve", it.solve_seconds}, {"total", it.seconds}}}};
   if (!it.response_exponent.empty()) {
     json["update"] = {{"response_exponent", exponents},
                       {"reflectance_scale", Json3(it.reflectance_scale)}};
@@ -334,8 +344,10 @@ nlohmann::json VerificationSummary::Json() const {
 
 std::string VerificationSummary::BriefReport() const {
   if (iterations.empty()) return "verify: no photo taken (" + termination + ")";
-  std::string text = "verify: " + std::to_string(iterations.size()) + " photo(s), measured mean ΔE76";
-  for (const VerificationIteration& it : iterations) text += fmt::format(" {:.2f}", it.measured.mean76);
+  std::string text =
+      "verify: " + std::to_string(iterations.size()) + " photo(s), measured mean ΔE76";
+  for (const VerificationIteration& it : iterations)
+    text += fmt::format(" {:.2f}", it.measured.mean76);
   if (best >= 0) {
     text += fmt::format("; best iteration {} ({:.2f}, model error {:.2f}, predicted {:.2f}), {}",
                         best, iterations[best].measured.mean76, iterations[best].model.mean76,
@@ -370,25 +382,30 @@ VerificationInputs ReadInputs(const VerificationOptions& options) {
   in.rig = ReadRigDirectory(options.rig_dir);
   in.rig_file = (options.rig_dir / "rig.json").string();
   const nlohmann::json camera_json = in.rig.json.value("camera", nlohmann::json::object());
-  if (!camera_json.is_object() || !camera_json.contains("model") || !camera_json["model"].is_string()) {
-    throw IoError(in.rig_file + ": camera.model: required key is missing (the camera registered in "
-                                "the room, from procam calibrate projectors)");
+  if (!camera_json.is_object() || !camera_json.contains("model") ||
+      !camera_json["model"].is_string()) {
+    throw IoError(in.rig_file +
+                  ": camera.model: required key is missing (the camera registered in "
+                  "the room, from procam calibrate projectors)");
   }
   in.camera_model_path = options.rig_dir / camera_json["model"].get<std::string>();
   if (!std::filesystem::exists(in.camera_model_path)) {
-    throw IoError(in.rig_file + ": camera.model: " + in.camera_model_path.string() + ": file not found");
+    throw IoError(in.rig_file + ": camera.model: " + in.camera_model_path.string() +
+                  ": file not found");
   }
   in.camera_geometry = ReadCameraModel(in.camera_model_path);
   in.solution = ReadSolutionDirectory(options.solution_dir);
 
   in.simulated = FindSimulatedCamera(options.camera);
-  in.colour_source = ResolveColourSource(options, in.rig.json, in.rig_file, in.simulated.has_value());
+  in.colour_source =
+      ResolveColourSource(options, in.rig.json, in.rig_file, in.simulated.has_value());
   in.displays = options.displays;
   if (in.simulated && in.displays.empty()) in.displays = in.simulated->displays;
   if (in.displays.size() != in.rig.projectors.size()) {
-    throw IoError(in.rig_file + ": projectors: the rig has " + std::to_string(in.rig.projectors.size()) +
-                  " projector(s) but " + std::to_string(in.displays.size()) +
-                  " display(s) were given (one --display glfw:N|NAME per projector, in rig.json's order)");
+    throw IoError(
+        in.rig_file + ": projectors: the rig has " + std::to_string(in.rig.projectors.size()) +
+        " projector(s) but " + std::to_string(in.displays.size()) +
+        " display(s) were given (one --display glfw:N|NAME per projector, in rig.json's order)");
   }
   for (size_t k = 0; k < in.displays.size(); ++k) {
     const Projector& projector = in.rig.projectors[k];
@@ -396,10 +413,10 @@ VerificationInputs ReadInputs(const VerificationOptions& options) {
     const cv::Size size(projector.geometry.width(), projector.geometry.height());
     const cv::Size display = in.displays[k]->Resolution();
     if (display != size) {
-      throw IoError(in.rig_file + ": projectors[" + std::to_string(k) + "] ('" + projector.name + "') is " +
-                    std::to_string(size.width) + "x" + std::to_string(size.height) + " but its display " +
-                    in.displays[k]->Name() + " is " + std::to_string(display.width) + "x" +
-                    std::to_string(display.height));
+      throw IoError(in.rig_file + ": projectors[" + std::to_string(k) + "] ('" + projector.name +
+                    "') is " + std::to_string(size.width) + "x" + std::to_string(size.height) +
+                    " but its display " + in.displays[k]->Name() + " is " +
+                    std::to_string(display.width) + "x" + std::to_string(display.height));
     }
   }
   return in;
@@ -433,19 +450,21 @@ VerificationModel BuildModel(const VerificationOptions& options, const Verificat
   model.projectors = in.rig.projectors;
   for (Projector& projector : model.projectors) {
     if (projector.photometry.bits != 8) {
-      Report(options.progress, fmt::format("verify: projector '{}' is {}-bit; the displays show 8 bits, "
-                                           "rendering at 8",
-                                           projector.name, projector.photometry.bits));
+      Report(options.progress,
+             fmt::format("verify: projector '{}' is {}-bit; the displays show 8 bits, "
+                         "rendering at 8",
+                         projector.name, projector.photometry.bits));
       projector.photometry.bits = 8;
     }
   }
-  model.rig = BuildProjectionRig(model.geometry.patches.fine, model.projectors, ProjectionRigOptions());
+  model.rig =
+      BuildProjectionRig(model.geometry.patches.fine, model.projectors, ProjectionRigOptions());
   if (in.camera_geometry.width() <= 0) throw IoError(in.camera_model_path.string() + ": bad size");
-  Report(options.progress, fmt::format("verify: casting the camera's {}x{} rays", in.camera_geometry.width(),
-                                       in.camera_geometry.height()));
+  Report(options.progress, fmt::format("verify: casting the camera's {}x{} rays",
+                                       in.camera_geometry.width(), in.camera_geometry.height()));
   // The geometry is fixed; the photometry the loop refines is applied per photo (PredictPixels).
-  model.lighting = CastCameraPixels(model.geometry.scene, model.geometry.patches.fine, model.projectors,
-                                    in.camera_geometry);
+  model.lighting = CastCameraPixels(model.geometry.scene, model.geometry.patches.fine,
+                                    model.projectors, in.camera_geometry);
   const CameraPixelRays& rays = model.lighting;
   model.interior.assign(rays.patch.size(), false);
   for (int row = 1; row + 1 < rays.height; ++row) {
@@ -453,11 +472,12 @@ VerificationModel BuildModel(const VerificationOptions& options, const Verificat
       const size_t index = static_cast<size_t>(row) * rays.width + col;
       const int i = rays.patch[index];
       model.interior[index] = i >= 0 && rays.patch[index - 1] == i && rays.patch[index + 1] == i &&
-                              rays.patch[index - rays.width] == i && rays.patch[index + rays.width] == i;
+                              rays.patch[index - rays.width] == i &&
+                              rays.patch[index + rays.width] == i;
     }
   }
-  model.problem = MakeProblem(model.geometry.scene, model.geometry.patches.fine, model.geometry.form_factors,
-                              in.solution.alpha);
+  model.problem = MakeProblem(model.geometry.scene, model.geometry.patches.fine,
+                              model.geometry.form_factors, in.solution.alpha);
   model.problem.lower = model.rig.lower;
   model.problem.upper = model.rig.upper;
   return model;
@@ -472,9 +492,9 @@ cv::Mat DesiredPicture(const VerificationModel& model) {
     for (int col = 0; col < rays.width; ++col) {
       const int i = rays.patch[static_cast<size_t>(row) * rays.width + col];
       if (i < 0) continue;
-      desired.at<cv::Vec3f>(row, col) =
-          cv::Vec3f(float(model.problem.desired(i, 0) / white), float(model.problem.desired(i, 1) / white),
-                    float(model.problem.desired(i, 2) / white));
+      desired.at<cv::Vec3f>(row, col) = cv::Vec3f(float(model.problem.desired(i, 0) / white),
+                                                  float(model.problem.desired(i, 1) / white),
+                                                  float(model.problem.desired(i, 2) / white));
     }
   }
   return LinearToDisplay(desired);
@@ -483,11 +503,13 @@ cv::Mat DesiredPicture(const VerificationModel& model) {
 // The loop's state from one iteration to the next.
 class VerificationLoop {
  public:
-  VerificationLoop(const VerificationOptions& options, const VerificationInputs& in, VerificationModel* model)
+  VerificationLoop(const VerificationOptions& options, const VerificationInputs& in,
+                   VerificationModel* model)
       : options_(options), in_(in), model_(*model), wall_(in.displays, in.names) {
     camera_ = OpenCamera(options.camera, OpenCameraOptions());
     if (!IsColour(camera_->Settings().pixel_format)) {
-      throw IoError("camera '" + options.camera + "': delivers grey images; verification needs colour");
+      throw IoError("camera '" + options.camera +
+                    "': delivers grey images; verification needs colour");
     }
     if (options.gain >= 0) camera_->SetGain(options.gain);
     sequencer_ = options.sequencer;
@@ -553,7 +575,8 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   it.directory = options_.out / "iterations" / std::to_string(k);
   CreateDirectories(it.directory);
   RenderSummary render;
-  images_ = RenderProjectorImages(model_.rig, model_.geometry.scene, emittance_, RenderOptions(), &render);
+  images_ = RenderProjectorImages(model_.rig, model_.geometry.scene, emittance_, RenderOptions(),
+                                  &render);
   std::vector<cv::Mat> patterns;
   for (size_t p = 0; p < images_.size(); ++p) {
     WriteProjectorImage(it.directory / (in_.names[p] + ".png"), images_[p]);
@@ -567,7 +590,8 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   CaptureSequence sequence;
   sequence.kind = "verify";
   const cv::Mat pattern = wall_.Compose(patterns);
-  sequence.parameters = {{"iteration", k}, {"projectors", in_.names}, {"checksum", PatternChecksum(pattern)}};
+  sequence.parameters = {
+      {"iteration", k}, {"projectors", in_.names}, {"checksum", PatternChecksum(pattern)}};
   sequence.patterns.push_back({"solution", pattern, {{"kind", "verify"}, {"iteration", k}}});
   CaptureSessionOptions session_options;
   session_options.directory = it.directory / "session";
@@ -582,19 +606,20 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   const CaptureSessionData session = CaptureSessionData::Load(session_options.directory);
   const cv::Mat photo = hdr_ ? session.Hdr(0) : session.Mean(0);
   const CameraPixelRays& rays = model_.lighting;
-  if (photo.channels() != 3) throw IoError(session_options.directory.string() + ": the photo is not colour");
+  if (photo.channels() != 3)
+    throw IoError(session_options.directory.string() + ": the photo is not colour");
   if (photo.cols != rays.width || photo.rows != rays.height) {
     throw IoError("camera '" + options_.camera + "' delivers " + std::to_string(photo.cols) + "x" +
-                  std::to_string(photo.rows) + " photos but " + in_.camera_model_path.string() + " is " +
-                  std::to_string(rays.width) + "x" + std::to_string(rays.height));
+                  std::to_string(photo.rows) + " photos but " + in_.camera_model_path.string() +
+                  " is " + std::to_string(rays.width) + "x" + std::to_string(rays.height));
   }
   const CameraColour colour = ColourOf(session);
   cv::Mat photo32;
   photo.convertTo(photo32, CV_32FC3);
   const cv::Mat exitance = PhotoToExitance(photo32, colour);
   const cv::Mat predicted = PredictPixels(rays, model_.rig, images_, model_.geometry.form_factors);
-  comparison_ = Compare(exitance, rays.patch, model_.interior, model_.problem, radiosity_, predicted,
-                        options_.min_patch_pixels);
+  comparison_ = Compare(exitance, rays.patch, model_.interior, model_.problem, radiosity_,
+                        predicted, options_.min_patch_pixels);
   it.measured = comparison_.measured;
   it.model = comparison_.model;
   it.predicted_mean76 = comparison_.predicted_mean76;
@@ -612,13 +637,15 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   WritePng(it.directory / "photo.png", it.photo);
   WritePng(it.directory / "predicted.png", it.predicted);
   WritePng(it.directory / "delta_e76.png", it.delta_e76);
-  WritePng(it.directory / "delta_e2000.png", HeatMapWithColourBar(comparison_.delta_e2000, heat_scale_ / 2, "dE00"));
+  WritePng(it.directory / "delta_e2000.png",
+           HeatMapWithColourBar(comparison_.delta_e2000, heat_scale_ / 2, "dE00"));
   WritePng(it.directory / "model_delta_e76.png", it.model_delta_e76);
   WriteNpy(it.directory / "measured_B.npy", RowMatrixXd(comparison_.patch_exitance));
-  Report(options_.progress, fmt::format("verify: iteration {}: measured ΔE76 {:.2f} (max {:.1f}), model error "
-                                        "{:.2f}, predicted {:.2f}, {} patches seen",
-                                        k, it.measured.mean76, it.measured.max76, it.model.mean76,
-                                        it.predicted_mean76, it.seen_patches));
+  Report(options_.progress,
+         fmt::format("verify: iteration {}: measured ΔE76 {:.2f} (max {:.1f}), model error "
+                     "{:.2f}, predicted {:.2f}, {} patches seen",
+                     k, it.measured.mean76, it.measured.max76, it.model.mean76, it.predicted_mean76,
+                     it.seen_patches));
   if (it.seen_patches == 0) {
     throw IoError("camera '" + options_.camera + "': " + in_.camera_model_path.string() +
                   " sees no patch of the scene (is the camera registered in the room frame?)");
@@ -641,14 +668,16 @@ void VerificationLoop::UpdateAndSolve(VerificationIteration* it) {
                                       comparison_.patch_exitance, comparison_.seen, radiosity_);
   it->response_exponent = update.exponent;
   it->reflectance_scale = update.scale;
-  Report(options_.progress, fmt::format("verify: model update: reflectance scale ({:.3f}, {:.3f}, {:.3f}), fit "
-                                        "rms {:.4f} → {:.4f}",
-                                        update.scale[0], update.scale[1], update.scale[2], update.rms_before,
-                                        update.rms_after));
+  Report(options_.progress,
+         fmt::format("verify: model update: reflectance scale ({:.3f}, {:.3f}, {:.3f}), fit "
+                     "rms {:.4f} → {:.4f}",
+                     update.scale[0], update.scale[1], update.scale[2], update.rms_before,
+                     update.rms_after));
   for (size_t p = 0; p < update.exponent.size(); ++p) {
-    Report(options_.progress, fmt::format("verify:   projector '{}': response exponent ({:.3f}, {:.3f}, {:.3f})",
-                                          in_.names[p], update.exponent[p][0], update.exponent[p][1],
-                                          update.exponent[p][2]));
+    Report(options_.progress,
+           fmt::format("verify:   projector '{}': response exponent ({:.3f}, {:.3f}, {:.3f})",
+                       in_.names[p], update.exponent[p][0], update.exponent[p][1],
+                       update.exponent[p][2]));
   }
   ApplyModelUpdate(update, &model_.rig, &model_.geometry.patches);
   CompensationOptions compensation;
@@ -722,8 +751,8 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
       summary.seconds = SecondsSince(start);
       write_summary();
       throw IoError("verify: iteration " + std::to_string(k) + ": " + error.what() + " (kept " +
-                    std::to_string(k) + " complete iteration(s) and the photos taken in " + options.out.string() +
-                    ", see result.json)");
+                    std::to_string(k) + " complete iteration(s) and the photos taken in " +
+                    options.out.string() + ", see result.json)");
     }
     const bool improved = it.measured.mean76 < best_mean * (1.0 - options.min_improvement);
     if (it.measured.mean76 < best_mean) {
@@ -779,10 +808,10 @@ void AddVerificationReport(const VerificationSummary& summary, HtmlReport* repor
     model.emplace_back(it.index, std::max(1e-3, it.model.mean76));
     predicted.emplace_back(it.index, std::max(1e-3, it.predicted_mean76));
   }
-  report->Table({"iteration", "measured ΔE76 mean (max)", "measured CIEDE2000 mean",
-                 "model error ΔE76 mean", "predicted ΔE76 mean", "patches seen",
-                 "model update after it", "seconds"},
-                rows);
+  report->Table(
+      {"iteration", "measured ΔE76 mean (max)", "measured CIEDE2000 mean", "model error ΔE76 mean",
+       "predicted ΔE76 mean", "patches seen", "model update after it", "seconds"},
+      rows);
   if (!summary.complete) report->Paragraph("Stopped by a fault: " + summary.error);
   if (!summary.iterations.empty()) {
     report->Plot("Convergence", "iteration", "mean ΔE76",
@@ -790,7 +819,8 @@ void AddVerificationReport(const VerificationSummary& summary, HtmlReport* repor
                   {"model error (photo vs predicted)", model},
                   {"predicted (solver vs desired)", predicted}});
   }
-  if (!summary.desired.empty()) report->Figures({{"desired (per patch, as the camera sees it)", summary.desired}});
+  if (!summary.desired.empty())
+    report->Figures({{"desired (per patch, as the camera sees it)", summary.desired}});
   for (const VerificationIteration& it : summary.iterations) {
     report->Heading(fmt::format("Iteration {}", it.index), 3);
     report->Figures({{"photo", it.photo},

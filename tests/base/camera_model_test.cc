@@ -27,7 +27,8 @@ TEST(CameraModelFile, WriteReadIsLossless) {
   EXPECT_EQ(back.intrinsics, model.intrinsics);  // bit for bit: 17 significant digits
   EXPECT_EQ(back.width, 1280);
   EXPECT_EQ(back.height, 800);
-  EXPECT_LT(testing::MaxAbsDifference(back.cam_from_ref.matrix(), model.cam_from_ref.matrix()), 1e-15);
+  EXPECT_LT(testing::MaxAbsDifference(back.cam_from_ref.matrix(), model.cam_from_ref.matrix()),
+            1e-15);
   EXPECT_EQ(ReadFile(dir / "m.cameramodel").rfind("# a test model\n", 0), 0u);
 }
 
@@ -37,9 +38,11 @@ TEST(CameraModelFile, BadFilesFailWithOneLineNamingTheFile) {
     ReadCameraModelFile(dir / "missing.cameramodel");
     FAIL() << "no error";
   } catch (const IoError& error) {
-    EXPECT_NE(std::string(error.what()).find("missing.cameramodel: file not found"), std::string::npos);
+    EXPECT_NE(std::string(error.what()).find("missing.cameramodel: file not found"),
+              std::string::npos);
   }
-  const auto junk = dir.Write("junk.cameramodel", "{ 'lensmodel': 'LENSMODEL_PINHOLE', 'intrinsics': [1, 2");
+  const auto junk =
+      dir.Write("junk.cameramodel", "{ 'lensmodel': 'LENSMODEL_PINHOLE', 'intrinsics': [1, 2");
   ::testing::internal::CaptureStderr();
   try {
     ReadCameraModelFile(junk);
