@@ -92,9 +92,8 @@ void ParseCameraScale(const PhotometricStageOptions& args, const std::filesystem
       throw IoError("--camera-scale: " + text + " is not the camera of " +
                     (session / "session.json").string() + " (" + recorded + ")");
     }
-    *scale = simulated->value_per_exitance(manifest, hdr, full_scale);
-    // The camera's own black level (the HDR merge has removed it).
-    *black = simulated->colour(manifest, hdr, full_scale, -1.0).black;
+    *scale = simulated->value_per_exitance(manifest, hdr, full_scale, simulated->black_level);
+    *black = hdr ? 0.0 : simulated->black_level;  // the HDR merge has removed it
     return;
   }
   *scale = ParsePositiveRgb("--camera-scale", text);

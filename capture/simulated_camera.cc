@@ -46,4 +46,14 @@ nlohmann::json CameraColour::Json() const {
   return {{"to_exitance", m}, {"black", black}, {"source", source}};
 }
 
+CameraColour SimulatedColour(const SimulatedCamera& camera, const nlohmann::json& manifest, bool hdr,
+                             double full_scale, double black_override) {
+  const double black = black_override >= 0 ? black_override : camera.black_level;
+  CameraColour colour;
+  colour.black = hdr ? 0.0 : black;
+  colour.to_exitance = camera.value_per_exitance(manifest, hdr, full_scale, black).cwiseInverse().asDiagonal();
+  colour.source = "simulated camera: " + camera.description;
+  return colour;
+}
+
 }  // namespace procam

@@ -36,12 +36,11 @@ struct SimulatedCamera {
   std::vector<std::string> projector_names;  // one per display
   std::vector<std::shared_ptr<PatternDisplay>> displays;
   double black_level = 0.0;  // the camera's black level, DN (what the HDR merge subtracts)
-  std::function<CameraColour(const nlohmann::json& manifest, bool hdr, double full_scale,
-                             double black_override)>
-      colour;
-  // The same calibration as camera value per unit exitance k per channel (colour's
-  // to_exitance is diag(1/k)), for the photometric calibration's transfer.
-  std::function<Eigen::Vector3d(const nlohmann::json& manifest, bool hdr, double full_scale)>
+  // Its colour calibration: camera value per unit exitance k per channel for a photo taken
+  // with the session's settings, `black` the black level assumed (the HDR merge's scale
+  // depends on it).
+  std::function<Eigen::Vector3d(const nlohmann::json& manifest, bool hdr, double full_scale,
+                                double black)>
       value_per_exitance;
   // What a whole-rig calibration needs: the room the camera looks at (a scene text such as
   // "synthetic:c_shaped", geometry/stage.h) and its patch target; a tape-measure guess of the
@@ -59,6 +58,12 @@ struct SimulatedCamera {
 // synthetic world registers "synthetic"; a URI of any other scheme is a real camera.
 using SimulatedCameraSource = std::function<SimulatedCamera(const std::string& camera_uri)>;
 void RegisterSimulatedCameraSource(const std::string& scheme, SimulatedCameraSource source);
+
+// A simulated camera's colour calibration as verification applies it: to_exitance = diag(1/k),
+// black = the black level (`black_override` ≥ 0, else the camera's; 0 for HDR merges, which
+// removed it).
+CameraColour SimulatedColour(const SimulatedCamera& camera, const nlohmann::json& manifest, bool hdr,
+                             double full_scale, double black_override);
 
 // The simulated camera behind `camera_uri` when its scheme has a registered source (which throws
 // IoError naming the URI when it cannot open it); nullopt for any other camera.

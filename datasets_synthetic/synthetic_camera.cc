@@ -292,17 +292,6 @@ double SyntheticValuePerExitance(const CameraUri& uri, const SyntheticWorld& wor
   return world.radiance_scale * full * exposure / camera.reference_exposure_us * gain;
 }
 
-CameraColour SyntheticColour(const CameraUri& uri, const SyntheticWorld& world,
-                             const nlohmann::json& manifest, bool hdr, double full_scale,
-                             double black_override) {
-  const double black = black_override >= 0 ? black_override : TestCameraOptionsFromUri(uri).black_level;
-  CameraColour colour;
-  colour.black = hdr ? 0.0 : black;
-  colour.to_exitance = Eigen::Matrix3d::Identity() / SyntheticValuePerExitance(uri, world, manifest, hdr, full_scale, black);
-  colour.source = "synthetic camera URI";
-  return colour;
-}
-
 // The synthetic camera's chessboard photos: the rig's own camera (its lens, not its pose) sees
 // a board of `board` held in ten poses. Written as 8-bit PNGs into `folder`.
 int RenderSyntheticChessboard(const SyntheticWorld& world, const ChessboardSpec& board,
@@ -364,13 +353,9 @@ void RegisterSyntheticWorld() {
         board.square_size = square;
         return RenderSyntheticChessboard(*world, board, folder);
       };
-      camera.value_per_exitance = [uri, world](const nlohmann::json& manifest, bool hdr, double full_scale) {
-        const double black = TestCameraOptionsFromUri(uri).black_level;
+      camera.value_per_exitance = [uri, world](const nlohmann::json& manifest, bool hdr, double full_scale,
+                                               double black) {
         return Eigen::Vector3d::Constant(SyntheticValuePerExitance(uri, *world, manifest, hdr, full_scale, black));
-      };
-      camera.colour = [uri, world](const nlohmann::json& manifest, bool hdr, double full_scale,
-                                   double black_override) {
-        return SyntheticColour(uri, *world, manifest, hdr, full_scale, black_override);
       };
       return camera;
     });

@@ -560,7 +560,7 @@ CameraColour VerificationLoop::ColourOf(const CaptureSessionData& session) const
   if (in_.colour_source.simulated) {
     const nlohmann::json& manifest = session.manifest();
     const double full_scale = manifest["patterns"][0]["captured"].value("full_scale", 255.0);
-    return in_.simulated->colour(manifest, hdr_, full_scale, options_.camera_black);
+    return SimulatedColour(*in_.simulated, manifest, hdr_, full_scale, options_.camera_black);
   }
   CameraColour colour;
   colour.to_exitance = in_.colour_source.matrix;
