@@ -94,7 +94,7 @@ void RunCalibrateResponse(const CalibrateResponseArguments& args) {
   const std::filesystem::path out(args.out);
   std::filesystem::create_directories(out);
   WriteFileAtomically(out / "camera_response.json", file.dump(2) + "\n");
-  UpdateRigJson(out, [](nlohmann::json& rig) { rig["camera"]["response"] = "camera_response.json"; });
+  UpdateRigFile(out, [](RigFile& rig) { rig.camera.response = "camera_response.json"; });
   std::printf("wrote %s\n", (out / "camera_response.json").c_str());
 }
 

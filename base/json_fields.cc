@@ -1,10 +1,47 @@
 #include "base/json_fields.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace procam {
 
 using nlohmann::json;
+
+namespace {
+
+std::string SyntaxErrorWithLine(const std::string& text, const json::parse_error& error) {
+  size_t line = 1, column = 1;
+  const size_t end = std::min(text.size(), error.byte > 0 ? error.byte - 1 : 0);
+  for (size_t k = 0; k < end; ++k) {
+    if (text[k] == '\n') {
+      ++line;
+      column = 1;
+    } else {
+      ++column;
+    }
+  }
+  std::string what = error.what();
+  const size_t colon = what.rfind(": ");
+  if (colon != std::string::npos) what = what.substr(colon + 2);
+  return "line " + std::to_string(line) + ", column " + std::to_string(column) +
+         ": invalid JSON: " + what;
+}
+
+}  // namespace
+
+json ReadJsonFile(const std::filesystem::path& path) {
+  const std::string file = path.string();
+  if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
+  const std::string text = ReadFile(path);
+  try {
+    return json::parse(text);
+  } catch (const json::parse_error& error) {
+    throw IoError(file + ": " + SyntaxErrorWithLine(text, error));
+  } catch (const json::exception& error) {  // e.g. a number too large for a double
+    const std::string what = error.what();
+    throw IoError(file + ": invalid JSON: " + what.substr(what.find(']') + 2));
+  }
+}
 
 JsonFields::JsonFields(const json& object, std::string file, std::string prefix)
     : object_(object), file_(std::move(file)), prefix_(std::move(prefix)) {

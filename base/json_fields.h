@@ -2,6 +2,7 @@
 // Reading one JSON object of a human-written file (scenes, projectors) with every problem
 // reported as one line "file: key.path: what" (an IoError), so that users can find it.
 
+#include <filesystem>
 #include <set>
 #include <string>
 #include <vector>
@@ -12,6 +13,10 @@
 #include "base/io.h"
 
 namespace procam {
+
+// The JSON document in `path`. Throws IoError naming the file: missing, unreadable, or not JSON
+// ("line 3, column 7: invalid JSON: ...").
+nlohmann::json ReadJsonFile(const std::filesystem::path& path);
 
 class JsonFields {
  public:
@@ -47,5 +52,8 @@ class JsonFields {
   std::string file_;
   std::string prefix_;
 };
+
+// [x, y, z], as every file writes a triple.
+inline nlohmann::json JsonTriple(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
 
 }  // namespace procam

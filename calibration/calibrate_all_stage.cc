@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "base/io.h"
+#include "base/json_fields.h"
 #include "calibration/camera_stage.h"
 #include "calibration/capture_stage.h"
 #include "calibration/photometric_stage.h"
@@ -106,8 +107,7 @@ void CalibrateCameraStep(const CalibrateAllOptions& args, const RigPlan& plan) {
   if (!args.camera_model.empty()) {
     std::filesystem::copy_file(args.camera_model, args.out / "camera.cameramodel",
                                std::filesystem::copy_options::overwrite_existing);
-    UpdateRigJson(args.out,
-                  [](nlohmann::json& rig) { rig["camera"]["model"] = "camera.cameramodel"; });
+    UpdateRigFile(args.out, [](RigFile& rig) { rig.camera.model = "camera.cameramodel"; });
     Report(args.progress, "camera model from " + args.camera_model.string());
     return;
   }
@@ -251,7 +251,6 @@ void SeparateProjectorBlacks(const std::filesystem::path& out,
                              const std::filesystem::path& captures, const std::string& scene,
                              int patches, const ProgressCallback& progress) {
   Report(progress, "\n== black levels, jointly");
-  const nlohmann::json rig_json = ReadRigJson(out);
   const RigDirectory rig = ReadRigDirectory(out);
   const ProjectorGeometry camera = ReadCameraModel(out / "camera.cameramodel");
   GeometryOptions geometry;
@@ -267,18 +266,14 @@ void SeparateProjectorBlacks(const std::filesystem::path& out,
                                         [&](const Projector& p) { return p.name == name; });
     if (projector == rig.projectors.end())
       throw IoError((out / "rig.json").string() + ": no projector " + name);
-    // Written by step 4 for every projector; .at() names what is missing otherwise.
-    Eigen::Vector3d scale;
-    nlohmann::json entry;
-    try {
-      entry = rig_json.at("photometric").at(name);
-      const nlohmann::json& k = entry.at("camera_scale");
-      scale = Eigen::Vector3d(k.at(0).get<double>(), k.at(1).get<double>(), k.at(2).get<double>());
-    } catch (const nlohmann::json::exception&) {
+    // Written by step 4 for every projector.
+    const auto photometry = rig.file.photometric.find(name);
+    if (photometry == rig.file.photometric.end() || !photometry->second.camera_scale) {
       throw IoError((out / "rig.json").string() + ": photometric." + name +
                     ".camera_scale: missing (calibrate photometric --scene did not run for it)");
     }
-    camera_black = entry.value("camera_black", 0.0);
+    const Eigen::Vector3d scale = *photometry->second.camera_scale;
+    camera_black = photometry->second.camera_black;
     const CameraPixelLighting lighting =
         LightCameraPixels(stage.scene, stage.patches.fine, projector->geometry, camera);
     const UnitLightModel model = ModelUnitLight(stage.patches.fine, stage.form_factors,
@@ -309,25 +304,25 @@ void SeparateProjectorBlacks(const std::filesystem::path& out,
   const std::vector<Eigen::Vector3d> black =
       SeparateBlackLevels(transfers, black_field, camera_black);
   nlohmann::json report = nlohmann::json::object();
-  UpdateRigJson(out, [&](nlohmann::json& json) {
+  UpdateRigFile(out, [&](RigFile& file) {
     for (size_t j = 0; j < names.size(); ++j) {
-      nlohmann::json& entry = RigProjectorEntry(json, names[j]);
-      nlohmann::json fitted_black = entry["black"], fitted_max = entry["max"];
-      nlohmann::json new_black = nlohmann::json::array(), new_max = nlohmann::json::array();
-      for (int c = 0; c < 3; ++c) {
-        const double shift = fitted_black[c].get<double>() - black[j][c];
-        new_black.push_back(std::max(0.0, black[j][c]));
-        new_max.push_back(fitted_max[c].get<double>() - shift);
+      RigProjector& entry = file.Projector(names[j]);
+      if (!entry.black || !entry.max) {
+        throw IoError((out / "rig.json").string() + ": projectors: '" + names[j] +
+                      "' has no black and max (calibrate photometric --scene did not run for it)");
       }
-      report[names[j]] = {{"fitted_black", fitted_black}, {"black", new_black}, {"max", new_max}};
-      Report(
-          progress,
-          fmt::format("{}: black ({:.5f}, {:.5f}, {:.5f}) (fitted alone: {:.5f}, {:.5f}, {:.5f})",
-                      names[j], new_black[0].get<double>(), new_black[1].get<double>(),
-                      new_black[2].get<double>(), fitted_black[0].get<double>(),
-                      fitted_black[1].get<double>(), fitted_black[2].get<double>()));
-      entry["black"] = new_black;
-      entry["max"] = new_max;
+      const Eigen::Vector3d fitted_black = *entry.black, fitted_max = *entry.max;
+      const Eigen::Vector3d new_black = black[j].cwiseMax(0.0);
+      const Eigen::Vector3d new_max = fitted_max - (fitted_black - black[j]);
+      report[names[j]] = {{"fitted_black", JsonTriple(fitted_black)},
+                          {"black", JsonTriple(new_black)},
+                          {"max", JsonTriple(new_max)}};
+      Report(progress,
+             fmt::format("{}: black ({:.5f}, {:.5f}, {:.5f}) (fitted alone: {:.5f}, {:.5f}, {:.5f})",
+                         names[j], new_black[0], new_black[1], new_black[2], fitted_black[0],
+                         fitted_black[1], fitted_black[2]));
+      entry.black = new_black;
+      entry.max = new_max;
     }
   });
   UpdateRigResult(

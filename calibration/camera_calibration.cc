@@ -1,5 +1,6 @@
 #include "calibration/camera_calibration.h"
 
+#include "base/timing.h"
 #include "calibration/pose_math.h"
 
 #include <algorithm>
@@ -157,7 +158,7 @@ bool ResidualStatistics(const ChessboardSpec& board, const LensModel& lens_fitte
 bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSpec& board,
                      const std::vector<ChessboardView>& views, int width, int height,
                      CameraCalibration* calibration, CameraCalibrationSummary* summary) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   std::string why;
   if (!options.Check(&why) || !board.Check(&why)) throw std::invalid_argument(why);
   if (width < 1 || height < 1) throw std::invalid_argument("image size must be at least 1×1");
@@ -173,7 +174,7 @@ bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSp
     summary->termination = termination;
     summary->message = std::move(message);
     summary->time_s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        SecondsSince(start);
     return termination == CameraCalibrationSummary::kConverged;
   };
   const int view_count = static_cast<int>(views.size());

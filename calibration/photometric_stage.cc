@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "base/io.h"
+#include "base/json_fields.h"
 #include "base/parse.h"
 #include "calibration/photometric_transfer.h"
 #include "calibration/rig_directory.h"
@@ -29,7 +30,6 @@
 namespace procam {
 namespace {
 
-nlohmann::json Json(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
 
 // The rig side of the stage: rig.json's geometry for scene units, the per-pixel transfer, the
 // reflectance and the rig.json update.
@@ -73,7 +73,8 @@ struct PhotometricRigStage::State {
   cv::Mat transfer;
   // Prepared by Prepare():
   ReflectanceEstimate reflectance;
-  nlohmann::json photometric_entry, rig_projector;
+  RigPhotometry photometric_entry;
+  RigProjector rig_projector;  // its photometry (black, max, response, mixing)
 };
 
 // k from "x", "r,g,b" or a simulated camera's URI (its colour calibration for the session's
@@ -128,33 +129,27 @@ PhotometricRigStage::PhotometricRigStage(const PhotometricStageOptions& args,
         "scene's units (a number or R,G,B; for the synthetic camera its URI)");
   }
   // The rig's geometry: the camera registered in the room and the projector's model.
-  const nlohmann::json rig = ReadRigJson(rig_dir);
-  const nlohmann::json camera = rig.value("camera", nlohmann::json::object());
-  if (!camera.is_object() || !camera.contains("model") || !camera["model"].is_string()) {
+  const RigFile rig = ReadRigFile(rig_dir);
+  if (rig.camera.model.empty()) {
     throw IoError(s.rig_file +
                   ": camera.model: required key is missing (procam calibrate "
                   "camera), needed for --scene");
   }
-  if (!rig.contains("registration")) {
+  if (rig.registration.is_null()) {
     throw IoError(s.rig_file +
                   ": registration: required key is missing (the camera is not registered in the "
                   "room frame: procam calibrate projectors), needed for --scene");
   }
-  const nlohmann::json* entry = nullptr;
-  if (rig.contains("projectors") && rig["projectors"].is_array()) {
-    for (const nlohmann::json& candidate : rig["projectors"]) {
-      if (candidate.is_object() && candidate.value("name", "") == args.projector)
-        entry = &candidate;
-    }
-  }
-  if (entry == nullptr || !entry->contains("model") || !(*entry)["model"].is_string()) {
+  const auto entry = std::find_if(rig.projectors.begin(), rig.projectors.end(),
+                                  [&](const RigProjector& p) { return p.name == args.projector; });
+  if (entry == rig.projectors.end() || entry->model.empty()) {
     throw IoError(s.rig_file + ": projectors: no entry named '" + args.projector +
                   "' with a model (procam calibrate projectors), needed for --scene");
   }
   ProjectorGeometry camera_geometry;
   try {
-    camera_geometry = ReadCameraModel(rig_dir / camera["model"].get<std::string>());
-    s.projector.geometry = ReadCameraModel(rig_dir / (*entry)["model"].get<std::string>());
+    camera_geometry = ReadCameraModel(rig_dir / rig.camera.model);
+    s.projector.geometry = ReadCameraModel(rig_dir / entry->model);
   } catch (const IoError& error) {
     throw IoError(s.rig_file + ": " + error.what());
   }
@@ -198,8 +193,9 @@ void PhotometricRigStage::Prepare(const PhotometricModel& model,
                                   const std::vector<FlatField>& fields, const cv::Mat& mask,
                                   nlohmann::json* photometric, nlohmann::json* result) {
   State& s = *state_;
-  nlohmann::json& entry = s.photometric_entry;
-  entry = {{"session", s.session_dir.string()}};
+  RigPhotometry& entry = s.photometric_entry;
+  entry = RigPhotometry{};
+  entry.session = s.session_dir.string();
   if (scene_units()) {
     const std::string units =
         "scene units: irradiance at 1 m on the projector's axis (docs/scene_format.md max)";
@@ -209,10 +205,10 @@ void PhotometricRigStage::Prepare(const PhotometricModel& model,
         " with the rig's geometry and camera scale k; scaled by the scene's nominal reflectance";
     (*result)["units"] = units;
     (*result)["note"] = (*photometric)["note"];
-    entry["units"] = "scene";
-    entry["scene"] = s.args.scene;
-    entry["camera_scale"] = Json(s.camera_scale);
-    entry["camera_black"] = s.camera_black;
+    entry.units = "scene";
+    entry.scene = s.args.scene;
+    entry.camera_scale = s.camera_scale;
+    entry.camera_black = s.camera_black;
 
     // White minus black: a white field when captured, else the sum of the full-drive channel
     // fields minus black; its output difference is max − black either way.
@@ -249,26 +245,23 @@ void PhotometricRigStage::Prepare(const PhotometricModel& model,
                                 {"patches", level.size()},
                                 {"patches_seen", s.reflectance.patches_seen},
                                 {"target_patches", s.stage->scene.target_patches}};
-    (*result)["camera_scale"] = Json(s.camera_scale);
+    (*result)["camera_scale"] = JsonTriple(s.camera_scale);
   } else {
-    entry["units"] = "camera";
+    entry.units = "camera";
   }
   (*result)["rig_projector"] = s.args.projector;
 
-  nlohmann::json& projector = s.rig_projector;
-  projector = nlohmann::json::object();
+  RigProjector& projector = s.rig_projector;
+  projector = RigProjector{};
   if (s.args.response == "lut") {
-    projector["lut"] = {model.table[0], model.table[1], model.table[2]};
+    projector.response = {{"lut", {model.table[0], model.table[1], model.table[2]}}};
   } else {
-    projector["gamma"] = Json(model.gamma);
+    projector.response = {{"gamma", JsonTriple(model.gamma)}};
   }
-  projector["mixing"] = nlohmann::json::array();
-  for (int i = 0; i < 3; ++i) {
-    projector["mixing"].push_back({model.mixing(i, 0), model.mixing(i, 1), model.mixing(i, 2)});
-  }
+  projector.mixing = model.mixing;
   if (scene_units()) {
-    projector["black"] = Json(model.black);
-    projector["max"] = Json(model.max);
+    projector.black = model.black;
+    projector.max = model.max;
   }
 }
 
@@ -278,20 +271,22 @@ void PhotometricRigStage::Commit() const {
   if (scene_units()) {
     WriteNpy(s.rig_dir / "reflectance.npy", RowMatrixXd(s.reflectance.reflectance));
   }
-  UpdateRigJson(s.rig_dir, [&](nlohmann::json& rig) {
-    nlohmann::json& entry = RigProjectorEntry(rig, s.args.projector);
-    for (const char* key : {"gamma", "lut", "black", "max"}) entry.erase(key);
-    entry.update(s.rig_projector);
-    if (!rig.contains("photometric") || !rig["photometric"].is_object())
-      rig["photometric"] = nlohmann::json::object();
-    rig["photometric"][s.args.projector] = s.photometric_entry;
+  UpdateRigFile(s.rig_dir, [&](RigFile& rig) {
+    RigProjector& entry = rig.Projector(s.args.projector);
+    entry.black = s.rig_projector.black;
+    entry.max = s.rig_projector.max;
+    entry.response = s.rig_projector.response;
+    entry.mixing = s.rig_projector.mixing;
+    rig.photometric[s.args.projector] = s.photometric_entry;
     if (scene_units()) {
-      rig["reflectance"] = {{"file", "reflectance.npy"},
-                            {"projector", s.args.projector},
-                            {"scene", s.args.scene},
-                            {"target_patches", s.stage->scene.target_patches},
-                            {"patches", s.stage->patches.fine.size()},
-                            {"patches_seen", s.reflectance.patches_seen}};
+      RigReflectance reflectance;
+      reflectance.file = "reflectance.npy";
+      reflectance.projector = s.args.projector;
+      reflectance.scene = s.args.scene;
+      reflectance.target_patches = s.stage->scene.target_patches;
+      reflectance.patches = s.stage->patches.fine.size();
+      reflectance.patches_seen = s.reflectance.patches_seen;
+      rig.reflectance = reflectance;
     }
   });
 }
@@ -448,10 +443,10 @@ PhotometricModel RunPhotometricStage(const PhotometricStageOptions& args) {
   nlohmann::json photometric;
   photometric["units"] = units;
   photometric["note"] = note;
-  photometric["black"] = Json(model.black);
-  photometric["max"] = Json(model.max);
-  photometric["gamma"] = Json(model.gamma);
-  photometric["gamma_rms"] = Json(model.gamma_rms);
+  photometric["black"] = JsonTriple(model.black);
+  photometric["max"] = JsonTriple(model.max);
+  photometric["gamma"] = JsonTriple(model.gamma);
+  photometric["gamma_rms"] = JsonTriple(model.gamma_rms);
   photometric["lut"] = {model.table[0], model.table[1], model.table[2]};
   photometric["mixing"] = nlohmann::json::array();
   for (int i = 0; i < 3; ++i) {
@@ -468,7 +463,7 @@ PhotometricModel RunPhotometricStage(const PhotometricStageOptions& args) {
   result["pixels_used"] = model.pixels;
   result["pixels_clipped"] = clipped;
   result["min_contrast"] = options.min_contrast;
-  result["black_over_max"] = Json(model.black.cwiseQuotient(model.max));
+  result["black_over_max"] = JsonTriple(model.black.cwiseQuotient(model.max));
   nlohmann::json channels = nlohmann::json::array();
   for (int c = 0; c < 3; ++c) {
     nlohmann::json samples = nlohmann::json::array();

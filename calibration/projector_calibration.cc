@@ -1,5 +1,6 @@
 #include "calibration/projector_calibration.h"
 
+#include "base/timing.h"
 #include "calibration/pose_math.h"
 
 #include <algorithm>
@@ -217,7 +218,7 @@ bool Refine(const ProjectorCalibrationOptions& options, const std::vector<Vec3>&
 bool CalibrateProjector(const ProjectorCalibrationOptions& options,
                         const ProjectorCalibrationProblem& problem,
                         ProjectorCalibration* calibration, ProjectorCalibrationSummary* summary) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   std::string why;
   if (!options.Check(&why))
     throw std::invalid_argument("ProjectorCalibrationOptions: " + why);
@@ -234,7 +235,7 @@ bool CalibrateProjector(const ProjectorCalibrationOptions& options,
     summary->termination = termination;
     summary->message = std::move(message);
     summary->time_s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        SecondsSince(start);
     return termination == ProjectorCalibrationSummary::kConverged;
   };
   summary->correspondences = static_cast<int>(problem.correspondences.size());

@@ -10,6 +10,7 @@
 
 #include "base/camera_model.h"
 #include "base/io.h"
+#include "base/json_fields.h"
 #include "base/parse.h"
 #include "calibration/rig_directory.h"
 #include "calibration/structured_light.h"
@@ -233,7 +234,6 @@ ScanCheck CheckAgainstScan(const RoomCalibrationProblem& problem,
   return check;
 }
 
-nlohmann::json Json(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 
 nlohmann::json PoseJson(const Eigen::Isometry3d& pose) {
   nlohmann::json matrix = nlohmann::json::array();
@@ -259,7 +259,7 @@ nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const Camera
   const RegistrationSummary& registration = check.registration;
   nlohmann::json registration_json;
   registration_json["room_from_camera"] = PoseJson(calibration.room_from_camera);
-  registration_json["camera_centre_m"] = Json(calibration.room_from_camera.translation());
+  registration_json["camera_centre_m"] = JsonTriple(calibration.room_from_camera.translation());
   registration_json["camera_guess"] = {{"source", guess_source},
                                        {"room_from_camera", PoseJson(guess)},
                                        {"moved_mm", summary.camera_moved_mm},
@@ -331,9 +331,9 @@ nlohmann::json ResultSection(const ProjectorsStageOptions& args,
   for (const FittedPlane& plane : check.planes) {
     const Vec3 normal = calibration.room_from_camera.linear() * plane.normal;
     planes_json.push_back(
-        {{"normal_room", Json(normal)},
+        {{"normal_room", JsonTriple(normal)},
          {"offset_room_m", plane.offset - normal.dot(calibration.room_from_camera.translation())},
-         {"centroid_room_m", Json(calibration.room_from_camera * plane.centroid)},
+         {"centroid_room_m", JsonTriple(calibration.room_from_camera * plane.centroid)},
          {"inliers", plane.inliers},
          {"rms_mm", plane.rms_mm},
          {"extent_m", {plane.extent.x(), plane.extent.y()}}});
@@ -358,7 +358,7 @@ nlohmann::json ResultSection(const ProjectorsStageOptions& args,
                                {"lens_model", p.lens_model},
                                {"intrinsics", p.intrinsics},
                                {"imagersize", {p.width, p.height}},
-                               {"centre_room_m", Json(p.proj_from_room.inverse().translation())}});
+                               {"centre_room_m", JsonTriple(p.proj_from_room.inverse().translation())}});
   result_section["projectors"] = projectors_json;
   return result_section;
 }
@@ -374,7 +374,7 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
       RegistrationJson(args, camera, guess, guess_source, scene, stage, check);
   const nlohmann::json result_section = ResultSection(args, registration_json, stage, check);
   // rig.json is read before anything is written, so a malformed one stops here.
-  ReadRigJson(out);
+  ReadRigFile(out);
 
   for (const RoomProjector& p : calibration.projectors) {
     CameraModel model_file;
@@ -398,11 +398,11 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
                            : "procam camera model (procam calibrate camera; pose by procam "
                              "calibrate projectors); extrinsics = rt_cam_room, the room = the "
                              "scene's frame");
-  UpdateRigJson(out, [&](nlohmann::json& rig) {
-    rig["camera"]["model"] = "camera.cameramodel";
+  UpdateRigFile(out, [&](RigFile& rig) {
+    rig.camera.model = "camera.cameramodel";
     for (const RoomProjector& p : calibration.projectors)
-      RigProjectorEntry(rig, p.name)["model"] = p.name + ".cameramodel";
-    rig["registration"] = registration_json;
+      rig.Projector(p.name).model = p.name + ".cameramodel";
+    rig.registration = registration_json;
   });
   UpdateRigResult(out, {"projectors"}, result_section);
   Report(args.progress,

@@ -1,5 +1,6 @@
 #include "calibration/registration.h"
 
+#include "base/timing.h"
 #include "calibration/pose_math.h"
 
 #include <algorithm>
@@ -580,7 +581,7 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
                    const RoomCalibrationProblem& problem,
                    const Eigen::Isometry3d& room_from_camera_guess, RoomCalibration* calibration,
                    RoomCalibrationSummary* summary) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   CheckRoomProblem(options, problem);
   const int projector_count = static_cast<int>(problem.projectors.size());
   *summary = RoomCalibrationSummary();
@@ -590,7 +591,7 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
     if (!message.empty())
       summary->message = summary->message.empty() ? message : summary->message + "; " + message;
     summary->time_s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        SecondsSince(start);
     return termination == RoomCalibrationSummary::kConverged ||
            termination == RoomCalibrationSummary::kNotSettled;
   };
@@ -846,7 +847,7 @@ bool RegisterModelToCloud(const RegistrationOptions& options, const RoomModel& m
                           const std::vector<Vec3>& points_in_cam,
                           const Eigen::Isometry3d& guess, Eigen::Isometry3d* room_from_camera,
                           RegistrationSummary* summary) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("RegistrationOptions: " + why);
   *summary = RegistrationSummary();
@@ -854,7 +855,7 @@ bool RegisterModelToCloud(const RegistrationOptions& options, const RoomModel& m
   auto finish = [&](RegistrationSummary::Termination termination) {
     summary->termination = termination;
     summary->time_s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        SecondsSince(start);
     return termination == RegistrationSummary::kConverged ||
            termination == RegistrationSummary::kMaxIterations;
   };

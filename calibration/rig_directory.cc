@@ -1,40 +1,242 @@
 #include "calibration/rig_directory.h"
 
+#include <cmath>
 #include <fstream>
 #include <sstream>
 
 #include "base/io.h"
+#include "base/json_fields.h"
 
 namespace procam {
 
-nlohmann::json ReadRigJson(const std::filesystem::path& rig_dir) {
+namespace {
+
+using nlohmann::json;
+
+std::string OptionalString(const JsonFields& fields, const std::string& key) {
+  return fields.Has(key) ? fields.String(key) : std::string();
+}
+
+std::optional<Eigen::Vector3d> OptionalRgb(const JsonFields& fields, const std::string& key) {
+  if (!fields.Has(key)) return std::nullopt;
+  return fields.NumberOrRgb(key);
+}
+
+int Integer(const JsonFields& fields, const std::string& key) {
+  const json& value = fields.At(key);
+  if (!value.is_number_integer() || value.get<int64_t>() < 0 || value.get<int64_t>() > (1 << 30))
+    throw fields.Error(key, "must be a non-negative integer");
+  return static_cast<int>(value.get<int64_t>());
+}
+
+Eigen::Matrix3d Matrix3(const JsonFields& fields, const std::string& key) {
+  const json& value = fields.At(key);
+  if (!value.is_array() || value.size() != 3) throw fields.Error(key, "must be 3 rows of 3 numbers");
+  Eigen::Matrix3d matrix;
+  for (int r = 0; r < 3; ++r)
+    matrix.row(r) = fields.Triple(key + "[" + std::to_string(r) + "]", value[r]).transpose();
+  return matrix;
+}
+
+json JsonMatrix(const Eigen::Matrix3d& m) {
+  json rows = json::array();
+  for (int r = 0; r < 3; ++r) rows.push_back(JsonTriple(m.row(r).transpose()));
+  return rows;
+}
+
+RigCamera ReadCamera(const json& object, const std::string& file) {
+  const JsonFields fields(object, file, "camera");
+  fields.RejectUnknown({"model", "response", "colour"});
+  RigCamera camera;
+  camera.model = OptionalString(fields, "model");
+  camera.response = OptionalString(fields, "response");
+  if (!fields.Has("colour")) return camera;
+  const JsonFields colour_fields(fields.At("colour"), file, "camera.colour");
+  colour_fields.RejectUnknown({"scale", "matrix", "black"});
+  if (colour_fields.Has("scale") == colour_fields.Has("matrix")) {
+    throw colour_fields.Error("", "give one of scale (camera value per unit exitance, [R,G,B]) "
+                                  "and matrix (camera RGB → exitance, 3×3)");
+  }
+  RigCameraColour colour;
+  if (colour_fields.Has("scale")) {
+    colour.scale = colour_fields.NumberOrRgb("scale");
+    if (!(colour.scale->minCoeff() > 0.0))
+      throw colour_fields.Error("scale", "three positive numbers (camera value per unit exitance)");
+  } else {
+    colour.matrix = Matrix3(colour_fields, "matrix");
+    if (!(std::abs(colour.matrix->determinant()) > 1e-300))
+      throw colour_fields.Error("matrix", "singular (camera RGB → exitance)");
+  }
+  if (colour_fields.Has("black")) colour.black = colour_fields.Number("black");
+  camera.colour = colour;
+  return camera;
+}
+
+json CameraJson(const RigCamera& camera) {
+  json object = json::object();
+  if (!camera.model.empty()) object["model"] = camera.model;
+  if (!camera.response.empty()) object["response"] = camera.response;
+  if (camera.colour) {
+    json colour = json::object();
+    if (camera.colour->scale) colour["scale"] = JsonTriple(*camera.colour->scale);
+    if (camera.colour->matrix) colour["matrix"] = JsonMatrix(*camera.colour->matrix);
+    if (camera.colour->black) colour["black"] = *camera.colour->black;
+    object["colour"] = colour;
+  }
+  return object;
+}
+
+RigProjector ReadProjector(const json& object, const std::string& file, size_t index) {
+  const JsonFields fields(object, file, "projectors[" + std::to_string(index) + "]");
+  fields.RejectUnknown({"name", "model", "black", "max", "gamma", "lut", "mixing", "bits"});
+  RigProjector projector;
+  projector.name = fields.String("name");
+  projector.model = OptionalString(fields, "model");
+  projector.black = OptionalRgb(fields, "black");
+  projector.max = OptionalRgb(fields, "max");
+  projector.response = json::object();
+  for (const char* key : {"gamma", "lut"}) {
+    if (fields.Has(key)) projector.response[key] = fields.At(key);
+  }
+  if (fields.Has("mixing")) projector.mixing = Matrix3(fields, "mixing");
+  if (fields.Has("bits")) projector.bits = Integer(fields, "bits");
+  return projector;
+}
+
+json ProjectorJson(const RigProjector& projector) {
+  json object = {{"name", projector.name}};
+  if (!projector.model.empty()) object["model"] = projector.model;
+  if (projector.black) object["black"] = JsonTriple(*projector.black);
+  if (projector.max) object["max"] = JsonTriple(*projector.max);
+  if (projector.response.is_object()) object.update(projector.response);
+  if (projector.mixing) object["mixing"] = JsonMatrix(*projector.mixing);
+  if (projector.bits) object["bits"] = *projector.bits;
+  return object;
+}
+
+RigPhotometry ReadPhotometry(const json& object, const std::string& file, const std::string& name) {
+  const JsonFields fields(object, file, "photometric." + name);
+  fields.RejectUnknown({"units", "session", "scene", "camera_scale", "camera_black"});
+  RigPhotometry photometry;
+  photometry.units = fields.String("units");
+  if (photometry.units != "scene" && photometry.units != "camera")
+    throw fields.Error("units", "must be \"scene\" or \"camera\"");
+  photometry.session = OptionalString(fields, "session");
+  photometry.scene = OptionalString(fields, "scene");
+  photometry.camera_scale = OptionalRgb(fields, "camera_scale");
+  if (fields.Has("camera_black")) photometry.camera_black = fields.Number("camera_black");
+  return photometry;
+}
+
+json PhotometryJson(const RigPhotometry& photometry) {
+  json object = {{"units", photometry.units}};
+  if (!photometry.session.empty()) object["session"] = photometry.session;
+  if (!photometry.scene.empty()) object["scene"] = photometry.scene;
+  if (photometry.camera_scale) object["camera_scale"] = JsonTriple(*photometry.camera_scale);
+  if (photometry.units == "scene") object["camera_black"] = photometry.camera_black;
+  return object;
+}
+
+RigReflectance ReadReflectance(const json& object, const std::string& file) {
+  const JsonFields fields(object, file, "reflectance");
+  fields.RejectUnknown({"file", "target_patches", "projector", "scene", "patches", "patches_seen"});
+  RigReflectance reflectance;
+  reflectance.file = fields.String("file");
+  reflectance.target_patches = Integer(fields, "target_patches");
+  reflectance.projector = OptionalString(fields, "projector");
+  reflectance.scene = OptionalString(fields, "scene");
+  if (fields.Has("patches")) reflectance.patches = Integer(fields, "patches");
+  if (fields.Has("patches_seen")) reflectance.patches_seen = Integer(fields, "patches_seen");
+  return reflectance;
+}
+
+json ReflectanceJson(const RigReflectance& reflectance) {
+  return {{"file", reflectance.file},           {"target_patches", reflectance.target_patches},
+          {"projector", reflectance.projector}, {"scene", reflectance.scene},
+          {"patches", reflectance.patches},     {"patches_seen", reflectance.patches_seen}};
+}
+
+}  // namespace
+
+RigProjector& RigFile::Projector(const std::string& name) {
+  for (RigProjector& projector : projectors) {
+    if (projector.name == name) return projector;
+  }
+  projectors.push_back(RigProjector{});
+  projectors.back().name = name;
+  projectors.back().response = json::object();
+  return projectors.back();
+}
+
+json RigFile::ProjectorsJson() const {
+  json entries = json::array();
+  for (const RigProjector& projector : projectors) entries.push_back(ProjectorJson(projector));
+  return entries;
+}
+
+RigFile ReadRigFile(const std::filesystem::path& rig_dir) {
   const std::filesystem::path path = rig_dir / "rig.json";
-  if (!std::filesystem::exists(path)) return nlohmann::json::object();
-  std::ifstream in(path);
-  if (!in) throw IoError(path.string() + ": cannot open");
-  std::stringstream text;
-  text << in.rdbuf();
-  nlohmann::json rig = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
-  if (rig.is_discarded()) throw IoError(path.string() + ": not valid JSON");
-  if (!rig.is_object()) throw IoError(path.string() + ": expected a JSON object");
-  if (!rig.contains("format_version") || !rig["format_version"].is_number_integer()) {
-    throw IoError(path.string() + ": format_version: required key is missing (an integer; written by an older "
-                                  "procam? calibrate the rig again)");
+  const std::string file = path.string();
+  RigFile rig;
+  if (!std::filesystem::exists(path)) return rig;
+  const json object = ReadJsonFile(path);
+  const JsonFields fields(object, file, "");
+  fields.RejectUnknown({"format_version", "camera", "projectors", "registration", "photometric",
+                        "reflectance"});
+  if (!fields.Has("format_version") || !object["format_version"].is_number_integer()) {
+    throw fields.Error("format_version",
+                       "required key is missing (an integer; written by an older procam? "
+                       "calibrate the rig again)");
   }
-  if (rig["format_version"].get<int64_t>() != kRigFormatVersion) {
-    throw IoError(path.string() + ": format_version: " + rig["format_version"].dump() +
-                  " is not supported (this procam reads version " + std::to_string(kRigFormatVersion) + ")");
+  if (object["format_version"].get<int64_t>() != kRigFormatVersion) {
+    throw fields.Error("format_version", object["format_version"].dump() +
+                                             " is not supported (this procam reads version " +
+                                             std::to_string(kRigFormatVersion) + ")");
   }
+  if (fields.Has("camera")) rig.camera = ReadCamera(object["camera"], file);
+  if (fields.Has("projectors")) {
+    const json& entries = object["projectors"];
+    if (!entries.is_array()) throw fields.Error("projectors", "must be an array");
+    for (size_t k = 0; k < entries.size(); ++k) {
+      rig.projectors.push_back(ReadProjector(entries[k], file, k));
+      for (size_t j = 0; j < k; ++j) {
+        if (rig.projectors[j].name == rig.projectors[k].name)
+          throw fields.Error("projectors[" + std::to_string(k) + "].name",
+                             "'" + rig.projectors[k].name + "' appears twice");
+      }
+    }
+  }
+  if (fields.Has("registration")) {
+    if (!object["registration"].is_object()) throw fields.Error("registration", "must be an object");
+    rig.registration = object["registration"];
+  }
+  if (fields.Has("photometric")) {
+    const JsonFields photometric(object["photometric"], file, "photometric");
+    for (const auto& item : object["photometric"].items())
+      rig.photometric[item.key()] = ReadPhotometry(item.value(), file, item.key());
+  }
+  if (fields.Has("reflectance")) rig.reflectance = ReadReflectance(object["reflectance"], file);
   return rig;
 }
 
-void UpdateRigJson(const std::filesystem::path& rig_dir,
-                   const std::function<void(nlohmann::json&)>& update) {
-  nlohmann::json rig = ReadRigJson(rig_dir);
-  update(rig);
-  rig["format_version"] = kRigFormatVersion;
+void WriteRigFile(const std::filesystem::path& rig_dir, const RigFile& rig) {
+  json object = {{"format_version", kRigFormatVersion}, {"camera", CameraJson(rig.camera)}};
+  object["projectors"] = rig.ProjectorsJson();
+  if (!rig.registration.is_null()) object["registration"] = rig.registration;
+  if (!rig.photometric.empty()) {
+    json photometric = json::object();
+    for (const auto& [name, entry] : rig.photometric) photometric[name] = PhotometryJson(entry);
+    object["photometric"] = photometric;
+  }
+  if (rig.reflectance) object["reflectance"] = ReflectanceJson(*rig.reflectance);
   std::filesystem::create_directories(rig_dir);
-  WriteFileAtomically(rig_dir / "rig.json", rig.dump(2) + "\n");
+  WriteFileAtomically(rig_dir / "rig.json", object.dump(2) + "\n");
+}
+
+void UpdateRigFile(const std::filesystem::path& rig_dir, const std::function<void(RigFile&)>& update) {
+  RigFile rig = ReadRigFile(rig_dir);
+  update(rig);
+  WriteRigFile(rig_dir, rig);
 }
 
 void UpdateRigResult(const std::filesystem::path& rig_dir, const std::vector<std::string>& path,
@@ -58,16 +260,6 @@ void UpdateRigResult(const std::filesystem::path& rig_dir, const std::vector<std
   WriteFileAtomically(file, result.dump(2) + "\n");
 }
 
-nlohmann::json& RigProjectorEntry(nlohmann::json& rig, const std::string& name) {
-  nlohmann::json& projectors = rig["projectors"];
-  if (!projectors.is_array()) projectors = nlohmann::json::array();
-  for (nlohmann::json& entry : projectors) {
-    if (entry.is_object() && entry.value("name", "") == name) return entry;
-  }
-  projectors.push_back({{"name", name}});
-  return projectors.back();
-}
-
 nlohmann::json RigDirectory::Describe() const {
   nlohmann::json names = nlohmann::json::array();
   for (const Projector& projector : projectors) names.push_back(projector.name);
@@ -88,42 +280,30 @@ RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir) {
   }
   RigDirectory rig;
   rig.dir = rig_dir;
-  rig.json = ReadRigJson(rig_dir);
-  if (!rig.json.contains("projectors") || !rig.json["projectors"].is_array() ||
-      rig.json["projectors"].empty()) {
+  rig.file = ReadRigFile(rig_dir);
+  if (rig.file.projectors.empty()) {
     throw IoError(file + ": projectors: required key is missing (a non-empty array, run procam "
                          "calibrate projectors and calibrate photometric)");
   }
   // Photometry still in camera units cannot light a scene: say so before the parser's plainer
   // "max: required key is missing".
-  const nlohmann::json& photometric = rig.json.value("photometric", nlohmann::json::object());
-  const nlohmann::json& entries = rig.json["projectors"];
-  for (size_t k = 0; k < entries.size(); ++k) {
-    if (!entries[k].is_object() || !entries[k].contains("name") || !entries[k]["name"].is_string())
-      continue;
-    const std::string name = entries[k]["name"].get<std::string>();
-    if (!photometric.is_object() || !photometric.contains(name)) continue;
-    const nlohmann::json& info = photometric[name];
-    if (info.is_object() && info.value("units", "") == "camera" && !entries[k].contains("max")) {
+  for (size_t k = 0; k < rig.file.projectors.size(); ++k) {
+    const RigProjector& entry = rig.file.projectors[k];
+    const auto photometry = rig.file.photometric.find(entry.name);
+    if (photometry != rig.file.photometric.end() && photometry->second.units == "camera" &&
+        !entry.max) {
       throw IoError(file + ": projectors[" + std::to_string(k) + "].max: the photometry of '" +
-                    name +
-                    "' is in camera units (photometric." + name +
+                    entry.name + "' is in camera units (photometric." + entry.name +
                     ".units); compensate needs scene units: run procam calibrate photometric "
                     "with --scene once the projector's geometry and the camera's registration "
                     "are in the rig");
     }
   }
-  rig.projectors = ParseProjectors(entries.dump(), file, rig_dir);
+  rig.projectors = ParseProjectors(rig.file.ProjectorsJson().dump(), file, rig_dir);
 
-  if (rig.json.contains("reflectance")) {
-    const nlohmann::json& info = rig.json["reflectance"];
-    if (!info.is_object() || !info.contains("file") || !info["file"].is_string()) {
-      throw IoError(file + ": reflectance.file: required key is missing (a .npy file)");
-    }
-    if (!info.contains("target_patches") || !info["target_patches"].is_number_integer()) {
-      throw IoError(file + ": reflectance.target_patches: required key is missing (an integer)");
-    }
-    const std::filesystem::path npy = rig_dir / info["file"].get<std::string>();
+  if (rig.file.reflectance) {
+    const RigReflectance& info = *rig.file.reflectance;
+    const std::filesystem::path npy = rig_dir / info.file;
     if (!std::filesystem::exists(npy)) {
       throw IoError(file + ": reflectance.file: " + npy.string() + ": file not found");
     }
@@ -142,7 +322,7 @@ RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir) {
         rig.reflectance(i, c) = value;
       }
     }
-    rig.reflectance_target_patches = info["target_patches"].get<int>();
+    rig.reflectance_target_patches = info.target_patches;
   }
   return rig;
 }

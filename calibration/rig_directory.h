@@ -1,21 +1,15 @@
 #pragma once
-// The rig directory (issue 7): what calibration writes and `compensate`/`project` consume
-// instead of the scene's ground truth.
+// The rig directory (docs/rig_format.md): what calibration writes and compensate, project and
+// verify consume instead of the scene's ground truth.
 //
-//   RIG_DIR/rig.json            {"camera": {"model": "camera.cameramodel"},
-//                                "projectors": [ {name, model, black, max, gamma|lut, mixing,
-//                                                 bits}, ... ],   (scene-file projector keys,
-//                                                                  docs/scene_format.md; paths
-//                                                                  relative to RIG_DIR)
-//                                "registration": {...}}          (room_from_camera, residuals)
+//   RIG_DIR/rig.json            RigFile below
 //   RIG_DIR/camera.cameramodel  mrcal; extrinsics = rt_cam_room once registered (zero before)
 //   RIG_DIR/NAME.cameramodel    mrcal; extrinsics = rt_proj_room (ref = the scene's frame)
-//
-// Several commands each fill their part of rig.json (`calibrate camera`, `calibrate projectors`,
-// `calibrate photometric`), so it is updated by read-modify-write, written atomically.
 
 #include <filesystem>
 #include <functional>
+#include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -31,16 +25,78 @@ namespace procam {
 // rig.json's format (docs/rig_format.md); written into every rig.json, required when one is read.
 constexpr int kRigFormatVersion = 1;
 
-// rig.json of `rig_dir` as JSON; an empty object when the file does not exist. Throws IoError
-// naming the file (and the key) when it exists but is not a JSON object, or its format_version is
-// missing or not kRigFormatVersion. The one reader of rig.json.
-nlohmann::json ReadRigJson(const std::filesystem::path& rig_dir);
+// rig.json's camera.colour: how verify turns the camera's values into exitance. One of `scale`
+// (camera value per unit exitance, per channel) and `matrix` (camera RGB → exitance).
+struct RigCameraColour {
+  std::optional<Eigen::Vector3d> scale;
+  std::optional<Eigen::Matrix3d> matrix;
+  std::optional<double> black;  // the camera's black level, in its values
+};
 
-// Reads rig.json (or {}), lets `update` change it, writes it back atomically with its
-// format_version (creating `rig_dir`). Nothing is written when `update` throws. The one writer of
-// rig.json.
-void UpdateRigJson(const std::filesystem::path& rig_dir,
-                   const std::function<void(nlohmann::json&)>& update);
+// rig.json's camera.
+struct RigCamera {
+  std::string model;     // the .cameramodel, relative to the rig directory; "" until calibrated
+  std::string response;  // camera_response.json, or ""
+  std::optional<RigCameraColour> colour;
+};
+
+// One entry of rig.json's projectors[]: the scene file's projector keys (docs/scene_format.md),
+// whose values ParseProjectors checks in full when the rig is used.
+struct RigProjector {
+  std::string name;
+  std::string model;  // relative to the rig directory; "" until calibrate projectors
+  std::optional<Eigen::Vector3d> black, max;
+  nlohmann::json response;  // {"gamma": g} or {"lut": table}; {} until calibrate photometric
+  std::optional<Eigen::Matrix3d> mixing;
+  std::optional<int> bits;
+};
+
+// rig.json's photometric.NAME: how a projector's photometry was measured.
+struct RigPhotometry {
+  std::string units;    // "scene" or "camera"
+  std::string session;  // the capture session it was fitted on
+  std::string scene;    // the scene file, for units "scene"
+  std::optional<Eigen::Vector3d> camera_scale;  // camera value per unit exitance (units "scene")
+  double camera_black = 0.0;
+};
+
+// rig.json's reflectance: the per-patch reflectance estimated by calibrate photometric --scene.
+struct RigReflectance {
+  std::string file;  // .npy, relative to the rig directory
+  int target_patches = 0;
+  std::string projector, scene;
+  int patches = 0, patches_seen = 0;
+};
+
+// RIG_DIR/rig.json (docs/rig_format.md).
+struct RigFile {
+  RigCamera camera;
+  std::vector<RigProjector> projectors;
+  // The camera's registration in the room, as calibrate projectors reports it (room_from_camera,
+  // the guess, residuals, the scan check); a record for people, null until registered.
+  nlohmann::json registration;
+  std::map<std::string, RigPhotometry> photometric;
+  std::optional<RigReflectance> reflectance;
+
+  // The entry named `name`, added at the end when missing.
+  RigProjector& Projector(const std::string& name);
+  // projectors[] as a scene file writes them, for ParseProjectors.
+  nlohmann::json ProjectorsJson() const;
+};
+
+// RIG_DIR/rig.json; an empty RigFile when the file does not exist. Throws IoError naming the file
+// and the key when it exists but is not JSON, its format_version is missing or not
+// kRigFormatVersion, a key is unknown or a value has the wrong type. The one reader of rig.json.
+RigFile ReadRigFile(const std::filesystem::path& rig_dir);
+
+// Writes RIG_DIR/rig.json atomically with its format_version (creating `rig_dir`). The one
+// writer of rig.json.
+void WriteRigFile(const std::filesystem::path& rig_dir, const RigFile& rig);
+
+// Several commands each fill their part of rig.json (calibrate camera, projectors, photometric,
+// response): reads it (or an empty one), lets `update` change it, writes it back. Nothing is
+// written when `update` throws.
+void UpdateRigFile(const std::filesystem::path& rig_dir, const std::function<void(RigFile&)>& update);
 
 // RIG_DIR/result.json gathers what every calibrate command reports, one section each
 // ("camera", "projectors", "photometric" → {NAME: ...}, "response"), so that one command never
@@ -49,14 +105,10 @@ void UpdateRigJson(const std::filesystem::path& rig_dir,
 void UpdateRigResult(const std::filesystem::path& rig_dir, const std::vector<std::string>& path,
                      const nlohmann::json& section);
 
-// The entry of projectors[] named `name` in `rig`, created (with "name") at the end of the array
-// when missing.
-nlohmann::json& RigProjectorEntry(nlohmann::json& rig, const std::string& name);
-
 // RIG_DIR/rig.json read for compensate and project.
 struct RigDirectory {
   std::filesystem::path dir;
-  nlohmann::json json;                // rig.json as read
+  RigFile file;                       // rig.json as read
   std::vector<Projector> projectors;  // rig.json's projectors[], paths relative to dir
   // RIG_DIR/reflectance.npy (n,3) when rig.json has "reflectance", with the patch target it was
   // estimated for; empty otherwise.

@@ -7,6 +7,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "base/io.h"
+#include "base/timing.h"
 
 namespace procam {
 namespace {
@@ -247,7 +248,7 @@ CaptureSummary RunCaptureSession(const CaptureSessionOptions& options,
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("CaptureSessionOptions: " + why);
   if (sequence.patterns.empty()) throw std::invalid_argument("RunCaptureSession: empty sequence");
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   const fs::path& directory = options.directory;
   const fs::path manifest_path = directory / kManifestName;
   std::error_code error;
@@ -327,7 +328,7 @@ CaptureSummary RunCaptureSession(const CaptureSessionOptions& options,
   }
   manifest["complete"] = true;
   WriteManifest(directory, manifest);
-  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  summary.seconds = SecondsSince(start);
   return summary;
 }
 

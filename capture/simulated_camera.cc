@@ -3,12 +3,11 @@
 #include <map>
 #include <mutex>
 
+#include "base/json_fields.h"
 #include "capture/camera.h"
 
 namespace procam {
 namespace {
-
-nlohmann::json Json3(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
 
 struct SimulatedCameraSources {
   std::mutex mutex;
@@ -42,7 +41,7 @@ void RegisterSimulatedCameraSource(const std::string& scheme, SimulatedCameraSou
 
 nlohmann::json CameraColour::Json() const {
   nlohmann::json m = nlohmann::json::array();
-  for (int r = 0; r < 3; ++r) m.push_back(Json3(to_exitance.row(r).transpose()));
+  for (int r = 0; r < 3; ++r) m.push_back(JsonTriple(to_exitance.row(r).transpose()));
   return {{"to_exitance", m}, {"black", black}, {"source", source}};
 }
 

@@ -11,15 +11,12 @@
 #include <ceres/ceres.h>
 #include <ceres/manifold.h>
 
+#include "base/timing.h"
+
 namespace procam {
 namespace {
 
-using Clock = std::chrono::steady_clock;
 using RowMatrixXd = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 Eigen::MatrixX3d Project(const Eigen::MatrixX3d& emittance, const CompensationProblem& problem) {
   return emittance.cwiseMax(problem.lower).cwiseMin(problem.upper);

@@ -5,18 +5,24 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdarg>
+#include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <sstream>
 #include <stdexcept>
 
 #include "base/io.h"
+#include "base/timing.h"
 #include "compensation/objective.h"
 #include "compensation/peers.h"
 #include "compensation/radiosity.h"
 #include "compensation/solver.h"
 #include "datasets_synthetic/rooms.h"
 #include "geometry/form_factors.h"
+#include "geometry/patches.h"
+#include "projection/projection_rig.h"
+#include "projection/projector.h"
 
 namespace procam {
 namespace {
@@ -84,21 +90,35 @@ BenchRow Peer(const char* name, const PeerResult& result) {
   return row;
 }
 
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
 // Median seconds of `repeats` calls.
 template <typename Call>
 double MedianSeconds(int repeats, Call call) {
   std::vector<double> seconds;
   for (int k = 0; k < repeats; ++k) {
-    const auto start = std::chrono::steady_clock::now();
+    const auto start = Clock::now();
     call();
     seconds.push_back(SecondsSince(start));
   }
   std::sort(seconds.begin(), seconds.end());
   return seconds[seconds.size() / 2];
+}
+
+// A 1024×1024 texture of crossed sinusoidal stripes (linear RGB), ~40 periods across: detail
+// finer than the bench's patches, for timing RenderOptions::detail.
+cv::Mat BenchTexture() {
+  constexpr int kSize = 1024;
+  constexpr double kTwoPi = 6.283185307179586;
+  cv::Mat texture(kSize, kSize, CV_32FC3);
+  for (int y = 0; y < kSize; ++y) {
+    for (int x = 0; x < kSize; ++x) {
+      const double u = (x + 0.5) / kSize, v = (y + 0.5) / kSize;
+      texture.at<cv::Vec3f>(y, x) =
+          cv::Vec3f(static_cast<float>(0.5 + 0.3 * std::sin(kTwoPi * 40 * u)),
+                    static_cast<float>(0.5 + 0.3 * std::sin(kTwoPi * 40 * v)),
+                    static_cast<float>(0.5 + 0.3 * std::sin(kTwoPi * 28 * (u + v))));
+    }
+  }
+  return texture;
 }
 
 }  // namespace
@@ -163,9 +183,9 @@ void RunSolverBenchmark(const BenchmarkOptions& args) {
     double setup = -1.0, gpu_setup = -1.0;
     std::vector<BenchRow> rows;
     if (run_cpu) {
-      const auto setup_start = std::chrono::steady_clock::now();
+      const auto setup_start = Clock::now();
       const RadiositySystem radiosity(problem.form_factors, problem.area, problem.reflectance);
-      setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_start).count();
+      setup = SecondsSince(setup_start);
       const CompensationObjective objective(problem, radiosity, ColourModel::kLab);
       const Eigen::MatrixX3d start =
           radiosity.Multiply(problem.desired).cwiseMax(problem.lower).cwiseMin(problem.upper);
@@ -369,6 +389,95 @@ void RunScaleBenchmark(const BenchmarkOptions& args) {
         {"sizes", sizes}};
     WriteFileAtomically(args.json, result.dump(2) + "\n");
     Line(args.progress, "wrote %s\n", args.json.c_str());
+  }
+}
+
+void RunProjectionBenchmark(const ProjectionBenchmarkOptions& args) {
+  const DitherMethod dither = args.dither;
+  BoxRoomOptions room;
+  room.target_patches = args.patches;
+  Scene scene = MakeBoxRoom(room);
+  if (args.detail) {
+    const cv::Mat texture = BenchTexture();
+    for (Surface& surface : scene.surfaces) surface.desired.texture_linear = texture;
+  }
+  SubdivisionOptions subdivision;
+  subdivision.target_patches = args.patches;
+  const PatchHierarchy hierarchy = SubdividePatches(scene, subdivision);
+  // Two projectors near the front wall, overlapping on the back wall and the occluder.
+  std::vector<Projector> projectors;
+  for (const double x : {1.2, 2.8}) {
+    Projector projector;
+    projector.name = x < 2.0 ? "left" : "right";
+    projector.geometry = ProjectorGeometry(
+        "LENSMODEL_OPENCV4",
+        {1.0 * args.width, 1.0 * args.width, 0.5 * (args.width - 1), 0.9 * args.height, -0.05, 0.01,
+         0.0, 0.0},
+        args.width, args.height,
+        ProjFromWorldLookingAt(Vec3(x, 0.2, 2.2), Vec3(4.0 - x, 3.0, 0.8), Vec3::UnitZ()));
+    projector.photometry.black = Vec3::Constant(0.01);
+    projector.photometry.max = Vec3(9.0, 10.0, 8.5);
+    projectors.push_back(projector);
+  }
+  ProjectionRigSummary rig_summary;
+  ProjectionRigOptions rig_options;
+  rig_options.texture_coordinates = args.detail;
+  const ProjectionRig rig =
+      BuildProjectionRig(hierarchy.fine, projectors, rig_options, &rig_summary);
+  std::mt19937 random(1);
+  std::uniform_real_distribution<double> unit(0.05, 0.95);
+  Eigen::MatrixX3d emittance(rig.size(), 3);
+  for (int i = 0; i < rig.size(); ++i) {
+    for (int c = 0; c < 3; ++c)
+      emittance(i, c) = rig.lower(i, c) + unit(random) * (rig.upper(i, c) - rig.lower(i, c));
+  }
+  RenderOptions options;
+  options.dither = dither;
+  options.detail = args.detail;
+  std::vector<double> render_times, encode_times;
+  RenderSummary summary;
+  for (int r = 0; r < args.repeat; ++r) {
+    const std::vector<ProjectorImage> images =
+        RenderProjectorImages(rig, scene, emittance, options, &summary);
+    render_times.push_back(summary.seconds);
+    const auto start = Clock::now();
+    EncodeProjectorImages(images);
+    encode_times.push_back(SecondsSince(start));
+  }
+  std::sort(render_times.begin(), render_times.end());
+  std::sort(encode_times.begin(), encode_times.end());
+  const double render_median = render_times[render_times.size() / 2];
+  const double encode_median = encode_times[encode_times.size() / 2];
+  Report(args.progress,
+         fmt::format("projection: 2 projectors {}x{} (OpenCV4 lens), closed room with occluder, {} patches",
+                     args.width, args.height, rig.size()));
+  Report(args.progress,
+         fmt::format("  maps (once per rig: unproject, {} rays + blending shadow rays): {:.3f} s",
+                     2LL * args.width * args.height, rig_summary.seconds));
+  Report(args.progress,
+         fmt::format("  images from a solution ({} dither{}, {} level passes): median {:.1f} ms, "
+                     "min {:.1f} ms over {} runs",
+                     DitherName(dither), args.detail ? ", textures' detail" : "",
+                     summary.level_passes, 1e3 * render_median, 1e3 * render_times.front(),
+                     args.repeat));
+  Report(args.progress, fmt::format("  PNG encoding of both: median {:.1f} ms", 1e3 * encode_median));
+  Report(args.progress, fmt::format("  largest delivered-emittance error {:.2e} (relative)",
+                                   summary.max_relative_error));
+  if (!args.json.empty()) {
+    const nlohmann::json result = {{"benchmark", "projection"},
+                                   {"width", args.width},
+                                   {"height", args.height},
+                                   {"projectors", 2},
+                                   {"patches", rig.size()},
+                                   {"dither", DitherName(dither)},
+                                   {"detail", args.detail},
+                                   {"maps_seconds", rig_summary.seconds},
+                                   {"render_seconds_median", render_median},
+                                   {"render_seconds_min", render_times.front()},
+                                   {"png_encode_seconds_median", encode_median},
+                                   {"repeat", args.repeat},
+                                   {"max_relative_error", summary.max_relative_error}};
+    WriteFileAtomically(args.json, result.dump(2) + "\n");
   }
 }
 

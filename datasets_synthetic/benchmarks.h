@@ -1,6 +1,6 @@
 #pragma once
 // procam's benchmarks on generated rooms (rooms.h: a closed box room with an occluder), as
-// `procam bench formfactors|solver|scale` runs them: the table goes to the progress callback a
+// `procam bench formfactors|solver|scale|projection` runs them: the table goes to the progress callback a
 // line per room size as it finishes, JSON to `json` when given. Timings are measurements for
 // people to read (docs/solver.md, docs/scale.md, docs/gpu.md), never asserted.
 
@@ -9,6 +9,7 @@
 
 #include "base/progress.h"
 #include "geometry/compressed_form_factors.h"
+#include "projection/projector_images.h"
 
 namespace procam {
 
@@ -36,5 +37,19 @@ void RunSolverBenchmark(const BenchmarkOptions& options);
 // The matrix-free path per room size: compressed F, its products, K⁻¹ by CG and the solver on
 // them, beside the dense F where it fits.
 void RunScaleBenchmark(const BenchmarkOptions& options);
+
+struct ProjectionBenchmarkOptions {
+  int width = 1920, height = 1080;  // each projector's
+  int patches = 1000;               // target patch count
+  int repeat = 10;                  // timed runs
+  DitherMethod dither = DitherMethod::kOrdered;
+  bool detail = false;  // every surface striped, rendered with the texture's detail
+  std::string json;     // also the timings as JSON here
+  ProgressCallback progress;
+};
+
+// Images for two projectors of the box room from a random emittance within the bounds: the pixel
+// maps once, then rendering and PNG encoding, median over the runs.
+void RunProjectionBenchmark(const ProjectionBenchmarkOptions& options);
 
 }  // namespace procam

@@ -7,11 +7,12 @@
 #include <fmt/format.h>
 
 #include "base/image_io.h"
+#include "base/io.h"
+#include "base/timing.h"
 #include "compensation/colour.h"
 #include "compensation/colour_image.h"
 #include "compensation/objective.h"
 #include "compensation/solver.h"
-#include "base/io.h"
 
 namespace procam {
 
@@ -38,7 +39,7 @@ void PixelDeltaE(const cv::Mat& result, const cv::Mat& desired, const cv::Mat& m
 SceneEvaluation EvaluateSyntheticScene(const std::string& name, const EvaluationOptions& options) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("evaluate: " + why);
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   SceneEvaluation evaluation;
   evaluation.name = name;
   const SyntheticScene synthetic = MakeSyntheticScene(name, options.patches);
@@ -94,7 +95,7 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
     Report(options.progress, fmt::format("evaluate {}: per patch mean ΔE76 linear {:.2f}, perceptual {:.2f}, lowest reachable {:.2f}", name,
                  evaluation.model_linear, evaluation.model_perceptual, evaluation.model_lowest));
   }
-  evaluation.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  evaluation.seconds = SecondsSince(start);
   return evaluation;
 }
 

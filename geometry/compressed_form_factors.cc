@@ -12,6 +12,8 @@
 #include <Eigen/Geometry>
 #include <stdexcept>
 
+#include "base/timing.h"
+
 namespace procam {
 namespace {
 
@@ -304,7 +306,7 @@ CompressedFormFactors BuildCompressedFormFactors(const std::vector<ClusterPatch>
                                                  const Visibility& visible, int threads,
                                                  const std::function<void(double)>& progress,
                                                  CompressedBuildSummary* summary) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("cluster options: " + why);
   const int n = static_cast<int>(patches.size());
@@ -453,7 +455,7 @@ CompressedFormFactors BuildCompressedFormFactors(const std::vector<ClusterPatch>
     summary->far_values = static_cast<int64_t>(result.far().values.size());
     summary->visibility_rays = rays;
     summary->bytes = result.bytes();
-    summary->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    summary->seconds = SecondsSince(start);
   }
   return result;
 }

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "base/timing.h"
 #include "geometry/ray_scene.h"
 
 namespace procam {
@@ -163,7 +164,7 @@ class PairIntegrator {
 
 Eigen::MatrixXd ComputeFormFactors(const Scene& scene, const PatchLevel& level,
                                    const FormFactorOptions& options, FormFactorSummary* summary) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   const int n = level.size();
   Eigen::MatrixXd f = Eigen::MatrixXd::Zero(n, n);
   const PairIntegrator integrator(scene, level, options);
@@ -197,7 +198,7 @@ Eigen::MatrixXd ComputeFormFactors(const Scene& scene, const PatchLevel& level,
     summary->pairs_evaluated = pairs;
     summary->shadow_rays = shadow_rays;
     SummariseFormFactors(f, level.Areas(), summary);
-    summary->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    summary->seconds = SecondsSince(start);
   }
   return f;
 }

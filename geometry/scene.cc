@@ -22,24 +22,6 @@ namespace {
 
 using nlohmann::json;
 
-std::string SyntaxErrorWithLine(const std::string& text, const json::parse_error& error) {
-  size_t line = 1, column = 1;
-  const size_t end = std::min(text.size(), error.byte > 0 ? error.byte - 1 : 0);
-  for (size_t k = 0; k < end; ++k) {
-    if (text[k] == '\n') {
-      ++line;
-      column = 1;
-    } else {
-      ++column;
-    }
-  }
-  std::string what = error.what();
-  const size_t colon = what.rfind(": ");
-  if (colon != std::string::npos) what = what.substr(colon + 2);
-  return "line " + std::to_string(line) + ", column " + std::to_string(column) +
-         ": invalid JSON: " + what;
-}
-
 void CheckReflectance(const JsonFields& fields, const std::string& key, const Vec3& rho) {
   for (int c = 0; c < 3; ++c) {
     if (!(rho[c] >= 0.0 && rho[c] < 1.0)) {
@@ -247,16 +229,7 @@ void ValidateScene(const Scene& scene) {
 Scene LoadScene(const std::filesystem::path& path) {
   const std::string file = path.string();
   if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
-  const std::string text = ReadFile(path);
-  json root;
-  try {
-    root = json::parse(text);
-  } catch (const json::parse_error& error) {
-    throw IoError(file + ": " + SyntaxErrorWithLine(text, error));
-  } catch (const json::exception& error) {  // e.g. a number too large for a double
-    std::string what = error.what();
-    throw IoError(file + ": invalid JSON: " + what.substr(what.find(']') + 2));
-  }
+  const json root = ReadJsonFile(path);
   const std::filesystem::path base = path.parent_path();
   JsonFields top(root, file, "");
   top.RejectUnknown({"name", "description", "patches", "white", "bounds", "surfaces",

@@ -12,6 +12,7 @@
 
 #include "base/image_io.h"
 #include "base/io.h"
+#include "base/timing.h"
 
 namespace procam {
 
@@ -101,10 +102,10 @@ GeometryStage RunGeometryStage(Scene scene, const GeometryOptions& options) {
   SubdivisionOptions subdivision;
   subdivision.target_patches = stage.scene.target_patches;
   if (!subdivision.Check(&why)) throw IoError("--patches: " + why);
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   stage.patches = SubdividePatches(stage.scene, subdivision);
   stage.subdivision_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      SecondsSince(start);
   Report(options.progress,
          fmt::format("{}: {} fine patches ({} coarse), {} adjacent pairs", stage.scene.name,
                      stage.patches.fine.size(), stage.patches.coarse.size(),

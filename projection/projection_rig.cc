@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "base/io.h"
+#include "base/timing.h"
 
 namespace procam {
 namespace {
@@ -250,7 +251,7 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
                                  ProjectionRigSummary* summary) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("ProjectionRigOptions: " + why);
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   ProjectionRig rig;
   rig.projectors = std::move(projectors);
   const int n = level.size();
@@ -358,7 +359,7 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
   }
   if (summary) {
     summary->seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        SecondsSince(start);
     summary->patches_reached = static_cast<int>((rig.blended_area.array() > 0.0).count());
   }
   return rig;

@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "base/io.h"
+#include "base/timing.h"
 #include "geometry/ray_scene.h"
 
 namespace procam {
@@ -357,7 +358,7 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
                                                   RenderSummary* summary) {
   CheckRenderInputs(rig, scene, emittance, options);
   const int n = rig.size();
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   const int projector_count = static_cast<int>(rig.projectors.size());
   RenderSummary local;
   RenderSummary& s = summary ? *summary : local;
@@ -499,7 +500,7 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
   }
   const double scale = std::max(rig.upper.maxCoeff(), std::numeric_limits<double>::min());
   s.max_relative_error = n > 0 ? (s.delivered - target).cwiseAbs().maxCoeff() / scale : 0.0;
-  s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  s.seconds = SecondsSince(start);
   return images;
 }
 

@@ -6,16 +6,12 @@
 #include <chrono>
 
 #include "base/io.h"
+#include "base/timing.h"
 #include "geometry/stage.h"
 
 namespace procam {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 }  // namespace
 

@@ -11,6 +11,8 @@
 
 #include "base/image_io.h"
 #include "base/io.h"
+#include "base/json_fields.h"
+#include "base/timing.h"
 #include "calibration/camera_response.h"
 #include "calibration/model_fit.h"
 #include "calibration/rig_directory.h"
@@ -30,13 +32,7 @@
 namespace procam {
 namespace {
 
-using Clock = std::chrono::steady_clock;
 
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-nlohmann::json Json3(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
 
 void CreateDirectories(const std::filesystem::path& dir) {
   std::error_code error;
@@ -55,7 +51,7 @@ struct ColourSource {
   std::string source;
 };
 
-ColourSource ResolveColourSource(const VerificationOptions& options, const nlohmann::json& rig_json,
+ColourSource ResolveColourSource(const VerificationOptions& options, const RigCamera& camera,
                                  const std::string& rig_file, bool simulated) {
   ColourSource c;
   c.black = std::max(0.0, options.camera_black);
@@ -64,35 +60,11 @@ ColourSource ResolveColourSource(const VerificationOptions& options, const nlohm
     c.source = "--camera-scale";
     return c;
   }
-  const nlohmann::json camera = rig_json.value("camera", nlohmann::json::object());
-  if (camera.is_object() && camera.contains("colour")) {
-    const nlohmann::json& colour = camera["colour"];
-    const std::string key = rig_file + ": camera.colour";
-    if (colour.is_object() && colour.contains("scale") && colour["scale"].is_array() &&
-        colour["scale"].size() == 3) {
-      Eigen::Vector3d k;
-      for (int i = 0; i < 3; ++i) {
-        if (!colour["scale"][i].is_number() || !(colour["scale"][i].get<double>() > 0))
-          throw IoError(key + ".scale: three positive numbers (camera value per unit exitance)");
-        k[i] = colour["scale"][i].get<double>();
-      }
-      c.matrix = k.cwiseInverse().asDiagonal();
-    } else if (colour.is_object() && colour.contains("matrix") && colour["matrix"].is_array() &&
-               colour["matrix"].size() == 3) {
-      for (int r = 0; r < 3; ++r) {
-        const nlohmann::json& row = colour["matrix"][r];
-        if (!row.is_array() || row.size() != 3)
-          throw IoError(key + ".matrix: 3 rows of 3 numbers (camera RGB → exitance)");
-        for (int j = 0; j < 3; ++j) {
-          if (!row[j].is_number()) throw IoError(key + ".matrix: numbers only");
-          c.matrix(r, j) = row[j].get<double>();
-        }
-      }
-      if (std::abs(c.matrix.determinant()) < 1e-300) throw IoError(key + ".matrix: singular");
-    } else {
-      throw IoError(key + ": expected {\"scale\": [R,G,B]} or {\"matrix\": [[..],[..],[..]]}");
-    }
-    if (options.camera_black < 0) c.black = colour.value("black", 0.0);
+  if (camera.colour) {
+    // ReadRigFile checked it: a positive scale or a non-singular matrix.
+    c.matrix = camera.colour->scale ? Eigen::Matrix3d(camera.colour->scale->cwiseInverse().asDiagonal())
+                                    : *camera.colour->matrix;
+    if (options.camera_black < 0) c.black = camera.colour->black.value_or(0.0);
     c.source = "rig.json camera.colour";
     return c;
   }
@@ -273,7 +245,7 @@ nlohmann::json DeltaEJson(const PhotoDeltaE& d) {
 
 nlohmann::json IterationJson(const VerificationIteration& it) {
   nlohmann::json exponents = nlohmann::json::array();
-  for (const Eigen::Vector3d& e : it.response_exponent) exponents.push_back(Json3(e));
+  for (const Eigen::Vector3d& e : it.response_exponent) exponents.push_back(JsonTriple(e));
   nlohmann::json json = {
       {"iteration", it.index},
       {"directory", it.directory.string()},
@@ -290,7 +262,7 @@ nlohmann::json IterationJson(const VerificationIteration& it) {
        {{"capture", it.capture_seconds}, {"solve", it.solve_seconds}, {"total", it.seconds}}}};
   if (!it.response_exponent.empty()) {
     json["update"] = {{"response_exponent", exponents},
-                      {"reflectance_scale", Json3(it.reflectance_scale)}};
+                      {"reflectance_scale", JsonTriple(it.reflectance_scale)}};
   }
   return json;
 }
@@ -381,14 +353,12 @@ VerificationInputs ReadInputs(const VerificationOptions& options) {
   VerificationInputs in;
   in.rig = ReadRigDirectory(options.rig_dir);
   in.rig_file = (options.rig_dir / "rig.json").string();
-  const nlohmann::json camera_json = in.rig.json.value("camera", nlohmann::json::object());
-  if (!camera_json.is_object() || !camera_json.contains("model") ||
-      !camera_json["model"].is_string()) {
+  if (in.rig.file.camera.model.empty()) {
     throw IoError(in.rig_file +
                   ": camera.model: required key is missing (the camera registered in "
                   "the room, from procam calibrate projectors)");
   }
-  in.camera_model_path = options.rig_dir / camera_json["model"].get<std::string>();
+  in.camera_model_path = options.rig_dir / in.rig.file.camera.model;
   if (!std::filesystem::exists(in.camera_model_path)) {
     throw IoError(in.rig_file + ": camera.model: " + in.camera_model_path.string() +
                   ": file not found");
@@ -398,7 +368,7 @@ VerificationInputs ReadInputs(const VerificationOptions& options) {
 
   in.simulated = FindSimulatedCamera(options.camera);
   in.colour_source =
-      ResolveColourSource(options, in.rig.json, in.rig_file, in.simulated.has_value());
+      ResolveColourSource(options, in.rig.file.camera, in.rig_file, in.simulated.has_value());
   in.displays = options.displays;
   if (in.simulated && in.displays.empty()) in.displays = in.simulated->displays;
   if (in.displays.size() != in.rig.projectors.size()) {

@@ -17,17 +17,18 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "calibration/rig_directory.h"
-#include "calibration/photometric_transfer.h"
-#include "projection/camera_rays.h"
-#include "compensation/unit_light.h"
-#include "projection/projection_rig.h"
+#include "base/io.h"
+#include "base/json_fields.h"
 #include "calibration/photometric.h"
+#include "calibration/photometric_transfer.h"
+#include "calibration/rig_directory.h"
+#include "compensation/unit_light.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "geometry/form_factors.h"
-#include "base/io.h"
+#include "projection/camera_rays.h"
+#include "projection/projection_rig.h"
 #include "projection/projection_rig.h"
 #include "tests/testing/testing.h"
 
@@ -46,7 +47,6 @@ nlohmann::json ReadJson(const std::filesystem::path& path) {
   return nlohmann::json::parse(file);
 }
 
-nlohmann::json Triplet(const Vec3& v) { return {v[0], v[1], v[2]}; }
 
 // The synthetic tiny box as a scene file (its surfaces are quads), projectors as given.
 std::filesystem::path WriteTinyBoxScene(const testing::TempDir& dir, const std::string& name,
@@ -56,11 +56,11 @@ std::filesystem::path WriteTinyBoxScene(const testing::TempDir& dir, const std::
   for (const Surface& surface : synthetic.scene.surfaces) {
     EXPECT_EQ(surface.kind, Surface::Kind::kQuad);
     nlohmann::json quad = nlohmann::json::array();
-    for (const Vec3& corner : surface.quad) quad.push_back(Triplet(corner));
+    for (const Vec3& corner : surface.quad) quad.push_back(JsonTriple(corner));
     surfaces.push_back({{"name", surface.name},
                         {"quad", quad},
-                        {"reflectance", Triplet(surface.reflectance)},
-                        {"desired", Triplet(surface.desired.srgb)}});
+                        {"reflectance", JsonTriple(surface.reflectance)},
+                        {"desired", JsonTriple(surface.desired.srgb)}});
   }
   nlohmann::json scene = {{"patches", kPatches}, {"surfaces", surfaces}};
   if (!projectors.is_null()) scene["projectors"] = projectors;
@@ -95,8 +95,8 @@ nlohmann::json ProjectorEntries(const std::vector<Projector>& projectors,
     for (int r = 0; r < 3; ++r) mixing.push_back({p.mixing(r, 0), p.mixing(r, 1), p.mixing(r, 2)});
     entries.push_back({{"name", projector.name},
                        {"model", projector.name + ".cameramodel"},
-                       {"black", Triplet(p.black)},
-                       {"max", Triplet(p.max)},
+                       {"black", JsonTriple(p.black)},
+                       {"max", JsonTriple(p.max)},
                        {"gamma", {p.response[0].gamma(), p.response[1].gamma(),
                                   p.response[2].gamma()}},
                        {"mixing", mixing}});
@@ -186,6 +186,83 @@ TEST(RigDirectory, TrueProjectorsInARigGiveTheScenesResults) {
             1e-3);
 }
 
+// Every field of rig.json written by WriteRigFile comes back from ReadRigFile as it was.
+TEST(RigFile, WritesAndReadsBackEveryField) {
+  testing::TempDir dir;
+  RigFile rig;
+  rig.camera.model = "camera.cameramodel";
+  rig.camera.response = "camera_response.json";
+  rig.camera.colour = RigCameraColour{};
+  rig.camera.colour->matrix = Eigen::Matrix3d::Identity() * 2.0;
+  rig.camera.colour->black = 0.03;
+  RigProjector left;
+  left.name = "left";
+  left.model = "left.cameramodel";
+  left.black = Eigen::Vector3d(0.01, 0.02, 0.03);
+  left.max = Eigen::Vector3d(1.0, 2.0, 3.0);
+  left.response = {{"gamma", {2.2, 2.1, 2.0}}};
+  left.mixing = Eigen::Matrix3d::Identity();
+  left.bits = 10;
+  rig.Projector("left") = left;
+  rig.Projector("right").model = "right.cameramodel";
+  EXPECT_EQ(&rig.Projector("left"), &rig.projectors[0]);  // found, not added again
+  EXPECT_EQ(rig.projectors.size(), 2u);
+  rig.registration = {{"room_from_camera", {1, 2, 3}}};
+  rig.photometric["left"] = {"scene", "captures/left", "room.json", Eigen::Vector3d(4, 5, 6), 0.5};
+  rig.reflectance = RigReflectance{"reflectance.npy", 600, "left", "room.json", 612, 580};
+  WriteRigFile(dir.path() / "rig", rig);
+
+  const RigFile back = ReadRigFile(dir.path() / "rig");
+  EXPECT_EQ(back.camera.model, rig.camera.model);
+  EXPECT_EQ(back.camera.response, rig.camera.response);
+  ASSERT_TRUE(back.camera.colour && back.camera.colour->matrix && back.camera.colour->black);
+  EXPECT_FALSE(back.camera.colour->scale);
+  EXPECT_EQ(*back.camera.colour->matrix, *rig.camera.colour->matrix);
+  EXPECT_EQ(*back.camera.colour->black, 0.03);
+  ASSERT_EQ(back.projectors.size(), 2u);
+  EXPECT_EQ(back.projectors[0].name, "left");
+  EXPECT_EQ(back.projectors[0].model, "left.cameramodel");
+  EXPECT_EQ(*back.projectors[0].black, *left.black);
+  EXPECT_EQ(*back.projectors[0].max, *left.max);
+  EXPECT_EQ(back.projectors[0].response, left.response);
+  EXPECT_EQ(*back.projectors[0].mixing, *left.mixing);
+  EXPECT_EQ(*back.projectors[0].bits, 10);
+  EXPECT_EQ(back.projectors[1].name, "right");
+  EXPECT_FALSE(back.projectors[1].black || back.projectors[1].max || back.projectors[1].bits);
+  EXPECT_EQ(back.registration, rig.registration);
+  ASSERT_EQ(back.photometric.count("left"), 1u);
+  const RigPhotometry& photometry = back.photometric.at("left");
+  EXPECT_EQ(photometry.units, "scene");
+  EXPECT_EQ(photometry.session, "captures/left");
+  EXPECT_EQ(photometry.scene, "room.json");
+  EXPECT_EQ(*photometry.camera_scale, Eigen::Vector3d(4, 5, 6));
+  EXPECT_EQ(photometry.camera_black, 0.5);
+  ASSERT_TRUE(back.reflectance);
+  EXPECT_EQ(back.reflectance->file, "reflectance.npy");
+  EXPECT_EQ(back.reflectance->target_patches, 600);
+  EXPECT_EQ(back.reflectance->patches, 612);
+  EXPECT_EQ(back.reflectance->patches_seen, 580);
+  EXPECT_EQ(ReadJson(dir.path() / "rig/rig.json")["format_version"], kRigFormatVersion);
+  // A missing rig.json reads as an empty rig (the first calibrate command starts from it).
+  EXPECT_TRUE(ReadRigFile(dir.path() / "nowhere").projectors.empty());
+}
+
+// An update that throws leaves rig.json as it was.
+TEST(RigFile, FailedUpdateWritesNothing) {
+  testing::TempDir dir;
+  RigFile rig;
+  rig.camera.model = "camera.cameramodel";
+  WriteRigFile(dir.path(), rig);
+  const std::string before = ReadFile(dir.path() / "rig.json");
+  EXPECT_THROW(UpdateRigFile(dir.path(),
+                             [](RigFile& file) {
+                               file.camera.model = "other.cameramodel";
+                               throw IoError("stop");
+                             }),
+               IoError);
+  EXPECT_EQ(ReadFile(dir.path() / "rig.json"), before);
+}
+
 TEST(RigDirectory, BadRigJsonGetsOneLineNamingTheFileAndKey) {
   testing::TempDir dir;
   const std::filesystem::path scene = WriteTinyBoxScene(dir, "scene.json", nullptr);
@@ -199,8 +276,15 @@ TEST(RigDirectory, BadRigJsonGetsOneLineNamingTheFileAndKey) {
     std::string expected;
   };
   nlohmann::json no_max = good, missing_model = good, camera_units = good, bad_mixing = good;
-  nlohmann::json unversioned = good, future = good;
+  nlohmann::json unversioned = good, future = good, bool_scale = good, unknown_key = good;
+  nlohmann::json string_black = good, number_units = good, no_target = good, twice = good;
   unversioned.erase("format_version");
+  bool_scale["camera"] = {{"model", "camera.cameramodel"}, {"colour", {{"scale", true}}}};
+  unknown_key["projecter"] = nlohmann::json::array();
+  string_black["projectors"][0]["black"] = "dark";
+  number_units["photometric"] = {{"left", {{"units", 3}}}};
+  no_target["reflectance"] = {{"file", "reflectance.npy"}};
+  twice["projectors"][1]["name"] = twice["projectors"][0]["name"];
   future["format_version"] = kRigFormatVersion + 1;
   no_max["projectors"][1].erase("max");
   missing_model["projectors"][0]["model"] = "nowhere.cameramodel";
@@ -217,6 +301,12 @@ TEST(RigDirectory, BadRigJsonGetsOneLineNamingTheFileAndKey) {
       {"missing_model", missing_model, "rig.json: projectors[0].model"},
       {"camera_units", camera_units, "rig.json: projectors[0].max: the photometry of 'left' is in camera units"},
       {"bad_mixing", bad_mixing, "rig.json: projectors[0].mixing: row 0"},
+      {"bool_scale", bool_scale, "rig.json: camera.colour.scale: must be a number or an RGB"},
+      {"unknown_key", unknown_key, "rig.json: projecter: unknown key"},
+      {"string_black", string_black, "rig.json: projectors[0].black: must be a number or an RGB"},
+      {"number_units", number_units, "rig.json: photometric.left.units: must be a string"},
+      {"no_target", no_target, "rig.json: reflectance.target_patches: required key is missing"},
+      {"twice", twice, "rig.json: projectors[1].name: 'left' appears twice"},
   };
   for (const Case& c : cases) {
     const std::filesystem::path rig = dir / ("rig_" + c.name);

@@ -19,18 +19,19 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "verification/verification.h"
+#include "base/io.h"
+#include "base/json_fields.h"
+#include "calibration/rig_directory.h"
 #include "capture/camera.h"
 #include "capture/display.h"
 #include "capture/session.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "datasets_synthetic/synthetic_camera.h"
-#include "base/io.h"
-#include "calibration/rig_directory.h"
 #include "geometry/patches.h"
 #include "projection/projector.h"
 #include "tests/testing/testing.h"
+#include "verification/verification.h"
 
 namespace procam {
 namespace {
@@ -48,7 +49,6 @@ nlohmann::json ReadJson(const std::filesystem::path& path) {
   return nlohmann::json::parse(file);
 }
 
-nlohmann::json Triplet(const Vec3& v) { return {v[0], v[1], v[2]}; }
 
 Eigen::MatrixXd ReadMatrix(const std::filesystem::path& path) {
   const NpyArray array = ReadNpy(path);
@@ -68,11 +68,11 @@ std::filesystem::path WriteScene(const testing::TempDir& dir) {
   nlohmann::json surfaces = nlohmann::json::array();
   for (const Surface& surface : synthetic.scene.surfaces) {
     nlohmann::json quad = nlohmann::json::array();
-    for (const Vec3& corner : surface.quad) quad.push_back(Triplet(corner));
+    for (const Vec3& corner : surface.quad) quad.push_back(JsonTriple(corner));
     surfaces.push_back({{"name", surface.name},
                         {"quad", quad},
-                        {"reflectance", Triplet(surface.reflectance)},
-                        {"desired", Triplet(0.5 * surface.desired.srgb + Vec3::Constant(0.35))}});
+                        {"reflectance", JsonTriple(surface.reflectance)},
+                        {"desired", JsonTriple(0.5 * surface.desired.srgb + Vec3::Constant(0.35))}});
   }
   return dir.Write("scene.json", nlohmann::json({{"patches", kPatches}, {"surfaces", surfaces}}).dump(2));
 }
@@ -94,8 +94,8 @@ std::filesystem::path WriteRig(const testing::TempDir& dir, const std::string& n
     const double gamma = p.response[0].gamma() + (k == 0 ? gamma_offset : 0.0);
     entries.push_back({{"name", projector.name},
                        {"model", projector.name + ".cameramodel"},
-                       {"black", Triplet(p.black)},
-                       {"max", Triplet(p.max)},
+                       {"black", JsonTriple(p.black)},
+                       {"max", JsonTriple(p.max)},
                        {"gamma", {gamma, gamma, gamma}}});
   }
   nlohmann::json json = {{"format_version", kRigFormatVersion},

@@ -1,0 +1,36 @@
+#pragma once
+// Images or a test pattern fullscreen on projector monitors (`procam show`), part of the optional
+// GLFW backend (procam_projection_glfw). Main thread only (GLFW's rule).
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "base/progress.h"
+#include "projection/test_pattern.h"
+
+namespace procam {
+
+struct ShowOptions {
+  // PNGs, one per monitor in its resolution; or, when empty, `pattern` on every chosen monitor.
+  std::vector<std::filesystem::path> images;
+  std::optional<TestPattern> pattern;
+  // Monitors by index or name, one per image (or the pattern's monitors); empty: image k on
+  // monitor k, or the pattern on every monitor.
+  std::vector<std::string> monitors;
+  // Where to write what each window shows (monitorN.png); empty: nowhere.
+  std::filesystem::path readback;
+  // How long to show; ≤ 0: until Esc or Q in a window.
+  double seconds = 0.0;
+  ProgressCallback progress;  // a line per monitor with what it shows
+
+  // "" when valid, else why not (images and pattern both or neither, monitors not one per image).
+  std::string Check() const;
+};
+
+// Checks every image (readable, the monitor's resolution) before a window opens, then shows them.
+// Throws std::invalid_argument for bad options, IoError naming the file or the monitor otherwise.
+void RunShow(const ShowOptions& options);
+
+}  // namespace procam
