@@ -59,19 +59,6 @@ int Blocks(long count) {
 // ---------------------------------------------------------------------------------------------
 // Scalars shared between the kernels and the host.
 
-// The conjugate-gradient solve of NewtonSystem::SolveMasked (solver.cc).
-struct CgState {
-  double r0;         // ‖r‖ at the start
-  double rz;         // rᵀz
-  double curvature;  // pᵀHp of the last iteration
-  double step;       // rᵀz / pᵀHp
-  double beta;
-  int iterations;    // products done
-  int preconditioner_applications;
-  int done;            // CG has stopped: converged, negative curvature or the iteration limit
-  int negative_first;  // stopped at negative curvature in its first iteration: the solution is p
-};
-
 struct Scalars {
   double value;               // f at the last evaluation
   double projected_gradient;  // ‖x − P(x − g)‖∞
@@ -392,14 +379,7 @@ __device__ void CgStartPhase(int n, bool split, const double* qg, const double* 
     }
   }
   if (GridReduce(value, 0u, reduction.partials, reduction.counter)) {
-    CgState& cg = scalars->cg;
-    cg.r0 = sqrt(value[0]);
-    cg.rz = value[1];
-    cg.curvature = cg.step = cg.beta = 0.0;
-    cg.iterations = 0;
-    cg.done = cg.r0 == 0.0 ? 1 : 0;
-    cg.preconditioner_applications = cg.done ? 0 : 1;
-    cg.negative_first = 0;
+    CgStart(scalars->cg, sqrt(value[0]), value[1]);
   }
 }
 
@@ -461,18 +441,7 @@ __device__ void CgCurvaturePhase(long count, const P* product, const double* mas
     hp[k] = h;
     value[0] += p[k] * h;
   }
-  if (GridReduce(value, 0u, reduction.partials, reduction.counter)) {
-    CgState& cg = scalars->cg;
-    ++cg.iterations;
-    const double curvature = value[0];
-    cg.curvature = curvature;
-    if (!(curvature > 0.0)) {
-      cg.done = 1;
-      cg.negative_first = cg.iterations == 1 ? 1 : 0;
-    } else {
-      cg.step = cg.rz / curvature;
-    }
-  }
+  if (GridReduce(value, 0u, reduction.partials, reduction.counter)) CgCurvature(scalars->cg, value[0]);
 }
 
 // x += step p, r −= step hp, z = P r; CG stops once ‖r‖ ≤ tolerance ‖r0‖ or at the iteration limit.
@@ -500,15 +469,8 @@ __device__ void CgUpdatePhase(int n, bool split, const double* p, const double* 
     }
   }
   if (GridReduce(value, 0u, reduction.partials, reduction.counter)) {
-    CgState& cg = scalars->cg;
-    if (sqrt(value[0]) <= tolerance * cg.r0) {
-      cg.done = 1;
-    } else if (!split) {
-      ++cg.preconditioner_applications;
-      cg.beta = value[1] / cg.rz;
-      cg.rz = value[1];
-      if (cg.iterations >= max_iterations) cg.done = 1;
-    }
+    if (CgResidual(scalars->cg, sqrt(value[0]), tolerance) && !split)
+      CgDirection(scalars->cg, value[1], max_iterations);
   }
 }
 
@@ -549,14 +511,10 @@ __device__ void NeumannPhase(int n, bool start, Weights w, const double* jacobia
     }
   }
   if (GridReduce(value, 0u, reduction.partials, reduction.counter)) {
-    CgState& cg = scalars->cg;
     if (start) {
-      cg.rz = value[0];
+      scalars->cg.rz = value[0];  // CgStartPhase's rᵀz was rᵀD⁻¹r
     } else {
-      ++cg.preconditioner_applications;
-      cg.beta = value[0] / cg.rz;
-      cg.rz = value[0];
-      if (cg.iterations >= max_iterations) cg.done = 1;
+      CgDirection(scalars->cg, value[0], max_iterations);
     }
   }
 }

@@ -10,6 +10,7 @@
 
 #include <Eigen/SparseCholesky>
 
+#include "base/timing.h"
 #include "procam/config.h"
 #if PROCAM_WITH_CUDA
 #include "compensation/cuda_compressed.h"
@@ -20,11 +21,6 @@
 namespace procam {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 Eigen::MatrixX3d Clamp(const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& lower, const Eigen::MatrixX3d& upper) {
   return x.cwiseMax(lower).cwiseMin(upper);
@@ -132,44 +128,38 @@ class NewtonSystem {
   int SolveMasked(const Eigen::MatrixX3d& rhs, const Eigen::MatrixX3d& mask, int max_iterations,
                   double tolerance, Eigen::MatrixX3d* solution, double* curvature_of_solution) const {
     if (preconditioner_ == SolverOptions::Preconditioner::kFreeColourHessian) FactoriseFree(mask);
+    // The recurrence's decisions are solver_driver.h's (CgState), as on the GPU.
     Eigen::MatrixX3d x = Eigen::MatrixX3d::Zero(rhs.rows(), 3);
     Eigen::MatrixX3d r = rhs.cwiseProduct(mask);
-    const double r0 = r.norm();
-    *curvature_of_solution = 0.0;
-    if (r0 == 0.0) {
-      *solution = x;
-      return 0;
-    }
     const Eigen::MatrixX3d b = r;
-    Eigen::MatrixX3d z = Precondition(r).cwiseProduct(mask);
-    Eigen::MatrixX3d p = z;
-    double rz = Dot(r, z);
-    int iteration = 0;
-    while (iteration < max_iterations) {
-      ++iteration;
-      const Eigen::MatrixX3d hp = Product(p).cwiseProduct(mask);
-      const double curvature = Dot(p, hp);
-      if (!(curvature > 0.0)) {
-        // Negative curvature (second-order term): stop with the descent direction so far.
-        if (iteration == 1) {
-          *solution = p;
-          *curvature_of_solution = curvature;
-          return iteration;
-        }
-        break;
-      }
-      const double step = rz / curvature;
-      x += step * p;
-      r -= step * hp;
-      if (r.norm() <= tolerance * r0) break;
+    CgState cg;
+    const double r0 = r.norm();
+    Eigen::MatrixX3d z, p;
+    if (r0 > 0.0) {
       z = Precondition(r).cwiseProduct(mask);
-      const double rz_next = Dot(r, z);
-      p = z + (rz_next / rz) * p;
-      rz = rz_next;
+      p = z;
     }
-    *curvature_of_solution = Dot(x, b - r);  // H_FF x = b − r
+    CgStart(cg, r0, r0 > 0.0 ? Dot(r, z) : 0.0);
+    *curvature_of_solution = 0.0;
+    while (!cg.done) {
+      const Eigen::MatrixX3d hp = Product(p).cwiseProduct(mask);
+      CgCurvature(cg, Dot(p, hp));
+      if (cg.negative_first) {
+        *solution = p;
+        *curvature_of_solution = cg.curvature;
+        return cg.iterations;
+      }
+      if (cg.done) break;
+      x += cg.step * p;
+      r -= cg.step * hp;
+      if (!CgResidual(cg, r.norm(), tolerance)) break;
+      z = Precondition(r).cwiseProduct(mask);
+      CgDirection(cg, Dot(r, z), max_iterations);
+      p = z + cg.beta * p;
+    }
+    *curvature_of_solution = r0 > 0.0 ? Dot(x, b - r) : 0.0;  // H_FF x = b − r
     *solution = x;
-    return iteration;
+    return cg.iterations;
   }
 
  private:

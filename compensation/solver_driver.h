@@ -120,6 +120,62 @@ struct SearchDirection {
   double slope;  // gᵀd
 };
 
+// Preconditioned conjugate gradients on H_FF s = b from s = 0, as SolveNewton runs it (the CPU's
+// NewtonSystem::SolveMasked, the GPU's CG phases): the vector work is each executor's, the
+// decisions are these. CG stops at non-positive curvature (with the step so far, or with p itself
+// when that happens in the first iteration: a descent direction), once ‖r‖ ≤ tolerance ‖r0‖, or
+// after max_iterations products.
+struct CgState {
+  double r0;         // ‖r‖ at the start
+  double rz;         // rᵀz
+  double curvature;  // pᵀHp of the last iteration
+  double step;       // rᵀz / pᵀHp
+  double beta;
+  int iterations;  // products done
+  int preconditioner_applications;
+  int done;            // CG has stopped: converged, negative curvature or the iteration limit
+  int negative_first;  // stopped at negative curvature in its first iteration: the solution is p
+};
+
+// The start: r = b, z = M⁻¹r, p = z; `residual_norm` = ‖r‖, `rz` = rᵀz. Done at once when b = 0.
+PROCAM_HOST_DEVICE inline void CgStart(CgState& cg, double residual_norm, double rz) {
+  cg.r0 = residual_norm;
+  cg.rz = rz;
+  cg.curvature = cg.step = cg.beta = 0.0;
+  cg.iterations = 0;
+  cg.done = residual_norm == 0.0 ? 1 : 0;
+  cg.preconditioner_applications = cg.done ? 0 : 1;
+  cg.negative_first = 0;
+}
+
+// After a product: `curvature` = pᵀHp. Counts the product; stops at non-positive curvature, else
+// sets the step length rᵀz / pᵀHp (x += step p, r −= step Hp follow).
+PROCAM_HOST_DEVICE inline void CgCurvature(CgState& cg, double curvature) {
+  ++cg.iterations;
+  cg.curvature = curvature;
+  if (!(curvature > 0.0)) {
+    cg.done = 1;
+    cg.negative_first = cg.iterations == 1 ? 1 : 0;
+  } else {
+    cg.step = cg.rz / curvature;
+  }
+}
+
+// After the step: `residual_norm` = ‖r‖. Stops when converged; returns whether CG goes on (z =
+// M⁻¹r and CgDirection follow).
+PROCAM_HOST_DEVICE inline bool CgResidual(CgState& cg, double residual_norm, double tolerance) {
+  if (residual_norm <= tolerance * cg.r0) cg.done = 1;
+  return cg.done == 0;
+}
+
+// With the new rᵀz: β = rᵀz / (rᵀz)_previous (p = z + β p follows); stops at the iteration limit.
+PROCAM_HOST_DEVICE inline void CgDirection(CgState& cg, double rz, int max_iterations) {
+  ++cg.preconditioner_applications;
+  cg.beta = rz / cg.rz;
+  cg.rz = rz;
+  if (cg.iterations >= max_iterations) cg.done = 1;
+}
+
 // Alg. 2's first step length along s: the minimiser of q along s where the curvature is
 // positive (never negative), else 1. The GPU loops also form it on the device, for a first trial
 // enqueued before the host reads it.
