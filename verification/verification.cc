@@ -304,6 +304,12 @@ nlohmann::json VerificationSummary::Json() const {
                          {"termination", termination},
                          {"seconds", seconds}};
   if (!error.empty()) json["error"] = error;
+  json["rig"] = rig;
+  json["solution"] = solution;
+  json["camera"] = camera;
+  json["colour_source"] = colour_source;
+  json["hdr"] = hdr;
+  json["exposures_us"] = exposures_us;
   if (!iterations.empty() && best >= 0) {
     const double first = iterations.front().measured.mean76;
     const double kept = iterations[best].measured.mean76;
@@ -312,6 +318,107 @@ nlohmann::json VerificationSummary::Json() const {
     json["improvement"] = first > 0 ? (first - kept) / first : 0.0;
   }
   return json;
+}
+
+void WriteVerificationRun(const std::filesystem::path& dir, const VerificationSummary& summary) {
+  std::filesystem::create_directories(dir);
+  WriteFileAtomically(dir / "result.json", summary.Json().dump(2) + "\n");
+}
+
+namespace {
+
+int ReadInt(const JsonFields& fields, const std::string& key) {
+  const nlohmann::json& value = fields.At(key);
+  if (!value.is_number_integer()) throw fields.Error(key, "must be an integer");
+  return value.get<int>();
+}
+
+bool ReadBool(const JsonFields& fields, const std::string& key) {
+  const nlohmann::json& value = fields.At(key);
+  if (!value.is_boolean()) throw fields.Error(key, "must be true or false");
+  return value.get<bool>();
+}
+
+PhotoDeltaE ReadDeltaE(const JsonFields& parent, const std::string& key, const std::string& file) {
+  const JsonFields fields(parent.At(key), file, parent.Path(key));
+  PhotoDeltaE d;
+  d.mean76 = fields.Number("pixel_mean76");
+  d.max76 = fields.Number("pixel_max76");
+  d.mean2000 = fields.Number("pixel_mean2000");
+  d.max2000 = fields.Number("pixel_max2000");
+  d.patch_mean76 = fields.Number("patch_mean76");
+  d.patch_mean2000 = fields.Number("patch_mean2000");
+  return d;
+}
+
+VerificationIteration ReadIteration(const nlohmann::json& object, const std::string& file,
+                                    const std::string& prefix) {
+  const JsonFields fields(object, file, prefix);
+  VerificationIteration it;
+  it.index = ReadInt(fields, "iteration");
+  it.directory = fields.String("directory");
+  it.measured = ReadDeltaE(fields, "measured_vs_desired", file);
+  it.model = ReadDeltaE(fields, "measured_vs_predicted", file);
+  it.model_constant_mean76 = fields.Number("measured_vs_patch_radiosity_pixel_mean76");
+  const JsonFields predicted(fields.At("predicted_vs_desired"), file,
+                             fields.Path("predicted_vs_desired"));
+  it.predicted_mean76 = predicted.Number("patch_mean76");
+  it.predicted_mean2000 = predicted.Number("patch_mean2000");
+  it.solver_mean76 = predicted.Number("solver_mean76_all_patches");
+  it.seen_pixels = ReadInt(fields, "seen_pixels");
+  it.seen_patches = ReadInt(fields, "seen_patches");
+  const JsonFields seconds(fields.At("seconds"), file, fields.Path("seconds"));
+  it.capture_seconds = seconds.Number("capture");
+  it.solve_seconds = seconds.Number("solve");
+  it.seconds = seconds.Number("total");
+  if (fields.Has("update")) {
+    const JsonFields update(fields.At("update"), file, fields.Path("update"));
+    const nlohmann::json& exponents = update.At("response_exponent");
+    if (!exponents.is_array()) throw update.Error("response_exponent", "must be an array");
+    for (size_t j = 0; j < exponents.size(); ++j) {
+      it.response_exponent.push_back(
+          update.Triple("response_exponent[" + std::to_string(j) + "]", exponents[j]));
+    }
+    it.reflectance_scale = update.Triple("reflectance_scale", update.At("reflectance_scale"));
+  }
+  return it;
+}
+
+}  // namespace
+
+VerificationSummary ReadVerificationRun(const std::filesystem::path& dir) {
+  const std::filesystem::path path = dir / "result.json";
+  const std::string file = path.string();
+  const nlohmann::json object = ReadJsonFile(path);
+  const JsonFields fields(object, file, "");
+  if (!fields.Has("format_version") || !object["format_version"].is_number_integer())
+    throw fields.Error("format_version", "required key is missing (an integer)");
+  if (object["format_version"].get<int64_t>() != kVerificationFormatVersion) {
+    throw fields.Error("format_version",
+                       object["format_version"].dump() + " is not supported (this procam reads " +
+                           std::to_string(kVerificationFormatVersion) + ")");
+  }
+  if (fields.String("command") != "verify") throw fields.Error("command", "not a verification run");
+  VerificationSummary summary;
+  const nlohmann::json& iterations = fields.At("iterations");
+  if (!iterations.is_array()) throw fields.Error("iterations", "must be an array");
+  for (size_t k = 0; k < iterations.size(); ++k)
+    summary.iterations.push_back(
+        ReadIteration(iterations[k], file, "iterations[" + std::to_string(k) + "]"));
+  summary.best = ReadInt(fields, "best");
+  if (summary.best < -1 || summary.best >= static_cast<int>(summary.iterations.size()))
+    throw fields.Error("best", "not an iteration of the run");
+  summary.complete = ReadBool(fields, "complete");
+  summary.termination = fields.String("termination");
+  if (fields.Has("error")) summary.error = fields.String("error");
+  summary.seconds = fields.Number("seconds");
+  summary.rig = fields.At("rig");
+  summary.solution = fields.String("solution");
+  summary.camera = fields.String("camera");
+  summary.colour_source = fields.String("colour_source");
+  summary.hdr = ReadBool(fields, "hdr");
+  summary.exposures_us = fields.Numbers("exposures_us", fields.At("exposures_us"));
+  return summary;
 }
 
 std::string VerificationSummary::BriefReport() const {
@@ -691,15 +798,14 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
   CreateDirectories(options.out);
   VerificationSummary summary;
   summary.termination = "max_iterations";
+  summary.rig = in.rig.Describe();
+  summary.solution = options.solution_dir.string();
+  summary.camera = options.camera;
+  summary.colour_source = in.colour_source.source;
+  summary.hdr = loop.hdr();
+  summary.exposures_us = loop.sequencer().exposures_us;
   auto write_summary = [&] {
-    nlohmann::json json = summary.Json();
-    json["rig"] = in.rig.Describe();
-    json["solution"] = options.solution_dir.string();
-    json["camera"] = options.camera;
-    json["colour_source"] = in.colour_source.source;
-    json["hdr"] = loop.hdr();
-    json["exposures_us"] = loop.sequencer().exposures_us;
-    WriteFileAtomically(options.out / "result.json", json.dump(2) + "\n");
+    WriteVerificationRun(options.out, summary);
     HtmlReport report("procam verify");
     AddVerificationReport(summary, &report);
     report.Write(options.out / "report.html");

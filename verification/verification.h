@@ -117,6 +117,7 @@ struct VerificationIteration {
 // The format version of a verification run's result.json (docs/verification.md).
 constexpr int kVerificationFormatVersion = 1;
 
+// A verification run: DIR/result.json (docs/verification.md) and the pictures of its report.
 struct VerificationSummary {
   std::vector<VerificationIteration> iterations;
   int best = -1;            // index of the iteration with the lowest measured mean ΔE76
@@ -125,9 +126,25 @@ struct VerificationSummary {
   std::string error;        // the fault, when not complete
   cv::Mat desired;          // 8-bit BGR, the desired appearance as the camera sees it
   double seconds = 0;
-  nlohmann::json Json() const;
+  // What the run used.
+  nlohmann::json rig;          // RigDirectory::Describe()
+  std::string solution;        // the solution directory
+  std::string camera;          // the camera's URI
+  std::string colour_source;   // where camera values → exitance came from
+  bool hdr = false;
+  std::vector<double> exposures_us;
+
+  nlohmann::json Json() const;      // result.json
   std::string BriefReport() const;  // one line
 };
+
+// Writes DIR/result.json of a verification run atomically. The one writer of that file.
+void WriteVerificationRun(const std::filesystem::path& dir, const VerificationSummary& summary);
+
+// DIR/result.json of a verification run: every number of it (not the pictures). Throws IoError
+// naming the file and the key: missing, not JSON, a format_version other than
+// kVerificationFormatVersion, a required key missing or of the wrong type. The one reader.
+VerificationSummary ReadVerificationRun(const std::filesystem::path& dir);
 
 // Runs the loop. Camera URIs are opened through the camera registry: callers register the
 // backends they use (RegisterDeviceBackends for real cameras; the synthetic world's, with its

@@ -26,6 +26,7 @@ TempDir::~TempDir() {
 
 std::filesystem::path TempDir::Write(const std::string& name, const std::string& text) const {
   const std::filesystem::path file = path_ / name;
+  std::filesystem::create_directories(file.parent_path());
   std::ofstream(file) << text;
   return file;
 }

@@ -150,6 +150,17 @@ TEST(Verify, ClosedLoopRecoversFromAWrongModel) {
   }
   EXPECT_LE(best_within_3, 0.7 * initial);
   EXPECT_TRUE(result.at("complete").get<bool>());
+  // The one reader of a verification run gives back what the file holds.
+  const VerificationSummary read = ReadVerificationRun(dir / "verify");
+  ASSERT_EQ(read.iterations.size(), iterations.size());
+  for (size_t k = 0; k < iterations.size(); ++k) {
+    EXPECT_EQ(read.iterations[k].measured.mean76, Measured(iterations.at(k)));
+    EXPECT_EQ(read.iterations[k].seen_pixels, iterations.at(k).at("seen_pixels").get<int>());
+  }
+  EXPECT_EQ(read.best, result.at("best").get<int>());
+  EXPECT_TRUE(read.complete);
+  EXPECT_EQ(read.camera, result.at("camera").get<std::string>());
+  EXPECT_EQ(read.iterations[0].response_exponent.size(), 2u);  // updated after photo 0
   const int best = result.at("best").get<int>();
   ASSERT_GE(best, 0);
   ASSERT_LT(best, static_cast<int>(iterations.size()));
@@ -259,6 +270,10 @@ TEST(Verify, CameraLostMidRunKeepsWhatWasDone) {
   EXPECT_FALSE(result.at("complete").get<bool>());
   EXPECT_EQ(result.at("termination"), "fault");
   ASSERT_EQ(result.at("iterations").size(), 1u);
+  const VerificationSummary read = ReadVerificationRun(dir / "verify");
+  EXPECT_FALSE(read.complete);
+  EXPECT_EQ(read.termination, "fault");
+  EXPECT_EQ(read.error, result.at("error").get<std::string>());
   EXPECT_TRUE(std::filesystem::exists(dir / "verify/iterations/0/photo.png"));
   EXPECT_TRUE(std::filesystem::exists(dir / "verify/iterations/0/session/session.json"));
   EXPECT_TRUE(std::filesystem::exists(dir / "verify/iterations/1/session/session.json"));
@@ -341,6 +356,73 @@ TEST(Verify, ProjectorLostMidRunKeepsWhatWasDone) {
   ASSERT_EQ(interrupted.manifest().at("interruptions").size(), 1u);
   EXPECT_NE(interrupted.manifest().at("interruptions").at(0).at("reason").get<std::string>().find(lost),
             std::string::npos);
+}
+
+// A verification run's result.json read back: a wrong version, a missing or mistyped key each
+// give one error naming the file and the key.
+TEST(VerificationRun, ReaderNamesTheFileAndKey) {
+  testing::TempDir dir;
+  VerificationSummary summary;
+  summary.iterations.resize(1);
+  summary.iterations[0].measured.mean76 = 12.5;
+  summary.iterations[0].response_exponent = {Vec3(1.0, 1.1, 0.9)};
+  summary.best = 0;
+  summary.complete = true;
+  summary.termination = "max_iterations";
+  summary.camera = "synthetic:tiny_box";
+  summary.exposures_us = {1000, 4000};
+  WriteVerificationRun(dir.path() / "good", summary);
+  const VerificationSummary back = ReadVerificationRun(dir.path() / "good");
+  EXPECT_EQ(back.iterations.at(0).measured.mean76, 12.5);
+  EXPECT_EQ(back.iterations.at(0).response_exponent.at(0), Vec3(1.0, 1.1, 0.9));
+  EXPECT_EQ(back.exposures_us, summary.exposures_us);
+  EXPECT_EQ(back.termination, "max_iterations");
+
+  const nlohmann::json good = ReadJson(dir.path() / "good/result.json");
+  struct Case {
+    std::string name, key;
+    nlohmann::json value;  // null: the key removed
+    std::string expected;
+  };
+  const Case cases[] = {
+      {"version", "format_version", 2, "result.json: format_version: 2 is not supported"},
+      {"unversioned", "format_version", nullptr, "result.json: format_version: required key"},
+      {"no_iterations", "iterations", nullptr, "result.json: iterations: required key is missing"},
+      {"bool_best", "best", true, "result.json: best: must be an integer"},
+      {"best_out", "best", 3, "result.json: best: not an iteration of the run"},
+      {"string_hdr", "hdr", "yes", "result.json: hdr: must be true or false"},
+  };
+  for (const Case& c : cases) {
+    nlohmann::json bad = good;
+    if (c.value.is_null()) {
+      bad.erase(c.key);
+    } else {
+      bad[c.key] = c.value;
+    }
+    dir.Write(c.name + "/result.json", bad.dump(2));
+    try {
+      ReadVerificationRun(dir.path() / c.name);
+      ADD_FAILURE() << c.name << ": accepted";
+    } catch (const IoError& error) {
+      EXPECT_NE(std::string(error.what()).find(c.expected), std::string::npos)
+          << c.name << ": " << error.what();
+    }
+  }
+  nlohmann::json no_pixels = good;
+  no_pixels["iterations"][0].erase("seen_pixels");
+  dir.Write("no_pixels/result.json", no_pixels.dump(2));
+  EXPECT_THROW(
+      {
+        try {
+          ReadVerificationRun(dir.path() / "no_pixels");
+        } catch (const IoError& error) {
+          EXPECT_NE(std::string(error.what()).find("iterations[0].seen_pixels: required key"),
+                    std::string::npos)
+              << error.what();
+          throw;
+        }
+      },
+      IoError);
 }
 
 TEST(Verify, BadInputGetsOneLineAndWritesNothing) {
