@@ -16,9 +16,9 @@ namespace procam {
 namespace {
 
 struct CompensateArguments {
-  std::string scene, out, rig, method = "perceptual", device = "cpu";
-  double alpha = 0.5;
-  int patches = 0;
+  std::string scene, out, rig, method = "perceptual", device = "cpu", loss = "soft_l1";
+  double alpha = 0.5, loss_scale = 5.0;
+  int patches = 0, metric_rounds = 4;
   bool multires = false, export_problem = false;
   std::string form_factors = "dense";
 };
@@ -29,8 +29,22 @@ void AddCompensationCommands(CLI::App& app) {
   auto args = std::make_shared<CompensateArguments>();
   CLI::App* cmd = app.add_subcommand("compensate", "Compute the emittance that makes the room look as desired");
   cmd->add_option("scene", args->scene, "Scene JSON")->required();
-  cmd->add_option("--method", args->method, "naive | reverse | linear | perceptual")
-      ->check(CLI::IsMember({"naive", "reverse", "linear", "perceptual"}))
+  cmd->add_option("--method", args->method,
+                  "naive | reverse | linear | perceptual (the paper's, CIE76) | perceptual2000 (the "
+                  "objective in CIEDE2000 with a robust loss; docs/solver.md)")
+      ->check(CLI::IsMember({"naive", "reverse", "linear", "perceptual", "perceptual2000"}))
+      ->capture_default_str();
+  cmd->add_option("--loss", args->loss,
+                  "perceptual2000: loss on each patch's ΔE00²: squared | soft_l1 | huber | cauchy")
+      ->check(CLI::IsMember({"squared", "soft_l1", "huber", "cauchy"}))
+      ->capture_default_str();
+  cmd->add_option("--loss-scale", args->loss_scale, "perceptual2000: the loss's scale, ΔE00 units")
+      ->check(CLI::Range(1e-6, 1e6))
+      ->capture_default_str();
+  cmd->add_option("--metric-rounds", args->metric_rounds,
+                  "perceptual2000: reweighting rounds (CIEDE2000's metric and the loss's weights "
+                  "re-evaluated at the last round's result)")
+      ->check(CLI::Range(1, 100))
       ->capture_default_str();
   cmd->add_option("--alpha", args->alpha, "Weight of the absolute term against the spatial term, in (0,1]")
       ->check(CLI::Range(1e-9, 1.0))
@@ -72,6 +86,9 @@ void AddCompensationCommands(CLI::App& app) {
     if (rig_dir) ApplyRigReflectance(*rig_dir, &stage.patches);
     CompensationOptions options;
     ParseMethod(args->method, &options.solver.method);
+    ParseRobustLoss(args->loss, &options.solver.robust_loss);
+    options.solver.robust_scale = args->loss_scale;
+    options.solver.metric_rounds = args->metric_rounds;
     options.solver.multires = args->multires;
     options.solver.device = device;
     options.alpha = args->alpha;

@@ -20,7 +20,9 @@ struct EvaluateArguments {
   std::string out = "out/evaluate";
   int patches = 600;
   int world_factor = 4;
-  double alpha = 0.5;
+  double alpha = 0.5, loss_scale = 5.0;
+  std::string loss = "soft_l1";
+  std::vector<std::string> methods;
 };
 
 std::vector<std::pair<std::string, cv::Mat>> ReadFigures(const std::filesystem::path& directory,
@@ -35,7 +37,7 @@ std::vector<std::pair<std::string, cv::Mat>> ReadFigures(const std::filesystem::
 void AddEvaluationCommands(CLI::App& app) {
   auto args = std::make_shared<EvaluateArguments>();
   CLI::App* cmd = app.add_subcommand(
-      "evaluate", "Table 1 of the paper on synthetic scenes: per-pixel ΔE of naive, reverse, linear, perceptual");
+      "evaluate", "Table 1 of the paper on synthetic scenes: per-pixel ΔE of naive, reverse, linear, perceptual, perceptual2000");
   std::string names;
   for (const std::string& name : SyntheticSceneNames()) names += (names.empty() ? "" : ", ") + name;
   cmd->add_option("scenes", args->scenes, "Synthetic scenes (" + names + ") or 'all'")->required();
@@ -43,6 +45,15 @@ void AddEvaluationCommands(CLI::App& app) {
   cmd->add_option("--world-factor", args->world_factor, "World mesh patches per solver patch (the simulated room)")
       ->capture_default_str();
   cmd->add_option("--alpha", args->alpha, "Weight of the absolute term, in (0,1]")->check(CLI::Range(1e-9, 1.0))
+      ->capture_default_str();
+  cmd->add_option("--methods", args->methods,
+                  "Methods to compare (default: naive reverse linear perceptual perceptual2000)")
+      ->check(CLI::IsMember({"naive", "reverse", "linear", "perceptual", "perceptual2000"}));
+  cmd->add_option("--loss", args->loss, "perceptual2000's loss: squared | soft_l1 | huber | cauchy")
+      ->check(CLI::IsMember({"squared", "soft_l1", "huber", "cauchy"}))
+      ->capture_default_str();
+  cmd->add_option("--loss-scale", args->loss_scale, "perceptual2000's loss scale, ΔE00 units")
+      ->check(CLI::Range(1e-6, 1e6))
       ->capture_default_str();
   cmd->add_option("--out", args->out, "Output directory")->capture_default_str();
   cmd->callback([args] {
@@ -57,6 +68,16 @@ void AddEvaluationCommands(CLI::App& app) {
     options.patches = args->patches;
     options.world_factor = args->world_factor;
     options.alpha = args->alpha;
+    ParseRobustLoss(args->loss, &options.loss);
+    options.loss_scale = args->loss_scale;
+    if (!args->methods.empty()) {
+      options.methods.clear();
+      for (const std::string& name : args->methods) {
+        CompensationMethod method;
+        ParseMethod(name, &method);  // CLI11 checked the name
+        options.methods.push_back(method);
+      }
+    }
     std::vector<std::unique_ptr<SceneEvaluation>> evaluations;
     nlohmann::json all = nlohmann::json::array();
     std::vector<std::vector<std::pair<std::string, cv::Mat>>> figures;  // per scene

@@ -1,5 +1,9 @@
 #include "compensation/colour.h"
 
+#include <algorithm>
+#include <vector>
+
+#include <Eigen/Dense>
 #include <Eigen/LU>
 
 namespace procam {
@@ -93,6 +97,38 @@ double DeltaE2000(const Eigen::Vector3d& lab1, const Eigen::Vector3d& lab2) {
   const double r_t = -std::sin(Radians(2.0 * delta_theta)) * r_c;
   const double term_l = delta_l / s_l, term_c = delta_c / s_c, term_h = delta_h / s_h;
   return std::sqrt(term_l * term_l + term_c * term_c + term_h * term_h + r_t * term_c * term_h);
+}
+
+Eigen::Matrix3d DeltaE2000Metric(const Eigen::Vector3d& lab, double step) {
+  // Unknowns m = (M00, M11, M22, M01, M02, M12): δᵀMδ = Σ δa² Maa + 2 Σ δa δb Mab.
+  std::vector<Eigen::Vector3d> directions;
+  for (int a = 0; a < 3; ++a) directions.push_back(Eigen::Vector3d::Unit(a));
+  for (int a = 0; a < 3; ++a) {
+    for (int b = a + 1; b < 3; ++b) {
+      directions.push_back((Eigen::Vector3d::Unit(a) + Eigen::Vector3d::Unit(b)) / std::sqrt(2.0));
+      directions.push_back((Eigen::Vector3d::Unit(a) - Eigen::Vector3d::Unit(b)) / std::sqrt(2.0));
+    }
+  }
+  Eigen::MatrixXd design(2 * directions.size(), 6);
+  Eigen::VectorXd squared(2 * directions.size());
+  int row = 0;
+  for (const Eigen::Vector3d& direction : directions) {
+    for (const double sign : {1.0, -1.0}) {
+      const Eigen::Vector3d delta = sign * step * direction;
+      design.row(row) << delta[0] * delta[0], delta[1] * delta[1], delta[2] * delta[2],
+          2 * delta[0] * delta[1], 2 * delta[0] * delta[2], 2 * delta[1] * delta[2];
+      const double distance = DeltaE2000(lab + delta, lab);
+      squared[row] = distance * distance;
+      ++row;
+    }
+  }
+  const Eigen::VectorXd m = design.colPivHouseholderQr().solve(squared);
+  Eigen::Matrix3d metric;
+  metric << m[0], m[3], m[4], m[3], m[1], m[5], m[4], m[5], m[2];
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(metric);
+  const double largest = std::max(eigen.eigenvalues().maxCoeff(), 1e-12);
+  const Eigen::Vector3d values = eigen.eigenvalues().cwiseMax(1e-3 * largest);
+  return eigen.eigenvectors() * values.asDiagonal() * eigen.eigenvectors().transpose();
 }
 
 }  // namespace procam

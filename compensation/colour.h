@@ -87,6 +87,13 @@ inline double DeltaE76(const Eigen::Vector3d& lab1, const Eigen::Vector3d& lab2)
 // CIEDE2000 colour difference with kL = kC = kH = 1 (Sharma, Wu & Dalal 2005).
 double DeltaE2000(const Eigen::Vector3d& lab1, const Eigen::Vector3d& lab2);
 
+// CIEDE2000's metric at `lab`: the symmetric positive definite M with
+// ΔE00(lab + δ, lab)² ≈ δᵀ M δ for small δ, fitted by least squares to ΔE00² along 18 directions
+// of length `step` (the three axes and the six diagonals of each pair, both signs); eigenvalues
+// below 1e-3 × the largest are raised to it (ΔE00's rotation term can make the fit indefinite
+// for saturated blues).
+Eigen::Matrix3d DeltaE2000Metric(const Eigen::Vector3d& lab, double step = 0.05);
+
 // Linear RGB → L*a*b*, given T and the XYZ of the reference white.
 struct LabConverter {
   Eigen::Matrix3d rgb_to_xyz;

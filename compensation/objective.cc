@@ -1,6 +1,8 @@
 #include "compensation/objective.h"
 
 #include <cmath>
+#include <stdexcept>
+#include <utility>
 
 #include "compensation/colour.h"
 
@@ -32,12 +34,20 @@ Eigen::MatrixX3d Unflatten(const Eigen::VectorXd& v) {
 }
 
 CompensationObjective::CompensationObjective(const CompensationProblem& problem,
-                                             const RadiositySystem& radiosity, ColourModel model)
-    : problem_(problem), radiosity_(radiosity), model_(model) {
+                                             const RadiositySystem& radiosity, ColourModel model,
+                                             ColourMetric metric)
+    : problem_(problem), radiosity_(radiosity), model_(model), metric_(std::move(metric)) {
   const int n = problem.size();
+  if ((!metric_.factor.empty() && static_cast<int>(metric_.factor.size()) != n) ||
+      (metric_.weight.size() != 0 && metric_.weight.size() != n)) {
+    throw std::invalid_argument("colour metric: one factor and weight per patch");
+  }
+  if (model_ == ColourModel::kLinear && !metric_.factor.empty())
+    throw std::invalid_argument("colour metric: for the L*a*b* model only");
   const double mean_area = problem.area.mean();
   weight_diagonal_ = problem.alpha * problem.area / mean_area;
   if (problem.patch_weight.size() == n) weight_diagonal_ = weight_diagonal_.cwiseProduct(problem.patch_weight);
+  if (metric_.weight.size() == n) weight_diagonal_ = weight_diagonal_.cwiseProduct(metric_.weight);
   std::vector<Eigen::Triplet<double>> triplets;
   triplets.reserve(2 * problem.adjacency.size() + n);
   Eigen::VectorXd diagonal = weight_diagonal_;
@@ -78,30 +88,36 @@ Eigen::Matrix3d CompensationObjective::ColourJacobian(const Eigen::Vector3d& rgb
   return XyzToLabJacobian(problem_.rgb_to_xyz * rgb, problem_.white_xyz) * problem_.rgb_to_xyz;
 }
 
+Eigen::Vector3d CompensationObjective::Residual(int i, const Eigen::Vector3d& rgb) const {
+  const Eigen::Vector3d r = Colour(rgb) - DesiredColour().row(i).transpose();
+  return metric_.factor.empty() ? r : Eigen::Vector3d(metric_.factor[i] * r);
+}
+
+Eigen::Matrix3d CompensationObjective::PatchJacobian(int i, const Eigen::Vector3d& rgb) const {
+  const Eigen::Matrix3d jacobian = ColourJacobian(rgb);
+  return metric_.factor.empty() ? jacobian : Eigen::Matrix3d(metric_.factor[i] * jacobian);
+}
+
 double CompensationObjective::Evaluate(const Eigen::MatrixX3d& emittance, ObjectivePoint* point) const {
   const int n = patches();
   point->emittance = emittance;
   point->radiosity = radiosity_.Solve(emittance);
   point->residual.resize(n, 3);
   point->colour_jacobian.resize(n);
-  const Eigen::MatrixX3d& desired = DesiredColour();
   for (int i = 0; i < n; ++i) {
     const Eigen::Vector3d rgb = point->radiosity.row(i).transpose();
-    point->residual.row(i) = (Colour(rgb) - desired.row(i).transpose()).transpose();
-    point->colour_jacobian[i] = ColourJacobian(rgb);
+    point->residual.row(i) = Residual(i, rgb).transpose();
+    point->colour_jacobian[i] = PatchJacobian(i, rgb);
   }
-  point->value = point->residual.cwiseProduct(weights_ * point->residual).sum();
+  point->value = point->residual.cwiseProduct((weights_ * point->residual)).sum();
   return point->value;
 }
 
 double CompensationObjective::Value(const Eigen::MatrixX3d& emittance) const {
   const Eigen::MatrixX3d radiosity = radiosity_.Solve(emittance);
   Eigen::MatrixX3d residual(patches(), 3);
-  const Eigen::MatrixX3d& desired = DesiredColour();
-  for (int i = 0; i < patches(); ++i) {
-    residual.row(i) = (Colour(radiosity.row(i).transpose()) - desired.row(i).transpose()).transpose();
-  }
-  return residual.cwiseProduct(weights_ * residual).sum();
+  for (int i = 0; i < patches(); ++i) residual.row(i) = Residual(i, radiosity.row(i).transpose()).transpose();
+  return residual.cwiseProduct((weights_ * residual)).sum();
 }
 
 Eigen::MatrixX3d CompensationObjective::Gradient(const ObjectivePoint& point) const {
@@ -134,8 +150,12 @@ void CompensationObjective::AddSecondOrder(ObjectivePoint* point) const {
   const Eigen::Matrix3d& t = problem_.rgb_to_xyz;
   for (int i = 0; i < patches(); ++i) {
     const Eigen::Vector3d xyz = t * point->radiosity.row(i).transpose();
-    const Eigen::Vector3d curvature =
-        XyzToLabWeightedCurvature(xyz, problem_.white_xyz, weighted.row(i).transpose());
+    // Σ_k w_k ∇²(L_i Lab)_k = Σ_m (L_iᵀ w)_m ∇²Lab_m.
+    const Eigen::Vector3d w =
+        metric_.factor.empty()
+            ? Eigen::Vector3d(weighted.row(i).transpose())
+            : Eigen::Vector3d(metric_.factor[i].transpose() * weighted.row(i).transpose());
+    const Eigen::Vector3d curvature = XyzToLabWeightedCurvature(xyz, problem_.white_xyz, w);
     point->second_order[i] = t.transpose() * curvature.asDiagonal() * t;
   }
 }

@@ -27,6 +27,17 @@ enum class ColourModel {
   kLinear  // Y, Pb, Pr of linear Rec. 709 RGB, scaled to L*-like units (linear; Sheng 2010)
 };
 
+// A per-patch reweighting of the L*a*b* objective: patch i's residual becomes L_i r_i, so that
+// its squared length is r_iᵀ M_i r_i with M_i = L_iᵀ L_i (e.g. CIEDE2000's metric,
+// DeltaE2000Metric), in the data term and in the spatial term alike (neighbours' residuals are
+// compared in their metrics: measured better than comparing them in plain L*a*b*, docs/solver.md),
+// and the data term α A_i/Ā is scaled by `weight`_i (e.g. a robust loss's ρ′). Empty members
+// leave the objective as published.
+struct ColourMetric {
+  std::vector<Eigen::Matrix3d> factor;  // L_i, n of them, or none
+  Eigen::VectorXd weight;               // n positive weights, or none
+};
+
 // Everything the objective knows at one point E.
 struct ObjectivePoint {
   Eigen::MatrixX3d emittance;   // E (n×3)
@@ -41,13 +52,15 @@ struct ObjectivePoint {
 
 class CompensationObjective {
  public:
-  // Keeps a reference to `problem` and `radiosity` (both must outlive the objective).
+  // Keeps a reference to `problem` and `radiosity` (both must outlive the objective). `metric`
+  // (copied) reweights the L*a*b* objective; the linear model takes none.
   CompensationObjective(const CompensationProblem& problem, const RadiositySystem& radiosity,
-                        ColourModel model);
+                        ColourModel model, ColourMetric metric = {});
 
   int patches() const { return static_cast<int>(weight_diagonal_.size()); }
   int variables() const { return 3 * patches(); }
   ColourModel model() const { return model_; }
+  const ColourMetric& metric() const { return metric_; }
   const CompensationProblem& problem() const { return problem_; }
   const RadiositySystem& radiosity() const { return radiosity_; }
 
@@ -86,6 +99,11 @@ class CompensationObjective {
                                           const Eigen::MatrixX3d& r) const;
   std::vector<Eigen::Matrix3d> InverseColourJacobians(const ObjectivePoint& point) const;
 
+  // Patch i's residual L_i (C(rgb) − C(Bd_i)) and its Jacobian L_i ∂C/∂B (L_i = I without a
+  // metric).
+  Eigen::Vector3d Residual(int i, const Eigen::Vector3d& rgb) const;
+  Eigen::Matrix3d PatchJacobian(int i, const Eigen::Vector3d& rgb) const;
+
   // Per-patch colour differences between B and the desired radiosity in L*a*b*.
   void DeltaE(const Eigen::MatrixX3d& radiosity, Eigen::VectorXd* delta_e76,
               Eigen::VectorXd* delta_e2000) const;
@@ -94,6 +112,7 @@ class CompensationObjective {
   const CompensationProblem& problem_;
   const RadiositySystem& radiosity_;
   ColourModel model_;
+  ColourMetric metric_;
   Eigen::VectorXd weight_diagonal_;
   Eigen::SparseMatrix<double> weights_;
   // W = L Lᵀ (W is SPD: α > 0), factorised on first use: only the kInverseHessian

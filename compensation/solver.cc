@@ -8,11 +8,13 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <Eigen/Cholesky>
 #include <Eigen/SparseCholesky>
 
 #include "base/timing.h"
 #include "procam/config.h"
 #if PROCAM_WITH_CUDA
+#include "compensation/colour.h"
 #include "compensation/cuda_compressed.h"
 #include "compensation/cuda_radiosity.h"
 #include "compensation/cuda_solver.h"
@@ -67,7 +69,10 @@ Eigen::MatrixX3d Minimise(const SolverOptions& options, const CompensationObject
                           const Eigen::MatrixX3d& initial, SolverSummary* summary,
                           Eigen::MatrixX3d* radiosity = nullptr) {
 #if PROCAM_WITH_CUDA
-  if (options.device == Device::kCuda && !options.device_host_loop) {
+  // The device loop forms L*a*b* residuals itself, without a colour metric's per-patch factors:
+  // with them, the host loop runs (the objective here, every K⁻¹ and K⁻ᵀ on the device).
+  if (options.device == Device::kCuda && !options.device_host_loop &&
+      objective.metric().factor.empty()) {
     return MinimiseBoundedOnGpu(options, objective, initial, summary, radiosity);
   }
 #else
@@ -360,13 +365,73 @@ const char* MethodName(CompensationMethod method) {
     case CompensationMethod::kReverse: return "reverse";
     case CompensationMethod::kLinear: return "linear";
     case CompensationMethod::kPerceptual: return "perceptual";
+    case CompensationMethod::kPerceptual2000: return "perceptual2000";
   }
   return "?";
 }
 
+const char* RobustLossName(SolverOptions::RobustLoss loss) {
+  switch (loss) {
+    case SolverOptions::RobustLoss::kSquared: return "squared";
+    case SolverOptions::RobustLoss::kSoftL1: return "soft_l1";
+    case SolverOptions::RobustLoss::kHuber: return "huber";
+    case SolverOptions::RobustLoss::kCauchy: return "cauchy";
+  }
+  return "?";
+}
+
+bool ParseRobustLoss(const std::string& name, SolverOptions::RobustLoss* loss) {
+  for (SolverOptions::RobustLoss l :
+       {SolverOptions::RobustLoss::kSquared, SolverOptions::RobustLoss::kSoftL1,
+        SolverOptions::RobustLoss::kHuber, SolverOptions::RobustLoss::kCauchy}) {
+    if (name == RobustLossName(l)) {
+      *loss = l;
+      return true;
+    }
+  }
+  return false;
+}
+
+double RobustLossWeight(SolverOptions::RobustLoss loss, double scale, double s) {
+  const double c2 = scale * scale;
+  switch (loss) {
+    case SolverOptions::RobustLoss::kSquared: return 1.0;
+    case SolverOptions::RobustLoss::kSoftL1: return 1.0 / std::sqrt(1.0 + s / c2);
+    case SolverOptions::RobustLoss::kHuber: return s <= c2 ? 1.0 : scale / std::sqrt(s);
+    case SolverOptions::RobustLoss::kCauchy: return 1.0 / (1.0 + s / c2);
+  }
+  return 1.0;
+}
+
+ColourMetric Ciede2000Metric(const SolverOptions& options, const CompensationProblem& problem,
+                             const Eigen::MatrixX3d& radiosity) {
+  const int n = problem.size();
+  ColourMetric metric;
+  metric.factor.resize(n);
+  metric.weight = Eigen::VectorXd::Ones(n);
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector3d desired =
+        XyzToLab(problem.rgb_to_xyz * problem.desired.row(i).transpose(), problem.white_xyz);
+    Eigen::Vector3d lab = desired;
+    if (radiosity.rows() == n)
+      lab = XyzToLab(problem.rgb_to_xyz * radiosity.row(i).transpose(), problem.white_xyz);
+    Eigen::Matrix3d m = DeltaE2000Metric(0.5 * (lab + desired));
+    const Eigen::Vector3d r = lab - desired;
+    const double quadratic = r.dot(m * r);
+    const double distance = DeltaE2000(lab, desired);
+    if (quadratic > 1e-12 && std::isfinite(distance)) m *= distance * distance / quadratic;
+    metric.factor[i] = Eigen::LLT<Eigen::Matrix3d>(m).matrixU();
+    if (radiosity.rows() == n)
+      metric.weight[i] = RobustLossWeight(options.robust_loss, options.robust_scale, distance * distance);
+  }
+  metric.weight /= metric.weight.mean();
+  return metric;
+}
+
 bool ParseMethod(const std::string& name, CompensationMethod* method) {
   for (CompensationMethod m : {CompensationMethod::kNaive, CompensationMethod::kReverse,
-                               CompensationMethod::kLinear, CompensationMethod::kPerceptual}) {
+                               CompensationMethod::kLinear, CompensationMethod::kPerceptual,
+                               CompensationMethod::kPerceptual2000}) {
     if (name == MethodName(m)) {
       *method = m;
       return true;
@@ -421,6 +486,14 @@ bool SolverOptions::Check(std::string* why) const {
   }
   if (!(cg_tolerance > 0.0 && cg_tolerance < 1.0)) {
     *why = "cg_tolerance must be in (0, 1)";
+    return false;
+  }
+  if (!(robust_scale > 0.0 && std::isfinite(robust_scale))) {
+    *why = "robust_scale must be a positive number";
+    return false;
+  }
+  if (metric_rounds < 1 || metric_rounds > 100) {
+    *why = "metric_rounds must be in [1, 100]";
     return false;
   }
   if (!(gradient_tolerance >= 0.0) || !(function_tolerance >= 0.0)) {
@@ -505,6 +578,70 @@ Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const Compensatio
   return executor.x();
 }
 
+namespace {
+
+// Multires: the coarse level solved (from its reverse radiosity) in `model`, each fine patch
+// starting from its parent's emittance.
+Eigen::MatrixX3d MultiresStart(const SolverOptions& options, const CompensationProblem& problem,
+                               const CoarseLevel& coarse, ColourModel model,
+                               const Eigen::MatrixX3d& reverse, SolverSummary* summary,
+                               double* coarse_setup_seconds) {
+  const auto coarse_start = Clock::now();
+  const auto setup_coarse = Clock::now();
+  const std::shared_ptr<const RadiositySystem> coarse_system =
+      MakeRadiositySystem(options, *coarse.problem);
+  const RadiositySystem& coarse_radiosity = *coarse_system;
+  *coarse_setup_seconds = SecondsSince(setup_coarse);
+  summary->setup_seconds += *coarse_setup_seconds;
+  const CompensationObjective coarse_objective(*coarse.problem, coarse_radiosity, model);
+  SolverSummary coarse_summary;
+  SolverOptions coarse_options = options;
+  coarse_options.progress = nullptr;
+  const Eigen::MatrixX3d coarse_reverse = Clamp(coarse_radiosity.Multiply(coarse.problem->desired),
+                                                coarse.problem->lower, coarse.problem->upper);
+  const Eigen::MatrixX3d coarse_emittance =
+      Minimise(coarse_options, coarse_objective, coarse_reverse, &coarse_summary);
+  Eigen::MatrixX3d initial = reverse;
+  for (int i = 0; i < problem.size(); ++i)
+    initial.row(i) = coarse_emittance.row((*coarse.coarse_of_fine)[i]);
+  summary->coarse_iterations = coarse_summary.iterations;
+  summary->coarse_seconds = SecondsSince(coarse_start) - *coarse_setup_seconds;
+  return Clamp(initial, problem.lower, problem.upper);
+}
+
+// kPerceptual2000's rounds (solver.h), from `initial`; counters and the trace accumulate over the
+// rounds, the costs are the last round's objective.
+void SolveCiede2000Rounds(const SolverOptions& options, const CompensationProblem& problem,
+                          const RadiositySystem& radiosity, const Eigen::MatrixX3d& initial,
+                          SolverSummary* summary, CompensationSolution* solution) {
+  Eigen::MatrixX3d emittance = initial;
+  Eigen::MatrixX3d current_radiosity;  // empty: the first round's metric
+  for (int round = 0; round < options.metric_rounds; ++round) {
+    ColourMetric metric = Ciede2000Metric(options, problem, current_radiosity);
+    const CompensationObjective objective(problem, radiosity, ColourModel::kLab, metric);
+    SolverSummary round_summary;
+    emittance = Minimise(options, objective, emittance, &round_summary, &current_radiosity);
+    if (current_radiosity.rows() != problem.size()) current_radiosity = radiosity.Solve(emittance);
+    if (round == 0) summary->initial_cost = round_summary.initial_cost;
+    summary->final_cost = round_summary.final_cost;
+    summary->termination = round_summary.termination;
+    summary->message = round_summary.message;
+    summary->iterations += round_summary.iterations;
+    summary->inner_iterations += round_summary.inner_iterations;
+    summary->cg_iterations += round_summary.cg_iterations;
+    summary->evaluations += round_summary.evaluations;
+    summary->gradients += round_summary.gradients;
+    summary->hessian_products += round_summary.hessian_products;
+    summary->preconditioner_applications += round_summary.preconditioner_applications;
+    summary->trace.insert(summary->trace.end(), round_summary.trace.begin(), round_summary.trace.end());
+    solution->metric = std::move(metric);
+  }
+  solution->emittance = emittance;
+  solution->radiosity = current_radiosity;
+}
+
+}  // namespace
+
 CompensationSolution Solve(const SolverOptions& options, const CompensationProblem& problem,
                            SolverSummary* summary, const CoarseLevel& coarse) {
   std::string why;
@@ -539,29 +676,20 @@ CompensationSolution Solve(const SolverOptions& options, const CompensationProbl
     case CompensationMethod::kPerceptual: {
       const ColourModel model =
           options.method == CompensationMethod::kLinear ? ColourModel::kLinear : ColourModel::kLab;
-      Eigen::MatrixX3d initial = reverse;
-      if (options.multires) {
-        const auto coarse_start = Clock::now();
-        const auto setup_coarse = Clock::now();
-        const std::shared_ptr<const RadiositySystem> coarse_system = MakeRadiositySystem(options, *coarse.problem);
-        const RadiositySystem& coarse_radiosity = *coarse_system;
-        coarse_setup_seconds = SecondsSince(setup_coarse);
-        summary->setup_seconds += coarse_setup_seconds;
-        const CompensationObjective coarse_objective(*coarse.problem, coarse_radiosity, model);
-        SolverSummary coarse_summary;
-        SolverOptions coarse_options = options;
-        coarse_options.progress = nullptr;
-        const Eigen::MatrixX3d coarse_reverse =
-            Clamp(coarse_radiosity.Multiply(coarse.problem->desired), coarse.problem->lower, coarse.problem->upper);
-        const Eigen::MatrixX3d coarse_emittance =
-            Minimise(coarse_options, coarse_objective, coarse_reverse, &coarse_summary);
-        for (int i = 0; i < problem.size(); ++i) initial.row(i) = coarse_emittance.row((*coarse.coarse_of_fine)[i]);
-        initial = Clamp(initial, problem.lower, problem.upper);
-        summary->coarse_iterations = coarse_summary.iterations;
-        summary->coarse_seconds = SecondsSince(coarse_start) - coarse_setup_seconds;
-      }
+      const Eigen::MatrixX3d initial =
+          options.multires ? MultiresStart(options, problem, coarse, model, reverse, summary,
+                                           &coarse_setup_seconds)
+                           : reverse;
       const CompensationObjective objective(problem, radiosity, model);
       solution.emittance = Minimise(options, objective, initial, summary, &solution.radiosity);
+      break;
+    }
+    case CompensationMethod::kPerceptual2000: {
+      const Eigen::MatrixX3d initial =
+          options.multires ? MultiresStart(options, problem, coarse, ColourModel::kLab, reverse,
+                                           summary, &coarse_setup_seconds)
+                           : reverse;
+      SolveCiede2000Rounds(options, problem, radiosity, initial, summary, &solution);
       break;
     }
   }

@@ -68,7 +68,10 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
     result.method = method;
     CompensationOptions compensation;
     compensation.solver.method = method;
-    compensation.solver.multires = options.multires && method == CompensationMethod::kPerceptual;
+    compensation.solver.multires = options.multires && (method == CompensationMethod::kPerceptual ||
+                                                        method == CompensationMethod::kPerceptual2000);
+    compensation.solver.robust_loss = options.loss;
+    compensation.solver.robust_scale = options.loss_scale;
     compensation.alpha = options.alpha;
     compensation.lower = evaluation.rig->lower;
     compensation.upper = evaluation.rig->upper;

@@ -46,10 +46,13 @@ struct SceneEvaluation {
 
 struct EvaluationOptions {
   int patches = 600;  // solver patches per scene, ≥ 4
-  std::vector<CompensationMethod> methods = {CompensationMethod::kNaive, CompensationMethod::kReverse,
-                                             CompensationMethod::kLinear, CompensationMethod::kPerceptual};
+  std::vector<CompensationMethod> methods = {
+      CompensationMethod::kNaive, CompensationMethod::kReverse, CompensationMethod::kLinear,
+      CompensationMethod::kPerceptual, CompensationMethod::kPerceptual2000};
   double alpha = 0.5;
-  bool multires = true;  // for the perceptual method
+  bool multires = true;  // for the perceptual methods
+  SolverOptions::RobustLoss loss = SolverOptions::RobustLoss::kSoftL1;  // perceptual2000's
+  double loss_scale = 5.0;
   int world_factor = 4;  // world mesh patches per solver patch
   double albedo_variation = 0.05;  // the simulated room's uneven paint (SimulatedRigOptions)
   ProgressCallback progress;       // what is being evaluated, ΔE per method
