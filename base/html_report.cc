@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <set>
 
 #include <opencv2/imgcodecs.hpp>
 #include <fmt/format.h>
@@ -74,7 +75,16 @@ void HtmlReport::Figures(const std::vector<std::pair<std::string, cv::Mat>>& cap
 
 void HtmlReport::Plot(const std::string& title, const std::string& x_label, const std::string& y_label,
                       const std::vector<Series>& series) {
-  const double width = 640, height = 360, left = 70, right = 160, top = 30, bottom = 50;
+  size_t longest_name = 0;
+  bool whole_x = true;
+  for (const auto& [name, points] : series) {
+    longest_name = std::max(longest_name, name.size());
+    for (const auto& point : points) whole_x &= point.first == std::floor(point.first);
+  }
+  // The legend sits right of the plot: ~7.5 px per character at 13 px.
+  const double left = 70, top = 30, bottom = 50;
+  const double right = std::max(160.0, 7.5 * static_cast<double>(longest_name) + 24.0);
+  const double width = 480 + right, height = 360;
   double x_min = 1e300, x_max = -1e300, y_min = 1e300, y_max = -1e300;
   for (const auto& [name, points] : series) {
     for (const auto& [x, y] : points) {
@@ -102,9 +112,18 @@ void HtmlReport::Plot(const std::string& title, const std::string& x_label, cons
     svg += fmt::format("<line x1=\"{}\" x2=\"{}\" y1=\"{:.1f}\" y2=\"{:.1f}\" stroke=\"#eee\"/>", left, width - right, y, y);
     svg += fmt::format("<text x=\"{}\" y=\"{:.1f}\" text-anchor=\"end\">1e{}</text>\n", left - 6, y + 4, decade);
   }
-  for (int tick = 0; tick <= 5; ++tick) {
-    const double x = x_min + (x_max - x_min) * tick / 5;
-    svg += fmt::format("<text x=\"{:.1f}\" y=\"{}\" text-anchor=\"middle\">{:.3g}</text>\n", sx(x), height - bottom + 18, x);
+  if (whole_x) {
+    const double step = std::max(1.0, std::ceil((x_max - x_min) / 6.0));
+    for (double x = std::ceil(x_min); x <= x_max + 1e-9; x += step) {
+      svg += fmt::format("<text x=\"{:.1f}\" y=\"{}\" text-anchor=\"middle\">{:.0f}</text>\n", sx(x),
+                         height - bottom + 18, x);
+    }
+  } else {
+    for (int tick = 0; tick <= 5; ++tick) {
+      const double x = x_min + (x_max - x_min) * tick / 5;
+      svg += fmt::format("<text x=\"{:.1f}\" y=\"{}\" text-anchor=\"middle\">{:.3g}</text>\n", sx(x),
+                         height - bottom + 18, x);
+    }
   }
   svg += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n", (left + width - right) / 2, height - 8,
                      HtmlEscape(x_label));
@@ -143,5 +162,68 @@ std::string HtmlReport::Html() const {
 }
 
 void HtmlReport::Write(const std::filesystem::path& path) const { WriteFileAtomically(path, Html()); }
+
+namespace {
+
+std::string Unbase64(const std::string& text) {
+  static const std::string kAlphabet =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string bytes;
+  int bits = 0, value = 0;
+  for (const char c : text) {
+    if (c == '=') break;
+    const size_t index = kAlphabet.find(c);
+    if (index == std::string::npos) return "";
+    value = (value << 6) | static_cast<int>(index);
+    bits += 6;
+    if (bits >= 8) {
+      bits -= 8;
+      bytes.push_back(static_cast<char>((value >> bits) & 0xff));
+    }
+  }
+  return bytes;
+}
+
+}  // namespace
+
+std::vector<std::string> CheckReportStructure(const std::string& html) {
+  std::vector<std::string> problems;
+  std::set<std::string> headings;
+  for (size_t h = html.find("<h"); h != std::string::npos; h = html.find("<h", h + 2)) {
+    if (h + 3 >= html.size() || html[h + 2] < '1' || html[h + 2] > '6' || html[h + 3] != '>') continue;
+    const std::string close = "</h" + std::string(1, html[h + 2]) + ">";
+    const size_t end = html.find(close, h);
+    if (end == std::string::npos) continue;
+    const std::string text = html.substr(h + 4, end - h - 4);
+    if (!headings.insert(text).second) problems.push_back("heading '" + text + "' appears twice");
+  }
+  size_t at = 0;
+  int pictures = 0;
+  while ((at = html.find("<img", at)) != std::string::npos) {
+    ++pictures;
+    const size_t end = html.find('>', at);
+    const std::string tag = html.substr(at, end - at);
+    const size_t figure = html.rfind("<figure>", at), closed = html.rfind("</figure>", at);
+    const size_t caption = html.find("<figcaption>", end), caption_end = html.find("</figcaption>", end);
+    const bool in_figure = figure != std::string::npos && (closed == std::string::npos || closed < figure);
+    const bool captioned = caption != std::string::npos && caption_end != std::string::npos &&
+                           caption_end > caption + 12 &&
+                           caption < html.find("</figure>", end);
+    if (!in_figure || !captioned)
+      problems.push_back("picture " + std::to_string(pictures) + " has no caption");
+    const std::string prefix = "src=\"data:image/png;base64,";
+    const size_t source = tag.find(prefix);
+    bool decodes = false;
+    if (source != std::string::npos) {
+      const size_t start = source + prefix.size();
+      const std::string bytes = Unbase64(tag.substr(start, tag.find('"', start) - start));
+      const std::vector<uchar> buffer(bytes.begin(), bytes.end());
+      decodes = !buffer.empty() && !cv::imdecode(buffer, cv::IMREAD_UNCHANGED).empty();
+    }
+    if (!decodes) problems.push_back("picture " + std::to_string(pictures) + " does not decode");
+    at = end;
+  }
+  return problems;
+}
 
 }  // namespace procam

@@ -98,6 +98,11 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
     Report(options.progress, fmt::format("evaluate {}: per patch mean ΔE76 linear {:.2f}, perceptual {:.2f}, lowest reachable {:.2f}", name,
                  evaluation.model_linear, evaluation.model_perceptual, evaluation.model_lowest));
   }
+  if (perceptual != nullptr) {
+    evaluation.model_lowest2000 = LowestMeanDeltaE2000(perceptual->run.fine);
+    Report(options.progress, fmt::format("evaluate {}: per patch mean CIEDE2000 lowest reachable {:.2f}",
+                                         name, evaluation.model_lowest2000));
+  }
   evaluation.seconds = SecondsSince(start);
   return evaluation;
 }
@@ -121,6 +126,22 @@ double LowestMeanDeltaE(const CompensationProblem& problem, const Eigen::VectorX
   return lowest;
 }
 
+
+double LowestMeanDeltaE2000(const CompensationProblem& problem, int rounds) {
+  CompensationProblem unsmoothed = problem;
+  unsmoothed.alpha = 1.0;
+  SolverOptions options;
+  options.method = CompensationMethod::kPerceptual2000;
+  options.robust_loss = SolverOptions::RobustLoss::kSoftL1;
+  options.robust_scale = 0.25;
+  options.metric_rounds = rounds;
+  SolverSummary summary;
+  const CompensationSolution solution = Solve(options, unsmoothed, &summary);
+  const CompensationObjective lab(problem, *solution.radiosity_system, ColourModel::kLab);
+  Eigen::VectorXd delta_e76, delta_e2000;
+  lab.DeltaE(solution.radiosity, &delta_e76, &delta_e2000);
+  return problem.area.dot(delta_e2000) / problem.area.sum();
+}
 
 std::vector<std::pair<std::string, std::string>> WriteEvaluationPictures(const SceneEvaluation& evaluation,
                                                                           const std::filesystem::path& directory) {
@@ -175,6 +196,21 @@ std::string EvaluationMarkdown(const std::vector<const SceneEvaluation*>& evalua
                            e->model_lowest / e->model_linear);
     }
   }
+  if (evaluations.front()->model_lowest2000 >= 0) {
+    table += "\nPer patch, in the solver's model (area-weighted mean CIEDE2000): each method, and the lowest "
+             "mean any emittance within the bounds reaches (reweighted least squares in CIEDE2000)\n\n| scene |";
+    std::string rule = "|---|";
+    for (const MethodEvaluation& m : evaluations.front()->methods) {
+      table += fmt::format(" {} |", MethodName(m.method));
+      rule += "---|";
+    }
+    table += " lowest reachable |\n" + rule + "---|\n";
+    for (const SceneEvaluation* e : evaluations) {
+      table += "| " + e->name + " |";
+      for (const MethodEvaluation& m : e->methods) table += fmt::format(" {:.2f} |", m.run.mean_delta_e2000);
+      table += fmt::format(" {:.2f} |\n", e->model_lowest2000);
+    }
+  }
   return table;
 }
 
@@ -189,6 +225,8 @@ nlohmann::json EvaluationJson(const SceneEvaluation& evaluation) {
         {"solver", run},
         {"render_max_relative_error", m.render.max_relative_error}};
   }
+  nlohmann::json model2000 = {{"lowest_reachable", evaluation.model_lowest2000}};
+  for (const MethodEvaluation& m : evaluation.methods) model2000[MethodName(m.method)] = m.run.mean_delta_e2000;
   return {{"scene", evaluation.name},
           {"patches", evaluation.geometry.patches.fine.size()},
           {"world_patches", evaluation.world->world().size()},
@@ -199,6 +237,7 @@ nlohmann::json EvaluationJson(const SceneEvaluation& evaluation) {
            {{"linear", evaluation.model_linear},
             {"perceptual", evaluation.model_perceptual},
             {"lowest_reachable", evaluation.model_lowest}}},
+          {"model_mean_delta_e2000", model2000},
           {"methods", methods}};
 }
 

@@ -41,6 +41,9 @@ struct SceneEvaluation {
   // linear, perceptual, and the lowest mean any emittance within the bounds was found to reach
   // (LowestMeanDeltaE); -1 when linear or perceptual was not run.
   double model_linear = -1, model_perceptual = -1, model_lowest = -1;
+  // The lowest area-weighted mean CIEDE2000 per patch found (LowestMeanDeltaE2000); -1 when
+  // perceptual was not run. Each method's own is its run.mean_delta_e2000.
+  double model_lowest2000 = -1;
   double seconds = 0.0;
 };
 
@@ -71,6 +74,12 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
 // instead — a bound on what any method could show in Table 1 under the model. Returns the
 // lowest mean seen (a local optimum: an upper bound on the true minimum).
 double LowestMeanDeltaE(const CompensationProblem& problem, const Eigen::VectorXd& delta_e76, int rounds = 10);
+
+// The lowest area-weighted mean CIEDE2000 per patch that emittances within `problem`'s bounds
+// reach: perceptual2000 without the spatial term (α = 1) and with soft-L1 at c = 0.25 (each
+// round's weights ≈ 1/ΔE00, so the reweighted least squares minimises the mean), `rounds` rounds.
+// A local optimum: an upper bound on the true minimum.
+double LowestMeanDeltaE2000(const CompensationProblem& problem, int rounds = 10);
 
 // Per-pixel ΔE76 and CIEDE2000 of two linear RGB images (CV_32FC3) in L*a*b* of `problem`'s
 // T and white, within `mask`; means and maxima over the mask.

@@ -1,6 +1,8 @@
 // The lowest mean ΔE bound of procam evaluate (datasets_synthetic/evaluation.h).
 #include "datasets_synthetic/evaluation.h"
 
+#include <cstdio>
+
 #include <gtest/gtest.h>
 
 #include "compensation/objective.h"
@@ -21,8 +23,10 @@ CompensationProblem BoxProblem() {
   return MakeProblem(scene, patches.fine, ComputeFormFactors(scene, patches.fine, FormFactorOptions(), nullptr), 0.5);
 }
 
-// Area-weighted mean ΔE76 per patch of `method`'s solution, and the per-patch values.
-double MeanDeltaE(const CompensationProblem& problem, CompensationMethod method, Eigen::VectorXd* delta_e76) {
+// Area-weighted mean ΔE76 per patch of `method`'s solution, and the per-patch values; the mean
+// CIEDE2000 in `mean2000` when given.
+double MeanDeltaE(const CompensationProblem& problem, CompensationMethod method, Eigen::VectorXd* delta_e76,
+                  double* mean2000 = nullptr) {
   SolverOptions options;
   options.method = method;
   SolverSummary summary;
@@ -30,6 +34,7 @@ double MeanDeltaE(const CompensationProblem& problem, CompensationMethod method,
   const CompensationObjective lab(problem, *solution.radiosity_system, ColourModel::kLab);
   Eigen::VectorXd delta_e2000;
   lab.DeltaE(solution.radiosity, delta_e76, &delta_e2000);
+  if (mean2000 != nullptr) *mean2000 = problem.area.dot(delta_e2000) / problem.area.sum();
   return problem.area.dot(*delta_e76) / problem.area.sum();
 }
 
@@ -52,6 +57,27 @@ TEST(LowestMeanDeltaE, GoesBelowBothMethodsWhenBoundsBite) {
   // Minimising the mean itself beats both least-squares optima on the mean.
   EXPECT_LT(lowest, 0.99 * perceptual) << "linear " << linear << ", perceptual " << perceptual;
   EXPECT_LT(lowest, linear);
+}
+
+TEST(LowestMeanDeltaE2000, IsZeroWhenReachableAndBelowEveryMethodWhenBoundsBite) {
+  CompensationProblem loose = BoxProblem();
+  loose.lower.setConstant(-10.0);
+  loose.upper.setConstant(10.0);
+  EXPECT_LT(LowestMeanDeltaE2000(loose, 3), 1e-6);
+
+  const CompensationProblem problem = BoxProblem();
+  const double lowest = LowestMeanDeltaE2000(problem);
+  EXPECT_GT(lowest, 1.0);
+  for (const CompensationMethod method : {CompensationMethod::kReverse, CompensationMethod::kLinear,
+                                          CompensationMethod::kPerceptual,
+                                          CompensationMethod::kPerceptual2000}) {
+    Eigen::VectorXd delta;
+    double mean2000 = 0.0;
+    MeanDeltaE(problem, method, &delta, &mean2000);
+    std::printf("%s: per patch mean CIEDE2000 %.3f (lowest reachable %.3f)\n", MethodName(method),
+                mean2000, lowest);
+    EXPECT_LT(lowest, mean2000) << MethodName(method);
+  }
 }
 
 }  // namespace
