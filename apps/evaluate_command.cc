@@ -85,6 +85,7 @@ void AddEvaluationCommands(CLI::App& app) {
         if (m.method == CompensationMethod::kLinear) linear = m.mean_delta_e76;
         if (m.method == CompensationMethod::kPerceptual) perceptual = m.mean_delta_e76;
       }
+      for (const MethodEvaluation& m : e->methods) row.push_back(fmt::format("{:.2f}", m.seams.seam));
       const double ratio = linear > 0 ? perceptual / linear : 0.0;
       all_met &= ratio <= 0.75;
       row.push_back(fmt::format("{:.2f}", ratio));
@@ -92,6 +93,7 @@ void AddEvaluationCommands(CLI::App& app) {
     }
     std::vector<std::string> header = {"scene"};
     for (const MethodEvaluation& m : pointers.front()->methods) header.push_back(std::string(MethodName(m.method)) + " ΔE76 mean (max)");
+    for (const MethodEvaluation& m : pointers.front()->methods) header.push_back(std::string(MethodName(m.method)) + " seam");
     header.push_back("perceptual / linear");
     HtmlReport page("procam evaluate: perceptual vs linear compensation (Sheng et al. 2011, Table 1)");
     page.Paragraph(fmt::format("{} solver patches per scene, world mesh {}× finer; per-pixel ΔE between the desired "

@@ -62,6 +62,14 @@ bool SeamOptions::Check(std::string* why) const {
   return true;
 }
 
+nlohmann::json SeamMeasure::Json() const {
+  return {{"seam", seam},
+          {"across", across},
+          {"within", within},
+          {"across_pairs", across_pairs},
+          {"within_pairs", within_pairs}};
+}
+
 SeamMeasure MeasureSeams(const cv::Mat& lab, const cv::Mat& lab_desired, const cv::Mat& patch,
                          const std::vector<int>& patch_surface, const SeamOptions& options) {
   std::string why;

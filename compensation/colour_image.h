@@ -7,6 +7,7 @@
 // colour.h); L*a*b* as CV_64FC3; ΔE as CV_32FC1; masks as CV_8UC1 (non-zero = compared).
 
 #include <cstdint>
+#include <nlohmann/json.hpp>
 #include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
@@ -44,6 +45,8 @@ struct SeamMeasure {
   double across = 0, within = 0;  // mean CIEDE2000 of the pairs (0 when there are none)
   int64_t across_pairs = 0, within_pairs = 0;
   double seam = 0;  // across − within: the metric (0 when either kind of pair is missing)
+  // {"seam", "across", "within", "across_pairs", "within_pairs"}: what reports write.
+  nlohmann::json Json() const;
 };
 // `lab`, `lab_desired`: L*a*b* images (CV_64FC3) of what is seen and what should be; `patch`:
 // the patch each pixel sees (CV_32SC1, < 0 for none, which is never counted); `patch_surface`:
