@@ -184,6 +184,63 @@ std::vector<std::vector<Eigen::Vector3f>> DetailFactors(const ProjectionRig& rig
   return detail;
 }
 
+// The detail's and the seamless light's factors multiplied into *combined (the detail), then
+// renormalised to a weighted mean of 1 per patch and channel (weights w a), so the flux is kept.
+void CombineFactors(const ProjectionRig& rig,
+                    const std::vector<std::vector<Eigen::Vector3f>>& smooth,
+                    std::vector<std::vector<Eigen::Vector3f>>* combined) {
+  const int n = rig.size();
+  const int projector_count = static_cast<int>(rig.maps.size());
+#pragma omp parallel for schedule(dynamic, 16)
+  for (int i = 0; i < n; ++i) {
+    Vec3 weighted = Vec3::Zero();
+    double weight_sum = 0.0;
+    for (int k = 0; k < projector_count; ++k) {
+      const ProjectorMap& map = rig.maps[k];
+      const double scale = rig.coverage_scale(i, k) * map.pixel_solid_angle;
+      for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+        Eigen::Vector3f& factor = (*combined)[k][position];
+        factor = factor.cwiseProduct(smooth[k][position]);
+        const double weight = scale * map.share[map.pixels_by_patch[position]];
+        weighted += weight * factor.cast<double>();
+        weight_sum += weight;
+      }
+    }
+    for (int c = 0; c < 3; ++c) {
+      const float normaliser =
+          weighted[c] > 0.0 ? static_cast<float>(weight_sum / weighted[c]) : 1.0f;
+      for (int k = 0; k < projector_count; ++k) {
+        for (int position = rig.maps[k].patch_begin[i]; position < rig.maps[k].patch_begin[i + 1];
+             ++position)
+          (*combined)[k][position][c] *= normaliser;
+      }
+    }
+  }
+}
+
+// The factor on τ per lit pixel (in pixels_by_patch order) and channel: the detail d, the
+// seamless light's m, or both (header comment); none with neither (1). `flux` is step 1's.
+std::vector<std::vector<Eigen::Vector3f>> PixelFactors(const ProjectionRig& rig,
+                                                       const Scene& scene,
+                                                       const Eigen::MatrixX3d& flux,
+                                                       const RenderOptions& options,
+                                                       long long* textured_pixels) {
+  std::vector<std::vector<Eigen::Vector3f>> detail;
+  if (options.detail) detail = DetailFactors(rig, scene, options, textured_pixels);
+  if (options.light != LightField::kSmooth) return detail;
+  const int n = rig.size();
+  Eigen::MatrixX3d exitance = Eigen::MatrixX3d::Zero(n, 3);  // ρ τ, above black
+  for (int i = 0; i < n; ++i) {
+    if (rig.blended_area[i] > 0.0)
+      exitance.row(i) = rig.reflectance.row(i).cwiseProduct(flux.row(i)) / rig.blended_area[i];
+  }
+  std::vector<std::vector<Eigen::Vector3f>> smooth =
+      SeamlessLightFactors(rig, exitance.cwiseMax(0.0), options.seamless);
+  if (detail.empty()) return smooth;
+  CombineFactors(rig, smooth, &detail);
+  return detail;
+}
+
 }  // namespace
 
 const char* DitherName(DitherMethod method) {
@@ -209,7 +266,28 @@ bool ParseDither(const std::string& name, DitherMethod* method) {
   return false;
 }
 
+const char* LightFieldName(LightField light) {
+  switch (light) {
+    case LightField::kFlat:
+      return "flat";
+    case LightField::kSmooth:
+      return "smooth";
+  }
+  return "?";
+}
+
+bool ParseLightField(const std::string& name, LightField* light) {
+  for (const LightField l : {LightField::kFlat, LightField::kSmooth}) {
+    if (name == LightFieldName(l)) {
+      *light = l;
+      return true;
+    }
+  }
+  return false;
+}
+
 bool RenderOptions::Check(std::string* why) const {
+  if (light == LightField::kSmooth && !seamless.Check(why)) return false;
   if (max_level_passes < 1 || max_level_passes > 1000) {
     *why = "max_level_passes must be in [1, 1000]";
     return false;
@@ -365,9 +443,6 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
   s.saturated_pixels.assign(projector_count, 0);
   s.clipped_pixels.assign(projector_count, 0);
   s.detail_saturated_pixels.assign(projector_count, 0);
-  // d per lit pixel (in pixels_by_patch order) and channel; none without detail (d = 1).
-  std::vector<std::vector<Eigen::Vector3f>> detail;
-  if (options.detail) detail = DetailFactors(rig, scene, options, &s.detail_pixels);
   std::vector<ProjectorTables> tables;
   tables.reserve(projector_count);
   for (const Projector& projector : rig.projectors) tables.emplace_back(projector);
@@ -392,6 +467,9 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
           flux(i, c) >= capacity * (1.0 - 1e-12) ? kInfinity : flux(i, c) / rig.blended_area[i];
     }
   }
+
+  const std::vector<std::vector<Eigen::Vector3f>> detail =
+      PixelFactors(rig, scene, flux, options, &s.detail_pixels);
 
   // Step 2, per patch: Newton from below on Σ_p min(w a τ, Ω Δ) = Φ.
   s.level_passes = RefineLevels(rig, tables, detail, flux, options, &level);
