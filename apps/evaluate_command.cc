@@ -7,6 +7,7 @@
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
+#include "apps/command_line.h"
 #include "apps/commands.h"
 #include "datasets_synthetic/evaluation.h"
 #include "base/html_report.h"
@@ -21,6 +22,7 @@ struct EvaluateArguments {
   int patches = 600;
   int world_factor = 4;
   double alpha = 0.5;
+  LightField light = LightField::kSmooth;
 };
 
 std::vector<std::pair<std::string, cv::Mat>> ReadFigures(const std::filesystem::path& directory,
@@ -45,6 +47,7 @@ void AddEvaluationCommands(CLI::App& app) {
   cmd->add_option("--alpha", args->alpha, "Weight of the absolute term, in (0,1]")->check(CLI::Range(1e-9, 1.0))
       ->capture_default_str();
   cmd->add_option("--out", args->out, "Output directory")->capture_default_str();
+  AddLightOption(cmd, &args->light);
   cmd->callback([args] {
     std::vector<std::string> scenes = args->scenes;
     if (scenes.size() == 1 && scenes.front() == "all") {
@@ -57,6 +60,7 @@ void AddEvaluationCommands(CLI::App& app) {
     options.patches = args->patches;
     options.world_factor = args->world_factor;
     options.alpha = args->alpha;
+    options.render.light = args->light;
     std::vector<std::unique_ptr<SceneEvaluation>> evaluations;
     nlohmann::json all = nlohmann::json::array();
     std::vector<std::vector<std::pair<std::string, cv::Mat>>> figures;  // per scene

@@ -47,6 +47,7 @@ double SecondsSince(Clock::time_point start) {
 
 struct ProjectArguments {
   std::string solution, out, rig, dither = "ordered";
+  LightField light = LightField::kSmooth;
   double feather = 0.1;
   int patches = 0;
   bool detail = false;
@@ -62,6 +63,7 @@ void RunProject(const ProjectArguments& args) {
   options.out = args.out;
   options.feather = args.feather;
   options.detail = args.detail;
+  options.light = args.light;
   options.load_seconds = SecondsSince(start);
   options.progress = PrintProgress();
   RunProjectionStage(solution, geometry, std::move(projectors.projectors), projectors.rig_description, options);
@@ -303,6 +305,7 @@ void AddProjectionCommands(CLI::App& app) {
       ->capture_default_str();
   project->add_option("--patches", args->patches,
                       "Patch target given to compensate with --patches, if any");
+  AddLightOption(project, &args->light);
   project->add_flag("--detail", args->detail,
                     "Modulate the light within each patch by the desired texture's detail "
                     "(patch totals unchanged; untextured surfaces as without)");

@@ -121,7 +121,7 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
   compensation.upper = recovered.upper;
   compensation.progress = progress;
   result.run = RunCompensation(geometry, compensation);
-  result.images = RenderProjectorImages(recovered, result.run.solution.emittance, RenderOptions(),
+  result.images = RenderProjectorImages(recovered, result.run.solution.emittance, options.render,
                                         &result.render);
   result.radiance = evaluation.world->RenderRadiance(result.images);
   PixelDeltaE(result.radiance, evaluation, result.run.fine.rgb_to_xyz, result.run.fine.white_xyz,
@@ -141,6 +141,7 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
   const std::filesystem::path& out = demo.out;
   EvaluationOptions options;
   options.patches = demo.patches;
+  options.render.light = demo.light;
   options.progress = demo.progress;
   Report(
       demo.progress,
@@ -175,6 +176,7 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
   verification.sequencer.frames_per_pattern = 2;
   verification.sequencer.settle_ms = 0;
   verification.iterations = 4;
+  verification.light = demo.light;
   verification.progress = demo.progress;
   const VerificationSummary verified = RunVerification(verification);
   WritePng(out / "perceptual_calibrated.png", LinearToDisplay(calibration.perceptual.radiance));

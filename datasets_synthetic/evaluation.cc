@@ -21,6 +21,7 @@ bool EvaluationOptions::Check(std::string* why) const {
     *why = "need patches >= 4, world_factor >= 1, at least one method, alpha in (0,1]";
     return false;
   }
+  if (!render.Check(why)) return false;
   return true;
 }
 
@@ -80,7 +81,7 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
     compensation.upper = evaluation.rig->upper;
     compensation.progress = options.progress;
     result.run = RunCompensation(evaluation.geometry, compensation);
-    result.images = RenderProjectorImages(*evaluation.rig, result.run.solution.emittance, RenderOptions(), &result.render);
+    result.images = RenderProjectorImages(*evaluation.rig, result.run.solution.emittance, options.render, &result.render);
     result.radiance = evaluation.world->RenderRadiance(result.images);
     PixelDeltaE(result.radiance, evaluation, result.run.fine.rgb_to_xyz, result.run.fine.white_xyz, &result);
     Report(options.progress,

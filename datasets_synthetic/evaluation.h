@@ -55,6 +55,7 @@ struct EvaluationOptions {
   bool multires = true;  // for the perceptual method
   int world_factor = 4;  // world mesh patches per solver patch
   double albedo_variation = 0.05;  // the simulated room's uneven paint (SimulatedRigOptions)
+  RenderOptions render;            // projector images (seamless light by default)
   ProgressCallback progress;       // what is being evaluated, ΔE per method
   bool Check(std::string* why) const;
 };

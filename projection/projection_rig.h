@@ -80,8 +80,8 @@ struct ProjectorMap {
   // (lit_pixels) The world point (metres) each lit pixel's ray hits, in pixels_by_patch's order:
   // where the seamless light of projector_images.h evaluates its smooth field.
   std::vector<Eigen::Vector3f> point_by_patch;
-  int lit_pixels = 0;                    // pixels with a patch
-  int patches_reached = 0;               // distinct patches lit
+  int lit_pixels = 0;       // pixels with a patch
+  int patches_reached = 0;  // distinct patches lit
 };
 
 // Everything the renderer needs, for one patch level and a set of projectors.
@@ -94,7 +94,7 @@ struct ProjectionRig {
   Eigen::MatrixX3d centroid;       // (n,3) Patch::centroid, metres
   Eigen::MatrixX3d desired;        // (n,3) PatchLevel::desired_linear (empty if the level has none)
   std::vector<std::array<int, 2>> adjacency;  // PatchLevel::adjacency
-  Eigen::MatrixX3d lower, upper;   // (n,3) direct-light exitance bounds (ρ · flux / A)
+  Eigen::MatrixX3d lower, upper;              // (n,3) direct-light exitance bounds (ρ · flux / A)
   // (n) Σ over the pixels lighting the patch of w · a · coverage_scale (m²): the patch's lit
   // area as the blending weights share it; 0 for a patch no projector reaches.
   Eigen::VectorXd blended_area;

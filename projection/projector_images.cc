@@ -220,8 +220,7 @@ void CombineFactors(const ProjectionRig& rig,
 
 // The factor on τ per lit pixel (in pixels_by_patch order) and channel: the detail d, the
 // seamless light's m, or both (header comment); none with neither (1). `flux` is step 1's.
-std::vector<std::vector<Eigen::Vector3f>> PixelFactors(const ProjectionRig& rig,
-                                                       const Scene& scene,
+std::vector<std::vector<Eigen::Vector3f>> PixelFactors(const ProjectionRig& rig, const Scene& scene,
                                                        const Eigen::MatrixX3d& flux,
                                                        const RenderOptions& options,
                                                        long long* textured_pixels) {
@@ -319,8 +318,8 @@ namespace {
 
 // RenderProjectorImages's inputs: the options, E's shape and values, and for detail the rig's
 // texture coordinates and the scene's surfaces. Throws std::invalid_argument.
-void CheckRenderInputs(const ProjectionRig& rig, const Scene& scene, const Eigen::MatrixX3d& emittance,
-                       const RenderOptions& options) {
+void CheckRenderInputs(const ProjectionRig& rig, const Scene& scene,
+                       const Eigen::MatrixX3d& emittance, const RenderOptions& options) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("RenderOptions: " + why);
   const int n = rig.size();
@@ -352,8 +351,9 @@ void CheckRenderInputs(const ProjectionRig& rig, const Scene& scene, const Eigen
 // evaluation one pass over the patch's pixels; the first one is all most patches need). Raises
 // `level` (τ per patch and channel) where pixels saturate; returns the most passes a patch took.
 int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& tables,
-                 const std::vector<std::vector<Eigen::Vector3f>>& detail, const Eigen::MatrixX3d& flux,
-                 const RenderOptions& options, Eigen::MatrixX3d* level_out) {
+                 const std::vector<std::vector<Eigen::Vector3f>>& detail,
+                 const Eigen::MatrixX3d& flux, const RenderOptions& options,
+                 Eigen::MatrixX3d* level_out) {
   Eigen::MatrixX3d& level = *level_out;
   const int n = rig.size();
   const int projector_count = static_cast<int>(rig.projectors.size());
@@ -417,8 +417,8 @@ Eigen::MatrixX3d FluxOfCodes(const ProjectionRig& rig, const std::vector<Project
         const cv::Vec3w& code = codes[map.pixels_by_patch[position]];
         for (int c = 0; c < 3; ++c) projector_light[c] += table.codes[c].Light(code[c]);
       }
-      const Vec3 mixed = table.identity_mixing ? projector_light
-                                               : Vec3(table.photometry.mixing * projector_light);
+      const Vec3 mixed =
+          table.identity_mixing ? projector_light : Vec3(table.photometry.mixing * projector_light);
       patch_flux +=
           rig.coverage_scale(i, k) * map.pixel_solid_angle * table.delta.cwiseProduct(mixed);
     }

@@ -86,11 +86,13 @@ class Field {
  public:
   Field(const ProjectionRig& rig, const SeamlessLightOptions& options)
       : rig_(rig), nodes_(FieldNodes(rig, options)), radius2_(rig.size()) {
-    for (int j = 0; j < rig.size(); ++j) radius2_[j] = options.radius * options.radius * rig.area[j];
+    for (int j = 0; j < rig.size(); ++j)
+      radius2_[j] = options.radius * options.radius * rig.area[j];
   }
 
   // The field at a point of patch i with node values v̂ (n,3).
-  Eigen::Vector3d At(int i, const Eigen::Vector3f& point, const Eigen::MatrixX3d& node_value) const {
+  Eigen::Vector3d At(int i, const Eigen::Vector3f& point,
+                     const Eigen::MatrixX3d& node_value) const {
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     double weight_sum = 0.0;
     const Eigen::Vector3d x = point.cast<double>();

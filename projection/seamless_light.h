@@ -35,7 +35,7 @@ struct SeamlessLightOptions {
   // Adjacency steps searched for the patches that share the field, in [1, 8].
   int rings = 3;
   // Corrections of the node values, in [0, 50] (0: the patches' own values).
-  int iterations = 3;
+  int iterations = 10;
   // Neighbours share the field where each channel of their desired colours differs by at most
   // this fraction of the larger, in [0, 1].
   double tolerance = 0.05;

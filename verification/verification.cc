@@ -582,7 +582,9 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   it.directory = options_.out / "iterations" / std::to_string(k);
   CreateDirectories(it.directory);
   RenderSummary render;
-  images_ = RenderProjectorImages(model_.rig, model_.geometry.scene, emittance_, RenderOptions(),
+  RenderOptions render_options;
+  render_options.light = options_.light;
+  images_ = RenderProjectorImages(model_.rig, model_.geometry.scene, emittance_, render_options,
                                   &render);
   std::vector<cv::Mat> patterns;
   for (size_t p = 0; p < images_.size(); ++p) {

@@ -53,6 +53,7 @@
 #include "capture/simulated_camera.h"
 #include "compensation/colour_image.h"
 #include "geometry/scene.h"
+#include "projection/projector_images.h"
 
 namespace procam {
 
@@ -84,6 +85,7 @@ struct VerificationOptions {
   bool fit_response = true;       // fit the projectors' response exponents
   bool fit_reflectance = true;    // update the per-patch reflectance
   int min_patch_pixels = 4;       // camera pixels a patch needs to count as seen, ≥ 1
+  LightField light = LightField::kSmooth;  // how the projector images shape the light in a patch
   ProgressCallback progress;      // a line per stage and iteration (ΔE, the model update)
   bool Check(std::string* why) const;
 };
