@@ -114,7 +114,7 @@ void AddLightOption(CLI::App* command, LightField* light) {
                    "desired appearance does, each patch's flux kept (seamless) | flat: one "
                    "uniform level per patch")
       ->transform(CLI::CheckedTransformer(names))
-      ->default_str(LightFieldName(*light));
+      ->option_text(std::string("smooth|flat (default ") + LightFieldName(*light) + ")");
 }
 
 }  // namespace procam
