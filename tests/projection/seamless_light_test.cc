@@ -128,7 +128,8 @@ TEST(SeamlessLight, EachPatchReceivesTheFluxOfTheFlatRendering) {
     const Steps flat_steps = LightSteps(rig, flat[0], Stage::kWall);
     const Steps smooth_steps = LightSteps(rig, smooth[0], Stage::kWall);
     std::printf(
-        "%s: codes step across borders / within patches: flat %.3f / %.3f, smooth %.3f / %.3f\n",
+        "%s: relative light steps across borders / within patches: flat %.3f / %.3f, smooth %.3f / "
+        "%.3f\n",
         DitherName(dither), flat_steps.across, flat_steps.within, smooth_steps.across,
         smooth_steps.within);
     EXPECT_LT(smooth_steps.across - smooth_steps.within,
