@@ -23,6 +23,7 @@ struct EvaluateArguments {
   int world_factor = 4;
   double alpha = 0.5;
   LightField light = LightField::kSmooth;
+  bool smooth_bounce = false;
 };
 
 std::vector<std::pair<std::string, cv::Mat>> ReadFigures(const std::filesystem::path& directory,
@@ -48,6 +49,9 @@ void AddEvaluationCommands(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--out", args->out, "Output directory")->capture_default_str();
   AddLightOption(cmd, &args->light);
+  cmd->add_flag("--smooth-bounce", args->smooth_bounce,
+                "Simulate bounce light continuous over each surface, not constant per world "
+                "patch");
   cmd->callback([args] {
     std::vector<std::string> scenes = args->scenes;
     if (scenes.size() == 1 && scenes.front() == "all") {
@@ -61,6 +65,7 @@ void AddEvaluationCommands(CLI::App& app) {
     options.world_factor = args->world_factor;
     options.alpha = args->alpha;
     options.render.light = args->light;
+    options.smooth_bounce = args->smooth_bounce;
     std::vector<std::unique_ptr<SceneEvaluation>> evaluations;
     nlohmann::json all = nlohmann::json::array();
     std::vector<std::vector<std::pair<std::string, cv::Mat>>> figures;  // per scene

@@ -63,6 +63,7 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
   world_options.solver_patches = options.patches;
   world_options.world_factor = options.world_factor;
   world_options.albedo_variation = options.albedo_variation;
+  world_options.smooth_bounce = options.smooth_bounce;
   evaluation.world = std::make_unique<SimulatedRig>(synthetic.scene, projectors,
                                                     CameraFromPlacement(synthetic.camera), world_options);
   evaluation.desired = evaluation.world->RenderDesired();

@@ -56,6 +56,7 @@ struct EvaluationOptions {
   int world_factor = 4;  // world mesh patches per solver patch
   double albedo_variation = 0.05;  // the simulated room's uneven paint (SimulatedRigOptions)
   RenderOptions render;            // projector images (seamless light by default)
+  bool smooth_bounce = false;      // the simulated room's bounce light (SimulatedRigOptions)
   ProgressCallback progress;       // what is being evaluated, ΔE per method
   bool Check(std::string* why) const;
 };
