@@ -1,11 +1,13 @@
 #include "apps/command_line.h"
 
-#include <cmath>
-#include <cstdio>
-#include <sstream>
-
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <sstream>
 
 #include "base/io.h"
 #include "procam/config.h"
@@ -37,7 +39,8 @@ GeometryOptions GeometryArguments(int patches, FormFactorStorage storage) {
 std::string DescribeGeometry(const GeometryStage& stage) {
   std::ostringstream out;
   const Scene& scene = stage.scene;
-  out << "scene " << scene.name << (scene.path.empty() ? "" : " (" + scene.path.string() + ")") << "\n";
+  out << "scene " << scene.name << (scene.path.empty() ? "" : " (" + scene.path.string() + ")")
+      << "\n";
   std::vector<int> fine_count(scene.surfaces.size(), 0), coarse_count(scene.surfaces.size(), 0);
   for (const Patch& patch : stage.patches.fine.patches) ++fine_count[patch.surface];
   for (const Patch& patch : stage.patches.coarse.patches) ++coarse_count[patch.surface];
@@ -48,24 +51,28 @@ std::string DescribeGeometry(const GeometryStage& stage) {
     const std::string desired =
         surface.desired.HasTexture()
             ? "texture " + surface.desired.texture_path
-            : fmt::format("sRGB {:.2f} {:.2f} {:.2f}", surface.desired.srgb[0], surface.desired.srgb[1],
-                          surface.desired.srgb[2]);
-    out << fmt::format("  {:<20} {:>6} {:>10.3f} {:>7} {:>7}   {:.2f} {:.2f} {:.2f}   {}\n", surface.name,
-                       surface.kind == Surface::Kind::kQuad ? "quad" : "mesh", surface.Area(), fine_count[s],
-                       coarse_count[s], surface.reflectance[0], surface.reflectance[1],
-                       surface.reflectance[2], desired);
+            : fmt::format("sRGB {:.2f} {:.2f} {:.2f}", surface.desired.srgb[0],
+                          surface.desired.srgb[1], surface.desired.srgb[2]);
+    out << fmt::format("  {:<20} {:>6} {:>10.3f} {:>7} {:>7}   {:.2f} {:.2f} {:.2f}   {}\n",
+                       surface.name, surface.kind == Surface::Kind::kQuad ? "quad" : "mesh",
+                       surface.Area(), fine_count[s], coarse_count[s], surface.reflectance[0],
+                       surface.reflectance[1], surface.reflectance[2], desired);
   }
   const Eigen::VectorXd areas = stage.patches.fine.Areas();
   const FormFactorSummary& ff = stage.form_factor_summary;
-  out << fmt::format("  total area {:.3f} m², {} fine patches (target {}), {} coarse, {} adjacent pairs\n",
-                     scene.Area(), stage.patches.fine.size(), scene.target_patches,
-                     stage.patches.coarse.size(), stage.patches.fine.adjacency.size());
-  out << fmt::format("  patch area min {:.4g} mean {:.4g} max {:.4g} m² (max/min {:.2f})\n", areas.minCoeff(),
-                     areas.mean(), areas.maxCoeff(), areas.maxCoeff() / areas.minCoeff());
-  out << fmt::format("  form factor row sums min {:.5f} mean {:.5f} max {:.5f}; reciprocity error {:.1e}\n",
-                     ff.min_row_sum, ff.mean_row_sum, ff.max_row_sum, ff.max_reciprocity_error);
-  out << fmt::format("  form factors: {} facing pairs, {} shadow rays, {:.2f} s; subdivision {:.3f} s\n",
-                     ff.pairs_evaluated, ff.shadow_rays, ff.seconds, stage.subdivision_seconds);
+  out << fmt::format(
+      "  total area {:.3f} m², {} fine patches (target {}), {} coarse, {} adjacent pairs\n",
+      scene.Area(), stage.patches.fine.size(), scene.target_patches, stage.patches.coarse.size(),
+      stage.patches.fine.adjacency.size());
+  out << fmt::format("  patch area min {:.4g} mean {:.4g} max {:.4g} m² (max/min {:.2f})\n",
+                     areas.minCoeff(), areas.mean(), areas.maxCoeff(),
+                     areas.maxCoeff() / areas.minCoeff());
+  out << fmt::format(
+      "  form factor row sums min {:.5f} mean {:.5f} max {:.5f}; reciprocity error {:.1e}\n",
+      ff.min_row_sum, ff.mean_row_sum, ff.max_row_sum, ff.max_reciprocity_error);
+  out << fmt::format(
+      "  form factors: {} facing pairs, {} shadow rays, {:.2f} s; subdivision {:.3f} s\n",
+      ff.pairs_evaluated, ff.shadow_rays, ff.seconds, stage.subdivision_seconds);
   return out.str();
 }
 
@@ -74,13 +81,12 @@ ChessboardSpec ParseChessboard(const std::string& corners, double square) {
   char separator = 0;
   if (std::sscanf(corners.c_str(), "%d%c%d", &board.corners_x, &separator, &board.corners_y) != 3 ||
       separator != 'x') {
-    throw std::invalid_argument("--corners: expected COLUMNSxROWS of inner corners, e.g. 9x6, got '" + corners +
-                                "'");
+    throw std::invalid_argument(
+        "--corners: expected COLUMNSxROWS of inner corners, e.g. 9x6, got '" + corners + "'");
   }
   board.square_size = square;
   return board;
 }
-
 
 std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text) {
   if (text.rfind("glfw:", 0) != 0) {
@@ -97,6 +103,18 @@ std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text) {
                 "': this build has no GLFW output backend (reconfigure with -DPROCAM_WITH_GLFW=ON; "
                 "apt-get install libglfw3-dev libgl-dev)");
 #endif
+}
+
+void AddLightOption(CLI::App* command, LightField* light) {
+  const std::map<std::string, LightField> names = {{"smooth", LightField::kSmooth},
+                                                   {"flat", LightField::kFlat}};
+  command
+      ->add_option("--light", *light,
+                   "smooth: the light varies smoothly over each surface, stepping only where the "
+                   "desired appearance does, each patch's flux kept (seamless) | flat: one "
+                   "uniform level per patch")
+      ->transform(CLI::CheckedTransformer(names))
+      ->option_text(std::string("smooth|flat (default ") + LightFieldName(*light) + ")");
 }
 
 }  // namespace procam

@@ -12,6 +12,11 @@
 #include "calibration/camera_calibration.h"
 #include "capture/display.h"
 #include "geometry/stage.h"
+#include "projection/projector_images.h"
+
+namespace CLI {
+class App;
+}
 
 namespace procam {
 
@@ -21,7 +26,8 @@ ProgressCallback LogProgress();
 ProgressCallback PrintProgress();
 
 // The geometry stage's options from --patches (0: the scene's) and the storage, logging progress.
-GeometryOptions GeometryArguments(int patches, FormFactorStorage storage = FormFactorStorage::kDense);
+GeometryOptions GeometryArguments(int patches,
+                                  FormFactorStorage storage = FormFactorStorage::kDense);
 
 // A chessboard from --corners COLUMNSxROWS (inner corners) and --square (metres). Throws
 // std::invalid_argument naming --corners.
@@ -30,6 +36,10 @@ ChessboardSpec ParseChessboard(const std::string& corners, double square);
 // A projector's monitor, "glfw:N|NAME" (procam show --list), as a fullscreen window. Throws
 // IoError naming the display: not glfw:..., no such monitor, a build without GLFW.
 std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text);
+
+// --light smooth|flat (default smooth): whether projector images shape the light within each patch
+// into a smooth field (seamless light) or light each patch uniformly (projector_images.h).
+void AddLightOption(CLI::App* command, LightField* light);
 
 // Human-readable summary: surfaces, areas, patch counts, form-factor statistics.
 std::string DescribeGeometry(const GeometryStage& stage);

@@ -9,6 +9,7 @@
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
+#include "apps/command_line.h"
 #include "apps/commands.h"
 #include "datasets_synthetic/evaluation.h"
 #include "base/html_report.h"
@@ -25,6 +26,8 @@ struct EvaluateArguments {
   double alpha = 0.5, loss_scale = 5.0;
   std::string loss = "soft_l1";
   std::vector<std::string> methods;
+  LightField light = LightField::kSmooth;
+  bool smooth_bounce = false;
 };
 
 std::vector<std::pair<std::string, cv::Mat>> ReadFigures(const std::filesystem::path& directory,
@@ -58,6 +61,10 @@ void AddEvaluationCommands(CLI::App& app) {
       ->check(CLI::Range(1e-6, 1e6))
       ->capture_default_str();
   cmd->add_option("--out", args->out, "Output directory")->capture_default_str();
+  AddLightOption(cmd, &args->light);
+  cmd->add_flag("--smooth-bounce", args->smooth_bounce,
+                "Simulate bounce light continuous over each surface, not constant per world "
+                "patch");
   cmd->callback([args] {
     std::vector<std::string> scenes = args->scenes;
     if (scenes.size() == 1 && scenes.front() == "all") {
@@ -80,6 +87,8 @@ void AddEvaluationCommands(CLI::App& app) {
         options.methods.push_back(method);
       }
     }
+    options.render.light = args->light;
+    options.smooth_bounce = args->smooth_bounce;
     std::vector<std::unique_ptr<SceneEvaluation>> evaluations;
     nlohmann::json all = nlohmann::json::array();
     std::vector<std::vector<std::pair<std::string, cv::Mat>>> figures;  // per scene
@@ -114,19 +123,22 @@ void AddEvaluationCommands(CLI::App& app) {
           others = std::min(others, m.mean_delta_e2000);
         }
       }
-      if (recommended != nullptr) {
-        const double ratio = e->model_lowest2000 > 0
-                                 ? recommended->run.mean_delta_e2000 / e->model_lowest2000
-                                 : 0.0;
+      if (recommended != nullptr && e->model_lowest2000 > 0) {
+        const double ratio = recommended->run.mean_delta_e2000 / e->model_lowest2000;
         row.push_back(fmt::format("{:.2f}", ratio));
         if (!(recommended->mean_delta_e2000 < others && ratio <= 1.1)) missed.push_back(e->name);
+      } else {
+        row.push_back("–");
       }
+      for (const MethodEvaluation& m : e->methods) row.push_back(fmt::format("{:.2f}", m.seams.seam));
       rows.push_back(row);
     }
     std::vector<std::string> header = {"scene"};
     for (const MethodEvaluation& m : pointers.front()->methods)
       header.push_back(std::string(MethodName(m.method)) + " CIEDE2000 mean (max)");
     header.push_back("perceptual2000 / lowest reachable (per patch)");
+    for (const MethodEvaluation& m : pointers.front()->methods)
+      header.push_back(std::string(MethodName(m.method)) + " seam");
     HtmlReport page("procam evaluate: compensation methods on synthetic scenes (Sheng et al. 2011, Table 1)");
     page.Paragraph(fmt::format("{} solver patches per scene, world mesh {}× finer; per-pixel ΔE between the desired "
                                "appearance and the simulated camera's view of each method's result.",

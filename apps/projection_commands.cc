@@ -25,6 +25,7 @@ namespace {
 
 struct ProjectArguments {
   std::string solution, out, rig, dither = "ordered";
+  LightField light = LightField::kSmooth;
   double feather = 0.1;
   int patches = 0;
   bool detail = false;
@@ -40,6 +41,7 @@ void RunProject(const ProjectArguments& args) {
   options.out = args.out;
   options.feather = args.feather;
   options.detail = args.detail;
+  options.light = args.light;
   options.load_seconds = SecondsSince(start);
   options.progress = PrintProgress();
   RunProjectionStage(solution, geometry, std::move(projectors.projectors), projectors.rig_description, options);
@@ -109,6 +111,7 @@ void AddProjectionCommands(CLI::App& app) {
       ->capture_default_str();
   project->add_option("--patches", args->patches,
                       "Patch target given to compensate with --patches, if any");
+  AddLightOption(project, &args->light);
   project->add_flag("--detail", args->detail,
                     "Modulate the light within each patch by the desired texture's detail "
                     "(patch totals unchanged; untextured surfaces as without)");

@@ -51,6 +51,7 @@ struct RigDemoArguments {
   int frames = 4;
   double settle_ms = 150.0;
   int iterations = 4;
+  LightField light = LightField::kSmooth;  // --light, also without --camera
 };
 
 // calibrate → compensate → project → photograph → verify → refine, each stage a library call
@@ -98,13 +99,15 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
   WriteCompensation(geometry, run, solution_dir, false, {{"rig", rig_directory.Describe()}});
 
   spdlog::info("stage 3/4 projector images");
-  std::printf("\n$ procam project %s --out %s\n", solution_dir.c_str(), images.c_str());
+  std::printf("\n$ procam project %s --out %s --light %s\n", solution_dir.c_str(), images.c_str(),
+              LightFieldName(rig.light));
   const SolutionDirectory solution = ReadSolutionDirectory(solution_dir);
   SolutionGeometry solution_geometry = ReadSolutionGeometry(solution);
   SolutionProjectors projectors = ProjectorsForSolution(solution, {}, solution_geometry.scene, &solution_geometry.patches);
   ProjectionStageOptions projection;
   projection.out = images;
   projection.progress = PrintProgress();
+  projection.light = rig.light;
   RunProjectionStage(solution, solution_geometry, std::move(projectors.projectors), projectors.rig_description,
                      projection);
 
@@ -119,6 +122,7 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
   verify.camera = rig.camera;
   for (const std::string& display : rig.displays) verify.displays.push_back(OpenMonitorDisplay(display));
   verify.iterations = rig.iterations;
+  verify.light = rig.light;
   verify.sequencer.frames_per_pattern = rig.frames;
   verify.sequencer.settle_ms = rig.settle_ms;
   if (!rig.camera_scale.empty()) verify.camera_scale = ParsePositiveRgb("--camera-scale", rig.camera_scale);
@@ -220,6 +224,7 @@ void AddDemoCommand(CLI::App& app) {
       ->capture_default_str();
   demo->add_option("--iterations", rig->iterations, "With --camera: closed-loop photos at most")
       ->capture_default_str();
+  AddLightOption(demo, &rig->light);
   demo->callback([args, rig] {
     const std::filesystem::path out = args->out;
     std::filesystem::create_directories(out);
@@ -236,14 +241,15 @@ void AddDemoCommand(CLI::App& app) {
     SyntheticDemoOptions demo;
     demo.scene = args->scene;
     demo.patches = args->patches;
+    demo.light = rig->light;
     demo.out = out;
     demo.progress = LogProgress();
     demo.steps = PrintProgress();
     const SyntheticDemoSummary summary = RunSyntheticDemo(demo);
-    std::cout << "\n  method        mean ΔE76  max ΔE76  mean ΔE2000  max ΔE2000\n";
+    std::cout << "\n  method        mean ΔE76  max ΔE76  mean ΔE2000  max ΔE2000   seam\n";
     const auto row = [](const std::string& name, const MethodEvaluation& m, const char* note) {
-      std::cout << fmt::format("  {:<12} {:>10.2f} {:>9.1f} {:>12.2f} {:>11.1f}{}\n", name, m.mean_delta_e76,
-                               m.max_delta_e76, m.mean_delta_e2000, m.max_delta_e2000, note);
+      std::cout << fmt::format("  {:<12} {:>10.2f} {:>9.1f} {:>12.2f} {:>11.1f} {:>6.2f}{}\n", name, m.mean_delta_e76,
+                               m.max_delta_e76, m.mean_delta_e2000, m.max_delta_e2000, m.seams.seam, note);
     };
     for (const MethodEvaluation& m : summary.methods) row(MethodName(m.method), m, "");
     row("perceptual", summary.calibrated, "   (calibrated rig)");

@@ -104,6 +104,7 @@ void AddVerifyCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--timeout-ms", args->options.sequencer.grab_timeout_ms, "Grab timeout per frame")
       ->capture_default_str();
+  AddLightOption(cmd, &args->options.light);
   cmd->callback([args] { RunVerify(*args); });
 }
 

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 
 #include "geometry/srgb.h"
 
@@ -50,6 +51,76 @@ ImageDeltaE CompareLabImages(const cv::Mat& lab_a, const cv::Mat& lab_b, const c
     result.mean76 = sum76 / result.pixels;
     result.mean2000 = sum2000 / result.pixels;
   }
+  return result;
+}
+
+bool SeamOptions::Check(std::string* why) const {
+  if (!(flat_delta_e > 0.0)) {
+    *why = "flat_delta_e must be > 0";
+    return false;
+  }
+  return true;
+}
+
+nlohmann::json SeamMeasure::Json() const {
+  return {{"seam", seam},
+          {"across", across},
+          {"within", within},
+          {"across_pairs", across_pairs},
+          {"within_pairs", within_pairs}};
+}
+
+SeamMeasure MeasureSeams(const cv::Mat& lab, const cv::Mat& lab_desired, const cv::Mat& patch,
+                         const std::vector<int>& patch_surface, const SeamOptions& options) {
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument("SeamOptions: " + why);
+  if (lab.type() != CV_64FC3 || lab_desired.type() != CV_64FC3 || patch.type() != CV_32SC1 ||
+      lab.size() != lab_desired.size() || lab.size() != patch.size()) {
+    throw std::invalid_argument(
+        "MeasureSeams: need L*a*b* images (CV_64FC3) and patch ids (CV_32SC1) of one size");
+  }
+  const int surfaces_known = static_cast<int>(patch_surface.size());
+  const auto surface_of = [&](int id) {
+    if (surfaces_known == 0) return 0;
+    if (id >= surfaces_known) {
+      throw std::invalid_argument("MeasureSeams: patch " + std::to_string(id) + " of " +
+                                  std::to_string(surfaces_known) + " with a known surface");
+    }
+    return patch_surface[id];
+  };
+  double across_sum = 0, within_sum = 0;
+  SeamMeasure result;
+  const auto add_pair = [&](int row_a, int col_a, int row_b, int col_b) {
+    const int id_a = patch.at<int32_t>(row_a, col_a), id_b = patch.at<int32_t>(row_b, col_b);
+    if (id_a < 0 || id_b < 0 || surface_of(id_a) != surface_of(id_b)) return;
+    const cv::Vec3d& da = lab_desired.at<cv::Vec3d>(row_a, col_a);
+    const cv::Vec3d& db = lab_desired.at<cv::Vec3d>(row_b, col_b);
+    if (!(DeltaE2000(Eigen::Vector3d(da[0], da[1], da[2]), Eigen::Vector3d(db[0], db[1], db[2])) <
+          options.flat_delta_e)) {
+      return;
+    }
+    const cv::Vec3d& a = lab.at<cv::Vec3d>(row_a, col_a);
+    const cv::Vec3d& b = lab.at<cv::Vec3d>(row_b, col_b);
+    const double difference =
+        DeltaE2000(Eigen::Vector3d(a[0], a[1], a[2]), Eigen::Vector3d(b[0], b[1], b[2]));
+    if (id_a != id_b) {
+      across_sum += difference;
+      ++result.across_pairs;
+    } else {
+      within_sum += difference;
+      ++result.within_pairs;
+    }
+  };
+  for (int row = 0; row < lab.rows; ++row) {
+    for (int col = 0; col < lab.cols; ++col) {
+      if (col + 1 < lab.cols) add_pair(row, col, row, col + 1);
+      if (row + 1 < lab.rows) add_pair(row, col, row + 1, col);
+    }
+  }
+  if (result.across_pairs > 0) result.across = across_sum / result.across_pairs;
+  if (result.within_pairs > 0) result.within = within_sum / result.within_pairs;
+  if (result.across_pairs > 0 && result.within_pairs > 0)
+    result.seam = result.across - result.within;
   return result;
 }
 

@@ -19,6 +19,7 @@ namespace procam {
 struct SyntheticDemoOptions {
   std::string scene = "c_shaped";  // SyntheticSceneNames()
   int patches = 600;               // solver patches
+  LightField light = LightField::kSmooth;  // projector images: seamless, or flat per patch
   std::filesystem::path out = "out/demo";
   ProgressCallback progress;  // stages, solver iterations, ΔE per method
   ProgressCallback steps;     // the calibration's command lines and their reports

@@ -13,6 +13,7 @@
 #include "compensation/colour_image.h"
 #include "compensation/objective.h"
 #include "compensation/solver.h"
+#include "projection/camera_rays.h"
 
 namespace procam {
 
@@ -21,13 +22,16 @@ bool EvaluationOptions::Check(std::string* why) const {
     *why = "need patches >= 4, world_factor >= 1, at least one method, alpha in (0,1]";
     return false;
   }
+  if (!render.Check(why)) return false;
   return true;
 }
 
-void PixelDeltaE(const cv::Mat& result, const cv::Mat& desired, const cv::Mat& mask, const Eigen::Matrix3d& rgb_to_xyz,
+void PixelDeltaE(const cv::Mat& result, const SceneEvaluation& scene, const Eigen::Matrix3d& rgb_to_xyz,
                  const Eigen::Vector3d& white_xyz, MethodEvaluation* evaluation) {
   const LabConverter lab{rgb_to_xyz, white_xyz};
-  const ImageDeltaE delta_e = CompareLabImages(LabImage(result, lab), LabImage(desired, lab), mask);
+  const cv::Mat lab_result = LabImage(result, lab), lab_desired = LabImage(scene.desired, lab);
+  const ImageDeltaE delta_e = CompareLabImages(lab_result, lab_desired, scene.world->coverage());
+  evaluation->seams = MeasureSeams(lab_result, lab_desired, scene.camera_patch, scene.rig->surface);
   evaluation->delta_e76 = delta_e.delta_e76;
   evaluation->delta_e2000 = delta_e.delta_e2000;
   evaluation->mean_delta_e76 = delta_e.mean76;
@@ -60,9 +64,14 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
   world_options.solver_patches = options.patches;
   world_options.world_factor = options.world_factor;
   world_options.albedo_variation = options.albedo_variation;
+  world_options.smooth_bounce = options.smooth_bounce;
   evaluation.world = std::make_unique<SimulatedRig>(synthetic.scene, projectors,
                                                     CameraFromPlacement(synthetic.camera), world_options);
   evaluation.desired = evaluation.world->RenderDesired();
+  const CameraPixelRays camera_rays = CastCameraPixels(evaluation.geometry.scene, evaluation.geometry.patches.fine,
+                                                       {}, evaluation.world->camera());
+  evaluation.camera_patch =
+      cv::Mat(camera_rays.height, camera_rays.width, CV_32SC1, const_cast<int*>(camera_rays.patch.data())).clone();
   for (const CompensationMethod method : options.methods) {
     MethodEvaluation result;
     result.method = method;
@@ -77,12 +86,13 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
     compensation.upper = evaluation.rig->upper;
     compensation.progress = options.progress;
     result.run = RunCompensation(evaluation.geometry, compensation);
-    result.images = RenderProjectorImages(*evaluation.rig, result.run.solution.emittance, RenderOptions(), &result.render);
+    result.images = RenderProjectorImages(*evaluation.rig, result.run.solution.emittance, options.render, &result.render);
     result.radiance = evaluation.world->RenderRadiance(result.images);
-    PixelDeltaE(result.radiance, evaluation.desired, evaluation.world->coverage(), result.run.fine.rgb_to_xyz,
-                result.run.fine.white_xyz, &result);
-    Report(options.progress, fmt::format("evaluate {}: {:<10} mean ΔE76 {:.2f} (max {:.1f}), mean ΔE2000 {:.2f}", name, MethodName(method),
-                 result.mean_delta_e76, result.max_delta_e76, result.mean_delta_e2000));
+    PixelDeltaE(result.radiance, evaluation, result.run.fine.rgb_to_xyz, result.run.fine.white_xyz, &result);
+    Report(options.progress,
+           fmt::format("evaluate {}: {:<10} mean ΔE76 {:.2f} (max {:.1f}), mean ΔE2000 {:.2f}, seam {:.2f}", name,
+                       MethodName(method), result.mean_delta_e76, result.max_delta_e76, result.mean_delta_e2000,
+                       result.seams.seam));
     evaluation.methods.push_back(std::move(result));
   }
   const MethodEvaluation* linear = nullptr;
@@ -172,15 +182,15 @@ std::string EvaluationMarkdown(const std::vector<const SceneEvaluation*>& evalua
   if (evaluations.empty()) return "";
   std::string header = "| scene |", rule = "|---|";
   for (const MethodEvaluation& m : evaluations.front()->methods) {
-    header += fmt::format(" {} ΔE76 mean (max) | {} ΔE2000 mean (max) |", MethodName(m.method), MethodName(m.method));
-    rule += "---|---|";
+    header += fmt::format(" {0} ΔE76 mean (max) | {0} ΔE2000 mean (max) | {0} seam |", MethodName(m.method));
+    rule += "---|---|---|";
   }
   std::string table = header + "\n" + rule + "\n";
   for (const SceneEvaluation* e : evaluations) {
     table += "| " + e->name + " |";
     for (const MethodEvaluation& m : e->methods) {
-      table += fmt::format(" {:.2f} ({:.1f}) | {:.2f} ({:.1f}) |", m.mean_delta_e76, m.max_delta_e76,
-                           m.mean_delta_e2000, m.max_delta_e2000);
+      table += fmt::format(" {:.2f} ({:.1f}) | {:.2f} ({:.1f}) | {:.2f} |", m.mean_delta_e76, m.max_delta_e76,
+                           m.mean_delta_e2000, m.max_delta_e2000, m.seams.seam);
     }
     table += "\n";
   }
@@ -222,6 +232,7 @@ nlohmann::json EvaluationJson(const SceneEvaluation& evaluation) {
     methods[MethodName(m.method)] = {
         {"pixel_delta_e76", {{"mean", m.mean_delta_e76}, {"max", m.max_delta_e76}}},
         {"pixel_delta_e2000", {{"mean", m.mean_delta_e2000}, {"max", m.max_delta_e2000}}},
+        {"seam", m.seams.Json()},
         {"solver", run},
         {"render_max_relative_error", m.render.max_relative_error}};
   }

@@ -12,6 +12,7 @@
 #include <opencv2/core/mat.hpp>
 
 #include "base/progress.h"
+#include "compensation/colour_image.h"
 #include "compensation/stage.h"
 #include "geometry/stage.h"
 #include "datasets_synthetic/simulated_rig.h"
@@ -28,6 +29,7 @@ struct MethodEvaluation {
   cv::Mat delta_e76;       // CV_32FC1 per pixel (0 outside coverage)
   cv::Mat delta_e2000;
   double mean_delta_e76 = 0, max_delta_e76 = 0, mean_delta_e2000 = 0, max_delta_e2000 = 0;
+  SeamMeasure seams;  // how visible the patch grid is (MeasureSeams, compensation/colour_image.h)
 };
 
 struct SceneEvaluation {
@@ -36,6 +38,7 @@ struct SceneEvaluation {
   std::unique_ptr<ProjectionRig> rig;
   std::unique_ptr<SimulatedRig> world;
   cv::Mat desired;  // CV_32FC3 linear RGB as the camera sees it
+  cv::Mat camera_patch;  // CV_32SC1: the solver's fine patch each camera pixel sees, −1 none
   std::vector<MethodEvaluation> methods;
   // Per patch, in the solver's model (area-weighted mean ΔE76 with the projectors' bounds):
   // linear, perceptual, and the lowest mean any emittance within the bounds was found to reach
@@ -58,6 +61,8 @@ struct EvaluationOptions {
   double loss_scale = 5.0;
   int world_factor = 4;  // world mesh patches per solver patch
   double albedo_variation = 0.05;  // the simulated room's uneven paint (SimulatedRigOptions)
+  RenderOptions render;            // projector images (seamless light by default)
+  bool smooth_bounce = false;      // the simulated room's bounce light (SimulatedRigOptions)
   ProgressCallback progress;       // what is being evaluated, ΔE per method
   bool Check(std::string* why) const;
 };
@@ -81,9 +86,10 @@ double LowestMeanDeltaE(const CompensationProblem& problem, const Eigen::VectorX
 // A local optimum: an upper bound on the true minimum.
 double LowestMeanDeltaE2000(const CompensationProblem& problem, int rounds = 10);
 
-// Per-pixel ΔE76 and CIEDE2000 of two linear RGB images (CV_32FC3) in L*a*b* of `problem`'s
-// T and white, within `mask`; means and maxima over the mask.
-void PixelDeltaE(const cv::Mat& result, const cv::Mat& desired, const cv::Mat& mask, const Eigen::Matrix3d& rgb_to_xyz,
+// Per-pixel ΔE76 and CIEDE2000 of what the camera sees (`result`, linear RGB CV_32FC3) against
+// the scene's desired appearance, in L*a*b* of T and white, over the pixels that see a surface
+// (means and maxima), and the seam metric over the scene's patches (MeasureSeams).
+void PixelDeltaE(const cv::Mat& result, const SceneEvaluation& scene, const Eigen::Matrix3d& rgb_to_xyz,
                  const Eigen::Vector3d& white_xyz, MethodEvaluation* evaluation);
 
 // Writes desired.png, <method>.png, <method>_delta_e76.png, <method>_delta_e2000.png,

@@ -1,5 +1,6 @@
 #include "datasets_synthetic/simulated_rig.h"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <stdexcept>
@@ -73,6 +74,29 @@ SimulatedRig::SimulatedRig(const Scene& scene, std::vector<Projector> projectors
   world_radiosity_ = std::make_unique<RadiositySystem>(f, world_.fine.Areas(), world_.fine.reflectance);
   surfaces_ = std::make_unique<RayScene>(scene_);
   const RayScene patches(PatchScene(world_.fine));
+  if (options.smooth_bounce) {
+    const int n = world_.fine.size();
+    std::vector<std::vector<int>> neighbours(n);
+    for (const auto& [a, b] : world_.fine.adjacency) {
+      if (world_.fine.patches[a].surface != world_.fine.patches[b].surface) continue;
+      neighbours[a].push_back(b);
+      neighbours[b].push_back(a);
+    }
+    bounce_nodes_.resize(n);
+    for (int i = 0; i < n; ++i) {
+      std::vector<int>& nodes = bounce_nodes_[i];
+      nodes = {i};
+      for (size_t ring_begin = 0, ring = 0; ring < 2; ++ring) {
+        const size_t ring_end = nodes.size();
+        for (size_t k = ring_begin; k < ring_end; ++k) {
+          for (const int j : neighbours[nodes[k]]) {
+            if (std::find(nodes.begin(), nodes.end(), j) == nodes.end()) nodes.push_back(j);
+          }
+        }
+        ring_begin = ring_end;
+      }
+    }
+  }
 
   const int width = camera_.width(), height = camera_.height();
   std::vector<Vec3> directions;
@@ -119,6 +143,23 @@ bool SimulatedRig::PointSeenByPixel(int row, int col, Vec3* point_in_world, Vec3
   return true;
 }
 
+Vec3 SimulatedRig::SmoothBounce(const PixelHit& hit, const Eigen::MatrixX3d& irradiance) const {
+  Vec3 sum = Vec3::Zero();
+  double weight_sum = 0.0;
+  for (const int j : bounce_nodes_[hit.world_patch]) {
+    const Patch& patch = world_.fine.patches[j];
+    const double radius2 = 1.5 * 1.5 * patch.area;
+    const double d2 = (hit.point - patch.centroid).squaredNorm();
+    if (d2 >= radius2) continue;
+    const double t = 1.0 - d2 / radius2;
+    sum += (t * t) * irradiance.row(j).transpose();
+    weight_sum += t * t;
+  }
+  const Vec3 field = weight_sum > 0.0 ? Vec3(sum / weight_sum)
+                                      : Vec3(irradiance.row(hit.world_patch).transpose());
+  return hit.reflectance.cwiseProduct(field);
+}
+
 cv::Mat SimulatedRig::RenderRadiance(const std::vector<ProjectorImage>& images) const {
   if (images.size() != projectors_.size()) {
     throw std::invalid_argument("simulated rig: " + std::to_string(images.size()) + " images for " +
@@ -128,6 +169,9 @@ cv::Mat SimulatedRig::RenderRadiance(const std::vector<ProjectorImage>& images) 
   const Eigen::MatrixX3d direct_world =
       SimulateDirectLight(world_.fine, projectors_, images, options_.direct_samples, options_.ray_margin);
   const Eigen::MatrixX3d indirect = world_radiosity_->Solve(direct_world) - direct_world;
+  // Indirect irradiance per world patch (exitance / ρ), what smooth_bounce interpolates.
+  const Eigen::MatrixX3d indirect_irradiance =
+      indirect.cwiseQuotient(world_.fine.reflectance.cwiseMax(1e-9));
 
   const int width = camera_.width(), height = camera_.height();
   cv::Mat radiance(height, width, CV_32FC3, cv::Scalar(0, 0, 0));
@@ -149,8 +193,9 @@ cv::Mat SimulatedRig::RenderRadiance(const std::vector<ProjectorImage>& images) 
         const double scale = 1.0 / projector.photometry.MaxCode();
         irradiance += gain * projector.photometry.Output(Vec3(code[0], code[1], code[2]) * scale);
       }
-      const Vec3 exitance = hit.reflectance.cwiseProduct(irradiance) +
-                            indirect.row(hit.world_patch).transpose();
+      const Vec3 bounce = options_.smooth_bounce ? SmoothBounce(hit, indirect_irradiance)
+                                                 : Vec3(indirect.row(hit.world_patch).transpose());
+      const Vec3 exitance = hit.reflectance.cwiseProduct(irradiance) + bounce;
       radiance.at<cv::Vec3f>(row, col) = cv::Vec3f(exitance[0], exitance[1], exitance[2]);
     }
   }

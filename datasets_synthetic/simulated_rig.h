@@ -56,6 +56,12 @@ struct SimulatedRigOptions {
   // this relative amplitude (like uneven paint), which the solver's uniform reflectance does
   // not know, in [0, 0.5). 0: uniform.
   double albedo_variation = 0.0;
+  // Bounce light continuous over each surface: at a pixel, the world patches' indirect
+  // irradiance interpolated between their centroids (bumps of radius 1.5 patch sides over the
+  // patches within 2 adjacency steps on the same surface) times the reflectance at the point.
+  // false: constant over each world patch, whose borders then show as steps (the default, with
+  // which the documented tables were measured).
+  bool smooth_bounce = false;
   SimulatedCameraOptions camera;
   bool Check(std::string* why) const;
 };
@@ -113,6 +119,9 @@ class SimulatedRig {
   std::unique_ptr<RadiositySystem> world_radiosity_;
   std::unique_ptr<RayScene> surfaces_;   // the scene's surfaces, for shadow rays
   std::vector<PixelHit> hits_;           // row-major, one per camera pixel
+  std::vector<std::vector<int>> bounce_nodes_;  // per world patch, for smooth_bounce
+  // The indirect exitance (n,3) spread over the surface at a pixel's hit (smooth_bounce).
+  Vec3 SmoothBounce(const PixelHit& hit, const Eigen::MatrixX3d& irradiance) const;
   cv::Mat coverage_;
 };
 

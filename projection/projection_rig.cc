@@ -258,7 +258,13 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
   rig.area = level.Areas();
   rig.reflectance = level.reflectance;
   rig.surface.resize(n);
-  for (int i = 0; i < n; ++i) rig.surface[i] = level.patches[i].surface;
+  rig.centroid.resize(n, 3);
+  for (int i = 0; i < n; ++i) {
+    rig.surface[i] = level.patches[i].surface;
+    rig.centroid.row(i) = level.patches[i].centroid.transpose();
+  }
+  if (level.desired_linear.rows() == n) rig.desired = level.desired_linear;
+  rig.adjacency = level.adjacency;
   rig.lower = Eigen::MatrixX3d::Zero(n, 3);
   rig.upper = Eigen::MatrixX3d::Zero(n, 3);
   rig.blended_area = Eigen::VectorXd::Zero(n);
@@ -313,6 +319,9 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
       if (map.patch[index] >= 0)
         map.pixels_by_patch[next[map.patch[index]]++] = static_cast<int32_t>(index);
     }
+    map.point_by_patch.resize(map.lit_pixels);
+    for (int position = 0; position < map.lit_pixels; ++position)
+      map.point_by_patch[position] = casters[k].point[map.pixels_by_patch[position]];
     // Footprints of the pixels counted per patch; a patch this projector lights wholly gets its
     // pixels' footprints rescaled to its exact area (coverage scale, header comment).
     Eigen::VectorXd solid_angle_sum = Eigen::VectorXd::Zero(n),

@@ -35,6 +35,7 @@
 // falls inside another's light.
 
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -76,8 +77,11 @@ struct ProjectorMap {
   // patch_begin[i + 1]), ascending.
   std::vector<int> patch_begin;          // (n + 1)
   std::vector<int32_t> pixels_by_patch;  // (lit_pixels)
-  int lit_pixels = 0;                    // pixels with a patch
-  int patches_reached = 0;               // distinct patches lit
+  // (lit_pixels) The world point (metres) each lit pixel's ray hits, in pixels_by_patch's order:
+  // where the seamless light of projector_images.h evaluates its smooth field.
+  std::vector<Eigen::Vector3f> point_by_patch;
+  int lit_pixels = 0;       // pixels with a patch
+  int patches_reached = 0;  // distinct patches lit
 };
 
 // Everything the renderer needs, for one patch level and a set of projectors.
@@ -87,7 +91,10 @@ struct ProjectionRig {
   Eigen::VectorXd area;            // (n) A_i, m²
   Eigen::MatrixX3d reflectance;    // (n,3) ρ
   std::vector<int> surface;        // (n) the scene surface each patch belongs to (Patch::surface)
-  Eigen::MatrixX3d lower, upper;   // (n,3) direct-light exitance bounds (ρ · flux / A)
+  Eigen::MatrixX3d centroid;       // (n,3) Patch::centroid, metres
+  Eigen::MatrixX3d desired;        // (n,3) PatchLevel::desired_linear (empty if the level has none)
+  std::vector<std::array<int, 2>> adjacency;  // PatchLevel::adjacency
+  Eigen::MatrixX3d lower, upper;              // (n,3) direct-light exitance bounds (ρ · flux / A)
   // (n) Σ over the pixels lighting the patch of w · a · coverage_scale (m²): the patch's lit
   // area as the blending weights share it; 0 for a patch no projector reaches.
   Eigen::VectorXd blended_area;

@@ -185,6 +185,62 @@ std::vector<std::vector<Eigen::Vector3f>> DetailFactors(const ProjectionRig& rig
   return detail;
 }
 
+// The detail's and the seamless light's factors multiplied into *combined (the detail), then
+// renormalised to a weighted mean of 1 per patch and channel (weights w a), so the flux is kept.
+void CombineFactors(const ProjectionRig& rig,
+                    const std::vector<std::vector<Eigen::Vector3f>>& smooth,
+                    std::vector<std::vector<Eigen::Vector3f>>* combined) {
+  const int n = rig.size();
+  const int projector_count = static_cast<int>(rig.maps.size());
+#pragma omp parallel for schedule(dynamic, 16)
+  for (int i = 0; i < n; ++i) {
+    Vec3 weighted = Vec3::Zero();
+    double weight_sum = 0.0;
+    for (int k = 0; k < projector_count; ++k) {
+      const ProjectorMap& map = rig.maps[k];
+      const double scale = rig.coverage_scale(i, k) * map.pixel_solid_angle;
+      for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+        Eigen::Vector3f& factor = (*combined)[k][position];
+        factor = factor.cwiseProduct(smooth[k][position]);
+        const double weight = scale * map.share[map.pixels_by_patch[position]];
+        weighted += weight * factor.cast<double>();
+        weight_sum += weight;
+      }
+    }
+    for (int c = 0; c < 3; ++c) {
+      const float normaliser =
+          weighted[c] > 0.0 ? static_cast<float>(weight_sum / weighted[c]) : 1.0f;
+      for (int k = 0; k < projector_count; ++k) {
+        for (int position = rig.maps[k].patch_begin[i]; position < rig.maps[k].patch_begin[i + 1];
+             ++position)
+          (*combined)[k][position][c] *= normaliser;
+      }
+    }
+  }
+}
+
+// The factor on τ per lit pixel (in pixels_by_patch order) and channel: the detail d, the
+// seamless light's m, or both (header comment); none with neither (1). `flux` is step 1's.
+std::vector<std::vector<Eigen::Vector3f>> PixelFactors(const ProjectionRig& rig, const Scene& scene,
+                                                       const Eigen::MatrixX3d& flux,
+                                                       const RenderOptions& options,
+                                                       long long* textured_pixels) {
+  std::vector<std::vector<Eigen::Vector3f>> detail;
+  if (options.detail) detail = DetailFactors(rig, scene, options, textured_pixels);
+  if (options.light != LightField::kSmooth) return detail;
+  const int n = rig.size();
+  Eigen::MatrixX3d exitance = Eigen::MatrixX3d::Zero(n, 3);  // ρ τ, above black
+  for (int i = 0; i < n; ++i) {
+    if (rig.blended_area[i] > 0.0)
+      exitance.row(i) = rig.reflectance.row(i).cwiseProduct(flux.row(i)) / rig.blended_area[i];
+  }
+  std::vector<std::vector<Eigen::Vector3f>> smooth =
+      SeamlessLightFactors(rig, exitance.cwiseMax(0.0), options.seamless);
+  if (detail.empty()) return smooth;
+  CombineFactors(rig, smooth, &detail);
+  return detail;
+}
+
 }  // namespace
 
 const char* DitherName(DitherMethod method) {
@@ -210,7 +266,28 @@ bool ParseDither(const std::string& name, DitherMethod* method) {
   return false;
 }
 
+const char* LightFieldName(LightField light) {
+  switch (light) {
+    case LightField::kFlat:
+      return "flat";
+    case LightField::kSmooth:
+      return "smooth";
+  }
+  return "?";
+}
+
+bool ParseLightField(const std::string& name, LightField* light) {
+  for (const LightField l : {LightField::kFlat, LightField::kSmooth}) {
+    if (name == LightFieldName(l)) {
+      *light = l;
+      return true;
+    }
+  }
+  return false;
+}
+
 bool RenderOptions::Check(std::string* why) const {
+  if (light == LightField::kSmooth && !seamless.Check(why)) return false;
   if (max_level_passes < 1 || max_level_passes > 1000) {
     *why = "max_level_passes must be in [1, 1000]";
     return false;
@@ -242,8 +319,8 @@ namespace {
 
 // RenderProjectorImages's inputs: the options, E's shape and values, and for detail the rig's
 // texture coordinates and the scene's surfaces. Throws std::invalid_argument.
-void CheckRenderInputs(const ProjectionRig& rig, const Scene& scene, const Eigen::MatrixX3d& emittance,
-                       const RenderOptions& options) {
+void CheckRenderInputs(const ProjectionRig& rig, const Scene& scene,
+                       const Eigen::MatrixX3d& emittance, const RenderOptions& options) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("RenderOptions: " + why);
   const int n = rig.size();
@@ -275,8 +352,9 @@ void CheckRenderInputs(const ProjectionRig& rig, const Scene& scene, const Eigen
 // evaluation one pass over the patch's pixels; the first one is all most patches need). Raises
 // `level` (τ per patch and channel) where pixels saturate; returns the most passes a patch took.
 int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& tables,
-                 const std::vector<std::vector<Eigen::Vector3f>>& detail, const Eigen::MatrixX3d& flux,
-                 const RenderOptions& options, Eigen::MatrixX3d* level_out) {
+                 const std::vector<std::vector<Eigen::Vector3f>>& detail,
+                 const Eigen::MatrixX3d& flux, const RenderOptions& options,
+                 Eigen::MatrixX3d* level_out) {
   Eigen::MatrixX3d& level = *level_out;
   const int n = rig.size();
   const int projector_count = static_cast<int>(rig.projectors.size());
@@ -340,8 +418,8 @@ Eigen::MatrixX3d FluxOfCodes(const ProjectionRig& rig, const std::vector<Project
         const cv::Vec3w& code = codes[map.pixels_by_patch[position]];
         for (int c = 0; c < 3; ++c) projector_light[c] += table.codes[c].Light(code[c]);
       }
-      const Vec3 mixed = table.identity_mixing ? projector_light
-                                               : Vec3(table.photometry.mixing * projector_light);
+      const Vec3 mixed =
+          table.identity_mixing ? projector_light : Vec3(table.photometry.mixing * projector_light);
       patch_flux +=
           rig.coverage_scale(i, k) * map.pixel_solid_angle * table.delta.cwiseProduct(mixed);
     }
@@ -366,9 +444,6 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
   s.saturated_pixels.assign(projector_count, 0);
   s.clipped_pixels.assign(projector_count, 0);
   s.detail_saturated_pixels.assign(projector_count, 0);
-  // d per lit pixel (in pixels_by_patch order) and channel; none without detail (d = 1).
-  std::vector<std::vector<Eigen::Vector3f>> detail;
-  if (options.detail) detail = DetailFactors(rig, scene, options, &s.detail_pixels);
   std::vector<ProjectorTables> tables;
   tables.reserve(projector_count);
   for (const Projector& projector : rig.projectors) tables.emplace_back(projector);
@@ -393,6 +468,9 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
           flux(i, c) >= capacity * (1.0 - 1e-12) ? kInfinity : flux(i, c) / rig.blended_area[i];
     }
   }
+
+  const std::vector<std::vector<Eigen::Vector3f>> detail =
+      PixelFactors(rig, scene, flux, options, &s.detail_pixels);
 
   // Step 2, per patch: Newton from below on Σ_p min(w a τ, Ω Δ) = Φ.
   s.level_passes = RefineLevels(rig, tables, detail, flux, options, &level);

@@ -29,6 +29,15 @@
 // texture. Pixels that d pushes beyond full drive saturate and the rest of the patch makes up
 // for them (step 2 with w a d in place of w a); the summary counts them. Surfaces without a
 // texture get d = 1: the same images as without detail.
+//
+// Light (RenderOptions::light): with kFlat, step 2's level is uniform over each patch, so the
+// light steps at every patch border and the patch grid shows on surfaces meant to look even. With
+// kSmooth (the default), τ becomes τ · m_p per pixel and channel, m the seamless light's factor
+// (seamless_light.h): a smooth field over each surface fitted to the patches' levels, stepping
+// only between surfaces and where the desired colour steps, with a weighted mean of 1 over every
+// patch, so that each patch receives the same flux as with kFlat. With detail too, the two
+// factors multiply and are renormalised to mean 1. Saturation is handled as for detail (step 2
+// with w a m in place of w a).
 
 #include <Eigen/Core>
 #include <filesystem>
@@ -39,6 +48,7 @@
 #include "geometry/patches.h"
 #include "geometry/scene.h"
 #include "projection/projection_rig.h"
+#include "projection/seamless_light.h"
 
 namespace procam {
 
@@ -50,8 +60,18 @@ enum class DitherMethod {
 const char* DitherName(DitherMethod method);
 bool ParseDither(const std::string& name, DitherMethod* method);
 
+// How the light within a patch is shaped (header comment).
+enum class LightField {
+  kFlat,    // one uniform level per patch
+  kSmooth,  // seamless: a smooth field over each surface, each patch's flux kept
+};
+const char* LightFieldName(LightField light);
+bool ParseLightField(const std::string& name, LightField* light);
+
 struct RenderOptions {
   DitherMethod dither = DitherMethod::kOrdered;
+  LightField light = LightField::kSmooth;
+  SeamlessLightOptions seamless;  // the smooth field, for LightField::kSmooth
   // Evaluations of each patch's level solve (step 2) at most, in [1, 1000].
   int max_level_passes = 16;
   // Modulate each pixel's light by the desired texture's detail at the point it lights (header
@@ -80,8 +100,9 @@ struct RenderSummary {
   int patches_unreached = 0;    // patches no projector lights
   std::vector<long long> saturated_pixels;  // per projector: some channel at full drive
   std::vector<long long> clipped_pixels;    // per projector: outside the gamut (mixing)
-  // Per projector: pixels at full drive on a channel the detail raises (d > 1): where the
-  // texture's highlights are clipped (included in saturated_pixels). Zeros without detail.
+  // Per projector: pixels at full drive on a channel the detail or the seamless light raises
+  // (factor > 1): where the texture's highlights or the field's peaks are clipped (included in
+  // saturated_pixels). Zeros with neither.
   std::vector<long long> detail_saturated_pixels;
   // Lit pixels whose patch's surface has a texture (all projectors); 0 without detail.
   long long detail_pixels = 0;

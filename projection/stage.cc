@@ -70,6 +70,7 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
   RenderOptions render_options;
   render_options.dither = args.dither;
   render_options.detail = args.detail;
+  render_options.light = args.light;
   RenderSummary& summary = result_summary.render;
   const std::vector<ProjectorImage> images =
       RenderProjectorImages(rig, geometry.scene, solution.emittance, render_options, &summary);
@@ -109,6 +110,7 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
                            {"dither", DitherName(args.dither)},
                            {"feather", args.feather},
                            {"detail", args.detail},
+                           {"light", LightFieldName(args.light)},
                            {"detail_pixels", summary.detail_pixels},
                            {"patches_reached", rig_summary.patches_reached},
                            {"patches_unreached", summary.patches_unreached},

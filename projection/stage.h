@@ -32,9 +32,10 @@ SolutionGeometry ReadSolutionGeometry(const SolutionDirectory& solution, int pat
 struct ProjectionStageOptions {
   std::filesystem::path out;  // the images directory (created)
   DitherMethod dither = DitherMethod::kOrdered;
-  double feather = 0.1;       // blending ramp at the edge of each projector's image, (0, 1]
-  bool detail = false;        // the desired texture's detail within patches (projector_images.h)
-  double load_seconds = 0.0;  // what reading the inputs took, for result.json
+  double feather = 0.1;  // blending ramp at the edge of each projector's image, (0, 1]
+  bool detail = false;   // the desired texture's detail within patches (projector_images.h)
+  LightField light = LightField::kSmooth;  // seamless light, or flat per patch (projector_images.h)
+  double load_seconds = 0.0;               // what reading the inputs took, for result.json
   ProgressCallback progress;  // per projector: pixels lit, patches, saturation; bounds; times
 };
 

@@ -104,13 +104,15 @@ struct Comparison {
   std::vector<bool> seen;
   int seen_pixels = 0, seen_patches = 0;
   cv::Mat delta_e76, delta_e2000, model_delta_e76, predicted;  // per pixel
+  SeamMeasure seams;                                           // of the photo
 };
 
 // Per pixel: the photo against the desired appearance of the patch each pixel sees and against
 // the per-pixel prediction `predicted_pixels` (PredictPixels), ΔE maps and means over the seen
 // pixels (colour_image.h); and against its patch's B (constant over the patch).
 void ComparePixels(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
-                   const LabConverter& lab, const std::vector<Eigen::Vector3d>& lab_desired,
+                   const std::vector<int>& patch_surface, const LabConverter& lab,
+                   const std::vector<Eigen::Vector3d>& lab_desired,
                    const std::vector<Eigen::Vector3d>& lab_predicted,
                    const cv::Mat& predicted_pixels, Comparison* result) {
   const int rows = exitance.rows, cols = exitance.cols;
@@ -130,6 +132,8 @@ void ComparePixels(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
     }
   }
   const ImageDeltaE against_desired = CompareLabImages(lab_measured, desired, seen);
+  const cv::Mat patch_image(rows, cols, CV_32SC1, const_cast<int*>(pixel_patch.data()));
+  result->seams = MeasureSeams(lab_measured, desired, patch_image, patch_surface);
   const ImageDeltaE against_model =
       CompareLabImages(lab_measured, LabImage(predicted_pixels, lab), seen);
   result->delta_e76 = against_desired.delta_e76;
@@ -210,9 +214,9 @@ void ComparePatches(const cv::Mat& exitance, const std::vector<int>& pixel_patch
 // Photo vs desired and vs predicted, per pixel (against the per-pixel prediction) and per patch
 // (against the solution's radiosity B), as the header comment says.
 Comparison Compare(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
-                   const std::vector<bool>& interior, const CompensationProblem& problem,
-                   const Eigen::MatrixX3d& radiosity, const cv::Mat& predicted_pixels,
-                   int min_pixels) {
+                   const std::vector<int>& patch_surface, const std::vector<bool>& interior,
+                   const CompensationProblem& problem, const Eigen::MatrixX3d& radiosity,
+                   const cv::Mat& predicted_pixels, int min_pixels) {
   const int n = problem.size();
   const LabConverter lab{problem.rgb_to_xyz, problem.white_xyz};
   std::vector<Eigen::Vector3d> lab_desired(n), lab_predicted(n);
@@ -221,7 +225,8 @@ Comparison Compare(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
     lab_predicted[i] = lab.Lab(radiosity.row(i).transpose());
   }
   Comparison result;
-  ComparePixels(exitance, pixel_patch, lab, lab_desired, lab_predicted, predicted_pixels, &result);
+  ComparePixels(exitance, pixel_patch, patch_surface, lab, lab_desired, lab_predicted,
+                predicted_pixels, &result);
   ComparePatches(exitance, pixel_patch, interior, problem, lab, lab_desired, lab_predicted,
                  min_pixels, &result);
   return result;
@@ -251,6 +256,7 @@ nlohmann::json IterationJson(const VerificationIteration& it) {
       {"directory", it.directory.string()},
       {"measured_vs_desired", DeltaEJson(it.measured)},
       {"measured_vs_predicted", DeltaEJson(it.model)},
+      {"seam", it.seams.Json()},
       {"measured_vs_patch_radiosity_pixel_mean76", it.model_constant_mean76},
       {"predicted_vs_desired",
        {{"patch_mean76", it.predicted_mean76},
@@ -365,6 +371,12 @@ VerificationIteration ReadIteration(const nlohmann::json& object, const std::str
   it.predicted_mean76 = predicted.Number("patch_mean76");
   it.predicted_mean2000 = predicted.Number("patch_mean2000");
   it.solver_mean76 = predicted.Number("solver_mean76_all_patches");
+  const JsonFields seam(fields.At("seam"), file, fields.Path("seam"));
+  it.seams.seam = seam.Number("seam");
+  it.seams.across = seam.Number("across");
+  it.seams.within = seam.Number("within");
+  it.seams.across_pairs = static_cast<int64_t>(seam.Number("across_pairs"));
+  it.seams.within_pairs = static_cast<int64_t>(seam.Number("within_pairs"));
   it.seen_pixels = ReadInt(fields, "seen_pixels");
   it.seen_patches = ReadInt(fields, "seen_patches");
   const JsonFields seconds(fields.At("seconds"), file, fields.Path("seconds"));
@@ -428,9 +440,10 @@ std::string VerificationSummary::BriefReport() const {
   for (const VerificationIteration& it : iterations)
     text += fmt::format(" {:.2f}", it.measured.mean76);
   if (best >= 0) {
-    text += fmt::format("; best iteration {} ({:.2f}, model error {:.2f}, predicted {:.2f}), {}",
-                        best, iterations[best].measured.mean76, iterations[best].model.mean76,
-                        iterations[best].predicted_mean76, termination);
+    text += fmt::format(
+        "; best iteration {} ({:.2f}, model error {:.2f}, predicted {:.2f}, seam {:.2f}), {}", best,
+        iterations[best].measured.mean76, iterations[best].model.mean76,
+        iterations[best].predicted_mean76, iterations[best].seams.seam, termination);
   }
   return text;
 }
@@ -652,7 +665,9 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   it.directory = options_.out / "iterations" / std::to_string(k);
   CreateDirectories(it.directory);
   RenderSummary render;
-  images_ = RenderProjectorImages(model_.rig, model_.geometry.scene, emittance_, RenderOptions(),
+  RenderOptions render_options;
+  render_options.light = options_.light;
+  images_ = RenderProjectorImages(model_.rig, model_.geometry.scene, emittance_, render_options,
                                   &render);
   std::vector<cv::Mat> patterns;
   for (size_t p = 0; p < images_.size(); ++p) {
@@ -695,8 +710,9 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   photo.convertTo(photo32, CV_32FC3);
   const cv::Mat exitance = PhotoToExitance(photo32, colour);
   const cv::Mat predicted = PredictPixels(rays, model_.rig, images_, model_.geometry.form_factors);
-  comparison_ = Compare(exitance, rays.patch, model_.interior, model_.problem, radiosity_,
-                        predicted, options_.min_patch_pixels);
+  comparison_ = Compare(exitance, rays.patch, model_.rig.surface, model_.interior, model_.problem,
+                        radiosity_, predicted, options_.min_patch_pixels);
+  it.seams = comparison_.seams;
   it.measured = comparison_.measured;
   it.model = comparison_.model;
   it.predicted_mean76 = comparison_.predicted_mean76;
@@ -720,9 +736,9 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   WriteNpy(it.directory / "measured_B.npy", RowMatrixXd(comparison_.patch_exitance));
   Report(options_.progress,
          fmt::format("verify: iteration {}: measured ΔE76 {:.2f} (max {:.1f}), model error "
-                     "{:.2f}, predicted {:.2f}, {} patches seen",
+                     "{:.2f}, predicted {:.2f}, seam {:.2f}, {} patches seen",
                      k, it.measured.mean76, it.measured.max76, it.model.mean76, it.predicted_mean76,
-                     it.seen_patches));
+                     it.seams.seam, it.seen_patches));
   if (it.seen_patches == 0) {
     throw IoError("camera '" + options_.camera + "': " + in_.camera_model_path.string() +
                   " sees no patch of the scene (is the camera registered in the room frame?)");
@@ -877,17 +893,17 @@ void AddVerificationReport(const VerificationSummary& summary, HtmlReport* repor
     rows.push_back({std::to_string(it.index) + (it.index == summary.best ? " (best)" : ""),
                     fmt::format("{:.2f} ({:.1f})", it.measured.mean76, it.measured.max76),
                     fmt::format("{:.2f}", it.measured.mean2000),
-                    fmt::format("{:.2f}", it.model.mean76),
+                    fmt::format("{:.2f}", it.seams.seam), fmt::format("{:.2f}", it.model.mean76),
                     fmt::format("{:.2f}", it.predicted_mean76), std::to_string(it.seen_patches),
                     update, fmt::format("{:.1f}", it.seconds)});
     measured.emplace_back(it.index, std::max(1e-3, it.measured.mean76));
     model.emplace_back(it.index, std::max(1e-3, it.model.mean76));
     predicted.emplace_back(it.index, std::max(1e-3, it.predicted_mean76));
   }
-  report->Table(
-      {"iteration", "measured ΔE76 mean (max)", "measured CIEDE2000 mean", "model error ΔE76 mean",
-       "predicted ΔE76 mean", "patches seen", "model update after it", "seconds"},
-      rows);
+  report->Table({"iteration", "measured ΔE76 mean (max)", "measured CIEDE2000 mean",
+                 "seam (CIEDE2000)", "model error ΔE76 mean", "predicted ΔE76 mean", "patches seen",
+                 "model update after it", "seconds"},
+                rows);
   if (!summary.complete) report->Paragraph("Stopped by a fault: " + summary.error);
   if (!summary.iterations.empty()) {
     report->Plot("Convergence", "iteration", "mean ΔE76",

@@ -36,16 +36,15 @@
 //   desired.png, result.json (every iteration, the best), report.html
 // Everything is written atomically as it is produced, so a fault keeps what was done.
 
+#include <Eigen/Core>
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <nlohmann/json.hpp>
+#include <opencv2/core/mat.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <nlohmann/json.hpp>
-#include <opencv2/core/mat.hpp>
 
 #include "base/html_report.h"
 #include "base/progress.h"
@@ -54,6 +53,7 @@
 #include "capture/simulated_camera.h"
 #include "compensation/colour_image.h"
 #include "geometry/scene.h"
+#include "projection/projector_images.h"
 
 namespace procam {
 
@@ -70,21 +70,22 @@ struct VerificationOptions {
   // The scene, when the solution's result.json names no file (a generated scene, as in the
   // demo); otherwise left empty and read from the file result.json names.
   std::optional<Scene> scene;
-  SequencerOptions sequencer;          // frames, exposures (several: HDR), settle, retries
-  std::string camera_response;         // camera_response.json: linearise (needs bracketing)
+  SequencerOptions sequencer;   // frames, exposures (several: HDR), settle, retries
+  std::string camera_response;  // camera_response.json: linearise (needs bracketing)
   // Camera colour calibration, camera value per unit exitance (scene units) per channel (R, G,
   // B, each > 0), or unset: rig.json camera.colour ({"scale": [R,G,B]} or {"matrix": 3×3}),
   // else a simulated camera's own (from its URI and the session's exposure and gain). For
   // bracketed (HDR) photos the units are full scale per second.
   std::optional<Eigen::Vector3d> camera_scale;
-  double camera_black = -1.0;  // camera black level, DN (< 0: the synthetic URI's, else 0)
-  double gain = -1.0;          // camera gain to set (< 0: leave it)
-  int iterations = 4;          // photos at most (iteration 0 is the solution as given), [1, 50]
+  double camera_black = -1.0;     // camera black level, DN (< 0: the synthetic URI's, else 0)
+  double gain = -1.0;             // camera gain to set (< 0: leave it)
+  int iterations = 4;             // photos at most (iteration 0 is the solution as given), [1, 50]
   double min_improvement = 0.01;  // relative drop of the mean ΔE76 needed to go on, [0, 1)
   double reflectance_step = 1.0;  // damping of the reflectance update, (0, 1]
   bool fit_response = true;       // fit the projectors' response exponents
   bool fit_reflectance = true;    // update the per-patch reflectance
   int min_patch_pixels = 4;       // camera pixels a patch needs to count as seen, ≥ 1
+  LightField light = LightField::kSmooth;  // how the projector images shape the light in a patch
   ProgressCallback progress;      // a line per stage and iteration (ΔE, the model update)
   bool Check(std::string* why) const;
 };
@@ -92,17 +93,19 @@ struct VerificationOptions {
 // Colour differences of one photo.
 struct PhotoDeltaE {
   double mean76 = 0, max76 = 0, mean2000 = 0, max2000 = 0;  // per pixel over the seen pixels
-  double patch_mean76 = 0, patch_mean2000 = 0;  // area-weighted over the seen patches
+  double patch_mean76 = 0, patch_mean2000 = 0;              // area-weighted over the seen patches
 };
 
 struct VerificationIteration {
   int index = 0;
-  PhotoDeltaE measured;       // photo vs desired
-  PhotoDeltaE model;          // photo vs predicted (the model's error): per pixel against the
-                              // per-pixel prediction, per patch against the solution's B
+  PhotoDeltaE measured;  // photo vs desired
+  PhotoDeltaE model;     // photo vs predicted (the model's error): per pixel against the
+                         // per-pixel prediction, per patch against the solution's B
   double model_constant_mean76 = 0;  // per pixel against its patch's B (constant over the patch)
+  // How visible the patch grid is in the photo (MeasureSeams, compensation/colour_image.h).
+  SeamMeasure seams;
   double predicted_mean76 = 0, predicted_mean2000 = 0;  // B vs desired, same seen patches
-  double solver_mean76 = 0;   // B vs desired over every patch (compensate's number)
+  double solver_mean76 = 0;  // B vs desired over every patch (compensate's number)
   int seen_pixels = 0, seen_patches = 0;
   // The model update made after this photo (empty for the last): per projector, the response
   // exponent per primary and the reflectance scale s per channel.
@@ -148,9 +151,10 @@ VerificationSummary ReadVerificationRun(const std::filesystem::path& dir);
 
 // Runs the loop. Camera URIs are opened through the camera registry: callers register the
 // backends they use (RegisterDeviceBackends for real cameras; the synthetic world's, with its
-// simulated-camera source below, through RegisterSyntheticWorld of datasets_synthetic). Throws IoError (naming the file, key, camera or projector) for bad input
-// before anything is captured; a camera or projector lost mid-run writes result.json and
-// report.html with the iterations done (complete = false) and then throws IoError saying so.
+// simulated-camera source below, through RegisterSyntheticWorld of datasets_synthetic). Throws
+// IoError (naming the file, key, camera or projector) for bad input before anything is captured; a
+// camera or projector lost mid-run writes result.json and report.html with the iterations done
+// (complete = false) and then throws IoError saying so.
 VerificationSummary RunVerification(const VerificationOptions& options);
 
 // Appends the verification's sections (table, convergence plot, per-iteration pictures) to a

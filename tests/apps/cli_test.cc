@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include "base/html_report.h"
+#include "base/io.h"
 #include "tests/testing/testing.h"
 
 namespace procam {
@@ -148,6 +150,9 @@ TEST(Cli, DemoOnTheSyntheticRigWritesAReportThatRendersInChromium) {
   EXPECT_GE(std::stoi(dom.substr(images + 13)), 10);  // pictures decoded
   EXPECT_NE(dom.find("Calibration (the rig recovered"), std::string::npos);
   EXPECT_NE(dom.find("Verification"), std::string::npos);
+  // One heading per section, every picture captioned and decodable.
+  for (const std::string& problem : CheckReportStructure(ReadFile(dir / "demo" / "report.html")))
+    ADD_FAILURE() << "demo report: " << problem;
 }
 
 // The demo on a rig (--camera): calibrate all → compensate --rig → project → verify, each the

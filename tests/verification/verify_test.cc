@@ -19,6 +19,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "base/html_report.h"
 #include "base/io.h"
 #include "base/json_fields.h"
 #include "calibration/rig_directory.h"
@@ -156,6 +157,7 @@ TEST(Verify, ClosedLoopRecoversFromAWrongModel) {
   for (size_t k = 0; k < iterations.size(); ++k) {
     EXPECT_EQ(read.iterations[k].measured.mean76, Measured(iterations.at(k)));
     EXPECT_EQ(read.iterations[k].seen_pixels, iterations.at(k).at("seen_pixels").get<int>());
+    EXPECT_EQ(read.iterations[k].seams.seam, iterations.at(k).at("seam").at("seam").get<double>());
   }
   EXPECT_EQ(read.best, result.at("best").get<int>());
   EXPECT_TRUE(read.complete);
@@ -208,6 +210,8 @@ TEST(Verify, ClosedLoopRecoversFromAWrongModel) {
       EXPECT_TRUE(std::filesystem::exists(it / file)) << it / file;
   }
   EXPECT_TRUE(std::filesystem::exists(dir / "verify/report.html"));
+  for (const std::string& problem : CheckReportStructure(ReadFile(dir / "verify/report.html")))
+    ADD_FAILURE() << "verify report: " << problem;
 }
 
 TEST(Verify, TrueModelPhotoMatchesThePrediction) {

@@ -1,0 +1,53 @@
+#pragma once
+// Seamless light: the light within each patch shaped so that it varies smoothly across patch
+// borders, instead of one uniform level per patch whose steps show the patch grid.
+//
+// The renderer (projector_images.h) gives every patch i a uniform irradiance level τ_i above
+// black. Here that level becomes τ_i · m_p per lit pixel p, m_p a factor per channel whose
+// weighted mean over the patch is 1 (weights w a, the flux bookkeeping's, projection_rig.h), so
+// the patch still receives exactly the flux its E asks for, and the light it receives follows a
+// smooth field v(x) over the surface:
+//
+//   v(x) = Σ_j K_j(x) v̂_j / Σ_j K_j(x),  K_j(x) = (1 − |x − c_j|² / r_j²)²  for |x − c_j| < r_j,
+//
+// a partition of unity of compactly supported (C¹) bumps at the patch centroids c_j, radius
+// r_j = radius · √A_j. The nodes j that take part at a point of patch i are the patches within
+// `rings` adjacency steps of i on the same surface whose desired colour is close to i's (each
+// channel within `tolerance`, relative): the field is continuous across borders between such
+// patches and steps only where the surface or the desired appearance does. The node values v̂
+// start at the patches' exitance above black (ρ τ) and are corrected `iterations` times,
+// v̂_j ← v̂_j · v_j / mean_j(v), so that the field's mean over each patch is close to the patch's
+// own value before the per-patch normalisation: the normalisation then hardly changes the field
+// and leaves no visible step. m_p = v(x_p) / mean_i(v).
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "projection/projection_rig.h"
+
+namespace procam {
+
+struct SeamlessLightOptions {
+  // Radius of each patch's bump in patch sides (√A), in [0.5, 5]: 1.5 reaches the centroids of a
+  // square grid's 8 neighbours from every point of a patch.
+  double radius = 1.5;
+  // Adjacency steps searched for the patches that share the field, in [1, 8].
+  int rings = 3;
+  // Corrections of the node values, in [0, 50] (0: the patches' own values).
+  int iterations = 10;
+  // Neighbours share the field where each channel of their desired colours differs by at most
+  // this fraction of the larger, in [0, 1].
+  double tolerance = 0.05;
+  bool Check(std::string* why) const;
+};
+
+// The factors m (header comment) per projector, lit pixel (in pixels_by_patch order) and channel,
+// for patches whose exitance above black is `exitance` (n,3, ≥ 0, e.g. ρ τ): exactly 1 on patches
+// whose field is flat. Needs the rig's point_by_patch, centroid and adjacency. Throws
+// std::invalid_argument if the options fail Check() or the rig or `exitance` do not fit.
+std::vector<std::vector<Eigen::Vector3f>> SeamlessLightFactors(const ProjectionRig& rig,
+                                                               const Eigen::MatrixX3d& exitance,
+                                                               const SeamlessLightOptions& options);
+
+}  // namespace procam
