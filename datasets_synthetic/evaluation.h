@@ -44,8 +44,9 @@ struct SceneEvaluation {
   // linear, perceptual, and the lowest mean any emittance within the bounds was found to reach
   // (LowestMeanDeltaE); -1 when linear or perceptual was not run.
   double model_linear = -1, model_perceptual = -1, model_lowest = -1;
-  // The lowest area-weighted mean CIEDE2000 per patch found (LowestMeanDeltaE2000); -1 when
-  // perceptual was not run. Each method's own is its run.mean_delta_e2000.
+  // The lowest area-weighted mean CIEDE2000 per patch found: LowestMeanDeltaE2000, or a method's
+  // own result where that is lower; -1 when perceptual was not run. Each method's own is its
+  // run.mean_delta_e2000.
   double model_lowest2000 = -1;
   double seconds = 0.0;
 };
