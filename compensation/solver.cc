@@ -620,8 +620,10 @@ void SolveCiede2000Rounds(const SolverOptions& options, const CompensationProble
     ColourMetric metric = Ciede2000Metric(options, problem, current_radiosity);
     const CompensationObjective objective(problem, radiosity, ColourModel::kLab, metric);
     SolverSummary round_summary;
-    emittance = Minimise(options, objective, emittance, &round_summary, &current_radiosity);
-    if (current_radiosity.rows() != problem.size()) current_radiosity = radiosity.Solve(emittance);
+    Eigen::MatrixX3d round_radiosity;  // filled by the device loop only
+    emittance = Minimise(options, objective, emittance, &round_summary, &round_radiosity);
+    current_radiosity = round_radiosity.rows() == problem.size() ? std::move(round_radiosity)
+                                                                   : radiosity.Solve(emittance);
     if (round == 0) summary->initial_cost = round_summary.initial_cost;
     summary->final_cost = round_summary.final_cost;
     summary->termination = round_summary.termination;
