@@ -17,8 +17,8 @@ namespace {
 
 struct CompensateArguments {
   std::string scene, out, rig, method = "perceptual", device = "cpu", loss = "soft_l1";
-  double alpha = 0.5, loss_scale = 5.0;
-  int patches = 0, metric_rounds = 4;
+  double alpha = 0.5, loss_scale = SolverOptions().robust_scale;
+  int patches = 0, metric_rounds = SolverOptions().metric_rounds;
   bool multires = false, export_problem = false;
   std::string form_factors = "dense";
 };

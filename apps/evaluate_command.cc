@@ -23,7 +23,7 @@ struct EvaluateArguments {
   std::string out = "out/evaluate";
   int patches = 600;
   int world_factor = 4;
-  double alpha = 0.5, loss_scale = 5.0;
+  double alpha = 0.5, loss_scale = SolverOptions().robust_scale;
   std::string loss = "soft_l1";
   std::vector<std::string> methods;
   LightField light = LightField::kSmooth;

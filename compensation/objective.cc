@@ -42,6 +42,9 @@ CompensationObjective::CompensationObjective(const CompensationProblem& problem,
       (metric_.weight.size() != 0 && metric_.weight.size() != n)) {
     throw std::invalid_argument("colour metric: one factor and weight per patch");
   }
+  const Eigen::Index pairs = static_cast<Eigen::Index>(problem.adjacency.size());
+  if (metric_.pair_weight.size() != 0 && metric_.pair_weight.size() != pairs)
+    throw std::invalid_argument("colour metric: one weight per adjacent pair");
   if (model_ == ColourModel::kLinear && !metric_.factor.empty())
     throw std::invalid_argument("colour metric: for the L*a*b* model only");
   const double mean_area = problem.area.mean();
@@ -51,9 +54,10 @@ CompensationObjective::CompensationObjective(const CompensationProblem& problem,
   std::vector<Eigen::Triplet<double>> triplets;
   triplets.reserve(2 * problem.adjacency.size() + n);
   Eigen::VectorXd diagonal = weight_diagonal_;
-  for (const auto& pair : problem.adjacency) {
-    const double w = 1.0 - problem.alpha;
-    if (w == 0.0) break;
+  for (Eigen::Index k = 0; k < pairs; ++k) {
+    const auto& pair = problem.adjacency[k];
+    const double w = (1.0 - problem.alpha) * (metric_.pair_weight.size() == pairs ? metric_.pair_weight[k] : 1.0);
+    if (w == 0.0) continue;
     diagonal[pair[0]] += w;
     diagonal[pair[1]] += w;
     triplets.emplace_back(pair[0], pair[1], -w);

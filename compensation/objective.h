@@ -31,11 +31,12 @@ enum class ColourModel {
 // its squared length is r_iᵀ M_i r_i with M_i = L_iᵀ L_i (e.g. CIEDE2000's metric,
 // DeltaE2000Metric), in the data term and in the spatial term alike (neighbours' residuals are
 // compared in their metrics: measured better than comparing them in plain L*a*b*, docs/solver.md),
-// and the data term α A_i/Ā is scaled by `weight`_i (e.g. a robust loss's ρ′). Empty members
-// leave the objective as published.
+// the data term α A_i/Ā is scaled by `weight`_i and the spatial term's pair k (problem.adjacency)
+// by `pair_weight`_k (e.g. a robust loss's ρ′). Empty members leave the objective as published.
 struct ColourMetric {
   std::vector<Eigen::Matrix3d> factor;  // L_i, n of them, or none
   Eigen::VectorXd weight;               // n positive weights, or none
+  Eigen::VectorXd pair_weight;          // one positive weight per adjacent pair, or none
 };
 
 // Everything the objective knows at one point E.

@@ -425,6 +425,24 @@ ColourMetric Ciede2000Metric(const SolverOptions& options, const CompensationPro
       metric.weight[i] = RobustLossWeight(options.robust_loss, options.robust_scale, distance * distance);
   }
   metric.weight /= metric.weight.mean();
+  if (radiosity.rows() == n && !problem.adjacency.empty()) {
+    // The spatial term's pairs under the same loss, at the difference of their metric residuals.
+    const Eigen::Index pairs = static_cast<Eigen::Index>(problem.adjacency.size());
+    std::vector<Eigen::Vector3d> residual(n);
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector3d lab = XyzToLab(problem.rgb_to_xyz * radiosity.row(i).transpose(), problem.white_xyz);
+      const Eigen::Vector3d desired =
+          XyzToLab(problem.rgb_to_xyz * problem.desired.row(i).transpose(), problem.white_xyz);
+      residual[i] = metric.factor[i] * (lab - desired);
+    }
+    metric.pair_weight.resize(pairs);
+    for (Eigen::Index k = 0; k < pairs; ++k) {
+      const auto& pair = problem.adjacency[k];
+      metric.pair_weight[k] = RobustLossWeight(options.robust_loss, options.robust_scale,
+                                               (residual[pair[0]] - residual[pair[1]]).squaredNorm());
+    }
+    metric.pair_weight /= metric.pair_weight.mean();
+  }
   return metric;
 }
 

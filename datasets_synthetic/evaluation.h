@@ -59,7 +59,7 @@ struct EvaluationOptions {
   double alpha = 0.5;
   bool multires = true;  // for the perceptual methods
   SolverOptions::RobustLoss loss = SolverOptions::RobustLoss::kSoftL1;  // perceptual2000's
-  double loss_scale = 5.0;
+  double loss_scale = SolverOptions().robust_scale;
   int world_factor = 4;  // world mesh patches per solver patch
   double albedo_variation = 0.05;  // the simulated room's uneven paint (SimulatedRigOptions)
   RenderOptions render;            // projector images (seamless light by default)

@@ -67,8 +67,11 @@ double ObjectiveByDefinition(const CompensationProblem& problem, const ColourMet
   double f = 0.0;
   for (int i = 0; i < n; ++i)
     f += problem.alpha * problem.area[i] / problem.area.mean() * metric.weight[i] * r.row(i).squaredNorm();
-  for (const auto& pair : problem.adjacency)
-    f += (1 - problem.alpha) * (r.row(pair[0]) - r.row(pair[1])).squaredNorm();
+  for (std::size_t k = 0; k < problem.adjacency.size(); ++k) {
+    const auto& pair = problem.adjacency[k];
+    const double w = metric.pair_weight.size() == 0 ? 1.0 : metric.pair_weight[static_cast<Eigen::Index>(k)];
+    f += (1 - problem.alpha) * w * (r.row(pair[0]) - r.row(pair[1])).squaredNorm();
+  }
   return f;
 }
 
@@ -159,6 +162,26 @@ TEST_F(Ciede2000Objective, MetricGivesEachPatchItsExactDeltaE2000) {
   }
   EXPECT_NEAR(metric.weight.mean(), 1.0, 1e-12);
   EXPECT_GT(metric.weight.maxCoeff() - metric.weight.minCoeff(), 0.1);  // soft-L1 reweights
+  // Each neighbour pair: soft-L1's ρ′ at the squared distance between the two measured
+  // residuals, normalised to mean 1 like the patches' weights.
+  ASSERT_EQ(metric.pair_weight.size(), static_cast<Eigen::Index>(problem.adjacency.size()));
+  Eigen::VectorXd expected(metric.pair_weight.size());
+  const double c = options.robust_scale;
+  for (Eigen::Index k = 0; k < expected.size(); ++k) {
+    const auto& pair = problem.adjacency[static_cast<std::size_t>(k)];
+    const Eigen::Vector3d d = metric.factor[pair[0]] * r.row(pair[0]).transpose() -
+                              metric.factor[pair[1]] * r.row(pair[1]).transpose();
+    expected[k] = 1.0 / std::sqrt(1.0 + d.squaredNorm() / (c * c));
+  }
+  expected /= expected.mean();
+  EXPECT_LT((metric.pair_weight - expected).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_GT(metric.pair_weight.maxCoeff() - metric.pair_weight.minCoeff(), 0.1);
+}
+
+TEST_F(Ciede2000Objective, MetricAtTheDesiredColoursWeighsNothing) {
+  const ColourMetric metric = Ciede2000Metric(SolverOptions(), test_->fine, Eigen::MatrixX3d());
+  EXPECT_EQ(metric.pair_weight.size(), 0);
+  EXPECT_TRUE((metric.weight.array() == 1.0).all());
 }
 
 TEST_F(Ciede2000Objective, ValueMatchesTheDefinition) {
