@@ -157,6 +157,7 @@ void AddProjectionCommands(CLI::App& app) {
       ->capture_default_str();
   bench_projection->add_flag("--detail", bench_args->detail,
                              "Give every surface a striped texture and render with its detail");
+  AddLightOption(bench_projection, &bench_args->light);
   bench_projection->add_option("--json", bench_args->json, "Also write the timings as JSON");
   bench_projection->callback([bench_args, bench_dither] {
     ParseDither(*bench_dither, &bench_args->dither);  // CLI11 checked the name

@@ -571,6 +571,21 @@ double ProjectedGradientNorm(const Eigen::MatrixX3d& emittance, const Eigen::Mat
   return (Clamp(emittance - gradient, lower, upper) - emittance).cwiseAbs().maxCoeff();
 }
 
+namespace {
+
+// Adds the work counters `from` (a DriverRecords or another SolverSummary) to `to`.
+template <typename Counters>
+void AddWorkCounters(const Counters& from, SolverSummary* to) {
+  to->inner_iterations += from.inner_iterations;
+  to->cg_iterations += from.cg_iterations;
+  to->evaluations += from.evaluations;
+  to->gradients += from.gradients;
+  to->hessian_products += from.hessian_products;
+  to->preconditioner_applications += from.preconditioner_applications;
+}
+
+}  // namespace
+
 void AddDriverRecords(const DriverRecords& records, SolverSummary* summary) {
   summary->termination = records.termination;
   const std::string message = TerminationMessage(records.termination);
@@ -578,12 +593,7 @@ void AddDriverRecords(const DriverRecords& records, SolverSummary* summary) {
   summary->initial_cost = records.initial_cost;
   summary->final_cost = records.final_cost;
   if (records.iterations > 0) summary->iterations = records.iterations;
-  summary->inner_iterations += records.inner_iterations;
-  summary->cg_iterations += records.cg_iterations;
-  summary->evaluations += records.evaluations;
-  summary->gradients += records.gradients;
-  summary->hessian_products += records.hessian_products;
-  summary->preconditioner_applications += records.preconditioner_applications;
+  AddWorkCounters(records, summary);
 }
 
 Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const CompensationObjective& objective,
@@ -647,12 +657,7 @@ void SolveCiede2000Rounds(const SolverOptions& options, const CompensationProble
     summary->termination = round_summary.termination;
     summary->message = round_summary.message;
     summary->iterations += round_summary.iterations;
-    summary->inner_iterations += round_summary.inner_iterations;
-    summary->cg_iterations += round_summary.cg_iterations;
-    summary->evaluations += round_summary.evaluations;
-    summary->gradients += round_summary.gradients;
-    summary->hessian_products += round_summary.hessian_products;
-    summary->preconditioner_applications += round_summary.preconditioner_applications;
+    AddWorkCounters(round_summary, summary);
     summary->trace.insert(summary->trace.end(), round_summary.trace.begin(), round_summary.trace.end());
     solution->metric = std::move(metric);
   }

@@ -434,6 +434,7 @@ void RunProjectionBenchmark(const ProjectionBenchmarkOptions& args) {
   RenderOptions options;
   options.dither = dither;
   options.detail = args.detail;
+  options.light = args.light;
   std::vector<double> render_times, encode_times;
   RenderSummary summary;
   for (int r = 0; r < args.repeat; ++r) {
@@ -455,9 +456,9 @@ void RunProjectionBenchmark(const ProjectionBenchmarkOptions& args) {
          fmt::format("  maps (once per rig: unproject, {} rays + blending shadow rays): {:.3f} s",
                      2LL * args.width * args.height, rig_summary.seconds));
   Report(args.progress,
-         fmt::format("  images from a solution ({} dither{}, {} level passes): median {:.1f} ms, "
-                     "min {:.1f} ms over {} runs",
-                     DitherName(dither), args.detail ? ", textures' detail" : "",
+         fmt::format("  images from a solution ({} light, {} dither{}, {} level passes): median "
+                     "{:.1f} ms, min {:.1f} ms over {} runs",
+                     LightFieldName(args.light), DitherName(dither), args.detail ? ", textures' detail" : "",
                      summary.level_passes, 1e3 * render_median, 1e3 * render_times.front(),
                      args.repeat));
   Report(args.progress, fmt::format("  PNG encoding of both: median {:.1f} ms", 1e3 * encode_median));
@@ -471,6 +472,7 @@ void RunProjectionBenchmark(const ProjectionBenchmarkOptions& args) {
                                    {"patches", rig.size()},
                                    {"dither", DitherName(dither)},
                                    {"detail", args.detail},
+                                   {"light", LightFieldName(args.light)},
                                    {"maps_seconds", rig_summary.seconds},
                                    {"render_seconds_median", render_median},
                                    {"render_seconds_min", render_times.front()},

@@ -44,6 +44,7 @@ struct ProjectionBenchmarkOptions {
   int repeat = 10;                  // timed runs
   DitherMethod dither = DitherMethod::kOrdered;
   bool detail = false;  // every surface striped, rendered with the texture's detail
+  LightField light = LightField::kSmooth;  // seamless light, or one level per patch
   std::string json;     // also the timings as JSON here
   ProgressCallback progress;
 };

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <utility>
+
+#include <Eigen/Sparse>
 
 namespace procam {
 
@@ -82,64 +85,134 @@ std::vector<std::vector<int>> FieldNodes(const ProjectionRig& rig,
   return nodes;
 }
 
+// The field v(x) = Σ_j K̃_j(x) v̂_j (K̃ the bumps normalised to a partition of unity) is linear in
+// the node values, so each patch's mean of it is a fixed row of an n×n matrix A: the corrections
+// of the node values run on A alone, and the lit pixels are visited twice (forming A, and the
+// factors).
 class Field {
  public:
   Field(const ProjectionRig& rig, const SeamlessLightOptions& options)
       : rig_(rig), nodes_(FieldNodes(rig, options)), radius2_(rig.size()) {
     for (int j = 0; j < rig.size(); ++j)
       radius2_[j] = options.radius * options.radius * rig.area[j];
+    DropNodesOutOfReach();
+    FormPatchMeans();
   }
 
-  // The field at a point of patch i with node values v̂ (n,3).
-  Eigen::Vector3d At(int i, const Eigen::Vector3f& point,
-                     const Eigen::MatrixX3d& node_value) const {
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  // Per patch, the field's mean over its pixels (weights w a, the flux bookkeeping's).
+  Eigen::MatrixX3d PatchMeans(const Eigen::MatrixX3d& node_value) const { return means_ * node_value; }
+
+  // The field at every lit pixel (in pixels_by_patch order) of the patches that are not flat.
+  void Values(const Eigen::MatrixX3d& node_value, Factors* values) const {
+    ForEachPixel([&](int i, size_t k, int position, const std::vector<std::pair<int, double>>& bumps) {
+      Eigen::Vector3d value = Eigen::Vector3d::Zero();
+      for (const auto& [j, weight] : bumps) value += weight * node_value.row(j).transpose();
+      (*values)[k][position] = value.cast<float>();
+      (void)i;
+    });
+  }
+
+  bool Flat(int i) const { return nodes_[i].size() <= 1; }
+
+ private:
+  // Keeps, for each patch i, the nodes j whose bump can reach one of its points:
+  // |c_i − c_j| < r_j + (the farthest of i's points from c_i). Exact: the others add nothing.
+  void DropNodesOutOfReach() {
+    const int n = rig_.size();
+    std::vector<double> reach(n, 0.0);
+    for (const ProjectorMap& map : rig_.maps) {
+      for (int i = 0; i < n; ++i) {
+        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+          const double d = (map.point_by_patch[position].cast<double>() - rig_.centroid.row(i).transpose()).norm();
+          reach[i] = std::max(reach[i], d);
+        }
+      }
+    }
+    for (int i = 0; i < n; ++i) {
+      std::vector<int>& list = nodes_[i];
+      list.erase(std::remove_if(list.begin() + 1, list.end(),
+                                [&](int j) {
+                                  const double d = (rig_.centroid.row(i) - rig_.centroid.row(j)).norm();
+                                  return d >= std::sqrt(radius2_[j]) + reach[i];
+                                }),
+                 list.end());
+    }
+  }
+
+  // Calls visit(i, k, position, bumps) for every lit pixel of every patch that is not flat, with
+  // the normalised bumps (node, K̃_j(x)) at its point; in parallel over patches.
+  template <typename Visit>
+  void ForEachPixel(Visit visit) const {
+    const int n = rig_.size();
+#pragma omp parallel
+    {
+      std::vector<std::pair<int, double>> bumps;
+#pragma omp for schedule(dynamic, 16)
+      for (int i = 0; i < n; ++i) {
+        if (Flat(i)) continue;
+        for (size_t k = 0; k < rig_.maps.size(); ++k) {
+          const ProjectorMap& map = rig_.maps[k];
+          for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+            Bumps(i, map.point_by_patch[position], &bumps);
+            visit(i, k, position, bumps);
+          }
+        }
+      }
+    }
+  }
+
+  // The bumps at a point of patch i, normalised to sum 1.
+  void Bumps(int i, const Eigen::Vector3f& point, std::vector<std::pair<int, double>>* bumps) const {
+    bumps->clear();
     double weight_sum = 0.0;
     const Eigen::Vector3d x = point.cast<double>();
     for (const int j : nodes_[i]) {
       const double d2 = (x - rig_.centroid.row(j).transpose()).squaredNorm();
       if (d2 >= radius2_[j]) continue;
       const double t = 1.0 - d2 / radius2_[j];
-      sum += (t * t) * node_value.row(j).transpose();
+      bumps->emplace_back(j, t * t);
       weight_sum += t * t;
     }
     // Only where a patch is so elongated that no bump reaches (outside the designed range).
-    if (!(weight_sum > 0.0)) return node_value.row(i).transpose();
-    return sum / weight_sum;
-  }
-
-  // Per patch, the field's mean over its pixels (weights w a, the flux bookkeeping's); with
-  // `values`, also the field at every lit pixel.
-  Eigen::MatrixX3d PatchMeans(const Eigen::MatrixX3d& node_value, Factors* values) const {
-    const int n = rig_.size();
-    Eigen::MatrixX3d means = node_value;
-#pragma omp parallel for schedule(dynamic, 16)
-    for (int i = 0; i < n; ++i) {
-      if (nodes_[i].size() <= 1) continue;  // a field of its own: constant
-      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-      double weight_sum = 0.0;
-      for (size_t k = 0; k < rig_.maps.size(); ++k) {
-        const ProjectorMap& map = rig_.maps[k];
-        const double scale = rig_.coverage_scale(i, k) * map.pixel_solid_angle;
-        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
-          const Eigen::Vector3d value = At(i, map.point_by_patch[position], node_value);
-          if (values) (*values)[k][position] = value.cast<float>();
-          const double weight = scale * map.share[map.pixels_by_patch[position]];
-          sum += weight * value;
-          weight_sum += weight;
-        }
-      }
-      if (weight_sum > 0.0) means.row(i) = (sum / weight_sum).transpose();
+    if (!(weight_sum > 0.0)) {
+      bumps->assign(1, {i, 1.0});
+      return;
     }
-    return means;
+    for (auto& bump : *bumps) bump.second /= weight_sum;
   }
 
-  bool Flat(int i) const { return nodes_[i].size() <= 1; }
+  // A: row i the pixel-weighted mean of the normalised bumps over patch i (e_i on flat patches).
+  void FormPatchMeans() {
+    const int n = rig_.size();
+    std::vector<std::vector<std::pair<int, double>>> rows(n);  // (node, Σ w K̃) per patch
+    std::vector<double> row_weight(n, 0.0);
+    ForEachPixel([&](int i, size_t k, int position, const std::vector<std::pair<int, double>>& bumps) {
+      const ProjectorMap& map = rig_.maps[k];
+      const double weight =
+          rig_.coverage_scale(i, k) * map.pixel_solid_angle * map.share[map.pixels_by_patch[position]];
+      for (const auto& [j, value] : bumps) {
+        auto it = std::find_if(rows[i].begin(), rows[i].end(), [j = j](const auto& e) { return e.first == j; });
+        if (it == rows[i].end()) it = rows[i].insert(rows[i].end(), {j, 0.0});
+        it->second += weight * value;
+      }
+      row_weight[i] += weight;  // patch i is visited by one thread only
+    });
+    std::vector<Eigen::Triplet<double>> triplets;
+    for (int i = 0; i < n; ++i) {
+      if (!(row_weight[i] > 0.0)) {
+        triplets.emplace_back(i, i, 1.0);
+        continue;
+      }
+      for (const auto& [j, value] : rows[i]) triplets.emplace_back(i, j, value / row_weight[i]);
+    }
+    means_.resize(n, n);
+    means_.setFromTriplets(triplets.begin(), triplets.end());
+  }
 
- private:
   const ProjectionRig& rig_;
   std::vector<std::vector<int>> nodes_;
   std::vector<double> radius2_;
+  Eigen::SparseMatrix<double, Eigen::RowMajor> means_;  // A
 };
 
 void CheckInputs(const ProjectionRig& rig, const Eigen::MatrixX3d& exitance,
@@ -173,7 +246,7 @@ Factors SeamlessLightFactors(const ProjectionRig& rig, const Eigen::MatrixX3d& e
   Eigen::MatrixX3d node_value = exitance;
   const double largest = exitance.size() > 0 ? exitance.maxCoeff() : 0.0;
   for (int iteration = 0; iteration < options.iterations; ++iteration) {
-    const Eigen::MatrixX3d means = field.PatchMeans(node_value, nullptr);
+    const Eigen::MatrixX3d means = field.PatchMeans(node_value);
     for (int j = 0; j < n; ++j) {
       for (int c = 0; c < 3; ++c) {
         if (means(j, c) > 0.0 && exitance(j, c) > 0.0) {
@@ -186,7 +259,8 @@ Factors SeamlessLightFactors(const ProjectionRig& rig, const Eigen::MatrixX3d& e
   Factors factors(rig.maps.size());
   for (size_t k = 0; k < rig.maps.size(); ++k)
     factors[k].assign(rig.maps[k].lit_pixels, Eigen::Vector3f::Ones());
-  const Eigen::MatrixX3d means = field.PatchMeans(node_value, &factors);
+  field.Values(node_value, &factors);
+  const Eigen::MatrixX3d means = field.PatchMeans(node_value);
   // m = v / mean(v) per patch and channel: the weighted mean of m is 1, so the flux is kept.
 #pragma omp parallel for schedule(dynamic, 16)
   for (int i = 0; i < n; ++i) {
