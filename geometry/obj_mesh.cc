@@ -155,15 +155,18 @@ ObjFile ParseObj(const std::string& text, const std::string& file) {
     std::string rest;
     std::getline(statement, rest);
     ObjLineReader values(rest, file + ":" + std::to_string(number));
+    // Coordinates are kept in single precision, as the OBJ reader before this one (tinyobjloader)
+    // kept them: the same file gives the same patches and results as before (the compressed-F
+    // solve in tests/apps/cli_test.cc moves by 10% on room.json's column otherwise).
     if (keyword == "v") {  // x y z, optionally w or a colour r g b
       const std::vector<double> xyz = values.Numbers(3, 6, kMaxCoordinate);
-      obj.vertices.emplace_back(xyz[0], xyz[1], xyz[2]);
+      obj.vertices.emplace_back(float(xyz[0]), float(xyz[1]), float(xyz[2]));
     } else if (keyword == "vt") {  // u, optionally v and w; [0, 1] (no repeating textures)
       const std::vector<double> uv = values.Numbers(1, 3, 1.0 + kUvSlack);
       if (uv[0] < -kUvSlack || (uv.size() > 1 && uv[1] < -kUvSlack)) {
         throw values.Error("texture coordinates must be in [0, 1]");
       }
-      obj.texcoords.emplace_back(uv[0], uv.size() > 1 ? uv[1] : 0.0);
+      obj.texcoords.emplace_back(float(uv[0]), float(uv.size() > 1 ? uv[1] : 0.0));
     } else if (keyword == "vn") {
       values.Numbers(3, 3, kMaxCoordinate);
       ++obj.normal_count;
