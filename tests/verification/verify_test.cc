@@ -495,10 +495,25 @@ TEST(Verify, BadInputGetsOneLineAndWritesNothing) {
   const std::filesystem::path rig = WriteRig(dir, "rig", 0.0, 1.0);
   const std::filesystem::path solution = Compensate(dir, scene, rig, "solution");
   std::filesystem::create_directories(dir / "empty");
+  // rig.json values of the wrong type: its typed reader (ReadRigFile) refuses them by key.
+  const auto typed_rig = [&](const std::string& name, const nlohmann::json& patch) {
+    const std::filesystem::path copy = dir / name;
+    std::filesystem::copy(rig, copy);
+    nlohmann::json json = ReadJson(rig / "rig.json");
+    json.merge_patch(patch);
+    dir.Write(name + "/rig.json", json.dump(2));
+    return copy.string();
+  };
   struct Case {
     std::string arguments, expected;
   };
   const Case cases[] = {
+      {typed_rig("bool_scale", {{"camera", {{"colour", {{"scale", true}}}}}}) + " " +
+           solution.string() + " --camera " + kCamera,
+       "camera.colour.scale"},
+      {typed_rig("string_model", {{"camera", {{"model", 3}}}}) + " " + solution.string() +
+           " --camera " + kCamera,
+       "camera.model"},
       {(dir / "empty").string() + " " + solution.string() + " --camera " + kCamera,
        (dir / "empty/rig.json").string() + ": file not found"},
       {rig.string() + " " + (dir / "empty").string() + " --camera " + kCamera,
