@@ -40,8 +40,9 @@ namespace {
 std::string DescribeScene(const GeometryStage& stage) {
   std::string text = DescribeGeometry(stage);
   for (const Projector& projector : ReadProjectors(stage.scene)) {
-    text += fmt::format("  projector {:<12} {}x{}  {}\n", projector.name, projector.geometry.width(),
-                        projector.geometry.height(), projector.model_path.string());
+    const ProjectorGeometry& geometry = projector.geometry;
+    text += fmt::format("  projector {:<12} {}x{}  {}\n", projector.name, geometry.width(),
+                        geometry.height(), projector.model_path.string());
   }
   return text;
 }

@@ -170,14 +170,16 @@ NpyArray ReadNpy(const std::filesystem::path& path) {
     if (item.find_first_not_of(' ') == std::string::npos) continue;
     char* end = nullptr;
     const long long extent = std::strtoll(item.c_str(), &end, 10);
-    if (end == item.c_str() || item.find_first_not_of(' ', end - item.c_str()) != std::string::npos ||
-        extent < 0 || (extent > 0 && count > max_count / static_cast<size_t>(extent))) {
+    if (end == item.c_str() ||
+        item.find_first_not_of(' ', end - item.c_str()) != std::string::npos || extent < 0 ||
+        (extent > 0 && count > max_count / static_cast<size_t>(extent))) {
       throw fail("shape: '" + item + "' is not a dimension that fits the file");
     }
     array.shape.push_back(extent);
     count *= static_cast<size_t>(extent);
   }
-  if (array.shape.empty() || array.shape.size() > 2) throw fail("shape: must have 1 or 2 dimensions");
+  if (array.shape.empty() || array.shape.size() > 2)
+    throw fail("shape: must have 1 or 2 dimensions");
   const size_t data_offset = header_start + header_length;
   if (bytes.size() != data_offset + 8 * count) throw fail("size mismatch");
   array.values.resize(count);

@@ -48,7 +48,8 @@ std::array<int, 2> ParseSize(const std::string& option, const std::string& text,
   const std::string parts[2] = {text.substr(0, x), text.substr(x + 1)};
   for (int k = 0; k < 2; ++k) {
     const std::string& part = parts[k];
-    if (part.empty() || part.size() > 9 || part.find_first_not_of("0123456789") != std::string::npos) {
+    if (part.empty() || part.size() > 9 ||
+        part.find_first_not_of("0123456789") != std::string::npos) {
       throw error;
     }
     sides[k] = std::stoi(part);

@@ -1,8 +1,7 @@
 #include "calibration/capture_stage.h"
 
-#include <set>
-
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include "base/io.h"
 #include "calibration/camera_response.h"
@@ -102,12 +101,14 @@ bool InGammaRange(double gamma) { return gamma > 0.0 && gamma <= 10.0; }  // fal
 bool CaptureStageOptions::Check(std::string* why) const {
   const std::set<std::string> sequences = {"graycode", "structured_light", "photometric", "verify"};
   if (!sequences.count(sequence)) {
-    return Fail(why, "--sequence: '" + sequence + "': graycode, structured_light, photometric or verify");
+    return Fail(
+        why, "--sequence: '" + sequence + "': graycode, structured_light, photometric or verify");
   }
   if (axes != "both" && axes != "columns" && axes != "rows") {
     return Fail(why, "--axes: '" + axes + "': both, columns or rows");
   }
-  if (projector < 0) return Fail(why, "--projector: must be >= 0, got " + std::to_string(projector));
+  if (projector < 0)
+    return Fail(why, "--projector: must be >= 0, got " + std::to_string(projector));
   if (gain && !(*gain >= 0.0 && *gain <= 1e6)) return Fail(why, "--gain: must be in [0, 1e6]");
   if (!InGammaRange(pattern_gamma)) return Fail(why, "--pattern-gamma: must be in (0, 10]");
   if (!InGammaRange(projector_gamma)) return Fail(why, "--projector-gamma: must be in (0, 10]");

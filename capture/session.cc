@@ -290,7 +290,8 @@ CaptureSummary RunCaptureSession(const CaptureSessionOptions& options,
   const CameraInfo info = camera.Info();
   const CameraSettings settings = camera.Settings();
   nlohmann::json manifest = ResumableManifest(options, sequence, info, settings);
-  if (manifest.is_null()) manifest = NewManifest(sequence, options.sequencer, info, settings, display);
+  if (manifest.is_null())
+    manifest = NewManifest(sequence, options.sequencer, info, settings, display);
   std::error_code error;
   for (const char* sub : {"patterns", "frames"}) {
     fs::create_directories(directory / sub, error);
@@ -393,8 +394,7 @@ cv::Mat CaptureSessionData::Mean(int pattern, int exposure) const {
       manifest_["patterns"][pattern]["captured"]["exposures"].at(exposure);
   const fs::path file = directory_ / entry.at("file").get<std::string>();
   const cv::Mat png = ReadImage(file, cv::IMREAD_UNCHANGED);
-  if (png.depth() != CV_16U)
-    throw IoError(file.string() + ": missing or not a 16-bit PNG");
+  if (png.depth() != CV_16U) throw IoError(file.string() + ": missing or not a 16-bit PNG");
   cv::Mat mean;
   png.convertTo(mean, CV_32F, 1.0 / entry.at("png_scale").get<double>());
   return mean;
@@ -409,8 +409,7 @@ cv::Mat CaptureSessionData::Hdr(int pattern) const {
   if (hdr.is_null()) return cv::Mat();
   const fs::path file = directory_ / hdr.get<std::string>();
   const cv::Mat image = ReadImage(file, cv::IMREAD_UNCHANGED);
-  if (image.depth() != CV_32F)
-    throw IoError(file.string() + ": missing or not a float TIFF");
+  if (image.depth() != CV_32F) throw IoError(file.string() + ": missing or not a float TIFF");
   return image;
 }
 

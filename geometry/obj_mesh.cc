@@ -83,8 +83,8 @@ class ObjLineReader {
       ObjCorner corner;
       corner.vertex = Index(parts[0], "vertex", defined.vertices.size(), file.vertices.size());
       if (parts.size() > 1 && !parts[1].empty()) {
-        corner.texcoord = Index(parts[1], "texture coordinate", defined.texcoords.size(),
-                                file.texcoords.size());
+        corner.texcoord =
+            Index(parts[1], "texture coordinate", defined.texcoords.size(), file.texcoords.size());
       }
       if (parts.size() > 2) {
         corner.normal = Index(parts[2], "normal", defined.normal_count, file.normal_count);
@@ -107,8 +107,8 @@ class ObjLineReader {
     const long long resolved = value > 0 ? value - 1 : static_cast<long long>(defined) + value;
     if (errno == ERANGE || value == 0 || resolved < 0 ||
         resolved >= static_cast<long long>(total)) {
-      throw Error(named + " is out of range (the file has " + std::to_string(total) + " " +
-                  what + (total == 1 ? "" : "s") + ")");
+      throw Error(named + " is out of range (the file has " + std::to_string(total) + " " + what +
+                  (total == 1 ? "" : "s") + ")");
     }
     return static_cast<int>(resolved);
   }
@@ -208,8 +208,8 @@ void LoadObjMesh(const std::filesystem::path& path, double weld_tolerance, Surfa
       uvs.push_back(corner.texcoord >= 0 ? obj.texcoords[corner.texcoord] : Vec2(0.0, 0.0));
     }
     std::string why;
-    if (!CheckPlanarConvexPolygon(corners.data(), static_cast<int>(corners.size()),
-                                  weld_tolerance, &why)) {
+    if (!CheckPlanarConvexPolygon(corners.data(), static_cast<int>(corners.size()), weld_tolerance,
+                                  &why)) {
       throw IoError(file + ":" + std::to_string(face.line) + ": " + why);
     }
     for (size_t k = 1; k + 1 < corners.size(); ++k) {  // fan over a convex planar face

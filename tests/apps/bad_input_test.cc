@@ -2,6 +2,7 @@
 // line "procam: error: ..." on stderr naming the file, key or option, exit code 1, no crash, no
 // hang, and nothing written. The readers' own tests check each case's message; these check
 // that the command line keeps the promise (docs/faults.md).
+#include <gtest/gtest.h>
 #include <sys/stat.h>
 
 #include <algorithm>
@@ -10,8 +11,6 @@
 #include <string>
 #include <vector>
 
-#include <gtest/gtest.h>
-
 #include "tests/testing/testing.h"
 
 namespace procam {
@@ -19,7 +18,8 @@ namespace {
 
 using testing::CommandRun;
 
-const char* kQuad = R"({"name": "floor", "quad": [[0,0,0],[2,0,0],[2,2,0],[0,2,0]], "reflectance": 0.5, "desired": [0.5, 0.5, 0.5]})";
+const char* kQuad =
+    R"({"name": "floor", "quad": [[0,0,0],[2,0,0],[2,2,0],[0,2,0]], "reflectance": 0.5, "desired": [0.5, 0.5, 0.5]})";
 
 std::string Scene(const std::string& surface, const std::string& projectors = "") {
   return R"({"patches": 16, "surfaces": [)" + surface + "]" +
@@ -29,7 +29,8 @@ std::string Scene(const std::string& surface, const std::string& projectors = ""
 // A pinhole projector model 64x48 at (1, 1, 1.5) looking down, with `extrinsics` if given.
 std::string Model(const std::string& extrinsics = "3.14159265, 0, 0, 1, -1, 1.5") {
   return "{ 'lensmodel': 'LENSMODEL_PINHOLE', 'intrinsics': [ 60, 60, 31.5, 23.5 ], "
-         "'imagersize': [ 64, 48 ], 'extrinsics': [ " + extrinsics + " ] }\n";
+         "'imagersize': [ 64, 48 ], 'extrinsics': [ " +
+         extrinsics + " ] }\n";
 }
 
 const char* kProjector = R"({"name": "p", "model": "p.cameramodel", "max": 1})";
@@ -38,7 +39,8 @@ const char* kProjector = R"({"name": "p", "model": "p.cameramodel", "max": 1})";
 void ExpectOneErrorLine(const std::string& arguments, const std::string& expected) {
   const CommandRun run = testing::RunProcamStderr(arguments);
   EXPECT_EQ(run.exit_code, 1) << arguments << "\n" << run.output;
-  EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << arguments << "\n" << run.output;
+  EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << arguments << "\n"
+                                                                       << run.output;
   EXPECT_EQ(run.output.rfind("procam: error: ", 0), 0u) << arguments << "\n" << run.output;
   EXPECT_NE(run.output.find(expected), std::string::npos) << arguments << "\n" << run.output;
 }
@@ -59,8 +61,10 @@ TEST(BadInput, OptionValuesThatDoNotParseAreOneErrorLine) {
 // Values that parse but make no sense are refused before a camera is opened or a file written.
 TEST(BadInput, CaptureOptionsOutOfRangeAreRefusedBeforeAnythingIsWritten) {
   testing::TempDir dir;
-  const std::string capture = "capture --camera test:loopback --projector-size 32x24 --frames 1 "
-                              "--settle-ms 0 --out " + (dir / "session").string() + " --sequence ";
+  const std::string capture =
+      "capture --camera test:loopback --projector-size 32x24 --frames 1 "
+      "--settle-ms 0 --out " +
+      (dir / "session").string() + " --sequence ";
   const std::vector<std::pair<std::string, std::string>> cases = {
       {"graycode --projector -1", "--projector: must be >= 0"},
       {"structured_light --pattern-gamma 0", "--pattern-gamma"},
@@ -91,6 +95,19 @@ TEST(BadInput, ChessboardCornersAreBounded) {
   EXPECT_FALSE(std::filesystem::exists(dir / "rig"));
 }
 
+// A corrupt chessboard photo: libpng's own line is silenced, procam's names the file.
+TEST(BadInput, CorruptPhotosAreOneErrorLine) {
+  testing::TempDir dir;
+  std::filesystem::create_directories(dir / "photos");
+  dir.Write("photos/a.png", std::string("\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR\0\0\0\x10\0\0\0\x10"
+                                        "\x08\x02\0\0\0\xde\xad\xbe\xef junk",
+                                        34));
+  ExpectOneErrorLine("calibrate camera " + (dir / "photos").string() + " --corners 9x6 --out " +
+                         (dir / "rig").string(),
+                     "a.png: not a readable image");
+  EXPECT_FALSE(std::filesystem::exists(dir / "rig"));
+}
+
 // scene info reads the projectors as every other command does: their names, photometry and
 // models, so a scene it accepts is one compensate and project accept.
 TEST(BadInput, SceneInfoChecksTheProjectors) {
@@ -102,7 +119,8 @@ TEST(BadInput, SceneInfoChecksTheProjectors) {
       {R"("")", "projectors[0]"},
       {R"({"name": "p", "model": "p.cameramodel", "max": 1, "mixing": [[1,0,0],[0,1,0]]})",
        "projectors[0].mixing"},
-      {R"({"name": "p", "model": "p.cameramodel", "max": 1, "lut": ["a", "b"]})", "projectors[0].lut"},
+      {R"({"name": "p", "model": "p.cameramodel", "max": 1, "lut": ["a", "b"]})",
+       "projectors[0].lut"},
       {R"({"name": "p", "model": "empty.cameramodel", "max": 1})", "empty.cameramodel"},
       {R"({"name": "p", "model": "truncated.cameramodel", "max": 1})", "truncated.cameramodel"},
       {R"({"name": "p", "model": "p.cameramodel", "max": -1})", "projectors[0].max"},
@@ -149,12 +167,15 @@ TEST(BadInput, MeshesAndTexturesAreReadSafely) {
   ASSERT_EQ(::mkfifo((dir / "fifo.obj").c_str(), 0600), 0);
   std::filesystem::create_symlink("/dev/zero", dir / "zero.png");
   // A PNG signature and header chunk with a wrong CRC, then junk.
-  dir.Write("corrupt.png", std::string("\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR\0\0\0\x10\0\0\0\x10\x08\x02\0\0\0"
-                                       "\xde\xad\xbe\xef junk junk junk", 45));
+  dir.Write("corrupt.png",
+            std::string("\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR\0\0\0\x10\0\0\0\x10\x08\x02\0\0\0"
+                        "\xde\xad\xbe\xef junk junk junk",
+                        45));
   const std::string mesh = R"({"mesh": "NAME", "reflectance": 0.5, "desired": [1,1,1]})";
-  const std::string texture = R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": 0.5, "desired": {"texture": "NAME"}})";
+  const std::string texture =
+      R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": 0.5, "desired": {"texture": "NAME"}})";
   const std::vector<std::pair<std::string, std::string>> cases = {
-      {mesh, "big.obj"}, {mesh, "vt.obj"}, {mesh, "fifo.obj"},
+      {mesh, "big.obj"},     {mesh, "vt.obj"},         {mesh, "fifo.obj"},
       {texture, "zero.png"}, {texture, "corrupt.png"},
   };
   for (const auto& [surface, name] : cases) {
@@ -162,7 +183,8 @@ TEST(BadInput, MeshesAndTexturesAreReadSafely) {
     text.replace(text.find("NAME"), 4, name);
     const auto scene = dir.Write("scene.json", Scene(text));
     ExpectOneErrorLine("scene info " + scene.string(), name);
-    ExpectOneErrorLine("compensate " + scene.string() + " --out " + (dir / "solution").string(), name);
+    ExpectOneErrorLine("compensate " + scene.string() + " --out " + (dir / "solution").string(),
+                       name);
   }
   EXPECT_FALSE(std::filesystem::exists(dir / "solution"));
 }

@@ -64,7 +64,8 @@ TEST(CameraModelFile, RefusesAbsurdNumbers) {
     return "{ 'lensmodel': 'LENSMODEL_PINHOLE', 'intrinsics': [" + intrinsics +
            "], 'imagersize': [" + size + "], 'extrinsics': [" + extrinsics + "] }\n";
   };
-  const std::string good_k = "100, 100, 50, 40", good_size = "100, 80", good_rt = "0, 0, 0, 1, 2, 3";
+  const std::string good_k = "100, 100, 50, 40", good_size = "100, 80",
+                    good_rt = "0, 0, 0, 1, 2, 3";
   struct Case {
     std::string text, expected;
   };
@@ -72,7 +73,8 @@ TEST(CameraModelFile, RefusesAbsurdNumbers) {
       {model(good_k, good_size, "0, 0, 0, 0, 0, 1e308"), "extrinsics: translation further than"},
       {model(good_k, good_size, "1e308, 0, 0, 0, 0, 0"), "extrinsics: rotation vector longer than"},
       {model("1e308, 100, 50, 40", good_size, good_rt), "intrinsics[0]: must be finite"},
-      {model("-100, 100, 50, 40", good_size, good_rt), "intrinsics: focal lengths fx, fy must be in (0, "},
+      {model("-100, 100, 50, 40", good_size, good_rt),
+       "intrinsics: focal lengths fx, fy must be in (0, "},
       {model(good_k, "0, 80", good_rt), "not a valid mrcal .cameramodel"},  // libmrcal's check
       {model(good_k, "100000, 80", good_rt), "imagersize: each side must be in [1, 65536]"},
   };
@@ -87,7 +89,8 @@ TEST(CameraModelFile, RefusesAbsurdNumbers) {
           << error.what();
     }
   }
-  EXPECT_NO_THROW(ReadCameraModelFile(dir.Write("m.cameramodel", model(good_k, good_size, good_rt))));
+  EXPECT_NO_THROW(
+      ReadCameraModelFile(dir.Write("m.cameramodel", model(good_k, good_size, good_rt))));
 }
 
 TEST(Rt, PoseRoundTripAndMrcalConvention) {

@@ -132,8 +132,7 @@ TEST(CaptureCli, ResumeRecapturesAFrameThatDoesNotDecode) {
   ASSERT_EQ(Procam(command).exit_code, 0);
   const nlohmann::json manifest = nlohmann::json::parse(ReadFile(dir / "flat" / "session.json"));
   const std::filesystem::path frame =
-      dir / "flat" /
-      manifest["patterns"][1]["captured"]["exposures"][0]["file"].get<std::string>();
+      dir / "flat" / manifest["patterns"][1]["captured"]["exposures"][0]["file"].get<std::string>();
   WriteFileAtomically(frame, "\x89PNG\r\n junk, not a picture");
   const CommandRun resumed = Procam(command);
   EXPECT_EQ(resumed.exit_code, 0) << resumed.output;

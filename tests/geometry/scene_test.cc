@@ -1,9 +1,9 @@
 #include "geometry/scene.h"
 
+#include <gtest/gtest.h>
 #include <sys/stat.h>
 
 #include <opencv2/imgcodecs.hpp>
-#include <gtest/gtest.h>
 
 #include "base/io.h"
 #include "tests/testing/testing.h"
@@ -115,7 +115,8 @@ TEST(LoadObjMesh, RefusesIndicesAndNumbersThatMakeNoSense) {
       {square + "f 1 2 0\n", "vertex index '0' is out of range"},
       {square + "f 1 2 -5\n", "vertex index '-5' is out of range"},
       {square + "f 1 2 3x\n", "vertex index '3x' is not an integer"},
-      {square + "f 1/1 2/2 3/3\n", "m.obj:5: texture coordinate index '1' is out of range (the file has 0"},
+      {square + "f 1/1 2/2 3/3\n",
+       "m.obj:5: texture coordinate index '1' is out of range (the file has 0"},
       {square + uv + "f 1/1 2/2 3/5\n", "texture coordinate index '5' is out of range"},
       {square + "vn 0 0 1\nf 1//1 2//1 3//2\n", "m.obj:6: normal index '2' is out of range"},
       {square + "f 1 2\n", "m.obj:5: face with fewer than 3 corners (2)"},
@@ -136,8 +137,8 @@ TEST(LoadObjMesh, RefusesIndicesAndNumbersThatMakeNoSense) {
       LoadObjMesh(dir.Write("m.obj", c.obj), 1e-3, &surface);
       ADD_FAILURE() << "accepted:\n" << c.obj;
     } catch (const IoError& error) {
-      EXPECT_NE(std::string(error.what()).find(c.expected), std::string::npos)
-          << c.obj << "\n" << error.what();
+      EXPECT_NE(std::string(error.what()).find(c.expected), std::string::npos) << c.obj << "\n"
+                                                                               << error.what();
     }
   }
   // Negative indices count back from the vertices defined so far; a face may name vertices
@@ -154,13 +155,14 @@ TEST(LoadScene, RefusesMeshesAndTexturesThatAreNotRegularFiles) {
   ASSERT_EQ(::mkfifo((dir / "fifo").c_str(), 0600), 0);
   std::filesystem::create_symlink("/dev/zero", dir / "zero");
   for (const char* name : {"fifo", "zero"}) {
-    const std::string mesh = LoadError(
-        dir, SceneText(R"({"mesh": ")" + std::string(name) +
-                       R"(", "reflectance": 0.5, "desired": [1,1,1]})"));
+    const std::string mesh =
+        LoadError(dir, SceneText(R"({"mesh": ")" + std::string(name) +
+                                 R"(", "reflectance": 0.5, "desired": [1,1,1]})"));
     EXPECT_NE(mesh.find(std::string(name) + ": not a regular file"), std::string::npos) << mesh;
     const std::string texture = LoadError(
         dir, SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": 0.5, )"
-                       R"("desired": {"texture": ")" + std::string(name) + R"("}})"));
+                       R"("desired": {"texture": ")" +
+                       std::string(name) + R"("}})"));
     EXPECT_NE(texture.find("desired.texture: "), std::string::npos) << texture;
     EXPECT_NE(texture.find(std::string(name) + ": not a regular file"), std::string::npos)
         << texture;
