@@ -50,11 +50,7 @@ void CalibrateAll(const CalibrateAllArguments& args) {
   options.frames = args.frames;
   options.settle_ms = args.settle_ms;
   options.exposures_us = args.exposures_us;
-  options.levels.clear();
-  for (const double level : ParseNumberList("--levels", args.levels, "8-bit levels, comma-separated")) {
-    if (level != std::floor(level)) throw IoError("--levels: expected 8-bit levels, got '" + args.levels + "'");
-    options.levels.push_back(static_cast<int>(level));
-  }
+  options.levels = ParseIntegerList("--levels", args.levels, "8-bit levels, comma-separated");
   options.progress = PrintProgress();
   RunCalibrateAll(options);
 }

@@ -48,9 +48,10 @@ void AddPhotometricStageOptions(CLI::App* command, PhotometricStageOptions* opti
   command->add_option("--camera-scale", options->camera_scale,
                       "Camera value per unit exitance in the scene's units: a number, R,G,B, or "
                       "the synthetic camera's URI (its exposure and gain from session.json)");
-  command->add_option("--camera-black", options->camera_black,
-                      "Camera black level in digital numbers, subtracted before the fit "
-                      "(default 0, or the synthetic URI's black)");
+  command->add_option_function<double>(
+      "--camera-black", [options](double black) { options->camera_black = black; },
+      "Camera black level in digital numbers, subtracted before the fit "
+      "(default 0, or the synthetic URI's black)");
   command->add_option("--response", options->response, "What rig.json gets: gamma or lut")
       ->check(CLI::IsMember({"gamma", "lut"}))
       ->capture_default_str();

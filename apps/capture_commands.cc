@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <nlohmann/json.hpp>
 
 #include "apps/command_line.h"
@@ -30,7 +31,7 @@ struct CaptureArguments {
   std::string projector_size;  // empty: 1024x768, or the synthetic projector's own
   int projector = 0;           // synthetic cameras: the rig projector that shows the patterns
   SequencerOptions sequencer;
-  double gain = -1.0;  // < 0: leave the camera's gain
+  std::optional<double> gain;  // unset: leave the camera's gain
   std::string axes = "both";
   std::vector<int> levels = PhotometricOptions().levels;
   std::string channels = PhotometricOptions().channels;
@@ -40,15 +41,10 @@ struct CaptureArguments {
   std::string camera_response;  // camera_response.json: linearise before the HDR merge
 };
 
-cv::Size ParseSize(const std::string& text) {
-  int width = 0, height = 0;
-  char separator = 0;
-  if (std::sscanf(text.c_str(), "%d%c%d", &width, &separator, &height) != 3 || separator != 'x' ||
-      width <= 0 || height <= 0) {
-    throw std::invalid_argument("--projector-size: expected WIDTHxHEIGHT, e.g. 1920x1080, got '" +
-                                text + "'");
-  }
-  return {width, height};
+cv::Size ProjectorSize(const std::string& text) {
+  const std::array<int, 2> size =
+      ParseSize("--projector-size", text, "WIDTHxHEIGHT, e.g. 1920x1080", 1, 16384);
+  return {size[0], size[1]};
 }
 
 // --display: memory (nothing but test cameras sees it), else a projector's monitor.
@@ -72,7 +68,7 @@ void RunCapture(const CaptureArguments& args) {
   options.out = args.out;
   options.display = CaptureDisplay(args.display, args.camera);
   options.projector = args.projector;
-  if (!args.projector_size.empty()) options.projector_size = ParseSize(args.projector_size);
+  if (!args.projector_size.empty()) options.projector_size = ProjectorSize(args.projector_size);
   options.sequencer = args.sequencer;
   options.gain = args.gain;
   options.axes = args.axes;
@@ -169,8 +165,9 @@ void AddCaptureCommands(CLI::App& app) {
   capture->add_option("--camera-response", args->camera_response,
                       "camera_response.json (procam calibrate response): linearise a camera that "
                       "is not linear before the HDR merge");
-  capture->add_option("--gain", args->gain,
-                      "Camera gain (dB for Aravis/test cameras, driver units for V4L2)");
+  capture->add_option_function<double>(
+      "--gain", [args](double gain) { args->gain = gain; },
+      "Camera gain (dB for Aravis/test cameras, driver units for V4L2)");
   capture
       ->add_option("--timeout-ms", args->sequencer.grab_timeout_ms,
                    "Grab timeout per frame, milliseconds")
@@ -190,8 +187,12 @@ void AddCaptureCommands(CLI::App& app) {
   capture->add_option("--axes", args->axes, "graycode, structured_light: columns, rows or both")
       ->check(CLI::IsMember({"both", "columns", "rows"}))
       ->capture_default_str();
-  capture->add_option("--levels", args->levels, "photometric: 8-bit levels, comma-separated")
-      ->delimiter(',');
+  capture->add_option_function<std::string>(
+      "--levels",
+      [args](const std::string& text) {
+        args->levels = ParseIntegerList("--levels", text, "8-bit levels, comma-separated");
+      },
+      "photometric: 8-bit levels, comma-separated");
   capture->add_option("--channels", args->channels, "photometric: any of r, g, b, w")
       ->capture_default_str();
   capture

@@ -77,13 +77,11 @@ std::string DescribeGeometry(const GeometryStage& stage) {
 }
 
 ChessboardSpec ParseChessboard(const std::string& corners, double square) {
+  const std::array<int, 2> sides =
+      ParseSize("--corners", corners, "COLUMNSxROWS of inner corners, e.g. 9x6", 2, 100);
   ChessboardSpec board;
-  char separator = 0;
-  if (std::sscanf(corners.c_str(), "%d%c%d", &board.corners_x, &separator, &board.corners_y) != 3 ||
-      separator != 'x') {
-    throw std::invalid_argument(
-        "--corners: expected COLUMNSxROWS of inner corners, e.g. 9x6, got '" + corners + "'");
-  }
+  board.corners_x = sides[0];
+  board.corners_y = sides[1];
   board.square_size = square;
   return board;
 }

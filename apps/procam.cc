@@ -3,12 +3,27 @@
 
 #include <cstdio>
 #include <exception>
+#include <string>
 
 #include <CLI/CLI.hpp>
 
 #include "apps/commands.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "procam/config.h"
+
+namespace {
+
+// Every error is one line on stderr: a message that spans lines (a library's) is joined.
+int PrintError(const char* message) {
+  std::string line = message;
+  for (char& c : line) {
+    if (c == '\n' || c == '\r') c = ' ';
+  }
+  std::fprintf(stderr, "procam: error: %s\n", line.c_str());
+  return 1;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"procam: make a white room look like a desired scene with projectors, "
@@ -30,10 +45,11 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {
-    return app.exit(error);
+    // --help and --version print and succeed; a bad option is an error like any other: one line.
+    if (error.get_exit_code() == 0) return app.exit(error);
+    return PrintError(error.what());
   } catch (const std::exception& error) {
-    std::fprintf(stderr, "procam: error: %s\n", error.what());
-    return 1;
+    return PrintError(error.what());
   }
   return 0;
 }

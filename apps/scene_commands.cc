@@ -15,6 +15,7 @@
 #include "apps/commands.h"
 #include "calibration/calibrate_all_stage.h"
 #include "capture/devices.h"
+#include "projection/projector.h"
 #include "projection/stage.h"
 #include <fmt/ranges.h>
 #include "compensation/stage.h"
@@ -33,6 +34,18 @@
 
 namespace procam {
 namespace {
+
+// The scene's geometry and its projectors, each read and checked in full (models included), so
+// that a scene `scene info` accepts is one every other command accepts.
+std::string DescribeScene(const GeometryStage& stage) {
+  std::string text = DescribeGeometry(stage);
+  for (const Projector& projector : ReadProjectors(stage.scene)) {
+    const ProjectorGeometry& geometry = projector.geometry;
+    text += fmt::format("  projector {:<12} {}x{}  {}\n", projector.name, geometry.width(),
+                        geometry.height(), projector.model_path.string());
+  }
+  return text;
+}
 
 struct SceneArguments {
   std::string scene;
@@ -174,7 +187,7 @@ void AddSceneCommands(CLI::App& app) {
   info->add_option("--patches", args->patches, "Override the scene's target patch count");
   info->callback([args] {
     const GeometryStage stage = RunGeometryStage(args->scene, GeometryArguments(args->patches));
-    std::cout << DescribeGeometry(stage);
+    std::cout << DescribeScene(stage);
   });
 
   CLI::App* export_cmd = scene->add_subcommand("export", "Write the problem as NumPy .npy files and problem.json");
@@ -186,8 +199,9 @@ void AddSceneCommands(CLI::App& app) {
       ->capture_default_str();
   export_cmd->callback([args] {
     const GeometryStage stage = RunGeometryStage(args->scene, GeometryArguments(args->patches));
+    const std::string description = DescribeScene(stage);  // checks the projectors first
     ExportGeometryProblem(stage, args->alpha, args->out);
-    std::cout << DescribeGeometry(stage) << "exported to " << args->out << "\n";
+    std::cout << description << "exported to " << args->out << "\n";
   });
 }
 

@@ -2,7 +2,6 @@
 
 #include <cmath>
 #include <cstdio>
-#include <mutex>
 #include <stdexcept>
 
 #include "base/io.h"
@@ -32,30 +31,62 @@ struct CameraModelDeleter {
 using ParsedCameraModel = std::unique_ptr<mrcal_cameramodel_t, CameraModelDeleter>;
 
 // libmrcal prints its own parser diagnostics on stderr before returning null; procam reports
-// one line of its own instead, so C's stderr stream points at /dev/null around the call (one
-// parse at a time: the stream is process-wide).
+// one line of its own instead.
 ParsedCameraModel ParseCameraModel(const std::string& text) {
-  static std::mutex mutex;
-  const std::lock_guard<std::mutex> lock(mutex);
-  std::fflush(stderr);
-  FILE* saved = stderr;
-  FILE* null = std::fopen("/dev/null", "w");
-  if (null) stderr = null;
-  ParsedCameraModel model(
+  const SilencedStderr quiet;
+  return ParsedCameraModel(
       mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
-  if (null) {
-    stderr = saved;
-    std::fclose(null);
+}
+
+// Numbers that make no sense are refused here, before they reach mrcal, Embree or a solver:
+// a pose further than kMaxTranslation metres away or turned by more than kMaxRotation radians
+// (a Rodrigues vector's length), non-finite intrinsics, focal lengths outside (0, kMaxFocal]
+// pixels, principal points or distortions beyond kMaxIntrinsic, images beyond kMaxImagerSide.
+constexpr double kMaxTranslation = 1e6;
+constexpr double kMaxRotation = 100.0;
+constexpr double kMaxFocal = 1e8;
+constexpr double kMaxIntrinsic = 1e8;
+constexpr unsigned kMaxImagerSide = 65536;
+
+// Why the model's numbers are absurd, or "" when they are not.
+std::string CheckModelNumbers(const mrcal_cameramodel_t& model, int intrinsics_count) {
+  const double* rt = model.rt_cam_ref;
+  for (int k = 0; k < 6; ++k) {
+    if (!std::isfinite(rt[k])) return "extrinsics: must be finite, got " + FormatNumber(rt[k]);
   }
-  return model;
+  if (Vec3(rt[0], rt[1], rt[2]).norm() > kMaxRotation) {
+    return "extrinsics: rotation vector longer than " + FormatNumber(kMaxRotation) + " radians";
+  }
+  if (Vec3(rt[3], rt[4], rt[5]).norm() > kMaxTranslation) {
+    return "extrinsics: translation further than " + FormatNumber(kMaxTranslation) + " metres";
+  }
+  for (int k = 0; k < intrinsics_count; ++k) {
+    const double value = model.intrinsics[k];
+    if (!std::isfinite(value) || std::abs(value) > kMaxIntrinsic) {
+      return "intrinsics[" + std::to_string(k) + "]: must be finite, at most " +
+             FormatNumber(kMaxIntrinsic) + " in magnitude, got " + FormatNumber(value);
+    }
+  }
+  const bool core = mrcal_lensmodel_metadata(&model.lensmodel).has_core;
+  if (core && intrinsics_count >= 2 &&
+      !(model.intrinsics[0] > 0.0 && model.intrinsics[0] <= kMaxFocal &&
+        model.intrinsics[1] > 0.0 && model.intrinsics[1] <= kMaxFocal)) {
+    return "intrinsics: focal lengths fx, fy must be in (0, " + FormatNumber(kMaxFocal) + "]";
+  }
+  for (const unsigned side : model.imagersize) {
+    if (side < 1 || side > kMaxImagerSide) {
+      return "imagersize: each side must be in [1, " + std::to_string(kMaxImagerSide) + "]";
+    }
+  }
+  return "";
 }
 
 }  // namespace
 
 CameraModel ReadCameraModelFile(const std::filesystem::path& path) {
   const std::string file = path.string();
-  if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
-  const ParsedCameraModel parsed = ParseCameraModel(ReadFile(path));
+  // A .cameramodel is a few kilobytes (splined models: some hundred numbers).
+  const ParsedCameraModel parsed = ParseCameraModel(ReadFile(path, uintmax_t{16} << 20));
   if (!parsed)
     throw IoError(file + ": not a valid mrcal .cameramodel (libmrcal could not parse it)");
   CameraModel model;
@@ -65,6 +96,8 @@ CameraModel ReadCameraModelFile(const std::filesystem::path& path) {
   }
   model.lens_model = name;
   const int count = mrcal_lensmodel_num_params(&parsed->lensmodel);
+  const std::string why = CheckModelNumbers(*parsed, count);
+  if (!why.empty()) throw IoError(file + ": " + why);
   model.intrinsics.assign(parsed->intrinsics, parsed->intrinsics + count);
   model.width = static_cast<int>(parsed->imagersize[0]);
   model.height = static_cast<int>(parsed->imagersize[1]);

@@ -1,6 +1,7 @@
 #pragma once
-// Pictures procam writes: 8-bit or 16-bit PNG through OpenCV, atomically (io.h).
+// Pictures procam writes (8-bit or 16-bit PNG through OpenCV, atomically, io.h) and reads.
 
+#include <cstdint>
 #include <filesystem>
 #include <opencv2/core/mat.hpp>
 
@@ -9,5 +10,15 @@ namespace procam {
 // Encodes `image` (8/16-bit, 1 or 3 channels, OpenCV's B, G, R order) as PNG and writes it
 // through WriteFileAtomically. Throws IoError naming the file.
 void WritePng(const std::filesystem::path& path, const cv::Mat& image);
+
+// The largest image file ReadImage reads unless told otherwise: 1 GiB.
+constexpr uintmax_t kMaxImageBytes = uintmax_t{1} << 30;
+
+// Decodes an image file as cv::imread does with `flags` (cv::ImreadModes), after checking that
+// it is a regular file of at most `max_bytes` (io.h CheckRegularFile), with the decoders' own
+// messages (libpng's, OpenCV's) silenced. Throws IoError naming the file: not found, not a
+// regular file, too large, "not a readable image".
+cv::Mat ReadImage(const std::filesystem::path& path, int flags,
+                  uintmax_t max_bytes = kMaxImageBytes);
 
 }  // namespace procam

@@ -1,10 +1,13 @@
 #include "base/io.h"
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <mutex>
 #include <random>
 #include <sstream>
 
@@ -73,12 +76,51 @@ void WriteFileAtomically(const std::filesystem::path& path, const std::string& b
   }
 }
 
-std::string ReadFile(const std::filesystem::path& path) {
+void CheckRegularFile(const std::filesystem::path& path, uintmax_t max_bytes) {
+  std::error_code error;
+  const std::filesystem::file_status status = std::filesystem::status(path, error);
+  if (!std::filesystem::exists(status)) throw IoError(path.string() + ": file not found");
+  if (!std::filesystem::is_regular_file(status)) {
+    throw IoError(path.string() + ": not a regular file (a directory, device, FIFO or socket)");
+  }
+  const uintmax_t bytes = std::filesystem::file_size(path, error);
+  if (error) throw IoError(path.string() + ": cannot read its size: " + error.message());
+  if (bytes > max_bytes) {
+    throw IoError(path.string() + ": too large (" + std::to_string(bytes) + " bytes, at most " +
+                  std::to_string(max_bytes) + ")");
+  }
+}
+
+std::string ReadFile(const std::filesystem::path& path, uintmax_t max_bytes) {
+  CheckRegularFile(path, max_bytes);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw IoError(path.string() + ": cannot open file");
   std::ostringstream contents;
   contents << in.rdbuf();
   return contents.str();
+}
+
+namespace {
+std::mutex stderr_mutex;  // SilencedStderr: one at a time
+}  // namespace
+
+SilencedStderr::SilencedStderr() {
+  stderr_mutex.lock();
+  std::fflush(stderr);
+  const int null = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
+  if (null < 0) return;
+  saved_ = ::dup(STDERR_FILENO);
+  if (saved_ >= 0) ::dup2(null, STDERR_FILENO);
+  ::close(null);
+}
+
+SilencedStderr::~SilencedStderr() {
+  std::fflush(stderr);
+  if (saved_ >= 0) {
+    ::dup2(saved_, STDERR_FILENO);
+    ::close(saved_);
+  }
+  stderr_mutex.unlock();
 }
 
 void WriteNpy(const std::filesystem::path& path, const RowMatrixXd& array, bool as_vector) {
@@ -93,10 +135,21 @@ NpyArray ReadNpy(const std::filesystem::path& path) {
   const std::string bytes = ReadFile(path);
   auto fail = [&](const std::string& why) { return IoError(path.string() + ": " + why); };
   if (bytes.size() < 10 || bytes.compare(0, 6, "\x93NUMPY") != 0) throw fail("not a .npy file");
-  const size_t header_length =
-      static_cast<unsigned char>(bytes[8]) | (static_cast<unsigned char>(bytes[9]) << 8);
-  if (bytes.size() < 10 + header_length) throw fail("truncated header");
-  const std::string header = bytes.substr(10, header_length);
+  // Format 1.x stores the header length in 2 bytes, 2.x and 3.x in 4; no other version exists.
+  const int major = static_cast<unsigned char>(bytes[6]);
+  if (major < 1 || major > 3) {
+    throw fail("unknown .npy format version " + std::to_string(major) + "." +
+               std::to_string(static_cast<unsigned char>(bytes[7])));
+  }
+  const size_t length_bytes = major == 1 ? 2 : 4;
+  if (bytes.size() < 8 + length_bytes) throw fail("truncated header");
+  size_t header_length = 0;
+  for (size_t k = 0; k < length_bytes; ++k) {
+    header_length |= static_cast<size_t>(static_cast<unsigned char>(bytes[8 + k])) << (8 * k);
+  }
+  const size_t header_start = 8 + length_bytes;
+  if (bytes.size() < header_start + header_length) throw fail("truncated header");
+  const std::string header = bytes.substr(header_start, header_length);
   NpyArray array;
   if (header.find("'<f8'") != std::string::npos) {
     array.is_integer = false;
@@ -111,16 +164,26 @@ NpyArray ReadNpy(const std::filesystem::path& path) {
   if (open == std::string::npos || close == std::string::npos) throw fail("no shape in header");
   std::stringstream shape(header.substr(open + 10, close - open - 10));
   std::string item;
-  int64_t count = 1;
+  size_t count = 1;
+  const size_t max_count = bytes.size() / 8;
   while (std::getline(shape, item, ',')) {
     if (item.find_first_not_of(' ') == std::string::npos) continue;
-    array.shape.push_back(std::stoll(item));
-    count *= array.shape.back();
+    char* end = nullptr;
+    const long long extent = std::strtoll(item.c_str(), &end, 10);
+    if (end == item.c_str() ||
+        item.find_first_not_of(' ', end - item.c_str()) != std::string::npos || extent < 0 ||
+        (extent > 0 && count > max_count / static_cast<size_t>(extent))) {
+      throw fail("shape: '" + item + "' is not a dimension that fits the file");
+    }
+    array.shape.push_back(extent);
+    count *= static_cast<size_t>(extent);
   }
-  const size_t data_offset = 10 + header_length;
-  if (bytes.size() != data_offset + 8 * static_cast<size_t>(count)) throw fail("size mismatch");
-  array.values.resize(static_cast<size_t>(count));
-  for (int64_t k = 0; k < count; ++k) {
+  if (array.shape.empty() || array.shape.size() > 2)
+    throw fail("shape: must have 1 or 2 dimensions");
+  const size_t data_offset = header_start + header_length;
+  if (bytes.size() != data_offset + 8 * count) throw fail("size mismatch");
+  array.values.resize(count);
+  for (size_t k = 0; k < count; ++k) {
     const char* at = bytes.data() + data_offset + 8 * k;
     if (array.is_integer) {
       int64_t value;

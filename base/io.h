@@ -24,8 +24,31 @@ class IoError : public std::runtime_error {
 // Writes `bytes` to `path` through a temporary file and a rename. Throws IoError.
 void WriteFileAtomically(const std::filesystem::path& path, const std::string& bytes);
 
-// Reads a whole file. Throws IoError naming the file.
-std::string ReadFile(const std::filesystem::path& path);
+// The largest file ReadFile reads unless told otherwise: 16 GiB (a dense F of 45k patches).
+constexpr uintmax_t kMaxFileBytes = uintmax_t{16} << 30;
+
+// Checks that `path` names a regular file (after symbolic links) of at most `max_bytes`, so a
+// FIFO, a device such as /dev/zero or a directory is refused before anything blocks on it or
+// reads without end. Throws IoError naming the file: not found, not a regular file, too large.
+void CheckRegularFile(const std::filesystem::path& path, uintmax_t max_bytes = kMaxFileBytes);
+
+// Reads a whole regular file of at most `max_bytes` (CheckRegularFile). Throws IoError naming
+// the file.
+std::string ReadFile(const std::filesystem::path& path, uintmax_t max_bytes = kMaxFileBytes);
+
+// While one exists, what libraries print on the process's stderr (file descriptor 2: libmrcal's
+// parser, libpng's and OpenCV's decoders) goes nowhere, so that procam reports a failure in its
+// own one line. One at a time (the descriptor is process-wide); keep the scope to one call.
+class SilencedStderr {
+ public:
+  SilencedStderr();
+  ~SilencedStderr();
+  SilencedStderr(const SilencedStderr&) = delete;
+  SilencedStderr& operator=(const SilencedStderr&) = delete;
+
+ private:
+  int saved_ = -1;
+};
 
 // Row-major (C order) matrices as NumPy stores them: one patch per row.
 using RowMatrixXd = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;

@@ -31,8 +31,8 @@ std::string SyntaxErrorWithLine(const std::string& text, const json::parse_error
 
 json ReadJsonFile(const std::filesystem::path& path) {
   const std::string file = path.string();
-  if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
-  const std::string text = ReadFile(path);
+  constexpr uintmax_t kMaxJsonBytes = uintmax_t{1} << 30;  // scenes, rig.json, result.json
+  const std::string text = ReadFile(path, kMaxJsonBytes);
   try {
     return json::parse(text);
   } catch (const json::parse_error& error) {

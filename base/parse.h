@@ -3,6 +3,7 @@
 // comma-separated numbers, one or three positive numbers for R, G, B.
 
 #include <Eigen/Core>
+#include <array>
 #include <cstddef>
 #include <string>
 #include <vector>
@@ -13,6 +14,16 @@ namespace procam {
 // Throws IoError "OPTION: expected EXPECTED, got 'TEXT'".
 std::vector<double> ParseNumberList(const std::string& option, const std::string& text,
                                     const std::string& expected, size_t count = 0);
+
+// Comma-separated whole numbers, e.g. "0,128,255" (at least one; "" is refused). Throws IoError
+// "OPTION: expected EXPECTED, got 'TEXT'".
+std::vector<int> ParseIntegerList(const std::string& option, const std::string& text,
+                                  const std::string& expected);
+
+// Two whole numbers WIDTHxHEIGHT (e.g. "1920x1080", "9x6"), each in [least, most]. Throws
+// IoError "OPTION: expected EXPECTED, each in [LEAST, MOST], got 'TEXT'".
+std::array<int, 2> ParseSize(const std::string& option, const std::string& text,
+                             const std::string& expected, int least, int most);
 
 // One positive number for every channel, or three (R, G, B). Throws IoError naming `option`.
 Eigen::Vector3d ParsePositiveRgb(const std::string& option, const std::string& text);

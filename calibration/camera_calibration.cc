@@ -24,8 +24,10 @@ extern "C" {
 namespace procam {
 
 bool ChessboardSpec::Check(std::string* why) const {
-  if (corners_x < 2 || corners_y < 2) {
-    *why = "chessboard: corners_x and corners_y must be at least 2";
+  // The detector's time grows with the grid: a board beyond 100 corners a side is a typing
+  // error, not a board.
+  if (corners_x < 2 || corners_y < 2 || corners_x > 100 || corners_y > 100) {
+    *why = "chessboard: corners_x and corners_y must be in [2, 100]";
     return false;
   }
   if (!(square_size > 0.0) || !std::isfinite(square_size)) {

@@ -26,8 +26,8 @@ namespace procam {
 
 // A planar chessboard: its inner-corner grid and square size.
 struct ChessboardSpec {
-  int corners_x = 9;          // inner corners along a row (OpenCV's pattern width), ≥ 2
-  int corners_y = 6;          // inner corners along a column (pattern height), ≥ 2
+  int corners_x = 9;          // inner corners along a row (OpenCV's pattern width), [2, 100]
+  int corners_y = 6;          // inner corners along a column (pattern height), [2, 100]
   double square_size = 0.03;  // side of one square, metres, > 0
   bool Check(std::string* why) const;
   int CornerCount() const { return corners_x * corners_y; }

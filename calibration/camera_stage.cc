@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "base/image_io.h"
 #include "base/io.h"
 #include "calibration/rig_directory.h"
 
@@ -50,8 +51,7 @@ CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
   nlohmann::json skipped = nlohmann::json::array();
   int width = 0, height = 0;
   for (const std::filesystem::path& path : ChessboardImages(args.images)) {
-    const cv::Mat image = cv::imread(path.string(), cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
-    if (image.empty()) throw IoError(path.string() + ": cannot read the image");
+    const cv::Mat image = ReadImage(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
     if (width == 0) {
       width = image.cols;
       height = image.rows;

@@ -1,6 +1,7 @@
 #include "calibration/capture_stage.h"
 
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include "base/io.h"
 #include "calibration/camera_response.h"
@@ -88,11 +89,40 @@ nlohmann::json CaptureResult(const CaptureSequence& sequence, const Camera& came
   return {{"command", "capture"}, {"sequence", sequence.kind}, {"camera", camera.Info().uri}};
 }
 
+bool Fail(std::string* why, const std::string& message) {
+  *why = message;
+  return false;
+}
+
+bool InGammaRange(double gamma) { return gamma > 0.0 && gamma <= 10.0; }  // false for NaN
+
 }  // namespace
+
+bool CaptureStageOptions::Check(std::string* why) const {
+  const std::set<std::string> sequences = {"graycode", "structured_light", "photometric", "verify"};
+  if (!sequences.count(sequence)) {
+    return Fail(
+        why, "--sequence: '" + sequence + "': graycode, structured_light, photometric or verify");
+  }
+  if (axes != "both" && axes != "columns" && axes != "rows") {
+    return Fail(why, "--axes: '" + axes + "': both, columns or rows");
+  }
+  if (projector < 0)
+    return Fail(why, "--projector: must be >= 0, got " + std::to_string(projector));
+  if (gain && !(*gain >= 0.0 && *gain <= 1e6)) return Fail(why, "--gain: must be in [0, 1e6]");
+  if (!InGammaRange(pattern_gamma)) return Fail(why, "--pattern-gamma: must be in (0, 10]");
+  if (!InGammaRange(projector_gamma)) return Fail(why, "--projector-gamma: must be in (0, 10]");
+  PhotometricOptions photometric;
+  photometric.levels = levels;
+  photometric.channels = channels;
+  if (!photometric.Check(why)) return Fail(why, "--levels/--channels: " + *why);
+  if (!sequencer.Check(why)) return Fail(why, "capture: " + *why);
+  return true;
+}
 
 CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
   std::string why;
-  if (!args.sequencer.Check(&why)) throw std::invalid_argument("capture: " + why);
+  if (!args.Check(&why)) throw std::invalid_argument(why);
   // A simulated camera photographs its room: the patterns go to one of its projectors, whose
   // display the camera (sharing the world) looks at.
   const std::optional<SimulatedCamera> simulated = FindSimulatedCamera(args.camera);
@@ -116,7 +146,7 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
            "warning: display 'memory' shows the patterns nowhere; camera " + camera->Info().uri +
                " photographs the room as it is (use --display glfw:N to show them on a projector)");
   }
-  if (args.gain >= 0) camera->SetGain(args.gain);
+  if (args.gain) camera->SetGain(*args.gain);
   const CaptureSequence sequence = MakeSequence(args, projector);
 
   CaptureSessionOptions options;

@@ -32,7 +32,7 @@ struct CaptureStageOptions {
   // resolution wins; given with a simulated projector, it must match the projector's.
   std::optional<cv::Size> projector_size;
   SequencerOptions sequencer;  // frames, exposures (several: HDR), settle, retries
-  double gain = -1.0;          // camera gain to set (< 0: leave it)
+  std::optional<double> gain;  // camera gain to set, [0, 1e6] (unset: leave it)
   std::string axes = "both";   // graycode, structured_light: "columns", "rows" or "both"
   double pattern_gamma = 1.0;  // structured_light: sinusoids pre-distorted for this gamma
   std::vector<int> levels = PhotometricOptions().levels;  // photometric: 8-bit levels
@@ -41,6 +41,11 @@ struct CaptureStageOptions {
   double projector_gamma = 1.0;           // memory display: the response the test camera sees
   std::filesystem::path camera_response;  // camera_response.json: linearise before HDR merges
   ProgressCallback progress;              // a warning when nothing shows the patterns
+
+  // Checks every value, whichever sequence uses it, so that a typing error is refused before
+  // anything is shown or written: the sequence, the projector (>= 0), the gain, the gammas
+  // (finite, in (0, 10]), levels and channels (PhotometricOptions), axes and the sequencer's.
+  bool Check(std::string* why) const;
 };
 
 // Captures what the session does not hold yet and writes OUT/result.json (also when the camera

@@ -113,8 +113,9 @@ PhotometricRigStage::PhotometricRigStage(const PhotometricStageOptions& args,
   s.rig_dir = rig_dir;
   s.session_dir = session_dir;
   s.rig_file = (rig_dir / "rig.json").string();
-  if (args.response != "gamma" && args.response != "lut") {
-    throw IoError("--response: '" + args.response + "': gamma or lut");
+  if (!args.projector.empty() && !std::filesystem::is_regular_file(s.rig_file)) {
+    throw IoError(s.rig_file + ": not found; --projector " + args.projector +
+                  " merges the fit into an existing rig (procam calibrate camera, projectors)");
   }
   if (args.scene.empty()) {
     if (!args.camera_scale.empty()) throw IoError("--camera-scale: needs --scene");
@@ -161,7 +162,7 @@ PhotometricRigStage::PhotometricRigStage(const PhotometricStageOptions& args,
                   std::to_string(image_size.width) + "x" + std::to_string(image_size.height));
   }
   ParseCameraScale(args, session_dir, hdr, full_scale, &s.camera_scale, &s.camera_black);
-  if (args.camera_black >= 0.0) s.camera_black = args.camera_black;
+  if (args.camera_black) s.camera_black = *args.camera_black;
 
   GeometryOptions geometry;
   geometry.patches = args.patches;
@@ -380,9 +381,26 @@ PhotometricSession ReadPhotometricSession(const std::filesystem::path& directory
 
 }  // namespace
 
+bool PhotometricStageOptions::Check(std::string* why) const {
+  auto fail = [&](const std::string& message) {
+    *why = message;
+    return false;
+  };
+  if (!(clip > 0.0 && clip <= 1.0)) return fail("clip: must be in (0, 1]");
+  if (camera_black && !(*camera_black >= 0.0 && *camera_black <= 1e9)) {
+    return fail("--camera-black: must be a number of digital numbers in [0, 1e9]");
+  }
+  if (response != "gamma" && response != "lut") {
+    return fail("--response: '" + response + "': gamma or lut");
+  }
+  if (patches < 0) return fail("--patches: must be >= 0");
+  if (min_patch_pixels < 1) return fail("min_patch_pixels: must be >= 1");
+  return options.Check(why);
+}
+
 PhotometricModel RunPhotometricStage(const PhotometricStageOptions& args) {
   std::string why;
-  if (!args.options.Check(&why)) throw std::invalid_argument(why);
+  if (!args.Check(&why)) throw std::invalid_argument(why);
   const std::filesystem::path session_dir(args.session);
   const PhotometricSession session = ReadPhotometricSession(session_dir);
   // rig.json and scene units, checked before anything is fitted.

@@ -9,6 +9,7 @@
 // calibrate photometric` runs; docs/calibration.md.
 
 #include <filesystem>
+#include <optional>
 #include <string>
 
 #include "base/progress.h"
@@ -27,10 +28,15 @@ struct PhotometricStageOptions {
   // With a scene, the camera value per unit exitance: a number, "R,G,B", or a simulated
   // camera's URI (its own calibration for the session's exposure and gain).
   std::string camera_scale;
-  double camera_black = -1;        // camera black level, DN (< 0: 0, or the simulated camera's)
+  // Camera black level, DN, in [0, 1e9] (unset: 0, or the simulated camera's).
+  std::optional<double> camera_black;
   std::string response = "gamma";  // what rig.json gets: "gamma" or "lut"
   int min_patch_pixels = 4;        // camera pixels a patch needs for its reflectance
   ProgressCallback progress;       // pixels used, the fit's brief report, files written
+
+  // Checks every value (clip in (0, 1], camera_black, response, patches >= 0,
+  // min_patch_pixels >= 1, options); why names the option.
+  bool Check(std::string* why) const;
 };
 
 // Fits and writes. Throws IoError naming the session, rig.json and the key, or the option, before

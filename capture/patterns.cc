@@ -9,6 +9,7 @@
 #include <set>
 #include <stdexcept>
 
+#include "base/image_io.h"
 #include "base/io.h"
 
 namespace procam {
@@ -234,9 +235,7 @@ CaptureSequence MakeVerifySequence(const std::vector<std::filesystem::path>& ima
   nlohmann::json files = nlohmann::json::array();
   for (size_t i = 0; i < images.size(); ++i) {
     const std::filesystem::path& path = images[i];
-    if (!std::filesystem::exists(path)) throw IoError(path.string() + ": no such image");
-    cv::Mat image = cv::imread(path.string(), cv::IMREAD_COLOR);
-    if (image.empty()) throw IoError(path.string() + ": not a readable image");
+    cv::Mat image = ReadImage(path, cv::IMREAD_COLOR);
     if (image.size() != projector_size) {
       throw IoError(path.string() + ": image is " + std::to_string(image.cols) + "x" +
                     std::to_string(image.rows) + ", the projector is " +

@@ -6,6 +6,7 @@
 #include <ctime>
 #include <opencv2/imgcodecs.hpp>
 
+#include "base/image_io.h"
 #include "base/io.h"
 #include "base/timing.h"
 
@@ -84,14 +85,24 @@ void WriteManifest(const fs::path& directory, nlohmann::json& manifest) {
   WriteFileAtomically(directory / kManifestName, manifest.dump(2) + "\n");
 }
 
+// Whether `file` decodes to an image of `depth` (a frame left by a crash or overwritten by
+// something else does not, and is captured again).
+bool FrameReadable(const fs::path& file, int depth) {
+  try {
+    return ReadImage(file, cv::IMREAD_UNCHANGED).depth() == depth;
+  } catch (const IoError&) {
+    return false;
+  }
+}
+
 bool PatternComplete(const fs::path& directory, const nlohmann::json& entry) {
   if (!entry.contains("captured") || entry["captured"].is_null()) return false;
   const nlohmann::json& captured = entry["captured"];
   for (const nlohmann::json& exposure : captured.at("exposures")) {
-    if (!fs::exists(directory / exposure.at("file").get<std::string>())) return false;
+    if (!FrameReadable(directory / exposure.at("file").get<std::string>(), CV_16U)) return false;
   }
   if (captured.contains("hdr") && !captured["hdr"].is_null() &&
-      !fs::exists(directory / captured["hdr"].get<std::string>())) {
+      !FrameReadable(directory / captured["hdr"].get<std::string>(), CV_32F)) {
     return false;
   }
   return true;
@@ -222,7 +233,32 @@ nlohmann::json WriteCapture(const fs::path& directory, int index, const std::str
           {"hdr", hdr}};
 }
 
+// The manifest of the session in options.directory if it can be resumed with these settings,
+// null when there is none. Throws IoError naming what differs.
+nlohmann::json ResumableManifest(const CaptureSessionOptions& options,
+                                 const CaptureSequence& sequence, const CameraInfo& info,
+                                 const CameraSettings& settings) {
+  const fs::path manifest_path = options.directory / kManifestName;
+  if (!fs::exists(manifest_path)) return nullptr;
+  try {
+    nlohmann::json manifest = nlohmann::json::parse(ReadFile(manifest_path));
+    const std::string mismatch = Mismatch(manifest, sequence, options.sequencer, info, settings);
+    if (!mismatch.empty()) {
+      throw IoError(manifest_path.string() + ": cannot resume: " + mismatch +
+                    " (use another --out directory, or the settings it was started with)");
+    }
+    return manifest;
+  } catch (const nlohmann::json::exception& parse_error) {
+    throw IoError(manifest_path.string() + ": malformed manifest: " + parse_error.what());
+  }
+}
+
 }  // namespace
+
+void CheckSessionResumable(const CaptureSessionOptions& options, const CaptureSequence& sequence,
+                           const Camera& camera) {
+  ResumableManifest(options, sequence, camera.Info(), camera.Settings());
+}
 
 bool CaptureSessionOptions::Check(std::string* why) const {
   if (directory.empty()) {
@@ -251,29 +287,16 @@ CaptureSummary RunCaptureSession(const CaptureSessionOptions& options,
   const auto start = Clock::now();
   const fs::path& directory = options.directory;
   const fs::path manifest_path = directory / kManifestName;
+  const CameraInfo info = camera.Info();
+  const CameraSettings settings = camera.Settings();
+  nlohmann::json manifest = ResumableManifest(options, sequence, info, settings);
+  if (manifest.is_null())
+    manifest = NewManifest(sequence, options.sequencer, info, settings, display);
   std::error_code error;
   for (const char* sub : {"patterns", "frames"}) {
     fs::create_directories(directory / sub, error);
     if (error)
       throw IoError((directory / sub).string() + ": cannot create directory: " + error.message());
-  }
-
-  const CameraInfo info = camera.Info();
-  const CameraSettings settings = camera.Settings();
-  nlohmann::json manifest;
-  if (fs::exists(manifest_path)) {
-    try {
-      manifest = nlohmann::json::parse(ReadFile(manifest_path));
-      const std::string mismatch = Mismatch(manifest, sequence, options.sequencer, info, settings);
-      if (!mismatch.empty()) {
-        throw IoError(manifest_path.string() + ": cannot resume: " + mismatch +
-                      " (use another --out directory, or the settings it was started with)");
-      }
-    } catch (const nlohmann::json::exception& parse_error) {
-      throw IoError(manifest_path.string() + ": malformed manifest: " + parse_error.what());
-    }
-  } else {
-    manifest = NewManifest(sequence, options.sequencer, info, settings, display);
   }
 
   CaptureSummary summary;
@@ -370,9 +393,8 @@ cv::Mat CaptureSessionData::Mean(int pattern, int exposure) const {
   const nlohmann::json& entry =
       manifest_["patterns"][pattern]["captured"]["exposures"].at(exposure);
   const fs::path file = directory_ / entry.at("file").get<std::string>();
-  const cv::Mat png = cv::imread(file.string(), cv::IMREAD_UNCHANGED);
-  if (png.empty() || png.depth() != CV_16U)
-    throw IoError(file.string() + ": missing or not a 16-bit PNG");
+  const cv::Mat png = ReadImage(file, cv::IMREAD_UNCHANGED);
+  if (png.depth() != CV_16U) throw IoError(file.string() + ": missing or not a 16-bit PNG");
   cv::Mat mean;
   png.convertTo(mean, CV_32F, 1.0 / entry.at("png_scale").get<double>());
   return mean;
@@ -386,9 +408,8 @@ cv::Mat CaptureSessionData::Hdr(int pattern) const {
   const nlohmann::json& hdr = manifest_["patterns"][pattern]["captured"]["hdr"];
   if (hdr.is_null()) return cv::Mat();
   const fs::path file = directory_ / hdr.get<std::string>();
-  const cv::Mat image = cv::imread(file.string(), cv::IMREAD_UNCHANGED);
-  if (image.empty() || image.depth() != CV_32F)
-    throw IoError(file.string() + ": missing or not a float TIFF");
+  const cv::Mat image = ReadImage(file, cv::IMREAD_UNCHANGED);
+  if (image.depth() != CV_32F) throw IoError(file.string() + ": missing or not a float TIFF");
   return image;
 }
 

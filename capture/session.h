@@ -62,6 +62,13 @@ CaptureSummary RunCaptureSession(const CaptureSessionOptions& options,
                                  const CaptureSequence& sequence, Camera& camera,
                                  PatternDisplay& display);
 
+// Checks, writing nothing, that RunCaptureSession could start or resume the session in
+// options.directory with `sequence` and `camera`: throws the IoError it would ("cannot resume:
+// ..." naming what differs, or a malformed manifest). Lets a caller check before it writes files
+// of its own beside the session.
+void CheckSessionResumable(const CaptureSessionOptions& options, const CaptureSequence& sequence,
+                           const Camera& camera);
+
 // A session read back, for calibration and tests.
 class CaptureSessionData {
  public:

@@ -3,7 +3,7 @@
 # are the Debian packages procam builds against (their -dev packages bring the run-time
 # libraries); a CUDA build also needs the CUDA toolkit, which is not a Debian package.
 set(PROCAM_DEB_DEPENDS
-  libeigen3-dev libceres-dev libembree-dev libopencv-dev libtinyobjloader-dev nlohmann-json3-dev
+  libeigen3-dev libceres-dev libembree-dev libopencv-dev nlohmann-json3-dev
   libspdlog-dev libfmt-dev libmrcal-dev)
 if(PROCAM_WITH_ARAVIS)
   list(APPEND PROCAM_DEB_DEPENDS libaravis-dev libusb-1.0-0-dev)

@@ -10,8 +10,8 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <tiny_obj_loader.h>
 
+#include "base/image_io.h"
 #include "base/io.h"
 #include "base/json_fields.h"
 #include "geometry/polygon.h"
@@ -103,9 +103,8 @@ double Scene::Area() const {
 }
 
 cv::Mat LoadSrgbTextureAsLinear(const std::filesystem::path& path) {
-  if (!std::filesystem::exists(path)) throw IoError(path.string() + ": file not found");
-  cv::Mat image = cv::imread(path.string(), cv::IMREAD_COLOR | cv::IMREAD_ANYDEPTH);
-  if (image.empty()) throw IoError(path.string() + ": not a readable image");
+  constexpr uintmax_t kMaxTextureBytes = uintmax_t{256} << 20;
+  cv::Mat image = ReadImage(path, cv::IMREAD_COLOR | cv::IMREAD_ANYDEPTH, kMaxTextureBytes);
   const double scale = image.depth() == CV_16U ? 1.0 / 65535.0 : 1.0 / 255.0;
   if (image.depth() != CV_8U && image.depth() != CV_16U) {
     throw IoError(path.string() + ": only 8- and 16-bit images are supported");
@@ -118,84 +117,6 @@ cv::Mat LoadSrgbTextureAsLinear(const std::filesystem::path& path) {
     for (int c = 0; c < 3; ++c) texel[c] = static_cast<float>(SrgbToLinear(texel[c]));
   });
   return linear;
-}
-
-void LoadObjMesh(const std::filesystem::path& path, double weld_tolerance, Surface* surface) {
-  const std::string file = path.string();
-  if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
-  // Line of each face statement, so that errors can point at it.
-  std::vector<int> face_lines;
-  {
-    std::ifstream in(path);
-    std::string line;
-    for (int number = 1; std::getline(in, line); ++number) {
-      const size_t start = line.find_first_not_of(" \t");
-      if (start != std::string::npos && line.compare(start, 2, "f ") == 0) face_lines.push_back(number);
-    }
-  }
-  tinyobj::ObjReaderConfig config;
-  config.triangulate = false;
-  config.vertex_color = false;
-  tinyobj::ObjReader reader;
-  if (!reader.ParseFromFile(file, config)) {
-    throw IoError(file + ": invalid OBJ: " + reader.Error());
-  }
-  const tinyobj::attrib_t& attrib = reader.GetAttrib();
-  for (const tinyobj::real_t value : attrib.vertices) {
-    if (!std::isfinite(value)) throw IoError(file + ": vertex coordinate is not finite");
-  }
-  surface->kind = Surface::Kind::kMesh;
-  surface->mesh_vertices.clear();
-  surface->mesh_triangles.clear();
-  // Weld vertices closer than the tolerance so that shared edges are recognised.
-  PointWelder welder(weld_tolerance);
-  std::unordered_map<int, int> welded_of_obj;
-  auto weld = [&](int obj_index) {
-    auto found = welded_of_obj.find(obj_index);
-    if (found != welded_of_obj.end()) return found->second;
-    const int index = welder.Weld(Vec3(attrib.vertices[3 * obj_index], attrib.vertices[3 * obj_index + 1],
-                                       attrib.vertices[3 * obj_index + 2]));
-    if (index == static_cast<int>(surface->mesh_vertices.size())) {
-      surface->mesh_vertices.push_back(welder.points()[index]);
-    }
-    welded_of_obj[obj_index] = index;
-    return index;
-  };
-  size_t face_counter = 0;
-  for (const tinyobj::shape_t& shape : reader.GetShapes()) {
-    size_t offset = 0;
-    for (const unsigned char corner_count : shape.mesh.num_face_vertices) {
-      const std::string where =
-          file + ":" + (face_counter < face_lines.size() ? std::to_string(face_lines[face_counter]) : "?");
-      ++face_counter;
-      if (corner_count < 3) throw IoError(where + ": face with fewer than 3 corners");
-      std::vector<Vec3> corners;
-      std::vector<int> vertices;
-      std::vector<Vec2> uvs;
-      for (size_t k = 0; k < corner_count; ++k) {
-        const tinyobj::index_t index = shape.mesh.indices[offset + k];
-        vertices.push_back(weld(index.vertex_index));
-        corners.push_back(surface->mesh_vertices[vertices.back()]);
-        if (index.texcoord_index >= 0) {
-          uvs.emplace_back(attrib.texcoords[2 * index.texcoord_index],
-                           attrib.texcoords[2 * index.texcoord_index + 1]);
-        } else {
-          uvs.emplace_back(0.0, 0.0);
-        }
-      }
-      offset += corner_count;
-      std::string why;
-      if (!CheckPlanarConvexPolygon(corners.data(), static_cast<int>(corners.size()),
-                                    weld_tolerance, &why)) {
-        throw IoError(where + ": " + why);
-      }
-      for (size_t k = 1; k + 1 < corners.size(); ++k) {  // fan over a convex planar face
-        surface->mesh_triangles.push_back(
-            {{vertices[0], vertices[k], vertices[k + 1]}, {uvs[0], uvs[k], uvs[k + 1]}});
-      }
-    }
-  }
-  if (surface->mesh_triangles.empty()) throw IoError(file + ": mesh has no faces");
 }
 
 void ValidateScene(const Scene& scene) {

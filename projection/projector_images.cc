@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
+#include "base/image_io.h"
 #include "base/io.h"
 #include "base/timing.h"
 #include "geometry/ray_scene.h"
@@ -670,9 +671,7 @@ void WriteProjectorImage(const std::filesystem::path& path, const ProjectorImage
 
 ProjectorImage ReadProjectorImage(const std::filesystem::path& path, int bits) {
   const std::string file = path.string();
-  if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
-  const cv::Mat raw = cv::imread(file, cv::IMREAD_UNCHANGED);
-  if (raw.empty()) throw IoError(file + ": not a readable image");
+  const cv::Mat raw = ReadImage(path, cv::IMREAD_UNCHANGED);
   if (raw.channels() != 3)
     throw IoError(file + ": must be an RGB image, has " + std::to_string(raw.channels()) +
                   " channels");

@@ -8,6 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "base/image_io.h"
 #include "base/io.h"
 #include "base/timing.h"
 #include "projection/glfw_display.h"
@@ -34,9 +35,7 @@ std::vector<MonitorInfo> ChooseMonitors(const ShowOptions& options) {
 
 cv::Mat ReadImageFor(const std::filesystem::path& path, const MonitorInfo& monitor) {
   const std::string file = path.string();
-  if (!std::filesystem::exists(path)) throw IoError(file + ": file not found");
-  cv::Mat image = cv::imread(file, cv::IMREAD_UNCHANGED);
-  if (image.empty()) throw IoError(file + ": not a readable image");
+  cv::Mat image = ReadImage(path, cv::IMREAD_UNCHANGED);
   if (image.channels() == 4) cv::cvtColor(image, image, cv::COLOR_BGRA2BGR);
   if (image.cols != monitor.width || image.rows != monitor.height) {
     throw IoError(file + ": image is " + std::to_string(image.cols) + "x" +

@@ -601,6 +601,14 @@ class VerificationLoop {
       throw IoError("camera '" + options.camera +
                     "': delivers grey images; verification needs colour");
     }
+    const CameraSettings settings = camera_->Settings();
+    const CameraPixelRays& rays = model->lighting;
+    if (settings.width > 0 && (settings.width != rays.width || settings.height != rays.height)) {
+      throw IoError("camera '" + options.camera + "' delivers " + std::to_string(settings.width) +
+                    "x" + std::to_string(settings.height) + " photos but " +
+                    in.camera_model_path.string() + " is " + std::to_string(rays.width) + "x" +
+                    std::to_string(rays.height));
+    }
     if (options.gain >= 0) camera_->SetGain(options.gain);
     sequencer_ = options.sequencer;
     if (!options.camera_response.empty()) {
@@ -623,6 +631,10 @@ class VerificationLoop {
   const SequencerOptions& sequencer() const { return sequencer_; }
   bool hdr() const { return hdr_; }
 
+  // Renders the current solution's projector images and the pattern they make, and checks that
+  // iteration k's session can take it (one an earlier run left with other inputs cannot), writing
+  // nothing. Throws IoError ("cannot resume: ...").
+  void Prepare(int k);
   // Shows the current solution, photographs it, compares; writes the iteration's files. Throws
   // PhotoFault on a camera or projector fault (the caller keeps what was done).
   VerificationIteration Photograph(int k, nlohmann::json* json);
@@ -631,6 +643,7 @@ class VerificationLoop {
 
  private:
   CameraColour ColourOf(const CaptureSessionData& session) const;
+  CaptureSessionOptions SessionOptions(int k) const;  // iteration k's session
 
   const VerificationOptions& options_;
   const VerificationInputs& in_;
@@ -641,6 +654,10 @@ class VerificationLoop {
   bool hdr_ = false;
   Eigen::MatrixX3d emittance_, radiosity_;
   double heat_scale_ = 0.0;
+  // What Prepare(prepared_) made: the images shown, their pattern and how they were rendered.
+  int prepared_ = -1;
+  CaptureSequence sequence_;
+  RenderSummary render_;
   // What the last photo said, for the update.
   std::vector<ProjectorImage> images_;
   Comparison comparison_;
@@ -659,38 +676,48 @@ CameraColour VerificationLoop::ColourOf(const CaptureSessionData& session) const
   return colour;
 }
 
+CaptureSessionOptions VerificationLoop::SessionOptions(int k) const {
+  CaptureSessionOptions session_options;
+  session_options.directory = options_.out / "iterations" / std::to_string(k) / "session";
+  session_options.sequencer = sequencer_;
+  return session_options;
+}
+
+void VerificationLoop::Prepare(int k) {
+  RenderOptions render_options;
+  render_options.light = options_.light;
+  images_ = RenderProjectorImages(model_.rig, model_.geometry.scene, emittance_, render_options,
+                                  &render_);
+  std::vector<cv::Mat> patterns;
+  for (const ProjectorImage& image : images_) patterns.push_back(PatternFromImage(image));
+  const cv::Mat pattern = wall_.Compose(patterns);
+  sequence_ = CaptureSequence();
+  sequence_.kind = "verify";
+  sequence_.parameters = {
+      {"iteration", k}, {"projectors", in_.names}, {"checksum", PatternChecksum(pattern)}};
+  sequence_.patterns.push_back({"solution", pattern, {{"kind", "verify"}, {"iteration", k}}});
+  CheckSessionResumable(SessionOptions(k), sequence_, *camera_);
+  prepared_ = k;
+}
+
 VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) {
+  if (prepared_ != k) Prepare(k);
   VerificationIteration it;
   it.index = k;
   it.directory = options_.out / "iterations" / std::to_string(k);
   CreateDirectories(it.directory);
-  RenderSummary render;
-  RenderOptions render_options;
-  render_options.light = options_.light;
-  images_ = RenderProjectorImages(model_.rig, model_.geometry.scene, emittance_, render_options,
-                                  &render);
-  std::vector<cv::Mat> patterns;
   for (size_t p = 0; p < images_.size(); ++p) {
     WriteProjectorImage(it.directory / (in_.names[p] + ".png"), images_[p]);
-    patterns.push_back(PatternFromImage(images_[p]));
   }
   WriteNpy(it.directory / "E.npy", RowMatrixXd(emittance_));
   WriteNpy(it.directory / "B.npy", RowMatrixXd(radiosity_));
   WriteNpy(it.directory / "reflectance.npy", RowMatrixXd(model_.rig.reflectance));
 
   // Show and photograph: the session keeps the photo the moment it is taken.
-  CaptureSequence sequence;
-  sequence.kind = "verify";
-  const cv::Mat pattern = wall_.Compose(patterns);
-  sequence.parameters = {
-      {"iteration", k}, {"projectors", in_.names}, {"checksum", PatternChecksum(pattern)}};
-  sequence.patterns.push_back({"solution", pattern, {{"kind", "verify"}, {"iteration", k}}});
-  CaptureSessionOptions session_options;
-  session_options.directory = it.directory / "session";
-  session_options.sequencer = sequencer_;
+  const CaptureSessionOptions session_options = SessionOptions(k);
   const auto capture_start = Clock::now();
   try {
-    RunCaptureSession(session_options, sequence, *camera_, wall_);
+    RunCaptureSession(session_options, sequence_, *camera_, wall_);
   } catch (const std::exception& error) {
     throw PhotoFault(error.what());
   }
@@ -745,9 +772,9 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   }
   *json = {{"colour", colour.Json()},
            {"render",
-            {{"patches_below_lower", render.patches_below_lower},
-             {"patches_above_upper", render.patches_above_upper},
-             {"max_relative_error", render.max_relative_error}}}};
+            {{"patches_below_lower", render_.patches_below_lower},
+             {"patches_above_upper", render_.patches_above_upper},
+             {"max_relative_error", render_.max_relative_error}}}};
   return it;
 }
 
@@ -810,6 +837,7 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
   const VerificationInputs in = ReadInputs(options);
   VerificationModel model = BuildModel(options, in);
   VerificationLoop loop(options, in, &model);
+  loop.Prepare(0);  // a run left there with other inputs is refused before anything is written
 
   CreateDirectories(options.out);
   VerificationSummary summary;

@@ -55,6 +55,44 @@ TEST(CameraModelFile, BadFilesFailWithOneLineNamingTheFile) {
   EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
 }
 
+// Numbers that make no sense are refused where models are read, before they reach mrcal, Embree
+// (an extrinsic of 1e308 aborts inside its BVH traversal) or a solver.
+TEST(CameraModelFile, RefusesAbsurdNumbers) {
+  testing::TempDir dir;
+  const auto model = [](const std::string& intrinsics, const std::string& size,
+                        const std::string& extrinsics) {
+    return "{ 'lensmodel': 'LENSMODEL_PINHOLE', 'intrinsics': [" + intrinsics +
+           "], 'imagersize': [" + size + "], 'extrinsics': [" + extrinsics + "] }\n";
+  };
+  const std::string good_k = "100, 100, 50, 40", good_size = "100, 80",
+                    good_rt = "0, 0, 0, 1, 2, 3";
+  struct Case {
+    std::string text, expected;
+  };
+  const std::vector<Case> cases = {
+      {model(good_k, good_size, "0, 0, 0, 0, 0, 1e308"), "extrinsics: translation further than"},
+      {model(good_k, good_size, "1e308, 0, 0, 0, 0, 0"), "extrinsics: rotation vector longer than"},
+      {model("1e308, 100, 50, 40", good_size, good_rt), "intrinsics[0]: must be finite"},
+      {model("-100, 100, 50, 40", good_size, good_rt),
+       "intrinsics: focal lengths fx, fy must be in (0, "},
+      {model(good_k, "0, 80", good_rt), "not a valid mrcal .cameramodel"},  // libmrcal's check
+      {model(good_k, "100000, 80", good_rt), "imagersize: each side must be in [1, 65536]"},
+  };
+  for (const Case& c : cases) {
+    const auto path = dir.Write("m.cameramodel", c.text);
+    try {
+      ReadCameraModelFile(path);
+      ADD_FAILURE() << "accepted: " << c.text;
+    } catch (const IoError& error) {
+      EXPECT_NE(std::string(error.what()).find(path.string() + ": " + c.expected),
+                std::string::npos)
+          << error.what();
+    }
+  }
+  EXPECT_NO_THROW(
+      ReadCameraModelFile(dir.Write("m.cameramodel", model(good_k, good_size, good_rt))));
+}
+
 TEST(Rt, PoseRoundTripAndMrcalConvention) {
   const double rt[6] = {0.1, -0.2, 0.3, 1.0, 2.0, -3.0};
   const Eigen::Isometry3d pose = PoseFromRt(rt);

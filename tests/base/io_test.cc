@@ -1,5 +1,7 @@
 #include "base/io.h"
 
+#include <sys/stat.h>
+
 #include <gtest/gtest.h>
 
 #include "tests/testing/testing.h"
@@ -57,6 +59,57 @@ TEST(Npy, RejectsGarbage) {
   const auto path = dir.Write("bad.npy", "not numpy at all");
   EXPECT_THROW(ReadNpy(path), IoError);
   EXPECT_THROW(ReadNpy(dir / "absent.npy"), IoError);
+}
+
+// The header length is 2 bytes in format 1.x and 4 in 2.x and 3.x; any other version is refused
+// by name rather than read as if it were 1.0.
+TEST(Npy, ReadsFormatTwoAndRefusesUnknownVersions) {
+  testing::TempDir dir;
+  RowMatrixXd values(1, 2);
+  values << 1.5, -2.0;
+  WriteNpy(dir / "a.npy", values);
+  const std::string v1 = ReadFile(dir / "a.npy");
+  std::string v2 = v1.substr(0, 6) + std::string("\x02\x00", 2) + v1.substr(8, 2) +
+                   std::string(2, '\0') + v1.substr(10);
+  EXPECT_EQ(ReadNpy(dir.Write("v2.npy", v2)).values, std::vector<double>({1.5, -2.0}));
+  for (const char version : {'\x00', '\x04', '\x7f'}) {
+    std::string unknown = v1;
+    unknown[6] = version;
+    try {
+      ReadNpy(dir.Write("v.npy", unknown));
+      ADD_FAILURE() << "accepted version " << int(version);
+    } catch (const IoError& error) {
+      EXPECT_NE(std::string(error.what()).find("v.npy: unknown .npy format version"),
+                std::string::npos)
+          << error.what();
+    }
+  }
+  std::string huge_shape = v1;
+  huge_shape.replace(huge_shape.find("(1, 2)"), 6, "(9999999999999, 9)");
+  EXPECT_THROW(ReadNpy(dir.Write("h.npy", huge_shape)), IoError);
+}
+
+// Files that are not regular files (a FIFO would block, /dev/zero never ends) and files over the
+// reader's limit are refused before anything is read.
+TEST(ReadFile, RefusesWhatIsNotARegularFileOrTooLarge) {
+  testing::TempDir dir;
+  ASSERT_EQ(::mkfifo((dir / "fifo").c_str(), 0600), 0);
+  std::filesystem::create_symlink("/dev/zero", dir / "zero");
+  for (const char* name : {"fifo", "zero"}) {
+    try {
+      ReadFile(dir / name);
+      ADD_FAILURE() << name;
+    } catch (const IoError& error) {
+      EXPECT_NE(std::string(error.what()).find(name + std::string(": not a regular file")),
+                std::string::npos)
+          << error.what();
+    }
+  }
+  std::filesystem::create_directories(dir / "directory");
+  EXPECT_THROW(ReadFile(dir / "directory"), IoError);
+  const auto small = dir.Write("small.txt", "0123456789");
+  EXPECT_EQ(ReadFile(small, 10), "0123456789");
+  EXPECT_THROW(ReadFile(small, 9), IoError);
 }
 
 }  // namespace

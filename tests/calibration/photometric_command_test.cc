@@ -123,5 +123,35 @@ TEST(CalibratePhotometricCommand, BadSessionsGetOneLineNamingTheFile) {
   }
 }
 
+// Option values that make no sense, and --projector without a rig.json to merge into (it used
+// to create one), are refused before anything is fitted or written.
+TEST(CalibratePhotometricCommand, RefusesBadOptionsBeforeWriting) {
+  testing::TempDir dir;
+  const std::string test_camera =
+      "'test:loopback?width=64&height=48&fps=500&exposure_us=1000&reference_exposure_us=1000"
+      "&format=BGR8'";
+  ASSERT_EQ(RunProcam("capture --camera " + test_camera +
+                      " --sequence photometric --levels 0,128,255 --channels rgb "
+                      "--projector-size 32x24 --frames 1 --settle-ms 1 --out " +
+                      (dir / "flat").string())
+                .exit_code,
+            0);
+  const std::string calibrate =
+      "calibrate photometric " + (dir / "flat").string() + " --out " + (dir / "rig").string();
+  const std::pair<std::string, std::string> cases[] = {
+      {" --camera-black nan", "--camera-black"},
+      {" --camera-black -1", "--camera-black"},
+      {" --projector left", (dir / "rig" / "rig.json").string() + ": not found"},
+  };
+  for (const auto& [options, expected] : cases) {
+    const CommandRun run = RunProcam(calibrate + options);
+    EXPECT_EQ(run.exit_code, 1) << options << ": " << run.output;
+    EXPECT_EQ(Lines(run.output), 1) << run.output;
+    EXPECT_NE(run.output.find("procam: error: "), std::string::npos) << run.output;
+    EXPECT_NE(run.output.find(expected), std::string::npos) << run.output;
+    EXPECT_FALSE(std::filesystem::exists(dir / "rig")) << options;
+  }
+}
+
 }  // namespace
 }  // namespace procam

@@ -121,6 +121,26 @@ TEST(CaptureCli, AnInterruptedCaptureResumesWhenRunAgain) {
   EXPECT_EQ(resumed.output.find("0 already there"), std::string::npos) << resumed.output;
 }
 
+// A frame overwritten with junk (or cut short) is not trusted on resume: that pattern is
+// captured again, so the finished session holds only frames that decode.
+TEST(CaptureCli, ResumeRecapturesAFrameThatDoesNotDecode) {
+  testing::TempDir dir;
+  const std::string command = "capture --camera " + kTestCamera +
+                              "' --sequence photometric --levels 0,255 --channels rgb "
+                              "--projector-size 32x24 --frames 1 --settle-ms 1 --out " +
+                              (dir / "flat").string();
+  ASSERT_EQ(Procam(command).exit_code, 0);
+  const nlohmann::json manifest = nlohmann::json::parse(ReadFile(dir / "flat" / "session.json"));
+  const std::filesystem::path frame =
+      dir / "flat" / manifest["patterns"][1]["captured"]["exposures"][0]["file"].get<std::string>();
+  WriteFileAtomically(frame, "\x89PNG\r\n junk, not a picture");
+  const CommandRun resumed = Procam(command);
+  EXPECT_EQ(resumed.exit_code, 0) << resumed.output;
+  EXPECT_NE(resumed.output.find("(1 this run, 3 already there)"), std::string::npos)
+      << resumed.output;
+  EXPECT_EQ(cv::imread(frame.string(), cv::IMREAD_UNCHANGED).depth(), CV_16U);
+}
+
 TEST(CaptureCli, ASyntheticCameraThatTimesOutMidSessionKeepsItsFramesAndResumes) {
   testing::TempDir dir;
   const std::string camera =

@@ -1,7 +1,9 @@
 #include "geometry/scene.h"
 
-#include <opencv2/imgcodecs.hpp>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+
+#include <opencv2/imgcodecs.hpp>
 
 #include "base/io.h"
 #include "tests/testing/testing.h"
@@ -93,6 +95,78 @@ TEST(LoadScene, ReadsObjMeshesAndReportsBadFacesByLine) {
   const std::string message =
       LoadError(dir, SceneText(R"({"mesh": "bad.obj", "reflectance": 0.5, "desired": [1,1,1]})"));
   EXPECT_NE(message.find("bad.obj:4: degenerate"), std::string::npos) << message;
+}
+
+// Every OBJ number and index is checked where it is read: out-of-range and overflowing
+// indices, corners that name elements the file lacks, non-finite or out-of-range coordinates
+// and faces of fewer than three corners are refused naming the file and line, never passed on.
+TEST(LoadObjMesh, RefusesIndicesAndNumbersThatMakeNoSense) {
+  testing::TempDir dir;
+  const std::string square = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n";
+  const std::string uv = "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n";
+  struct Case {
+    std::string obj, expected;
+  };
+  const std::vector<Case> cases = {
+      {square + "f 1 2 2147483648\n", "m.obj:5: vertex index '2147483648' is out of range"},
+      {square + "f 1 2 -2147483649\n", "m.obj:5: vertex index '-2147483649' is out of range"},
+      {square + "f 1 2 99999999999\n", "m.obj:5: vertex index '99999999999' is out of range"},
+      {square + "f 1 2 99999999999999999999999\n", "out of range"},
+      {square + "f 1 2 0\n", "vertex index '0' is out of range"},
+      {square + "f 1 2 -5\n", "vertex index '-5' is out of range"},
+      {square + "f 1 2 3x\n", "vertex index '3x' is not an integer"},
+      {square + "f 1/1 2/2 3/3\n",
+       "m.obj:5: texture coordinate index '1' is out of range (the file has 0"},
+      {square + uv + "f 1/1 2/2 3/5\n", "texture coordinate index '5' is out of range"},
+      {square + "vn 0 0 1\nf 1//1 2//1 3//2\n", "m.obj:6: normal index '2' is out of range"},
+      {square + "f 1 2\n", "m.obj:5: face with fewer than 3 corners (2)"},
+      {square + "f\n", "face with fewer than 3 corners (0)"},
+      {square + "vt 1e400 0\nf 1/1 2/1 3/1\n", "m.obj:5: '1e400' is not a finite number"},
+      {square + "vt nan nan\nf 1/1 2/1 3/1\n", "m.obj:5: 'nan' is not a finite number"},
+      {square + "vt 0.5 inf\n", "'inf' is not a finite number"},
+      {square + "vt 1.5 0\n", "m.obj:5: '1.5' is out of range"},
+      {square + "vt -0.5 0\n", "texture coordinates must be in [0, 1]"},
+      {"v 0 0 1e300\n", "m.obj:1: '1e300' is out of range"},
+      {"v 0 0\n", "m.obj:1: expected 3 to 6 numbers, got 2"},
+      {"v 0 0 zero\n", "'zero' is not a finite number"},
+      {square + "f 1/1/1/1 2 3\n", "is not a face corner"},
+  };
+  for (const Case& c : cases) {
+    Surface surface;
+    try {
+      LoadObjMesh(dir.Write("m.obj", c.obj), 1e-3, &surface);
+      ADD_FAILURE() << "accepted:\n" << c.obj;
+    } catch (const IoError& error) {
+      EXPECT_NE(std::string(error.what()).find(c.expected), std::string::npos) << c.obj << "\n"
+                                                                               << error.what();
+    }
+  }
+  // Negative indices count back from the vertices defined so far; a face may name vertices
+  // defined after it.
+  Surface surface;
+  LoadObjMesh(dir.Write("m.obj", "f 1 2 3\n" + square + "f -4 -2 -1\n"), 1e-3, &surface);
+  EXPECT_EQ(surface.mesh_triangles.size(), 2u);
+}
+
+// A mesh or texture path that is a FIFO or a device (/dev/zero) is refused at once instead of
+// blocking or reading without end.
+TEST(LoadScene, RefusesMeshesAndTexturesThatAreNotRegularFiles) {
+  testing::TempDir dir;
+  ASSERT_EQ(::mkfifo((dir / "fifo").c_str(), 0600), 0);
+  std::filesystem::create_symlink("/dev/zero", dir / "zero");
+  for (const char* name : {"fifo", "zero"}) {
+    const std::string mesh =
+        LoadError(dir, SceneText(R"({"mesh": ")" + std::string(name) +
+                                 R"(", "reflectance": 0.5, "desired": [1,1,1]})"));
+    EXPECT_NE(mesh.find(std::string(name) + ": not a regular file"), std::string::npos) << mesh;
+    const std::string texture = LoadError(
+        dir, SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": 0.5, )"
+                       R"("desired": {"texture": ")" +
+                       std::string(name) + R"("}})"));
+    EXPECT_NE(texture.find("desired.texture: "), std::string::npos) << texture;
+    EXPECT_NE(texture.find(std::string(name) + ": not a regular file"), std::string::npos)
+        << texture;
+  }
 }
 
 TEST(LoadScene, TexturesAreDecodedToLinear) {

@@ -49,6 +49,13 @@ CommandRun RunProcam(const std::string& arguments) {
   return RunShell(std::string(binary ? binary : "procam") + " " + arguments);
 }
 
+CommandRun RunProcamStderr(const std::string& arguments) {
+  const char* binary = std::getenv("PROCAM_BINARY");
+  EXPECT_NE(binary, nullptr) << "PROCAM_BINARY is not set (run the test through CTest)";
+  return RunShell("{ " + std::string(binary ? binary : "procam") + " " + arguments +
+                  " 2>&1 >/dev/null; }");
+}
+
 std::filesystem::path SourceDir() {
   const char* dir = std::getenv("PROCAM_SOURCE_DIR");
   return dir ? dir : ".";

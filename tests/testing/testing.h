@@ -36,6 +36,9 @@ struct CommandRun {
 CommandRun RunShell(const std::string& command);
 // Runs the procam binary CTest names in PROCAM_BINARY with `arguments`, as a user would.
 CommandRun RunProcam(const std::string& arguments);
+// The same, keeping only what procam writes on stderr (its logs on stdout are dropped): for
+// checking that an error is one line and nothing else.
+CommandRun RunProcamStderr(const std::string& arguments);
 
 // Max-norm distance of two matrices, for EXPECT_LT(MaxAbsDifference(a, b), tol).
 template <typename A, typename B>

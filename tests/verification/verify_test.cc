@@ -17,8 +17,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 
+#include "base/camera_model.h"
 #include "base/html_report.h"
 #include "base/io.h"
 #include "base/json_fields.h"
@@ -429,16 +431,89 @@ TEST(VerificationRun, ReaderNamesTheFileAndKey) {
       IoError);
 }
 
+// The files of a verification run that a refused rerun must leave as they were.
+std::map<std::string, std::string> RunFiles(const std::filesystem::path& out) {
+  std::map<std::string, std::string> files;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(out)) {
+    if (entry.is_regular_file()) {
+      files[std::filesystem::relative(entry.path(), out).string()] = ReadFile(entry.path());
+    }
+  }
+  return files;
+}
+
+// A rerun into a directory holding a run of other inputs cannot resume its sessions: it is
+// refused before result.json, report.html, desired.png or an iteration's files change.
+TEST(Verify, ResumeWithOtherInputsChangesNothing) {
+  testing::TempDir dir;
+  const std::filesystem::path scene = WriteScene(dir);
+  const std::filesystem::path rig = WriteRig(dir, "rig", 0.0, 0.95);
+  const std::filesystem::path solution = Compensate(dir, scene, rig, "solution");
+  const std::string verify = "verify " + rig.string() + " " + solution.string() + " --camera " +
+                             kCamera + kCapture + "--iterations 1 --out " + (dir / "out").string();
+  ASSERT_EQ(RunProcam(verify).exit_code, 0);
+  const std::map<std::string, std::string> before = RunFiles(dir / "out");
+  ASSERT_TRUE(before.count("iterations/0/E.npy") && before.count("report.html"));
+  const std::filesystem::path inputs[] = {solution / "E.npy", rig / "reflectance.npy"};
+  for (const std::filesystem::path& changed : inputs) {
+    const std::string original = ReadFile(changed);
+    WriteNpy(changed, RowMatrixXd(0.9 * ReadMatrix(changed)));
+    const CommandRun run = testing::RunProcamStderr(verify);
+    EXPECT_EQ(run.exit_code, 1) << changed << ": " << run.output;
+    EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << run.output;
+    EXPECT_NE(run.output.find("cannot resume"), std::string::npos) << run.output;
+    EXPECT_TRUE(RunFiles(dir / "out") == before) << changed;
+    WriteFileAtomically(changed, original);
+  }
+}
+
+// A camera model whose size is not the camera's is refused when the camera opens, before
+// desired.png or a session changes.
+TEST(Verify, CameraOfAnotherSizeChangesNothing) {
+  testing::TempDir dir;
+  const std::filesystem::path scene = WriteScene(dir);
+  const std::filesystem::path rig = WriteRig(dir, "rig", 0.0, 1.0);
+  const std::filesystem::path solution = Compensate(dir, scene, rig, "solution");
+  const std::string verify = "verify " + rig.string() + " " + solution.string() + " --camera " +
+                             kCamera + kCapture + "--iterations 1 --out " + (dir / "out").string();
+  ASSERT_EQ(RunProcam(verify).exit_code, 0);
+  const std::map<std::string, std::string> before = RunFiles(dir / "out");
+  CameraModel camera = ReadCameraModelFile(rig / "camera.cameramodel");
+  camera.width += 16;
+  camera.intrinsics[2] += 8.0;  // the same view, a wider image
+  WriteCameraModelFile(rig / "camera.cameramodel", camera, "a camera model of another size");
+  const CommandRun run = testing::RunProcamStderr(verify);
+  EXPECT_EQ(run.exit_code, 1) << run.output;
+  EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << run.output;
+  EXPECT_NE(run.output.find("camera.cameramodel is"), std::string::npos) << run.output;
+  EXPECT_TRUE(RunFiles(dir / "out") == before);
+}
+
 TEST(Verify, BadInputGetsOneLineAndWritesNothing) {
   testing::TempDir dir;
   const std::filesystem::path scene = WriteScene(dir);
   const std::filesystem::path rig = WriteRig(dir, "rig", 0.0, 1.0);
   const std::filesystem::path solution = Compensate(dir, scene, rig, "solution");
   std::filesystem::create_directories(dir / "empty");
+  // rig.json values of the wrong type: its typed reader (ReadRigFile) refuses them by key.
+  const auto typed_rig = [&](const std::string& name, const nlohmann::json& patch) {
+    const std::filesystem::path copy = dir / name;
+    std::filesystem::copy(rig, copy);
+    nlohmann::json json = ReadJson(rig / "rig.json");
+    json.merge_patch(patch);
+    dir.Write(name + "/rig.json", json.dump(2));
+    return copy.string();
+  };
   struct Case {
     std::string arguments, expected;
   };
   const Case cases[] = {
+      {typed_rig("bool_scale", {{"camera", {{"colour", {{"scale", true}}}}}}) + " " +
+           solution.string() + " --camera " + kCamera,
+       "camera.colour.scale"},
+      {typed_rig("string_model", {{"camera", {{"model", 3}}}}) + " " + solution.string() +
+           " --camera " + kCamera,
+       "camera.model"},
       {(dir / "empty").string() + " " + solution.string() + " --camera " + kCamera,
        (dir / "empty/rig.json").string() + ": file not found"},
       {rig.string() + " " + (dir / "empty").string() + " --camera " + kCamera,
