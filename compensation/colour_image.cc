@@ -144,26 +144,42 @@ cv::Mat HeatMapWithColourBar(const cv::Mat& delta_e, double max_value, const std
   delta_e.convertTo(scaled, CV_8UC1, 255.0 / max_value);
   cv::Mat heat;
   cv::applyColorMap(scaled, heat, cv::COLORMAP_INFERNO);
-  const int bar_width = 70, bar_left = 12, bar_thickness = 18;
+  // Text sized to the picture, so it stays readable where a report shows the picture at half
+  // its width: about 1/40 of the height, never below 0.5 (≈ 11 px).
+  const int face = cv::FONT_HERSHEY_SIMPLEX;
+  const double font = std::max(0.5, heat.rows / 640.0 * 0.7);
+  const int thickness = font >= 0.9 ? 2 : 1;
+  std::vector<std::string> ticks;
+  int widest = cv::getTextSize(label, face, font, thickness, nullptr).width;
+  for (int tick = 0; tick <= 4; ++tick) {
+    ticks.push_back(fmt::format("{:.3g}", max_value * tick / 4));
+    widest = std::max(widest, cv::getTextSize(ticks.back(), face, font, thickness, nullptr).width);
+  }
+  int baseline = 0;
+  const int text_height = cv::getTextSize("0", face, font, thickness, &baseline).height;
+  const int margin = text_height, bar_thickness = 2 * text_height;
+  const int bar_width = std::max(margin + bar_thickness + margin / 2 + widest + margin, widest + 2 * margin);
   cv::Mat canvas(heat.rows, heat.cols + bar_width, CV_8UC3, cv::Scalar(255, 255, 255));
   heat.copyTo(canvas(cv::Rect(0, 0, heat.cols, heat.rows)));
-  const int top = 20, bottom = heat.rows - 20;
+  const int top = 3 * text_height, bottom = heat.rows - text_height;
+  if (bottom - top < 2) return canvas;  // too small a picture for a bar
   cv::Mat ramp(bottom - top, 1, CV_8UC1);
   for (int k = 0; k < ramp.rows; ++k)
     ramp.at<uchar>(k, 0) = static_cast<uchar>(255 - 255 * k / std::max(1, ramp.rows - 1));
   cv::Mat ramp_colour;
   cv::applyColorMap(ramp, ramp_colour, cv::COLORMAP_INFERNO);
   cv::resize(ramp_colour, ramp_colour, cv::Size(bar_thickness, ramp.rows), 0, 0, cv::INTER_NEAREST);
-  ramp_colour.copyTo(canvas(cv::Rect(heat.cols + bar_left, top, bar_thickness, ramp.rows)));
-  const double font = 0.35;
+  const int bar_left = heat.cols + margin;
+  ramp_colour.copyTo(canvas(cv::Rect(bar_left, top, bar_thickness, ramp.rows)));
   for (int tick = 0; tick <= 4; ++tick) {
     const int y = bottom - (bottom - top) * tick / 4;
-    cv::putText(canvas, fmt::format("{:.0f}", max_value * tick / 4),
-                cv::Point(heat.cols + bar_left + bar_thickness + 3, y + 4),
-                cv::FONT_HERSHEY_SIMPLEX, font, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+    cv::line(canvas, cv::Point(bar_left + bar_thickness, y), cv::Point(bar_left + bar_thickness + margin / 3, y),
+             cv::Scalar(0, 0, 0), thickness);
+    cv::putText(canvas, ticks[tick], cv::Point(bar_left + bar_thickness + margin / 2, y + text_height / 2), face,
+                font, cv::Scalar(0, 0, 0), thickness, cv::LINE_AA);
   }
-  cv::putText(canvas, label, cv::Point(heat.cols + 4, 12), cv::FONT_HERSHEY_SIMPLEX, font,
-              cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+  cv::putText(canvas, label, cv::Point(heat.cols + margin / 2, 2 * text_height - baseline / 2), face, font,
+              cv::Scalar(0, 0, 0), thickness, cv::LINE_AA);
   return canvas;
 }
 

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <opencv2/imgproc.hpp>
+
 #include <cmath>
 #include <stdexcept>
 
@@ -98,6 +100,46 @@ TEST(MeasureSeams, RejectsBadInput) {
                std::invalid_argument);
   EXPECT_THROW(MeasureSeams(kFlatDesired, kFlatDesired, PatchGrid(), {0, 1}),
                std::invalid_argument);
+}
+
+// The heat map keeps the picture's colours (inferno of ΔE / max), and its bar runs from inferno(0)
+// at the bottom to inferno(255) at the top with dark tick text beside it, at a size that grows
+// with the picture.
+TEST(HeatMapWithColourBar, PictureBarAndLabelsScaleWithTheImage) {
+  int previous_bar_width = 0;
+  for (const int rows : {120, 640, 1280}) {
+    cv::Mat delta_e(rows, rows * 3 / 2, CV_32FC1);
+    for (int row = 0; row < delta_e.rows; ++row)
+      for (int col = 0; col < delta_e.cols; ++col) delta_e.at<float>(row, col) = 20.0f * col / delta_e.cols;
+    const cv::Mat canvas = HeatMapWithColourBar(delta_e, 20.0, "dE00");
+    ASSERT_EQ(canvas.rows, rows);
+    const int bar_width = canvas.cols - delta_e.cols;
+    EXPECT_GT(bar_width, previous_bar_width) << rows;
+    previous_bar_width = bar_width;
+    cv::Mat expected_scaled, expected;
+    delta_e.convertTo(expected_scaled, CV_8UC1, 255.0 / 20.0);
+    cv::applyColorMap(expected_scaled, expected, cv::COLORMAP_INFERNO);
+    EXPECT_EQ(cv::norm(canvas(cv::Rect(0, 0, delta_e.cols, rows)), expected, cv::NORM_INF), 0.0) << rows;
+    // The bar: the brightest and darkest inferno colours in its column, top and bottom.
+    cv::Mat ends(2, 1, CV_8UC1), ends_colour;
+    ends.at<uchar>(0, 0) = 255;
+    ends.at<uchar>(1, 0) = 0;
+    cv::applyColorMap(ends, ends_colour, cv::COLORMAP_INFERNO);
+    const cv::Mat bar = canvas(cv::Rect(delta_e.cols, 0, bar_width, rows));
+    int top_hits = 0, bottom_hits = 0, dark = 0;
+    for (int row = 0; row < rows; ++row) {
+      for (int col = 0; col < bar_width; ++col) {
+        const cv::Vec3b& p = bar.at<cv::Vec3b>(row, col);
+        top_hits += row < rows / 2 && p == ends_colour.at<cv::Vec3b>(0, 0);
+        bottom_hits += row >= rows / 2 && p == ends_colour.at<cv::Vec3b>(1, 0);
+        dark += p[0] < 60 && p[1] < 60 && p[2] < 60;
+      }
+    }
+    EXPECT_GT(top_hits, 0) << rows;
+    EXPECT_GT(bottom_hits, 0) << rows;
+    // The text (five ticks and the label) covers more pixels on a larger picture.
+    EXPECT_GT(dark, rows / 4) << rows;
+  }
 }
 
 }  // namespace
