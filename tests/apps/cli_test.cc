@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+
 #include "base/html_report.h"
 #include "base/io.h"
 #include "tests/testing/testing.h"
@@ -110,6 +112,25 @@ TEST(Cli, CompensateWithCompressedFormFactorsMatchesTheDenseSolve) {
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_NE(bad.output.find("--export"), std::string::npos) << bad.output;
   EXPECT_FALSE(std::filesystem::exists(dir / "bad"));
+}
+
+// procam evaluate on the small box: every method in the markdown table, the report with one
+// table per scene (a row per method and the lowest reachable), well formed; the verdict line.
+TEST(Cli, EvaluateWritesTableReportAndVerdict) {
+  testing::TempDir dir;
+  const CommandRun run = Procam("evaluate tiny_box --patches 60 --world-factor 1 --out " + (dir / "eval").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  const std::string table = ReadFile(dir / "eval" / "table.md");
+  const std::string report = ReadFile(dir / "eval" / "report.html");
+  for (const char* method : {"naive", "reverse", "linear", "perceptual", "perceptual2000"}) {
+    EXPECT_NE(table.find(std::string(method) + " ΔE2000 mean (max)"), std::string::npos) << method;
+    EXPECT_NE(report.find(std::string("<td>") + method + "</td>"), std::string::npos) << method;
+  }
+  EXPECT_NE(report.find("lowest reachable"), std::string::npos);
+  EXPECT_NE(run.output.find("perceptual2000 lowest per-pixel mean CIEDE2000 of all methods"), std::string::npos);
+  for (const std::string& problem : CheckReportStructure(report)) ADD_FAILURE() << "evaluate report: " << problem;
+  const nlohmann::json result = nlohmann::json::parse(ReadFile(dir / "eval" / "tiny_box" / "result.json"));
+  EXPECT_TRUE(result.at("methods").at("perceptual2000").at("seam").contains("seam"));
 }
 
 TEST(Cli, DemoOnASceneFileRunsGeometryAndCompensation) {
