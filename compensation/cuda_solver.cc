@@ -150,6 +150,13 @@ Eigen::MatrixX3d MinimiseBoundedOnGpu(const SolverOptions& options, const Compen
   resident_problem.desired = problem.desired.data();
   resident_problem.initial = start.data();
   resident_problem.lab = objective.model() == ColourModel::kLab;
+  // A colour metric's factors L_i, laid out as the device keeps its Jacobians.
+  const std::vector<Eigen::Matrix3d>& factors = objective.metric().factor;
+  std::vector<double> metric_factor(factors.empty() ? 0 : 9 * static_cast<size_t>(n));
+  for (int i = 0; i < static_cast<int>(factors.size()); ++i) {
+    for (int k = 0; k < 9; ++k) metric_factor[static_cast<size_t>(k) * n + i] = factors[i](k / 3, k % 3);
+  }
+  if (!metric_factor.empty()) resident_problem.metric_factor = metric_factor.data();
   const Eigen::Matrix3d linear = objective.ColourJacobian(Eigen::Vector3d::Zero());  // constant for kLinear
   for (int a = 0; a < 3; ++a) {
     for (int b = 0; b < 3; ++b) {

@@ -146,6 +146,7 @@ struct ColourSpace {
   double white[3];
   double linear[9];      // row-major
   int lab;
+  const double* factor;  // a colour metric's L_i, 9n ((3a + b)·n + i), or null
 };
 
 // W: its diagonal and its off-diagonal entries (CSR).
@@ -249,14 +250,27 @@ __global__ void DesiredColourKernel(int n, ColourSpace space, const double* desi
   }
 }
 
-// r_i = C(B_i) − C(Bd_i) and J_i = ∂C/∂B at B_i.
+// r_i = C(B_i) − C(Bd_i) and J_i = ∂C/∂B at B_i; with a colour metric L_i r_i and L_i J_i
+// (CompensationObjective::Residual and PatchJacobian).
 __device__ void ResidualPhase(int n, ColourSpace space, const double* radiosity, const double* desired_colour,
                                double* residual, double* jacobian) {
   for (int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
     const double rgb[3] = {radiosity[i], radiosity[n + i], radiosity[2 * n + i]};
     double colour[3], j[9];
     ColourAndJacobian(space, rgb, colour, j);
-    for (int c = 0; c < 3; ++c) residual[c * n + i] = colour[c] - desired_colour[c * n + i];
+    double r[3];
+    for (int c = 0; c < 3; ++c) r[c] = colour[c] - desired_colour[c * n + i];
+    if (space.factor != nullptr) {
+      double l[9], lr[3], lj[9];
+      LoadJacobian(space.factor, n, i, l);  // same layout as the Jacobians
+      for (int a = 0; a < 3; ++a) {
+        lr[a] = l[3 * a] * r[0] + l[3 * a + 1] * r[1] + l[3 * a + 2] * r[2];
+        for (int b = 0; b < 3; ++b) lj[3 * a + b] = l[3 * a] * j[b] + l[3 * a + 1] * j[3 + b] + l[3 * a + 2] * j[6 + b];
+      }
+      for (int c = 0; c < 3; ++c) r[c] = lr[c];
+      for (int k = 0; k < 9; ++k) j[k] = lj[k];
+    }
+    for (int c = 0; c < 3; ++c) residual[c * n + i] = r[c];
     for (int k = 0; k < 9; ++k) jacobian[k * n + i] = j[k];
   }
 }
@@ -282,9 +296,15 @@ __device__ void WeightedResidualPhase(int n, ColourSpace space, Weights w, const
     if (space.lab) {
       const Eigen::Matrix3d t = RowMajor(space.rgb_to_xyz);
       const Eigen::Vector3d xyz = t * Eigen::Vector3d(radiosity[i], radiosity[n + i], radiosity[2 * n + i]);
+      // With a metric, Σ_k w_k ∇²(L_i Lab)_k = Σ_m (L_iᵀ w)_m ∇²Lab_m.
+      Eigen::Vector3d by_lab(weighted[0], weighted[1], weighted[2]);
+      if (space.factor != nullptr) {
+        double l[9];
+        LoadJacobian(space.factor, n, i, l);
+        by_lab = RowMajor(l).transpose() * by_lab;
+      }
       const Eigen::Vector3d curve = XyzToLabWeightedCurvature(
-          xyz, Eigen::Vector3d(space.white[0], space.white[1], space.white[2]),
-          Eigen::Vector3d(weighted[0], weighted[1], weighted[2]));
+          xyz, Eigen::Vector3d(space.white[0], space.white[1], space.white[2]), by_lab);
       for (int c = 0; c < 3; ++c) curvature[c * n + i] = curve[c];
     }
   }
@@ -1146,6 +1166,7 @@ class Loop {
     reduction_ = workspace->reduction();
     const size_t n = static_cast<size_t>(n_), vector = 3 * n;
     const int entries = problem.neighbour_offsets[n_];
+    metric_ = problem.lab && problem.metric_factor != nullptr;
     workspace->Measure();
     Carve(workspace, entries);
     workspace->Allocate();
@@ -1163,7 +1184,8 @@ class Loop {
          {weight_diagonal_, problem.weight_diagonal, n * sizeof(double)},
          {offsets_, problem.neighbour_offsets, (n + 1) * sizeof(int)},
          {neighbours_, problem.neighbours, entries * sizeof(int)},
-         {neighbour_weights_, problem.neighbour_weights, entries * sizeof(double)}},
+         {neighbour_weights_, problem.neighbour_weights, entries * sizeof(double)},
+         {factor_, metric_ ? problem.metric_factor : nullptr, metric_ ? 9 * n * sizeof(double) : 0}},
         stream_);
     weights_ = {weight_diagonal_, offsets_, neighbours_, neighbour_weights_};
     for (int k = 0; k < 9; ++k) {
@@ -1172,6 +1194,7 @@ class Loop {
     }
     for (int c = 0; c < 3; ++c) space_.white[c] = problem.white_xyz[c];
     space_.lab = problem.lab ? 1 : 0;
+    space_.factor = metric_ ? factor_ : nullptr;
     second_order_ = problem.lab && options.second_order;
     // The desired colours, from their staging in the trial point's emittance.
     DesiredColourKernel<<<Blocks(n_), kThreads, 0, stream_>>>(n_, space_, trial_.emittance, desired_colour_);
@@ -1217,6 +1240,7 @@ class Loop {
     offsets_ = workspace->Take<int>(n + 1);
     neighbours_ = workspace->Take<int>(entries);
     neighbour_weights_ = workspace->Take<double>(entries);
+    if (metric_) factor_ = workspace->Take<double>(9 * n);
     fixed_ = workspace->Take<unsigned char>(vector);
     records_ = workspace->Take<FusedRecords>(1);
     trace_ = workspace->Take<IterationRecord>(static_cast<size_t>(options_.max_iterations) + 1);
@@ -1725,6 +1749,8 @@ class Loop {
   Weights weights_{};
   Point current_{}, trial_{};
   double *lower_, *upper_, *desired_colour_, *gradient_, *d_, *hd_, *qg_, *mask_;
+  bool metric_ = false;       // the problem has a colour metric's factors ...
+  double* factor_ = nullptr;  // ... here (ColourSpace::factor)
   double *x_, *r_, *b0_, *p_, *z_, *y_, *hp_, *solution_, *delta_, *step_trial_, *preconditioner_;
   P *p_fast_, *u_fast_, *back_fast_, *product_fast_;
   double *weight_diagonal_, *neighbour_weights_;

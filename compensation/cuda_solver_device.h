@@ -69,6 +69,9 @@ struct ResidentProblem {
   double rgb_to_xyz[9] = {};     // T, row-major
   double white_xyz[3] = {};
   double linear_colour[9] = {};  // row-major
+  // A colour metric's per-patch factors L_i (ColourMetric::factor, Lab only): each residual and
+  // Jacobian is multiplied by L_i. 9n values, entry (a, b) of L_i at [(3a + b)·n + i]; null: none.
+  const double* metric_factor = nullptr;
 };
 
 // SolverOptions' settings of the loop: Alg. 1 and 2's (solver_driver.h documents them) and the

@@ -69,10 +69,7 @@ Eigen::MatrixX3d Minimise(const SolverOptions& options, const CompensationObject
                           const Eigen::MatrixX3d& initial, SolverSummary* summary,
                           Eigen::MatrixX3d* radiosity = nullptr) {
 #if PROCAM_WITH_CUDA
-  // The device loop forms L*a*b* residuals itself, without a colour metric's per-patch factors:
-  // with them, the host loop runs (the objective here, every K⁻¹ and K⁻ᵀ on the device).
-  if (options.device == Device::kCuda && !options.device_host_loop &&
-      objective.metric().factor.empty()) {
+  if (options.device == Device::kCuda && !options.device_host_loop) {
     return MinimiseBoundedOnGpu(options, objective, initial, summary, radiosity);
   }
 #else
@@ -409,32 +406,27 @@ ColourMetric Ciede2000Metric(const SolverOptions& options, const CompensationPro
   ColourMetric metric;
   metric.factor.resize(n);
   metric.weight = Eigen::VectorXd::Ones(n);
+  const bool measured = radiosity.rows() == n;  // else the first round's: at the desired colours
+  std::vector<Eigen::Vector3d> residual(n);     // L_i r_i
+#pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     const Eigen::Vector3d desired =
         XyzToLab(problem.rgb_to_xyz * problem.desired.row(i).transpose(), problem.white_xyz);
     Eigen::Vector3d lab = desired;
-    if (radiosity.rows() == n)
-      lab = XyzToLab(problem.rgb_to_xyz * radiosity.row(i).transpose(), problem.white_xyz);
+    if (measured) lab = XyzToLab(problem.rgb_to_xyz * radiosity.row(i).transpose(), problem.white_xyz);
     Eigen::Matrix3d m = DeltaE2000Metric(0.5 * (lab + desired));
     const Eigen::Vector3d r = lab - desired;
     const double quadratic = r.dot(m * r);
     const double distance = DeltaE2000(lab, desired);
     if (quadratic > 1e-12 && std::isfinite(distance)) m *= distance * distance / quadratic;
     metric.factor[i] = Eigen::LLT<Eigen::Matrix3d>(m).matrixU();
-    if (radiosity.rows() == n)
-      metric.weight[i] = RobustLossWeight(options.robust_loss, options.robust_scale, distance * distance);
+    residual[i] = metric.factor[i] * r;
+    if (measured) metric.weight[i] = RobustLossWeight(options.robust_loss, options.robust_scale, distance * distance);
   }
   metric.weight /= metric.weight.mean();
-  if (radiosity.rows() == n && !problem.adjacency.empty()) {
+  if (measured && !problem.adjacency.empty()) {
     // The spatial term's pairs under the same loss, at the difference of their metric residuals.
     const Eigen::Index pairs = static_cast<Eigen::Index>(problem.adjacency.size());
-    std::vector<Eigen::Vector3d> residual(n);
-    for (int i = 0; i < n; ++i) {
-      const Eigen::Vector3d lab = XyzToLab(problem.rgb_to_xyz * radiosity.row(i).transpose(), problem.white_xyz);
-      const Eigen::Vector3d desired =
-          XyzToLab(problem.rgb_to_xyz * problem.desired.row(i).transpose(), problem.white_xyz);
-      residual[i] = metric.factor[i] * (lab - desired);
-    }
     metric.pair_weight.resize(pairs);
     for (Eigen::Index k = 0; k < pairs; ++k) {
       const auto& pair = problem.adjacency[k];
@@ -658,6 +650,11 @@ void SolveCiede2000Rounds(const SolverOptions& options, const CompensationProble
     summary->message = round_summary.message;
     summary->iterations += round_summary.iterations;
     AddWorkCounters(round_summary, summary);
+    summary->device_loop = round_summary.device_loop;  // how the rounds ran on a device
+    summary->device_fused = round_summary.device_fused;
+    summary->device_fused_blocks = round_summary.device_fused_blocks;
+    summary->device_preconditioner = round_summary.device_preconditioner;
+    summary->device_cg_matrix = round_summary.device_cg_matrix;
     summary->trace.insert(summary->trace.end(), round_summary.trace.begin(), round_summary.trace.end());
     solution->metric = std::move(metric);
   }

@@ -128,14 +128,9 @@ TEST(SolveCudaExported, ResidentAndHostLoopMatchTheCpuOnRealRooms) {
         bool host_loop, fused;
         const char* name;
       };
-      // perceptual2000's rounds run the host loop whatever the options ask (solver.h).
       const bool rounds = method == CompensationMethod::kPerceptual2000;
-      std::vector<Variant> variants = {Variant{true, false, "cuda host loop"}};
-      if (!rounds) {
-        variants.insert(variants.begin(), {Variant{false, true, "cuda resident"},
-                                           Variant{false, false, "cuda kernel per step"}});
-      }
-      for (const Variant& v : variants) {
+      for (const Variant& v : {Variant{false, true, "cuda resident"}, Variant{false, false, "cuda kernel per step"},
+                               Variant{true, false, "cuda host loop"}}) {
         SolverOptions gpu = cpu;
         gpu.device = Device::kCuda;
         gpu.device_host_loop = v.host_loop;
@@ -655,7 +650,8 @@ TEST(SolveCudaAnalytic, DISABLED_Timings) {
                         {"linear [cuda resident]", Device::kCuda, false, false, false, kLinear},
                         {"perceptual2000 (CPU)", Device::kCpu, false, false, false, k2000},
                         {"perceptual2000 [cuda host loop]", Device::kCuda, false, false, true, k2000},
-                        {"perceptual2000 --multires [cuda host loop]", Device::kCuda, true, false, true, k2000}};
+                        {"perceptual2000 [cuda resident]", Device::kCuda, false, false, false, k2000},
+                        {"perceptual2000 --multires [cuda resident]", Device::kCuda, true, false, false, k2000}};
     double reference[3] = {0.0, 0.0, 0.0};  // perceptual, linear, perceptual2000: the first row's
     // Same yardstick for every row: the objective in double, with the float64 K⁻¹ formed on the
     // device (a CPU factorisation of the largest sizes would take minutes).
