@@ -6,7 +6,9 @@
 # Options: --table FILE (default build/fuzz/campaign.md), --only NAME (one target).
 # New inputs go to build/fuzz/corpus/NAME (the seeds in the repository are not changed); a crash,
 # hang (-timeout=10 s per input), leak, memory blow-up (-rss_limit_mb=2048) or sanitizer report
-# leaves its input in build/fuzz/artifacts/ and makes the script exit 1.
+# leaves its input in build/fuzz/artifacts/ and makes the script exit 1. -close_fd_mask=2: procam's
+# own stderr is dropped, and libFuzzer and the sanitizers report on a copy of it, so that a report
+# made while a reader silences stderr (SilencedStderr, around decoders) still reaches the log.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -24,11 +26,13 @@ while [ $# -gt 0 ]; do
 done
 
 # fuzz_one NAME: runs build/fuzz/fuzz/fuzz_NAME; prints the table's row; returns its exit status.
+# Seeds: fuzz/corpus/NAME and the inputs of earlier findings, fuzz/regressions/NAME.
 fuzz_one() {
-  local name=$1 log=build/fuzz/logs/$1.log status=0
+  local name=$1 log=build/fuzz/logs/$1.log status=0 seeds=("fuzz/corpus/$1")
+  [ -d "fuzz/regressions/$name" ] && seeds+=("fuzz/regressions/$name")
   mkdir -p "build/fuzz/corpus/$name" build/fuzz/artifacts build/fuzz/logs
-  "build/fuzz/fuzz/fuzz_$name" "$budget" -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
-    -artifact_prefix="build/fuzz/artifacts/$name-" "build/fuzz/corpus/$name" "fuzz/corpus/$name" \
+  "build/fuzz/fuzz/fuzz_$name" "$budget" -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 -close_fd_mask=2 \
+    -artifact_prefix="build/fuzz/artifacts/$name-" "build/fuzz/corpus/$name" "${seeds[@]}" \
     >"$log" 2>&1 || status=$?
   local runs cov ft corpus seconds verdict=ok
   runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
