@@ -31,11 +31,14 @@ struct CameraModelDeleter {
 using ParsedCameraModel = std::unique_ptr<mrcal_cameramodel_t, CameraModelDeleter>;
 
 // libmrcal prints its own parser diagnostics on stderr before returning null; procam reports
-// one line of its own instead.
+// one line of its own instead. Its parser reads a '#' comment up to a newline even past the end
+// of the buffer (a file ending inside a comment crashed it, fuzz/regressions/cameramodel/), so it
+// gets the text with a newline appended.
 ParsedCameraModel ParseCameraModel(const std::string& text) {
   const SilencedStderr quiet;
+  const std::string terminated = text + "\n";
   return ParsedCameraModel(
-      mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
+      mrcal_read_cameramodel_string(terminated.data(), static_cast<int>(terminated.size())));
 }
 
 // Numbers that make no sense are refused here, before they reach mrcal, Embree or a solver:

@@ -96,7 +96,9 @@ void CheckImageHeader(const std::filesystem::path& path, const std::string& byte
     if (!size) size = reader(bytes);
   }
   if (!size) throw IoError(path.string() + ": not a readable image (PNG, JPEG, TIFF or BMP)");
-  if (size->width < 1 || size->height < 1 || size->width * size->height > kMaxImagePixels) {
+  // Each side first: sides of up to 2^32 would overflow the product.
+  if (size->width < 1 || size->height < 1 || size->width > kMaxImagePixels ||
+      size->height > kMaxImagePixels || size->width * size->height > kMaxImagePixels) {
     throw IoError(path.string() + ": not a readable image: its header states " +
                   std::to_string(size->width) + "x" + std::to_string(size->height) +
                   " pixels (at most " + std::to_string(kMaxImagePixels) + ")");

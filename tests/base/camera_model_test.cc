@@ -93,6 +93,13 @@ TEST(CameraModelFile, RefusesAbsurdNumbers) {
       ReadCameraModelFile(dir.Write("m.cameramodel", model(good_k, good_size, good_rt))));
 }
 
+// A file ending inside a '#' comment (no newline after it) made libmrcal's parser read past
+// its buffer and crash (found by fuzz_cameramodel; the input is fuzz/regressions/cameramodel/).
+TEST(CameraModelFile, FileEndingInsideACommentIsRefused) {
+  const auto path = testing::SourceDir() / "fuzz/regressions/cameramodel/comment_at_end_of_file.cameramodel";
+  EXPECT_THROW(ReadCameraModelFile(path), IoError);
+}
+
 TEST(Rt, PoseRoundTripAndMrcalConvention) {
   const double rt[6] = {0.1, -0.2, 0.3, 1.0, 2.0, -3.0};
   const Eigen::Isometry3d pose = PoseFromRt(rt);

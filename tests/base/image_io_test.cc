@@ -12,13 +12,15 @@
 namespace procam {
 namespace {
 
-// Files of a few bytes whose headers state 30000 x 30000 pixels or more (one found by fuzz_image,
-// fuzz/regressions/image/): OpenCV's decoders allocated the whole image (2.7 GB for the 62-byte
-// BMP) before finding the data missing. ReadImage refuses them from the header, naming the size.
+// Files of a few bytes whose headers state 30000 x 30000 pixels or more (fuzz/regressions/image/):
+// OpenCV's decoders allocated the whole image (2.7 GB for the 62-byte BMP) before finding the
+// data missing. ReadImage refuses them from the header, naming the size; sides near 2^32, whose
+// product overflowed in the first version of the check, are found by fuzz_image.
 TEST(ReadImage, RefusesHeadersStatingMorePixelsThanItReads) {
   const auto dir = testing::SourceDir() / "fuzz/regressions/image";
   for (const char* name : {"bmp_header_30000x30000.bmp", "png_header_30000x30000.png",
-                           "jpeg_header_65000x65000.jpg", "tiff_header_40000x40000.tif"}) {
+                           "jpeg_header_65000x65000.jpg", "tiff_header_40000x40000.tif",
+                           "sides_overflowing_their_product.img"}) {
     try {
       ReadImage(dir / name, cv::IMREAD_UNCHANGED);
       ADD_FAILURE() << "accepted " << name;
