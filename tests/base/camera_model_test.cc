@@ -93,11 +93,14 @@ TEST(CameraModelFile, RefusesAbsurdNumbers) {
       ReadCameraModelFile(dir.Write("m.cameramodel", model(good_k, good_size, good_rt))));
 }
 
-// A file ending inside a '#' comment (no newline after it) made libmrcal's parser read past
-// its buffer and crash (found by fuzz_cameramodel; the input is fuzz/regressions/cameramodel/).
-TEST(CameraModelFile, FileEndingInsideACommentIsRefused) {
-  const auto path = testing::SourceDir() / "fuzz/regressions/cameramodel/comment_at_end_of_file.cameramodel";
-  EXPECT_THROW(ReadCameraModelFile(path), IoError);
+// A file ending inside a '#' comment, or with a quoted string that never closes, made libmrcal's
+// parser read past its buffer and crash (found by fuzz_cameramodel; the inputs are in
+// fuzz/regressions/cameramodel/). Both are refused as unparsable.
+TEST(CameraModelFile, CommentsAndStringsThatDoNotEndAreRefused) {
+  const auto dir = testing::SourceDir() / "fuzz/regressions/cameramodel";
+  for (const char* name : {"comment_at_end_of_file.cameramodel", "string_not_closed.cameramodel"}) {
+    EXPECT_THROW(ReadCameraModelFile(dir / name), IoError) << name;
+  }
 }
 
 TEST(Rt, PoseRoundTripAndMrcalConvention) {
