@@ -30,12 +30,27 @@ struct CameraModelDeleter {
 };
 using ParsedCameraModel = std::unique_ptr<mrcal_cameramodel_t, CameraModelDeleter>;
 
+// libmrcal's parser reads a '#' comment up to its newline and a quoted string up to its closing
+// quote even past the end of the buffer (files ending inside either crashed it, found by
+// fuzz_cameramodel: fuzz/regressions/cameramodel/). True when every comment ends with a newline
+// and every string closes on its own line, so that the parser never runs off the end.
+bool CommentsAndStringsEnd(const std::string& text) {
+  for (size_t at = 0; at < text.size(); ++at) {
+    const char c = text[at];
+    if (c != '#' && c != '\'' && c != '"') continue;
+    const size_t end = text.find_first_of(c == '#' ? std::string("\n") : std::string(1, c) + "\n", at + 1);
+    if (end == std::string::npos || (c != '#' && text[end] != c)) return false;
+    at = end;
+  }
+  return true;
+}
+
 // libmrcal prints its own parser diagnostics on stderr before returning null; procam reports
-// one line of its own instead.
+// one line of its own instead. Null also for text libmrcal cannot parse safely.
 ParsedCameraModel ParseCameraModel(const std::string& text) {
+  if (!CommentsAndStringsEnd(text)) return nullptr;
   const SilencedStderr quiet;
-  return ParsedCameraModel(
-      mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
+  return ParsedCameraModel(mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size())));
 }
 
 // Numbers that make no sense are refused here, before they reach mrcal, Embree or a solver:

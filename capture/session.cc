@@ -364,7 +364,8 @@ CaptureSessionData CaptureSessionData::Load(const fs::path& directory) {
   } catch (const nlohmann::json::exception& error) {
     throw IoError(path.string() + ": malformed manifest: " + error.what());
   }
-  if (data.manifest_.value("format", "") != kFormat || !data.manifest_.contains("patterns")) {
+  if (!data.manifest_.is_object() || data.manifest_.value("format", "") != kFormat ||
+      !data.manifest_.contains("patterns") || !data.manifest_["patterns"].is_array()) {
     throw IoError(path.string() + ": not a procam capture session");
   }
   return data;
@@ -377,8 +378,10 @@ int CaptureSessionData::pattern_count() const {
 }
 
 bool CaptureSessionData::captured(int pattern) const {
-  return pattern >= 0 && pattern < pattern_count() &&
-         !manifest_["patterns"][pattern]["captured"].is_null();
+  if (pattern < 0 || pattern >= pattern_count()) return false;
+  // at() and value(): operator[] on a const json asserts when the key is missing (fuzz_session).
+  const nlohmann::json& entry = manifest_.at("patterns").at(pattern);
+  return entry.is_object() && !entry.value("captured", nlohmann::json()).is_null();
 }
 
 std::string CaptureSessionData::pattern_name(int pattern) const {

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <limits>
 
+#include <cpuid.h>
 #include <immintrin.h>
 
 namespace procam {
@@ -179,6 +180,25 @@ __attribute__((target("avx2,fma,f16c"))) void RowsDotHalfF16c(const std::uint16_
   }
 }
 
+// float32 → binary16, rounding to nearest even as a conversion to _Float16 does (written out
+// because clang before 15 has no _Float16 on x86).
+std::uint16_t FloatToHalf(float value) {
+  std::uint32_t bits;
+  std::memcpy(&bits, &value, sizeof bits);
+  const std::uint32_t sign = (bits >> 16) & 0x8000u, magnitude = bits & 0x7fffffffu;
+  if (magnitude > 0x7f800000u) return static_cast<std::uint16_t>(sign | 0x7e00u);  // NaN
+  if (magnitude >= 0x477ff000u) return static_cast<std::uint16_t>(sign | 0x7c00u);  // ≥ 65520: ∞
+  if (magnitude < 0x38800000u) {  // below 2^-14: a subnormal half (or the smallest normal)
+    float scaled;
+    std::memcpy(&scaled, &magnitude, sizeof scaled);
+    return static_cast<std::uint16_t>(sign | static_cast<std::uint32_t>(std::nearbyint(scaled * 16777216.0f)));
+  }
+  std::uint32_t half = (magnitude - 0x38000000u) >> 13;  // exponent rebiased by 127 − 15
+  const std::uint32_t rest = magnitude & 0x1fffu;
+  if (rest > 0x1000u || (rest == 0x1000u && (half & 1u))) ++half;  // a carry may reach ∞
+  return static_cast<std::uint16_t>(sign | half);
+}
+
 // The portable fallback (binary16 → float32 by bit manipulation).
 float HalfToFloat(std::uint16_t h) {
   const std::uint32_t sign = static_cast<std::uint32_t>(h & 0x8000u) << 16;
@@ -209,7 +229,10 @@ void RowsDotHalfPortable(const std::uint16_t* a, long stride, long length, const
 bool HaveF16c() {
   static const bool have = [] {
     __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") && __builtin_cpu_supports("f16c");
+    // F16C through cpuid: clang before 15 knows no "f16c" for __builtin_cpu_supports.
+    unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
+    const bool f16c = __get_cpuid(1, &eax, &ebx, &ecx, &edx) && (ecx & bit_F16C);
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") && f16c;
   }();
   return have;
 }
@@ -313,10 +336,7 @@ void CholeskySolve(const std::uint16_t* factor, int n, int columns, float* x) {
 }
 
 void ToHalf(const float* values, long count, std::uint16_t* half) {
-  for (long k = 0; k < count; ++k) {
-    const _Float16 h = static_cast<_Float16>(values[k]);  // round to nearest even
-    std::memcpy(half + k, &h, sizeof h);
-  }
+  for (long k = 0; k < count; ++k) half[k] = FloatToHalf(values[k]);
 }
 
 }  // namespace procam

@@ -12,9 +12,9 @@
 #include <Eigen/SparseCholesky>
 
 #include "base/timing.h"
+#include "compensation/colour.h"
 #include "procam/config.h"
 #if PROCAM_WITH_CUDA
-#include "compensation/colour.h"
 #include "compensation/cuda_compressed.h"
 #include "compensation/cuda_radiosity.h"
 #include "compensation/cuda_solver.h"

@@ -76,7 +76,10 @@ bool CheckPlanarConvexPolygon(const Eigen::Vector3d* corners, int count, double 
 }
 
 int64_t PointWelder::CellKey(int64_t x, int64_t y, int64_t z) const {
-  return (x * 73856093) ^ (y * 19349663) ^ (z * 83492791);
+  // Unsigned, so that the hash wraps as intended: cell indices reach 10^11 and more (coordinates
+  // of 10^5 m at a tolerance of 10^-6 m), where the signed products overflowed (fuzz_obj).
+  const auto mix = [](int64_t cell, uint64_t prime) { return static_cast<uint64_t>(cell) * prime; };
+  return static_cast<int64_t>(mix(x, 73856093u) ^ mix(y, 19349663u) ^ mix(z, 83492791u));
 }
 
 int PointWelder::Weld(const Eigen::Vector3d& point) {

@@ -4,6 +4,8 @@
 #   scripts/run.sh test                          install, build (Release), run the whole test suite
 #   scripts/run.sh asan                          install, build with ASan+UBSan, run the tests
 #   scripts/run.sh build                         install and build only
+#   scripts/run.sh fuzz [SECONDS]                install, build the libFuzzer targets (clang 14), run
+#                                                each over its corpus for SECONDS (20); fails on any crash
 # Packages come from scripts/packages.txt; apt-get runs as root or through sudo.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -55,8 +57,13 @@ case "$command" in
     install_packages
     build release
     ;;
+  fuzz)
+    install_packages
+    build fuzz
+    scripts/fuzz_campaign.sh --seconds "${1:-20}"
+    ;;
   *)
-    echo "usage: scripts/run.sh demo|test|asan|build [args]" >&2
+    echo "usage: scripts/run.sh demo|test|asan|build|fuzz [args]" >&2
     exit 2
     ;;
 esac

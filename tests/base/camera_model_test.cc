@@ -93,6 +93,16 @@ TEST(CameraModelFile, RefusesAbsurdNumbers) {
       ReadCameraModelFile(dir.Write("m.cameramodel", model(good_k, good_size, good_rt))));
 }
 
+// A file ending inside a '#' comment, or with a quoted string that never closes, made libmrcal's
+// parser read past its buffer and crash (found by fuzz_cameramodel; the inputs are in
+// fuzz/regressions/cameramodel/). Both are refused as unparsable.
+TEST(CameraModelFile, CommentsAndStringsThatDoNotEndAreRefused) {
+  const auto dir = testing::SourceDir() / "fuzz/regressions/cameramodel";
+  for (const char* name : {"comment_at_end_of_file.cameramodel", "string_not_closed.cameramodel"}) {
+    EXPECT_THROW(ReadCameraModelFile(dir / name), IoError) << name;
+  }
+}
+
 TEST(Rt, PoseRoundTripAndMrcalConvention) {
   const double rt[6] = {0.1, -0.2, 0.3, 1.0, 2.0, -3.0};
   const Eigen::Isometry3d pose = PoseFromRt(rt);

@@ -58,6 +58,17 @@ double ExpectedLuma(const cv::Mat& pattern) {
 
 std::string Bytes(const fs::path& path) { return ReadFile(path); }
 
+// A session.json pattern without a "captured" key aborted captured() on an assertion of
+// nlohmann::json (found by fuzz_session; the input is fuzz/regressions/session/).
+TEST(CaptureSessionData, PatternWithoutCapturedKeyIsNotCaptured) {
+  const auto dir = testing::SourceDir() / "fuzz/regressions/session/pattern_without_captured";
+  const CaptureSessionData session = CaptureSessionData::Load(dir);
+  int captured = 0;
+  for (int pattern = 0; pattern < session.pattern_count(); ++pattern) captured += session.captured(pattern);
+  EXPECT_FALSE(session.captured(0));
+  EXPECT_EQ(captured, session.pattern_count() - 1);
+}
+
 TEST(CaptureSession, CompleteSessionHoldsPatternsFramesAndManifest) {
   testing::TempDir dir;
   const CaptureSequence sequence = Photometric();
