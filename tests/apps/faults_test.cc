@@ -113,7 +113,8 @@ std::function<bool()> After(double seconds) {
 
 // compensate on the synthetic box with `rig` into `out`; expects it to succeed.
 void Compensate(const fs::path& rig, const fs::path& out) {
-  ASSERT_GT(TimedRun("compensate " + kScene + " --rig " + rig.string() + " --out " + out.string()), 0);
+  ASSERT_GT(TimedRun("compensate " + kScene + " --rig " + rig.string() + " --out " + out.string()),
+            0);
 }
 
 // One rig for the suite, made by `calibrate all` killed part-way (during the last projector's
@@ -176,9 +177,8 @@ TEST_F(Faults, KillNineDuringCaptureThenRunAgain) {
            (dir / out).string();
   };
   ASSERT_GT(TimedRun(command("clean")), 0);
-  const CommandRun resumed =
-      KillThenRunAgain(command("flat"), [&] { return CountFiles(dir / "flat" / "frames") >= 2; },
-                       dir);
+  const CommandRun resumed = KillThenRunAgain(
+      command("flat"), [&] { return CountFiles(dir / "flat" / "frames") >= 2; }, dir);
   ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
   EXPECT_NE(resumed.output.find("7/7 patterns captured"), std::string::npos) << resumed.output;
   EXPECT_EQ(resumed.output.find(" 0 already there"), std::string::npos) << resumed.output;
@@ -197,9 +197,9 @@ TEST_F(Faults, KillNineDuringCompensateThenRunAgain) {
   ASSERT_GT(TimedRun(command("solution")), 0);  // the earlier solution the kill interrupts
   ASSERT_TRUE(testing::KillProcamWhen(command("solution"), After(0.5 * seconds), kMaxSeconds,
                                       dir / "killed.log"));
-  const CommandRun project = testing::RunProcamStderr(
-      "project " + (dir / "solution").string() + " --rig " + Rig().string() + " --out " +
-      (dir / "images").string());
+  const CommandRun project =
+      testing::RunProcamStderr("project " + (dir / "solution").string() + " --rig " +
+                               Rig().string() + " --out " + (dir / "images").string());
   if (project.exit_code != 0) testing::ExpectOneErrorLine(project, "result.json", "project");
   const CommandRun again = testing::RunProcam(command("solution"));
   ASSERT_EQ(again.exit_code, 0) << again.output;
@@ -235,8 +235,8 @@ TEST_F(Faults, KillNineDuringVerifyThenRunAgain) {
   };
   ASSERT_GT(TimedRun(command("clean")), 0);
   const fs::path second = dir / "verify" / "iterations" / "1" / "session" / "frames";
-  const CommandRun again =
-      KillThenRunAgain(command("verify"), [&] { return CountFiles(second) >= 1; }, dir);
+  const CommandRun again = KillThenRunAgain(
+      command("verify"), [&] { return CountFiles(second) >= 1; }, dir);
   ASSERT_EQ(again.exit_code, 0) << again.output;
   EXPECT_EQ(FilesUnder(dir / "verify"), FilesUnder(dir / "clean"));
   ExpectEveryFileReads(dir / "verify");
@@ -279,13 +279,12 @@ TEST_F(Faults, FullFilesystemIsOneLineAndKeepsWhatWasWritten) {
   Compensate(Rig(), solution);
   const fs::path mount = dir / "small", after = dir / "after";
   fs::create_directories(mount);
-  const std::string script =
-      "mount -t tmpfs -o size=64k tmpfs " + mount.string() + " && cp -r " + solution + " " +
-      (mount / "old").string() + " && " +
-      ProcamInScript("compensate " + kScene + " --rig " + Rig().string() + " --export --out " +
-                         (mount / "new").string(),
-                     dir.path()) +
-      " && cp -r " + mount.string() + " " + after.string();
+  const std::string script = "mount -t tmpfs -o size=64k tmpfs " + mount.string() + " && cp -r " +
+                             solution + " " + (mount / "old").string() + " && " +
+                             ProcamInScript("compensate " + kScene + " --rig " + Rig().string() +
+                                                " --export --out " + (mount / "new").string(),
+                                            dir.path()) +
+                             " && cp -r " + mount.string() + " " + after.string();
   std::string why;
   if (!RunInMountNamespace(script, &why)) GTEST_SKIP() << why;
   testing::ExpectOneErrorLine(ScriptRun(dir.path()), (mount / "new").string(), "compensate");
@@ -335,9 +334,10 @@ TEST_F(Faults, ReadOnlyDirectoryIsOneLineAndKeepsWhatWasWritten) {
 TEST_F(Faults, StalledCameraEndsVerifyWithOneLineAndItResumes) {
   const std::string solution = (dir / "solution").string();
   Compensate(Rig(), solution);
-  const std::string verify = "verify " + Rig().string() + " " + solution + kCapture +
-                             "--iterations 2 --timeout-ms 50 --retries 1 --retry-delay-ms 0 --out " +
-                             (dir / "verify").string() + " --camera " + kCamera;
+  const std::string verify =
+      "verify " + Rig().string() + " " + solution + kCapture +
+      "--iterations 2 --timeout-ms 50 --retries 1 --retry-delay-ms 0 --out " +
+      (dir / "verify").string() + " --camera " + kCamera;
   const CommandRun stalled = testing::RunProcamStderr(verify + "&fault=timeout&fault_after=2'");
   testing::ExpectOneErrorLine(stalled, "camera 'synthetic:tiny_box'", "stalled");
   const std::set<std::string> kept = FilesUnder(dir / "verify");

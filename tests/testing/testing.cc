@@ -74,8 +74,8 @@ bool KillProcamWhen(const std::string& arguments, const std::function<bool()>& r
                     double max_seconds, const std::filesystem::path& log) {
   const char* binary = std::getenv("PROCAM_BINARY");
   EXPECT_NE(binary, nullptr) << "PROCAM_BINARY is not set (run the test through CTest)";
-  const std::string command =
-      "exec " + std::string(binary ? binary : "procam") + " " + arguments + " >'" + log.string() + "' 2>&1";
+  const std::string command = "exec " + std::string(binary ? binary : "procam") + " " +
+                              arguments + " >'" + log.string() + "' 2>&1";
   const pid_t pid = ::fork();
   if (pid == 0) {
     ::execl("/bin/sh", "sh", "-c", command.c_str(), static_cast<char*>(nullptr));
@@ -83,7 +83,8 @@ bool KillProcamWhen(const std::string& arguments, const std::function<bool()>& r
   }
   EXPECT_GT(pid, 0) << "fork failed";
   if (pid <= 0) return false;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(max_seconds);
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::duration<double>(max_seconds);
   int status = 0;
   bool running = true;
   while (std::chrono::steady_clock::now() < deadline) {
