@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <cerrno>
 #include <cstring>
 #include <fstream>
 #include <mutex>
@@ -58,14 +59,18 @@ void WriteFileAtomically(const std::filesystem::path& path, const std::string& b
   const std::filesystem::path temp =
       path.string() + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(entropy());
   {
+    errno = 0;
     std::ofstream out(temp, std::ios::binary | std::ios::trunc);
-    if (!out) throw IoError(temp.string() + ": cannot create file: " + std::strerror(errno));
+    if (!out) throw IoError(path.string() + ": cannot create file: " + std::strerror(errno));
     out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
     out.flush();
+    const int write_errno = errno;
+    out.close();
     if (!out) {
       std::error_code ignored;
       std::filesystem::remove(temp, ignored);
-      throw IoError(path.string() + ": write failed (disk full?)");
+      throw IoError(path.string() + ": write failed: " +
+                    (write_errno != 0 ? std::strerror(write_errno) : "disk full or I/O error"));
     }
   }
   std::error_code error;
@@ -74,6 +79,12 @@ void WriteFileAtomically(const std::filesystem::path& path, const std::string& b
     std::filesystem::remove(temp, error);
     throw IoError(path.string() + ": cannot replace file: " + error.message());
   }
+}
+
+void RemoveManifest(const std::filesystem::path& path) {
+  std::error_code error;
+  std::filesystem::remove(path, error);
+  if (error) throw IoError(path.string() + ": cannot remove the old manifest: " + error.message());
 }
 
 void CheckRegularFile(const std::filesystem::path& path, uintmax_t max_bytes) {

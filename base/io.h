@@ -21,8 +21,17 @@ class IoError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Writes `bytes` to `path` through a temporary file and a rename. Throws IoError.
+// Writes `bytes` to `path` through a temporary file and a rename. Throws IoError naming
+// `path` (a full disk, a read-only directory); the temporary file is removed on failure. A
+// process killed mid-write leaves only its temporary file, `NAME.tmp-PID-N`, which no reader
+// opens.
 void WriteFileAtomically(const std::filesystem::path& path, const std::string& bytes);
+
+// Removes the manifest of a multi-file output (a solution's or an images directory's
+// result.json) before its files are replaced: the manifest is written last, so a directory
+// whose rewrite stopped part-way (killed, disk full) has none and no later command trusts a mix
+// of old and new files. Missing is fine; throws IoError naming `path` when it cannot be removed.
+void RemoveManifest(const std::filesystem::path& path);
 
 // The largest file ReadFile reads unless told otherwise: 16 GiB (a dense F of 45k patches).
 constexpr uintmax_t kMaxFileBytes = uintmax_t{16} << 30;

@@ -143,6 +143,7 @@ void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run
   std::error_code error;
   std::filesystem::create_directories(out, error);
   if (error) throw IoError(out.string() + ": cannot create directory: " + error.message());
+  RemoveManifest(out / "result.json");  // written last: a rewrite cut short is not a solution
   if (export_problem) {
     if (run.fine.compressed()) {
       throw std::invalid_argument(

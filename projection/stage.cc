@@ -80,6 +80,7 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
   std::error_code error;
   std::filesystem::create_directories(out, error);
   if (error) throw IoError(out.string() + ": cannot create directory: " + error.message());
+  RemoveManifest(out / "result.json");  // written last: a rewrite cut short is not a result
   const std::vector<std::string> encoded = EncodeProjectorImages(images);
   nlohmann::json projector_json = nlohmann::json::array();
   for (size_t k = 0; k < images.size(); ++k) {

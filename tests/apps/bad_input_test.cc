@@ -37,12 +37,7 @@ const char* kProjector = R"({"name": "p", "model": "p.cameramodel", "max": 1})";
 
 // Expects a refusal: exit 1 and exactly one line on stderr, procam's, containing `expected`.
 void ExpectOneErrorLine(const std::string& arguments, const std::string& expected) {
-  const CommandRun run = testing::RunProcamStderr(arguments);
-  EXPECT_EQ(run.exit_code, 1) << arguments << "\n" << run.output;
-  EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << arguments << "\n"
-                                                                       << run.output;
-  EXPECT_EQ(run.output.rfind("procam: error: ", 0), 0u) << arguments << "\n" << run.output;
-  EXPECT_NE(run.output.find(expected), std::string::npos) << arguments << "\n" << run.output;
+  testing::ExpectOneErrorLine(testing::RunProcamStderr(arguments), expected, arguments);
 }
 
 // CLI11's own errors (a value that does not convert, a missing option) are procam's one line.

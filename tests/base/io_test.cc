@@ -54,6 +54,36 @@ TEST(AtomicWrite, FailureLeavesTheOldFileAndNoTemporaries) {
   EXPECT_EQ(files, 2);  // keep.txt and sub: no temporaries left behind
 }
 
+// A failed create names the file asked for, not its temporary name.
+TEST(AtomicWrite, ErrorsNameTheTarget) {
+  testing::TempDir dir;
+  try {
+    WriteFileAtomically(dir / "missing" / "x.txt", "new");
+    ADD_FAILURE() << "no error";
+  } catch (const IoError& error) {
+    EXPECT_EQ(std::string(error.what()).rfind((dir / "missing" / "x.txt").string() + ": ", 0), 0u)
+        << error.what();
+    EXPECT_EQ(std::string(error.what()).find(".tmp-"), std::string::npos) << error.what();
+  }
+}
+
+// The manifest goes first: missing is fine, what cannot be removed is an error naming it.
+TEST(RemoveManifest, RemovesOrNamesWhatItCannotRemove) {
+  testing::TempDir dir;
+  WriteFileAtomically(dir / "result.json", "{}");
+  RemoveManifest(dir / "result.json");
+  EXPECT_FALSE(std::filesystem::exists(dir / "result.json"));
+  RemoveManifest(dir / "result.json");
+  std::filesystem::create_directories(dir / "busy.json" / "inner");  // not removable
+  try {
+    RemoveManifest(dir / "busy.json");
+    ADD_FAILURE() << "no error";
+  } catch (const IoError& error) {
+    EXPECT_NE(std::string(error.what()).find("busy.json: cannot remove"), std::string::npos)
+        << error.what();
+  }
+}
+
 TEST(Npy, RejectsGarbage) {
   testing::TempDir dir;
   const auto path = dir.Write("bad.npy", "not numpy at all");

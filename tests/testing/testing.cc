@@ -1,8 +1,13 @@
 #include "tests/testing/testing.h"
 
+#include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <array>
+#include <chrono>
+#include <thread>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
@@ -54,6 +59,47 @@ CommandRun RunProcamStderr(const std::string& arguments) {
   EXPECT_NE(binary, nullptr) << "PROCAM_BINARY is not set (run the test through CTest)";
   return RunShell("{ " + std::string(binary ? binary : "procam") + " " + arguments +
                   " 2>&1 >/dev/null; }");
+}
+
+void ExpectOneErrorLine(const CommandRun& run, const std::string& expected,
+                        const std::string& context) {
+  EXPECT_EQ(run.exit_code, 1) << context << "\n" << run.output;
+  EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << context << "\n"
+                                                                       << run.output;
+  EXPECT_EQ(run.output.rfind("procam: error: ", 0), 0u) << context << "\n" << run.output;
+  EXPECT_NE(run.output.find(expected), std::string::npos) << context << "\n" << run.output;
+}
+
+bool KillProcamWhen(const std::string& arguments, const std::function<bool()>& ready,
+                    double max_seconds, const std::filesystem::path& log) {
+  const char* binary = std::getenv("PROCAM_BINARY");
+  EXPECT_NE(binary, nullptr) << "PROCAM_BINARY is not set (run the test through CTest)";
+  const std::string command = "exec " + std::string(binary ? binary : "procam") + " " +
+                              arguments + " >'" + log.string() + "' 2>&1";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::execl("/bin/sh", "sh", "-c", command.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  EXPECT_GT(pid, 0) << "fork failed";
+  if (pid <= 0) return false;
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::duration<double>(max_seconds);
+  int status = 0;
+  bool running = true;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (::waitpid(pid, &status, WNOHANG) == pid) {
+      running = false;
+      break;
+    }
+    if (ready()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  if (running) {
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, &status, 0);
+  }
+  return running && WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL;
 }
 
 std::filesystem::path SourceDir() {

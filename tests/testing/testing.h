@@ -2,6 +2,7 @@
 // Shared test utilities: temporary directories, paths to test data, Eigen comparisons.
 
 #include <filesystem>
+#include <functional>
 #include <string>
 
 #include <Eigen/Core>
@@ -39,6 +40,17 @@ CommandRun RunProcam(const std::string& arguments);
 // The same, keeping only what procam writes on stderr (its logs on stdout are dropped): for
 // checking that an error is one line and nothing else.
 CommandRun RunProcamStderr(const std::string& arguments);
+
+// Expects a refusal: exit code 1 and exactly one line, procam's "procam: error: ...",
+// containing `expected` (`context` is printed on failure).
+void ExpectOneErrorLine(const CommandRun& run, const std::string& expected,
+                        const std::string& context);
+
+// Starts procam with `arguments` (its output to `log`), polls `ready` every 10 ms for at most
+// `max_seconds`, and once it holds (or the time is up) sends SIGKILL, as a crash or a pulled
+// plug would. Returns true if procam was still running when killed (false: it had ended).
+bool KillProcamWhen(const std::string& arguments, const std::function<bool()>& ready,
+                    double max_seconds, const std::filesystem::path& log);
 
 // Max-norm distance of two matrices, for EXPECT_LT(MaxAbsDifference(a, b), tol).
 template <typename A, typename B>

@@ -1,0 +1,392 @@
+// Faults through the procam binary, on the synthetic rig (the `synthetic:tiny_box` camera and
+// its simulated projectors): a command killed with SIGKILL part-way and run again, output to a
+// full filesystem and to a read-only one, a camera that stalls, and files cut short by a crash.
+// Each ends with one line naming what failed, a non-zero exit, and nothing already written lost;
+// a command run again after a kill resumes or redoes and ends as an uninterrupted run would
+// (docs/faults.md, "Faults").
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <set>
+#include <string>
+
+#include "base/image_io.h"
+#include "base/io.h"
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::CommandRun;
+
+// The simulated rig's camera, fast (500 fps, 1 ms exposures) and a little noisy.
+const std::string kCamera =
+    "'synthetic:tiny_box?patches=150&fps=500&exposure_us=1000&reference_exposure_us=1000"
+    "&black=8&noise=1";
+const std::string kCapture = " --frames 2 --settle-ms 1 ";
+const std::string kScene = "synthetic:tiny_box --patches 150";
+constexpr double kMaxSeconds = 120;  // bound on any one wait for a command to reach a point
+
+bool IsTemporary(const fs::path& path) {
+  return path.filename().string().find(".tmp-") != std::string::npos;
+}
+
+// The regular files under `dir`, relative to it, sorted; temporary files (a killed writer's
+// `NAME.tmp-PID-N`, which no reader opens) apart.
+std::set<std::string> FilesUnder(const fs::path& dir, bool temporary = false) {
+  std::set<std::string> files;
+  if (!fs::exists(dir)) return files;
+  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
+    if (entry.is_regular_file() && IsTemporary(entry.path()) == temporary) {
+      files.insert(fs::relative(entry.path(), dir).string());
+    }
+  }
+  return files;
+}
+
+size_t CountFiles(const fs::path& dir) { return FilesUnder(dir).size(); }
+
+// Every .npy, .png and .json file under `dir` reads whole: nothing is half-written.
+void ExpectEveryFileReads(const fs::path& dir) {
+  for (const std::string& name : FilesUnder(dir)) {
+    const fs::path path = dir / name;
+    const std::string extension = path.extension().string();
+    try {
+      if (extension == ".npy") ReadNpy(path);
+      if (extension == ".png") ReadImage(path, cv::IMREAD_UNCHANGED);
+      if (extension == ".json") {
+        EXPECT_FALSE(nlohmann::json::parse(ReadFile(path)).is_discarded()) << name;
+      }
+    } catch (const std::exception& error) {
+      ADD_FAILURE() << name << ": " << error.what();
+    }
+  }
+}
+
+std::string Bytes(const fs::path& path) { return ReadFile(path); }
+
+// The largest difference between two .npy arrays of one shape.
+double NpyDifference(const fs::path& a, const fs::path& b) {
+  const NpyArray x = ReadNpy(a), y = ReadNpy(b);
+  EXPECT_EQ(x.shape, y.shape) << a << " " << b;
+  if (x.values.size() != y.values.size()) return 1e300;
+  double largest = 0;
+  for (size_t i = 0; i < x.values.size(); ++i) {
+    largest = std::max(largest, std::abs(x.values[i] - y.values[i]));
+  }
+  return largest;
+}
+
+// Cuts `path` to half its length, as a crash of a writer that wrote in place would.
+void Truncate(const fs::path& path) { fs::resize_file(path, fs::file_size(path) / 2); }
+
+// Runs `arguments` as a child, SIGKILLs it once `ready` holds (or after kMaxSeconds), and
+// returns the same command run again to its end.
+CommandRun KillThenRunAgain(const std::string& arguments, const std::function<bool()>& ready,
+                            const testing::TempDir& dir) {
+  const bool killed = testing::KillProcamWhen(arguments, ready, kMaxSeconds, dir / "killed.log");
+  EXPECT_TRUE(killed) << arguments << " ended before it was killed\n" << Bytes(dir / "killed.log");
+  return testing::RunProcam(arguments);
+}
+
+// Seconds `arguments` takes uninterrupted; expects it to succeed.
+double TimedRun(const std::string& arguments) {
+  const auto start = std::chrono::steady_clock::now();
+  const CommandRun run = testing::RunProcam(arguments);
+  EXPECT_EQ(run.exit_code, 0) << arguments << "\n" << run.output;
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+std::function<bool()> After(double seconds) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  return [deadline] { return std::chrono::steady_clock::now() >= deadline; };
+}
+
+// compensate on the synthetic box with `rig` into `out`; expects it to succeed.
+void Compensate(const fs::path& rig, const fs::path& out) {
+  ASSERT_GT(TimedRun("compensate " + kScene + " --rig " + rig.string() + " --out " + out.string()),
+            0);
+}
+
+// One rig for the suite, made by `calibrate all` killed part-way (during the last projector's
+// flat fields) and run again: the test of that fault checks what these runs left.
+class Faults : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new testing::TempDir;
+    const std::string calibrate =
+        "calibrate all --camera " + kCamera + "'" + kCapture + "--out " + Rig().string();
+    const fs::path last = Rig() / "captures" / "photometric_right" / "frames";
+    killed_ = testing::KillProcamWhen(
+        calibrate, [last] { return CountFiles(last) >= 4; }, 4 * kMaxSeconds,
+        *dir_ / "calibrate_killed.log");
+    rerun_ = new CommandRun(testing::RunProcam(calibrate));
+  }
+  static void TearDownTestSuite() {
+    delete rerun_;
+    delete dir_;
+  }
+  static fs::path Rig() { return *dir_ / "rig"; }
+
+  // A copy of the rig's files (not its captures) in `to`.
+  static fs::path CopyRig(const fs::path& to) {
+    fs::create_directories(to);
+    for (const auto& entry : fs::directory_iterator(Rig())) {
+      if (entry.is_regular_file()) fs::copy_file(entry.path(), to / entry.path().filename());
+    }
+    return to;
+  }
+
+  static testing::TempDir* dir_;
+  static bool killed_;
+  static CommandRun* rerun_;
+  testing::TempDir dir;
+};
+
+testing::TempDir* Faults::dir_ = nullptr;
+bool Faults::killed_ = false;
+CommandRun* Faults::rerun_ = nullptr;
+
+TEST_F(Faults, KillNineDuringCalibrateAllThenRunAgain) {
+  EXPECT_TRUE(killed_) << Bytes(*dir_ / "calibrate_killed.log");
+  ASSERT_EQ(rerun_->exit_code, 0) << rerun_->output;
+  // The captures finished before the kill are kept, the one cut short resumes.
+  EXPECT_NE(rerun_->output.find("(0 this run, "), std::string::npos) << rerun_->output;
+  EXPECT_EQ(rerun_->output.find("(25 this run, 0 already there)"), std::string::npos)
+      << rerun_->output;
+  for (const char* name : {"rig.json", "camera.cameramodel", "left.cameramodel",
+                           "right.cameramodel", "reflectance.npy", "result.json"}) {
+    EXPECT_TRUE(fs::exists(Rig() / name)) << name;
+  }
+  ExpectEveryFileReads(Rig());
+}
+
+TEST_F(Faults, KillNineDuringCaptureThenRunAgain) {
+  const auto command = [&](const std::string& out) {
+    return "capture --camera " + kCamera + "'" + kCapture +
+           "--projector 0 --sequence photometric --levels 0,128,255 --channels rgb --out " +
+           (dir / out).string();
+  };
+  ASSERT_GT(TimedRun(command("clean")), 0);
+  const CommandRun resumed = KillThenRunAgain(
+      command("flat"), [&] { return CountFiles(dir / "flat" / "frames") >= 2; }, dir);
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  EXPECT_NE(resumed.output.find("7/7 patterns captured"), std::string::npos) << resumed.output;
+  EXPECT_EQ(resumed.output.find(" 0 already there"), std::string::npos) << resumed.output;
+  EXPECT_EQ(FilesUnder(dir / "flat"), FilesUnder(dir / "clean"));
+  ExpectEveryFileReads(dir / "flat");
+}
+
+// compensate is killed while rewriting a solution: the directory is then either the old
+// solution, the new one, or has no result.json (removed first, written last), so `project`
+// either uses a whole solution or refuses with one line; run again, it redoes the solve.
+TEST_F(Faults, KillNineDuringCompensateThenRunAgain) {
+  const auto command = [&](const std::string& out) {
+    return "compensate " + kScene + " --rig " + Rig().string() + " --out " + (dir / out).string();
+  };
+  const double seconds = TimedRun(command("clean"));
+  ASSERT_GT(TimedRun(command("solution")), 0);  // the earlier solution the kill interrupts
+  ASSERT_TRUE(testing::KillProcamWhen(command("solution"), After(0.5 * seconds), kMaxSeconds,
+                                      dir / "killed.log"));
+  const CommandRun project =
+      testing::RunProcamStderr("project " + (dir / "solution").string() + " --rig " +
+                               Rig().string() + " --out " + (dir / "images").string());
+  if (project.exit_code != 0) testing::ExpectOneErrorLine(project, "result.json", "project");
+  const CommandRun again = testing::RunProcam(command("solution"));
+  ASSERT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_EQ(FilesUnder(dir / "solution"), FilesUnder(dir / "clean"));
+  ExpectEveryFileReads(dir / "solution");
+  EXPECT_LT(NpyDifference(dir / "solution" / "E.npy", dir / "clean" / "E.npy"), 1e-9);
+}
+
+TEST_F(Faults, KillNineDuringProjectThenRunAgain) {
+  const std::string solution = (dir / "solution").string();
+  Compensate(Rig(), solution);
+  const auto command = [&](const std::string& out) {
+    return "project " + solution + " --rig " + Rig().string() + " --out " + (dir / out).string();
+  };
+  const double seconds = TimedRun(command("clean"));
+  const CommandRun again = KillThenRunAgain(command("images"), After(0.5 * seconds), dir);
+  ASSERT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_EQ(FilesUnder(dir / "images"), FilesUnder(dir / "clean"));
+  ExpectEveryFileReads(dir / "images");
+  for (const char* image : {"left.png", "right.png"}) {
+    EXPECT_EQ(Bytes(dir / "images" / image), Bytes(dir / "clean" / image)) << image;
+  }
+}
+
+// verify is killed during its second iteration; run again it resumes (the photo sessions'
+// frames are kept) and ends with the files of an uninterrupted run.
+TEST_F(Faults, KillNineDuringVerifyThenRunAgain) {
+  const std::string solution = (dir / "solution").string();
+  Compensate(Rig(), solution);
+  const auto command = [&](const std::string& out) {
+    return "verify " + Rig().string() + " " + solution + " --camera " + kCamera + "'" + kCapture +
+           "--iterations 2 --out " + (dir / out).string();
+  };
+  ASSERT_GT(TimedRun(command("clean")), 0);
+  const fs::path second = dir / "verify" / "iterations" / "1" / "session" / "frames";
+  const CommandRun again = KillThenRunAgain(
+      command("verify"), [&] { return CountFiles(second) >= 1; }, dir);
+  ASSERT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_EQ(FilesUnder(dir / "verify"), FilesUnder(dir / "clean"));
+  ExpectEveryFileReads(dir / "verify");
+  const nlohmann::json result = nlohmann::json::parse(Bytes(dir / "verify" / "result.json"));
+  EXPECT_TRUE(result.at("complete").get<bool>()) << result.dump(2);
+}
+
+// Runs `script` (sh) in a new user and mount namespace, where `mount` is allowed; false (and
+// the reason in `why`) where this system does not allow such namespaces.
+bool RunInMountNamespace(const std::string& script, std::string* why) {
+  const CommandRun probe = testing::RunShell("unshare -rm true");
+  if (probe.exit_code != 0) {
+    *why = "unshare -rm (user and mount namespaces) is not available: " + probe.output;
+    return false;
+  }
+  const CommandRun run = testing::RunShell("unshare -rm sh -c '" + script + "'");
+  EXPECT_EQ(run.exit_code, 0) << script << "\n" << run.output;
+  return true;
+}
+
+// The procam binary and its stderr only, its exit code appended to `log_dir`/exit.
+std::string ProcamInScript(const std::string& arguments, const fs::path& log_dir) {
+  return "{ " + std::string(std::getenv("PROCAM_BINARY")) + " " + arguments + " 2>" +
+         (log_dir / "stderr").string() + " >/dev/null; echo $? >" + (log_dir / "exit").string() +
+         "; }";
+}
+
+CommandRun ScriptRun(const fs::path& log_dir) {
+  CommandRun run;
+  run.exit_code = std::stoi(Bytes(log_dir / "exit"));
+  run.output = Bytes(log_dir / "stderr");
+  return run;
+}
+
+// An earlier solution in a 64 KiB tmpfs, then compensate --export (a 160 KiB F.npy) into the
+// same filesystem: one line naming the file that did not fit, exit 1, the earlier solution
+// untouched, no temporary file left.
+TEST_F(Faults, FullFilesystemIsOneLineAndKeepsWhatWasWritten) {
+  const std::string solution = (dir / "solution").string();
+  Compensate(Rig(), solution);
+  const fs::path mount = dir / "small", after = dir / "after";
+  fs::create_directories(mount);
+  const std::string script = "mount -t tmpfs -o size=64k tmpfs " + mount.string() + " && cp -r " +
+                             solution + " " + (mount / "old").string() + " && " +
+                             ProcamInScript("compensate " + kScene + " --rig " + Rig().string() +
+                                                " --export --out " + (mount / "new").string(),
+                                            dir.path()) +
+                             " && cp -r " + mount.string() + " " + after.string();
+  std::string why;
+  if (!RunInMountNamespace(script, &why)) GTEST_SKIP() << why;
+  testing::ExpectOneErrorLine(ScriptRun(dir.path()), (mount / "new").string(), "compensate");
+  EXPECT_NE(ScriptRun(dir.path()).output.find("No space left on device"), std::string::npos);
+  for (const std::string& name : FilesUnder(solution)) {
+    EXPECT_EQ(Bytes(after / "old" / name), Bytes(fs::path(solution) / name)) << name;
+  }
+  EXPECT_EQ(FilesUnder(after, /*temporary=*/true).size(), 0u);
+  EXPECT_FALSE(fs::exists(after / "new" / "result.json"));  // no solution to trust
+}
+
+// A solution on a read-only filesystem (as root, mode 0555 would not stop a write): compensate
+// over it and project beside it are one line each naming the path, exit 1, and it is unchanged.
+TEST_F(Faults, ReadOnlyDirectoryIsOneLineAndKeepsWhatWasWritten) {
+  const std::string solution = (dir / "solution").string();
+  Compensate(Rig(), solution);
+  const fs::path mount = dir / "readonly", after = dir / "after";
+  const fs::path compensate_log = dir / "compensate", project_log = dir / "project";
+  for (const fs::path& d : {mount, compensate_log, project_log}) fs::create_directories(d);
+  const std::string script =
+      "mount -t tmpfs tmpfs " + mount.string() + " && cp -r " + solution + " " +
+      (mount / "solution").string() + " && mount -o remount,ro " + mount.string() + " && " +
+      ProcamInScript("compensate " + kScene + " --rig " + Rig().string() + " --out " +
+                         (mount / "solution").string(),
+                     compensate_log) +
+      " && " +
+      ProcamInScript("project " + (mount / "solution").string() + " --rig " + Rig().string() +
+                         " --out " + (mount / "images").string(),
+                     project_log) +
+      " && cp -r " + mount.string() + " " + after.string();
+  std::string why;
+  if (!RunInMountNamespace(script, &why)) GTEST_SKIP() << why;
+  testing::ExpectOneErrorLine(ScriptRun(compensate_log), (mount / "solution").string(),
+                              "compensate");
+  testing::ExpectOneErrorLine(ScriptRun(project_log), (mount / "images").string(), "project");
+  EXPECT_NE(ScriptRun(project_log).output.find("Read-only file system"), std::string::npos);
+  EXPECT_EQ(FilesUnder(after / "solution"), FilesUnder(solution));
+  for (const std::string& name : FilesUnder(solution)) {
+    EXPECT_EQ(Bytes(after / "solution" / name), Bytes(fs::path(solution) / name)) << name;
+  }
+}
+
+// A camera that stalls: after some frames it delivers nothing and reports nothing, so every
+// grab waits its --timeout-ms (the synthetic camera's fault=timeout, for ever). verify ends with
+// one line naming the camera, exit 1, the photos it took kept; run again with a camera that
+// answers, it resumes and completes.
+TEST_F(Faults, StalledCameraEndsVerifyWithOneLineAndItResumes) {
+  const std::string solution = (dir / "solution").string();
+  Compensate(Rig(), solution);
+  const std::string verify =
+      "verify " + Rig().string() + " " + solution + kCapture +
+      "--iterations 2 --timeout-ms 50 --retries 1 --retry-delay-ms 0 --out " +
+      (dir / "verify").string() + " --camera " + kCamera;
+  const CommandRun stalled = testing::RunProcamStderr(verify + "&fault=timeout&fault_after=2'");
+  testing::ExpectOneErrorLine(stalled, "camera 'synthetic:tiny_box'", "stalled");
+  const std::set<std::string> kept = FilesUnder(dir / "verify");
+  EXPECT_GT(kept.size(), 0u);
+  ExpectEveryFileReads(dir / "verify");
+  const CommandRun resumed = testing::RunProcam(verify + "'");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  const std::set<std::string> now = FilesUnder(dir / "verify");
+  EXPECT_TRUE(std::includes(now.begin(), now.end(), kept.begin(), kept.end()));
+  const nlohmann::json result = nlohmann::json::parse(Bytes(dir / "verify" / "result.json"));
+  EXPECT_TRUE(result.at("complete").get<bool>());
+}
+
+// Files cut short by a crash of whatever wrote them: a solution's E.npy and a rig's
+// reflectance.npy are refused by the next command in one line naming them, with nothing
+// written; a session's frame PNG is captured again on resume (as a frame of junk is).
+TEST_F(Faults, TruncatedFilesAreNamedOrCapturedAgain) {
+  const fs::path solution = dir / "solution";
+  Compensate(Rig(), solution);
+  Truncate(solution / "E.npy");
+  testing::ExpectOneErrorLine(
+      testing::RunProcamStderr("project " + solution.string() + " --rig " + Rig().string() +
+                               " --out " + (dir / "images").string()),
+      "E.npy", "project");
+  EXPECT_FALSE(fs::exists(dir / "images"));
+
+  const fs::path rig = CopyRig(dir / "rig");
+  Truncate(rig / "reflectance.npy");
+  testing::ExpectOneErrorLine(
+      testing::RunProcamStderr("compensate " + kScene + " --rig " + rig.string() + " --out " +
+                               (dir / "other").string()),
+      "reflectance.npy", "compensate");
+  EXPECT_FALSE(fs::exists(dir / "other"));
+
+  const std::string capture = "capture --camera " + kCamera + "'" + kCapture +
+                              "--projector 0 --sequence photometric --levels 0,255 "
+                              "--channels rgb --out " +
+                              (dir / "flat").string();
+  ASSERT_GT(TimedRun(capture), 0);
+  const nlohmann::json manifest = nlohmann::json::parse(Bytes(dir / "flat" / "session.json"));
+  const fs::path frame =
+      dir / "flat" / manifest["patterns"][1]["captured"]["exposures"][0]["file"].get<std::string>();
+  Truncate(frame);
+  const CommandRun resumed = testing::RunProcam(capture);
+  EXPECT_EQ(resumed.exit_code, 0) << resumed.output;
+  EXPECT_NE(resumed.output.find("(1 this run, 3 already there)"), std::string::npos)
+      << resumed.output;
+  ExpectEveryFileReads(dir / "flat");
+}
+
+}  // namespace
+}  // namespace procam
