@@ -51,7 +51,9 @@ case "$command" in
   asan)
     install_packages
     build asan
-    ctest --preset asan --parallel 2 "$@"
+    # apps/faults kills, fills and stalls whole commands (process and filesystem behaviour, not
+    # memory): run by the test command, left out here to keep CI short.
+    ctest --preset asan --parallel 2 -E '^apps/faults$' "$@"
     ;;
   build)
     install_packages
