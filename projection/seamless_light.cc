@@ -106,9 +106,8 @@ class Field {
   void Values(const Eigen::MatrixX3d& node_value, Factors* values) const {
     ForEachPixel([&](int i, size_t k, int position, const std::vector<std::pair<int, double>>& bumps) {
       Eigen::Vector3d value = Eigen::Vector3d::Zero();
-      for (const auto& [j, weight] : bumps) value += weight * node_value.row(j).transpose();
+      for (const auto& [node, weight] : bumps) value += weight * node_value.row(nodes_[i][node]).transpose();
       (*values)[k][position] = value.cast<float>();
-      (void)i;
     });
   }
 
@@ -140,7 +139,7 @@ class Field {
   }
 
   // Calls visit(i, k, position, bumps) for every lit pixel of every patch that is not flat, with
-  // the normalised bumps (node, K̃_j(x)) at its point; in parallel over patches.
+  // the normalised bumps (position in nodes_[i], K̃_j(x)) at its point; in parallel over patches.
   template <typename Visit>
   void ForEachPixel(Visit visit) const {
     const int n = rig_.size();
@@ -161,21 +160,24 @@ class Field {
     }
   }
 
-  // The bumps at a point of patch i, normalised to sum 1.
+  // The bumps at a point of patch i, normalised to sum 1, each by its node's position in
+  // nodes_[i].
   void Bumps(int i, const Eigen::Vector3f& point, std::vector<std::pair<int, double>>* bumps) const {
     bumps->clear();
     double weight_sum = 0.0;
     const Eigen::Vector3d x = point.cast<double>();
-    for (const int j : nodes_[i]) {
+    for (int node = 0; node < static_cast<int>(nodes_[i].size()); ++node) {
+      const int j = nodes_[i][node];
       const double d2 = (x - rig_.centroid.row(j).transpose()).squaredNorm();
       if (d2 >= radius2_[j]) continue;
       const double t = 1.0 - d2 / radius2_[j];
-      bumps->emplace_back(j, t * t);
+      bumps->emplace_back(node, t * t);
       weight_sum += t * t;
     }
-    // Only where a patch is so elongated that no bump reaches (outside the designed range).
+    // Only where a patch is so elongated that no bump reaches (outside the designed range): the
+    // patch's own value (nodes_[i] starts with i).
     if (!(weight_sum > 0.0)) {
-      bumps->assign(1, {i, 1.0});
+      bumps->assign(1, {0, 1.0});
       return;
     }
     for (auto& bump : *bumps) bump.second /= weight_sum;
@@ -184,17 +186,14 @@ class Field {
   // A: row i the pixel-weighted mean of the normalised bumps over patch i (e_i on flat patches).
   void FormPatchMeans() {
     const int n = rig_.size();
-    std::vector<std::vector<std::pair<int, double>>> rows(n);  // (node, Σ w K̃) per patch
+    std::vector<std::vector<double>> rows(n);  // Σ w K̃ per node of nodes_[i]
+    for (int i = 0; i < n; ++i) rows[i].assign(nodes_[i].size(), 0.0);
     std::vector<double> row_weight(n, 0.0);
     ForEachPixel([&](int i, size_t k, int position, const std::vector<std::pair<int, double>>& bumps) {
       const ProjectorMap& map = rig_.maps[k];
       const double weight =
           rig_.coverage_scale(i, k) * map.pixel_solid_angle * map.share[map.pixels_by_patch[position]];
-      for (const auto& [j, value] : bumps) {
-        auto it = std::find_if(rows[i].begin(), rows[i].end(), [j = j](const auto& e) { return e.first == j; });
-        if (it == rows[i].end()) it = rows[i].insert(rows[i].end(), {j, 0.0});
-        it->second += weight * value;
-      }
+      for (const auto& [node, value] : bumps) rows[i][node] += weight * value;
       row_weight[i] += weight;  // patch i is visited by one thread only
     });
     std::vector<Eigen::Triplet<double>> triplets;
@@ -203,7 +202,9 @@ class Field {
         triplets.emplace_back(i, i, 1.0);
         continue;
       }
-      for (const auto& [j, value] : rows[i]) triplets.emplace_back(i, j, value / row_weight[i]);
+      for (size_t node = 0; node < rows[i].size(); ++node) {
+        if (rows[i][node] != 0.0) triplets.emplace_back(i, nodes_[i][node], rows[i][node] / row_weight[i]);
+      }
     }
     means_.resize(n, n);
     means_.setFromTriplets(triplets.begin(), triplets.end());
