@@ -9,6 +9,8 @@
 #include <cpuid.h>
 #include <immintrin.h>
 
+#include <Eigen/Core>
+
 namespace procam {
 namespace {
 
@@ -180,40 +182,11 @@ __attribute__((target("avx2,fma,f16c"))) void RowsDotHalfF16c(const std::uint16_
   }
 }
 
-// float32 → binary16, rounding to nearest even as a conversion to _Float16 does (written out
-// because clang before 15 has no _Float16 on x86).
-std::uint16_t FloatToHalf(float value) {
-  std::uint32_t bits;
-  std::memcpy(&bits, &value, sizeof bits);
-  const std::uint32_t sign = (bits >> 16) & 0x8000u, magnitude = bits & 0x7fffffffu;
-  if (magnitude > 0x7f800000u) return static_cast<std::uint16_t>(sign | 0x7e00u);  // NaN
-  if (magnitude >= 0x477ff000u) return static_cast<std::uint16_t>(sign | 0x7c00u);  // ≥ 65520: ∞
-  if (magnitude < 0x38800000u) {  // below 2^-14: a subnormal half (or the smallest normal)
-    float scaled;
-    std::memcpy(&scaled, &magnitude, sizeof scaled);
-    return static_cast<std::uint16_t>(sign | static_cast<std::uint32_t>(std::nearbyint(scaled * 16777216.0f)));
-  }
-  std::uint32_t half = (magnitude - 0x38000000u) >> 13;  // exponent rebiased by 127 − 15
-  const std::uint32_t rest = magnitude & 0x1fffu;
-  if (rest > 0x1000u || (rest == 0x1000u && (half & 1u))) ++half;  // a carry may reach ∞
-  return static_cast<std::uint16_t>(sign | half);
-}
+// float32 → binary16, rounding to nearest even (Eigen's conversion).
+std::uint16_t FloatToHalf(float value) { return Eigen::numext::bit_cast<std::uint16_t>(Eigen::half(value)); }
 
-// The portable fallback (binary16 → float32 by bit manipulation).
-float HalfToFloat(std::uint16_t h) {
-  const std::uint32_t sign = static_cast<std::uint32_t>(h & 0x8000u) << 16;
-  const std::uint32_t exponent = (h >> 10) & 0x1fu, mantissa = h & 0x3ffu;
-  float value;
-  if (exponent == 0) {
-    value = std::ldexp(static_cast<float>(mantissa), -24);  // zero or subnormal
-  } else if (exponent == 31) {
-    value = mantissa ? std::numeric_limits<float>::quiet_NaN() : std::numeric_limits<float>::infinity();
-  } else {
-    const std::uint32_t bits = ((exponent + 112u) << 23) | (mantissa << 13);
-    std::memcpy(&value, &bits, sizeof value);
-  }
-  return sign ? -value : value;
-}
+// The portable fallback: binary16 → float32 by Eigen's conversion.
+float HalfToFloat(std::uint16_t h) { return static_cast<float>(Eigen::numext::bit_cast<Eigen::half>(h)); }
 
 void RowsDotHalfPortable(const std::uint16_t* a, long stride, long length, const float* x, long ldx, float* out,
                          long ldo, long begin, long end, int columns) {

@@ -94,6 +94,30 @@ TEST(DenseKernels, ProductsMatchEigen) {
   }
 }
 
+// IEEE 754 binary16 bit patterns, written from the format's definition (1 sign, 5 exponent bits
+// biased by 15, 10 mantissa bits), rounding to nearest even.
+TEST(DenseKernels, ToHalfGivesTheBinary16BitPatterns) {
+  const std::pair<float, std::uint16_t> cases[] = {
+      {0.0f, 0x0000},       {-0.0f, 0x8000},          {1.0f, 0x3c00},
+      {-2.0f, 0xc000},      {0.5f, 0x3800},           {65504.0f, 0x7bff},  // the largest finite
+      {65520.0f, 0x7c00},   {1e9f, 0x7c00},           {-1e9f, 0xfc00},     // rounds to infinity
+      {0x1p-14f, 0x0400},   {0x1p-24f, 0x0001},       {0x1p-26f, 0x0000},  // smallest normal, subnormal
+      {1.0f + 0x1p-11f, 0x3c00},                   // a tie: to the even mantissa (0)
+      {1.0f + 3 * 0x1p-11f, 0x3c02},               // a tie: to the even mantissa (2)
+      {1.0f + 0x1p-11f + 0x1p-20f, 0x3c01},        // above the tie: up
+  };
+  for (const auto& [value, bits] : cases) {
+    std::uint16_t half = 0;
+    ToHalf(&value, 1, &half);
+    EXPECT_EQ(half, bits) << value;
+  }
+  const float nan = std::nanf("");
+  std::uint16_t half = 0;
+  ToHalf(&nan, 1, &half);
+  EXPECT_EQ(half & 0x7c00, 0x7c00);
+  EXPECT_NE(half & 0x03ff, 0);
+}
+
 TEST(DenseKernels, CholeskySolveMatchesADenseSolveInEachPrecision) {
   for (const int n : {1, 7, 203}) {
     // Like I − D^½ S D^½: unit diagonal, small positive coupling, symmetric positive definite.

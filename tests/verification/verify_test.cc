@@ -442,51 +442,48 @@ std::map<std::string, std::string> RunFiles(const std::filesystem::path& out) {
   return files;
 }
 
+// A finished one-iteration verification run (scene, rig, solution, out) and the files a refused
+// rerun must leave as they were.
+class VerifyRerun : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    rig_ = WriteRig(dir_, "rig", 0.0, 0.95);
+    solution_ = Compensate(dir_, WriteScene(dir_), rig_, "solution");
+    verify_ = "verify " + rig_.string() + " " + solution_.string() + " --camera " + kCamera +
+              kCapture + "--iterations 1 --out " + (dir_ / "out").string();
+    ASSERT_EQ(RunProcam(verify_).exit_code, 0);
+    before_ = RunFiles(dir_ / "out");
+    ASSERT_TRUE(before_.count("iterations/0/E.npy") && before_.count("report.html"));
+  }
+
+  testing::TempDir dir_;
+  std::filesystem::path rig_, solution_;
+  std::string verify_;
+  std::map<std::string, std::string> before_;
+};
+
 // A rerun into a directory holding a run of other inputs cannot resume its sessions: it is
 // refused before result.json, report.html, desired.png or an iteration's files change.
-TEST(Verify, ResumeWithOtherInputsChangesNothing) {
-  testing::TempDir dir;
-  const std::filesystem::path scene = WriteScene(dir);
-  const std::filesystem::path rig = WriteRig(dir, "rig", 0.0, 0.95);
-  const std::filesystem::path solution = Compensate(dir, scene, rig, "solution");
-  const std::string verify = "verify " + rig.string() + " " + solution.string() + " --camera " +
-                             kCamera + kCapture + "--iterations 1 --out " + (dir / "out").string();
-  ASSERT_EQ(RunProcam(verify).exit_code, 0);
-  const std::map<std::string, std::string> before = RunFiles(dir / "out");
-  ASSERT_TRUE(before.count("iterations/0/E.npy") && before.count("report.html"));
-  const std::filesystem::path inputs[] = {solution / "E.npy", rig / "reflectance.npy"};
-  for (const std::filesystem::path& changed : inputs) {
+TEST_F(VerifyRerun, ResumeWithOtherInputsChangesNothing) {
+  for (const std::filesystem::path& changed : {solution_ / "E.npy", rig_ / "reflectance.npy"}) {
     const std::string original = ReadFile(changed);
     WriteNpy(changed, RowMatrixXd(0.9 * ReadMatrix(changed)));
-    const CommandRun run = testing::RunProcamStderr(verify);
-    EXPECT_EQ(run.exit_code, 1) << changed << ": " << run.output;
-    EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << run.output;
-    EXPECT_NE(run.output.find("cannot resume"), std::string::npos) << run.output;
-    EXPECT_TRUE(RunFiles(dir / "out") == before) << changed;
+    testing::ExpectOneErrorLine(testing::RunProcamStderr(verify_), "cannot resume", changed);
+    EXPECT_TRUE(RunFiles(dir_ / "out") == before_) << changed;
     WriteFileAtomically(changed, original);
   }
 }
 
 // A camera model whose size is not the camera's is refused when the camera opens, before
 // desired.png or a session changes.
-TEST(Verify, CameraOfAnotherSizeChangesNothing) {
-  testing::TempDir dir;
-  const std::filesystem::path scene = WriteScene(dir);
-  const std::filesystem::path rig = WriteRig(dir, "rig", 0.0, 1.0);
-  const std::filesystem::path solution = Compensate(dir, scene, rig, "solution");
-  const std::string verify = "verify " + rig.string() + " " + solution.string() + " --camera " +
-                             kCamera + kCapture + "--iterations 1 --out " + (dir / "out").string();
-  ASSERT_EQ(RunProcam(verify).exit_code, 0);
-  const std::map<std::string, std::string> before = RunFiles(dir / "out");
-  CameraModel camera = ReadCameraModelFile(rig / "camera.cameramodel");
+TEST_F(VerifyRerun, CameraOfAnotherSizeChangesNothing) {
+  CameraModel camera = ReadCameraModelFile(rig_ / "camera.cameramodel");
   camera.width += 16;
   camera.intrinsics[2] += 8.0;  // the same view, a wider image
-  WriteCameraModelFile(rig / "camera.cameramodel", camera, "a camera model of another size");
-  const CommandRun run = testing::RunProcamStderr(verify);
-  EXPECT_EQ(run.exit_code, 1) << run.output;
-  EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << run.output;
-  EXPECT_NE(run.output.find("camera.cameramodel is"), std::string::npos) << run.output;
-  EXPECT_TRUE(RunFiles(dir / "out") == before);
+  WriteCameraModelFile(rig_ / "camera.cameramodel", camera, "a camera model of another size");
+  testing::ExpectOneErrorLine(testing::RunProcamStderr(verify_), "camera.cameramodel is",
+                              "a camera model 16 pixels wider");
+  EXPECT_TRUE(RunFiles(dir_ / "out") == before_);
 }
 
 TEST(Verify, BadInputGetsOneLineAndWritesNothing) {
