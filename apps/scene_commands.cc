@@ -15,6 +15,9 @@
 #include "apps/commands.h"
 #include "calibration/calibrate_all_stage.h"
 #include "capture/devices.h"
+#include "capture/pixel_format.h"
+#include "capture/scene_cameras.h"
+#include "datasets_synthetic/scene_files.h"
 #include "projection/projector.h"
 #include "projection/stage.h"
 #include <fmt/ranges.h>
@@ -43,6 +46,13 @@ std::string DescribeScene(const GeometryStage& stage) {
     const ProjectorGeometry& geometry = projector.geometry;
     text += fmt::format("  projector {:<12} {}x{}  {}\n", projector.name, geometry.width(),
                         geometry.height(), projector.model_path.string());
+  }
+  const Scene& scene = stage.scene;
+  for (const SceneCamera& camera :
+       ParseSceneCameras(scene.cameras_json, scene.path.string(), scene.path.parent_path())) {
+    text += fmt::format("  camera    {:<12} {}x{}  {}  {}\n", camera.name, camera.model.width,
+                        camera.model.height, PixelFormatName(camera.settings.pixel_format),
+                        camera.model_path.string());
   }
   return text;
 }
@@ -188,6 +198,25 @@ void AddSceneCommands(CLI::App& app) {
   info->callback([args] {
     const GeometryStage stage = RunGeometryStage(args->scene, GeometryArguments(args->patches));
     std::cout << DescribeScene(stage);
+  });
+
+  CLI::App* write = scene->add_subcommand(
+      "write", "Write a built-in synthetic scene as a scene file with its projectors and camera (open it as a "
+               "synthetic rig: --camera synthetic:DIR/NAME.json)");
+  write->add_option("scene", args->scene, "A synthetic scene (" + fmt::format("{}", fmt::join(SyntheticSceneNames(), ", ")) + ")")
+      ->required();
+  write->add_option("--out", args->out, "Output directory")->required();
+  write->add_option("--patches", args->patches, "The scene file's patch target (default 1000)");
+  write->callback([args] {
+    const std::vector<std::string> names = SyntheticSceneNames();
+    if (std::find(names.begin(), names.end(), args->scene) == names.end()) {
+      throw std::invalid_argument("scene write: unknown synthetic scene '" + args->scene + "' (scenes: " +
+                                  fmt::format("{}", fmt::join(names, ", ")) + ")");
+    }
+    const std::filesystem::path path =
+        WriteSyntheticSceneFile(args->scene, args->patches > 0 ? args->patches : 1000, args->out);
+    std::cout << "wrote " << path.string() << " with its projectors' and camera's models; open it as a rig with "
+              << "--camera synthetic:" << path.string() << "\n";
   });
 
   CLI::App* export_cmd = scene->add_subcommand("export", "Write the problem as NumPy .npy files and problem.json");

@@ -76,6 +76,11 @@ bool TestCameraOptions::Check(std::string* why) const {
 TestCameraOptions TestCameraOptionsFromUri(const CameraUri& uri) {
   TestCameraOptions options;
   if (!uri.path().empty()) options.name = uri.path();
+  return TestCameraOptionsFromUri(uri, options);
+}
+
+TestCameraOptions TestCameraOptionsFromUri(const CameraUri& uri, TestCameraOptions defaults) {
+  TestCameraOptions& options = defaults;
   const std::string format = uri.GetString("format", PixelFormatName(options.pixel_format));
   const auto parsed = ParsePixelFormat(format);
   if (!parsed) throw IoError("camera '" + uri.text() + "': unknown pixel format '" + format + "'");

@@ -66,6 +66,9 @@ struct TestCameraOptions {
 
 // Reads the URI's keys (see the file comment). Throws IoError naming the URI and key.
 TestCameraOptions TestCameraOptionsFromUri(const CameraUri& uri);
+// The same, starting from `defaults` instead of TestCameraOptions' (a synthetic rig's camera
+// settings, which the URI's keys override).
+TestCameraOptions TestCameraOptionsFromUri(const CameraUri& uri, TestCameraOptions defaults);
 
 class TestCamera : public Camera {
  public:

@@ -16,7 +16,10 @@
 #include "datasets_synthetic/paper_scenes.h"
 #include "base/io.h"
 #include "geometry/stage.h"
+#include "capture/scene_cameras.h"
 #include "capture/simulated_camera.h"
+#include "geometry/scene.h"
+#include "projection/projector.h"
 
 namespace procam {
 namespace {
@@ -56,36 +59,92 @@ bool SamePattern(const cv::Mat& a, const cv::Mat& b) {
   return cv::norm(a, b, cv::NORM_INF) == 0.0;
 }
 
-// Scene name and patch count of a synthetic URI (reads `patches`). Throws IoError.
+// What a synthetic URI names: a built-in scene or a scene file (with its camera), the patch
+// count and the albedo variation. Throws IoError naming the URI.
 struct SyntheticUri {
-  std::string scene;
+  std::string scene;  // the URI's path
+  std::filesystem::path file;  // a scene file, made absolute (empty for a built-in scene)
+  std::string camera;  // the scene file's camera ("" = its first)
   int patches = 0;
   double albedo_variation = 0.0;
   bool operator<(const SyntheticUri& other) const {
-    return std::tie(scene, patches, albedo_variation) <
-           std::tie(other.scene, other.patches, other.albedo_variation);
+    return std::tie(scene, file, camera, patches, albedo_variation) <
+           std::tie(other.scene, other.file, other.camera, other.patches, other.albedo_variation);
   }
 };
+
+bool IsSceneFile(const std::string& path) {
+  return path.size() > 5 && path.compare(path.size() - 5, 5, ".json") == 0;
+}
 
 SyntheticUri ParseSyntheticUri(const CameraUri& uri) {
   if (uri.scheme() != "synthetic")
     throw IoError("camera '" + uri.text() + "': not a synthetic: camera URI");
-  if (!IsSceneName(uri.path())) {
+  SyntheticUri parsed;
+  parsed.scene = uri.path();
+  if (IsSceneFile(uri.path())) {
+    parsed.file = std::filesystem::absolute(uri.path()).lexically_normal();
+    parsed.camera = uri.GetString("camera", "");
+  } else if (!IsSceneName(uri.path())) {
     throw IoError("camera '" + uri.text() + "': unknown synthetic scene '" + uri.path() +
-                  "' (scenes: " + SceneList() + ")");
+                  "' (scenes: " + SceneList() + ", or a scene file ROOM.json)");
   }
-  const int patches = uri.GetInt("patches", kDefaultPatches);
-  if (patches < kMinPatches || patches > kMaxPatches) {
+  parsed.patches = uri.GetInt("patches", kDefaultPatches);
+  if (parsed.patches < kMinPatches || parsed.patches > kMaxPatches) {
     throw IoError("camera '" + uri.text() + "': patches must be in [" +
                   std::to_string(kMinPatches) + ", " + std::to_string(kMaxPatches) + "], got " +
-                  std::to_string(patches));
+                  std::to_string(parsed.patches));
   }
-  const double albedo = uri.GetDouble("albedo", 0.0);
-  if (!(albedo >= 0.0 && albedo < 0.5)) {
+  parsed.albedo_variation = uri.GetDouble("albedo", 0.0);
+  if (!(parsed.albedo_variation >= 0.0 && parsed.albedo_variation < 0.5)) {
     throw IoError("camera '" + uri.text() + "': albedo must be in [0, 0.5), got " +
-                  std::to_string(albedo));
+                  std::to_string(parsed.albedo_variation));
   }
-  return {uri.path(), patches, albedo};
+  return parsed;
+}
+
+void CheckPatches(const std::string& scene, int patches) {
+  if (patches < kMinPatches || patches > kMaxPatches) {
+    throw std::invalid_argument("synthetic scene '" + scene + "': patches must be in [" +
+                                std::to_string(kMinPatches) + ", " + std::to_string(kMaxPatches) +
+                                "], got " + std::to_string(patches));
+  }
+}
+
+// A tape-measure guess of a camera's pose: its position rounded to 5 cm and the point it aims
+// at rounded to 25 cm (what someone standing in the room would write down).
+std::string CameraGuess(const Vec3& centre, const Vec3& target) {
+  const auto round = [](double value, double step) { return std::round(value / step) * step; };
+  return fmt::format("{},{},{},{},{},{}", round(centre.x(), 0.05), round(centre.y(), 0.05),
+                     round(centre.z(), 0.05), round(target.x(), 0.25), round(target.y(), 0.25),
+                     round(target.z(), 0.25));
+}
+
+// The world of a scene, its projectors and camera: the rig, one display per projector and the
+// radiance scale (one full-white render). `world` holds the names and settings already.
+std::shared_ptr<SyntheticWorld> BuildWorld(std::shared_ptr<SyntheticWorld> world, const Scene& scene,
+                                           std::vector<Projector> projectors, CameraGeometry camera,
+                                           double albedo_variation) {
+  SimulatedRigOptions options;
+  options.solver_patches = world->patches;
+  options.albedo_variation = albedo_variation;
+  auto rig = std::make_shared<SimulatedRig>(scene, std::move(projectors), std::move(camera), options);
+  std::vector<ProjectorImage> white;
+  for (const Projector& projector : rig->projectors()) {
+    world->displays.push_back(std::make_shared<MemoryDisplay>(
+        cv::Size(projector.geometry.width(), projector.geometry.height()),
+        "synthetic:" + world->scene + "/" + projector.name));
+    ProjectorImage image;
+    image.bits = projector.photometry.bits;
+    image.codes = cv::Mat(projector.geometry.height(), projector.geometry.width(), CV_16UC3,
+                          cv::Scalar::all(projector.photometry.MaxCode()));
+    white.push_back(std::move(image));
+  }
+  double brightest = 0.0;
+  cv::minMaxLoc(rig->RenderRadiance(white).reshape(1), nullptr, &brightest);
+  world->radiance_scale = brightest > 0.0 ? 1.0 / brightest : 1.0;
+  world->rig = std::move(rig);
+  return world;
 }
 
 }  // namespace
@@ -129,40 +188,64 @@ std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int
     throw std::invalid_argument("unknown synthetic scene '" + scene + "' (scenes: " + SceneList() +
                                 ")");
   }
-  if (patches < kMinPatches || patches > kMaxPatches) {
-    throw std::invalid_argument("synthetic scene '" + scene + "': patches must be in [" +
-                                std::to_string(kMinPatches) + ", " + std::to_string(kMaxPatches) +
-                                "], got " + std::to_string(patches));
-  }
+  CheckPatches(scene, patches);
   const SyntheticScene synthetic = MakeSyntheticScene(scene, patches);
   std::vector<Projector> projectors;
   for (const DevicePlacement& placement : synthetic.projectors)
     projectors.push_back(ProjectorFromPlacement(placement));
-  SimulatedRigOptions options;
-  options.solver_patches = patches;
-  options.albedo_variation = albedo_variation;
-
   auto world = std::make_shared<SyntheticWorld>();
   world->scene = scene;
+  world->scene_source = "synthetic:" + scene;
   world->patches = patches;
-  auto rig = std::make_shared<SimulatedRig>(synthetic.scene, std::move(projectors),
-                                            CameraFromPlacement(synthetic.camera), options);
-  std::vector<ProjectorImage> white;
-  for (const Projector& projector : rig->projectors()) {
-    world->displays.push_back(std::make_shared<MemoryDisplay>(
-        cv::Size(projector.geometry.width(), projector.geometry.height()),
-        "synthetic:" + scene + "/" + projector.name));
-    ProjectorImage image;
-    image.bits = projector.photometry.bits;
-    image.codes = cv::Mat(projector.geometry.height(), projector.geometry.width(), CV_16UC3,
-                          cv::Scalar::all(projector.photometry.MaxCode()));
-    white.push_back(std::move(image));
+  world->camera_settings.name = scene;
+  world->camera_settings.width = synthetic.camera.width;
+  world->camera_settings.height = synthetic.camera.height;
+  world->camera_settings.pixel_format = PixelFormat::kBGR8;
+  world->camera_guess = CameraGuess(synthetic.camera.centre, synthetic.camera.target);
+  return BuildWorld(world, synthetic.scene, std::move(projectors),
+                    CameraFromPlacement(synthetic.camera), albedo_variation);
+}
+
+std::shared_ptr<SyntheticWorld> MakeSceneFileWorld(const std::filesystem::path& scene_file,
+                                                   const std::string& camera, int patches,
+                                                   double albedo_variation, const std::string& uri_path) {
+  const std::string file = scene_file.string();
+  CheckPatches(file, patches);
+  Scene scene = LoadScene(scene_file);
+  scene.target_patches = patches;
+  std::vector<Projector> projectors = ReadProjectors(scene);
+  if (projectors.empty())
+    throw IoError(file + ": projectors: a synthetic rig needs at least one projector");
+  const std::vector<SceneCamera> cameras =
+      ParseSceneCameras(scene.cameras_json, file, scene_file.parent_path());
+  if (cameras.empty()) throw IoError(file + ": cameras: a synthetic rig needs a camera");
+  size_t index = 0;
+  if (!camera.empty()) {
+    std::string names;
+    while (index < cameras.size() && cameras[index].name != camera) {
+      names += (names.empty() ? "" : ", ") + cameras[index].name;
+      ++index;
+    }
+    if (index == cameras.size())
+      throw IoError(file + ": cameras: no camera named '" + camera + "' (cameras: " + names + ")");
   }
-  double brightest = 0.0;
-  cv::minMaxLoc(rig->RenderRadiance(white).reshape(1), nullptr, &brightest);
-  world->radiance_scale = brightest > 0.0 ? 1.0 / brightest : 1.0;
-  world->rig = std::move(rig);
-  return world;
+  const SceneCamera& entry = cameras[index];
+  CameraGeometry geometry;
+  try {
+    geometry = CameraGeometry::FromModel(entry.model);
+  } catch (const std::invalid_argument& error) {
+    throw IoError(file + ": cameras[" + std::to_string(index) + "].model: " + error.what());
+  }
+  auto world = std::make_shared<SyntheticWorld>();
+  world->scene = uri_path.empty() ? file : uri_path;
+  world->scene_source = file;
+  world->patches = patches;
+  world->camera_settings = entry.settings;
+  world->camera_settings.name = world->scene;
+  const Eigen::Isometry3d world_from_camera = entry.model.cam_from_ref.inverse();
+  const Vec3 centre = world_from_camera.translation();
+  world->camera_guess = CameraGuess(centre, centre + 3.0 * world_from_camera.linear().col(2));
+  return BuildWorld(world, scene, std::move(projectors), std::move(geometry), albedo_variation);
 }
 
 SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world) {
@@ -207,8 +290,16 @@ std::shared_ptr<SyntheticWorld> OpenSyntheticWorld(const CameraUri& uri) {
   std::lock_guard<std::mutex> lock(mutex);
   std::weak_ptr<SyntheticWorld>& slot = worlds[key];
   if (std::shared_ptr<SyntheticWorld> alive = slot.lock()) return alive;
-  std::shared_ptr<SyntheticWorld> world =
-      MakeSyntheticWorld(key.scene, key.patches, key.albedo_variation);
+  std::shared_ptr<SyntheticWorld> world;
+  if (key.file.empty()) {
+    world = MakeSyntheticWorld(key.scene, key.patches, key.albedo_variation);
+  } else {
+    try {  // the file as the URI names it, so that errors name it so too
+      world = MakeSceneFileWorld(key.scene, key.camera, key.patches, key.albedo_variation, key.scene);
+    } catch (const IoError& error) {
+      throw IoError("camera '" + uri.text() + "': " + error.what());
+    }
+  }
   slot = world;
   return world;
 }
@@ -236,15 +327,10 @@ CameraBackend SyntheticCameraBackend() {
   backend.scheme = "synthetic";
   backend.description = "the simulated rig's camera in a synthetic scene (datasets_synthetic)";
   backend.open = [](const CameraUri& uri, const OpenCameraOptions&) -> std::unique_ptr<Camera> {
-    ParseSyntheticUri(uri);  // scene and patches first, so CheckAllRead below knows `patches`
-    TestCameraOptions options = TestCameraOptionsFromUri(uri);  // rejects unknown keys
+    ParseSyntheticUri(uri);  // its own keys first, so CheckAllRead below knows them
+    TestCameraOptionsFromUri(uri);  // rejects unknown keys before the world is built
     const std::shared_ptr<SyntheticWorld> world = OpenSyntheticWorld(uri);
-    if (!uri.Has("width")) options.width = world->rig->camera().width();
-    if (!uri.Has("height")) options.height = world->rig->camera().height();
-    if (!uri.Has("format")) options.pixel_format = PixelFormat::kBGR8;
-    std::string why;
-    if (!options.Check(&why)) throw IoError("camera '" + uri.text() + "': " + why);
-    return std::make_unique<SyntheticCamera>(options, world);
+    return std::make_unique<SyntheticCamera>(TestCameraOptionsFromUri(uri, world->camera_settings), world);
   };
   backend.list = [](const ListCamerasOptions& options) {
     std::vector<CameraInfo> cameras;
@@ -280,7 +366,7 @@ namespace {
 // (one exposure) or per full scale per second (HDR), as calibrate photometric derives it.
 double SyntheticValuePerExitance(const CameraUri& uri, const SyntheticWorld& world, const nlohmann::json& manifest,
                                  bool hdr, double full_scale, double black) {
-  const TestCameraOptions camera = TestCameraOptionsFromUri(uri);
+  const TestCameraOptions camera = TestCameraOptionsFromUri(uri, world.camera_settings);
   const nlohmann::json settings = manifest.value("camera", nlohmann::json::object())
                                       .value("settings", nlohmann::json::object());
   const double gain = std::pow(10.0, settings.value("gain", 0.0) / 20.0);
@@ -304,17 +390,6 @@ int RenderSyntheticChessboard(const SyntheticWorld& world, const ChessboardSpec&
     WritePng(folder / fmt::format("{:03d}_board.png", v), image);
   }
   return static_cast<int>(poses.size());
-}
-
-// A tape-measure guess of the synthetic camera's pose: its position rounded to 5 cm and the
-// point it aims at rounded to 25 cm (what someone standing in the room would write down).
-std::string SyntheticCameraGuess(const std::string& scene) {
-  const DevicePlacement camera = MakeSyntheticScene(scene, 100).camera;
-  const auto round = [](double value, double step) { return std::round(value / step) * step; };
-  return fmt::format("{},{},{},{},{},{}", round(camera.centre.x(), 0.05),
-                     round(camera.centre.y(), 0.05), round(camera.centre.z(), 0.05),
-                     round(camera.target.x(), 0.25), round(camera.target.y(), 0.25),
-                     round(camera.target.z(), 0.25));
 }
 
 }  // namespace
@@ -341,10 +416,10 @@ void RegisterSyntheticWorld() {
       camera.description = "synthetic scene '" + world->scene + "'";
       for (const Projector& projector : world->rig->projectors()) camera.projector_names.push_back(projector.name);
       camera.displays.assign(world->displays.begin(), world->displays.end());
-      camera.black_level = TestCameraOptionsFromUri(uri).black_level;
-      camera.scene = "synthetic:" + world->scene;
+      camera.black_level = TestCameraOptionsFromUri(uri, world->camera_settings).black_level;
+      camera.scene = world->scene_source;
       camera.patches = world->patches;
-      camera.camera_guess = SyntheticCameraGuess(world->scene);
+      camera.camera_guess = world->camera_guess;
       camera.render_chessboard = [world](int corners_x, int corners_y, double square,
                                          const std::filesystem::path& folder) {
         ChessboardSpec board;

@@ -25,6 +25,7 @@
 // only reserves the scheme until RegisterSyntheticCameraBackend() is called.
 
 #include <atomic>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -39,8 +40,18 @@ namespace procam {
 // A synthetic room with its projectors and camera, and one in-memory display per projector:
 // showing a pattern on displays[k] is projector k of the rig showing it.
 struct SyntheticWorld {
-  std::string scene;  // a name of SyntheticSceneNames()
+  std::string scene;  // a name of SyntheticSceneNames(), or the scene file as the URI names it
+  // The room as a scene text the pipeline loads (geometry/stage.h): "synthetic:NAME", or the
+  // scene file's path.
+  std::string scene_source;
   int patches = 0;    // solver patch count the scene and the rig were built for
+  // The camera's settings before a URI's keys override them: TestCameraOptions' defaults with
+  // the rig camera's size and BGR8 (a built-in scene), or the scene file's camera entry.
+  TestCameraOptions camera_settings;
+  // A tape-measure guess of the camera's pose, "x,y,z,look_x,look_y,look_z": its position
+  // rounded to 5 cm and a point 3 m ahead of it (built-in scenes: the point it aims at) rounded
+  // to 25 cm.
+  std::string camera_guess;
   std::shared_ptr<const SimulatedRig> rig;
   // One per rig projector, same order; resolution = the projector's width × height, named
   // "synthetic:<scene>/<projector name>".
@@ -65,6 +76,16 @@ struct SyntheticWorld {
 // unknown or patches is outside [20, 5000].
 std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int patches = 300,
                                                    double albedo_variation = 0.0);
+// The world of a scene file with `projectors` and `cameras` (docs/scene_format.md): the scene's
+// surfaces, its projectors as written (models and photometry), and its camera `camera` (a name
+// of its cameras; "" = the first) with the entry's settings; the rest as MakeSyntheticWorld.
+// `uri_path` names the world (SyntheticWorld::scene). Throws IoError naming the file and key
+// (a scene without projectors or cameras, an unknown camera name), std::invalid_argument for
+// patches outside [20, 5000].
+std::shared_ptr<SyntheticWorld> MakeSceneFileWorld(const std::filesystem::path& scene_file,
+                                                   const std::string& camera, int patches = 300,
+                                                   double albedo_variation = 0.0,
+                                                   const std::string& uri_path = "");
 
 // The SceneView (camera.h) of the world's camera: for an exposure start time, the radiance of
 // what every display shows at that time (MemoryDisplay::ShownAt; 8-bit grey or B, G, R
@@ -75,8 +96,9 @@ std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int
 // std::invalid_argument when `world` is empty or its displays do not match its projectors.
 SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world);
 
-// The world a "synthetic:" URI names (its path, `patches` and `albedo` keys; other keys are left
-// unread).
+// The world a "synthetic:" URI names: its path is a built-in scene's name or a scene file
+// (ending in .json, relative to the working directory); its keys `patches`, `albedo` and, for a
+// scene file, `camera` (which of its cameras) are read, other keys are left unread.
 // Worlds are shared while alive: opening the same scene and patch count again, while a camera
 // or caller still holds the world, returns the same world — so the capture command shows its
 // patterns on the displays the camera looks at. Throws IoError naming the URI: not a synthetic

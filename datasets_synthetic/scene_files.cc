@@ -1,0 +1,119 @@
+#include "datasets_synthetic/scene_files.h"
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include "base/image_io.h"
+#include "base/io.h"
+#include "datasets_synthetic/paper_scenes.h"
+#include "datasets_synthetic/simulated_rig.h"
+#include "geometry/srgb.h"
+
+namespace procam {
+namespace {
+
+using json = nlohmann::ordered_json;
+
+json Triple(const Vec3& v) { return {v[0], v[1], v[2]}; }
+
+// A file name made of the surface's name (letters, digits, '_', '-').
+std::string FileStem(const std::string& text) {
+  std::string stem;
+  for (char c : text) stem += std::isalnum(static_cast<unsigned char>(c)) || c == '-' ? c : '_';
+  return stem;
+}
+
+// The surface's mesh as OBJ text: its vertices, one `vt` per triangle corner, faces v/vt.
+std::string ObjText(const Surface& surface) {
+  std::string text = "# " + surface.name + ", written by procam scene write\n";
+  for (const Vec3& v : surface.mesh_vertices) text += fmt::format("v {:.17g} {:.17g} {:.17g}\n", v.x(), v.y(), v.z());
+  for (const MeshTriangle& triangle : surface.mesh_triangles)
+    for (const Vec2& uv : triangle.uv) text += fmt::format("vt {:.17g} {:.17g}\n", uv.x(), uv.y());
+  int corner = 1;
+  for (const MeshTriangle& triangle : surface.mesh_triangles) {
+    text += "f";
+    for (int k = 0; k < 3; ++k) text += fmt::format(" {}/{}", triangle.vertex[k] + 1, corner++);
+    text += "\n";
+  }
+  return text;
+}
+
+// A linear RGB texture (CV_32FC3, row 0 = top) as a 16-bit sRGB PNG (B, G, R as PNGs store it).
+void WriteTexture(const std::filesystem::path& path, const cv::Mat& linear_rgb) {
+  cv::Mat bgr(linear_rgb.size(), CV_16UC3);
+  for (int row = 0; row < bgr.rows; ++row) {
+    const cv::Vec3f* in = linear_rgb.ptr<cv::Vec3f>(row);
+    cv::Vec3w* out = bgr.ptr<cv::Vec3w>(row);
+    for (int col = 0; col < bgr.cols; ++col) {
+      for (int c = 0; c < 3; ++c) {
+        out[col][2 - c] = cv::saturate_cast<ushort>(65535.0 * LinearToSrgb(std::clamp<double>(in[col][c], 0.0, 1.0)));
+      }
+    }
+  }
+  WritePng(path, bgr);
+}
+
+json ProjectorEntry(const Projector& projector, const std::string& model) {
+  const ProjectorPhotometry& photometry = projector.photometry;
+  json gamma = json::array();
+  for (const ResponseCurve& curve : photometry.response) gamma.push_back(curve.gamma());
+  json mixing = json::array();
+  for (int r = 0; r < 3; ++r) mixing.push_back(Triple(photometry.mixing.row(r).transpose()));
+  return {{"name", projector.name},           {"model", model},
+          {"black", Triple(photometry.black)}, {"max", Triple(photometry.max)},
+          {"gamma", gamma},                   {"mixing", mixing},
+          {"bits", photometry.bits}};
+}
+
+}  // namespace
+
+std::filesystem::path WriteSyntheticSceneFile(const std::string& name, int patches,
+                                              const std::filesystem::path& dir) {
+  const SyntheticScene synthetic = MakeSyntheticScene(name, patches);
+  std::filesystem::create_directories(dir);
+  const Scene& scene = synthetic.scene;
+  json surfaces = json::array();
+  for (const Surface& surface : scene.surfaces) {
+    json entry = {{"name", surface.name}, {"reflectance", Triple(surface.reflectance)}};
+    const std::string stem = FileStem(name + "_" + surface.name);
+    if (surface.kind == Surface::Kind::kQuad) {
+      entry["quad"] = json::array();
+      for (const Vec3& corner : surface.quad) entry["quad"].push_back(Triple(corner));
+    } else {
+      WriteFileAtomically(dir / (stem + ".obj"), ObjText(surface));
+      entry["mesh"] = stem + ".obj";
+    }
+    if (surface.desired.HasTexture()) {
+      WriteTexture(dir / (stem + ".png"), surface.desired.texture_linear);
+      entry["desired"] = {{"texture", stem + ".png"}};
+    } else {
+      entry["desired"] = Triple(surface.desired.srgb);
+    }
+    surfaces.push_back(entry);
+  }
+  json projectors = json::array();
+  for (const DevicePlacement& placement : synthetic.projectors) {
+    const Projector projector = ProjectorFromPlacement(placement);
+    const std::string model = FileStem(name + "_" + projector.name) + ".cameramodel";
+    WriteCameraModel(dir / model, projector.geometry);
+    projectors.push_back(ProjectorEntry(projector, model));
+  }
+  const std::string camera_model = FileStem(name + "_camera") + ".cameramodel";
+  WriteCameraModelFile(dir / camera_model, CameraFromPlacement(synthetic.camera).Model(),
+                       "procam synthetic camera of " + name + "; extrinsics = mrcal rt_cam_ref with ref = world");
+  const json file = {
+      {"name", name},
+      {"description", "procam's built-in synthetic scene " + name},
+      {"patches", patches},
+      {"white", scene.white},
+      {"weld_tolerance", scene.weld_tolerance},
+      {"surfaces", surfaces},
+      {"projectors", projectors},
+      {"cameras", json::array({{{"name", "camera"}, {"model", camera_model}, {"format", "BGR8"}}})}};
+  const std::filesystem::path path = dir / (name + ".json");
+  WriteFileAtomically(path, file.dump(2) + "\n");
+  return path;
+}
+
+}  // namespace procam
