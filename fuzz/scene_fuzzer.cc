@@ -1,6 +1,8 @@
-// LoadScene (geometry/scene.h) and the scene's projectors (ReadProjectors). The directory holds
+// LoadScene (geometry/scene.h), the scene's projectors (ReadProjectors) and cameras
+// (ParseSceneCameras). The directory holds
 // data/scenes/column.obj, sunset.png and the corpus's left/right.cameramodel, so that scenes
 // naming them get past the file checks.
+#include "capture/scene_cameras.h"
 #include "fuzz/fuzz_input.h"
 #include "geometry/scene.h"
 #include "projection/projector.h"
@@ -17,6 +19,10 @@ const bool kSceneFilesCopied = [] {
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const auto path = procam::WriteFuzzInput(data, size, "scene.json");
-  procam::ReadOrRefuse([&] { procam::ReadProjectors(procam::LoadScene(path)); });
+  procam::ReadOrRefuse([&] {
+    const procam::Scene scene = procam::LoadScene(path);
+    procam::ReadProjectors(scene);
+    procam::ParseSceneCameras(scene.cameras_json, path.string(), path.parent_path());
+  });
   return 0;
 }
