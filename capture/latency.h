@@ -1,0 +1,58 @@
+#pragma once
+// The display-to-camera latency of a rig, measured: how long after a pattern is shown (Show()
+// returned) a frame whose exposure starts can first see it. The sequencer's settle time must
+// cover it; measuring it replaces a guessed --settle-ms.
+//
+// Method (a flash sequence): reference frames of the display's black and its full white give,
+// for every camera pixel the display lights, the two levels. Then the display alternates
+// between white and black `edges` times, each change shown at a random phase of the camera's
+// frame clock, and every frame after a change is classed by how far its lit pixels have moved
+// from the old level to the new one: still old (< 10 %), new (> 90 %), or in between (a frame
+// whose exposure the change fell into). A frame exposed from s to s + e after a change shown at
+// t0 bounds the latency L:
+//   still old:  L > s − t0      (its exposure began before the light changed)
+//   new:        L ≤ s − t0      (it saw only the new light)
+//   in between: s − t0 < L ≤ s + e − t0
+// so L lies in (lower, upper] with lower the largest and upper the smallest bound over all
+// edges; random phases narrow the interval to about a frame period divided by the edges.
+
+#include <cstdint>
+#include <string>
+
+#include "capture/camera.h"
+#include "capture/display.h"
+
+namespace procam {
+
+struct LatencyOptions {
+  int edges = 8;                 // changes of the display measured, [1, 200]
+  double max_latency_ms = 1000;  // a change not seen within this (plus two frames) fails, (0, 60000]
+  double grab_timeout_ms = 2000;  // per frame, (0, 600000]; the exposure is added
+  double min_contrast = 0.02;    // lit pixels: white − black above this fraction of full scale, (0, 1)
+  uint32_t seed = 1;             // the random phases
+  bool Check(std::string* why) const;
+};
+
+struct LatencyMeasurement {
+  double lower_ms = 0.0;         // the latency is above this ...
+  double upper_ms = 0.0;         // ... and at most this (milliseconds after Show() returned)
+  double frame_period_ms = 0.0;  // median interval between frames' exposure starts
+  double exposure_ms = 0.0;      // the frames' exposure
+  int edges = 0;                 // display changes measured
+  int frames = 0;                // frames classed
+  double lit_fraction = 0.0;     // of the camera's pixels, those the display lights
+  double EstimateMs() const { return 0.5 * (lower_ms + upper_ms); }
+  // The settle time the sequencer needs: the upper bound plus a margin for jitter (10 %, at
+  // least 5 ms), rounded up to a millisecond.
+  double SettleMs() const;
+  std::string Summary() const;  // one line, for logs
+};
+
+// Measures with `display` and `camera`, which must be streaming (Start() called) and look at
+// what the display lights. Leaves the display black. Throws std::invalid_argument for options
+// that fail Check(), IoError naming the display and camera when the display lights nothing the
+// camera sees, or when a change is not seen within max_latency_ms; camera errors pass through.
+LatencyMeasurement MeasureDisplayLatency(Camera* camera, PatternDisplay* display,
+                                         const LatencyOptions& options = {});
+
+}  // namespace procam
