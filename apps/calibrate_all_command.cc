@@ -27,7 +27,7 @@ struct CalibrateAllArguments {
   std::string camera_guess;
   std::string camera_scale;
   int frames = 4;
-  double settle_ms = 150.0;
+  SettleSetting settle{true, 150.0};  // default: measured
   std::vector<double> exposures_us;
   std::string levels = "0,32,64,96,128,160,192,224,255";
 };
@@ -48,7 +48,8 @@ void CalibrateAll(const CalibrateAllArguments& args) {
   options.camera_guess = args.camera_guess;
   options.camera_scale = args.camera_scale;
   options.frames = args.frames;
-  options.settle_ms = args.settle_ms;
+  options.settle_ms = args.settle.ms;
+  options.measure_settle = args.settle.measure;
   options.exposures_us = args.exposures_us;
   options.levels = ParseIntegerList("--levels", args.levels, "8-bit levels, comma-separated");
   options.progress = PrintProgress();
@@ -91,8 +92,7 @@ void AddCalibrateAllCommand(CLI::App& calibrate) {
                   "Camera value per unit exitance (number or R,G,B; default for a synthetic "
                   "camera: from its URI)");
   all->add_option("--frames", args->frames, "Frames averaged per pattern")->capture_default_str();
-  all->add_option("--settle-ms", args->settle_ms, "Wait after each pattern, milliseconds")
-      ->capture_default_str();
+  AddSettleOption(all, &args->settle);
   all->add_option("--exposure-us", args->exposures_us,
                   "Exposure(s), microseconds; several bracket and merge to HDR")
       ->delimiter(',');

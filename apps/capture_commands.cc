@@ -31,6 +31,7 @@ struct CaptureArguments {
   std::string projector_size;  // empty: 1024x768, or the synthetic projector's own
   int projector = 0;           // synthetic cameras: the rig projector that shows the patterns
   SequencerOptions sequencer;
+  SettleSetting settle{false, SequencerOptions().settle_ms};
   std::optional<double> gain;  // unset: leave the camera's gain
   std::string axes = "both";
   std::vector<int> levels = PhotometricOptions().levels;
@@ -70,6 +71,8 @@ void RunCapture(const CaptureArguments& args) {
   options.projector = args.projector;
   if (!args.projector_size.empty()) options.projector_size = ProjectorSize(args.projector_size);
   options.sequencer = args.sequencer;
+  options.sequencer.settle_ms = args.settle.ms;
+  options.measure_latency = args.settle.measure;
   options.gain = args.gain;
   options.axes = args.axes;
   options.pattern_gamma = args.pattern_gamma;
@@ -149,10 +152,7 @@ void AddCaptureCommands(CLI::App& app) {
       ->add_option("--frames", args->sequencer.frames_per_pattern,
                    "Frames averaged per pattern and exposure")
       ->capture_default_str();
-  capture
-      ->add_option("--settle-ms", args->sequencer.settle_ms,
-                   "Wait after showing a pattern, milliseconds")
-      ->capture_default_str();
+  AddSettleOption(capture, &args->settle);
   capture
       ->add_option("--discard", args->sequencer.discard_frames,
                    "Fresh frames discarded before averaging")

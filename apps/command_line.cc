@@ -115,4 +115,28 @@ void AddLightOption(CLI::App* command, LightField* light) {
       ->option_text(std::string("smooth|flat (default ") + LightFieldName(*light) + ")");
 }
 
+std::string SettleSetting::Text() const { return measure ? "auto" : fmt::format("{}", ms); }
+
+void AddSettleOption(CLI::App* command, SettleSetting* settle) {
+  command
+      ->add_option_function<std::string>(
+          "--settle-ms",
+          [settle](const std::string& text) {
+            if (text == "auto") {
+              settle->measure = true;
+              return;
+            }
+            char* end = nullptr;
+            const double ms = std::strtod(text.c_str(), &end);
+            if (text.empty() || *end != '\0' || !(ms >= 0.0 && ms <= 60000.0)) {
+              throw CLI::ValidationError("--settle-ms", "'" + text + "': auto, or milliseconds in [0, 60000]");
+            }
+            settle->measure = false;
+            settle->ms = ms;
+          },
+          "Wait after each pattern before frames count: auto (measure the display-to-camera latency first with "
+          "a flash sequence) or milliseconds")
+      ->option_text("auto|MS (default " + settle->Text() + ")");
+}
+
 }  // namespace procam

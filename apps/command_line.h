@@ -41,6 +41,16 @@ std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text);
 // into a smooth field (seamless light) or light each patch uniformly (projector_images.h).
 void AddLightOption(CLI::App* command, LightField* light);
 
+// --settle-ms auto|MS: the wait after each pattern before frames count. "auto" measures the
+// display-to-camera latency first (a flash sequence, capture/latency.h) and settles for it;
+// a number is milliseconds in [0, 60000].
+struct SettleSetting {
+  bool measure = false;
+  double ms = 150.0;
+  std::string Text() const;  // as the option is written
+};
+void AddSettleOption(CLI::App* command, SettleSetting* settle);
+
 // Human-readable summary: surfaces, areas, patch counts, form-factor statistics.
 std::string DescribeGeometry(const GeometryStage& stage);
 

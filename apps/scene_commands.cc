@@ -72,7 +72,7 @@ struct RigDemoArguments {
   std::string chessboard, camera_model, camera_scale, camera_guess;
   std::vector<std::string> names;
   int frames = 4;
-  double settle_ms = 150.0;
+  SettleSetting settle{true, 150.0};  // default: measured
   int iterations = 4;
   LightField light = LightField::kSmooth;  // --light, also without --camera
 };
@@ -90,7 +90,8 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
   calibrate.out = rig_dir;
   calibrate.patches = patches;
   calibrate.frames = rig.frames;
-  calibrate.settle_ms = rig.settle_ms;
+  calibrate.settle_ms = rig.settle.ms;
+  calibrate.measure_settle = rig.settle.measure;
   calibrate.chessboard = rig.chessboard;
   calibrate.camera_model = rig.camera_model;
   calibrate.camera_scale = rig.camera_scale;
@@ -99,8 +100,8 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
   calibrate.display_names = rig.displays;
   calibrate.open_display = OpenMonitorDisplay;
   calibrate.progress = PrintProgress();
-  std::printf("\n$ procam calibrate all --camera %s --scene %s --out %s --patches %d --frames %d --settle-ms %g%s\n",
-              rig.camera.c_str(), scene.c_str(), rig_dir.c_str(), patches, rig.frames, rig.settle_ms,
+  std::printf("\n$ procam calibrate all --camera %s --scene %s --out %s --patches %d --frames %d --settle-ms %s%s\n",
+              rig.camera.c_str(), scene.c_str(), rig_dir.c_str(), patches, rig.frames, rig.settle.Text().c_str(),
               rig.displays.empty() ? "" : (" --display " + fmt::format("{}", fmt::join(rig.displays, ","))).c_str());
   RunCalibrateAll(calibrate);
 
@@ -135,9 +136,9 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
                      projection);
 
   spdlog::info("stage 4/4 photographs, verification and the closed loop");
-  std::printf("\n$ procam verify %s %s --camera %s --out %s --iterations %d --frames %d --settle-ms %g\n",
+  std::printf("\n$ procam verify %s %s --camera %s --out %s --iterations %d --frames %d --settle-ms %s\n",
               rig_dir.c_str(), solution_dir.c_str(), rig.camera.c_str(), (out / "verify").c_str(), rig.iterations,
-              rig.frames, rig.settle_ms);
+              rig.frames, rig.settle.Text().c_str());
   VerificationOptions verify;
   verify.rig_dir = rig_dir;
   verify.solution_dir = solution_dir;
@@ -147,7 +148,8 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
   verify.iterations = rig.iterations;
   verify.light = rig.light;
   verify.sequencer.frames_per_pattern = rig.frames;
-  verify.sequencer.settle_ms = rig.settle_ms;
+  verify.sequencer.settle_ms = rig.settle.ms;
+  verify.measure_latency = rig.settle.measure;
   if (!rig.camera_scale.empty()) verify.camera_scale = ParsePositiveRgb("--camera-scale", rig.camera_scale);
   verify.progress = LogProgress();
   const VerificationSummary verified = RunVerification(verify);
@@ -263,8 +265,7 @@ void AddDemoCommand(CLI::App& app) {
   demo->add_option("--camera-guess", rig->camera_guess,
                    "With --camera: camera position and a point it looks at, x,y,z,look_x,look_y,look_z");
   demo->add_option("--frames", rig->frames, "With --camera: frames averaged per pattern")->capture_default_str();
-  demo->add_option("--settle-ms", rig->settle_ms, "With --camera: wait after each pattern, milliseconds")
-      ->capture_default_str();
+  AddSettleOption(demo, &rig->settle);
   demo->add_option("--iterations", rig->iterations, "With --camera: closed-loop photos at most")
       ->capture_default_str();
   AddLightOption(demo, &rig->light);

@@ -21,6 +21,7 @@ struct VerifyArguments {
   std::string rig, solution, out, camera, camera_response, camera_scale;
   std::vector<std::string> displays;
   VerificationOptions options;
+  SettleSetting settle{false, SequencerOptions().settle_ms};
 };
 
 void RunVerify(VerifyArguments& args) {
@@ -31,6 +32,8 @@ void RunVerify(VerifyArguments& args) {
   options.out = args.out;
   options.camera = args.camera;
   options.camera_response = args.camera_response;
+  options.sequencer.settle_ms = args.settle.ms;
+  options.measure_latency = args.settle.measure;
   if (!args.camera_scale.empty()) options.camera_scale = ParsePositiveRgb("--camera-scale", args.camera_scale);
   options.progress = LogProgress();
   std::string why;
@@ -90,9 +93,7 @@ void AddVerifyCommand(CLI::App& app) {
   cmd->add_option("--gain", args->options.gain, "Camera gain (dB for Aravis/test cameras)");
   cmd->add_option("--frames", args->options.sequencer.frames_per_pattern, "Frames averaged per photo")
       ->capture_default_str();
-  cmd->add_option("--settle-ms", args->options.sequencer.settle_ms,
-                  "Wait after showing the images, milliseconds")
-      ->capture_default_str();
+  AddSettleOption(cmd, &args->settle);
   cmd->add_option("--exposure-us", args->options.sequencer.exposures_us,
                   "Exposure(s), microseconds; several bracket and merge to HDR")
       ->delimiter(',');

@@ -142,11 +142,12 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args,
     capture.camera = args.camera;
     capture.sequencer.frames_per_pattern = args.frames;
     capture.sequencer.settle_ms = args.settle_ms;
+    capture.measure_latency = args.measure_settle;
     capture.sequencer.exposures_us = args.exposures_us;
     capture.progress = args.progress;
-    std::vector<std::string> common = {"--camera",    args.camera,
-                                       "--frames",    std::to_string(args.frames),
-                                       "--settle-ms", fmt::format("{}", args.settle_ms)};
+    std::vector<std::string> common = {
+        "--camera", args.camera, "--frames", std::to_string(args.frames), "--settle-ms",
+        args.measure_settle ? std::string("auto") : fmt::format("{}", args.settle_ms)};
     if (plan.simulated) {
       capture.projector = static_cast<int>(k);
       common.insert(common.end(), {"--projector", std::to_string(k)});
@@ -165,9 +166,15 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args,
                                         capture.out.string()};
     command.insert(command.end(), common.begin(), common.end());
     ShowCommand(args.progress, command);
-    Report(args.progress, CaptureLine(capture, RunCaptureStage(capture)));
+    const CaptureSummary structured = RunCaptureStage(capture);
+    Report(args.progress, CaptureLine(capture, structured));
     sessions.push_back(capture.out);
 
+    // The flat fields settle as the structured light did (measured once per projector).
+    capture.measure_latency = false;
+    capture.sequencer.settle_ms = structured.settle_ms;
+    for (size_t i = 0; i + 1 < common.size(); ++i)
+      if (common[i] == "--settle-ms") common[i + 1] = fmt::format("{}", structured.settle_ms);
     capture.sequence = "photometric";
     capture.levels = args.levels;
     capture.channels = "rgb";

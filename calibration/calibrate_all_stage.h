@@ -47,7 +47,10 @@ struct CalibrateAllOptions {
   // Camera value per unit exitance (a number or "R,G,B"); empty: a simulated camera's own.
   std::string camera_scale;
   int frames = 4;                    // averaged per pattern
-  double settle_ms = 150.0;          // wait after each pattern
+  double settle_ms = 150.0;          // wait after each pattern ...
+  // ... unless measured: the display-to-camera latency of each projector, measured before its
+  // structured light (capture/latency.h), sets the settle time of its captures.
+  bool measure_settle = false;
   std::vector<double> exposures_us;  // several: bracketed and merged to HDR
   std::vector<int> levels = {0, 32, 64, 96, 128, 160, 192, 224, 255};  // photometric drives
   ProgressCallback progress;  // each step's command line and its report

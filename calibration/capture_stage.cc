@@ -1,6 +1,7 @@
 #include "calibration/capture_stage.h"
 
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 
 #include "base/io.h"
@@ -117,6 +118,7 @@ bool CaptureStageOptions::Check(std::string* why) const {
   photometric.channels = channels;
   if (!photometric.Check(why)) return Fail(why, "--levels/--channels: " + *why);
   if (!sequencer.Check(why)) return Fail(why, "capture: " + *why);
+  if (measure_latency && !latency.Check(why)) return Fail(why, "latency: " + *why);
   return true;
 }
 
@@ -156,6 +158,18 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
     options.sequencer.hdr.inverse_response = ReadInverseResponse(
         args.camera_response.string(), IsColour(camera->Settings().pixel_format) ? 3 : 1);
   }
+  std::optional<LatencyMeasurement> latency;
+  if (args.measure_latency) {
+    latency = MeasureDisplayLatency(camera.get(), output.get(), args.latency);
+    options.sequencer.settle_ms = latency->SettleMs();
+    Report(args.progress, latency->Summary());
+  }
+  const auto latency_json = [&latency]() -> nlohmann::json {
+    if (!latency) return nullptr;
+    return {{"lower_ms", latency->lower_ms},       {"upper_ms", latency->upper_ms},
+            {"estimate_ms", latency->EstimateMs()}, {"settle_ms", latency->SettleMs()},
+            {"frame_period_ms", latency->frame_period_ms}, {"edges", latency->edges}};
+  };
   const std::filesystem::path result_path = args.out / "result.json";
   CaptureSummary summary;
   try {
@@ -164,11 +178,14 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
     nlohmann::json result = CaptureResult(sequence, *camera);
     result.update({{"manifest", (args.out / "session.json").string()},
                    {"complete", false},
+                   {"settle_ms", options.sequencer.settle_ms},
+                   {"latency", latency_json()},
                    {"error", fault.what()}});
     WriteFileAtomically(result_path, result.dump(2) + "\n");
     throw;
   }
   summary.camera = camera->Info().uri;
+  summary.settle_ms = options.sequencer.settle_ms;
   nlohmann::json result = CaptureResult(sequence, *camera);
   result.update({{"manifest", summary.manifest.string()},
                  {"complete", true},
@@ -177,6 +194,8 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
                  {"patterns_captured", summary.patterns_captured},
                  {"retries", summary.retries},
                  {"stale_dropped", summary.stale_dropped},
+                 {"settle_ms", options.sequencer.settle_ms},
+                 {"latency", latency_json()},
                  {"seconds", summary.seconds}});
   WriteFileAtomically(result_path, result.dump(2) + "\n");
   return summary;

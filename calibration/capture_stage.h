@@ -13,6 +13,7 @@
 
 #include "base/progress.h"
 #include "capture/display.h"
+#include "capture/latency.h"
 #include "capture/patterns.h"
 #include "capture/sequencer.h"
 #include "capture/session.h"
@@ -32,6 +33,10 @@ struct CaptureStageOptions {
   // resolution wins; given with a simulated projector, it must match the projector's.
   std::optional<cv::Size> projector_size;
   SequencerOptions sequencer;  // frames, exposures (several: HDR), settle, retries
+  // Measure the display-to-camera latency first (capture/latency.h) and use its settle time
+  // instead of sequencer.settle_ms.
+  bool measure_latency = false;
+  LatencyOptions latency;
   std::optional<double> gain;  // camera gain to set, [0, 1e6] (unset: leave it)
   std::string axes = "both";   // graycode, structured_light: "columns", "rows" or "both"
   double pattern_gamma = 1.0;  // structured_light: sinusoids pre-distorted for this gamma

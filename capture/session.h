@@ -49,6 +49,7 @@ struct CaptureSummary {
   double seconds = 0.0;
   std::filesystem::path manifest;
   std::string camera;  // the camera's URI as it names itself (set by callers that opened it)
+  double settle_ms = 0.0;  // the settle time used (set by callers: given, or measured)
   std::string BriefReport() const;  // one line
 };
 

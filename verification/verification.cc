@@ -294,6 +294,7 @@ bool VerificationOptions::Check(std::string* why) const {
   if (min_patch_pixels < 1) return fail("--min-patch-pixels must be ≥ 1");
   std::string sequencer_why;
   if (!sequencer.Check(&sequencer_why)) return fail(sequencer_why);
+  if (measure_latency && !latency.Check(&sequencer_why)) return fail("latency: " + sequencer_why);
   if (!camera_response.empty() && sequencer.exposures_us.size() < 2)
     return fail("--camera-response needs bracketed exposures (--exposure-us a,b,...)");
   return true;
@@ -316,6 +317,7 @@ nlohmann::json VerificationSummary::Json() const {
   json["colour_source"] = colour_source;
   json["hdr"] = hdr;
   json["exposures_us"] = exposures_us;
+  json["settle_ms"] = settle_ms;
   if (!iterations.empty() && best >= 0) {
     const double first = iterations.front().measured.mean76;
     const double kept = iterations[best].measured.mean76;
@@ -430,6 +432,7 @@ VerificationSummary ReadVerificationRun(const std::filesystem::path& dir) {
   summary.colour_source = fields.String("colour_source");
   summary.hdr = ReadBool(fields, "hdr");
   summary.exposures_us = fields.Numbers("exposures_us", fields.At("exposures_us"));
+  if (fields.Has("settle_ms")) summary.settle_ms = fields.Number("settle_ms");
   return summary;
 }
 
@@ -615,6 +618,11 @@ class VerificationLoop {
       sequencer_.hdr.inverse_response = ReadInverseResponse(options.camera_response, 3);
     }
     hdr_ = sequencer_.exposures_us.size() >= 2;
+    if (options.measure_latency) {
+      const LatencyMeasurement latency = MeasureDisplayLatency(camera_.get(), &wall_, options.latency);
+      sequencer_.settle_ms = latency.SettleMs();
+      Report(options.progress, latency.Summary());
+    }
     // The HDR merge subtracts the camera's black level: the option's, the simulated camera's,
     // or rig.json's.
     if (options.camera_black >= 0) {
@@ -848,6 +856,7 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
   summary.colour_source = in.colour_source.source;
   summary.hdr = loop.hdr();
   summary.exposures_us = loop.sequencer().exposures_us;
+  summary.settle_ms = loop.sequencer().settle_ms;
   auto write_summary = [&] {
     WriteVerificationRun(options.out, summary);
     HtmlReport report("procam verify");

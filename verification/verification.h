@@ -49,6 +49,7 @@
 #include "base/html_report.h"
 #include "base/progress.h"
 #include "capture/display.h"
+#include "capture/latency.h"
 #include "capture/sequencer.h"
 #include "capture/simulated_camera.h"
 #include "compensation/colour_image.h"
@@ -71,6 +72,10 @@ struct VerificationOptions {
   // demo); otherwise left empty and read from the file result.json names.
   std::optional<Scene> scene;
   SequencerOptions sequencer;   // frames, exposures (several: HDR), settle, retries
+  // Measure the display-to-camera latency first (capture/latency.h, every projector flashing
+  // at once) and settle for it instead of sequencer.settle_ms.
+  bool measure_latency = false;
+  LatencyOptions latency;
   std::string camera_response;  // camera_response.json: linearise (needs bracketing)
   // Camera colour calibration, camera value per unit exitance (scene units) per channel (R, G,
   // B, each > 0), or unset: rig.json camera.colour ({"scale": [R,G,B]} or {"matrix": 3×3}),
@@ -136,6 +141,7 @@ struct VerificationSummary {
   std::string colour_source;   // where camera values → exitance came from
   bool hdr = false;
   std::vector<double> exposures_us;
+  double settle_ms = 0.0;      // the settle time used (given, or measured)
 
   nlohmann::json Json() const;      // result.json
   std::string BriefReport() const;  // one line

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <memory>
 
+#include "capture/sequencer.h"
 #include "capture/test_camera.h"
 
 namespace procam {
@@ -59,6 +60,33 @@ TEST(DisplayLatency, BracketsTheConfiguredLatencyWithinAFramePeriod) {
     EXPECT_EQ(measured.edges, 8);
     EXPECT_GT(measured.lit_fraction, 0.99);
   }
+}
+
+// The measured settle time is what the sequencer needs: with it every capture of a run of
+// different patterns sees its own pattern; with a guessed settle shorter than the latency the
+// captures see the pattern before.
+TEST(DisplayLatency, MeasuredSettleMakesEveryCaptureSeeItsOwnPattern) {
+  Rig rig(120, 100);
+  LatencyOptions options;
+  options.max_latency_ms = 400;
+  const LatencyMeasurement measured = MeasureDisplayLatency(rig.camera.get(), rig.display.get(), options);
+  const auto captures_own = [&](double settle_ms) {
+    SequencerOptions sequencer;
+    sequencer.settle_ms = settle_ms;
+    sequencer.frames_per_pattern = 1;
+    PatternSequencer capture(sequencer, rig.camera.get(), rig.display.get());
+    int own = 0;
+    for (int k = 0; k < 6; ++k) {  // grey levels 40, 80, ... : each differs from the one before
+      const double level = 40.0 * (k + 1);
+      const cv::Mat mean = capture.Capture(cv::Mat(rig.display->Resolution(), CV_8UC1, cv::Scalar(level)))
+                               .exposures[0].mean;
+      // Loopback: DN = (ambient + level/255) · 255 at the reference exposure, clipped.
+      own += std::abs(cv::mean(mean)[0] - std::min(255.0, 0.05 * 255 + level)) < 2.0;
+    }
+    return own;
+  };
+  EXPECT_EQ(captures_own(measured.SettleMs()), 6) << measured.Summary();
+  EXPECT_EQ(captures_own(20.0), 0) << "a 20 ms settle against a 120 ms latency";
 }
 
 TEST(DisplayLatency, RefusesADisplayTheCameraDoesNotSee) {
