@@ -1,8 +1,10 @@
 #include "base/io.h"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cerrno>
@@ -54,6 +56,32 @@ std::string NpyBytes(const char* descr, const Eigen::Matrix<Scalar, Eigen::Dynam
 
 }  // namespace
 
+namespace {
+
+// Removes what a writer killed between creating and renaming its temporary file left beside
+// `path`: PATH.tmp-PID-N whose process is gone (no such PID here) and that is over a minute old
+// (so that a writer on another machine sharing the directory is never disturbed).
+void RemoveStaleTemporaries(const std::filesystem::path& path) {
+  const std::string prefix = path.filename().string() + ".tmp-";
+  const std::filesystem::path directory = path.has_parent_path() ? path.parent_path() : ".";
+  std::error_code error;
+  const auto now = std::filesystem::file_time_type::clock::now();
+  for (std::filesystem::directory_iterator it(directory, error), end; !error && it != end; it.increment(error)) {
+    const std::string name = it->path().filename().string();
+    if (name.compare(0, prefix.size(), prefix) != 0) continue;
+    char* digits_end = nullptr;
+    const long pid = std::strtol(name.c_str() + prefix.size(), &digits_end, 10);
+    if (pid <= 0 || *digits_end != '-') continue;
+    if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive, or not ours to ask
+    std::error_code stat_error;
+    const auto modified = std::filesystem::last_write_time(it->path(), stat_error);
+    if (stat_error || now - modified < std::chrono::minutes(1)) continue;
+    std::filesystem::remove(it->path(), stat_error);
+  }
+}
+
+}  // namespace
+
 void WriteFileAtomically(const std::filesystem::path& path, const std::string& bytes) {
   std::random_device entropy;
   const std::filesystem::path temp =
@@ -79,6 +107,7 @@ void WriteFileAtomically(const std::filesystem::path& path, const std::string& b
     std::filesystem::remove(temp, error);
     throw IoError(path.string() + ": cannot replace file: " + error.message());
   }
+  RemoveStaleTemporaries(path);
 }
 
 void RemoveManifest(const std::filesystem::path& path) {

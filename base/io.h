@@ -24,7 +24,8 @@ class IoError : public std::runtime_error {
 // Writes `bytes` to `path` through a temporary file and a rename. Throws IoError naming
 // `path` (a full disk, a read-only directory); the temporary file is removed on failure. A
 // process killed mid-write leaves only its temporary file, `NAME.tmp-PID-N`, which no reader
-// opens.
+// opens and which the next write of `path` removes (once no process PID exists here and the
+// file is over a minute old).
 void WriteFileAtomically(const std::filesystem::path& path, const std::string& bytes);
 
 // Removes the manifest of a multi-file output (a solution's or an images directory's

@@ -1,6 +1,10 @@
 #include "base/io.h"
 
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
 
 #include <gtest/gtest.h>
 
@@ -55,6 +59,30 @@ TEST(AtomicWrite, FailureLeavesTheOldFileAndNoTemporaries) {
 }
 
 // A failed create names the file asked for, not its temporary name.
+// What a writer killed before its rename left (NAME.tmp-PID-N) goes with the next write of NAME
+// once its process is gone and it is over a minute old; a live writer's and a fresh one stay.
+TEST(AtomicWrite, NextWriteRemovesTemporariesOfDeadWriters) {
+  testing::TempDir dir;
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  ASSERT_GT(child, 0);
+  ASSERT_EQ(::waitpid(child, nullptr, 0), child);  // `child` names no process now
+  const std::filesystem::path target = dir.path() / "result.json";
+  const std::string dead = "result.json.tmp-" + std::to_string(child) + "-7";
+  const std::string fresh = "result.json.tmp-" + std::to_string(child) + "-8";
+  const std::string live = "result.json.tmp-" + std::to_string(::getpid()) + "-9";
+  const std::string other = "report.html.tmp-" + std::to_string(child) + "-7";
+  for (const std::string& name : {dead, fresh, live, other}) dir.Write(name, "half a file");
+  const auto old = std::filesystem::file_time_type::clock::now() - std::chrono::minutes(5);
+  for (const std::string& name : {dead, live, other}) std::filesystem::last_write_time(dir.path() / name, old);
+  WriteFileAtomically(target, "{}");
+  EXPECT_EQ(ReadFile(target), "{}");
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / dead));
+  EXPECT_TRUE(std::filesystem::exists(dir.path() / fresh)) << "under a minute old";
+  EXPECT_TRUE(std::filesystem::exists(dir.path() / live)) << "its writer is alive";
+  EXPECT_TRUE(std::filesystem::exists(dir.path() / other)) << "another file's";
+}
+
 TEST(AtomicWrite, ErrorsNameTheTarget) {
   testing::TempDir dir;
   try {

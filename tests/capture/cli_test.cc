@@ -171,8 +171,10 @@ TEST(CaptureCli, MistakesGetOneLineNamingTheCulprit) {
   ASSERT_TRUE(cv::imwrite((dir / "small.png").string(), cv::Mat(3, 4, CV_8UC3, cv::Scalar(0))));
   const std::string out = " --out " + (dir / "out").string();
   for (const Case& c :
-       {Case{"capture --camera synthetic:room.json --sequence graycode" + out,
-             "camera 'synthetic:room.json': unknown synthetic scene 'room.json' (scenes: "},
+       {Case{"capture --camera synthetic:room --sequence graycode" + out,
+             "camera 'synthetic:room': unknown synthetic scene 'room' (scenes: "},
+        Case{"capture --camera synthetic:room.json --sequence graycode" + out,
+             "camera 'synthetic:room.json': room.json: file not found"},
         Case{"capture --camera synthetic:tiny_box?patches=20 --projector 2 --sequence graycode" +
                  out,
              "--projector 2: synthetic scene 'tiny_box' has 2 projectors (0..1: left, right)"},
