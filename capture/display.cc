@@ -1,5 +1,7 @@
 #include "capture/display.h"
 
+#include <algorithm>
+
 #include <cmath>
 #include <stdexcept>
 
@@ -18,7 +20,9 @@ MemoryDisplay::MemoryDisplay(cv::Size resolution, std::string name)
     throw std::invalid_argument("MemoryDisplay: empty resolution");
 }
 
-void MemoryDisplay::Show(const cv::Mat& pattern) {
+void MemoryDisplay::Show(const cv::Mat& pattern) { ShowAt(pattern, SteadyNowNs()); }
+
+void MemoryDisplay::ShowAt(const cv::Mat& pattern, int64_t time_ns) {
   if (pattern.size() != resolution_ || (pattern.type() != CV_8UC1 && pattern.type() != CV_8UC3)) {
     throw IoError("display '" + name_ + "': pattern must be " + std::to_string(resolution_.width) +
                   "x" + std::to_string(resolution_.height) + " 8-bit grey or BGR, got " +
@@ -26,7 +30,8 @@ void MemoryDisplay::Show(const cv::Mat& pattern) {
                   std::to_string(pattern.type()));
   }
   std::lock_guard<std::mutex> lock(mutex_);
-  history_.push_back({SteadyNowNs(), pattern.clone()});
+  if (!history_.empty()) time_ns = std::max(time_ns, history_.back().time_ns);
+  history_.push_back({time_ns, pattern.clone()});
   while (history_.size() > kHistory) history_.pop_front();
   ++shown_count_;
 }

@@ -37,6 +37,9 @@ class MemoryDisplay : public PatternDisplay {
   cv::Size Resolution() const override { return resolution_; }
   std::string Name() const override { return name_; }
   void Show(const cv::Mat& pattern) override;
+  // Shows `pattern` as from steady-clock time `time_ns` (not before the last pattern's time):
+  // for a watcher that copies what a real monitor showed when it looked. Same checks as Show.
+  void ShowAt(const cv::Mat& pattern, int64_t time_ns);
 
   // The pattern on screen at steady-clock time `time_ns` (CV_8UC1 or CV_8UC3); black before
   // the first Show(). Only the last 8 patterns are kept; older times give the oldest kept.
