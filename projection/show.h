@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "base/progress.h"
+#include "projection/glfw_display.h"
 #include "projection/test_pattern.h"
 
 namespace procam {
@@ -16,16 +17,21 @@ struct ShowOptions {
   // PNGs, one per monitor in its resolution; or, when empty, `pattern` on every chosen monitor.
   std::vector<std::filesystem::path> images;
   std::optional<TestPattern> pattern;
-  // Monitors by index or name, one per image (or the pattern's monitors); empty: image k on
-  // monitor k, or the pattern on every monitor.
+  // Monitors by index or name (ListMonitors' names, e.g. "HDMI-1" or "XWAYLAND1"), one per
+  // image (or the pattern's monitors); empty: image k on monitor k, or the pattern on every
+  // monitor.
   std::vector<std::string> monitors;
+  // How the windows reach their monitors; each is checked to cover its monitor before anything
+  // is reported shown.
+  GlfwDisplayOptions display;
   // Where to write what each window shows (monitorN.png); empty: nowhere.
   std::filesystem::path readback;
   // How long to show; ≤ 0: until Esc or Q in a window.
   double seconds = 0.0;
   ProgressCallback progress;  // a line per monitor with what it shows
 
-  // "" when valid, else why not (images and pattern both or neither, monitors not one per image).
+  // "" when valid, else why not (images and pattern both or neither, monitors not one per image,
+  // display options).
   std::string Check() const;
 };
 
