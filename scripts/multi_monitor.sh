@@ -58,15 +58,25 @@ fi
 dir=$(mktemp -d /tmp/procam-monitors.XXXXXX)
 sway_pid=""
 cleanup() {
+  [ -z "${command_pid:-}" ] || kill -KILL -- "-$command_pid" 2>/dev/null || true
   if [ -n "$sway_pid" ]; then
-    # sway, Xwayland and whatever sway started share sway's process group (setsid below).
-    kill -TERM -- "-$sway_pid" 2>/dev/null || true
-    for _ in $(seq 50); do
-      kill -0 -- "-$sway_pid" 2>/dev/null || break
+    # sway shuts down in 1–5 s when it also has to stop Xwayland: give it 1 s, then end sway,
+    # Xwayland and whatever sway started together (they share sway's process group, setsid
+    # below), and remove the X display's lock and socket they leave.
+    kill -TERM "$sway_pid" 2>/dev/null || true
+    for _ in $(seq 10); do
+      kill -0 "$sway_pid" 2>/dev/null || break
       sleep 0.1
     done
     kill -KILL -- "-$sway_pid" 2>/dev/null || true
-    wait "$sway_pid" 2>/dev/null || true
+    wait 2>/dev/null || true
+    if [ -n "${display:-}" ]; then
+      lock="/tmp/.X${display#:}-lock"
+      owner=$( { tr -dc 0-9 <"$lock"; } 2>/dev/null || true)
+      if [ -n "$owner" ] && ! kill -0 "$owner" 2>/dev/null; then
+        rm -f "$lock" "/tmp/.X11-unix/X${display#:}"
+      fi
+    fi
   fi
   rm -rf "$dir"
 }
@@ -86,11 +96,19 @@ chmod 700 "$dir" "$dir/runtime"
   echo "exec printf '%s %s\\n' \"\$WAYLAND_DISPLAY\" \"\$DISPLAY\" > $dir/sockets.tmp && mv $dir/sockets.tmp $dir/sockets"
 } >"$dir/config"
 
-setsid env -i PATH="$PATH" HOME="$dir/home" XDG_RUNTIME_DIR="$dir/runtime" \
+# sway leads a session and process group of its own (setsid may fork first: the pid comes from
+# the process that becomes sway), so that it, Xwayland and what sway starts end together.
+setsid sh -c 'echo $$ >"$0/sway.pid" && exec "$@"' "$dir" \
+  env -i PATH="$PATH" HOME="$dir/home" XDG_RUNTIME_DIR="$dir/runtime" \
   XDG_CACHE_HOME="$dir/home" WLR_BACKENDS=headless WLR_HEADLESS_OUTPUTS="$outputs" \
   WLR_RENDERER=pixman WLR_LIBINPUT_NO_DEVICES=1 \
   "${as_user[@]}" sway --config "$dir/config" >"$dir/sway.log" 2>&1 &
-sway_pid=$!
+for _ in $(seq 50); do
+  [ -s "$dir/sway.pid" ] && break
+  sleep 0.02
+done
+sway_pid=$(cat "$dir/sway.pid" 2>/dev/null || true)
+[ -n "$sway_pid" ] || fail "sway did not start"
 
 # Wait (at most 10 s) for sway's exec and for Xwayland's socket.
 for _ in $(seq 100); do
