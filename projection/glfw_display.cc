@@ -67,8 +67,8 @@ std::string Describe(const std::vector<MonitorInfo>& monitors) {
 }
 
 std::string Rectangle(int width, int height, int x, int y) {
-  return std::to_string(width) + "x" + std::to_string(height) + " at (" + std::to_string(x) +
-         ", " + std::to_string(y) + ")";
+  return std::to_string(width) + "x" + std::to_string(height) + " at (" + std::to_string(x) + ", " +
+         std::to_string(y) + ")";
 }
 
 // Whether the X11 window manager can be told on which monitor a fullscreen window belongs. GLFW
@@ -86,8 +86,8 @@ bool WindowManagerTakesTheMonitor() {
   int format = 0;
   unsigned long count = 0, remaining = 0;
   unsigned char* data = nullptr;
-  if (XGetWindowProperty(display, DefaultRootWindow(display), supported, 0, 1 << 16, False,
-                         XA_ATOM, &type, &format, &count, &remaining, &data) != Success ||
+  if (XGetWindowProperty(display, DefaultRootWindow(display), supported, 0, 1 << 16, False, XA_ATOM,
+                         &type, &format, &count, &remaining, &data) != Success ||
       data == nullptr) {
     return true;
   }
@@ -157,8 +157,8 @@ GlfwDisplay::GlfwDisplay(const MonitorInfo& monitor, const GlfwDisplayOptions& o
   glfwGetMonitorPos(target, &monitor_.x, &monitor_.y);
   placement_ = options.placement;
   if (placement_ == WindowPlacement::kAuto) {
-    placement_ = WindowManagerTakesTheMonitor() ? WindowPlacement::kWindowManager
-                                                : WindowPlacement::kByHand;
+    placement_ =
+        WindowManagerTakesTheMonitor() ? WindowPlacement::kWindowManager : WindowPlacement::kByHand;
   }
   OpenWindow(target, placement_);
   if (window_ == nullptr) {
@@ -177,16 +177,16 @@ GlfwDisplay::GlfwDisplay(const MonitorInfo& monitor, const GlfwDisplayOptions& o
   glfwSwapBuffers(window);
   // The window manager moves the window asynchronously: wait until the display server has it
   // over the monitor, and say where it is if it never gets there.
-  const auto deadline = std::chrono::steady_clock::now() +
-                        std::chrono::duration<double>(options.placement_seconds);
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::duration<double>(options.placement_seconds);
   while (true) {
     glfwPollEvents();
     if (OnMonitor()) break;
     if (std::chrono::steady_clock::now() > deadline) {
       const std::string message =
           "monitor " + std::to_string(monitor_.index) + " '" + monitor_.name + "' (" +
-          Rectangle(monitor_.width, monitor_.height, monitor_.x, monitor_.y) +
-          "): its window is " + WindowRectangle() + " instead: the window manager put it elsewhere";
+          Rectangle(monitor_.width, monitor_.height, monitor_.x, monitor_.y) + "): its window is " +
+          WindowRectangle() + " instead: the window manager put it elsewhere";
       glfwDestroyWindow(window);  // the destructor does not run for a constructor that throws
       --open_windows;
       ReleaseGlfwIfIdle();
@@ -268,14 +268,14 @@ void GlfwDisplay::CheckStillThere() {
     const char* name = glfwGetMonitorName(monitors[k]);
     connected |= name != nullptr && monitor_.name == name;
   }
-  if (!connected || (placement_ == WindowPlacement::kWindowManager &&
-                     glfwGetWindowMonitor(window) == nullptr)) {
+  if (!connected ||
+      (placement_ == WindowPlacement::kWindowManager && glfwGetWindowMonitor(window) == nullptr)) {
     throw IoError(Name() + ": the monitor was disconnected (the window is no longer fullscreen)");
   }
   if (!OnMonitor()) {
     throw IoError(Name() + ": the window left its monitor (" +
-                  Rectangle(monitor_.width, monitor_.height, monitor_.x, monitor_.y) +
-                  "): it is " + WindowRectangle() + " now");
+                  Rectangle(monitor_.width, monitor_.height, monitor_.x, monitor_.y) + "): it is " +
+                  WindowRectangle() + " now");
   }
 }
 

@@ -95,8 +95,8 @@ class GlfwDisplay : public PatternDisplay {
 
   MonitorInfo monitor_;
   WindowPlacement placement_ = WindowPlacement::kAuto;  // kWindowManager or kByHand once open
-  void* window_ = nullptr;  // GLFWwindow
-  cv::Mat shown_;           // CV_16UC3, R, G, B: what Draw() puts on screen
+  void* window_ = nullptr;                              // GLFWwindow
+  cv::Mat shown_;  // CV_16UC3, R, G, B: what Draw() puts on screen
 };
 
 }  // namespace procam

@@ -32,7 +32,8 @@ bool Installed(const std::string& program) {
 
 // An 8-bit R, G, B image as grim writes it with -t ppm ("P6\nW H\n255\n", rows top down).
 std::string Ppm(const cv::Mat& rgb) {
-  std::string bytes = "P6\n" + std::to_string(rgb.cols) + " " + std::to_string(rgb.rows) + "\n255\n";
+  std::string bytes =
+      "P6\n" + std::to_string(rgb.cols) + " " + std::to_string(rgb.rows) + "\n255\n";
   for (int r = 0; r < rgb.rows; ++r)
     bytes.append(rgb.ptr<char>(r), static_cast<size_t>(rgb.cols) * 3);
   return bytes;
@@ -63,6 +64,28 @@ bool Uniform(const cv::Mat& rgb) {
   return cv::norm(rgb, same, cv::NORM_INF) == 0.0;
 }
 
+// Run inside the server with procam's arguments: shows, waits until each output k with an
+// expected<k>.ppm shows it (at most 5 s each), captures every output into output<k>.ppm, ends
+// procam and writes its exit status (143 if it was still showing) and prints its output.
+constexpr char kShowScript[] = R"sh(cd "$(dirname "$0")"
+./procam show "$@" --seconds 60 >show.log 2>&1 &
+pid=$!
+for k in 1 2 3; do
+  [ -f expected$k.ppm ] || continue
+  i=0
+  until grim -t ppm -o HEADLESS-$k output$k.ppm && cmp -s output$k.ppm expected$k.ppm; do
+    i=$((i + 1)); [ $i -ge 50 ] && break
+    kill -0 $pid 2>/dev/null || break
+    sleep 0.1
+  done
+done
+for k in 1 2 3; do grim -t ppm -o HEADLESS-$k output$k.ppm; done
+kill $pid 2>/dev/null
+wait $pid
+echo $? >show.status
+cat show.log
+)sh";
+
 class MultiMonitor : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -80,41 +103,23 @@ class MultiMonitor : public ::testing::Test {
     std::filesystem::copy_file(binary, dir_ / "procam");
   }
 
-  // Runs `procam show ARGUMENTS` on the three monitors. `expected` maps outputs (1..3) to the
-  // image each should show; once each shows it (or 5 s passed), every output is captured into
-  // output<k>.ppm and procam, still showing, is ended. Returns the run (its output: procam's).
+  // Runs `procam show ARGUMENTS` (kShowScript) on the three monitors. `expected` maps outputs
+  // (1..3) to the image each should show. Returns the run (its output: procam's).
   CommandRun Show(const std::string& arguments, const std::map<int, cv::Mat>& expected) {
     for (const auto& [output, rgb] : expected)
       dir_.Write("expected" + std::to_string(output) + ".ppm", Ppm(rgb));
-    const std::string dir = dir_.path().string();
-    dir_.Write("show.sh",
-               "cd '" + dir + "'\n"
-               "./procam show " + arguments + " --seconds 60 >show.log 2>&1 &\n"
-               "pid=$!\n"
-               "for k in 1 2 3; do\n"
-               "  [ -f expected$k.ppm ] || continue\n"
-               "  i=0\n"
-               "  until grim -t ppm -o HEADLESS-$k output$k.ppm && cmp -s output$k.ppm expected$k.ppm; do\n"
-               "    i=$((i + 1)); [ $i -ge 50 ] && break\n"
-               "    kill -0 $pid 2>/dev/null || break\n"
-               "    sleep 0.1\n"
-               "  done\n"
-               "done\n"
-               "for k in 1 2 3; do grim -t ppm -o HEADLESS-$k output$k.ppm; done\n"
-               "kill $pid 2>/dev/null\n"
-               "wait $pid\n"
-               "echo $? >show.status\n"
-               "cat show.log\n");
-    return OnThreeMonitors("sh '" + dir + "/show.sh'");
+    dir_.Write("show.sh", kShowScript);
+    return OnThreeMonitors("sh " + (dir_ / "show.sh").string() + " " + arguments);
   }
 
   CommandRun OnThreeMonitors(const std::string& command) {
-    return RunShell((testing::SourceDir() / "scripts" / "multi_monitor.sh").string() +
-                    " --mode " + std::to_string(kWidth) + "x" + std::to_string(kHeight) +
-                    " --timeout 30 " + std::to_string(kOutputs) + " -- " + command);
+    return RunShell((testing::SourceDir() / "scripts" / "multi_monitor.sh").string() + " --mode " +
+                    std::to_string(kWidth) + "x" + std::to_string(kHeight) + " --timeout 30 " +
+                    std::to_string(kOutputs) + " -- " + command);
   }
 
-  // Expects each output in `expected` to show exactly its image and the others to show nothing; procam to have kept showing until it was ended (SIGTERM: 143).
+  // Expects each output in `expected` to show exactly its image and the others to show nothing;
+  // procam to have kept showing until it was ended (SIGTERM: 143).
   void ExpectShown(const CommandRun& run, const std::map<int, cv::Mat>& expected) {
     std::ifstream status_file(dir_ / "show.status");
     int status = -1;
@@ -192,8 +197,8 @@ TEST_F(MultiMonitor, ShowsEachImageOnItsMonitor) {
   for (const int monitor : {2, 0, 1}) {
     ProjectorImage image;
     image.codes = cv::Mat(kHeight, kWidth, CV_16UC3);
-    cv::RNG(monitor + 1).fill(image.codes, cv::RNG::UNIFORM, cv::Scalar::all(0),
-                              cv::Scalar::all(256));
+    cv::RNG(monitor + 1)
+        .fill(image.codes, cv::RNG::UNIFORM, cv::Scalar::all(0), cv::Scalar::all(256));
     const std::string file = "image" + std::to_string(monitor) + ".png";
     WriteProjectorImage(dir_ / file, image);
     images += file + " ";
