@@ -175,8 +175,8 @@ GlfwDisplay::GlfwDisplay(const MonitorInfo& monitor, const GlfwDisplayOptions& o
   shown_ = cv::Mat(mode->height, mode->width, CV_16UC3, cv::Scalar::all(0));
   Draw();
   glfwSwapBuffers(window);
-  // The window manager moves the window asynchronously: wait until the display server has it
-  // over the monitor, and say where it is if it never gets there.
+  // The window manager and the server move and map the window asynchronously: wait until the
+  // server has it over the monitor, and say where it is if it never gets there.
   const auto deadline =
       std::chrono::steady_clock::now() + std::chrono::duration<double>(options.placement_seconds);
   while (true) {
@@ -186,7 +186,10 @@ GlfwDisplay::GlfwDisplay(const MonitorInfo& monitor, const GlfwDisplayOptions& o
       const std::string message =
           "monitor " + std::to_string(monitor_.index) + " '" + monitor_.name + "' (" +
           Rectangle(monitor_.width, monitor_.height, monitor_.x, monitor_.y) + "): its window is " +
-          WindowRectangle() + " instead: the window manager put it elsewhere";
+          WindowRectangle() +
+          (placement_ == WindowPlacement::kWindowManager
+               ? " instead: the window manager put it elsewhere"
+               : " instead, though placed there by hand");
       glfwDestroyWindow(window);  // the destructor does not run for a constructor that throws
       --open_windows;
       ReleaseGlfwIfIdle();
@@ -213,8 +216,8 @@ void GlfwDisplay::OpenWindow(void* target_monitor, WindowPlacement placement) {
     window_ = glfwCreateWindow(mode->width, mode->height, title.c_str(), target, nullptr);
     return;
   }
-  // By hand: an unmapped borderless window, made override-redirect (ICCCM 4.1.10: the window
-  // manager neither moves nor resizes it) before it is first mapped, over the monitor.
+  // By hand: an unmapped borderless window, made override-redirect before it is first mapped
+  // (ICCCM: the window manager then neither manages, moves nor resizes it), over the monitor.
   glfwWindowHint(GLFW_VISIBLE, GLFW_FALSE);
   glfwWindowHint(GLFW_DECORATED, GLFW_FALSE);
   GLFWwindow* window = glfwCreateWindow(mode->width, mode->height, title.c_str(), nullptr, nullptr);
