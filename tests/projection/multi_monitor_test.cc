@@ -64,10 +64,12 @@ bool Uniform(const cv::Mat& rgb) {
   return cv::norm(rgb, same, cv::NORM_INF) == 0.0;
 }
 
-// Run inside the server with procam's arguments: shows, waits until each output k with an
+// Run inside the server with procam's arguments: lists the monitors into list.txt, shows,
+// waits until each output k with an
 // expected<k>.ppm shows it (at most 5 s each), captures every output into output<k>.ppm, ends
 // procam and writes its exit status (143 if it was still showing) and prints its output.
 constexpr char kShowScript[] = R"sh(cd "$(dirname "$0")"
+./procam show --list >list.txt 2>&1
 ./procam show "$@" --seconds 60 >show.log 2>&1 &
 pid=$!
 for k in 1 2 3; do
@@ -139,12 +141,10 @@ class MultiMonitor : public ::testing::Test {
     }
   }
 
-  // Output (1..3) at monitor `which`'s position, as `procam show --list` reports it: the script
-  // puts HEADLESS-k at x = (k - 1) · width.
+  // Output (1..3) at monitor `which`'s position, as `procam show --list` reported it in the
+  // last Show: the script puts HEADLESS-k at x = (k - 1) · width.
   int OutputOf(const std::string& which) {
-    const CommandRun list = OnThreeMonitors((dir_ / "procam").string() + " show --list");
-    EXPECT_EQ(list.exit_code, 0) << list.output;
-    std::istringstream lines(list.output);
+    std::ifstream lines(dir_ / "list.txt");
     for (std::string line; std::getline(lines, line);) {
       std::istringstream fields(line);
       std::string index, name;
@@ -153,7 +153,7 @@ class MultiMonitor : public ::testing::Test {
       if ((index == which || name == which) && at != std::string::npos)
         return std::stoi(line.substr(at + 5)) / kWidth + 1;
     }
-    ADD_FAILURE() << "monitor " << which << " not listed:\n" << list.output;
+    ADD_FAILURE() << "monitor " << which << " not listed";
     return 0;
   }
 
@@ -173,20 +173,19 @@ TEST_F(MultiMonitor, ListsOneMonitorPerOutputSideBySide) {
 }
 
 TEST_F(MultiMonitor, ShowsThePatternOnTheMonitorGivenByIndex) {
-  const int output = OutputOf("1");
-  ASSERT_EQ(output, 2);
   const cv::Mat bars = Rgb8(MakeTestPattern(TestPattern::kBars, cv::Size(kWidth, kHeight)));
-  const CommandRun run = Show("--pattern bars --monitor 1", {{output, bars}});
-  ExpectShown(run, {{output, bars}});
+  const CommandRun run = Show("--pattern bars --monitor 1", {{2, bars}});
+  EXPECT_EQ(OutputOf("1"), 2);
+  ExpectShown(run, {{2, bars}});
   EXPECT_NE(run.output.find("monitor 1 'XWAYLAND1' 320x240 at (320, 0): bars"), std::string::npos)
       << run.output;
 }
 
 TEST_F(MultiMonitor, ShowsThePatternOnTheMonitorGivenByName) {
-  const int output = OutputOf("XWAYLAND2");
-  ASSERT_EQ(output, 3);
   const cv::Mat grid = Rgb8(MakeTestPattern(TestPattern::kGrid, cv::Size(kWidth, kHeight)));
-  ExpectShown(Show("--pattern grid --monitor XWAYLAND2", {{output, grid}}), {{output, grid}});
+  const CommandRun run = Show("--pattern grid --monitor XWAYLAND2", {{3, grid}});
+  EXPECT_EQ(OutputOf("XWAYLAND2"), 3);
+  ExpectShown(run, {{3, grid}});
 }
 
 // One image per monitor, each different, in another order than the monitors': every output
