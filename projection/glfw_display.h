@@ -85,10 +85,13 @@ class GlfwDisplay : public PatternDisplay {
   bool PollEvents();
   // Closes the window as the window manager does when someone closes it by hand.
   void RequestClose();
+  // Handles window events and throws IoError naming the monitor when the projector is gone, as
+  // Show does: the window was closed, its monitor disconnected, or the window no longer covers
+  // the monitor's rectangle (moved, resized or taken out of fullscreen by the window manager).
+  void CheckStillThere();
 
  private:
   void Draw();
-  void CheckStillThere();  // throws IoError when the window was closed or left its monitor
   void OpenWindow(void* monitor, WindowPlacement placement);  // GLFWmonitor; sets window_
   std::string WindowRectangle() const;  // where the window is now: "WxH at (x, y)"
   bool OnMonitor() const;               // whether that is exactly the monitor's rectangle

@@ -97,6 +97,9 @@ void RunShow(const ShowOptions& options) {
     bool open = true;
     for (const auto& display : displays) open &= display->PollEvents();
     if (!open) break;
+    // Still where they were put: a window manager may move a window or take it out of
+    // fullscreen later, and a monitor may be unplugged.
+    for (const auto& display : displays) display->CheckStillThere();
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
 }

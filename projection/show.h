@@ -35,8 +35,10 @@ struct ShowOptions {
   std::string Check() const;
 };
 
-// Checks every image (readable, the monitor's resolution) before a window opens, then shows them.
-// Throws std::invalid_argument for bad options, IoError naming the file or the monitor otherwise.
+// Checks every image (readable, the monitor's resolution) before a window opens, then shows them
+// until `seconds` pass, Esc or Q is pressed or a window is closed. Throws std::invalid_argument
+// for bad options, IoError naming the file or the monitor otherwise, also when a window is not
+// on its monitor, at opening or later (GlfwDisplay::CheckStillThere).
 void RunShow(const ShowOptions& options);
 
 }  // namespace procam

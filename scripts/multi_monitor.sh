@@ -7,10 +7,10 @@
 # starts sway with its headless backend and N outputs HEADLESS-1..N, each at WxH (default
 # 640x480), side by side from left to right (HEADLESS-k at x = (k-1)·W, y = 0), with Xwayland,
 # so that X11 clients such as procam see N monitors XWAYLAND0..N-1 at the same places. COMMAND
-# runs in the caller's environment with DISPLAY, WAYLAND_DISPLAY, XDG_RUNTIME_DIR and HOME set;
-# `grim -o HEADLESS-k FILE.png` inside it captures what output k shows. The script exits with
-# COMMAND's exit status (124 when it ran past --timeout, default 60 s) and leaves no process
-# behind.
+# runs in the caller's environment with DISPLAY, WAYLAND_DISPLAY, SWAYSOCK, XDG_RUNTIME_DIR and
+# HOME set; `grim -o HEADLESS-k FILE.png` inside it captures what output k shows, and swaymsg
+# talks to sway. The script exits with COMMAND's exit status (124 when it ran past --timeout,
+# default 60 s) and leaves no process behind.
 #
 # sway refuses to run as root: as root, sway and COMMAND run as USER (default nobody), who must
 # be able to read and run what COMMAND names and to write where it writes.
@@ -122,10 +122,14 @@ done
 [ -n "${display:-}" ] && [ -S "/tmp/.X11-unix/X${display#:}" ] ||
   { tail -5 "$dir/sway.log" >&2; fail "sway or Xwayland did not come up within 10 s"; }
 
+# sway's IPC socket, for swaymsg inside COMMAND.
+swaysock=""
+for socket in "$dir"/runtime/sway-ipc.*.sock; do [ -S "$socket" ] && swaysock=$socket; done
+
 # timeout puts itself and COMMAND in a process group of their own: whatever COMMAND leaves
 # running is ended with it.
 env HOME="$dir/home" XDG_RUNTIME_DIR="$dir/runtime" XDG_CACHE_HOME="$dir/home" \
-  WAYLAND_DISPLAY="$wayland_display" DISPLAY="$display" \
+  WAYLAND_DISPLAY="$wayland_display" DISPLAY="$display" SWAYSOCK="$swaysock" \
   timeout --kill-after=5 "$timeout_seconds" "${as_user[@]}" "$@" &
 command_pid=$!
 status=0

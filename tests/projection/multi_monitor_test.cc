@@ -88,6 +88,26 @@ echo $? >show.status
 cat show.log
 )sh";
 
+// Shows the bars on monitor 0 through the window manager (sway puts that window where it
+// belongs: monitor 0's output has the focus), then has sway take the window out of fullscreen
+// while procam shows; prints procam's stderr and exits with its status.
+constexpr char kUnfullscreenScript[] = R"sh(cd "$(dirname "$0")"
+./procam show --pattern bars --monitor 0 --placement window-manager --seconds 30 \
+  >show.log 2>error.log &
+pid=$!
+i=0
+until grep -q XWAYLAND0 show.log; do
+  i=$((i + 1)); [ $i -ge 100 ] && break
+  kill -0 $pid 2>/dev/null || break
+  sleep 0.1
+done
+swaymsg '[title="procam XWAYLAND0"] fullscreen disable' >/dev/null
+wait $pid
+status=$?
+cat error.log
+exit $status
+)sh";
+
 class MultiMonitor : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -218,6 +238,18 @@ TEST_F(MultiMonitor, WindowManagerPlacementOnAnotherMonitorIsAnErrorNamingIt) {
                               "monitor 1 'XWAYLAND1' (320x240 at (320, 0)): its window is 320x240 "
                               "at (0, 0) instead: the window manager put it elsewhere",
                               "window-manager placement on sway");
+}
+
+// A window taken off its monitor later, while procam shows (the window manager moves it, resizes
+// it or ends its fullscreen): procam notices within a poll and stops with one line naming the
+// monitor, both rectangles in it.
+TEST_F(MultiMonitor, WindowTakenOffItsMonitorLaterIsAnErrorNamingIt) {
+  dir_.Write("unfullscreen.sh", kUnfullscreenScript);
+  const CommandRun run = OnThreeMonitors("sh " + (dir_ / "unfullscreen.sh").string());
+  testing::ExpectOneErrorLine(run,
+                              "glfw:XWAYLAND0: the window left its monitor (320x240 at (0, 0)): "
+                              "it is ",
+                              "window taken out of fullscreen by sway");
 }
 
 }  // namespace
