@@ -60,9 +60,9 @@ sway_pid=""
 cleanup() {
   [ -z "${command_pid:-}" ] || kill -KILL -- "-$command_pid" 2>/dev/null || true
   if [ -n "$sway_pid" ]; then
-    # sway shuts down in 1–5 s when it also has to stop Xwayland: give it 1 s, then end sway,
+    # sway stops Xwayland and itself on SIGTERM (10–120 ms here): give it 1 s, then end sway,
     # Xwayland and whatever sway started together (they share sway's process group, setsid
-    # below), and remove the X display's lock and socket they leave.
+    # below), and remove the X display's lock and socket left if it had to be killed.
     kill -TERM "$sway_pid" 2>/dev/null || true
     for _ in $(seq 10); do
       kill -0 "$sway_pid" 2>/dev/null || break
