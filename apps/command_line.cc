@@ -99,7 +99,7 @@ std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text) {
 #else
   throw IoError("display '" + text +
                 "': this build has no GLFW output backend (reconfigure with -DPROCAM_WITH_GLFW=ON; "
-                "apt-get install libglfw3-dev libgl-dev)");
+                "apt-get install libglfw3-dev libgl-dev libx11-dev libxrandr-dev)");
 #endif
 }
 

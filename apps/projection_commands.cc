@@ -49,7 +49,7 @@ void RunProject(const ProjectArguments& args) {
 
 struct ShowArguments {
   std::vector<std::string> images, monitors;
-  std::string pattern, readback;
+  std::string pattern, readback, placement = "auto";
   double seconds = 0.0;
   bool list = false;
 };
@@ -72,6 +72,7 @@ void RunShowCommand(const ShowArguments& args) {
     options.pattern = pattern;
   }
   options.monitors = args.monitors;
+  ParseWindowPlacement(args.placement, &options.display.placement);  // CLI11 checked the name
   options.readback = args.readback;
   options.seconds = args.seconds;
   options.progress = PrintProgress();
@@ -81,7 +82,7 @@ void RunShowCommand(const ShowArguments& args) {
 void RunShowCommand(const ShowArguments&) {
   throw IoError(
       "procam show: this build has no GLFW output backend (reconfigure with -DPROCAM_WITH_GLFW=ON; "
-      "needs libglfw3-dev and libgl-dev)");
+      "needs libglfw3-dev, libgl-dev, libx11-dev and libxrandr-dev)");
 }
 #endif
 
@@ -122,7 +123,13 @@ void AddProjectionCommands(CLI::App& app) {
       "show", "Show images (or a test pattern) fullscreen on projector monitors");
   show->add_option("images", show_args->images, "PNG per projector, in the monitor's resolution");
   show->add_option("--monitor", show_args->monitors,
-                   "Monitor index or name, once per image (default: image k on monitor k)");
+                   "Monitor index or name (as --list shows), once per image (default: image k "
+                   "on monitor k)");
+  show->add_option("--placement", show_args->placement,
+                   "How windows reach their monitors: auto | window-manager (fullscreen through "
+                   "the window manager) | by-hand (placed by procam, the window manager left out)")
+      ->check(CLI::IsMember({"auto", "window-manager", "by-hand"}))
+      ->capture_default_str();
   show->add_flag("--list", show_args->list, "List the connected monitors and exit");
   show->add_option("--pattern", show_args->pattern,
                    "Test pattern instead of images: grid | bars | white | black")

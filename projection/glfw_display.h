@@ -25,15 +25,45 @@ struct MonitorInfo {
 
 // Monitors connected now. Throws IoError when no display server can be reached.
 std::vector<MonitorInfo> ListMonitors();
-// The monitor `which` names: an index ("1") or a name ("HDMI-1"). Throws IoError listing the
-// monitors when none matches.
+// The monitor `which` names: an index ("1") or a name ("HDMI-1", "XWAYLAND1"). Throws IoError
+// listing the monitors when none matches.
 MonitorInfo FindMonitor(const std::string& which);
+
+// How a projector's window is put on its monitor (X11).
+enum class WindowPlacement {
+  // kWindowManager where the window manager can be told the monitor (it lists EWMH's
+  // _NET_WM_FULLSCREEN_MONITORS in _NET_SUPPORTED) or where there is no window manager; kByHand
+  // where it can only be asked for fullscreen and would choose the monitor itself (sway's
+  // Xwayland puts a new window on the focused output, whatever its position).
+  kAuto,
+  // GLFW's fullscreen: the window manager is asked for _NET_WM_STATE_FULLSCREEN on the monitor
+  // (_NET_WM_FULLSCREEN_MONITORS); without a window manager GLFW places the window itself.
+  kWindowManager,
+  // A borderless window the window manager leaves alone (override-redirect), placed by procam
+  // over the monitor's rectangle of the virtual desktop.
+  kByHand,
+};
+// "auto", "window-manager", "by-hand"; false for anything else.
+bool ParseWindowPlacement(const std::string& text, WindowPlacement* placement);
+
+struct GlfwDisplayOptions {
+  WindowPlacement placement = WindowPlacement::kAuto;
+  // How long to wait for the window to cover its monitor after it opens, seconds, in (0, 60].
+  double placement_seconds = 2.0;
+
+  // "" when valid, else why not.
+  std::string Check() const;
+};
 
 // A fullscreen window on one monitor, usable as the capture module's PatternDisplay.
 class GlfwDisplay : public PatternDisplay {
  public:
-  // Opens the window on `monitor` (its current video mode). Throws IoError naming the monitor.
-  explicit GlfwDisplay(const MonitorInfo& monitor);
+  // Opens the window on `monitor` (its current video mode) and waits until it covers exactly the
+  // monitor's rectangle of the virtual desktop (the window's position and size as the display
+  // server has them). Throws std::invalid_argument for bad options, IoError naming the monitor
+  // when the window cannot be opened or is elsewhere after options.placement_seconds (then one
+  // line with both rectangles).
+  explicit GlfwDisplay(const MonitorInfo& monitor, const GlfwDisplayOptions& options = {});
   ~GlfwDisplay() override;
   GlfwDisplay(const GlfwDisplay&) = delete;
   GlfwDisplay& operator=(const GlfwDisplay&) = delete;
@@ -43,8 +73,8 @@ class GlfwDisplay : public PatternDisplay {
   // Shows an 8- or 16-bit image, 1 or 3 channels (B, G, R as OpenCV stores them), of exactly
   // Resolution() pixels, and returns after the buffer swap. Throws IoError naming the monitor
   // and both sizes when the size differs, and IoError naming the monitor when the projector is
-  // gone: its window was closed (by hand or the window manager) or its monitor disconnected
-  // (GLFW then drops the window out of fullscreen).
+  // gone: its window was closed (by hand or the window manager), its monitor disconnected (GLFW
+  // then drops the window out of fullscreen) or the window no longer covers the monitor.
   void Show(const cv::Mat& pattern) override;
   // Shows a projector image (codes in R, G, B; 10-bit codes scaled to the output's depth).
   void Show(const ProjectorImage& image);
@@ -55,14 +85,21 @@ class GlfwDisplay : public PatternDisplay {
   bool PollEvents();
   // Closes the window as the window manager does when someone closes it by hand.
   void RequestClose();
+  // Handles window events and throws IoError naming the monitor when the projector is gone, as
+  // Show does: the window was closed, its monitor disconnected, or the window no longer covers
+  // the monitor's rectangle (moved, resized or taken out of fullscreen by the window manager).
+  void CheckStillThere();
 
  private:
   void Draw();
-  void CheckStillThere();  // throws IoError when the window was closed or left its monitor
+  void OpenWindow(void* monitor, WindowPlacement placement);  // GLFWmonitor; sets window_
+  std::string WindowRectangle() const;  // where the window is now: "WxH at (x, y)"
+  bool OnMonitor() const;               // whether that is exactly the monitor's rectangle
 
   MonitorInfo monitor_;
-  void* window_ = nullptr;  // GLFWwindow
-  cv::Mat shown_;           // CV_16UC3, R, G, B: what Draw() puts on screen
+  WindowPlacement placement_ = WindowPlacement::kAuto;  // kWindowManager or kByHand once open
+  void* window_ = nullptr;                              // GLFWwindow
+  cv::Mat shown_;  // CV_16UC3, R, G, B: what Draw() puts on screen
 };
 
 }  // namespace procam

@@ -55,7 +55,7 @@ std::string ShowOptions::Check() const {
     return std::to_string(images.size()) + " images but " + std::to_string(monitors.size()) +
            " --monitor options (one per image)";
   }
-  return "";
+  return display.Check();
 }
 
 void RunShow(const ShowOptions& options) {
@@ -67,7 +67,7 @@ void RunShow(const ShowOptions& options) {
 
   std::vector<std::unique_ptr<GlfwDisplay>> displays;
   for (size_t k = 0; k < monitors.size(); ++k) {
-    displays.push_back(std::make_unique<GlfwDisplay>(monitors[k]));
+    displays.push_back(std::make_unique<GlfwDisplay>(monitors[k], options.display));
     if (images.empty()) {
       displays.back()->Show(MakeTestPattern(*options.pattern, displays.back()->Resolution()));
     } else {
@@ -76,8 +76,9 @@ void RunShow(const ShowOptions& options) {
     Report(options.progress,
            "monitor " + std::to_string(monitors[k].index) + " '" + monitors[k].name + "' " +
                std::to_string(monitors[k].width) + "x" + std::to_string(monitors[k].height) +
-               ": " + (images.empty() ? TestPatternName(*options.pattern)
-                                      : options.images[k].string()));
+               " at (" + std::to_string(monitors[k].x) + ", " + std::to_string(monitors[k].y) +
+               "): " + (images.empty() ? TestPatternName(*options.pattern)
+                                       : options.images[k].string()));
   }
   if (!options.readback.empty()) {
     std::filesystem::create_directories(options.readback);
@@ -96,6 +97,9 @@ void RunShow(const ShowOptions& options) {
     bool open = true;
     for (const auto& display : displays) open &= display->PollEvents();
     if (!open) break;
+    // Still where they were put: a window manager may move a window or take it out of
+    // fullscreen later, and a monitor may be unplugged.
+    for (const auto& display : displays) display->CheckStillThere();
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
 }

@@ -21,6 +21,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
+#include <stdexcept>
 #include <thread>
 
 #include "base/io.h"
@@ -161,6 +162,38 @@ TEST(GlfwDisplay, ShowsTestPatterns) {
     EXPECT_EQ(cv::norm(display.ReadBack(), expected, cv::NORM_INF), 0.0)
         << TestPatternName(pattern);
   }
+}
+
+// Placed by procam as an override-redirect window rather than through the window manager (here
+// there is none, so GLFW's own fullscreen places it too): the same pixels on the same monitor.
+TEST(GlfwDisplay, PlacesTheWindowByHand) {
+  SKIP_WITHOUT_XVFB();
+  GlfwDisplayOptions options;
+  options.placement = WindowPlacement::kByHand;
+  GlfwDisplay display(FindMonitor("0"), options);
+  EXPECT_EQ(display.Resolution(), cv::Size(kWidth, kHeight));
+  const ProjectorImage image = RandomImage(8, 5);
+  display.Show(image);
+  cv::Mat expected;
+  image.codes.convertTo(expected, CV_8UC3);
+  EXPECT_EQ(cv::norm(display.ReadBack(), expected, cv::NORM_INF), 0.0);
+}
+
+TEST(GlfwDisplay, PlacementOptions) {
+  WindowPlacement placement = WindowPlacement::kAuto;
+  EXPECT_TRUE(ParseWindowPlacement("by-hand", &placement));
+  EXPECT_EQ(placement, WindowPlacement::kByHand);
+  EXPECT_TRUE(ParseWindowPlacement("window-manager", &placement));
+  EXPECT_EQ(placement, WindowPlacement::kWindowManager);
+  EXPECT_TRUE(ParseWindowPlacement("auto", &placement));
+  EXPECT_EQ(placement, WindowPlacement::kAuto);
+  EXPECT_FALSE(ParseWindowPlacement("sideways", &placement));
+  GlfwDisplayOptions options;
+  EXPECT_EQ(options.Check(), "");
+  options.placement_seconds = 0.0;
+  EXPECT_NE(options.Check(), "");
+  MonitorInfo monitor;
+  EXPECT_THROW(GlfwDisplay(monitor, options), std::invalid_argument);
 }
 
 TEST(GlfwDisplay, ImageOfTheWrongSizeIsAnError) {
