@@ -18,6 +18,7 @@ void AddDemoCommand(CLI::App& app);           // demo
 void AddEvaluationCommands(CLI::App& app);    // evaluate
 void AddCaptureCommands(CLI::App& app);       // cameras, capture
 void AddVerifyCommand(CLI::App& app);         // verify
+void AddEmulateCommand(CLI::App& app);        // emulate (the room as a GigE camera)
 void AddCalibrateCommands(CLI::App& app);     // calibrate camera, photometric, ...
 void AddCalibrateResponseCommand(CLI::App& calibrate);  // calibrate response (the group)
 void AddCalibrateAllCommand(CLI::App& calibrate);       // calibrate all (the group)

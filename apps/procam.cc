@@ -40,6 +40,7 @@ int main(int argc, char** argv) {
   procam::AddBenchCommands(app);
   procam::AddCaptureCommands(app);
   procam::AddVerifyCommand(app);
+  procam::AddEmulateCommand(app);
   procam::AddCalibrateCommands(app);
   procam::AddProjectionCommands(app);
   try {

@@ -1,0 +1,159 @@
+// procam emulate: the room as a device. A scene file's synthetic rig (its surfaces, projectors
+// and camera) watches what each projector's monitor of a running wlroots compositor shows
+// (MonitorWatcher) and is photographed by its camera, served as a GigE Vision camera
+// (GigeEmulator), so that procam — calibrate all, capture, verify, the demo — drives a real
+// display server and a real camera protocol with no hardware.
+#include <csignal>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "apps/commands.h"
+#include "base/io.h"
+#include "capture/pixel_format.h"
+#include "datasets_synthetic/monitor_watcher.h"
+#include "datasets_synthetic/synthetic_camera.h"
+#include "procam/config.h"
+#if PROCAM_WITH_ARAVIS
+#include "capture/gige_emulator.h"
+#endif
+
+namespace procam {
+namespace {
+
+struct EmulateArguments {
+  std::string room;
+  std::vector<std::string> monitors;
+  std::string camera;  // the scene's camera entry ("" = the first)
+  std::string address = "127.0.0.1";
+  double latency_ms = -1.0;  // < 0: the camera entry's latency_ms
+  double fps = 0.0;          // 0: the camera entry's fps
+  int patches = 300;
+  double seconds = 0.0;  // 0: until interrupted
+  double watch_hz = 200.0;
+};
+
+volatile std::sig_atomic_t g_stop = 0;
+void OnSignal(int) { g_stop = 1; }
+
+#if PROCAM_WITH_ARAVIS
+// The emulated camera's pixel format: the entry's where the GigE camera offers it, else RGB8
+// for colour (Aravis's fake camera has no BGR8) and Mono8 for grey.
+PixelFormat ServedFormat(PixelFormat wanted) {
+  for (PixelFormat format : GigeEmulator::SupportedPixelFormats())
+    if (format == wanted) return wanted;
+  return IsColour(wanted) ? PixelFormat::kRGB8 : PixelFormat::kMono8;
+}
+
+void RunEmulate(const EmulateArguments& args) {
+  const std::shared_ptr<SyntheticWorld> world =
+      MakeSceneFileWorld(args.room, args.camera, args.patches, 0.0, args.room);
+  const std::vector<std::shared_ptr<MemoryDisplay>>& displays = world->displays;
+  if (args.monitors.size() != displays.size()) {
+    throw std::invalid_argument(fmt::format("--monitors: {} outputs for the {} projectors of {} (one per projector, in order)",
+                                            args.monitors.size(), displays.size(), args.room));
+  }
+  std::vector<WatchedMonitor> watched;
+  for (size_t k = 0; k < displays.size(); ++k) watched.push_back({args.monitors[k], displays[k]});
+  MonitorWatcher watcher(watched, args.watch_hz);
+
+  const TestCameraOptions& camera = world->camera_settings;
+  GigeEmulatorOptions options;
+  options.address = args.address;
+  options.width = camera.width;
+  options.height = camera.height;
+  options.pixel_format = ServedFormat(camera.pixel_format);
+  options.frame_rate = args.fps > 0 ? args.fps : camera.frame_rate;
+  options.latency_ms = args.latency_ms >= 0 ? args.latency_ms : camera.display_latency_ms;
+  options.exposure_us = std::round(camera.exposure_us);
+  options.gain_db = std::round(std::min(camera.gain_db, 10.0));
+  std::string why;
+  if (!options.Check(&why)) throw IoError(args.room + ": cameras: the emulated GigE camera cannot take it: " + why);
+  GigeEmulator emulator(options, PhotographScene(MakeSyntheticView(world), camera));
+
+  // What calibrate all needs of a real camera: its value per unit exitance at these settings.
+  const double full_scale = FullScale(options.pixel_format);
+  const double scale = world->radiance_scale * full_scale * options.exposure_us / camera.reference_exposure_us *
+                       std::pow(10.0, options.gain_db / 20.0);
+  std::printf("procam emulate: room %s, camera %s (%dx%d %s, %.3g fps, latency %.0f ms, exposure %.0f us, gain %.0f dB)\n",
+              args.room.c_str(), emulator.Uri().c_str(), options.width, options.height,
+              PixelFormatName(options.pixel_format).c_str(), options.frame_rate, options.latency_ms,
+              options.exposure_us, options.gain_db);
+  for (size_t k = 0; k < displays.size(); ++k) {
+    std::printf("  projector %s watches output %s (%dx%d)\n", world->rig->projectors()[k].name.c_str(),
+                args.monitors[k].c_str(), displays[k]->Resolution().width, displays[k]->Resolution().height);
+  }
+  std::printf("  camera scale %.6g (camera value per unit exitance at these settings: --camera-scale)\n", scale);
+  std::printf("  camera guess %s\n", world->camera_guess.c_str());
+  std::fflush(stdout);
+
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  const auto start = std::chrono::steady_clock::now();
+  auto last_status = start;
+  while (!g_stop) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    const std::string error = watcher.error();
+    if (!error.empty()) throw IoError("emulate: " + error);
+    const auto now = std::chrono::steady_clock::now();
+    const double elapsed = std::chrono::duration<double>(now - start).count();
+    if (args.seconds > 0 && elapsed >= args.seconds) break;
+    if (now - last_status >= std::chrono::seconds(5)) {
+      last_status = now;
+      std::printf("procam emulate: %.0f s, %lld frames served (%lld failed), monitors watched every %.1f ms, %lld changes seen\n",
+                  elapsed, static_cast<long long>(emulator.frames_served()),
+                  static_cast<long long>(emulator.frames_failed()), watcher.round_ms(),
+                  static_cast<long long>(watcher.changes()));
+      std::fflush(stdout);
+    }
+  }
+  std::printf("procam emulate: stopped after %lld frames (%lld failed%s%s)\n",
+              static_cast<long long>(emulator.frames_served()), static_cast<long long>(emulator.frames_failed()),
+              emulator.last_error().empty() ? "" : "; last: ", emulator.last_error().c_str());
+}
+#endif
+
+}  // namespace
+
+void AddEmulateCommand(CLI::App& app) {
+  auto args = std::make_shared<EmulateArguments>();
+  CLI::App* emulate = app.add_subcommand(
+      "emulate",
+      "Play the room of a scene file as a device: watch what each projector's monitor shows (a wlroots compositor "
+      "such as sway, through grim) and serve what the scene's camera photographs as a GigE Vision camera "
+      "(aravis:gv:ADDRESS)");
+  emulate->add_option("room", args->room, "Scene file with projectors and cameras (docs/scene_format.md)")->required();
+  emulate->add_option("--monitors", args->monitors,
+                      "The compositor's output showing each projector, in the scene's order (e.g. HEADLESS-1,HEADLESS-2)")
+      ->delimiter(',')
+      ->required();
+  emulate->add_option("--camera", args->camera, "The scene's camera entry by name (default: the first)");
+  emulate->add_option("--address", args->address, "Local IPv4 address to serve the camera on")->capture_default_str();
+  emulate->add_option("--latency-ms", args->latency_ms,
+                      "Display-to-camera latency, milliseconds (default: the camera entry's latency_ms)")
+      ->check(CLI::Range(0.0, 10000.0));
+  emulate->add_option("--fps", args->fps, "Frame rate (default: the camera entry's fps)")->check(CLI::Range(0.1, 1000.0));
+  emulate->add_option("--patches", args->patches, "Solver patches the simulated room is built for (its mesh is 4x finer)")
+      ->check(CLI::Range(20, 5000))
+      ->capture_default_str();
+  emulate->add_option("--seconds", args->seconds, "Stop after this long (default: at Ctrl+C or SIGTERM)")
+      ->check(CLI::Range(0.0, 1e7));
+  emulate->add_option("--watch-hz", args->watch_hz, "Monitor captures per second at most")
+      ->check(CLI::Range(1.0, 1000.0))
+      ->capture_default_str();
+  emulate->callback([args] {
+#if PROCAM_WITH_ARAVIS
+    RunEmulate(*args);
+#else
+    throw IoError("emulate: this procam was built without Aravis (apt-get install libaravis-dev libusb-1.0-0-dev, reconfigure)");
+#endif
+  });
+}
+
+}  // namespace procam
