@@ -146,6 +146,8 @@ bool AravisCameraOptions::Check(std::string* why) const {
     return Fail(why, "trigger must be auto, software or free, got '" + trigger + "'");
   }
   if (buffers < 2 || buffers > 64) return Fail(why, "buffers must be in [2, 64]");
+  if (packet_size != 0 && (packet_size < 576 || packet_size > 65000))
+    return Fail(why, "packet_size must be in [576, 65000] bytes (or 0: the camera's)");
   return true;
 }
 
@@ -159,6 +161,7 @@ AravisCameraOptions AravisCameraOptionsFromUri(const CameraUri& uri) {
   }
   options.trigger = uri.GetString("trigger", options.trigger);
   options.buffers = uri.GetInt("buffers", options.buffers);
+  options.packet_size = uri.GetInt("packet_size", options.packet_size);
   if (uri.Has("format")) {
     const std::string name = uri.GetString("format", "");
     options.format = ParsePixelFormat(name);
@@ -288,6 +291,13 @@ struct AravisCamera::Impl {
       format = PixelFormat::kMono8;
     }
 
+    if (options.packet_size > 0) {
+      if (!arv_camera_is_gv_device(camera))
+        throw IoError("camera '" + Uri() + "': packet_size is for GigE Vision cameras");
+      arv_camera_gv_set_packet_size_adjustment(camera, ARV_GV_PACKET_SIZE_ADJUSTMENT_NEVER);
+      arv_camera_gv_set_packet_size(camera, options.packet_size, &error);
+      Check(error, "setting the packet size to " + std::to_string(options.packet_size));
+    }
     arv_camera_set_acquisition_mode(camera, ARV_ACQUISITION_MODE_CONTINUOUS, &error);
     Check(error, "setting continuous acquisition");
     const bool supported = arv_camera_is_software_trigger_supported(camera, &error);
@@ -540,6 +550,10 @@ Frame AravisCamera::Grab(std::chrono::milliseconds timeout) {
       ++bad_buffers;
       last_bad = status;
       arv_stream_push_buffer(impl_->stream, buffer);
+      if (impl_->software_trigger) {  // that frame spent our trigger: ask for another
+        arv_camera_software_trigger(impl_->camera, &error);
+        impl_->Check(error, "software trigger");
+      }
       continue;
     }
     const int64_t arrival_steady = SteadyNowNs();

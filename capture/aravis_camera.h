@@ -3,7 +3,9 @@
 // Aravis's in-process Fake camera (device id Fake_1) for tests. Exposure, gain and pixel format
 // through the GenICam features ExposureTime (µs), Gain (dB by the SFNC) and PixelFormat; frames
 // through an ArvStream with `buffers` preallocated buffers; a software trigger per grab when the
-// camera supports it (trigger=software, the default where available), free-running otherwise.
+// camera supports it (trigger=software, the default where available), free-running otherwise;
+// a triggered frame that arrives incomplete (lost packets) is triggered again until the grab's
+// timeout.
 // ExposureTime and Gain are read when the camera opens and after each change procam makes, not
 // at every grab (a grab costs no control transaction): a camera changed behind procam's back
 // reports stale values in Frame until the next SetExposure or SetGain.
@@ -17,11 +19,13 @@
 //       interface. Ids beginning with "Fake" open only the Fake interface and switch GigE
 //       Vision discovery off for the process, so tests never broadcast. Note that the
 //       in-process Fake camera free-runs at 25 Hz whatever its trigger settings.
-//   aravis:gv:<IPv4 address>?interface=<IPv4 address>&trigger=...&buffers=...&format=...
+//   aravis:gv:<IPv4 address>?interface=<IPv4 address>&packet_size=8192&trigger=...&buffers=...
+//       &format=...
 //       A GigE Vision camera opened by its address, with discovery off: every packet goes to
 //       that address, none is broadcast. `interface` is the local address to talk from; by
 //       default the one the kernel routes the camera's address from (127.0.0.1 for a camera
-//       on loopback, such as the emulator of gige_emulator.h).
+//       on loopback, such as the emulator of gige_emulator.h). `packet_size` (any GigE Vision
+//       camera, by id or address) sets the stream packet size.
 
 #include <atomic>
 #include <cstdint>
@@ -43,6 +47,10 @@ struct AravisCameraOptions {
   std::string trigger =
       "auto";       // "software", "free" (free-running), "auto" = software if supported
   int buffers = 8;  // stream buffers, [2, 64]
+  // GigE Vision stream packet size, bytes (GevSCPSPacketSize), [576, 65000]; 0 = the camera's
+  // (or what Aravis negotiates). Larger packets (jumbo frames, where the network allows them)
+  // cost the receiving host less per frame.
+  int packet_size = 0;
   std::optional<PixelFormat> format;  // nullopt: keep the camera's (Mono8 when it is not decodable)
   bool Check(std::string* why) const;
 };

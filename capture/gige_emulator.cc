@@ -79,6 +79,7 @@ bool GigeEmulatorOptions::Check(std::string* why) const {
     return Fail(why, "exposure_us must be in [10, 1e7]");
   if (!(gain_db >= 0 && gain_db <= 10 && gain_db == std::floor(gain_db)))
     return Fail(why, "gain_db must be an integer in [0, 10]");
+  if (!(packet_loss >= 0 && packet_loss < 1)) return Fail(why, "packet_loss must be in [0, 1)");
   return true;
 }
 
@@ -177,6 +178,7 @@ GigeEmulator::GigeEmulator(const GigeEmulatorOptions& options, GigeFrameSource s
     if (impl_->gv_camera) g_object_unref(impl_->gv_camera);
     throw IoError(impl_->Where() + ": Aravis's GigE Vision fake camera did not start");
   }
+  g_object_set(impl_->gv_camera, "gvsp-lost-ratio", options.packet_loss, nullptr);
   ArvFakeCamera* camera = arv_gv_fake_camera_get_fake_camera(impl_->gv_camera);
   impl_->camera = camera;
   arv_fake_camera_write_register(camera, ARV_FAKE_CAMERA_REGISTER_WIDTH, options.width);

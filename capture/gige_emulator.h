@@ -84,6 +84,9 @@ struct GigeEmulatorOptions {
   double exposure_us = 10000.0;
   // Gain until a client changes it, dB, an integer in [0, 10].
   double gain_db = 0.0;
+  // Fraction of stream (GVSP) packets the emulator drops at random, [0, 1): a lossy network.
+  // A frame missing a packet reaches the client incomplete (the emulator does not resend).
+  double packet_loss = 0.0;
 
   bool Check(std::string* why) const;
 };
