@@ -21,6 +21,8 @@
 #include "capture/aravis_camera.h"
 #include "capture/devices.h"
 #include "capture/gige_emulator.h"
+#include "capture/session.h"
+#include "tests/testing/testing.h"
 
 namespace procam {
 namespace {
@@ -409,6 +411,36 @@ TEST_F(GigeEmulatorTest, AStoppedEmulatorIsADisconnection) {
   // The address is free again at once.
   ExpectFrameIsTheScene(Serve(GigeEmulatorOptions{})->Grab(milliseconds(2000)),
                         PixelFormat::kMono8, 10000, 0);
+}
+
+// procam's own capture command photographs the emulator (a child process talking GVCP and
+// GVSP to this one), and says in one line when the camera is gone.
+TEST_F(GigeEmulatorTest, ProcamCapturesFromTheEmulator) {
+  testing::TempDir dir;
+  const std::string common =
+      " --sequence graycode --projector-size 4x2 --frames 1 --settle-ms 1 --retries 0 --out " +
+      (dir / "session").string();
+  GigeEmulatorOptions options;
+  options.exposure_us = 4000;
+  Serve(options).reset();  // starts the emulator; our camera closes so that procam can control it
+  const testing::CommandRun run = testing::RunProcam("capture --camera aravis:gv:127.0.0.1" + common);
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  const CaptureSessionData session = CaptureSessionData::Load(dir / "session");
+  ASSERT_TRUE(session.complete());
+  const int patterns = static_cast<int>(session.manifest()["patterns"].size());
+  EXPECT_EQ(patterns, 8);
+  for (int i = 0; i < patterns; ++i) {
+    const uint64_t id =
+        session.manifest()["patterns"][i]["captured"]["exposures"][0]["sequences"][0]
+            .get<uint64_t>();
+    cv::Mat expected;
+    Photograph(640, 480, PixelFormat::kMono8, id, 4000, 0).convertTo(expected, CV_32F);
+    EXPECT_EQ(CountDifferences(session.Mean(i), expected), 0) << "pattern " << i;
+  }
+  emulator_.reset();
+  testing::ExpectOneErrorLine(
+      testing::RunProcam("capture --camera aravis:gv:127.0.0.1" + common + "2"),
+      "camera 'aravis:gv:127.0.0.1'", "capture from a camera that is not there");
 }
 
 // Throughput and latency over loopback (not a pass/fail test: run with
