@@ -62,6 +62,20 @@ std::string ProbeGvcpPort(const std::string& address) {
 
 }  // namespace
 
+GigeFrameSource PhotographScene(SceneView view, const TestCameraOptions& model) {
+  auto rng = std::make_shared<cv::RNG>(model.seed);
+  return [view = std::move(view), model, rng](const GigeFrameRequest& request) {
+    PhotographSettings settings;
+    settings.width = request.width;
+    settings.height = request.height;
+    settings.pixel_format = request.pixel_format;
+    settings.exposure_us = request.exposure_us;
+    settings.gain_db = request.gain_db;
+    return PhotographRadiance(view ? view(request.scene_time_ns) : cv::Mat(), model, settings,
+                              *rng);
+  };
+}
+
 bool GigeEmulatorOptions::Check(std::string* why) const {
   if (!IsIpv4(address)) return Fail(why, "address must be an IPv4 address, got '" + address + "'");
   if (serial.empty() || serial.size() > 15)
@@ -106,9 +120,21 @@ struct GigeEmulator::Impl {
   // Called by the fake camera's thread when an exposure starts (free-running period or
   // software trigger); the frame is sent when this returns.
   void Fill(ArvBuffer* buffer, guint32 exposure_us, guint32 gain_raw, ArvPixelFormat code) {
-    // The fake camera stamped the buffer with the real-time clock just before calling: that
-    // instant is the exposure start. Map it onto the steady clock.
-    const int64_t stamp_real_ns = static_cast<int64_t>(arv_buffer_get_timestamp(buffer));
+    // The fake camera stamped the buffer with the real-time clock just before calling: a
+    // triggered exposure starts then. A free-running one starts on the multiple of the frame
+    // period the camera's thread woke up for (it wakes a little late on a busy host; a camera's
+    // sensor timing would not), which also becomes the frame's device timestamp. Map it onto the
+    // steady clock.
+    int64_t stamp_real_ns = static_cast<int64_t>(arv_buffer_get_timestamp(buffer));
+    guint32 period_us = 0;
+    if (arv_fake_camera_is_in_free_running_mode(camera) &&
+        arv_fake_camera_read_register(
+            camera, ARV_FAKE_CAMERA_REGISTER_ACQUISITION_FRAME_PERIOD_US, &period_us) &&
+        period_us > 0) {
+      const int64_t period_ns = int64_t{period_us} * 1000;
+      stamp_real_ns -= stamp_real_ns % period_ns;
+      arv_buffer_set_timestamp(buffer, static_cast<guint64>(stamp_real_ns));
+    }
     const int64_t steady_now = SteadyNowNs();
     const int64_t real_now = g_get_real_time() * 1000;
     GigeFrameRequest request;

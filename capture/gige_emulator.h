@@ -10,8 +10,9 @@
 //
 // The frame model (what tests use as truth):
 //   - Free-running (TriggerMode Off), exposures start at the multiples of the frame period
-//     1/frame_rate on the real-time clock; with TriggerSource Software, an exposure starts at
-//     most 1 ms after the trigger command arrives.
+//     1/frame_rate on the real-time clock (a frame whose turn the emulator's thread misses on
+//     a busy host starts on a later multiple); with TriggerSource Software, an exposure starts
+//     at most 1 ms after the trigger command arrives.
 //   - At exposure start the source is called with the frame's settings and
 //     scene_time_ns = exposure_start_ns − latency (the display-to-camera latency: the frame
 //     shows the scene as it was `latency` before its exposure began). The frame is sent when
@@ -19,7 +20,8 @@
 //   - The GVSP leader's timestamp (Aravis: arv_buffer_get_timestamp, procam:
 //     Frame::device_timestamp_ns) is the exposure start in nanoseconds of the real-time clock
 //     (the device's tick frequency is 1 GHz).
-//   - The GVSP block id (procam: Frame::sequence) counts frames from 1 and wraps after 65535.
+//   - The GVSP block id (procam: Frame::sequence) counts frames from 65401 and wraps after 65535
+//     to 1 (Aravis starts near the wrap on purpose, so that clients meet it early).
 //
 // What the GenICam description of Aravis 0.8 offers (and so what this camera offers): pixel
 // formats Mono8, Mono16, RGB8, BayerRG8, BayerBG8, BayerGR8, BayerGB8 (no BGR8 or YUV); Width
@@ -40,13 +42,15 @@
 #include <string>
 #include <vector>
 
+#include "capture/camera.h"
 #include "capture/pixel_format.h"
+#include "capture/test_camera.h"
 
 namespace procam {
 
 // What the source is asked to render: one frame as the client configured it.
 struct GigeFrameRequest {
-  uint64_t frame_id = 0;  // the GVSP block id of the frame, 1..65535
+  uint64_t frame_id = 0;  // the GVSP block id of the frame, 1..65535 (wraps)
   int width = 0;          // pixels (the client's Width)
   int height = 0;         // pixels (the client's Height)
   PixelFormat pixel_format = PixelFormat::kMono8;
@@ -63,6 +67,13 @@ struct GigeFrameRequest {
 // Bayer formats (mosaiced by the emulator), width × height. A source that throws or returns
 // another size or type gets its frame sent black and counted in frames_failed().
 using GigeFrameSource = std::function<cv::Mat(const GigeFrameRequest& request)>;
+
+// A source that photographs a scene with the test camera's model (PhotographRadiance of
+// test_camera.h): the view's radiance at each frame's scene_time_ns, with the frame's size,
+// format, exposure and gain, and `model`'s reference exposure, black level, read noise (seeded
+// by model.seed) and response curve. An empty view sees black. This is how a synthetic room
+// (datasets_synthetic/synthetic_camera.h: MakeSyntheticView) becomes a GigE Vision camera.
+GigeFrameSource PhotographScene(SceneView view, const TestCameraOptions& model = {});
 
 struct GigeEmulatorOptions {
   // IPv4 address of the local interface to serve on, e.g. "127.0.0.1"; clients open
