@@ -128,8 +128,8 @@ struct GigeEmulator::Impl {
     int64_t stamp_real_ns = static_cast<int64_t>(arv_buffer_get_timestamp(buffer));
     guint32 period_us = 0;
     if (arv_fake_camera_is_in_free_running_mode(camera) &&
-        arv_fake_camera_read_register(
-            camera, ARV_FAKE_CAMERA_REGISTER_ACQUISITION_FRAME_PERIOD_US, &period_us) &&
+        arv_fake_camera_read_register(camera, ARV_FAKE_CAMERA_REGISTER_ACQUISITION_FRAME_PERIOD_US,
+                                      &period_us) &&
         period_us > 0) {
       const int64_t period_ns = int64_t{period_us} * 1000;
       stamp_real_ns -= stamp_real_ns % period_ns;
@@ -159,10 +159,10 @@ struct GigeEmulator::Impl {
       try {
         const cv::Mat image = source(request);
         if (image.cols != request.width || image.rows != request.height) {
-          throw std::invalid_argument(
-              "the source returned " + std::to_string(image.cols) + "x" +
-              std::to_string(image.rows) + " for a " + std::to_string(request.width) + "x" +
-              std::to_string(request.height) + " frame");
+          throw std::invalid_argument("the source returned " + std::to_string(image.cols) + "x" +
+                                      std::to_string(image.rows) + " for a " +
+                                      std::to_string(request.width) + "x" +
+                                      std::to_string(request.height) + " frame");
         }
         const std::vector<uint8_t> raw = EncodeRaw(image, *format);
         if (raw.size() != payload) throw std::logic_error("encoded size differs from payload");
@@ -181,8 +181,8 @@ struct GigeEmulator::Impl {
     }
     ++frames_served;
     // Send when the exposure ends (or at once when stopping).
-    const auto end = std::chrono::steady_clock::time_point(
-        std::chrono::nanoseconds(request.exposure_end_ns));
+    const auto end =
+        std::chrono::steady_clock::time_point(std::chrono::nanoseconds(request.exposure_end_ns));
     wake.wait_until(lock, end, [this] { return stopping; });
   }
 };

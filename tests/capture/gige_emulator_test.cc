@@ -8,13 +8,15 @@
 // the test camera's model (test_camera.h), DN = round(min(full, radiance · full · exposure /
 // 10 ms · 10^(gain/20))); the tests compute the image they expect from the exposure, gain,
 // format and frame id they asked for, never from what the emulator reports.
+#include "capture/gige_emulator.h"
+
 #include <arv.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <atomic>
-#include <limits>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <numeric>
@@ -22,7 +24,6 @@
 
 #include "capture/aravis_camera.h"
 #include "capture/devices.h"
-#include "capture/gige_emulator.h"
 #include "capture/session.h"
 #include "tests/testing/testing.h"
 
@@ -42,8 +43,8 @@ double Radiance(int x, int y, int channel, uint64_t frame_id) {
 
 // The image the camera model makes of the scene: the test's ground truth and the emulator's
 // source (decoded layout of `format`: CV_8UC1, CV_16UC1 or CV_8UC3 B, G, R).
-cv::Mat Photograph(int width, int height, PixelFormat format, uint64_t frame_id,
-                   double exposure_us, double gain_db) {
+cv::Mat Photograph(int width, int height, PixelFormat format, uint64_t frame_id, double exposure_us,
+                   double gain_db) {
   const double full = FullScale(format);
   const double scale = full * exposure_us / kReferenceExposureUs * std::pow(10.0, gain_db / 20.0);
   auto digital = [&](double radiance) { return std::round(std::min(full, radiance * scale)); };
@@ -144,7 +145,8 @@ class GigeEmulatorTest : public ::testing::Test {
                                 const std::string& parameters = "") {
     source_ = std::make_shared<RecordingSource>();
     emulator_ = std::make_unique<GigeEmulator>(
-        options, [source = source_](const GigeFrameRequest& request) { return (*source)(request); });
+        options,
+        [source = source_](const GigeFrameRequest& request) { return (*source)(request); });
     return OpenCamera(emulator_->Uri() + parameters);
   }
 
@@ -226,9 +228,9 @@ TEST_F(GigeEmulatorTest, ExposureAndGainChangeTheFramesAsTheModelSays) {
 TEST_F(GigeEmulatorTest, PixelFormatsSwitch) {
   const auto camera = Serve(GigeEmulatorOptions{});
   camera->SetExposure(7000);
-  for (PixelFormat format : {PixelFormat::kMono16, PixelFormat::kRGB8, PixelFormat::kBayerRG8,
-                             PixelFormat::kBayerBG8, PixelFormat::kBayerGR8,
-                             PixelFormat::kBayerGB8, PixelFormat::kMono8}) {
+  for (PixelFormat format :
+       {PixelFormat::kMono16, PixelFormat::kRGB8, PixelFormat::kBayerRG8, PixelFormat::kBayerBG8,
+        PixelFormat::kBayerGR8, PixelFormat::kBayerGB8, PixelFormat::kMono8}) {
     camera->SetPixelFormat(format);
     EXPECT_EQ(camera->Settings().pixel_format, format);
     const Frame frame = camera->Grab(milliseconds(2000));
@@ -312,10 +314,9 @@ TEST_F(GigeEmulatorTest, LatencyIsHonoured) {
       const GigeFrameRequest request = source_->Request(frame.sequence);
       EXPECT_EQ(request.exposure_start_ns - request.scene_time_ns,
                 static_cast<int64_t>(latency_ms * 1e6));
-      const double error_ms =
-          (frame.exposure_start_ns - static_cast<int64_t>(latency_ms * 1e6) -
-           request.scene_time_ns) *
-          1e-6;
+      const double error_ms = (frame.exposure_start_ns - static_cast<int64_t>(latency_ms * 1e6) -
+                               request.scene_time_ns) *
+                              1e-6;
       EXPECT_GT(error_ms, -1.0) << "latency " << latency_ms << " ms";
       EXPECT_LT(error_ms, 30.0) << "latency " << latency_ms << " ms";
     }
@@ -450,8 +451,8 @@ TEST_F(GigeEmulatorTest, AStoppedEmulatorIsADisconnection) {
   EXPECT_THROW(camera->Start(), CameraDisconnected);
   camera.reset();
   // The address is free again at once.
-  ExpectFrameIsTheScene(Serve(GigeEmulatorOptions{})->Grab(milliseconds(2000)),
-                        PixelFormat::kMono8, 10000, 0);
+  ExpectFrameIsTheScene(Serve(GigeEmulatorOptions{})->Grab(milliseconds(2000)), PixelFormat::kMono8,
+                        10000, 0);
 }
 
 // procam's own capture command photographs the emulator (a child process talking GVCP and
@@ -464,7 +465,8 @@ TEST_F(GigeEmulatorTest, ProcamCapturesFromTheEmulator) {
   GigeEmulatorOptions options;
   options.exposure_us = 4000;
   Serve(options).reset();  // starts the emulator; our camera closes so that procam can control it
-  const testing::CommandRun run = testing::RunProcam("capture --camera aravis:gv:127.0.0.1" + common);
+  const testing::CommandRun run =
+      testing::RunProcam("capture --camera aravis:gv:127.0.0.1" + common);
   ASSERT_EQ(run.exit_code, 0) << run.output;
   const CaptureSessionData session = CaptureSessionData::Load(dir / "session");
   ASSERT_TRUE(session.complete());
@@ -525,10 +527,10 @@ TEST_F(GigeEmulatorTest, DISABLED_Throughput) {
           }
           return camera;
         };
-        const std::string what =
-            std::to_string(size.width) + "x" + std::to_string(size.height) + " " +
-            PixelFormatName(format) + ", packets " + std::to_string(packet_size) + " B, " +
-            (packet_socket ? "packet socket" : "UDP socket");
+        const std::string what = std::to_string(size.width) + "x" + std::to_string(size.height) +
+                                 " " + PixelFormatName(format) + ", packets " +
+                                 std::to_string(packet_size) + " B, " +
+                                 (packet_socket ? "packet socket" : "UDP socket");
         double frames_per_second = 0;
         int incomplete = 0;
         try {
@@ -566,12 +568,13 @@ TEST_F(GigeEmulatorTest, DISABLED_Throughput) {
         }
         std::sort(latency_ms.begin(), latency_ms.end());
         std::sort(arrival_ms.begin(), arrival_ms.end());
-        std::printf("%s: %6.1f frames/s (%5.1f MB/s, %d grabs timed out); source-to-Grab "
-                    "latency median %5.2f ms, 90th percentile %5.2f ms (leader arrival %5.2f ms)\n",
-                    what.c_str(), frames_per_second,
-                    frames_per_second * size.area() * RawBytesPerPixel(format) * 1e-6, incomplete,
-                    latency_ms[latency_ms.size() / 2], latency_ms[latency_ms.size() * 9 / 10],
-                    arrival_ms[arrival_ms.size() / 2]);
+        std::printf(
+            "%s: %6.1f frames/s (%5.1f MB/s, %d grabs timed out); source-to-Grab "
+            "latency median %5.2f ms, 90th percentile %5.2f ms (leader arrival %5.2f ms)\n",
+            what.c_str(), frames_per_second,
+            frames_per_second * size.area() * RawBytesPerPixel(format) * 1e-6, incomplete,
+            latency_ms[latency_ms.size() / 2], latency_ms[latency_ms.size() * 9 / 10],
+            arrival_ms[arrival_ms.size() / 2]);
         std::fflush(stdout);
       }
     }
