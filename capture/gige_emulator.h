@@ -108,7 +108,8 @@ class GigeEmulator {
   // fails, no local interface has the address, or its GigE Vision port (UDP 3956) is taken.
   GigeEmulator(const GigeEmulatorOptions& options, GigeFrameSource source);
   // Stops serving: an exposure in progress is cut short, the emulator's thread is joined and
-  // its sockets closed. A connected client then loses its camera (control-lost).
+  // its sockets closed. A connected client's next request goes unanswered (procam's Aravis
+  // backend: CameraDisconnected, after Aravis's retries, about 2.5 s).
   ~GigeEmulator();
   GigeEmulator(const GigeEmulator&) = delete;
   GigeEmulator& operator=(const GigeEmulator&) = delete;
