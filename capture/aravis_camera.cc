@@ -180,7 +180,7 @@ struct AravisCamera::Impl {
   ArvStream* stream = nullptr;
   gulong control_lost_handler = 0;
   std::atomic<bool> control_lost{false};
-  bool gone = false;  // a request went unanswered: the device is unreachable
+  bool gone = false;  // the last control request went unanswered: closing skips the stop
   // ExposureTime and Gain as last set or read, so a grab needs no control transaction.
   double exposure_us = 0.0;
   double gain = 0.0;
@@ -194,7 +194,10 @@ struct AravisCamera::Impl {
 
   // Throws for a failed call; lost connections become CameraDisconnected.
   void Check(GError* error, const std::string& what) {
-    if (error == nullptr) return;
+    if (error == nullptr) {
+      gone = false;
+      return;
+    }
     const std::string message = "camera '" + Uri() + "': " + what + ": " + error->message;
     const bool unreachable =
         error->domain == ARV_DEVICE_ERROR &&
@@ -209,9 +212,9 @@ struct AravisCamera::Impl {
   }
 
   void CheckConnected() {
-    if (control_lost || gone) {
-      throw CameraDisconnected("camera '" + Uri() + "': lost the connection to the camera (" +
-                               (control_lost ? "control lost" : "it stopped answering") + ")");
+    if (control_lost) {
+      throw CameraDisconnected("camera '" + Uri() +
+                               "': lost the connection to the camera (control lost)");
     }
   }
 

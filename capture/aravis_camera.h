@@ -10,7 +10,9 @@
 // at every grab (a grab costs no control transaction): a camera changed behind procam's back
 // reports stale values in Frame until the next SetExposure or SetGain.
 // A camera whose control channel is lost (Aravis's "control-lost" signal, e.g. a GigE camera
-// that stops answering heartbeats) raises CameraDisconnected from the next call.
+// that stops answering heartbeats) raises CameraDisconnected from the next call; so does a
+// request that goes unanswered (after Aravis's retries), and closing the camera after one skips
+// the stop command, which would only be retried too.
 //
 // URIs:
 //   aravis:<device id>?trigger=auto|software|free&buffers=8&format=Mono8
