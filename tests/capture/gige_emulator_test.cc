@@ -341,11 +341,10 @@ TEST_F(GigeEmulatorTest, TheSceneIsSeenLatencyLate) {
   GigeEmulator emulator(options, PhotographScene(wall));  // reference exposure 10 ms = ours
   const auto camera = OpenCamera(emulator.Uri() + "?trigger=free");
   camera->Grab(milliseconds(2000));
-  const int64_t realtime_minus_steady_ns =
-      std::chrono::duration_cast<std::chrono::nanoseconds>(
-          std::chrono::system_clock::now().time_since_epoch())
-          .count() -
-      SteadyNowNs();
+  const int64_t realtime_minus_steady_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                               std::chrono::system_clock::now().time_since_epoch())
+                                               .count() -
+                                           SteadyNowNs();
   step_ns = SteadyNowNs() + 200'000'000;
   int before = 0, after = 0, stale = 0;
   while (SteadyNowNs() < step_ns + 400'000'000) {
