@@ -1,6 +1,10 @@
 #include "capture/aravis_camera.h"
 
+#include <arpa/inet.h>
 #include <arv.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
@@ -14,9 +18,37 @@ bool Fail(std::string* why, const std::string& message) {
   return false;
 }
 
-// Aravis's pixel-format codes (PFNC) of the formats procam decodes.
-std::optional<PixelFormat> FromArv(ArvPixelFormat code) {
-  switch (code) {
+bool IsIpv4(const std::string& text) {
+  in_addr parsed{};
+  return inet_pton(AF_INET, text.c_str(), &parsed) == 1;
+}
+
+// The local address the kernel would send from to reach `address` (a connected UDP socket:
+// connecting sends nothing). Empty when there is no route.
+std::string RoutedSourceAddress(const std::string& address) {
+  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+  if (fd < 0) return "";
+  sockaddr_in remote{};
+  remote.sin_family = AF_INET;
+  remote.sin_port = htons(3956);
+  inet_pton(AF_INET, address.c_str(), &remote.sin_addr);
+  std::string local_text;
+  sockaddr_in local{};
+  socklen_t length = sizeof(local);
+  char text[INET_ADDRSTRLEN] = {};
+  if (connect(fd, reinterpret_cast<const sockaddr*>(&remote), sizeof(remote)) == 0 &&
+      getsockname(fd, reinterpret_cast<sockaddr*>(&local), &length) == 0 &&
+      inet_ntop(AF_INET, &local.sin_addr, text, sizeof(text)) != nullptr) {
+    local_text = text;
+  }
+  close(fd);
+  return local_text;
+}
+
+}  // namespace
+
+std::optional<PixelFormat> PixelFormatFromPfnc(uint32_t code) {
+  switch (static_cast<ArvPixelFormat>(code)) {
     case ARV_PIXEL_FORMAT_MONO_8:
       return PixelFormat::kMono8;
     case ARV_PIXEL_FORMAT_MONO_16:
@@ -39,6 +71,21 @@ std::optional<PixelFormat> FromArv(ArvPixelFormat code) {
       return std::nullopt;
   }
 }
+
+std::optional<uint32_t> PfncFromPixelFormat(PixelFormat format) {
+  for (uint32_t code :
+       {ARV_PIXEL_FORMAT_MONO_8, ARV_PIXEL_FORMAT_MONO_16, ARV_PIXEL_FORMAT_BAYER_RG_8,
+        ARV_PIXEL_FORMAT_BAYER_BG_8, ARV_PIXEL_FORMAT_BAYER_GR_8, ARV_PIXEL_FORMAT_BAYER_GB_8,
+        ARV_PIXEL_FORMAT_RGB_8_PACKED, ARV_PIXEL_FORMAT_BGR_8_PACKED,
+        ARV_PIXEL_FORMAT_YUV_422_YUYV_PACKED}) {
+    if (PixelFormatFromPfnc(code) == format) return code;
+  }
+  return std::nullopt;
+}
+
+namespace {
+
+std::optional<PixelFormat> FromArv(ArvPixelFormat code) { return PixelFormatFromPfnc(code); }
 
 // The GenICam PixelFormat entry of a format ("YUV422_8" is the Y U Y V order).
 std::string GenicamName(PixelFormat format) {
@@ -85,20 +132,36 @@ std::mutex& InterfaceMutex() {
 }  // namespace
 
 bool AravisCameraOptions::Check(std::string* why) const {
-  if (device_id.empty())
+  if (device_id.empty() && gige_address.empty())
     return Fail(why, "no device id (aravis:<id>; `procam cameras` lists them)");
+  if (!device_id.empty() && !gige_address.empty())
+    return Fail(why, "give a device id or a GigE Vision address, not both");
+  if (!gige_address.empty() && !IsIpv4(gige_address))
+    return Fail(why, "'" + gige_address + "' is not an IPv4 address (aravis:gv:<address>)");
+  if (!interface_address.empty() && gige_address.empty())
+    return Fail(why, "interface is for cameras opened by address (aravis:gv:<address>)");
+  if (!interface_address.empty() && !IsIpv4(interface_address))
+    return Fail(why, "interface '" + interface_address + "' is not an IPv4 address");
   if (trigger != "auto" && trigger != "software" && trigger != "free") {
     return Fail(why, "trigger must be auto, software or free, got '" + trigger + "'");
   }
   if (buffers < 2 || buffers > 64) return Fail(why, "buffers must be in [2, 64]");
+  if (packet_size != 0 && (packet_size < 576 || packet_size > 65000))
+    return Fail(why, "packet_size must be in [576, 65000] bytes (or 0: the camera's)");
   return true;
 }
 
 AravisCameraOptions AravisCameraOptionsFromUri(const CameraUri& uri) {
   AravisCameraOptions options;
-  options.device_id = uri.path();
+  if (uri.path().rfind("gv:", 0) == 0) {
+    options.gige_address = uri.path().substr(3);
+    options.interface_address = uri.GetString("interface", "");
+  } else {
+    options.device_id = uri.path();
+  }
   options.trigger = uri.GetString("trigger", options.trigger);
   options.buffers = uri.GetInt("buffers", options.buffers);
+  options.packet_size = uri.GetInt("packet_size", options.packet_size);
   if (uri.Has("format")) {
     const std::string name = uri.GetString("format", "");
     options.format = ParsePixelFormat(name);
@@ -117,25 +180,38 @@ struct AravisCamera::Impl {
   ArvStream* stream = nullptr;
   gulong control_lost_handler = 0;
   std::atomic<bool> control_lost{false};
+  bool gone = false;  // the last control request went unanswered: closing skips the stop
+  // ExposureTime and Gain as last set or read, so a grab needs no control transaction.
+  double exposure_us = 0.0;
+  double gain = 0.0;
   bool software_trigger = false;
   PixelFormat format = PixelFormat::kMono8;
 
-  std::string Uri() const { return "aravis:" + options.device_id; }
+  std::string Uri() const {
+    return "aravis:" + (options.gige_address.empty() ? options.device_id
+                                                      : "gv:" + options.gige_address);
+  }
 
   // Throws for a failed call; lost connections become CameraDisconnected.
-  void Check(GError* error, const std::string& what) const {
-    if (error == nullptr) return;
+  void Check(GError* error, const std::string& what) {
+    if (error == nullptr) {
+      gone = false;
+      return;
+    }
     const std::string message = "camera '" + Uri() + "': " + what + ": " + error->message;
-    const bool gone =
+    const bool unreachable =
         error->domain == ARV_DEVICE_ERROR &&
         (error->code == ARV_DEVICE_ERROR_NOT_CONNECTED || error->code == ARV_DEVICE_ERROR_TIMEOUT ||
          error->code == ARV_DEVICE_ERROR_TRANSFER_ERROR);
     g_error_free(error);
-    if (gone || control_lost) throw CameraDisconnected(message);
+    if (unreachable || control_lost) {
+      gone = true;
+      throw CameraDisconnected(message);
+    }
     throw IoError(message);
   }
 
-  void CheckConnected() const {
+  void CheckConnected() {
     if (control_lost) {
       throw CameraDisconnected("camera '" + Uri() +
                                "': lost the connection to the camera (control lost)");
@@ -146,7 +222,39 @@ struct AravisCamera::Impl {
     static_cast<Impl*>(self)->control_lost = true;
   }
 
+  // A GigE Vision camera by address: the GVCP socket talks to that address only.
+  ArvCamera* OpenByAddress() {
+    const std::string local = options.interface_address.empty()
+                                  ? RoutedSourceAddress(options.gige_address)
+                                  : options.interface_address;
+    if (local.empty()) throw IoError("camera '" + Uri() + "': no route to the address");
+    GInetAddress* interface_address = g_inet_address_new_from_string(local.c_str());
+    GInetAddress* device_address = g_inet_address_new_from_string(options.gige_address.c_str());
+    GError* error = nullptr;
+    ArvDevice* device = arv_gv_device_new(interface_address, device_address, &error);
+    g_object_unref(interface_address);
+    g_object_unref(device_address);
+    if (device == nullptr && error == nullptr)
+      throw IoError("camera '" + Uri() + "': no GigE Vision camera answers (from " + local + ")");
+    Check(error, "cannot open (from " + local + ")");
+    ArvCamera* opened = arv_camera_new_with_device(device, &error);
+    g_object_unref(device);  // the camera holds its own reference
+    if (opened == nullptr && error == nullptr)
+      throw IoError("camera '" + Uri() + "': cannot open");
+    Check(error, "cannot open");
+    return opened;
+  }
+
   void Open() {
+    if (!options.gige_address.empty()) {
+      camera = OpenByAddress();
+    } else {
+      OpenById();
+    }
+    FinishOpening();
+  }
+
+  void OpenById() {
     {
       std::lock_guard<std::mutex> lock(InterfaceMutex());
       if (options.device_id.rfind("Fake", 0) == 0) {  // never broadcast for the in-process camera
@@ -160,6 +268,10 @@ struct AravisCamera::Impl {
       throw IoError("camera '" + Uri() + "': not found (see `procam cameras`)");
     }
     Check(error, "cannot open");
+  }
+
+  void FinishOpening() {
+    GError* error = nullptr;
     control_lost_handler = g_signal_connect(arv_camera_get_device(camera), "control-lost",
                                             G_CALLBACK(&Impl::OnControlLost), this);
 
@@ -182,6 +294,13 @@ struct AravisCamera::Impl {
       format = PixelFormat::kMono8;
     }
 
+    if (options.packet_size > 0) {
+      if (!arv_camera_is_gv_device(camera))
+        throw IoError("camera '" + Uri() + "': packet_size is for GigE Vision cameras");
+      arv_camera_gv_set_packet_size_adjustment(camera, ARV_GV_PACKET_SIZE_ADJUSTMENT_NEVER);
+      arv_camera_gv_set_packet_size(camera, options.packet_size, &error);
+      Check(error, "setting the packet size to " + std::to_string(options.packet_size));
+    }
     arv_camera_set_acquisition_mode(camera, ARV_ACQUISITION_MODE_CONTINUOUS, &error);
     Check(error, "setting continuous acquisition");
     const bool supported = arv_camera_is_software_trigger_supported(camera, &error);
@@ -189,6 +308,7 @@ struct AravisCamera::Impl {
     if (options.trigger == "software" && !supported) {
       throw IoError("camera '" + Uri() + "': no software trigger; use trigger=free");
     }
+    ReadExposureAndGain();
     software_trigger = options.trigger != "free" && supported;
     if (software_trigger) {
       arv_camera_set_trigger(camera, "Software", &error);
@@ -196,6 +316,18 @@ struct AravisCamera::Impl {
     } else {
       arv_camera_clear_triggers(camera, &error);
       Check(error, "switching triggers off");
+    }
+  }
+
+  void ReadExposureAndGain() {
+    GError* error = nullptr;
+    if (arv_camera_is_exposure_time_available(camera, nullptr)) {
+      exposure_us = arv_camera_get_exposure_time(camera, &error);
+      Check(error, "reading ExposureTime");
+    }
+    if (arv_camera_is_gain_available(camera, nullptr)) {
+      gain = arv_camera_get_gain(camera, &error);
+      Check(error, "reading Gain");
     }
   }
 
@@ -219,7 +351,8 @@ struct AravisCamera::Impl {
   void StopStreaming() {
     if (stream == nullptr) return;
     GError* error = nullptr;
-    arv_camera_stop_acquisition(camera, &error);
+    // An unreachable device would keep us through every retry of the command (seconds).
+    if (!gone && !control_lost) arv_camera_stop_acquisition(camera, &error);
     if (error) g_error_free(error);
     g_object_unref(stream);  // stops the stream thread and frees its buffers
     stream = nullptr;
@@ -339,6 +472,7 @@ void AravisCamera::SetExposure(double exposure_us) {
   }
   arv_camera_set_exposure_time(impl_->camera, exposure_us, &error);
   impl_->Check(error, "setting ExposureTime");
+  impl_->ReadExposureAndGain();  // as the device rounded it
 }
 
 void AravisCamera::SetGain(double gain) {
@@ -361,6 +495,7 @@ void AravisCamera::SetGain(double gain) {
   }
   arv_camera_set_gain(impl_->camera, gain, &error);
   impl_->Check(error, "setting Gain");
+  impl_->ReadExposureAndGain();
 }
 
 void AravisCamera::SetPixelFormat(PixelFormat format) {
@@ -392,11 +527,8 @@ Frame AravisCamera::Grab(std::chrono::milliseconds timeout) {
     arv_camera_software_trigger(impl_->camera, &error);
     impl_->Check(error, "software trigger");
   }
-  const double exposure_us = arv_camera_get_exposure_time(impl_->camera, &error);
-  impl_->Check(error, "reading ExposureTime");
-  const double gain = arv_camera_is_gain_available(impl_->camera, nullptr)
-                          ? arv_camera_get_gain(impl_->camera, nullptr)
-                          : 0.0;
+  const double exposure_us = impl_->exposure_us;
+  const double gain = impl_->gain;
   const int64_t deadline =
       SteadyNowNs() + std::chrono::duration_cast<std::chrono::nanoseconds>(timeout).count();
   int bad_buffers = 0;
@@ -421,6 +553,10 @@ Frame AravisCamera::Grab(std::chrono::milliseconds timeout) {
       ++bad_buffers;
       last_bad = status;
       arv_stream_push_buffer(impl_->stream, buffer);
+      if (impl_->software_trigger) {  // that frame spent our trigger: ask for another
+        arv_camera_software_trigger(impl_->camera, &error);
+        impl_->Check(error, "software trigger");
+      }
       continue;
     }
     const int64_t arrival_steady = SteadyNowNs();

@@ -291,26 +291,25 @@ int TestCamera::DropBufferedFrames() {
   return dropped;
 }
 
-Frame TestCamera::Render(const PendingFrame& pending) {
-  const int64_t latency_ns = static_cast<int64_t>(std::llround(options_.display_latency_ms * 1e6));
-  cv::Mat radiance = view_ ? view_(pending.exposure_start_ns - latency_ns)
-                           : DefaultChart(options_.width, options_.height);
-  if (radiance.empty()) radiance = cv::Mat::zeros(options_.height, options_.width, CV_32FC1);
+cv::Mat PhotographRadiance(cv::Mat radiance, const TestCameraOptions& model,
+                           const PhotographSettings& settings, cv::RNG& rng) {
+  const int width = settings.width;
+  const int height = settings.height;
+  const PixelFormat format = settings.pixel_format;
+  if (radiance.empty()) radiance = cv::Mat::zeros(height, width, CV_32FC1);
   if (radiance.depth() != CV_32F) radiance.convertTo(radiance, CV_32F);
-  if (radiance.cols != options_.width || radiance.rows != options_.height) {
-    cv::Mat resized(options_.height, options_.width, radiance.type());
-    for (int y = 0; y < options_.height; ++y) {
-      const int source_y =
-          static_cast<int>(static_cast<int64_t>(y) * radiance.rows / options_.height);
-      for (int x = 0; x < options_.width; ++x) {
-        const int source_x =
-            static_cast<int>(static_cast<int64_t>(x) * radiance.cols / options_.width);
+  if (radiance.cols != width || radiance.rows != height) {
+    cv::Mat resized(height, width, radiance.type());
+    for (int y = 0; y < height; ++y) {
+      const int source_y = static_cast<int>(static_cast<int64_t>(y) * radiance.rows / height);
+      for (int x = 0; x < width; ++x) {
+        const int source_x = static_cast<int>(static_cast<int64_t>(x) * radiance.cols / width);
         std::memcpy(resized.ptr(y, x), radiance.ptr(source_y, source_x), radiance.elemSize());
       }
     }
     radiance = resized;
   }
-  const bool colour = IsColour(options_.pixel_format);
+  const bool colour = IsColour(format);
   if (colour && radiance.channels() == 1) {
     cv::cvtColor(radiance, radiance, cv::COLOR_GRAY2BGR);
   } else if (!colour && radiance.channels() == 3) {
@@ -318,26 +317,40 @@ Frame TestCamera::Render(const PendingFrame& pending) {
     cv::transform(radiance, luma, cv::Matx13f(0.0722f, 0.7152f, 0.2126f));  // B, G, R weights
     radiance = luma;
   }
-  const double full_scale = FullScale(options_.pixel_format);
-  const double scale = full_scale * (pending.exposure_us / options_.reference_exposure_us) *
-                       std::pow(10.0, pending.gain_db / 20.0);
+  const double full_scale = FullScale(format);
+  const double scale = full_scale * (settings.exposure_us / model.reference_exposure_us) *
+                       std::pow(10.0, settings.gain_db / 20.0);
   cv::Mat digital;
-  radiance.convertTo(digital, CV_32F, scale, options_.black_level);
-  if (options_.noise_sigma > 0) {
+  radiance.convertTo(digital, CV_32F, scale, model.black_level);
+  if (model.noise_sigma > 0) {
     cv::Mat noise(digital.size(), digital.type());
-    rng_.fill(noise, cv::RNG::NORMAL, 0.0, options_.noise_sigma);
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, model.noise_sigma);
     digital += noise;
   }
-  if (options_.response_gamma != 1.0) {  // the output curve of a camera that is not linear
-    const double range = full_scale - options_.black_level;
-    const double exponent = 1.0 / options_.response_gamma;
+  if (model.response_gamma != 1.0) {  // the output curve of a camera that is not linear
+    const double range = full_scale - model.black_level;
+    const double exponent = 1.0 / model.response_gamma;
     digital.reshape(1).forEach<float>([&](float& value, const int*) {
-      const double u = std::clamp((value - options_.black_level) / range, 0.0, 1.0);
-      value = static_cast<float>(options_.black_level + range * std::pow(u, exponent));
+      const double u = std::clamp((value - model.black_level) / range, 0.0, 1.0);
+      value = static_cast<float>(model.black_level + range * std::pow(u, exponent));
     });
   }
   cv::Mat image;  // convertTo rounds and saturates to [0, full scale]
-  digital.convertTo(image, options_.pixel_format == PixelFormat::kMono16 ? CV_16U : CV_8U);
+  digital.convertTo(image, format == PixelFormat::kMono16 ? CV_16U : CV_8U);
+  return image;
+}
+
+Frame TestCamera::Render(const PendingFrame& pending) {
+  const int64_t latency_ns = static_cast<int64_t>(std::llround(options_.display_latency_ms * 1e6));
+  const cv::Mat radiance = view_ ? view_(pending.exposure_start_ns - latency_ns)
+                                 : DefaultChart(options_.width, options_.height);
+  PhotographSettings settings;
+  settings.width = options_.width;
+  settings.height = options_.height;
+  settings.pixel_format = options_.pixel_format;
+  settings.exposure_us = pending.exposure_us;
+  settings.gain_db = pending.gain_db;
+  const cv::Mat image = PhotographRadiance(radiance, options_, settings, rng_);
 
   const std::vector<uint8_t> raw = EncodeRaw(image, options_.pixel_format);
   RawImage raw_image;

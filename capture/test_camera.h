@@ -70,6 +70,25 @@ TestCameraOptions TestCameraOptionsFromUri(const CameraUri& uri);
 // settings, which the URI's keys override).
 TestCameraOptions TestCameraOptionsFromUri(const CameraUri& uri, TestCameraOptions defaults);
 
+// The settings a picture is taken with (a camera's current ones).
+struct PhotographSettings {
+  int width = 640;   // pixels
+  int height = 480;  // pixels
+  PixelFormat pixel_format = PixelFormat::kMono8;  // any but YUYV and MJPEG
+  double exposure_us = 10000.0;                    // microseconds
+  double gain_db = 0.0;                            // decibels
+};
+
+// The test camera's picture of a radiance image (the model above, without its timing):
+// resampled to width × height (nearest neighbour), Rec. 709 luma for mono formats, scaled to
+// digital numbers by exposure and gain, black level, read noise drawn from `rng`, the response
+// curve, rounded and clipped. Takes the model's reference_exposure_us, black_level, noise_sigma
+// and response_gamma (its size, format, exposure and gain are `settings`'). Returns the decoded
+// layout of the format: CV_8UC1 (Mono8), CV_16UC1 (Mono16) or CV_8UC3 B, G, R (colour and Bayer
+// formats, before any mosaic). An empty `radiance` is black.
+cv::Mat PhotographRadiance(cv::Mat radiance, const TestCameraOptions& model,
+                           const PhotographSettings& settings, cv::RNG& rng);
+
 class TestCamera : public Camera {
  public:
   // `view` may be empty: the camera then sees a fixed chart (a horizontal ramp from 0 to 1,

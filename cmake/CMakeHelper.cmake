@@ -24,15 +24,20 @@ function(procam_add_library name)
   target_compile_options(procam_${name} PRIVATE "$<$<COMPILE_LANGUAGE:CXX>:${PROCAM_WARNINGS}>")
 endfunction()
 
-# procam_add_test(MODULE NAME SOURCES... [LINK libs...])
-# Declares the gtest binary `MODULE_NAME_test`, registered with CTest as `MODULE/NAME`.
+# procam_add_test(MODULE NAME SOURCES... [LINK libs...] [WRAPPER command...])
+# Declares the gtest binary `MODULE_NAME_test`, registered with CTest as `MODULE/NAME`; with
+# WRAPPER, CTest runs `command... BINARY` (e.g. scripts/in_private_netns.sh).
 function(procam_add_test module name)
-  cmake_parse_arguments(ARG "" "" "SOURCES;LINK" ${ARGN})
+  cmake_parse_arguments(ARG "" "" "SOURCES;LINK;WRAPPER" ${ARGN})
   set(target ${module}_${name}_test)
   add_executable(${target} ${ARG_SOURCES})
   target_link_libraries(${target} PRIVATE procam_testing ${ARG_LINK})
   target_compile_options(${target} PRIVATE ${PROCAM_WARNINGS})
-  add_test(NAME ${module}/${name} COMMAND ${target})
+  if(ARG_WRAPPER)
+    add_test(NAME ${module}/${name} COMMAND ${ARG_WRAPPER} $<TARGET_FILE:${target}>)
+  else()
+    add_test(NAME ${module}/${name} COMMAND ${target})
+  endif()
   set_tests_properties(${module}/${name} PROPERTIES
     ENVIRONMENT "PROCAM_SOURCE_DIR=${PROJECT_SOURCE_DIR};PROCAM_SHARED_DIR=${PROCAM_SHARED_DIR}")
 endfunction()
