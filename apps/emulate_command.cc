@@ -59,10 +59,6 @@ void RunEmulate(const EmulateArguments& args) {
     throw std::invalid_argument(fmt::format("--monitors: {} outputs for the {} projectors of {} (one per projector, in order)",
                                             args.monitors.size(), displays.size(), args.room));
   }
-  std::vector<WatchedMonitor> watched;
-  for (size_t k = 0; k < displays.size(); ++k) watched.push_back({args.monitors[k], displays[k]});
-  MonitorWatcher watcher(watched, args.watch_hz);
-
   const TestCameraOptions& camera = world->camera_settings;
   GigeEmulatorOptions options;
   options.address = args.address;
@@ -76,6 +72,12 @@ void RunEmulate(const EmulateArguments& args) {
   std::string why;
   if (!options.Check(&why)) throw IoError(args.room + ": cameras: the emulated GigE camera cannot take it: " + why);
   GigeEmulator emulator(options, PhotographScene(MakeSyntheticView(world), camera));
+  // The watcher after the emulator: grim's processes are started from then on, and none may
+  // inherit a socket while the camera binds its port.
+  std::vector<WatchedMonitor> watched;
+  for (size_t k = 0; k < displays.size(); ++k) watched.push_back({args.monitors[k], displays[k]});
+  MonitorWatcher watcher(watched, args.watch_hz);
+
 
   // What calibrate all needs of a real camera: its value per unit exitance at these settings.
   const double full_scale = FullScale(options.pixel_format);

@@ -6,8 +6,10 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <mutex>
 
 namespace procam {
@@ -26,7 +28,7 @@ bool IsIpv4(const std::string& text) {
 // The local address the kernel would send from to reach `address` (a connected UDP socket:
 // connecting sends nothing). Empty when there is no route.
 std::string RoutedSourceAddress(const std::string& address) {
-  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+  const int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
   if (fd < 0) return "";
   sockaddr_in remote{};
   remote.sin_family = AF_INET;
@@ -185,6 +187,12 @@ struct AravisCamera::Impl {
   double exposure_us = 0.0;
   double gain = 0.0;
   bool software_trigger = false;
+  // The device clock onto the steady clock: exposure start ≈ device timestamp + offset, offset
+  // the smallest (arrival − exposure − device timestamp) seen, allowed to grow 100 ppm of the
+  // time since (the two clocks drift). INT64_MAX until a frame with a device timestamp arrives.
+  int64_t clock_offset_ns = std::numeric_limits<int64_t>::max();
+  int64_t clock_offset_at_ns = 0;  // steady time of the frame that set it
+  int64_t last_device_ns = 0;      // a device clock that goes back (a restarted camera) starts over
   PixelFormat format = PixelFormat::kMono8;
 
   std::string Uri() const {
@@ -589,8 +597,24 @@ Frame AravisCamera::Grab(std::chrono::milliseconds timeout) {
     frame.arrival_ns = system_ns > 0 ? system_ns - RealtimeMinusSteadyNs() : arrival_steady;
     frame.exposure_us = exposure_us;
     frame.gain = gain;
-    frame.exposure_start_ns =
-        frame.arrival_ns - static_cast<int64_t>(std::llround(exposure_us * 1e3));
+    const int64_t exposure_ns = static_cast<int64_t>(std::llround(exposure_us * 1e3));
+    frame.exposure_start_ns = frame.arrival_ns - exposure_ns;
+    if (frame.device_timestamp_ns > 0) {
+      // The device's timestamp places the exposure better than arrival, which carries the
+      // transfer and the host's delays (milliseconds, varying): map it through the smallest
+      // apparent delay so far.
+      const int64_t sample = frame.exposure_start_ns - frame.device_timestamp_ns;
+      int64_t& offset = impl_->clock_offset_ns;
+      if (frame.device_timestamp_ns < impl_->last_device_ns) offset = std::numeric_limits<int64_t>::max();
+      impl_->last_device_ns = frame.device_timestamp_ns;
+      if (offset != std::numeric_limits<int64_t>::max())
+        offset += (frame.arrival_ns - impl_->clock_offset_at_ns) / 10000;  // 100 ppm drift allowance
+      if (sample <= offset) {
+        offset = sample;
+      }
+      impl_->clock_offset_at_ns = frame.arrival_ns;
+      frame.exposure_start_ns = std::min(frame.exposure_start_ns, frame.device_timestamp_ns + offset);
+    }
     return frame;
   }
 }

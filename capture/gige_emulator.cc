@@ -43,7 +43,7 @@ bool LatencyInRange(double latency_ms) { return latency_ms >= 0.0 && latency_ms 
 // Binds (and releases) the GVCP port of `address`, so that a taken port or an address no
 // interface has is reported before Aravis, which only logs it, tries. Empty when it is free.
 std::string ProbeGvcpPort(const std::string& address) {
-  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+  const int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);  // a program started meanwhile must not hold the port
   if (fd < 0) return std::string("cannot create a UDP socket: ") + std::strerror(errno);
   sockaddr_in where{};
   where.sin_family = AF_INET;

@@ -67,15 +67,26 @@ class Flasher {
     }
     lit_.convertTo(weight_, CV_32F, 1.0 / 255.0);
     contrast_sum_ = cv::sum(contrast.mul(weight_))[0];
-    result.lower_ms = -std::numeric_limits<double>::infinity();
-    result.upper_ms = std::numeric_limits<double>::infinity();
     const double period_ms = Period();
+    std::vector<double> middles;
+    result.lower_ms = std::numeric_limits<double>::infinity();
+    result.upper_ms = -std::numeric_limits<double>::infinity();
     for (int edge = 0; edge < options_.edges; ++edge) {
       const bool rising = edge % 2 == 1;  // the references leave the display white
       std::uniform_real_distribution<double> phase(0.0, period_ms);
       SleepNs(MsToNs(phase(rng_)));
-      Edge(rising, &result);
+      double lower = -std::numeric_limits<double>::infinity(), upper = std::numeric_limits<double>::infinity();
+      Edge(rising, &lower, &upper);
+      // No frame seen old after the change (the first was new): a period and an exposure before it.
+      lower = std::max(lower, upper - period_ms - exposure_ms_);
+      lower = std::min(lower, upper);  // a frame seen old after one seen new: the change fell between
+      result.lower_ms = std::min(result.lower_ms, lower);
+      result.upper_ms = std::max(result.upper_ms, upper);
+      middles.push_back(0.5 * (lower + upper));
     }
+    std::nth_element(middles.begin(), middles.begin() + middles.size() / 2, middles.end());
+    result.estimate_ms = middles[middles.size() / 2];
+    result.frames = frames_;
     display_->Show(black_);
     result.edges = options_.edges;
     result.frame_period_ms = Period();
@@ -126,7 +137,8 @@ class Flasher {
     return cv::sum(above.mul(weight_))[0] / contrast_sum_;
   }
 
-  void Edge(bool rising, LatencyMeasurement* result) {
+  // One change of the display; `lower` and `upper` bound the latency it showed.
+  void Edge(bool rising, double* lower, double* upper) {
     display_->Show(rising ? white_ : black_);
     const int64_t shown = SteadyNowNs();
     const int64_t deadline =
@@ -138,12 +150,11 @@ class Flasher {
       const double start_ms = NsToMs(frame.exposure_start_ns - shown);
       if (moved > kNew) {
         if (start_ms < 0.0) continue;  // a frame begun before the change cannot have seen it
-        result->upper_ms = std::min(result->upper_ms, start_ms);
-        result->frames = frames_;
+        *upper = std::min(*upper, start_ms);
         return;
       }
-      result->lower_ms = std::max(result->lower_ms, start_ms);
-      if (moved >= kOld) result->upper_ms = std::min(result->upper_ms, start_ms + frame.exposure_us * 1e-3);
+      *lower = std::max(*lower, start_ms);
+      if (moved >= kOld) *upper = std::min(*upper, start_ms + frame.exposure_us * 1e-3);
       if (SteadyNowNs() > deadline) {
         throw IoError(fmt::format(
             "latency: camera '{}' did not see display '{}' change within {:.0f} ms (the lit pixels moved "
@@ -189,7 +200,7 @@ double LatencyMeasurement::SettleMs() const {
 
 std::string LatencyMeasurement::Summary() const {
   return fmt::format(
-      "display-to-camera latency {:.1f} ms (between {:.1f} and {:.1f} ms, {} changes, {} frames at {:.1f} ms, "
+      "display-to-camera latency {:.1f} ms (every change seen between {:.1f} and {:.1f} ms, {} changes, {} frames at {:.1f} ms, "
       "exposure {:.1f} ms, {:.0f}% of the view lit): settle {:.0f} ms",
       EstimateMs(), lower_ms, upper_ms, edges, frames, frame_period_ms, exposure_ms, 100 * lit_fraction,
       SettleMs());

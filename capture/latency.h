@@ -9,12 +9,14 @@
 // frame clock, and every frame after a change is classed by how far its lit pixels have moved
 // from the old level to the new one: still old (< 10 %), new (> 90 %), or in between (a frame
 // whose exposure the change fell into). A frame exposed from s to s + e after a change shown at
-// t0 bounds the latency L:
+// t0 bounds the latency L of that change:
 //   still old:  L > s − t0      (its exposure began before the light changed)
 //   new:        L ≤ s − t0      (it saw only the new light)
 //   in between: s − t0 < L ≤ s + e − t0
-// so L lies in (lower, upper] with lower the largest and upper the smallest bound over all
-// edges; random phases narrow the interval to about a frame period divided by the edges.
+// so each change's latency lies in (lower, upper], an interval of about a frame period (random
+// phases move it). A rig's latency varies from change to change (a display's refresh, a
+// compositor's frame, a camera's transfer): the measurement reports the median change's, the
+// range every change fell in, and settles for the slowest.
 
 #include <cstdint>
 #include <string>
@@ -34,16 +36,17 @@ struct LatencyOptions {
 };
 
 struct LatencyMeasurement {
-  double lower_ms = 0.0;         // the latency is above this ...
+  double estimate_ms = 0.0;      // the median change's latency (the middle of its interval)
+  double lower_ms = 0.0;         // every change's latency was above this ...
   double upper_ms = 0.0;         // ... and at most this (milliseconds after Show() returned)
   double frame_period_ms = 0.0;  // median interval between frames' exposure starts
   double exposure_ms = 0.0;      // the frames' exposure
   int edges = 0;                 // display changes measured
   int frames = 0;                // frames classed
   double lit_fraction = 0.0;     // of the camera's pixels, those the display lights
-  double EstimateMs() const { return 0.5 * (lower_ms + upper_ms); }
-  // The settle time the sequencer needs: the upper bound plus a margin for jitter (10 %, at
-  // least 5 ms), rounded up to a millisecond.
+  double EstimateMs() const { return estimate_ms; }
+  // The settle time the sequencer needs: the slowest change's upper bound plus a margin (10 %,
+  // at least 5 ms), rounded up to a millisecond.
   double SettleMs() const;
   std::string Summary() const;  // one line, for logs
 };
