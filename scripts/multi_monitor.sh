@@ -90,7 +90,8 @@ chmod 700 "$dir" "$dir/runtime"
   echo "# Written by scripts/multi_monitor.sh"
   echo "xwayland force"  # start Xwayland now (not on the first X11 client), so DISPLAY is up
   for k in $(seq "$outputs"); do
-    echo "output HEADLESS-$k mode ${width}x${height} position $(((k - 1) * width)) 0"
+    # Black where nothing is shown, as an idle projector should be (sway's default is grey).
+    echo "output HEADLESS-$k mode ${width}x${height} position $(((k - 1) * width)) 0 bg #000000 solid_color"
   done
   # Tell the script the sockets, once sway and Xwayland are up.
   echo "exec printf '%s %s\\n' \"\$WAYLAND_DISPLAY\" \"\$DISPLAY\" > $dir/sockets.tmp && mv $dir/sockets.tmp $dir/sockets"
