@@ -47,6 +47,28 @@ wait $emulator
 cat "$2.emulate.log" "$2.capture.log"
 )sh";
 
+// Inside the server: the emulator (latency 50 ms) and the whole demo on the rig it plays —
+// calibrate all with the scene's camera model, compensate, project, verify — into demo/.
+constexpr char kDemoScript[] = R"sh(cd "$(dirname "$0")"
+./procam emulate room/tiny_box.json --monitors HEADLESS-1,HEADLESS-2 --patches 60 --latency-ms 50 \
+  >demo.emulate.log 2>&1 &
+emulator=$!
+i=0
+until grep -q "camera scale" demo.emulate.log 2>/dev/null; do
+  i=$((i + 1)); [ $i -ge 300 ] && break
+  kill -0 $emulator 2>/dev/null || break
+  sleep 0.1
+done
+./procam demo --camera aravis:gv:127.0.0.1 --display glfw:XWAYLAND0,glfw:XWAYLAND1 --names left,right \
+  --scene room/tiny_box.json --camera-model room/tiny_box_camera.cameramodel \
+  --camera-scale "$(sed -n 's/.*camera scale \([0-9.e+-]*\).*/\1/p' demo.emulate.log)" \
+  --camera-guess 0.5,-1.4,0.8,0.5,1.5,0.25 --patches 100 --out demo >demo.log 2>&1
+echo $? >demo.status
+kill $emulator 2>/dev/null
+wait $emulator
+cat demo.emulate.log demo.log
+)sh";
+
 class EmulatedRoom : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -70,18 +92,32 @@ class EmulatedRoom : public ::testing::Test {
     dir_.Write("room/tiny_box.json", room.dump(2));
     RunShell("chmod -R a+rwX " + dir_.path().string());
     dir_.Write("run.sh", kRunScript);
+    dir_.Write("demo.sh", kDemoScript);
   }
 
+  // Runs `script ARGUMENTS` on two 320x200 monitors in a private network namespace.
+  CommandRun InTheRoom(const std::string& script, const std::string& arguments) {
+    const std::string inner = (testing::SourceDir() / "scripts/multi_monitor.sh").string() +
+                              " --mode 320x200 --timeout 240 2 -- sh " + (dir_ / script).string() + " " + arguments;
+    return RunShell("unshare -n sh -c 'ip link set lo up && " + inner + "'");
+  }
   // The emulated capture with the emulator's latency `latency_ms`, into DIR/`name`.
   CommandRun CaptureThroughTheRoom(double latency_ms, const std::string& name) {
-    const std::string inner = (testing::SourceDir() / "scripts/multi_monitor.sh").string() +
-                              " --mode 320x200 --timeout 120 2 -- sh " + (dir_ / "run.sh").string() + " " +
-                              std::to_string(latency_ms) + " " + name;
-    return RunShell("unshare -n sh -c 'ip link set lo up && " + inner + "'");
+    return InTheRoom("run.sh", std::to_string(latency_ms) + " " + name);
   }
 
   testing::TempDir dir_;
 };
+
+// The camera scale `procam emulate` printed into its log.
+std::string ScaleFromLog(const std::filesystem::path& log) {
+  std::ifstream file(log);
+  for (std::string line; std::getline(file, line);) {
+    const size_t at = line.find("camera scale ");
+    if (at != std::string::npos) return line.substr(at + 13, line.find(' ', at + 13) - at - 13);
+  }
+  return "0";
+}
 
 // Frames of two sessions of the same sequence, file by file: the largest mean absolute
 // difference of a frame, in 8-bit digital numbers.
@@ -134,6 +170,46 @@ TEST_F(EmulatedRoom, CaptureThroughTheRoomPhotographsWhatTheInProcessRigDoes) {
     EXPECT_LT(measured, latency_ms + 35.0) << run.output;
     EXPECT_GE(result["settle_ms"].get<double>(), latency_ms);
   }
+}
+
+// The whole pipeline on the emulated room reaches what it reaches on the in-process rig of the
+// same scene file: the same projector calibration, registration and verified appearance (the
+// camera has no noise, so to rounding).
+TEST_F(EmulatedRoom, DemoThroughTheRoomReachesWhatTheInProcessRigDoes) {
+  const CommandRun run = InTheRoom("demo.sh", "");
+  std::ifstream status_file(dir_ / "demo.status");
+  int status = -1;
+  status_file >> status;
+  ASSERT_EQ(status, 0) << "the demo through the emulated room failed:\n" << run.output;
+  const CommandRun reference = RunShell(
+      "cd " + dir_.path().string() +
+      " && ./procam demo --camera 'synthetic:room/tiny_box.json?patches=60' --scene room/tiny_box.json "
+      "--camera-model room/tiny_box_camera.cameramodel --camera-scale " +
+      ScaleFromLog(dir_ / "demo.emulate.log") + " --camera-guess 0.5,-1.4,0.8,0.5,1.5,0.25 --patches 100 --out truth_demo");
+  ASSERT_EQ(reference.exit_code, 0) << reference.output;
+
+  const nlohmann::json emulated = ReadJsonFile(dir_ / "demo/verify/result.json");
+  const nlohmann::json truth = ReadJsonFile(dir_ / "truth_demo/verify/result.json");
+  const auto best = [](const nlohmann::json& result) { return result["iterations"][result["best"].get<int>()]; };
+  for (const char* key : {"pixel_mean76", "pixel_mean2000", "patch_mean2000"}) {
+    const double a = best(emulated)["measured_vs_desired"][key].get<double>();
+    const double b = best(truth)["measured_vs_desired"][key].get<double>();
+    std::printf("verified %s: emulated room %.4f, in-process %.4f\n", key, a, b);
+    EXPECT_NEAR(a, b, 0.01 * b) << key;
+  }
+  // rig/result.json: the projectors' calibration residuals and the registration's.
+  const nlohmann::json rig_a = ReadJsonFile(dir_ / "demo/rig/result.json")["projectors"]["registration"];
+  const nlohmann::json rig_b = ReadJsonFile(dir_ / "truth_demo/rig/result.json")["projectors"]["registration"];
+  std::vector<double> a, b;
+  for (const auto& projector : rig_a["projectors"]) a.push_back(projector["rms_px_per_coordinate"].get<double>());
+  for (const auto& projector : rig_b["projectors"]) b.push_back(projector["rms_px_per_coordinate"].get<double>());
+  a.push_back(rig_a["residual"]["inliers"]["rms_mm"].get<double>());
+  b.push_back(rig_b["residual"]["inliers"]["rms_mm"].get<double>());
+  std::printf("projector RMS %.4f %.4f px, registration %.3f mm (in-process %.4f %.4f px, %.3f mm)\n", a[0], a[1], a[2],
+              b[0], b[1], b[2]);
+  ASSERT_EQ(a.size(), 3u);
+  ASSERT_EQ(b.size(), 3u);
+  for (size_t k = 0; k < a.size(); ++k) EXPECT_NEAR(a[k], b[k], 0.01 * b[k]) << k;
 }
 
 }  // namespace
