@@ -28,6 +28,7 @@ struct CalibrateAllArguments {
   std::string camera_scale;
   int frames = 4;
   SettleSetting settle{true, 150.0};  // default: measured
+  double timeout_ms = SequencerOptions().grab_timeout_ms;
   std::vector<double> exposures_us;
   std::string levels = "0,32,64,96,128,160,192,224,255";
 };
@@ -50,6 +51,7 @@ void CalibrateAll(const CalibrateAllArguments& args) {
   options.frames = args.frames;
   options.settle_ms = args.settle.ms;
   options.measure_settle = args.settle.measure;
+  options.grab_timeout_ms = args.timeout_ms;
   options.exposures_us = args.exposures_us;
   options.levels = ParseIntegerList("--levels", args.levels, "8-bit levels, comma-separated");
   options.progress = PrintProgress();
@@ -93,6 +95,11 @@ void AddCalibrateAllCommand(CLI::App& calibrate) {
                   "camera: from its URI)");
   all->add_option("--frames", args->frames, "Frames averaged per pattern")->capture_default_str();
   AddSettleOption(all, &args->settle);
+  all->add_option("--timeout-ms", args->timeout_ms,
+                  "Grab timeout per frame, milliseconds (a camera that delivers nothing for this long is retried, "
+                  "then the capture stops with one line; run the same command again to resume)")
+      ->check(CLI::Range(1.0, 600000.0))
+      ->capture_default_str();
   all->add_option("--exposure-us", args->exposures_us,
                   "Exposure(s), microseconds; several bracket and merge to HDR")
       ->delimiter(',');

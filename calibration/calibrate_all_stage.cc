@@ -143,11 +143,14 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args,
     capture.sequencer.frames_per_pattern = args.frames;
     capture.sequencer.settle_ms = args.settle_ms;
     capture.measure_latency = args.measure_settle;
+    capture.sequencer.grab_timeout_ms = args.grab_timeout_ms;
+    capture.latency.grab_timeout_ms = args.grab_timeout_ms;
     capture.sequencer.exposures_us = args.exposures_us;
     capture.progress = args.progress;
     std::vector<std::string> common = {
         "--camera", args.camera, "--frames", std::to_string(args.frames), "--settle-ms",
-        args.measure_settle ? std::string("auto") : fmt::format("{}", args.settle_ms)};
+        args.measure_settle ? std::string("auto") : fmt::format("{}", args.settle_ms),
+        "--timeout-ms", fmt::format("{}", args.grab_timeout_ms)};
     if (plan.simulated) {
       capture.projector = static_cast<int>(k);
       common.insert(common.end(), {"--projector", std::to_string(k)});

@@ -51,6 +51,7 @@ struct CalibrateAllOptions {
   // ... unless measured: the display-to-camera latency of each projector, measured before its
   // structured light (capture/latency.h), sets the settle time of its captures.
   bool measure_settle = false;
+  double grab_timeout_ms = SequencerOptions().grab_timeout_ms;  // per frame, before a retry
   std::vector<double> exposures_us;  // several: bracketed and merged to HDR
   std::vector<int> levels = {0, 32, 64, 96, 128, 160, 192, 224, 255};  // photometric drives
   ProgressCallback progress;  // each step's command line and its report

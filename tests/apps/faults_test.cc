@@ -327,6 +327,23 @@ TEST_F(Faults, ReadOnlyDirectoryIsOneLineAndKeepsWhatWasWritten) {
   }
 }
 
+// The same stall in calibrate all, with its own --timeout-ms: one line naming the camera, in
+// bounded time, the captured frames kept for a rerun.
+TEST_F(Faults, StalledCameraEndsCalibrateAllWithOneLine) {
+  const fs::path rig = dir / "stalled_rig";
+  const auto start = std::chrono::steady_clock::now();
+  const CommandRun stalled = testing::RunProcamStderr("calibrate all --camera " + kCamera +
+                                                      "&fault=timeout&fault_after=30'" + kCapture +
+                                                      "--timeout-ms 50 --out " + rig.string());
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  testing::ExpectOneErrorLine(stalled, "camera 'synthetic:tiny_box'", "stalled in calibrate all");
+  // --timeout-ms reached the grabs: 50 ms plus the 1 ms exposure.
+  EXPECT_NE(stalled.output.find("no frame within 51 ms"), std::string::npos) << stalled.output;
+  EXPECT_LT(seconds, kMaxSeconds);
+  EXPECT_TRUE(fs::exists(rig / "captures" / "structured_light_left" / "session.json"));
+  ExpectEveryFileReads(rig);
+}
+
 // A camera that stalls: after some frames it delivers nothing and reports nothing, so every
 // grab waits its --timeout-ms (the synthetic camera's fault=timeout, for ever). verify ends with
 // one line naming the camera, exit 1, the photos it took kept; run again with a camera that
