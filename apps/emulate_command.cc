@@ -80,9 +80,8 @@ void RunEmulate(const EmulateArguments& args) {
 
 
   // What calibrate all needs of a real camera: its value per unit exitance at these settings.
-  const double full_scale = FullScale(options.pixel_format);
-  const double scale = world->radiance_scale * full_scale * options.exposure_us / camera.reference_exposure_us *
-                       std::pow(10.0, options.gain_db / 20.0);
+  const double scale = CameraValuePerExitance(*world, camera, options.exposure_us, options.gain_db,
+                                              FullScale(options.pixel_format));
   std::printf("procam emulate: room %s, camera %s (%dx%d %s, %.3g fps, latency %.0f ms, exposure %.0f us, gain %.0f dB)\n",
               args.room.c_str(), emulator.Uri().c_str(), options.width, options.height,
               PixelFormatName(options.pixel_format).c_str(), options.frame_rate, options.latency_ms,

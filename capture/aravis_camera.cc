@@ -20,11 +20,6 @@ bool Fail(std::string* why, const std::string& message) {
   return false;
 }
 
-bool IsIpv4(const std::string& text) {
-  in_addr parsed{};
-  return inet_pton(AF_INET, text.c_str(), &parsed) == 1;
-}
-
 // The local address the kernel would send from to reach `address` (a connected UDP socket:
 // connecting sends nothing). Empty when there is no route.
 std::string RoutedSourceAddress(const std::string& address) {
@@ -138,11 +133,11 @@ bool AravisCameraOptions::Check(std::string* why) const {
     return Fail(why, "no device id (aravis:<id>; `procam cameras` lists them)");
   if (!device_id.empty() && !gige_address.empty())
     return Fail(why, "give a device id or a GigE Vision address, not both");
-  if (!gige_address.empty() && !IsIpv4(gige_address))
+  if (!gige_address.empty() && !IsIpv4Address(gige_address))
     return Fail(why, "'" + gige_address + "' is not an IPv4 address (aravis:gv:<address>)");
   if (!interface_address.empty() && gige_address.empty())
     return Fail(why, "interface is for cameras opened by address (aravis:gv:<address>)");
-  if (!interface_address.empty() && !IsIpv4(interface_address))
+  if (!interface_address.empty() && !IsIpv4Address(interface_address))
     return Fail(why, "interface '" + interface_address + "' is not an IPv4 address");
   if (trigger != "auto" && trigger != "software" && trigger != "free") {
     return Fail(why, "trigger must be auto, software or free, got '" + trigger + "'");
@@ -151,6 +146,11 @@ bool AravisCameraOptions::Check(std::string* why) const {
   if (packet_size != 0 && (packet_size < 576 || packet_size > 65000))
     return Fail(why, "packet_size must be in [576, 65000] bytes (or 0: the camera's)");
   return true;
+}
+
+bool IsIpv4Address(const std::string& text) {
+  in_addr parsed{};
+  return inet_pton(AF_INET, text.c_str(), &parsed) == 1;
 }
 
 AravisCameraOptions AravisCameraOptionsFromUri(const CameraUri& uri) {

@@ -60,6 +60,10 @@ struct AravisCameraOptions {
 // Reads the URI's keys. Throws IoError naming the URI and key.
 AravisCameraOptions AravisCameraOptionsFromUri(const CameraUri& uri);
 
+// Whether `text` is a dotted IPv4 address (inet_pton), as aravis:gv: URIs and the GigE
+// emulator's address take.
+bool IsIpv4Address(const std::string& text);
+
 class AravisCamera : public Camera {
  public:
   // Opens the camera and configures acquisition and trigger. Throws IoError naming the device.

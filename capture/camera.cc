@@ -5,6 +5,7 @@
 #include <cmath>
 #include <mutex>
 #include <sstream>
+#include <thread>
 
 #include "capture/test_camera.h"
 #include "procam/config.h"
@@ -67,6 +68,13 @@ int64_t SteadyNowNs() {
              std::chrono::steady_clock::now().time_since_epoch())
       .count();
 }
+
+void SleepUntil(int64_t steady_ns) {
+  const int64_t wait = steady_ns - SteadyNowNs();
+  if (wait > 0) std::this_thread::sleep_for(std::chrono::nanoseconds(wait));
+}
+
+int64_t MsToNs(double ms) { return static_cast<int64_t>(std::llround(ms * 1e6)); }
 
 CameraUri CameraUri::Parse(const std::string& text) {
   CameraUri uri;

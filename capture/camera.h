@@ -37,6 +37,10 @@ namespace procam {
 
 // Nanoseconds of std::chrono::steady_clock now.
 int64_t SteadyNowNs();
+// Sleeps until SteadyNowNs() reaches `steady_ns` (returns at once if it has).
+void SleepUntil(int64_t steady_ns);
+// Milliseconds as nanoseconds, rounded.
+int64_t MsToNs(double ms);
 
 // A grab waited longer than its timeout. The camera may still answer later.
 class CameraTimeout : public IoError {

@@ -32,11 +32,6 @@ bool Fail(std::string* why, const std::string& message) {
   return false;
 }
 
-bool IsIpv4(const std::string& text) {
-  in_addr parsed{};
-  return inet_pton(AF_INET, text.c_str(), &parsed) == 1;
-}
-
 bool FrameRateInRange(double frame_rate) { return frame_rate >= 0.1 && frame_rate <= 1000.0; }
 bool LatencyInRange(double latency_ms) { return latency_ms >= 0.0 && latency_ms <= 10000.0; }
 
@@ -77,7 +72,7 @@ GigeFrameSource PhotographScene(SceneView view, const TestCameraOptions& model) 
 }
 
 bool GigeEmulatorOptions::Check(std::string* why) const {
-  if (!IsIpv4(address)) return Fail(why, "address must be an IPv4 address, got '" + address + "'");
+  if (!IsIpv4Address(address)) return Fail(why, "address must be an IPv4 address, got '" + address + "'");
   if (serial.empty() || serial.size() > 15)
     return Fail(why, "serial must have 1 to 15 characters, got '" + serial + "'");
   if (width < 1 || width > 2048 || height < 1 || height > 2048)

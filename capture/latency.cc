@@ -20,12 +20,7 @@ namespace {
 
 constexpr double kOld = 0.1, kNew = 0.9;  // how far the lit pixels moved: still old, new
 
-int64_t MsToNs(double ms) { return static_cast<int64_t>(std::llround(ms * 1e6)); }
 double NsToMs(int64_t ns) { return static_cast<double>(ns) * 1e-6; }
-
-void SleepNs(int64_t ns) {
-  if (ns > 0) std::this_thread::sleep_for(std::chrono::nanoseconds(ns));
-}
 
 // A frame as one grey float channel, and its full scale.
 cv::Mat Grey(const Frame& frame, double* full_scale) {
@@ -74,7 +69,7 @@ class Flasher {
     for (int edge = 0; edge < options_.edges; ++edge) {
       const bool rising = edge % 2 == 1;  // the references leave the display white
       std::uniform_real_distribution<double> phase(0.0, period_ms);
-      SleepNs(MsToNs(phase(rng_)));
+      SleepUntil(SteadyNowNs() + MsToNs(phase(rng_)));
       double lower = -std::numeric_limits<double>::infinity(), upper = std::numeric_limits<double>::infinity();
       Edge(rising, &lower, &upper);
       // No frame seen old after the change (the first was new): a period and an exposure before it.
@@ -99,7 +94,7 @@ class Flasher {
   cv::Mat Reference(const cv::Mat& pattern) {
     display_->Show(pattern);
     const int64_t settled = SteadyNowNs() + MsToNs(options_.max_latency_ms);
-    SleepNs(settled - SteadyNowNs());
+    SleepUntil(settled);
     camera_->DropBufferedFrames();
     cv::Mat sum;
     for (int frames = 0; frames < 2;) {

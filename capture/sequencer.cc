@@ -13,13 +13,6 @@ bool Fail(std::string* why, const std::string& message) {
   return false;
 }
 
-void SleepUntil(int64_t steady_ns) {
-  const int64_t wait = steady_ns - SteadyNowNs();
-  if (wait > 0) std::this_thread::sleep_for(std::chrono::nanoseconds(wait));
-}
-
-int64_t MsToNs(double ms) { return static_cast<int64_t>(std::llround(ms * 1e6)); }
-
 }  // namespace
 
 bool HdrMergeOptions::Check(std::string* why) const {

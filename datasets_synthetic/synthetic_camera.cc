@@ -281,6 +281,12 @@ SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world) {
   };
 }
 
+double CameraValuePerExitance(const SyntheticWorld& world, const TestCameraOptions& camera, double exposure_us,
+                              double gain_db, double full_scale) {
+  return world.radiance_scale * full_scale * exposure_us / camera.reference_exposure_us *
+         std::pow(10.0, gain_db / 20.0);
+}
+
 std::shared_ptr<SyntheticWorld> OpenSyntheticWorld(const CameraUri& uri) {
   const SyntheticUri key = ParseSyntheticUri(uri);
   // Alive worlds by scene, patch count and albedo; a world goes when its last holder lets it go,
@@ -374,8 +380,8 @@ double SyntheticValuePerExitance(const CameraUri& uri, const SyntheticWorld& wor
   if (hdr) {  // the HDR merge: (DN − black) / (full − black) per second
     return world.radiance_scale * full / (full - black) * gain / (camera.reference_exposure_us * 1e-6);
   }
-  const double exposure = settings.value("exposure_us", camera.exposure_us);
-  return world.radiance_scale * full * exposure / camera.reference_exposure_us * gain;
+  return CameraValuePerExitance(world, camera, settings.value("exposure_us", camera.exposure_us),
+                                settings.value("gain", 0.0), full);
 }
 
 // The synthetic camera's chessboard photos: the rig's own camera (its lens, not its pose) sees

@@ -96,6 +96,12 @@ std::shared_ptr<SyntheticWorld> MakeSceneFileWorld(const std::filesystem::path& 
 // std::invalid_argument when `world` is empty or its displays do not match its projectors.
 SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world);
 
+// The world's camera value per unit exitance (the scale calibrate all needs of a camera) for a
+// single exposure: radiance_scale · full scale · exposure / the camera's reference exposure ·
+// 10^(gain/20).
+double CameraValuePerExitance(const SyntheticWorld& world, const TestCameraOptions& camera, double exposure_us,
+                              double gain_db, double full_scale);
+
 // The world a "synthetic:" URI names: its path is a built-in scene's name or a scene file
 // (ending in .json, relative to the working directory); its keys `patches`, `albedo` and, for a
 // scene file, `camera` (which of its cameras) are read, other keys are left unread.
