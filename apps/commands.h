@@ -19,6 +19,7 @@ void AddEvaluationCommands(CLI::App& app);    // evaluate
 void AddCaptureCommands(CLI::App& app);       // cameras, capture
 void AddVerifyCommand(CLI::App& app);         // verify
 void AddEmulateCommand(CLI::App& app);        // emulate (the room as a GigE camera)
+void AddNodeCommands(CLI::App& app);          // keys, node, play (display nodes)
 void AddCalibrateCommands(CLI::App& app);     // calibrate camera, photometric, ...
 void AddCalibrateResponseCommand(CLI::App& calibrate);  // calibrate response (the group)
 void AddCalibrateAllCommand(CLI::App& calibrate);       // calibrate all (the group)

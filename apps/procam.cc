@@ -43,6 +43,7 @@ int main(int argc, char** argv) {
   procam::AddEmulateCommand(app);
   procam::AddCalibrateCommands(app);
   procam::AddProjectionCommands(app);
+  procam::AddNodeCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {

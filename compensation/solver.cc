@@ -665,18 +665,23 @@ void SolveCiede2000Rounds(const SolverOptions& options, const CompensationProble
 }  // namespace
 
 CompensationSolution Solve(const SolverOptions& options, const CompensationProblem& problem,
-                           SolverSummary* summary, const CoarseLevel& coarse) {
+                           SolverSummary* summary, const CoarseLevel& coarse, const WarmStart& start) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("solver options: " + why);
   why = problem.Validate();
   if (!why.empty()) throw std::invalid_argument("compensation problem: " + why);
-  if (options.multires && (coarse.problem == nullptr || coarse.coarse_of_fine == nullptr)) {
+  const bool warm = start.emittance.size() > 0;
+  if (warm && (start.emittance.rows() != problem.size() || start.emittance.cols() != 3 ||
+               !start.emittance.allFinite())) {
+    throw std::invalid_argument("warm start: need finite (" + std::to_string(problem.size()) + ",3) emittance");
+  }
+  if (!warm && options.multires && (coarse.problem == nullptr || coarse.coarse_of_fine == nullptr)) {
     throw std::invalid_argument("multires needs a coarse level");
   }
   *summary = SolverSummary();
   summary->method = options.method;
   auto setup_start = Clock::now();
-  auto radiosity_system = MakeRadiositySystem(options, problem);
+  auto radiosity_system = start.radiosity ? start.radiosity : MakeRadiositySystem(options, problem);
   const RadiositySystem& radiosity = *radiosity_system;
   summary->setup_seconds = SecondsSince(setup_start);
   const auto solve_start = Clock::now();
@@ -699,18 +704,20 @@ CompensationSolution Solve(const SolverOptions& options, const CompensationProbl
       const ColourModel model =
           options.method == CompensationMethod::kLinear ? ColourModel::kLinear : ColourModel::kLab;
       const Eigen::MatrixX3d initial =
-          options.multires ? MultiresStart(options, problem, coarse, model, reverse, summary,
-                                           &coarse_setup_seconds)
-                           : reverse;
+          warm ? Clamp(start.emittance, problem.lower, problem.upper)
+               : options.multires ? MultiresStart(options, problem, coarse, model, reverse, summary,
+                                                  &coarse_setup_seconds)
+                                  : reverse;
       const CompensationObjective objective(problem, radiosity, model);
       solution.emittance = Minimise(options, objective, initial, summary, &solution.radiosity);
       break;
     }
     case CompensationMethod::kPerceptual2000: {
       const Eigen::MatrixX3d initial =
-          options.multires ? MultiresStart(options, problem, coarse, ColourModel::kLab, reverse,
-                                           summary, &coarse_setup_seconds)
-                           : reverse;
+          warm ? Clamp(start.emittance, problem.lower, problem.upper)
+               : options.multires ? MultiresStart(options, problem, coarse, ColourModel::kLab, reverse,
+                                                  summary, &coarse_setup_seconds)
+                                  : reverse;
       SolveCiede2000Rounds(options, problem, radiosity, initial, summary, &solution);
       break;
     }

@@ -193,9 +193,22 @@ struct CompensationSolution {
   ColourMetric metric;
 };
 
+// Where a solve starts, for a sequence of problems that differ only in their desired colours
+// (procam play: one per frame of changing content).
+struct WarmStart {
+  // Made for this problem's form factors and reflectance (an earlier solution's
+  // radiosity_system, with the same options' device): reused instead of factorising K again.
+  // Null: made here.
+  std::shared_ptr<const RadiositySystem> radiosity;
+  // The start of the iterative methods (projected onto the bounds), e.g. the previous frame's
+  // emittance; it replaces multires's coarse start. Empty: the reverse method's E, as Solve does.
+  Eigen::MatrixX3d emittance;
+};
+
 // Solves `problem` (validated first: throws std::invalid_argument naming the fault).
 CompensationSolution Solve(const SolverOptions& options, const CompensationProblem& problem,
-                           SolverSummary* summary, const CoarseLevel& coarse = {});
+                           SolverSummary* summary, const CoarseLevel& coarse = {},
+                           const WarmStart& start = {});
 
 // Alg. 1 on an objective, from `initial` (projected onto the bounds). Used by Solve for the
 // linear and perceptual methods; exposed for tests and benchmarks.

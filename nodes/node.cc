@@ -1,0 +1,269 @@
+#include "nodes/node.h"
+
+#include <fmt/format.h>
+
+#include <chrono>
+#include <optional>
+
+#include "base/io.h"
+#include "base/timing.h"
+#include "calibration/rig_directory.h"
+#include "geometry/patches.h"
+#include "geometry/stage.h"
+#include "nodes/messages.h"
+#include "nodes/transport.h"
+#include "projection/projection_rig.h"
+
+namespace procam {
+namespace {
+
+// What a kSetup asks for, and the rig built for it.
+struct NodeSetup {
+  std::string id;
+  int target_patches = 0, patches = 0;
+  RenderOptions render;
+  double feather = 0.1;
+  ProjectionRig rig;
+};
+
+// Reads a kSetup's body into *setup (not the rig). Throws std::invalid_argument naming the key.
+void ParseSetup(const nlohmann::json& body, NodeSetup* setup) {
+  auto need = [&](const char* key) -> const nlohmann::json& {
+    if (!body.contains(key)) throw std::invalid_argument(std::string("setup: no \"") + key + "\"");
+    return body.at(key);
+  };
+  const nlohmann::json& id = need("setup");
+  const nlohmann::json& target = need("target_patches");
+  const nlohmann::json& patches = need("patches");
+  if (!id.is_string() || id.get<std::string>().size() > 256) throw std::invalid_argument("setup: \"setup\" must be a string");
+  if (!target.is_number_integer() || target.get<long long>() < 4 || target.get<long long>() > kMaxFramePatches)
+    throw std::invalid_argument("setup: \"target_patches\" must be an integer in [4, " + std::to_string(kMaxFramePatches) + "]");
+  if (!patches.is_number_integer() || patches.get<long long>() < 1 || patches.get<long long>() > kMaxFramePatches)
+    throw std::invalid_argument("setup: \"patches\" must be an integer in [1, " + std::to_string(kMaxFramePatches) + "]");
+  setup->id = id.get<std::string>();
+  setup->target_patches = target.get<int>();
+  setup->patches = patches.get<int>();
+  if (body.contains("dither")) {
+    if (!body["dither"].is_string() || !ParseDither(body["dither"].get<std::string>(), &setup->render.dither))
+      throw std::invalid_argument("setup: \"dither\" must be none, ordered or error-diffusion");
+  }
+  if (body.contains("light")) {
+    if (!body["light"].is_string() || !ParseLightField(body["light"].get<std::string>(), &setup->render.light))
+      throw std::invalid_argument("setup: \"light\" must be smooth or flat");
+  }
+  if (body.contains("feather")) {
+    if (!body["feather"].is_number() || !(body["feather"].get<double>() > 0.0 && body["feather"].get<double>() <= 0.5))
+      throw std::invalid_argument("setup: \"feather\" must be a number in (0, 0.5]");
+    setup->feather = body["feather"].get<double>();
+  }
+}
+
+class Node {
+ public:
+  Node(zmq::context_t& context, const NodeOptions& options, const NodeOutputFactory& make_outputs)
+      : options_(options), rig_dir_(ReadRigDirectory(options.rig_dir)) {
+    if (options.projectors.empty()) throw IoError("node " + options.name + ": no projectors to show (--projectors)");
+    for (const std::string& name : options.projectors) {
+      int found = -1;
+      for (size_t k = 0; k < rig_dir_.projectors.size(); ++k) {
+        if (rig_dir_.projectors[k].name == name) found = static_cast<int>(k);
+      }
+      if (found < 0) {
+        std::string names;
+        for (const Projector& p : rig_dir_.projectors) names += (names.empty() ? "" : ", ") + p.name;
+        throw IoError((options.rig_dir / "rig.json").string() + ": no projector '" + name +
+                      "' (the rig has " + names + ")");
+      }
+      own_.push_back(found);
+      own_projectors_.push_back(rig_dir_.projectors[found]);
+    }
+    outputs_ = make_outputs(own_projectors_);
+    if (outputs_.size() != own_.size()) throw IoError("node " + options.name + ": one output per projector needed");
+    const bool local = options.listen.starts_with("inproc://");
+    std::optional<RigKeys> keys;
+    if (!local) keys = ReadRigKeys(options.rig_dir, KeyRole::kNode);
+    socket_ = std::make_unique<NodeSocket>(context, options.listen, keys ? &*keys : nullptr, options.log);
+    Log(fmt::format("node {}: listening at {}, showing {}", options.name, socket_->endpoint(), Describe()));
+  }
+
+  // Returns when `stop` is set or a controller asked the node to exit.
+  void Run(const std::atomic<bool>& stop) {
+    while (!stop && !exit_) {
+      CheckOutputs();
+      std::optional<Envelope> envelope = socket_->Receive(100);
+      if (!envelope) continue;
+      peer_ = envelope->peer;
+      try {
+        Handle(envelope->message);
+      } catch (const std::exception& e) {  // a frame it cannot render: say so, go on
+        Fail(envelope->message.sequence, e.what());
+      }
+    }
+  }
+
+ private:
+  std::string Describe() const {
+    std::string text;
+    for (size_t k = 0; k < outputs_.size(); ++k)
+      text += (k ? ", " : "") + own_projectors_[k].name + " on " + outputs_[k]->Describe();
+    return text;
+  }
+
+  void Handle(const Message& message) {
+    switch (message.type) {
+      case MessageType::kPing: Reply(MessageType::kPong, message.sequence, Status()); break;
+      case MessageType::kSetup: SetUp(message); break;
+      case MessageType::kFrame: Render(message); break;
+      case MessageType::kPresent: Present(message.sequence); break;
+      case MessageType::kStop:
+        rendered_.reset();
+        Log(fmt::format("node {}: stopped by the controller", options_.name));
+        exit_ = message.body.is_object() && message.body.value("exit", false);
+        break;
+      default:
+        Fail(message.sequence, std::string("unexpected message '") + MessageTypeName(message.type) + "' from the controller");
+    }
+  }
+
+  nlohmann::json Status() const {
+    nlohmann::json status = {{"node", options_.name}, {"setup", setup_ ? setup_->id : ""}, {"render", "cpu"}};
+    for (size_t k = 0; k < outputs_.size(); ++k)
+      status["projectors"].push_back({{"name", own_projectors_[k].name}, {"output", outputs_[k]->Describe()}});
+    return status;
+  }
+
+  void SetUp(const Message& message) {
+    const auto start = Clock::now();
+    auto setup = std::make_unique<NodeSetup>();
+    nlohmann::json done = {{"node", options_.name}};
+    try {
+      ParseSetup(message.body, setup.get());
+      done["setup"] = setup->id;
+      if (setup_ && setup_->id == setup->id) {  // already built (a controller reconnecting)
+        done["patches"] = setup_->patches;
+        Reply(MessageType::kSetupDone, message.sequence, done);
+        return;
+      }
+      Log(fmt::format("node {}: setting up {} patches (target {})", options_.name, setup->patches, setup->target_patches));
+      Scene scene = LoadSceneArgument(options_.scene);
+      SubdivisionOptions subdivision;
+      subdivision.target_patches = setup->target_patches;
+      PatchHierarchy patches = SubdividePatches(scene, subdivision);
+      if (patches.fine.size() != setup->patches) {
+        throw IoError(fmt::format("{}: subdivides into {} patches for target {}, the controller's room into {}: "
+                                  "the display PC's copy of the room differs",
+                                  scene.path.string(), patches.fine.size(), setup->target_patches, setup->patches));
+      }
+      ApplyRigReflectance(rig_dir_, &patches);
+      ProjectionRigOptions rig_options;
+      rig_options.feather = setup->feather;
+      setup->rig = BuildProjectionRig(patches.fine, rig_dir_.projectors, rig_options);
+      setup_ = std::move(setup);
+      rendered_.reset();
+      done["patches"] = setup_->patches;
+      done["seconds"] = SecondsSince(start);
+      Log(fmt::format("node {}: set up in {:.1f} s", options_.name, SecondsSince(start)));
+    } catch (const std::exception& e) {
+      done["error"] = e.what();
+      Log(fmt::format("node {}: setup failed: {}", options_.name, e.what()));
+    }
+    Reply(MessageType::kSetupDone, message.sequence, done);
+  }
+
+  void Render(const Message& message) {
+    if (!setup_) return Fail(message.sequence, "frame before setup");
+    const int n = setup_->rig.size();
+    if (static_cast<int>(message.emittance.size()) != 3 * n) {
+      return Fail(message.sequence, fmt::format("frame of {} patches, the rig has {}", message.emittance.size() / 3, n));
+    }
+    const auto start = Clock::now();
+    const Eigen::MatrixX3d emittance =
+        Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(message.emittance.data(), n, 3);
+    RenderSummary summary;
+    const std::vector<ProjectorImage> images = RenderProjectorImages(setup_->rig, emittance, setup_->render, &summary);
+    const double render_ms = 1e3 * SecondsSince(start);
+    const auto draw_start = Clock::now();
+    for (size_t k = 0; k < outputs_.size(); ++k) {
+      if (faulty_[k]) continue;
+      outputs_[k]->Draw(images[own_[k]]);
+    }
+    rendered_ = message.sequence;
+    Reply(MessageType::kReady, message.sequence,
+          {{"node", options_.name}, {"render_ms", render_ms}, {"draw_ms", 1e3 * SecondsSince(draw_start)}});
+  }
+
+  void Present(uint64_t frame) {
+    if (!rendered_ || *rendered_ != frame) {
+      return Fail(frame, fmt::format("present of frame {} that was not rendered", frame));
+    }
+    const auto start = Clock::now();
+    for (size_t k = 0; k < outputs_.size(); ++k) {
+      if (!faulty_[k]) outputs_[k]->Present(frame);
+    }
+    Message presented;
+    presented.type = MessageType::kPresented;
+    presented.sequence = frame;
+    presented.presented_ns = SystemNowNs();
+    presented.body = {{"node", options_.name}, {"present_ms", 1e3 * SecondsSince(start)}};
+    socket_->Send(peer_, presented);
+  }
+
+  // An output that stops working is reported once and skipped from then on.
+  void CheckOutputs() {
+    faulty_.resize(outputs_.size(), false);
+    for (size_t k = 0; k < outputs_.size(); ++k) {
+      if (faulty_[k]) continue;
+      const std::string fault = outputs_[k]->Fault();
+      if (fault.empty()) continue;
+      faulty_[k] = true;
+      Fail(rendered_.value_or(0), fmt::format("projector {}: {}", own_projectors_[k].name, fault));
+    }
+  }
+
+  void Fail(uint64_t sequence, const std::string& why) {
+    Log(fmt::format("node {}: {}", options_.name, why));
+    if (!peer_.empty()) Reply(MessageType::kFailed, sequence, {{"node", options_.name}, {"error", why}});
+  }
+
+  void Reply(MessageType type, uint64_t sequence, nlohmann::json body) {
+    Message message;
+    message.type = type;
+    message.sequence = sequence;
+    message.body = std::move(body);
+    socket_->Send(peer_, message);
+  }
+
+  void Log(const std::string& line) const {
+    if (options_.log) options_.log(line);
+  }
+
+  NodeOptions options_;
+  RigDirectory rig_dir_;
+  std::vector<int> own_;  // the rig's index of each projector this node shows
+  std::vector<Projector> own_projectors_;
+  std::vector<std::unique_ptr<NodeOutput>> outputs_;
+  std::vector<bool> faulty_;
+  std::unique_ptr<NodeSocket> socket_;
+  std::unique_ptr<NodeSetup> setup_;
+  std::optional<uint64_t> rendered_;  // the frame in the back buffers
+  std::string peer_;                  // the controller (the last peer heard)
+  bool exit_ = false;
+};
+
+}  // namespace
+
+std::string RecordOutput::Describe() const { return path_.empty() ? "memory" : "record:" + path_.string(); }
+
+void RecordOutput::Present(uint64_t) {
+  presented_ = drawn_;
+  ++frames_;
+  if (!path_.empty() && !presented_.codes.empty()) WriteProjectorImage(path_, presented_);
+}
+
+void RunNode(zmq::context_t& context, const NodeOptions& options, const NodeOutputFactory& outputs,
+             const std::atomic<bool>& stop) {
+  Node node(context, options, outputs);
+  node.Run(stop);
+}
+
+}  // namespace procam

@@ -1,0 +1,80 @@
+#pragma once
+// A display node (`procam node`): owns the projectors attached to one display PC — their
+// monitors, and the pixel maps, blending weights and photometry of the rig — and shows the
+// frames a controller sends it (nodes/messages.h for the protocol and the frame barrier).
+//
+// At start the node reads the rig directory (the projectors it shows must be in rig.json) and
+// opens its outputs. A controller's kSetup names the patch subdivision and the render options;
+// the node subdivides its copy of the room (the scene file) the same way, checks that it gives
+// the controller's patch count, applies the rig's reflectance, and casts every projector's rays
+// (BuildProjectionRig: the maps of all projectors, since the blending weights and the level of
+// every patch depend on all of them). Each kFrame's per-patch emittance is then rendered into
+// its outputs' back buffers with the same renderer `procam project` uses, and shown at kPresent.
+// A monitor that disappears is reported to the controller (kFailed) and the node goes on with
+// the others.
+
+#include <atomic>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <zmq.hpp>
+
+#include "projection/projector.h"
+#include "projection/projector_images.h"
+
+namespace procam {
+
+// Where a node's projector image goes.
+class NodeOutput {
+ public:
+  virtual ~NodeOutput() = default;
+  virtual std::string Describe() const = 0;  // e.g. "glfw:HDMI-1" or "record:DIR/left.png"
+  // Puts the image into the back buffer (nothing visible changes).
+  virtual void Draw(const ProjectorImage& image) = 0;
+  // Shows what Draw put there.
+  virtual void Present(uint64_t frame) = 0;
+  // "" while the output works; else one line saying why not (e.g. its monitor is gone).
+  virtual std::string Fault() { return ""; }
+};
+
+// An output that keeps the last presented image (for tests) and, when `path` is given, writes it
+// there as PNG (atomically) at every Present.
+class RecordOutput : public NodeOutput {
+ public:
+  explicit RecordOutput(std::filesystem::path path = {}) : path_(std::move(path)) {}
+  std::string Describe() const override;
+  void Draw(const ProjectorImage& image) override { drawn_ = image; }
+  void Present(uint64_t frame) override;
+  const ProjectorImage& presented() const { return presented_; }
+  uint64_t frames() const { return frames_; }
+
+ private:
+  std::filesystem::path path_;
+  ProjectorImage drawn_, presented_;
+  uint64_t frames_ = 0;
+};
+
+struct NodeOptions {
+  std::string name = "node";
+  std::filesystem::path rig_dir;
+  std::string scene;                    // the room (LoadSceneArgument), as the controller's
+  std::vector<std::string> projectors;  // names in rig.json this node shows, in output order
+  std::string listen;                   // tcp://ADDRESS:PORT, or inproc://NAME (no keys)
+  std::function<void(const std::string&)> log;  // a line per event (setup, faults, refusals)
+};
+
+// Makes the outputs, one per projector of `projectors` (the node's, in order).
+using NodeOutputFactory =
+    std::function<std::vector<std::unique_ptr<NodeOutput>>(const std::vector<Projector>&)>;
+
+// Runs a node until `stop` is set (checked every 100 ms) or a controller sends kStop with
+// {"exit": true}. Throws IoError naming the file, projector or endpoint when it cannot start
+// (no such projector in the rig, keys missing, the port taken); once running, faults are
+// reported to the controller and logged, never thrown.
+void RunNode(zmq::context_t& context, const NodeOptions& options, const NodeOutputFactory& outputs,
+             const std::atomic<bool>& stop);
+
+}  // namespace procam

@@ -1,0 +1,341 @@
+#include "nodes/play.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <exception>
+#include <random>
+#include <thread>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "base/io.h"
+#include "base/timing.h"
+#include "calibration/rig_directory.h"
+#include "compensation/problem.h"
+#include "geometry/srgb.h"
+#include "geometry/stage.h"
+#include "projection/camera_rays.h"
+#include "projection/projection_rig.h"
+
+namespace procam {
+namespace {
+
+double MsSince(Clock::time_point start) { return 1e3 * SecondsSince(start); }
+
+// The desired appearance's frames: the images of a directory in name order, or a video's frames.
+class FrameSource {
+ public:
+  explicit FrameSource(const std::filesystem::path& path) : path_(path) {
+    if (std::filesystem::is_directory(path)) {
+      for (const auto& entry : std::filesystem::directory_iterator(path)) {
+        std::string extension = entry.path().extension().string();
+        std::transform(extension.begin(), extension.end(), extension.begin(), ::tolower);
+        if (extension == ".png" || extension == ".jpg" || extension == ".jpeg" || extension == ".tif" ||
+            extension == ".tiff" || extension == ".ppm" || extension == ".pnm")
+          files_.push_back(entry.path());
+      }
+      std::sort(files_.begin(), files_.end());
+      if (files_.empty()) throw IoError(path.string() + ": no images (.png, .jpg, .tif, .ppm) in the directory");
+      count_ = static_cast<int>(files_.size());
+      return;
+    }
+    if (!std::filesystem::exists(path)) throw IoError(path.string() + ": no such file or directory");
+    if (!video_.open(path.string(), cv::CAP_ANY) || !video_.isOpened()) {
+      throw IoError(path.string() + ": not a video OpenCV can read (nor a directory of images)");
+    }
+    count_ = static_cast<int>(video_.get(cv::CAP_PROP_FRAME_COUNT));  // may be an estimate
+  }
+  // Frames in the source (a video's may be an estimate; 0 if unknown).
+  int count() const { return count_; }
+  // Frame `index` (≥ every earlier call's): skipped frames of a video are decoded and dropped.
+  // Empty at the end of the source.
+  cv::Mat Read(int index) {
+    if (!files_.empty()) {
+      if (index >= static_cast<int>(files_.size())) return cv::Mat();
+      cv::Mat image = cv::imread(files_[index].string(), cv::IMREAD_COLOR | cv::IMREAD_ANYDEPTH);
+      if (image.empty()) throw IoError(files_[index].string() + ": not an image OpenCV can read");
+      return image;
+    }
+    cv::Mat frame;
+    while (next_ <= index) {
+      if (!video_.read(frame) || frame.empty()) return cv::Mat();
+      ++next_;
+    }
+    return frame;
+  }
+
+ private:
+  std::filesystem::path path_;
+  std::vector<std::filesystem::path> files_;
+  cv::VideoCapture video_;
+  int count_ = 0, next_ = 0;
+};
+
+std::string RandomId() {
+  std::random_device device;
+  return fmt::format("{:08x}{:08x}", device(), device());
+}
+
+nlohmann::json FrameJson(const PlayFrame& frame, const std::vector<NodeAddress>& nodes) {
+  nlohmann::json json = {{"frame", frame.shown.frame},     {"source", frame.source},
+                         {"read_ms", frame.read_ms},       {"desired_ms", frame.desired_ms},
+                         {"solve_ms", frame.solve_ms},     {"iterations", frame.iterations},
+                         {"ready_ms", frame.shown.ready_ms}, {"present_ms", frame.shown.present_ms},
+                         {"skew_ms", frame.shown.skew_ms}, {"total_ms", frame.total_ms},
+                         {"nodes_shown", frame.shown.shown}};
+  for (size_t k = 0; k < frame.shown.nodes.size(); ++k) {
+    const NodeFrame& node = frame.shown.nodes[k];
+    json["nodes"][nodes[k].name] = {{"state", node.state}, {"ready_ms", node.ready_ms},
+                                    {"render_ms", node.render_ms}, {"presented_ns", node.presented_ns}};
+  }
+  return json;
+}
+
+double Median(std::vector<double> values) {
+  if (values.empty()) return 0.0;
+  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+  return values[values.size() / 2];
+}
+
+// Everything the frames share: the problem with the rig's bounds and reflectance, the camera's
+// view of the patches, the nodes' setup.
+struct PlayScene {
+  GeometryStage geometry;
+  CompensationProblem problem;
+  std::vector<int> pixel_patch;
+  int camera_width = 0, camera_height = 0;
+  nlohmann::json setup;
+};
+
+PlayScene PreparePlay(const PlayOptions& options, const RigDirectory& rig) {
+  PlayScene play;
+  GeometryOptions geometry_options;
+  geometry_options.patches = options.patches;
+  Report(options.progress, "play: subdividing the room and computing form factors");
+  play.geometry = RunGeometryStage(options.scene, geometry_options);
+  ApplyRigReflectance(rig, &play.geometry.patches);
+  const PatchLevel& fine = play.geometry.patches.fine;
+  play.problem = MakeProblem(play.geometry.scene, fine, play.geometry.form_factors, options.alpha);
+  ProjectionRigOptions rig_options;
+  rig_options.feather = options.feather;
+  {
+    const ProjectionRig bounds = BuildProjectionRig(fine, rig.projectors, rig_options);
+    play.problem.lower = bounds.lower;
+    play.problem.upper = bounds.upper;
+  }
+  if (rig.file.camera.model.empty()) {
+    throw IoError((options.rig_dir / "rig.json").string() +
+                  ": camera.model: the rig has no registered camera, which play needs to map the desired "
+                  "images onto the room (run procam calibrate all)");
+  }
+  Report(options.progress, "play: casting the camera's rays into the room");
+  const ProjectorGeometry camera = ReadCameraModel(options.rig_dir / rig.file.camera.model);
+  const CameraPixelRays rays = CastCameraPixels(play.geometry.scene, fine, {}, camera);
+  play.pixel_patch = rays.patch;
+  play.camera_width = rays.width;
+  play.camera_height = rays.height;
+  play.setup = {{"setup", RandomId()},
+                {"target_patches", play.geometry.scene.target_patches},
+                {"patches", fine.size()},
+                {"light", LightFieldName(options.light)},
+                {"dither", DitherName(options.dither)},
+                {"feather", options.feather}};
+  return play;
+}
+
+void WritePlayResult(const PlayOptions& options, const PlaySummary& summary, const std::vector<NodeAddress>& nodes,
+                     const PlayScene& play) {
+  nlohmann::json result = {{"scene", options.scene},
+                           {"rig", options.rig_dir.string()},
+                           {"desired", options.desired.string()},
+                           {"patches", play.problem.size()},
+                           {"method", MethodName(options.solver.method)},
+                           {"fps_target", options.fps},
+                           {"frames_shown", summary.frames.size()},
+                           {"frames_dropped", summary.dropped},
+                           {"seconds", summary.seconds},
+                           {"setup_seconds", summary.setup_seconds}};
+  std::vector<double> solve, ready, skew, total;
+  for (const PlayFrame& frame : summary.frames) {
+    result["frames"].push_back(FrameJson(frame, nodes));
+    solve.push_back(frame.solve_ms);
+    ready.push_back(frame.shown.ready_ms);
+    skew.push_back(frame.shown.skew_ms);
+    total.push_back(frame.total_ms);
+  }
+  result["median_ms"] = {{"solve", Median(solve)}, {"ready", Median(ready)}, {"skew", Median(skew)}, {"total", Median(total)}};
+  for (const NodeAddress& node : nodes) result["nodes"].push_back({{"name", node.name}, {"endpoint", node.endpoint}});
+  std::filesystem::create_directories(options.out);
+  WriteFileAtomically(options.out / "result.json", result.dump(2) + "\n");
+}
+
+// The show itself: frames through the controller until the source ends.
+PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& controller, FrameSource& source,
+                       Clock::time_point start) {
+  PlaySummary summary;
+  const int limit = options.frames > 0 ? options.frames : (source.count() > 0 ? source.count() : INT32_MAX);
+  const auto period = std::chrono::duration<double>(1.0 / options.fps);
+  std::shared_ptr<const RadiositySystem> radiosity;
+  Eigen::MatrixX3d previous;
+  const Eigen::MatrixX3d room_desired = play.problem.desired;
+  auto last_progress = Clock::now();
+  Clock::time_point t0;
+  int index = 0;
+  while (index < limit) {
+    const auto frame_start = Clock::now();
+    PlayFrame frame;
+    frame.source = index;
+    cv::Mat image = source.Read(index);
+    if (image.empty()) break;  // the end of a video
+    frame.read_ms = MsSince(frame_start);
+    auto step = Clock::now();
+    play.problem.desired =
+        DesiredFromImage(image, play.pixel_patch, play.camera_width, play.camera_height, room_desired);
+    frame.desired_ms = MsSince(step);
+    step = Clock::now();
+    SolverSummary solver_summary;
+    const CompensationSolution solution =
+        Solve(options.solver, play.problem, &solver_summary, {}, WarmStart{radiosity, previous});
+    radiosity = solution.radiosity_system;
+    previous = solution.emittance;
+    frame.solve_ms = MsSince(step);
+    frame.iterations = solver_summary.iterations;
+    frame.shown = controller.Show(static_cast<uint64_t>(summary.frames.size()), solution.emittance);
+    frame.total_ms = MsSince(frame_start);
+    if (summary.frames.empty()) t0 = Clock::now() - std::chrono::duration_cast<Clock::duration>(period * index);
+    summary.frames.push_back(frame);
+    // The next frame is the one due now: frames whose time passed are dropped, not shown late.
+    const auto next_due = t0 + std::chrono::duration_cast<Clock::duration>(period * (index + 1));
+    if (Clock::now() < next_due) std::this_thread::sleep_until(next_due);
+    const int due = static_cast<int>(std::chrono::duration<double>(Clock::now() - t0) / period);
+    const int next = std::max(index + 1, due);
+    summary.dropped += std::min(next, limit) - (index + 1);
+    index = next;
+    if (SecondsSince(last_progress) >= 1.0 || index >= limit) {
+      last_progress = Clock::now();
+      Report(options.progress,
+             fmt::format("play: frame {}/{} ({:.1f} fps), solve {:.1f} ms ({} it), ready {:.1f} ms, skew {:.2f} ms, "
+                         "dropped {}, nodes {}/{}",
+                         std::min(index, limit), limit == INT32_MAX ? 0 : limit,
+                         summary.frames.size() / std::max(1e-9, SecondsSince(t0)), frame.solve_ms, frame.iterations,
+                         frame.shown.ready_ms, frame.shown.skew_ms, summary.dropped, controller.live(),
+                         controller.nodes().size()));
+    }
+  }
+  summary.seconds = SecondsSince(start);
+  return summary;
+}
+
+}  // namespace
+
+Eigen::MatrixX3d DesiredFromImage(const cv::Mat& image, const std::vector<int>& pixel_patch, int width, int height,
+                                  const Eigen::MatrixX3d& fallback) {
+  if (image.empty() || image.channels() != 3 || (image.depth() != CV_8U && image.depth() != CV_16U))
+    throw std::invalid_argument("desired image: need 8- or 16-bit colour");
+  if (static_cast<long long>(pixel_patch.size()) != 1LL * width * height)
+    throw std::invalid_argument("desired image: the camera's pixel map does not fit its size");
+  cv::Mat resized;
+  if (image.cols != width || image.rows != height) {
+    cv::resize(image, resized, cv::Size(width, height), 0, 0, cv::INTER_AREA);
+  } else {
+    resized = image;
+  }
+  const double scale = image.depth() == CV_8U ? 1.0 / 255.0 : 1.0 / 65535.0;
+  // sRGB decoding per code value (a table: 256 or 65536 entries).
+  std::vector<double> linear(image.depth() == CV_8U ? 256 : 65536);
+  for (size_t q = 0; q < linear.size(); ++q) linear[q] = SrgbToLinear(q * scale);
+  const int n = static_cast<int>(fallback.rows());
+  Eigen::MatrixX3d sum = Eigen::MatrixX3d::Zero(n, 3);
+  Eigen::VectorXd count = Eigen::VectorXd::Zero(n);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const int patch = pixel_patch[static_cast<size_t>(y) * width + x];
+      if (patch < 0 || patch >= n) continue;
+      int b, g, r;
+      if (resized.depth() == CV_8U) {
+        const cv::Vec3b& p = resized.at<cv::Vec3b>(y, x);
+        b = p[0], g = p[1], r = p[2];
+      } else {
+        const cv::Vec3w& p = resized.at<cv::Vec3w>(y, x);
+        b = p[0], g = p[1], r = p[2];
+      }
+      sum.row(patch) += Eigen::RowVector3d(linear[r], linear[g], linear[b]);
+      count[patch] += 1.0;
+    }
+  }
+  Eigen::MatrixX3d desired = fallback;
+  for (int i = 0; i < n; ++i) {
+    if (count[i] > 0.0) desired.row(i) = sum.row(i) / count[i];
+  }
+  return desired;
+}
+
+PlaySummary RunPlay(const PlayOptions& options) {
+  const auto start = Clock::now();
+  if (!(options.fps > 0.0 && options.fps <= 1000.0)) throw std::invalid_argument("--fps must be in (0, 1000]");
+  const RigDirectory rig = ReadRigDirectory(options.rig_dir);
+  std::optional<RigKeys> keys;
+  std::vector<NodeAddress> nodes = options.nodes;
+  const bool local = nodes.empty();
+  if (local) {
+    nodes.push_back({"local", "inproc://procam-play-node"});
+  } else {
+    keys = ReadRigKeys(options.rig_dir, KeyRole::kController);
+  }
+  FrameSource source(options.desired);
+  zmq::context_t context;
+  std::atomic<bool> node_stop{false}, node_failed{false};
+  std::exception_ptr failure;
+  PlaySummary summary;
+  std::vector<NodeAddress> node_list = nodes;
+  // The controller's part (on its own thread when the node runs on this one).
+  auto control = [&] {
+    try {
+      PlayScene play = PreparePlay(options, rig);
+      ControllerOptions controller_options;
+      controller_options.setup = play.setup;
+      controller_options.frame_timeout_s = options.frame_timeout_s;
+      controller_options.log = options.progress;
+      controller_options.cancelled = [&] { return node_failed.load(); };
+      Controller controller(context, nodes, keys ? &*keys : nullptr, controller_options);
+      Report(options.progress, fmt::format("play: setting up {} node(s)", nodes.size()));
+      controller.Connect();
+      const double setup_seconds = SecondsSince(start);
+      summary = PlayFrames(options, play, controller, source, start);
+      summary.setup_seconds = setup_seconds;
+      controller.Stop(/*exit=*/local);
+      WritePlayResult(options, summary, node_list, play);
+    } catch (...) {
+      failure = std::current_exception();
+    }
+    node_stop = true;
+  };
+  if (!local) {
+    control();
+  } else {
+    std::thread controller_thread(control);
+    try {
+      NodeOptions node;
+      node.name = "local";
+      node.rig_dir = options.rig_dir;
+      node.scene = options.scene;
+      for (const Projector& projector : rig.projectors) node.projectors.push_back(projector.name);
+      node.listen = nodes[0].endpoint;
+      node.log = options.progress;
+      RunNode(context, node, options.local_outputs, node_stop);
+    } catch (...) {
+      node_failed = true;
+      controller_thread.join();
+      throw;
+    }
+    controller_thread.join();
+  }
+  if (failure) std::rethrow_exception(failure);
+  return summary;
+}
+
+}  // namespace procam

@@ -1,0 +1,80 @@
+#pragma once
+// `procam play`: light that follows changing content. Each frame's desired appearance (an image
+// of the room as the rig's camera would see it: one of an image sequence or a video's frames)
+// becomes the per-patch desired colours, is solved warm-started from the previous frame's
+// emittance (the factorised radiosity system made once), sent to the display nodes and shown
+// through the frame barrier (nodes/controller.h), at a target rate: a frame whose time has
+// passed while the previous one was being solved and shown is dropped, never shown late, so the
+// show does not drift. Per-frame timings go to OUT/result.json; a progress line every second.
+//
+// Desired appearance from an image: the image (sRGB, 8 or 16 bits) is resized to the rig
+// camera's resolution; every camera pixel's ray is cast into the room (CastCameraPixels with the
+// registered camera of RIG_DIR/camera.cameramodel); a patch's desired linear colour is the mean
+// of the linearised pixels that see it. Patches the camera does not see keep the room's own
+// desired colours.
+
+#include <atomic>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core/mat.hpp>
+#include <zmq.hpp>
+
+#include "base/progress.h"
+#include "compensation/solver.h"
+#include "nodes/controller.h"
+#include "nodes/node.h"
+#include "projection/projector_images.h"
+
+namespace procam {
+
+struct PlayOptions {
+  std::string scene;                // the room (LoadSceneArgument)
+  std::filesystem::path rig_dir;    // projectors, reflectance, camera, keys
+  std::filesystem::path desired;    // a directory of images (sorted by name) or a video file
+  std::filesystem::path out;        // result.json (created)
+  double fps = 30.0;                // target frame rate, > 0
+  int frames = 0;                   // frames to play (0: the whole source)
+  int patches = 0;                  // target patch count (0: the room's)
+  double alpha = 0.5;
+  SolverOptions solver;             // method (default perceptual), device
+  DitherMethod dither = DitherMethod::kOrdered;
+  LightField light = LightField::kSmooth;
+  double feather = 0.1;
+  double frame_timeout_s = 0.5;     // a node silent this long in a frame is reported lost
+  // Display nodes; empty: one node in this process showing every projector of the rig on
+  // `local_outputs` (made on the calling thread, which runs the node: GLFW's main thread).
+  std::vector<NodeAddress> nodes;
+  NodeOutputFactory local_outputs;
+  ProgressCallback progress;
+};
+
+struct PlayFrame {
+  int source = 0;  // index in the source
+  double read_ms = 0.0, desired_ms = 0.0, solve_ms = 0.0;
+  int iterations = 0;
+  FrameReport shown;
+  double total_ms = 0.0;  // from the frame's start to its presentation
+};
+
+struct PlaySummary {
+  std::vector<PlayFrame> frames;
+  int dropped = 0;
+  double seconds = 0.0;
+  double setup_seconds = 0.0;  // geometry, form factors, camera rays, nodes set up
+};
+
+// Desired linear colours (n,3) from an image as the camera sees the room: `image` any size
+// (resized to pixel_patch's), 8- or 16-bit sRGB, BGR (OpenCV's order); `pixel_patch` the patch
+// every camera pixel sees (−1 for none), row-major `width` × `height`; patches no pixel sees get
+// `fallback`'s row.
+Eigen::MatrixX3d DesiredFromImage(const cv::Mat& image, const std::vector<int>& pixel_patch,
+                                  int width, int height, const Eigen::MatrixX3d& fallback);
+
+// Plays the source (header comment). Throws IoError naming the file, node or key that stops it
+// before the first frame; a node failing during the show is reported and the show goes on.
+PlaySummary RunPlay(const PlayOptions& options);
+
+}  // namespace procam

@@ -1,0 +1,330 @@
+#include "nodes/transport.h"
+
+#include <sys/stat.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstring>
+#include <fstream>
+#include <mutex>
+
+#include "base/io.h"
+
+namespace procam {
+namespace {
+
+constexpr int kHeartbeatMs = 200;
+constexpr int kHeartbeatTimeoutMs = 1000;
+
+std::filesystem::path KeyFile(const std::filesystem::path& rig_dir, const std::string& name) {
+  return rig_dir / "keys" / name;
+}
+
+// The 32 bytes of a Z85 key; throws IoError naming `where` if it is not one.
+std::string DecodeKey(const std::string& z85, const std::string& where) {
+  if (z85.size() != 40) throw IoError(where + ": not a CURVE key (40 Z85 characters); make the rig's keys with `procam keys`");
+  uint8_t bytes[32];
+  if (zmq_z85_decode(bytes, z85.c_str()) == nullptr) {
+    throw IoError(where + ": not a CURVE key (Z85); make the rig's keys with `procam keys`");
+  }
+  return std::string(reinterpret_cast<const char*>(bytes), 32);
+}
+
+std::string ReadKey(const std::filesystem::path& path) {
+  if (!std::filesystem::exists(path)) {
+    throw IoError(path.string() + ": no such key file; make the rig's keys with `procam keys --rig " +
+                  path.parent_path().parent_path().string() + "` and copy them (docs/nodes.md)");
+  }
+  std::string text = ReadFile(path, 4096);
+  while (!text.empty() && (text.back() == '\n' || text.back() == '\r' || text.back() == ' ')) text.pop_back();
+  DecodeKey(text, path.string());
+  return text;
+}
+
+void CommonOptions(zmq::socket_t& socket) {
+  socket.set(zmq::sockopt::linger, 0);
+  socket.set(zmq::sockopt::maxmsgsize, kMaxMessageBytes);
+  socket.set(zmq::sockopt::heartbeat_ivl, kHeartbeatMs);
+  socket.set(zmq::sockopt::heartbeat_timeout, kHeartbeatTimeoutMs);
+  socket.set(zmq::sockopt::heartbeat_ttl, kHeartbeatTimeoutMs);
+}
+
+}  // namespace
+
+int64_t SystemNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+RigKeys MakeRigKeys(const std::filesystem::path& rig_dir, bool replace) {
+  if (!std::filesystem::is_directory(rig_dir)) throw IoError(rig_dir.string() + ": no such rig directory");
+  for (const char* name : {"controller.key", "controller.pub", "node.key", "node.pub"}) {
+    const std::filesystem::path path = KeyFile(rig_dir, name);
+    if (!replace && std::filesystem::exists(path)) {
+      throw IoError(path.string() + ": the rig already has keys (nodes set up with them would refuse a "
+                    "controller with new ones); give --replace to make new ones anyway");
+    }
+  }
+  std::error_code error;
+  std::filesystem::create_directories(rig_dir / "keys", error);
+  if (error) throw IoError((rig_dir / "keys").string() + ": " + error.message());
+  RigKeys keys;
+  for (CurveKeyPair* pair : {&keys.controller, &keys.node}) {
+    char public_key[41], secret_key[41];
+    if (zmq_curve_keypair(public_key, secret_key) != 0) {
+      throw IoError("zmq_curve_keypair: " + std::string(zmq_strerror(zmq_errno())) +
+                    " (libzmq built without CURVE?)");
+    }
+    pair->public_key = public_key;
+    pair->secret_key = secret_key;
+  }
+  // Secrets first, each written atomically and then made readable by its owner only.
+  const std::pair<std::string, std::string> files[] = {
+      {"controller.key", keys.controller.secret_key}, {"node.key", keys.node.secret_key},
+      {"controller.pub", keys.controller.public_key}, {"node.pub", keys.node.public_key}};
+  for (const auto& [name, key] : files) {
+    const std::filesystem::path path = KeyFile(rig_dir, name);
+    WriteFileAtomically(path, key + "\n");
+    if (name.ends_with(".key")) ::chmod(path.c_str(), 0600);
+  }
+  return keys;
+}
+
+RigKeys ReadRigKeys(const std::filesystem::path& rig_dir, KeyRole role) {
+  RigKeys keys;
+  keys.controller.public_key = ReadKey(KeyFile(rig_dir, "controller.pub"));
+  keys.node.public_key = ReadKey(KeyFile(rig_dir, "node.pub"));
+  if (role == KeyRole::kController) {
+    keys.controller.secret_key = ReadKey(KeyFile(rig_dir, "controller.key"));
+  } else {
+    keys.node.secret_key = ReadKey(KeyFile(rig_dir, "node.key"));
+  }
+  return keys;
+}
+
+// ZeroMQ's authentication protocol (ZAP, RFC 27) for one context: a thread that answers the
+// CURVE server's requests (admit only the controller's public key) and watches the node
+// socket's monitor for handshakes that fail before ZAP is asked (a client without CURVE, or one
+// that does not know the node's key).
+class NodeSocket::ZapHandler {
+ public:
+  ZapHandler(zmq::context_t& context, const std::string& allowed_key,
+             std::function<void(const std::string&)> log)
+      : handler_(context, zmq::socket_type::rep), monitor_(context, zmq::socket_type::pair),
+        allowed_(allowed_key), log_(std::move(log)) {
+    handler_.set(zmq::sockopt::linger, 0);
+    handler_.bind("inproc://zeromq.zap.01");
+  }
+  ~ZapHandler() {
+    stop_ = true;
+    if (thread_.joinable()) thread_.join();
+  }
+  // Starts answering; `monitor_endpoint` is the node socket's monitor (zmq_socket_monitor).
+  void Start(const std::string& monitor_endpoint) {
+    monitor_.set(zmq::sockopt::linger, 0);
+    monitor_.connect(monitor_endpoint);
+    thread_ = std::thread([this] { Run(); });
+  }
+  long long refused() const { return refused_; }
+
+ private:
+  void Run() {
+    zmq::pollitem_t items[] = {{handler_.handle(), 0, ZMQ_POLLIN, 0},
+                               {monitor_.handle(), 0, ZMQ_POLLIN, 0}};
+    while (!stop_) {
+      try {
+        zmq::poll(items, 2, std::chrono::milliseconds(50));
+        if (items[0].revents & ZMQ_POLLIN) Answer();
+        if (items[1].revents & ZMQ_POLLIN) Watch();
+      } catch (const zmq::error_t& e) {
+        if (e.num() == ETERM) return;
+        Log(std::string("node: authentication: ") + e.what());
+      }
+    }
+  }
+  void Answer() {
+    std::vector<zmq::message_t> request;
+    for (;;) {
+      zmq::message_t part;
+      if (!handler_.recv(part, zmq::recv_flags::none)) return;
+      const bool more = part.more();
+      request.push_back(std::move(part));
+      if (!more || request.size() > 16) break;
+    }
+    // version, request id, domain, address, routing id, mechanism, credentials...
+    if (request.size() < 6) return;
+    const std::string address = request[3].to_string();
+    const std::string mechanism = request[5].to_string();
+    bool admit = false;
+    std::string text = "not the rig's controller";
+    if (mechanism == "CURVE" && request.size() >= 7 && request[6].size() == 32) {
+      admit = request[6].to_string() == allowed_;
+      if (!admit) {
+        char z85[41];
+        zmq_z85_encode(z85, static_cast<const uint8_t*>(request[6].data()), 32);
+        Refuse("node: refused a controller at " + address + ": its key " + z85 +
+               " is not the rig's (keys/controller.pub)");
+      }
+    } else {
+      text = "CURVE required";
+      Refuse("node: refused a peer at " + address + ": mechanism " + mechanism + ", not CURVE");
+    }
+    const std::string version = "1.0", status = admit ? "200" : "400", status_text = admit ? "OK" : text;
+    handler_.send(zmq::buffer(version), zmq::send_flags::sndmore);
+    handler_.send(request[1], zmq::send_flags::sndmore);
+    handler_.send(zmq::buffer(status), zmq::send_flags::sndmore);
+    handler_.send(zmq::buffer(status_text), zmq::send_flags::sndmore);
+    handler_.send(zmq::buffer(std::string(admit ? "controller" : "")), zmq::send_flags::sndmore);
+    handler_.send(zmq::str_buffer(""), zmq::send_flags::none);
+  }
+  // Monitor events: two frames, (u16 event, u32 value) and the peer's endpoint.
+  void Watch() {
+    zmq::message_t event, address;
+    if (!monitor_.recv(event, zmq::recv_flags::none)) return;
+    if (event.more()) (void)monitor_.recv(address, zmq::recv_flags::none);
+    if (event.size() < 6) return;
+    uint16_t id;
+    std::memcpy(&id, event.data(), 2);
+    if (id == ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL || id == ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL) {
+      Refuse("node: refused a peer (" + address.to_string() +
+             "): its security handshake failed (no CURVE, or not the rig's node key)");
+    }
+  }
+  void Refuse(const std::string& line) {
+    ++refused_;
+    Log(line);
+  }
+  void Log(const std::string& line) {
+    std::lock_guard<std::mutex> lock(log_mutex_);
+    if (log_) log_(line);
+  }
+
+  zmq::socket_t handler_, monitor_;
+  std::string allowed_;
+  std::function<void(const std::string&)> log_;
+  std::mutex log_mutex_;
+  std::atomic<bool> stop_{false};
+  std::atomic<long long> refused_{0};
+  std::thread thread_;
+};
+
+NodeSocket::NodeSocket(zmq::context_t& context, const std::string& endpoint, const RigKeys* keys,
+                       std::function<void(const std::string&)> log)
+    : log_(std::move(log)) {
+  if (keys != nullptr) {
+    zap_ = std::make_unique<ZapHandler>(context, DecodeKey(keys->controller.public_key, "keys/controller.pub"), log_);
+  }
+  socket_ = zmq::socket_t(context, zmq::socket_type::router);
+  CommonOptions(socket_);
+  socket_.set(zmq::sockopt::router_mandatory, 1);
+  if (keys != nullptr) {
+    socket_.set(zmq::sockopt::curve_server, 1);
+    socket_.set(zmq::sockopt::curve_secretkey, DecodeKey(keys->node.secret_key, "keys/node.key"));
+    const std::string monitor = "inproc://procam-node-monitor-" + std::to_string(reinterpret_cast<uintptr_t>(this));
+    if (zmq_socket_monitor(socket_.handle(), monitor.c_str(),
+                           ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL | ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL) != 0) {
+      throw IoError("node: cannot monitor the socket: " + std::string(zmq_strerror(zmq_errno())));
+    }
+    zap_->Start(monitor);
+  } else if (!endpoint.starts_with("inproc://")) {
+    throw IoError("node " + endpoint + ": a network endpoint needs the rig's keys");
+  }
+  try {
+    socket_.bind(endpoint);
+  } catch (const zmq::error_t& e) {
+    throw IoError("node: cannot listen at " + endpoint + ": " + e.what());
+  }
+  endpoint_ = socket_.get(zmq::sockopt::last_endpoint);
+}
+
+NodeSocket::~NodeSocket() {
+  if (zap_) zmq_socket_monitor(socket_.handle(), nullptr, 0);
+  socket_.close();
+  zap_.reset();
+}
+
+long long NodeSocket::refused() const { return zap_ ? zap_->refused() : 0; }
+
+std::optional<Envelope> NodeSocket::Receive(int timeout_ms) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  for (;;) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    zmq::pollitem_t item = {socket_.handle(), 0, ZMQ_POLLIN, 0};
+    zmq::poll(&item, 1, std::max(left, std::chrono::milliseconds(0)));
+    if (!(item.revents & ZMQ_POLLIN)) return std::nullopt;
+    std::vector<zmq::message_t> parts;
+    for (;;) {
+      zmq::message_t part;
+      if (!socket_.recv(part, zmq::recv_flags::dontwait)) break;
+      const bool more = part.more();
+      if (parts.size() < 3) parts.push_back(std::move(part));
+      if (!more) break;
+    }
+    std::string why;
+    Envelope envelope;
+    if (parts.size() == 2) {
+      envelope.peer = parts[0].to_string();
+      if (ParseMessage(parts[1].data(), parts[1].size(), &envelope.message, &why)) return envelope;
+    } else {
+      why = "a message of " + std::to_string(parts.size() - 1) + " frames (one expected)";
+    }
+    ++malformed_;
+    if (log_) log_("node: dropped a malformed message: " + why);
+  }
+}
+
+bool NodeSocket::Send(const std::string& peer, const Message& message) {
+  const std::string bytes = EncodeMessage(message);
+  try {
+    if (!socket_.send(zmq::buffer(peer), zmq::send_flags::sndmore | zmq::send_flags::dontwait)) return false;
+    return socket_.send(zmq::buffer(bytes), zmq::send_flags::dontwait).has_value();
+  } catch (const zmq::error_t&) {
+    return false;  // EHOSTUNREACH: the peer is gone (router_mandatory)
+  }
+}
+
+ControllerSocket::ControllerSocket(zmq::context_t& context, const std::string& endpoint, const RigKeys* keys)
+    : socket_(context, zmq::socket_type::dealer), endpoint_(endpoint) {
+  CommonOptions(socket_);
+  socket_.set(zmq::sockopt::immediate, 1);
+  socket_.set(zmq::sockopt::reconnect_ivl, 100);
+  socket_.set(zmq::sockopt::reconnect_ivl_max, 500);
+  if (keys != nullptr) {
+    socket_.set(zmq::sockopt::curve_serverkey, DecodeKey(keys->node.public_key, "keys/node.pub"));
+    socket_.set(zmq::sockopt::curve_publickey, DecodeKey(keys->controller.public_key, "keys/controller.pub"));
+    socket_.set(zmq::sockopt::curve_secretkey, DecodeKey(keys->controller.secret_key, "keys/controller.key"));
+  } else if (!endpoint.starts_with("inproc://")) {
+    throw IoError("controller: node " + endpoint + " is on the network: the rig's keys are needed");
+  }
+  try {
+    socket_.connect(endpoint);
+  } catch (const zmq::error_t& e) {
+    throw IoError("controller: cannot connect to node " + endpoint + ": " + e.what());
+  }
+}
+
+bool ControllerSocket::Send(const Message& message) {
+  const std::string bytes = EncodeMessage(message);
+  return socket_.send(zmq::buffer(bytes), zmq::send_flags::dontwait).has_value();
+}
+
+std::optional<Message> ControllerSocket::Receive(int timeout_ms, std::string* why) {
+  zmq::pollitem_t item = {socket_.handle(), 0, ZMQ_POLLIN, 0};
+  zmq::poll(&item, 1, std::chrono::milliseconds(std::max(0, timeout_ms)));
+  if (!(item.revents & ZMQ_POLLIN)) return std::nullopt;
+  zmq::message_t part;
+  if (!socket_.recv(part, zmq::recv_flags::dontwait)) return std::nullopt;
+  bool extra = false;
+  while (part.more()) {  // a node sends one frame per message; anything more is malformed
+    extra = true;
+    if (!socket_.recv(part, zmq::recv_flags::dontwait)) break;
+  }
+  Message message;
+  std::string reason;
+  if (!extra && ParseMessage(part.data(), part.size(), &message, &reason)) return message;
+  if (why) *why = extra ? "a message of several frames" : reason;
+  return std::nullopt;
+}
+
+}  // namespace procam
