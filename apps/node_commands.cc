@@ -27,10 +27,10 @@ struct NodeArguments {
 };
 
 struct PlayArguments {
-  std::string scene, rig, desired, out, method = "perceptual", device = "cpu", dither = "ordered";
+  std::string scene, rig, desired, solution, out, method = "perceptual", device = "cpu", dither = "ordered";
   std::vector<std::string> nodes, display = {"memory"};
   LightField light = LightField::kSmooth;
-  double fps = 30.0, alpha = 0.5, frame_timeout_ms = 500.0;
+  double fps = 30.0, alpha = 0.5, frame_timeout_ms = 500.0, setup_timeout = 120.0;
   int frames = 0, patches = 0;
 };
 
@@ -39,6 +39,8 @@ void RunPlayCommand(const PlayArguments& args) {
   options.scene = args.scene;
   options.rig_dir = args.rig;
   options.desired = args.desired;
+  options.solution = args.solution;
+  options.setup_timeout_s = args.setup_timeout;
   options.out = args.out;
   options.fps = args.fps;
   options.frames = args.frames;
@@ -105,8 +107,10 @@ void AddNodeCommands(CLI::App& app) {
   play->add_option("scene", play_args->scene, "The room (scene file)")->required();
   play->add_option("--rig", play_args->rig, "Rig directory (projectors, registered camera, keys)")->required();
   play->add_option("--desired", play_args->desired,
-                   "The desired appearance as the rig's camera sees the room: a directory of images or a video")
-      ->required();
+                   "The desired appearance as the rig's camera sees the room: a directory of images or a video");
+  play->add_option("--solution", play_args->solution,
+                   "Instead of --desired: show a compensation solution's emittance (procam compensate --out) "
+                   "as every frame");
   play->add_option("--out", play_args->out, "Output directory (result.json with per-frame timings)")->required();
   play->add_option("--nodes", play_args->nodes, "Display nodes NAME=tcp://HOST:PORT,...; none: a node in this process")
       ->delimiter(',');
@@ -129,6 +133,10 @@ void AddNodeCommands(CLI::App& app) {
   play->add_option("--frame-timeout-ms", play_args->frame_timeout_ms,
                    "A node that does not answer a frame in this time is reported lost; the others go on")
       ->check(CLI::Range(1.0, 60000.0))
+      ->capture_default_str();
+  play->add_option("--setup-timeout", play_args->setup_timeout,
+                   "Seconds for every node to answer and build the rig before the first frame")
+      ->check(CLI::Range(0.1, 3600.0))
       ->capture_default_str();
   play->callback([play_args] { RunPlayCommand(*play_args); });
 }

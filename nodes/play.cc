@@ -16,6 +16,7 @@
 #include "base/timing.h"
 #include "calibration/rig_directory.h"
 #include "compensation/problem.h"
+#include "compensation/stage.h"
 #include "geometry/srgb.h"
 #include "geometry/stage.h"
 #include "projection/camera_rays.h"
@@ -106,19 +107,44 @@ double Median(std::vector<double> values) {
 struct PlayScene {
   GeometryStage geometry;
   CompensationProblem problem;
+  Eigen::MatrixX3d solution;  // shown as every frame, when playing a solution
   std::vector<int> pixel_patch;
   int camera_width = 0, camera_height = 0;
   nlohmann::json setup;
 };
 
+// kSetup's body: a fresh id, the subdivision and the render options.
+nlohmann::json SetupJson(const PlayOptions& options, const PlayScene& play) {
+  return {{"setup", RandomId()},
+          {"target_patches", play.geometry.scene.target_patches},
+          {"patches", play.geometry.patches.fine.size()},
+          {"light", LightFieldName(options.light)},
+          {"dither", DitherName(options.dither)},
+          {"feather", options.feather}};
+}
+
 PlayScene PreparePlay(const PlayOptions& options, const RigDirectory& rig) {
   PlayScene play;
   GeometryOptions geometry_options;
   geometry_options.patches = options.patches;
+  std::optional<SolutionDirectory> solution;
+  if (!options.solution.empty()) {
+    solution = ReadSolutionDirectory(options.solution);
+    if (geometry_options.patches == 0) geometry_options.patches = solution->target_patches;
+  }
   Report(options.progress, "play: subdividing the room and computing form factors");
   play.geometry = RunGeometryStage(options.scene, geometry_options);
   ApplyRigReflectance(rig, &play.geometry.patches);
   const PatchLevel& fine = play.geometry.patches.fine;
+  if (solution) {
+    if (solution->patches != fine.size()) {
+      throw IoError(fmt::format("{}: the solution has {} patches, {} subdivides into {} (give --patches as "
+                                "compensate was given it)",
+                                (options.solution / "result.json").string(), solution->patches, options.scene,
+                                fine.size()));
+    }
+    play.solution = solution->emittance;
+  }
   play.problem = MakeProblem(play.geometry.scene, fine, play.geometry.form_factors, options.alpha);
   ProjectionRigOptions rig_options;
   rig_options.feather = options.feather;
@@ -126,6 +152,10 @@ PlayScene PreparePlay(const PlayOptions& options, const RigDirectory& rig) {
     const ProjectionRig bounds = BuildProjectionRig(fine, rig.projectors, rig_options);
     play.problem.lower = bounds.lower;
     play.problem.upper = bounds.upper;
+  }
+  if (!options.solution.empty()) {  // the solution's emittance: no camera needed
+    play.setup = SetupJson(options, play);
+    return play;
   }
   if (rig.file.camera.model.empty()) {
     throw IoError((options.rig_dir / "rig.json").string() +
@@ -138,12 +168,7 @@ PlayScene PreparePlay(const PlayOptions& options, const RigDirectory& rig) {
   play.pixel_patch = rays.patch;
   play.camera_width = rays.width;
   play.camera_height = rays.height;
-  play.setup = {{"setup", RandomId()},
-                {"target_patches", play.geometry.scene.target_patches},
-                {"patches", fine.size()},
-                {"light", LightFieldName(options.light)},
-                {"dither", DitherName(options.dither)},
-                {"feather", options.feather}};
+  play.setup = SetupJson(options, play);
   return play;
 }
 
@@ -152,6 +177,7 @@ void WritePlayResult(const PlayOptions& options, const PlaySummary& summary, con
   nlohmann::json result = {{"scene", options.scene},
                            {"rig", options.rig_dir.string()},
                            {"desired", options.desired.string()},
+                           {"solution", options.solution.string()},
                            {"patches", play.problem.size()},
                            {"method", MethodName(options.solver.method)},
                            {"fps_target", options.fps},
@@ -174,10 +200,12 @@ void WritePlayResult(const PlayOptions& options, const PlaySummary& summary, con
 }
 
 // The show itself: frames through the controller until the source ends.
-PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& controller, FrameSource& source,
+PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& controller, FrameSource* source,
                        Clock::time_point start) {
   PlaySummary summary;
-  const int limit = options.frames > 0 ? options.frames : (source.count() > 0 ? source.count() : INT32_MAX);
+  const int limit = options.frames > 0   ? options.frames
+                    : source == nullptr ? 1
+                                        : (source->count() > 0 ? source->count() : INT32_MAX);
   const auto period = std::chrono::duration<double>(1.0 / options.fps);
   std::shared_ptr<const RadiositySystem> radiosity;
   Eigen::MatrixX3d previous;
@@ -189,22 +217,26 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
     const auto frame_start = Clock::now();
     PlayFrame frame;
     frame.source = index;
-    cv::Mat image = source.Read(index);
-    if (image.empty()) break;  // the end of a video
-    frame.read_ms = MsSince(frame_start);
-    auto step = Clock::now();
-    play.problem.desired =
-        DesiredFromImage(image, play.pixel_patch, play.camera_width, play.camera_height, room_desired);
-    frame.desired_ms = MsSince(step);
-    step = Clock::now();
-    SolverSummary solver_summary;
-    const CompensationSolution solution =
-        Solve(options.solver, play.problem, &solver_summary, {}, WarmStart{radiosity, previous});
-    radiosity = solution.radiosity_system;
-    previous = solution.emittance;
-    frame.solve_ms = MsSince(step);
-    frame.iterations = solver_summary.iterations;
-    frame.shown = controller.Show(static_cast<uint64_t>(summary.frames.size()), solution.emittance);
+    if (source != nullptr) {
+      cv::Mat image = source->Read(index);
+      if (image.empty()) break;  // the end of a video
+      frame.read_ms = MsSince(frame_start);
+      auto step = Clock::now();
+      play.problem.desired =
+          DesiredFromImage(image, play.pixel_patch, play.camera_width, play.camera_height, room_desired);
+      frame.desired_ms = MsSince(step);
+      step = Clock::now();
+      SolverSummary solver_summary;
+      const CompensationSolution solution =
+          Solve(options.solver, play.problem, &solver_summary, {}, WarmStart{radiosity, previous});
+      radiosity = solution.radiosity_system;
+      previous = solution.emittance;
+      frame.solve_ms = MsSince(step);
+      frame.iterations = solver_summary.iterations;
+    } else {
+      previous = play.solution;
+    }
+    frame.shown = controller.Show(static_cast<uint64_t>(summary.frames.size()), previous);
     frame.total_ms = MsSince(frame_start);
     if (summary.frames.empty()) t0 = Clock::now() - std::chrono::duration_cast<Clock::duration>(period * index);
     summary.frames.push_back(frame);
@@ -286,7 +318,10 @@ PlaySummary RunPlay(const PlayOptions& options) {
   } else {
     keys = ReadRigKeys(options.rig_dir, KeyRole::kController);
   }
-  FrameSource source(options.desired);
+  if (options.desired.empty() == options.solution.empty())
+    throw std::invalid_argument("play: give the desired appearance (--desired) or a solution (--solution), not both");
+  std::optional<FrameSource> source;
+  if (!options.desired.empty()) source.emplace(options.desired);
   zmq::context_t context;
   std::atomic<bool> node_stop{false}, node_failed{false};
   std::exception_ptr failure;
@@ -299,13 +334,14 @@ PlaySummary RunPlay(const PlayOptions& options) {
       ControllerOptions controller_options;
       controller_options.setup = play.setup;
       controller_options.frame_timeout_s = options.frame_timeout_s;
+      controller_options.setup_timeout_s = options.setup_timeout_s;
       controller_options.log = options.progress;
       controller_options.cancelled = [&] { return node_failed.load(); };
       Controller controller(context, nodes, keys ? &*keys : nullptr, controller_options);
       Report(options.progress, fmt::format("play: setting up {} node(s)", nodes.size()));
       controller.Connect();
       const double setup_seconds = SecondsSince(start);
-      summary = PlayFrames(options, play, controller, source, start);
+      summary = PlayFrames(options, play, controller, source ? &*source : nullptr, start);
       summary.setup_seconds = setup_seconds;
       controller.Stop(/*exit=*/local);
       WritePlayResult(options, summary, node_list, play);
