@@ -23,6 +23,7 @@ void OnSignal(int) { g_stop = true; }
 
 struct NodeArguments {
   std::string rig, scene, listen = "tcp://*:5600", name = "node";
+  double seconds = 0.0;
   std::vector<std::string> projectors, display = {"memory"};
 };
 
@@ -88,6 +89,8 @@ void AddNodeCommands(CLI::App& app) {
       ->capture_default_str();
   node->add_option("--listen", node_args->listen, "Endpoint to listen at (tcp://ADDRESS:PORT)")->capture_default_str();
   node->add_option("--name", node_args->name, "The node's name in logs")->capture_default_str();
+  node->add_option("--seconds", node_args->seconds, "Run at most this long (0: until interrupted)")
+      ->check(CLI::NonNegativeNumber);
   node->callback([node_args] {
     NodeOptions options;
     options.name = node_args->name;
@@ -95,6 +98,7 @@ void AddNodeCommands(CLI::App& app) {
     options.scene = node_args->scene;
     options.projectors = node_args->projectors;
     options.listen = node_args->listen;
+    options.max_seconds = node_args->seconds;
     options.log = [](const std::string& line) { std::cout << line << std::endl; };
     std::signal(SIGINT, OnSignal);
     std::signal(SIGTERM, OnSignal);

@@ -38,8 +38,8 @@ struct Controller::Node {
   bool ever_live = false;
   Clock::time_point last_heard = Clock::now(), last_ping = Clock::now() - std::chrono::hours(1);
   std::string error;  // its setup's error
-  // The current frame.
-  bool ready = false, presented = false;
+  // The current frame: whether it takes part (live when the frame was sent), and its answers.
+  bool in_frame = false, ready = false, presented = false;
   double ready_ms = 0.0, render_ms = 0.0;
   int64_t presented_ns = 0;
 };
@@ -81,6 +81,12 @@ void Controller::Handle(Node& node, const Message& message) {
   node.last_heard = Clock::now();
   switch (message.type) {
     case MessageType::kPong:
+      // A node being set up that answers without our setup has restarted since it was sent
+      // (or answers a ping sent before it): it is sent again (the same id is cheap to repeat).
+      if (node.state == Node::State::kSettingUp &&
+          message.body.value("setup", std::string()) != options_.setup.value("setup", std::string())) {
+        node.state = Node::State::kJoining;
+      }
       if (node.state != Node::State::kJoining) break;
       if (message.body.value("setup", std::string()) == options_.setup.value("setup", std::string()) &&
           node.ever_live) {
@@ -110,7 +116,7 @@ void Controller::Handle(Node& node, const Message& message) {
       node.ever_live = true;
       break;
     case MessageType::kReady:
-      if (message.sequence == current_frame_ && node.state == Node::State::kLive) {
+      if (message.sequence == current_frame_ && node.in_frame && node.state == Node::State::kLive) {
         node.ready = true;
         const nlohmann::json& body = message.body;
         if (body.contains("render_ms") && body["render_ms"].is_number()) node.render_ms = body["render_ms"].get<double>();
@@ -159,10 +165,11 @@ void Controller::Service() {
   const auto now = Clock::now();
   for (const auto& node : nodes_) {
     if (node->state == Node::State::kLive) continue;
-    if (node->state == Node::State::kSettingUp && SecondsSince(node->last_ping) < options_.setup_timeout_s) continue;
-    if (SecondsSince(node->last_ping) < kPingIntervalS) continue;
+    // A node being set up is pinged too, less often: its answer says whether it still has our
+    // setup coming (it restarted otherwise).
+    const double interval = node->state == Node::State::kSettingUp ? 1.0 : kPingIntervalS;
+    if (SecondsSince(node->last_ping) < interval) continue;
     node->last_ping = now;
-    node->state = Node::State::kJoining;
     Message ping;
     ping.type = MessageType::kPing;
     ping.sequence = next_request_++;
@@ -205,17 +212,21 @@ FrameReport Controller::Show(uint64_t frame, const Eigen::MatrixX3d& emittance) 
       emittance;
   const std::string bytes = EncodeMessage(message);  // once, for every node
   const auto sent = Clock::now();
+  // Only the nodes live now take part: one that rejoins while the frame is under way waits for
+  // the next.
   std::vector<bool> was_live;
   for (const auto& node : nodes_) {
     was_live.push_back(node->state == Node::State::kLive);
+    node->in_frame = node->state == Node::State::kLive;
     node->ready = node->presented = false;
     node->ready_ms = node->render_ms = 0.0;
-    if (node->state != Node::State::kLive) continue;
+    if (!node->in_frame) continue;
     if (!node->socket->socket().send(zmq::buffer(bytes), zmq::send_flags::dontwait)) Lose(*node, "not connected");
   }
+  auto taking_part = [](const Node& node) { return node.in_frame && node.state == Node::State::kLive; };
   auto waiting = [&](bool presented) {
     return std::any_of(nodes_.begin(), nodes_.end(), [&](const auto& node) {
-      return node->state == Node::State::kLive && !(presented ? node->presented : node->ready);
+      return taking_part(*node) && !(presented ? node->presented : node->ready);
     });
   };
   const auto timeout = std::chrono::duration<double>(options_.frame_timeout_s);
@@ -226,7 +237,7 @@ FrameReport Controller::Show(uint64_t frame, const Eigen::MatrixX3d& emittance) 
     }
   }
   for (const auto& node : nodes_) {
-    if (node->state == Node::State::kLive && !node->ready)
+    if (taking_part(*node) && !node->ready)
       Lose(*node, fmt::format("no answer to frame {} in {:.0f} ms", frame, 1e3 * options_.frame_timeout_s));
   }
   report.ready_ms = MsSince(sent);
@@ -235,12 +246,12 @@ FrameReport Controller::Show(uint64_t frame, const Eigen::MatrixX3d& emittance) 
   present.sequence = frame;
   const auto present_sent = Clock::now();
   for (const auto& node : nodes_) {
-    if (node->state == Node::State::kLive && !node->socket->Send(present)) Lose(*node, "not connected");
+    if (taking_part(*node) && !node->socket->Send(present)) Lose(*node, "not connected");
   }
   while (waiting(true) && Clock::now() - present_sent < timeout)
     Pump(static_cast<int>(std::ceil(1e3 * (options_.frame_timeout_s - SecondsSince(present_sent)))));
   for (const auto& node : nodes_) {
-    if (node->state == Node::State::kLive && !node->presented)
+    if (taking_part(*node) && !node->presented)
       Lose(*node, fmt::format("frame {} not presented in {:.0f} ms", frame, 1e3 * options_.frame_timeout_s));
   }
   report.present_ms = MsSince(present_sent);
@@ -250,7 +261,7 @@ FrameReport Controller::Show(uint64_t frame, const Eigen::MatrixX3d& emittance) 
     NodeFrame part;
     part.ready_ms = node->ready_ms;
     part.render_ms = node->render_ms;
-    if (node->presented && node->state == Node::State::kLive) {
+    if (node->presented && taking_part(*node)) {
       part.state = "shown";
       part.presented_ns = node->presented_ns;
       if (report.shown == 0 || node->presented_ns < earliest) earliest = node->presented_ns;

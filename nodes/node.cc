@@ -88,7 +88,12 @@ class Node {
 
   // Returns when `stop` is set or a controller asked the node to exit.
   void Run(const std::atomic<bool>& stop) {
+    const auto start = Clock::now();
     while (!stop && !exit_) {
+      if (options_.max_seconds > 0.0 && SecondsSince(start) > options_.max_seconds) {
+        Log(fmt::format("node {}: ran its {:.0f} s", options_.name, options_.max_seconds));
+        return;
+      }
       CheckOutputs();
       std::optional<Envelope> envelope = socket_->Receive(100);
       if (!envelope) continue;

@@ -63,6 +63,7 @@ struct NodeOptions {
   std::string scene;                    // the room (LoadSceneArgument), as the controller's
   std::vector<std::string> projectors;  // names in rig.json this node shows, in output order
   std::string listen;                   // tcp://ADDRESS:PORT, or inproc://NAME (no keys)
+  double max_seconds = 0.0;             // > 0: return after this long (tests, timed shows)
   std::function<void(const std::string&)> log;  // a line per event (setup, faults, refusals)
 };
 

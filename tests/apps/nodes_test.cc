@@ -1,0 +1,181 @@
+// A controller and three display nodes, each its own `procam node` process on 127.0.0.1, as a
+// user runs them: the images the nodes show equal `procam project`'s, the frame barrier holds,
+// a killed node is reported within a second and rejoins when restarted, and a node set up with
+// another rig's keys refuses the controller. Every process is bounded by `timeout`.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "base/io.h"
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+std::string Binary() {
+  const char* binary = std::getenv("PROCAM_BINARY");
+  EXPECT_NE(binary, nullptr) << "PROCAM_BINARY is not set (run the test through CTest)";
+  return binary ? binary : "procam";
+}
+
+// tiny_box written as a scene file, and a rig directory holding the scene's projectors (their
+// true models and photometry), a third projector `centre` sharing left's model, the scene's
+// camera as the registered camera, and CURVE keys.
+struct Rig {
+  explicit Rig(const testing::TempDir& dir) : root(dir.path()), scene((dir / "room" / "tiny_box.json").string()) {
+    const std::filesystem::path room = root / "room";
+    testing::CommandRun run = testing::RunProcam("scene write tiny_box --out " + room.string());
+    EXPECT_EQ(run.exit_code, 0) << run.output;
+    const nlohmann::json file = nlohmann::json::parse(ReadFile(scene));
+    nlohmann::json projectors = file.at("projectors");
+    nlohmann::json centre = projectors.at(0);
+    centre["name"] = "centre";
+    projectors.push_back(centre);
+    const nlohmann::json rig = {{"format_version", 1},
+                                {"camera", {{"model", file.at("cameras").at(0).at("model")}}},
+                                {"projectors", projectors}};
+    WriteFileAtomically(room / "rig.json", rig.dump(1));
+    run = testing::RunProcam("keys --rig " + room.string());
+    EXPECT_EQ(run.exit_code, 0) << run.output;
+    // Ports no other test of this run uses (CTest runs tests side by side).
+    const int base = 20000 + static_cast<int>(::getpid() % 2000) * 10;
+    for (int k = 0; k < 3; ++k) ports.push_back(base + k);
+  }
+  // The shell line that starts node k (n1, n2, n3 show left, right, centre) in the background
+  // (its process id in $!), bounded to 60 s, its log in node<k>.log.
+  std::string StartNode(int k, const std::string& rig_dir = "") const {
+    static const char* names[] = {"left", "right", "centre"};
+    return Binary() + " node --seconds 60 --rig " + (rig_dir.empty() ? (root / "room").string() : rig_dir) +
+           " --scene " + scene + " --projectors " + names[k] + " --display record:" +
+           (root / ("n" + std::to_string(k + 1))).string() + " --listen tcp://127.0.0.1:" +
+           std::to_string(ports[k]) + " --name n" + std::to_string(k + 1) + " > " +
+           (root / ("node" + std::to_string(k + 1) + ".log")).string() + " 2>&1 &\n";
+  }
+  std::string Nodes() const {
+    std::string text;
+    for (int k = 0; k < 3; ++k)
+      text += (k ? "," : "") + std::string("n") + std::to_string(k + 1) + "=tcp://127.0.0.1:" + std::to_string(ports[k]);
+    return text;
+  }
+  std::filesystem::path root;
+  std::string scene;
+  std::vector<int> ports;
+};
+
+nlohmann::json ReadResult(const std::filesystem::path& path) { return nlohmann::json::parse(ReadFile(path)); }
+
+TEST(Nodes, ThreeNodesShowWhatProjectMakesAndHoldTheBarrier) {
+  testing::TempDir dir;
+  const Rig rig(dir);
+  const std::string room = (rig.root / "room").string();
+  testing::CommandRun run = testing::RunProcam("compensate " + rig.scene + " --rig " + room + " --patches 150 --out " +
+                                               (dir / "solution").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  run = testing::RunProcam("project " + (dir / "solution").string() + " --out " + (dir / "images").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  const std::string script = rig.StartNode(0) + rig.StartNode(1) + rig.StartNode(2) + "timeout 120 " + Binary() +
+                             " play " + rig.scene + " --rig " + room + " --solution " + (dir / "solution").string() +
+                             " --frames 12 --fps 5 --nodes " + rig.Nodes() + " --out " + (dir / "play").string() +
+                             "\nstatus=$?\nkill %1 %2 %3 2>/dev/null\nwait\nexit $status\n";
+  run = testing::RunShell("bash -c '" + script + "'");
+  ASSERT_EQ(run.exit_code, 0) << run.output << ReadFile(dir / "node1.log");
+  // The images on the nodes are procam project's, byte for byte.
+  EXPECT_EQ(ReadFile(dir / "n1" / "left.png"), ReadFile(dir / "images" / "left.png"));
+  EXPECT_EQ(ReadFile(dir / "n2" / "right.png"), ReadFile(dir / "images" / "right.png"));
+  EXPECT_EQ(ReadFile(dir / "n3" / "centre.png"), ReadFile(dir / "images" / "centre.png"));
+  const nlohmann::json result = ReadResult(dir / "play" / "result.json");
+  // Frames whose time passed while the previous one was shown are dropped (a loaded machine).
+  ASSERT_EQ(result.at("frames").size() + result.at("frames_dropped").get<size_t>(), 12u);
+  ASSERT_GE(result.at("frames").size(), 4u);
+  // The barrier: no node presents frame k+1 before every node has presented frame k.
+  int64_t previous_latest = 0;
+  for (const nlohmann::json& frame : result.at("frames")) {
+    EXPECT_EQ(frame.at("nodes_shown"), 3) << frame.dump();
+    int64_t earliest = INT64_MAX, latest = 0;
+    for (const auto& [name, node] : frame.at("nodes").items()) {
+      EXPECT_EQ(node.at("state"), "shown") << name;
+      earliest = std::min(earliest, node.at("presented_ns").get<int64_t>());
+      latest = std::max(latest, node.at("presented_ns").get<int64_t>());
+    }
+    EXPECT_GE(earliest, previous_latest) << "frame " << frame.at("frame") << " shown before the last was everywhere";
+    EXPECT_NEAR(frame.at("skew_ms").get<double>(), 1e-6 * double(latest - earliest), 1e-6);
+    previous_latest = latest;
+  }
+}
+
+TEST(Nodes, AKilledNodeIsReportedWithinASecondAndRejoins) {
+  testing::TempDir dir;
+  const Rig rig(dir);
+  const std::string room = (rig.root / "room").string();
+  testing::CommandRun run = testing::RunProcam("compensate " + rig.scene + " --rig " + room + " --patches 100 --out " +
+                                               (dir / "solution").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  // 80 frames at 10 fps (8 s); node 3 is killed (SIGKILL, as a crash) half a second after the
+  // first progress line (frames are being shown) and started again 1.5 s later.
+  const std::string script =
+      rig.StartNode(0) + rig.StartNode(1) + rig.StartNode(2) + "node3=$!\n" + "timeout 120 " + Binary() + " play " +
+      rig.scene + " --rig " + room + " --solution " + (dir / "solution").string() +
+      " --frames 80 --fps 10 --nodes " + rig.Nodes() + " --out " + (dir / "play").string() +
+      " > " + (dir / "play.log").string() + " 2>&1 &\nplay=$!\n" +
+      "for i in $(seq 300); do grep -q \"play: frame\" " + (dir / "play.log").string() +
+      " && break; sleep 0.1; done\nsleep 0.5\nkill -KILL $node3\ndate +%s%N > " + (dir / "killed").string() + "\nsleep 1.5\n" + rig.StartNode(2) +
+      "wait $play\nstatus=$?\nkill %1 %2 %5 2>/dev/null\nwait\nexit $status\n";
+  run = testing::RunShell("bash -c '" + script + "'");
+  const std::string log = ReadFile(dir / "play.log");
+  ASSERT_EQ(run.exit_code, 0) << run.output << log;
+  const int64_t killed = std::stoll(ReadFile(dir / "killed"));
+  const nlohmann::json result = ReadResult(dir / "play" / "result.json");
+  int64_t first_missed = 0;
+  bool rejoined = false;
+  for (const nlohmann::json& frame : result.at("frames")) {
+    const nlohmann::json& nodes = frame.at("nodes");
+    EXPECT_EQ(nodes.at("n1").at("state"), "shown");  // the others go on
+    EXPECT_EQ(nodes.at("n2").at("state"), "shown");
+    if (nodes.at("n3").at("state") != "shown" && first_missed == 0) first_missed = nodes.at("n1").at("presented_ns");
+    if (first_missed != 0 && nodes.at("n3").at("state") == "shown") rejoined = true;
+  }
+  ASSERT_NE(first_missed, 0) << log;
+  EXPECT_LT(double(first_missed - killed) * 1e-9, 1.0) << log;  // reported within a second
+  EXPECT_TRUE(rejoined) << log;
+  EXPECT_NE(log.find("node n3 (tcp://127.0.0.1:" + std::to_string(rig.ports[2]) + ") lost at frame"), std::string::npos)
+      << log;
+  EXPECT_NE(log.find("node n3 rejoins at frame"), std::string::npos) << log;
+}
+
+TEST(Nodes, ANodeWithAnotherRigsKeysRefusesTheController) {
+  testing::TempDir dir;
+  const Rig rig(dir);
+  const std::string room = (rig.root / "room").string();
+  testing::CommandRun run = testing::RunProcam("compensate " + rig.scene + " --rig " + room + " --patches 60 --out " +
+                                               (dir / "solution").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  // Another rig directory with the same projectors and its own keys.
+  const std::filesystem::path other = dir / "other";
+  std::filesystem::create_directories(other);
+  for (const auto& entry : std::filesystem::directory_iterator(rig.root / "room"))
+    if (entry.is_regular_file()) std::filesystem::copy_file(entry.path(), other / entry.path().filename());
+  run = testing::RunProcam("keys --rig " + other.string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  std::filesystem::copy_file(rig.root / "room" / "keys" / "node.pub", other / "keys" / "node.pub",
+                             std::filesystem::copy_options::overwrite_existing);
+  std::filesystem::copy_file(rig.root / "room" / "keys" / "node.key", other / "keys" / "node.key",
+                             std::filesystem::copy_options::overwrite_existing);
+  const std::string script = rig.StartNode(0, other.string()) + "timeout 60 " + Binary() + " play " + rig.scene +
+                             " --rig " + room + " --solution " + (dir / "solution").string() +
+                             " --setup-timeout 2 --nodes n1=tcp://127.0.0.1:" + std::to_string(rig.ports[0]) +
+                             " --out " + (dir / "play").string() + " 2>&1 >/dev/null\nstatus=$?\nkill %1\nwait\nexit $status\n";
+  run = testing::RunShell("bash -c '" + script + "'");
+  EXPECT_EQ(run.exit_code, 1) << run.output;
+  EXPECT_NE(run.output.find("procam: error: node n1 (tcp://127.0.0.1:"), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("no answer in 2 s"), std::string::npos) << run.output;
+  const std::string node_log = ReadFile(dir / "node1.log");
+  EXPECT_NE(node_log.find("refused a controller at 127.0.0.1"), std::string::npos) << node_log;
+  EXPECT_FALSE(std::filesystem::exists(dir / "play" / "result.json"));
+}
+
+}  // namespace
+}  // namespace procam
