@@ -79,10 +79,10 @@ std::string EncodeMessage(const Message& message) {
   bytes.append(3, '\0');
   Append(&bytes, message.sequence);
   if (message.type == MessageType::kFrame) {
-    if (message.emittance.size() % 3 != 0 || message.emittance.size() / 3 > kMaxFramePatches) {
+    if (message.emittance.empty() || message.emittance.size() % 3 != 0 || message.emittance.size() / 3 > kMaxFramePatches) {
       throw std::invalid_argument("frame message: emittance of " +
                                   std::to_string(message.emittance.size()) +
-                                  " values is not n x 3 with n <= " + std::to_string(kMaxFramePatches));
+                                  " values is not n x 3 with 1 <= n <= " + std::to_string(kMaxFramePatches));
     }
     Append(&bytes, static_cast<uint32_t>(message.emittance.size() / 3));
     Append(&bytes, uint32_t{0});
@@ -134,6 +134,7 @@ bool ParseMessage(const void* data, size_t size, Message* message, std::string* 
       const uint32_t patches = Read<uint32_t>(bytes + offset);
       if (Read<uint32_t>(bytes + offset + 4) != 0) return Fail(why, "frame message: reserved bytes 20-23 are not zero");
       offset += 8;
+      if (patches == 0) return Fail(why, "frame message of 0 patches");
       if (patches > kMaxFramePatches) {
         return Fail(why, "frame message of " + std::to_string(patches) + " patches (at most " +
                              std::to_string(kMaxFramePatches) + ")");

@@ -11,7 +11,7 @@
 //   8       8     sequence: the frame number (kFrame, kReady, kPresent, kPresented, kFailed), or
 //                 the request's number (kPing/kPong, kSetup/kSetupDone), little endian
 //   16      ...   payload, by type:
-//     kFrame      u32 patches n, u32 zero, then n × 3 float64 per-patch emittance (R, G,
+//     kFrame      u32 patches n ≥ 1, u32 zero, then n × 3 float64 per-patch emittance (R, G,
 //                 B), little endian: exactly what the solver computed (24 bytes a patch)
 //     kPresented  i64 the presentation time (ns since the Unix epoch, the node's system clock,
 //                 which linuxptp keeps in step between PCs), then kPong's JSON

@@ -95,6 +95,9 @@ TEST(NodeMessages, MalformedMessagesAreRefusedWithOneLine) {
   const uint32_t more = 1000;
   std::memcpy(&bad[16], &more, 4);
   EXPECT_NE(Refusal(bad).find("1000 patches need"), std::string::npos);
+  const uint32_t none = 0;  // found by the fuzz target (its memcpy of no bytes from null)
+  std::memcpy(&bad[16], &none, 4);
+  EXPECT_NE(Refusal(bad.substr(0, 24)).find("0 patches"), std::string::npos);
   const uint32_t huge = kMaxFramePatches + 1;
   std::memcpy(&bad[16], &huge, 4);
   EXPECT_NE(Refusal(bad).find("at most"), std::string::npos);
