@@ -1,0 +1,184 @@
+// A display node in this process (inproc://, its own thread) with outputs the test controls: a
+// monitor that disappears mid-show is reported to the controller and the node goes on with its
+// other projector; play's mapping of a desired image onto the patches is the per-patch mean.
+#include "nodes/node.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <mutex>
+#include <thread>
+
+#include "base/io.h"
+#include "datasets_synthetic/scene_files.h"
+#include "nodes/controller.h"
+#include "nodes/play.h"
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+// Keeps what it presents; after `fail_after` presents it says its monitor is gone.
+class VanishingOutput : public NodeOutput {
+ public:
+  VanishingOutput(std::string name, int fail_after, int* presented)
+      : name_(std::move(name)), fail_after_(fail_after), presented_(presented) {}
+  std::string Describe() const override { return "test:" + name_; }
+  void Draw(const ProjectorImage&) override {}
+  void Present(uint64_t) override { ++*presented_; }
+  std::string Fault() override {
+    return fail_after_ >= 0 && *presented_ >= fail_after_ ? "monitor TEST-" + name_ + " disappeared" : "";
+  }
+
+ private:
+  std::string name_;
+  int fail_after_;
+  int* presented_;
+};
+
+// tiny_box as a scene file and a rig directory holding its projectors.
+std::string WriteRig(const testing::TempDir& dir) {
+  const std::filesystem::path scene = WriteSyntheticSceneFile("tiny_box", 80, dir.path());
+  const nlohmann::json file = nlohmann::json::parse(ReadFile(scene));
+  WriteFileAtomically(dir / "rig.json",
+                      nlohmann::json{{"format_version", 1}, {"projectors", file.at("projectors")}}.dump());
+  return scene.string();
+}
+
+TEST(Node, AMonitorThatDisappearsIsReportedAndTheOtherProjectorGoesOn) {
+  testing::TempDir dir;
+  const std::string scene = WriteRig(dir);
+  int presented_left = 0, presented_right = 0;
+  NodeOptions options;
+  options.name = "n";
+  options.rig_dir = dir.path();
+  options.scene = scene;
+  options.projectors = {"left", "right"};
+  options.listen = "inproc://node-test";
+  zmq::context_t context;
+  std::atomic<bool> stop{false};
+  std::thread node([&] {
+    RunNode(context, options,
+            [&](const std::vector<Projector>&) {
+              std::vector<std::unique_ptr<NodeOutput>> outputs;
+              outputs.push_back(std::make_unique<VanishingOutput>("left", 2, &presented_left));
+              outputs.push_back(std::make_unique<VanishingOutput>("right", -1, &presented_right));
+              return outputs;
+            },
+            stop);
+  });
+  std::mutex mutex;
+  std::string log;
+  ControllerOptions controller_options;
+  controller_options.setup = {{"setup", "test"}, {"target_patches", 80}, {"patches", 64}};
+  controller_options.setup_timeout_s = 30.0;
+  controller_options.log = [&](const std::string& line) {
+    std::lock_guard<std::mutex> lock(mutex);
+    log += line + "\n";
+  };
+  Controller controller(context, {{"n", "inproc://node-test"}}, nullptr, controller_options);
+  bool connected = true;
+  try {
+    controller.Connect();
+  } catch (const IoError& e) {
+    ADD_FAILURE() << e.what();
+    connected = false;
+  }
+  Eigen::MatrixX3d emittance = Eigen::MatrixX3d::Constant(64, 3, 0.5);
+  for (uint64_t frame = 0; connected && frame < 5; ++frame) {
+    const FrameReport report = controller.Show(frame, emittance);
+    EXPECT_EQ(report.shown, 1) << log;  // the node goes on
+  }
+  stop = true;
+  node.join();
+  EXPECT_EQ(presented_right, 5);
+  EXPECT_EQ(presented_left, 2);  // not shown on once its monitor was gone
+  EXPECT_NE(log.find("node n says: projector left: monitor TEST-left disappeared"), std::string::npos) << log;
+  EXPECT_EQ(log.find("right:"), std::string::npos) << log;
+}
+
+TEST(Node, ASetupTheRoomDoesNotGiveIsRefusedNamingTheScene) {
+  testing::TempDir dir;
+  const std::string scene = WriteRig(dir);
+  NodeOptions options;
+  options.rig_dir = dir.path();
+  options.scene = scene;
+  options.projectors = {"left"};
+  options.listen = "inproc://node-test-2";
+  zmq::context_t context;
+  std::atomic<bool> stop{false};
+  std::thread node([&] {
+    RunNode(context, options,
+            [](const std::vector<Projector>&) {
+              std::vector<std::unique_ptr<NodeOutput>> outputs;
+              outputs.push_back(std::make_unique<RecordOutput>());
+              return outputs;
+            },
+            stop);
+  });
+  ControllerOptions controller_options;
+  controller_options.setup = {{"setup", "x"}, {"target_patches", 80}, {"patches", 99}};  // not tiny_box's
+  controller_options.setup_timeout_s = 30.0;
+  Controller controller(context, {{"n", "inproc://node-test-2"}}, nullptr, controller_options);
+  try {
+    controller.Connect();
+    ADD_FAILURE() << "a node set up on another room";
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("tiny_box.json: subdivides into 64 patches for target 80, the controller's "
+                                         "room into 99"),
+              std::string::npos)
+        << e.what();
+  }
+  stop = true;
+  node.join();
+}
+
+TEST(Node, AProjectorNotInTheRigIsRefusedAtStart) {
+  testing::TempDir dir;
+  const std::string scene = WriteRig(dir);
+  NodeOptions options;
+  options.rig_dir = dir.path();
+  options.scene = scene;
+  options.projectors = {"middle"};
+  options.listen = "inproc://node-test-3";
+  zmq::context_t context;
+  std::atomic<bool> stop{false};
+  try {
+    RunNode(context, options,
+            [](const std::vector<Projector>&) { return std::vector<std::unique_ptr<NodeOutput>>(); }, stop);
+    ADD_FAILURE() << "started";
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("rig.json: no projector 'middle' (the rig has left, right)"), std::string::npos)
+        << e.what();
+  }
+}
+
+// The mean of the linearised pixels seeing each patch; unseen patches keep the fallback.
+TEST(Play, DesiredFromImageIsThePerPatchMeanOfTheLinearisedPixels) {
+  const int width = 4, height = 2;
+  const std::vector<int> pixel_patch = {0, 0, 1, 1, 0, -1, 1, 1};
+  cv::Mat image(height, width, CV_8UC3);
+  const int values[8] = {0, 255, 128, 128, 255, 17, 64, 200};  // grey levels
+  for (int k = 0; k < 8; ++k) image.at<cv::Vec3b>(k / width, k % width) = cv::Vec3b(values[k], values[k], values[k]);
+  image.at<cv::Vec3b>(0, 0) = cv::Vec3b(255, 0, 0);  // blue (OpenCV's B, G, R)
+  Eigen::MatrixX3d fallback(3, 3);
+  fallback << 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9;
+  const Eigen::MatrixX3d desired = DesiredFromImage(image, pixel_patch, width, height, fallback);
+  auto linear = [](int code) {  // the sRGB transfer function, written out
+    const double c = code / 255.0;
+    return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+  };
+  // Patch 0: pixels 0 (blue), 1, 4.
+  EXPECT_NEAR(desired(0, 0), (0.0 + linear(255) + linear(255)) / 3, 1e-12);
+  EXPECT_NEAR(desired(0, 2), (linear(255) + linear(255) + linear(255)) / 3, 1e-12);
+  // Patch 1: pixels 2, 3, 6, 7.
+  EXPECT_NEAR(desired(1, 1), (2 * linear(128) + linear(64) + linear(200)) / 4, 1e-12);
+  EXPECT_EQ(desired.row(2), fallback.row(2));  // seen by no pixel
+  // An image of another size is resized to the camera's first (a flat image stays flat).
+  cv::Mat flat(10, 20, CV_16UC3, cv::Scalar::all(65535));
+  const Eigen::MatrixX3d white = DesiredFromImage(flat, pixel_patch, width, height, fallback);
+  EXPECT_NEAR(white(1, 0), 1.0, 1e-12);
+}
+
+}  // namespace
+}  // namespace procam
