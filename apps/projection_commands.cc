@@ -2,6 +2,7 @@
 // test patterns fullscreen on projector monitors) and procam bench projection (images for two
 // 1920×1080 projectors from a solution, timed): each parses, calls its library function, prints.
 #include <cstdio>
+#include <array>
 #include <memory>
 #include <stdexcept>
 
@@ -170,6 +171,31 @@ void AddProjectionCommands(CLI::App& app) {
     ParseDither(*bench_dither, &bench_args->dither);  // CLI11 checked the name
     bench_args->progress = PrintProgress();
     RunProjectionBenchmark(*bench_args);
+  });
+
+  auto play_args = std::make_shared<PlayBenchmarkOptions>();
+  auto play_strings = std::make_shared<std::array<std::string, 3>>(std::array<std::string, 3>{"perceptual", "cpu", "ordered"});
+  CLI::App* bench_play = bench->add_subcommand(
+      "play", "One frame of procam play: new desired colours -> warm-started solve -> images of 3 projectors");
+  bench_play->add_option("--width", play_args->width, "Projector width, pixels")->capture_default_str();
+  bench_play->add_option("--height", play_args->height, "Projector height, pixels")->capture_default_str();
+  bench_play->add_option("--patches", play_args->patches, "Target patch count (3 variables each)")->capture_default_str();
+  bench_play->add_option("--frames", play_args->frames, "Timed frames (after a first, cold one)")
+      ->check(CLI::Range(1, 10000))
+      ->capture_default_str();
+  bench_play->add_option("--method", (*play_strings)[0], "linear | perceptual | perceptual2000")
+      ->check(CLI::IsMember({"linear", "perceptual", "perceptual2000"}))
+      ->capture_default_str();
+  bench_play->add_option("--device", (*play_strings)[1], "cpu | cuda")->check(CLI::IsMember({"cpu", "cuda"}))->capture_default_str();
+  bench_play->add_option("--dither", (*play_strings)[2], "none | ordered")->check(CLI::IsMember({"none", "ordered"}))->capture_default_str();
+  AddLightOption(bench_play, &play_args->light);
+  bench_play->add_option("--json", play_args->json, "Also write the timings as JSON");
+  bench_play->callback([play_args, play_strings] {
+    ParseMethod((*play_strings)[0], &play_args->method);
+    ParseDevice((*play_strings)[1], &play_args->device);
+    ParseDither((*play_strings)[2], &play_args->dither);
+    play_args->progress = PrintProgress();
+    RunPlayBenchmark(*play_args);
   });
 }
 

@@ -16,6 +16,7 @@
 #include "base/timing.h"
 #include "compensation/objective.h"
 #include "compensation/peers.h"
+#include "compensation/problem.h"
 #include "compensation/radiosity.h"
 #include "compensation/solver.h"
 #include "datasets_synthetic/rooms.h"
@@ -392,6 +393,119 @@ void RunScaleBenchmark(const BenchmarkOptions& args) {
   }
 }
 
+namespace {
+
+// `count` projectors (2 or 3) near the front wall of the box room, overlapping on the back wall
+// and the occluder.
+std::vector<Projector> BenchProjectors(int count, int width, int height) {
+  const std::vector<double> xs = count == 2 ? std::vector<double>{1.2, 2.8} : std::vector<double>{1.2, 2.0, 2.8};
+  const char* names[] = {"left", "centre", "right"};
+  std::vector<Projector> projectors;
+  for (size_t k = 0; k < xs.size(); ++k) {
+    const double x = xs[k];
+    Projector projector;
+    projector.name = count == 2 ? (k == 0 ? "left" : "right") : names[k];
+    projector.geometry = ProjectorGeometry(
+        "LENSMODEL_OPENCV4",
+        {1.0 * width, 1.0 * width, 0.5 * (width - 1), 0.9 * height, -0.05, 0.01, 0.0, 0.0}, width, height,
+        ProjFromWorldLookingAt(Vec3(x, 0.2, 2.2), Vec3(4.0 - x, 3.0, 0.8), Vec3::UnitZ()));
+    projector.photometry.black = Vec3::Constant(0.01);
+    projector.photometry.max = Vec3(9.0, 10.0, 8.5);
+    projectors.push_back(projector);
+  }
+  return projectors;
+}
+
+double MedianOf(std::vector<double> values) {
+  std::sort(values.begin(), values.end());
+  return values.empty() ? 0.0 : values[values.size() / 2];
+}
+
+}  // namespace
+
+void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
+  BoxRoomOptions room;
+  room.target_patches = args.patches;
+  const Scene scene = MakeBoxRoom(room);
+  SubdivisionOptions subdivision;
+  subdivision.target_patches = args.patches;
+  const PatchHierarchy hierarchy = SubdividePatches(scene, subdivision);
+  const PatchLevel& fine = hierarchy.fine;
+  auto start = Clock::now();
+  Eigen::MatrixXd form_factors = ComputeFormFactors(scene, fine, FormFactorOptions(), nullptr);
+  const double form_factor_seconds = SecondsSince(start);
+  ProjectionRigSummary rig_summary;
+  const ProjectionRig rig =
+      BuildProjectionRig(fine, BenchProjectors(3, args.width, args.height), ProjectionRigOptions(), &rig_summary);
+  CompensationProblem problem = MakeProblem(scene, fine, std::move(form_factors), 0.5);
+  problem.lower = rig.lower;
+  problem.upper = rig.upper;
+  const Eigen::MatrixX3d base = problem.desired;
+  SolverOptions solver;
+  solver.method = args.method;
+  solver.device = args.device;
+  RenderOptions render;
+  render.light = args.light;
+  render.dither = args.dither;
+  WarmStart warm;
+  std::vector<double> solve_ms, render_ms, total_ms;
+  std::vector<int> iterations;
+  // Frame 0 factorises K (or forms K⁻¹ on the device) and starts cold: reported apart.
+  double first_ms = 0.0;
+  for (int frame = 0; frame <= args.frames; ++frame) {
+    // Changing content: every patch's desired colour drifts by a few percent per frame.
+    for (int i = 0; i < problem.size(); ++i) {
+      for (int c = 0; c < 3; ++c)
+        problem.desired(i, c) = std::clamp(base(i, c) * (1.0 + 0.15 * std::sin(0.3 * frame + 0.01 * i + 2.0 * c)), 0.0, 1.0);
+    }
+    start = Clock::now();
+    SolverSummary summary;
+    const CompensationSolution solution = Solve(solver, problem, &summary, {}, warm);
+    const double solved = 1e3 * SecondsSince(start);
+    warm = WarmStart{solution.radiosity_system, solution.emittance};
+    const auto render_start = Clock::now();
+    RenderSummary render_summary;
+    const std::vector<ProjectorImage> images = RenderProjectorImages(rig, solution.emittance, render, &render_summary);
+    const double rendered = 1e3 * SecondsSince(render_start);
+    if (frame == 0) {
+      first_ms = solved + rendered;
+      continue;
+    }
+    solve_ms.push_back(solved);
+    render_ms.push_back(rendered);
+    total_ms.push_back(solved + rendered);
+    iterations.push_back(summary.iterations);
+  }
+  std::vector<double> iteration_values(iterations.begin(), iterations.end());
+  Report(args.progress, fmt::format("play: box room, {} patches ({} variables), 3 projectors {}x{}, {} {}, {} light",
+                                    problem.size(), 3 * problem.size(), args.width, args.height, MethodName(args.method),
+                                    DeviceName(args.device), LightFieldName(args.light)));
+  Report(args.progress, fmt::format("  once: form factors {:.2f} s, projector maps {:.2f} s, first frame (factorise K, "
+                                    "cold solve, render) {:.1f} ms",
+                                    form_factor_seconds, rig_summary.seconds, first_ms));
+  Report(args.progress,
+         fmt::format("  per frame, median of {}: solve (warm) {:.1f} ms ({:.0f} iterations), render 3 images (CPU) "
+                     "{:.1f} ms; new desired appearance -> every image ready {:.1f} ms",
+                     args.frames, MedianOf(solve_ms), MedianOf(iteration_values), MedianOf(render_ms),
+                     MedianOf(total_ms)));
+  if (!args.json.empty()) {
+    const nlohmann::json result = {{"benchmark", "play"},
+                                   {"patches", problem.size()},
+                                   {"width", args.width},
+                                   {"height", args.height},
+                                   {"projectors", 3},
+                                   {"method", MethodName(args.method)},
+                                   {"device", DeviceName(args.device)},
+                                   {"frames", args.frames},
+                                   {"first_frame_ms", first_ms},
+                                   {"median_solve_ms", MedianOf(solve_ms)},
+                                   {"median_render_ms", MedianOf(render_ms)},
+                                   {"median_total_ms", MedianOf(total_ms)},
+                                   {"median_iterations", MedianOf(iteration_values)}};
+    WriteFileAtomically(args.json, result.dump(2) + "\n");
+  }
+}
+
 void RunProjectionBenchmark(const ProjectionBenchmarkOptions& args) {
   const DitherMethod dither = args.dither;
   BoxRoomOptions room;
@@ -404,21 +518,7 @@ void RunProjectionBenchmark(const ProjectionBenchmarkOptions& args) {
   SubdivisionOptions subdivision;
   subdivision.target_patches = args.patches;
   const PatchHierarchy hierarchy = SubdividePatches(scene, subdivision);
-  // Two projectors near the front wall, overlapping on the back wall and the occluder.
-  std::vector<Projector> projectors;
-  for (const double x : {1.2, 2.8}) {
-    Projector projector;
-    projector.name = x < 2.0 ? "left" : "right";
-    projector.geometry = ProjectorGeometry(
-        "LENSMODEL_OPENCV4",
-        {1.0 * args.width, 1.0 * args.width, 0.5 * (args.width - 1), 0.9 * args.height, -0.05, 0.01,
-         0.0, 0.0},
-        args.width, args.height,
-        ProjFromWorldLookingAt(Vec3(x, 0.2, 2.2), Vec3(4.0 - x, 3.0, 0.8), Vec3::UnitZ()));
-    projector.photometry.black = Vec3::Constant(0.01);
-    projector.photometry.max = Vec3(9.0, 10.0, 8.5);
-    projectors.push_back(projector);
-  }
+  const std::vector<Projector> projectors = BenchProjectors(2, args.width, args.height);
   ProjectionRigSummary rig_summary;
   ProjectionRigOptions rig_options;
   rig_options.texture_coordinates = args.detail;
