@@ -13,6 +13,7 @@
 #include "datasets_synthetic/scene_files.h"
 #include "nodes/controller.h"
 #include "nodes/play.h"
+#include <opencv2/videoio.hpp>
 #include "tests/testing/testing.h"
 
 namespace procam {
@@ -178,6 +179,78 @@ TEST(Play, DesiredFromImageIsThePerPatchMeanOfTheLinearisedPixels) {
   cv::Mat flat(10, 20, CV_16UC3, cv::Scalar::all(65535));
   const Eigen::MatrixX3d white = DesiredFromImage(flat, pixel_patch, width, height, fallback);
   EXPECT_NEAR(white(1, 0), 1.0, 1e-12);
+}
+
+}  // namespace
+}  // namespace procam
+
+namespace procam {
+namespace {
+
+// Keeps the mean code of each channel of every image it presents.
+class MeanOutput : public NodeOutput {
+ public:
+  explicit MeanOutput(std::vector<cv::Scalar>* means) : means_(means) {}
+  std::string Describe() const override { return "test:means"; }
+  void Draw(const ProjectorImage& image) override { drawn_ = image; }
+  void Present(uint64_t) override { means_->push_back(cv::mean(drawn_.codes)); }
+
+ private:
+  std::vector<cv::Scalar>* means_;
+  ProjectorImage drawn_;
+};
+
+// procam play on a video (OpenCV's MJPG AVI) with the node in this process: every frame is shown
+// (or dropped), and the light follows the content — a red frame's images are red, a blue one's
+// blue, whatever the room's own desired colours.
+TEST(Play, AVideosFramesAreSolvedAndShownAndTheLightFollowsThem) {
+  testing::TempDir dir;
+  const std::filesystem::path scene = WriteSyntheticSceneFile("tiny_box", 80, dir.path());
+  const nlohmann::json file = nlohmann::json::parse(ReadFile(scene));
+  WriteFileAtomically(dir / "rig.json", nlohmann::json{{"format_version", 1},
+                                                       {"camera", {{"model", file.at("cameras").at(0).at("model")}}},
+                                                       {"projectors", file.at("projectors")}}
+                                            .dump());
+  const std::filesystem::path video = dir / "content.avi";
+  {
+    cv::VideoWriter writer(video.string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 10.0, cv::Size(64, 48));
+    ASSERT_TRUE(writer.isOpened());
+    for (int k = 0; k < 6; ++k) {
+      const cv::Scalar colour = k % 2 == 0 ? cv::Scalar(30, 30, 220) : cv::Scalar(220, 30, 30);  // B, G, R
+      writer.write(cv::Mat(48, 64, CV_8UC3, colour));
+    }
+  }
+  std::vector<cv::Scalar> left, right;
+  PlayOptions options;
+  options.scene = scene.string();
+  options.rig_dir = dir.path();
+  options.desired = video;
+  options.out = dir / "play";
+  options.fps = 2.0;  // slow enough that no frame is dropped on a loaded machine
+  options.local_outputs = [&](const std::vector<Projector>& projectors) {
+    EXPECT_EQ(projectors.size(), 2u);
+    std::vector<std::unique_ptr<NodeOutput>> outputs;
+    outputs.push_back(std::make_unique<MeanOutput>(&left));
+    outputs.push_back(std::make_unique<MeanOutput>(&right));
+    return outputs;
+  };
+  const PlaySummary summary = RunPlay(options);
+  ASSERT_EQ(summary.frames.size() + summary.dropped, 6u);
+  const nlohmann::json result = nlohmann::json::parse(ReadFile(dir / "play" / "result.json"));
+  EXPECT_EQ(result.at("frames").size(), summary.frames.size());
+  ASSERT_EQ(left.size(), summary.frames.size());
+  for (size_t k = 0; k < summary.frames.size(); ++k) {
+    const bool red = summary.frames[k].source % 2 == 0;
+    // Codes in R, G, B order (ProjectorImage): the frame's colour dominates both projectors.
+    for (const cv::Scalar& mean : {left[k], right[k]}) {
+      if (red) {
+        EXPECT_GT(mean[0], 1.5 * mean[2]) << "frame " << k;
+      } else {
+        EXPECT_GT(mean[2], 1.5 * mean[0]) << "frame " << k;
+      }
+    }
+    if (k > 0) EXPECT_GT(summary.frames[k].iterations, 0);
+  }
 }
 
 }  // namespace
