@@ -6,10 +6,15 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
+#include <cstring>
 #include <cstdlib>
 #include <nlohmann/json.hpp>
 #include <iostream>
 #include <string>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "base/io.h"
 #include "tests/testing/testing.h"
@@ -182,6 +187,60 @@ TEST(Nodes, ANodeWithAnotherRigsKeysRefusesTheController) {
   const std::string node_log = ReadFile(dir / "node1.log");
   EXPECT_NE(node_log.find("refused a controller at 127.0.0.1"), std::string::npos) << node_log;
   EXPECT_FALSE(std::filesystem::exists(dir / "play" / "result.json"));
+}
+
+// An 8-bit RGB image from a grim capture (-t ppm); empty if the file is not one.
+cv::Mat ReadPpm(const std::filesystem::path& path) {
+  const std::string bytes = std::filesystem::exists(path) ? ReadFile(path) : std::string();
+  int width = 0, height = 0, max_value = 0, header = 0;
+  if (std::sscanf(bytes.c_str(), "P6 %d %d %d%n", &width, &height, &max_value, &header) != 3 || max_value != 255)
+    return {};
+  const size_t start = static_cast<size_t>(header) + 1;
+  if (bytes.size() < start + size_t{3} * width * height) return {};
+  cv::Mat rgb(height, width, CV_8UC3);
+  std::memcpy(rgb.data, bytes.data() + start, rgb.total() * 3);
+  return rgb;
+}
+
+// The node in procam play's process showing on three monitors of a headless sway with Xwayland
+// (scripts/multi_monitor.sh; fullscreen windows through the GLFW backend): what each output
+// shows, captured by grim through the compositor, is procam project's image for its projector.
+TEST(Nodes, PlayShowsProjectsImagesOnThreeMonitors) {
+  for (const char* program : {"sway", "Xwayland", "grim"}) {
+    if (testing::RunShell(std::string("command -v ") + program + " >/dev/null").exit_code != 0)
+      GTEST_SKIP() << program << " is not installed (apt-get install sway xwayland grim)";
+  }
+  testing::TempDir dir;
+  const Rig rig(dir);
+  const std::string room = (rig.root / "room").string();
+  testing::CommandRun run = testing::RunProcam("compensate " + rig.scene + " --rig " + room + " --patches 150 --out " +
+                                               (dir / "solution").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  run = testing::RunProcam("project " + (dir / "solution").string() + " --out " + (dir / "images").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  // sway and what runs in it run as an unprivileged user when the tests run as root: everything
+  // lives where that user can read and write, the binary copied in.
+  std::filesystem::copy_file(Binary(), dir / "procam");
+  testing::RunShell("chmod -R a+rwX " + dir.path().string());
+  dir.Write("show.sh", "cd \"$(dirname \"$0\")\"\n"
+                       "./procam play room/tiny_box.json --rig room --solution solution --display "
+                       "glfw:XWAYLAND0,glfw:XWAYLAND1,glfw:XWAYLAND2 --frames 16 --fps 2 --out play >play.log 2>&1 &\n"
+                       "pid=$!\n"
+                       "i=0; until grep -q \"play: frame\" play.log 2>/dev/null; do i=$((i+1)); [ $i -ge 300 ] && break; "
+                       "sleep 0.1; done\nsleep 1\n"
+                       "for k in 1 2 3; do grim -t ppm -o HEADLESS-$k output$k.ppm; done\n"
+                       "wait $pid\nstatus=$?\ncat play.log\nexit $status\n");
+  run = testing::RunShell((testing::SourceDir() / "scripts" / "multi_monitor.sh").string() +
+                          " --mode 320x200 --timeout 90 3 -- sh " + (dir / "show.sh").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  const char* names[] = {"left", "right", "centre"};
+  for (int k = 0; k < 3; ++k) {
+    const cv::Mat shown = ReadPpm(dir / ("output" + std::to_string(k + 1) + ".ppm"));
+    ASSERT_FALSE(shown.empty()) << "HEADLESS-" << k + 1 << "\n" << run.output;
+    cv::Mat expected = cv::imread((dir / "images" / (std::string(names[k]) + ".png")).string(), cv::IMREAD_COLOR);
+    cv::cvtColor(expected, expected, cv::COLOR_BGR2RGB);
+    EXPECT_EQ(cv::norm(shown, expected, cv::NORM_INF), 0.0) << names[k] << " on HEADLESS-" << k + 1;
+  }
 }
 
 }  // namespace
