@@ -78,12 +78,18 @@ FramePlan FramePlanner::Plan(const Eigen::MatrixX3d& emittance) const {
   for (int i = 0; i < n; ++i) {
     Vec3 factor_bound = Vec3::Ones();
     if (field_ && !field_->Flat(i)) {
-      Vec3 largest = Vec3::Zero();
+      // v ≤ min(max_j v̂_j, v̂_i + Σ_j reach_ij (v̂_j − v̂_i)⁺) over the patch (seamless_light.h).
+      const Vec3 own = plan.node_value.row(i).transpose();
+      Vec3 largest = Vec3::Zero(), rise = Vec3::Zero();
       const std::vector<int>& begin = field_->node_begin();
-      for (int node = begin[i]; node < begin[i + 1]; ++node)
-        largest = largest.cwiseMax(plan.node_value.row(field_->node_list()[node]).transpose());
+      for (int node = begin[i]; node < begin[i + 1]; ++node) {
+        const Vec3 value = plan.node_value.row(field_->node_list()[node]).transpose();
+        largest = largest.cwiseMax(value);
+        rise += field_->node_reach()[node] * (value - own).cwiseMax(0.0);
+      }
+      const Vec3 highest = largest.cwiseMin(own + rise);
       for (int c = 0; c < 3; ++c) {
-        if (plan.mean(i, c) > 0.0) factor_bound[c] = largest[c] / plan.mean(i, c);
+        if (plan.mean(i, c) > 0.0) factor_bound[c] = highest[c] / plan.mean(i, c);
       }
     }
     for (int c = 0; c < 3; ++c) {

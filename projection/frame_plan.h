@@ -17,10 +17,12 @@
 //
 // Step 2 (saturation) needs per-pixel factors only on patches where some pixel may reach full
 // drive. Per patch and channel the planner bounds share · τ · m / Δ from above by
-// max_p(share_p / Δ_k) · τ_i · max_j(v̂_j) / mean_i (the first factor static: the largest over the
-// patch's pixels of every projector; m ≤ max_j v̂_j / mean_i because v is a convex combination of
-// the v̂_j); only patches whose bound reaches 1 (less a margin for rounding) get the exact
-// per-pixel refinement, their pixels' factors computed as RenderProjectorImages computes them.
+// max_p(share_p / Δ_k) · τ_i · v_max / mean_i, the first factor static (the largest over the
+// patch's pixels of every projector) and v_max = min(max_j v̂_j, v̂_i + Σ_j reach_ij (v̂_j − v̂_i)⁺)
+// a bound on the field over the patch (v is a convex combination of the v̂_j; reach_ij the
+// largest normalised bump of node j over the patch, static: SeamlessField::node_reach). Only
+// patches whose bound reaches 1 (less a margin for rounding) get the exact per-pixel refinement,
+// their pixels' factors computed as RenderProjectorImages computes them.
 // Everywhere else no pixel saturates, so step 2 would leave τ as it is: the plan's levels are
 // exactly RenderProjectorImages's, and the rest of a plan costs O(n) plus the sparse products
 // with A (SeamlessLightOptions::iterations of them).

@@ -78,6 +78,11 @@ class SeamlessField {
   const std::vector<int>& node_begin() const { return node_begin_; }  // (n + 1)
   const std::vector<int>& node_list() const { return node_list_; }
   const std::vector<double>& radius2() const { return radius2_; }  // (n) r_j², m²
+  // Aligned with node_list(): the largest normalised bump K̃_j (K_j / Σ K) of the node over
+  // patch i's pixels. Since Σ_j K̃_j = 1 at every pixel, v(x) − v̂_i = Σ_j K̃_j(x) (v̂_j − v̂_i)
+  // ≤ Σ_j reach_ij · max(0, v̂_j − v̂_i) over the patch: a bound on the field within a patch
+  // that is tight where the field is smooth (frame_plan.h).
+  const std::vector<double>& node_reach() const { return node_reach_; }
   const ProjectionRig& rig() const { return rig_; }
 
  private:
@@ -90,6 +95,7 @@ class SeamlessField {
   SeamlessLightOptions options_;
   std::vector<int> node_begin_, node_list_;
   std::vector<double> radius2_;
+  std::vector<double> node_reach_;
   struct Means;                   // A (sparse, row-major)
   std::unique_ptr<Means> means_;
 };
