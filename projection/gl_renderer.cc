@@ -181,6 +181,14 @@ constexpr std::array<const char*, kUnits> kSamplerNames = {
 
 }  // namespace
 
+std::string OpenGlDescription() {
+  const auto text = [](GLenum name) {
+    const GLubyte* value = glGetString(name);
+    return value ? std::string(reinterpret_cast<const char*>(value)) : std::string("?");
+  };
+  return text(GL_VERSION) + ", " + text(GL_RENDERER);
+}
+
 struct GlProjectorRenderer::State {
   int width = 0, height = 0, bits = 8, patches = 0;
   LightField light = LightField::kSmooth;

@@ -31,11 +31,16 @@
 // (ShadeProjectorImages / RenderProjectorImages).
 
 #include <memory>
+#include <string>
 
 #include "projection/frame_plan.h"
 #include "projection/projector_images.h"
 
 namespace procam {
+
+// The current OpenGL context as the driver names it: "VERSION, RENDERER" (e.g. "4.5 (Compatibility
+// Profile) Mesa 22.3.6, llvmpipe (LLVM 15.0.6, 256 bits)"), for a display node's log.
+std::string OpenGlDescription();
 
 class GlProjectorRenderer {
  public:
@@ -45,6 +50,7 @@ class GlProjectorRenderer {
   // (detail, error diffusion), and IoError when the context is older than 3.3 or the shader
   // does not build (one line with the driver's log).
   GlProjectorRenderer(const FramePlanner& planner, int projector);
+  // Deletes the GL objects: the renderer's context must still exist and be current.
   ~GlProjectorRenderer();
   GlProjectorRenderer(const GlProjectorRenderer&) = delete;
   GlProjectorRenderer& operator=(const GlProjectorRenderer&) = delete;

@@ -124,6 +124,7 @@ TEST_P(GlRendererTest, EqualsTheCpuWithinOneCodeStep) {
 
   GlfwDisplay display(FindMonitor("0"));
   display.MakeContextCurrent();
+  std::printf("OpenGL %s\n", OpenGlDescription().c_str());
   for (int k = 0; k < static_cast<int>(rig.projectors.size()); ++k) {
     GlProjectorRenderer renderer(planner, k);
     renderer.Draw(plan);
@@ -271,6 +272,7 @@ TEST(GlProjectorRenderer, DISABLED_Timings) {
   constexpr int kRuns = 20;
   GlfwDisplay display(FindMonitor("0"));
   display.MakeContextCurrent();
+  std::printf("OpenGL %s\n", OpenGlDescription().c_str());
   for (const LightField light : {LightField::kFlat, LightField::kSmooth}) {
     RenderOptions options;
     options.light = light;
