@@ -1,6 +1,8 @@
 #include "projection/frame_plan.h"
 
 #include <algorithm>
+#include <functional>
+#include <utility>
 #include <stdexcept>
 #include <string>
 
@@ -11,6 +13,38 @@ namespace procam {
 
 using internal::kInfinity;
 using internal::ProjectorTables;
+
+namespace {
+
+// An upper bound of share_p · v(x_p) / Δ over patch i's pixels p (channel c, node values v̂):
+// at every pixel it is Σ_j u_j v̂_j with u_j = share_p K̃_j(x_p) / Δ_k, 0 ≤ u_j ≤ cap_j =
+// node_share_reach_ij · max_k(1/Δ_k) and Σ_j u_j = share_p / Δ_k ≤ `total` (the largest share / Δ
+// over the patch), so it is at most the largest Σ_j u_j v̂_j under those constraints: `total`
+// filled from the largest v̂_j down, each node up to its cap (a fractional knapsack). `nodes` is
+// scratch.
+double FieldBound(const SeamlessField& field, int i, const Eigen::MatrixX3d& node_value, int c,
+                  double inverse_delta, double total,
+                  std::vector<std::pair<double, double>>* nodes) {
+  nodes->clear();
+  double largest = 0.0;
+  for (int node = field.node_begin()[i]; node < field.node_begin()[i + 1]; ++node) {
+    const double value = node_value(field.node_list()[node], c);
+    nodes->emplace_back(value, inverse_delta * field.node_share_reach()[node]);
+    largest = std::max(largest, value);
+  }
+  std::sort(nodes->begin(), nodes->end(), std::greater<>());
+  double bound = 0.0, filled = 0.0;
+  for (const auto& [value, cap] : *nodes) {
+    const double taken = std::min(cap, total - filled);
+    bound += taken * value;
+    filled += taken;
+    if (filled >= total) break;
+  }
+  // Caps summing to less than the total (only by rounding): the rest at the largest value.
+  return bound + std::max(0.0, total - filled) * largest;
+}
+
+}  // namespace
 
 FramePlanner::FramePlanner(const ProjectionRig& rig, const RenderOptions& options)
     : rig_(rig), options_(options), tables_(std::make_unique<std::vector<ProjectorTables>>()) {
@@ -27,6 +61,9 @@ FramePlanner::FramePlanner(const ProjectionRig& rig, const RenderOptions& option
   for (const Projector& projector : rig.projectors) tables_->emplace_back(projector);
   const int n = rig.size();
   share_bound_ = Eigen::MatrixX3d::Zero(n, 3);
+  largest_inverse_delta_ = Vec3::Zero();
+  for (const ProjectorTables& table : *tables_)
+    largest_inverse_delta_ = largest_inverse_delta_.cwiseMax(table.inverse_delta);
   for (size_t k = 0; k < rig.maps.size(); ++k) {
     const ProjectorMap& map = rig.maps[k];
     const Vec3& inverse_delta = (*tables_)[k].inverse_delta;
@@ -75,27 +112,24 @@ FramePlan FramePlanner::Plan(const Eigen::MatrixX3d& emittance) const {
   // far above the rounding of the factors (single precision) and of the products.
   constexpr double kMargin = 1e-5;
   std::vector<char> refine(n, 0);
+  std::vector<std::pair<double, double>> nodes;  // FieldBound's
   for (int i = 0; i < n; ++i) {
-    Vec3 factor_bound = Vec3::Ones();
+    // max_p share_p · m_p / Δ per channel: the share alone where m = 1.
+    Vec3 share_factor_bound = share_bound_.row(i).transpose();
     if (field_ && !field_->Flat(i)) {
-      // v ≤ min(max_j v̂_j, v̂_i + Σ_j reach_ij (v̂_j − v̂_i)⁺) over the patch (seamless_light.h).
-      const Vec3 own = plan.node_value.row(i).transpose();
-      Vec3 largest = Vec3::Zero(), rise = Vec3::Zero();
-      const std::vector<int>& begin = field_->node_begin();
-      for (int node = begin[i]; node < begin[i + 1]; ++node) {
-        const Vec3 value = plan.node_value.row(field_->node_list()[node]).transpose();
-        largest = largest.cwiseMax(value);
-        rise += field_->node_reach()[node] * (value - own).cwiseMax(0.0);
-      }
-      const Vec3 highest = largest.cwiseMin(own + rise);
       for (int c = 0; c < 3; ++c) {
-        if (plan.mean(i, c) > 0.0) factor_bound[c] = highest[c] / plan.mean(i, c);
+        if (plan.mean(i, c) > 0.0) {
+          share_factor_bound[c] = FieldBound(*field_, i, plan.node_value, c,
+                                             largest_inverse_delta_[c], share_bound_(i, c),
+                                             &nodes) /
+                                  plan.mean(i, c);
+        }
       }
     }
     for (int c = 0; c < 3; ++c) {
       const double tau = plan.level(i, c);
       if (tau == kInfinity) continue;
-      refine[i] |= share_bound_(i, c) * tau * factor_bound[c] >= 1.0 - kMargin;
+      refine[i] |= share_factor_bound[c] * tau >= 1.0 - kMargin;
     }
     plan.refined_patches += refine[i];
   }

@@ -16,13 +16,17 @@
 // +inf), and the rest of step 3 (mixing inverse, clip, dithered quantisation) is per pixel too.
 //
 // Step 2 (saturation) needs per-pixel factors only on patches where some pixel may reach full
-// drive. Per patch and channel the planner bounds share · τ · m / Δ from above by
-// max_p(share_p / Δ_k) · τ_i · v_max / mean_i, the first factor static (the largest over the
-// patch's pixels of every projector) and v_max = min(max_j v̂_j, v̂_i + Σ_j reach_ij (v̂_j − v̂_i)⁺)
-// a bound on the field over the patch (v is a convex combination of the v̂_j; reach_ij the
-// largest normalised bump of node j over the patch, static: SeamlessField::node_reach). Only
-// patches whose bound reaches 1 (less a margin for rounding) get the exact per-pixel refinement,
-// their pixels' factors computed as RenderProjectorImages computes them.
+// drive. Per patch and channel the planner bounds max_p share_p · τ_i · m_p / Δ_k from above,
+// without visiting the pixels: m_p = v(x_p) / mean_i, and at every pixel
+// share_p v(x_p) / Δ_k = Σ_j u_j v̂_j with u_j = share_p K̃_j(x_p) / Δ_k (K̃_j the normalised
+// bumps, summing to 1), each u_j at most a static cap (the largest share · K̃_j over the patch's
+// pixels, SeamlessField::node_share_reach, times max_k 1/Δ_k) and Σ_j u_j at most the largest
+// share / Δ_k over the patch (static too). So it is at most the largest Σ_j u_j v̂_j under those
+// constraints: that total filled from the largest v̂_j down, each node up to its cap (a
+// fractional knapsack, O(nodes log nodes) per patch; for flat light or a flat patch simply the
+// largest share / Δ). Only patches whose bound reaches 1 (less a margin for rounding) get the
+// exact per-pixel refinement, their pixels' factors computed as RenderProjectorImages computes
+// them.
 // Everywhere else no pixel saturates, so step 2 would leave τ as it is: the plan's levels are
 // exactly RenderProjectorImages's, and the rest of a plan costs O(n) plus the sparse products
 // with A (SeamlessLightOptions::iterations of them).
@@ -88,6 +92,7 @@ class FramePlanner {
   std::unique_ptr<SeamlessField> field_;
   std::unique_ptr<std::vector<internal::ProjectorTables>> tables_;
   Eigen::MatrixX3d share_bound_;  // (n,3) max over the patch's pixels of share / Δ_k
+  Vec3 largest_inverse_delta_;    // max_k 1 / Δ_k
 };
 
 // FramePlanner(rig, options).Plan(E): for one frame (the planner's static part is rebuilt).
