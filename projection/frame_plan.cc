@@ -2,9 +2,9 @@
 
 #include <algorithm>
 #include <functional>
-#include <utility>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "base/timing.h"
 #include "projection/render_steps.h"
@@ -101,8 +101,8 @@ FramePlan FramePlanner::Plan(const Eigen::MatrixX3d& emittance) const {
     Eigen::MatrixX3d exitance = Eigen::MatrixX3d::Zero(n, 3);
     for (int i = 0; i < n; ++i) {
       if (rig_.blended_area[i] > 0.0)
-        exitance.row(i) = rig_.reflectance.row(i).cwiseProduct(first.flux.row(i)) /
-                          rig_.blended_area[i];
+        exitance.row(i) =
+            rig_.reflectance.row(i).cwiseProduct(first.flux.row(i)) / rig_.blended_area[i];
     }
     plan.node_value = field_->NodeValues(exitance.cwiseMax(0.0));
     plan.mean = field_->PatchMeans(plan.node_value);
@@ -119,10 +119,10 @@ FramePlan FramePlanner::Plan(const Eigen::MatrixX3d& emittance) const {
     if (field_ && !field_->Flat(i)) {
       for (int c = 0; c < 3; ++c) {
         if (plan.mean(i, c) > 0.0) {
-          share_factor_bound[c] = FieldBound(*field_, i, plan.node_value, c,
-                                             largest_inverse_delta_[c], share_bound_(i, c),
-                                             &nodes) /
-                                  plan.mean(i, c);
+          share_factor_bound[c] =
+              FieldBound(*field_, i, plan.node_value, c, largest_inverse_delta_[c],
+                         share_bound_(i, c), &nodes) /
+              plan.mean(i, c);
         }
       }
     }

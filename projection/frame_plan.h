@@ -53,7 +53,7 @@ struct ProjectorTables;
 // One frame's per-patch plan (header comment).
 struct FramePlan {
   LightField light = LightField::kSmooth;
-  Eigen::MatrixX3d level;       // (n,3) τ: irradiance level above black per unit share; +inf: full drive
+  Eigen::MatrixX3d level;  // (n,3) τ: irradiance level above black per unit share; +inf: full drive
   Eigen::MatrixX3d node_value;  // (n,3) v̂, kSmooth only (else empty)
   Eigen::MatrixX3d mean;        // (n,3) mean_i(v) = (A v̂)_i, kSmooth only (else empty)
   Eigen::MatrixX3d target;      // (n,3) E clipped to [lower, upper]

@@ -208,8 +208,8 @@ struct GlProjectorRenderer::State {
     glGenBuffers(1, &buffers[unit]);
     glBindBuffer(GL_TEXTURE_BUFFER, buffers[unit]);
     const std::array<float, 4> zero = {0, 0, 0, 0};
-    glBufferData(GL_TEXTURE_BUFFER, bytes > 0 ? bytes : sizeof(zero), bytes > 0 ? data : zero.data(),
-                 usage);
+    glBufferData(GL_TEXTURE_BUFFER, bytes > 0 ? bytes : sizeof(zero),
+                 bytes > 0 ? data : zero.data(), usage);
     glGenTextures(1, &textures[unit]);
     glBindTexture(GL_TEXTURE_BUFFER, textures[unit]);
     glTexBuffer(GL_TEXTURE_BUFFER, format, buffers[unit]);

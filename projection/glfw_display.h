@@ -11,11 +11,10 @@
 // between the two: Draw (a projector image rendered on the GPU from a frame plan, or a CPU image)
 // into the back buffer, then Present, which swaps and says when. Show is Draw then Present.
 
+#include <cstdint>
 #include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
-
-#include <cstdint>
 
 #include "capture/display.h"
 #include "projection/frame_plan.h"
@@ -112,8 +111,8 @@ class GlfwDisplay : public PatternDisplay {
   void CheckStillThere();
 
  private:
-  void DrawShown();  // shown_ into the back buffer
-  void CheckSize(int width, int height) const;  // IoError unless the monitor's
+  void DrawShown();                                           // shown_ into the back buffer
+  void CheckSize(int width, int height) const;                // IoError unless the monitor's
   void OpenWindow(void* monitor, WindowPlacement placement);  // GLFWmonitor; sets window_
   std::string WindowRectangle() const;  // where the window is now: "WxH at (x, y)"
   bool OnMonitor() const;               // whether that is exactly the monitor's rectangle

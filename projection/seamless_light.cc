@@ -142,9 +142,11 @@ SeamlessField::SeamlessField(const ProjectionRig& rig, const SeamlessLightOption
   std::vector<std::vector<int>> nodes = FieldNodes(rig, options);
   DropNodesOutOfReach(rig, radius2_, &nodes);
   node_begin_.assign(n + 1, 0);
-  for (int i = 0; i < n; ++i) node_begin_[i + 1] = node_begin_[i] + static_cast<int>(nodes[i].size());
+  for (int i = 0; i < n; ++i)
+    node_begin_[i + 1] = node_begin_[i] + static_cast<int>(nodes[i].size());
   node_list_.reserve(node_begin_[n]);
-  for (const std::vector<int>& list : nodes) node_list_.insert(node_list_.end(), list.begin(), list.end());
+  for (const std::vector<int>& list : nodes)
+    node_list_.insert(node_list_.end(), list.begin(), list.end());
   FormPatchMeans();
 }
 
@@ -206,20 +208,20 @@ void SeamlessField::FormPatchMeans() {
   std::vector<double> row_weight(n, 0.0);
   node_reach_.assign(node_list_.size(), 0.0);
   node_share_reach_.assign(node_list_.size(), 0.0);
-  ForEachPixel([&](int i, size_t k, int position,
-                   const std::vector<std::pair<int, double>>& bumps) {
-    const ProjectorMap& map = rig_.maps[k];
-    const double share = map.share[map.pixels_by_patch[position]];
-    const double weight = rig_.coverage_scale(i, k) * map.pixel_solid_angle * share;
-    for (const auto& [node, value] : bumps) {
-      rows[i][node] += weight * value;
-      double& reach = node_reach_[node_begin_[i] + node];
-      reach = std::max(reach, value);
-      double& share_reach = node_share_reach_[node_begin_[i] + node];
-      share_reach = std::max(share_reach, share * value);
-    }
-    row_weight[i] += weight;  // patch i is visited by one thread only
-  });
+  ForEachPixel(
+      [&](int i, size_t k, int position, const std::vector<std::pair<int, double>>& bumps) {
+        const ProjectorMap& map = rig_.maps[k];
+        const double share = map.share[map.pixels_by_patch[position]];
+        const double weight = rig_.coverage_scale(i, k) * map.pixel_solid_angle * share;
+        for (const auto& [node, value] : bumps) {
+          rows[i][node] += weight * value;
+          double& reach = node_reach_[node_begin_[i] + node];
+          reach = std::max(reach, value);
+          double& share_reach = node_share_reach_[node_begin_[i] + node];
+          share_reach = std::max(share_reach, share * value);
+        }
+        row_weight[i] += weight;  // patch i is visited by one thread only
+      });
   std::vector<Eigen::Triplet<double>> triplets;
   for (int i = 0; i < n; ++i) {
     if (!(row_weight[i] > 0.0)) {
@@ -310,8 +312,9 @@ std::vector<std::vector<Eigen::Vector3f>> SeamlessField::Factors(
   return factors;
 }
 
-std::vector<std::vector<Eigen::Vector3f>> SeamlessLightFactors(const ProjectionRig& rig, const Eigen::MatrixX3d& exitance,
-                             const SeamlessLightOptions& options) {
+std::vector<std::vector<Eigen::Vector3f>> SeamlessLightFactors(
+    const ProjectionRig& rig, const Eigen::MatrixX3d& exitance,
+    const SeamlessLightOptions& options) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("SeamlessLightOptions: " + why);
   const int n = rig.size();

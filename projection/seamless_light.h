@@ -98,7 +98,7 @@ class SeamlessField {
   std::vector<int> node_begin_, node_list_;
   std::vector<double> radius2_;
   std::vector<double> node_reach_, node_share_reach_;
-  struct Means;                   // A (sparse, row-major)
+  struct Means;  // A (sparse, row-major)
   std::unique_ptr<Means> means_;
 };
 

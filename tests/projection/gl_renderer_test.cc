@@ -37,8 +37,8 @@ using testing::StageOptions;
 // The screen holds a 1080p window (the benchmark's); the small stages draw into its lower left.
 constexpr int kScreenWidth = 1920, kScreenHeight = 1080;
 
-::testing::Environment* const xvfb = ::testing::AddGlobalTestEnvironment(
-    new testing::XvfbEnvironment(kScreenWidth, kScreenHeight));
+::testing::Environment* const xvfb =
+    ::testing::AddGlobalTestEnvironment(new testing::XvfbEnvironment(kScreenWidth, kScreenHeight));
 
 // The stage of the projection tests (two 320×240 projectors overlapping on the wall, a plate in
 // front), the second projector with colour mixing so that the shader's mixing inverse and
@@ -84,8 +84,8 @@ Eigen::MatrixX3d RampEmittance(const Stage& stage, const ProjectionRig& rig, int
 }
 
 struct Difference {
-  int largest = 0;         // largest |GPU − CPU| code over pixels and channels
-  double fraction = 0.0;   // of the pixels, those with some channel different
+  int largest = 0;        // largest |GPU − CPU| code over pixels and channels
+  double fraction = 0.0;  // of the pixels, those with some channel different
 };
 Difference Compare(const ProjectorImage& gpu, const ProjectorImage& cpu) {
   Difference difference;
@@ -131,10 +131,11 @@ TEST_P(GlRendererTest, EqualsTheCpuWithinOneCodeStep) {
     const ProjectorImage gpu = renderer.ReadBack();
     ASSERT_EQ(gpu.codes.size(), cpu[k].codes.size());
     const Difference difference = Compare(gpu, cpu[k]);
-    std::printf("%s light, dither %s, t in [%.2f, %.2f], projector %d: %d of %d patches refined, "
-                "%.4f%% of the pixels differ, by at most %d\n",
-                LightFieldName(test.light), DitherName(test.dither), test.t_low, test.t_high, k,
-                plan.refined_patches, rig.size(), 100.0 * difference.fraction, difference.largest);
+    std::printf(
+        "%s light, dither %s, t in [%.2f, %.2f], projector %d: %d of %d patches refined, "
+        "%.4f%% of the pixels differ, by at most %d\n",
+        LightFieldName(test.light), DitherName(test.dither), test.t_low, test.t_high, k,
+        plan.refined_patches, rig.size(), 100.0 * difference.fraction, difference.largest);
     EXPECT_LE(difference.largest, 1);
     EXPECT_LT(difference.fraction, 0.01);
   }
@@ -302,7 +303,9 @@ TEST(GlProjectorRenderer, DISABLED_Timings) {
       char line[200];
       std::snprintf(line, sizeof(line), "%s%.1f ms (%d patches refined) for %s",
                     planning.empty() ? "" : ", ", median(plan_seconds), refined,
-                    kind == 0 ? "E in [0, 1]" : kind == 1 ? "E in [0.1, 0.6]" : "a ramp");
+                    kind == 0   ? "E in [0, 1]"
+                    : kind == 1 ? "E in [0.1, 0.6]"
+                                : "a ramp");
       planning += line;
     }
     for (int run = 0; run < 3; ++run) {
@@ -319,11 +322,12 @@ TEST(GlProjectorRenderer, DISABLED_Timings) {
       renderer.Finish();
       gpu_seconds.push_back(SecondsSince(start));
     }
-    std::printf("%s light: planner (static) %.0f ms; PlanFrame median %s; CPU shading of %zu "
-                "images median of 3 %.0f ms; GPU one image (upload + draw + glFinish) median "
-                "%.1f ms\n",
-                LightFieldName(light), 1e3 * planner_seconds, planning.c_str(),
-                rig.projectors.size(), median(shade_seconds), median(gpu_seconds));
+    std::printf(
+        "%s light: planner (static) %.0f ms; PlanFrame median %s; CPU shading of %zu "
+        "images median of 3 %.0f ms; GPU one image (upload + draw + glFinish) median "
+        "%.1f ms\n",
+        LightFieldName(light), 1e3 * planner_seconds, planning.c_str(), rig.projectors.size(),
+        median(shade_seconds), median(gpu_seconds));
   }
 }
 
