@@ -12,7 +12,7 @@ if(PROCAM_WITH_V4L2)
   list(APPEND PROCAM_DEB_DEPENDS libv4l-dev)
 endif()
 if(PROCAM_WITH_GLFW)
-  list(APPEND PROCAM_DEB_DEPENDS libglfw3-dev libgl-dev libx11-dev libxrandr-dev)
+  list(APPEND PROCAM_DEB_DEPENDS libglfw3-dev libgl-dev libepoxy-dev libx11-dev libxrandr-dev)
 endif()
 list(JOIN PROCAM_DEB_DEPENDS ", " CPACK_DEBIAN_PACKAGE_DEPENDS)
 

@@ -1,5 +1,8 @@
 #include "projection/glfw_display.h"
 
+// libepoxy loads the OpenGL functions (legacy ones too, for glDrawPixels); GLFW brings none.
+#include <epoxy/gl.h>
+#define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
 
 #include <chrono>
@@ -9,6 +12,8 @@
 #include <thread>
 
 #include "base/io.h"
+#include "capture/camera.h"
+#include "projection/gl_renderer.h"
 
 // Last: Xlib's macros (None, Status, Bool, ...) would clash with names in the headers above.
 #define GLFW_EXPOSE_NATIVE_X11
@@ -173,7 +178,7 @@ GlfwDisplay::GlfwDisplay(const MonitorInfo& monitor, const GlfwDisplayOptions& o
   glfwSwapInterval(1);
   glfwSetInputMode(window, GLFW_CURSOR, GLFW_CURSOR_HIDDEN);
   shown_ = cv::Mat(mode->height, mode->width, CV_16UC3, cv::Scalar::all(0));
-  Draw();
+  DrawShown();
   glfwSwapBuffers(window);
   // The window manager and the server move and map the window asynchronously: wait until the
   // server has it over the monitor, and say where it is if it never gets there.
@@ -286,13 +291,17 @@ void GlfwDisplay::RequestClose() {
   glfwSetWindowShouldClose(static_cast<GLFWwindow*>(window_), GLFW_TRUE);
 }
 
+void GlfwDisplay::CheckSize(int width, int height) const {
+  if (width != monitor_.width || height != monitor_.height) {
+    throw IoError(Name() + ": image is " + std::to_string(width) + "x" + std::to_string(height) +
+                  ", the monitor runs at " + std::to_string(monitor_.width) + "x" +
+                  std::to_string(monitor_.height));
+  }
+}
+
 void GlfwDisplay::Show(const cv::Mat& pattern) {
   CheckStillThere();
-  if (pattern.size() != Resolution()) {
-    throw IoError(Name() + ": image is " + std::to_string(pattern.cols) + "x" +
-                  std::to_string(pattern.rows) + ", the monitor runs at " +
-                  std::to_string(monitor_.width) + "x" + std::to_string(monitor_.height));
-  }
+  CheckSize(pattern.cols, pattern.rows);
   cv::Mat rgb;
   if (pattern.channels() == 1) {
     cv::cvtColor(pattern, rgb, cv::COLOR_GRAY2RGB);
@@ -308,23 +317,39 @@ void GlfwDisplay::Show(const cv::Mat& pattern) {
   } else {
     throw IoError(Name() + ": images must be 8- or 16-bit");
   }
-  Draw();
-  glfwSwapBuffers(static_cast<GLFWwindow*>(window_));
+  DrawShown();
+  Present();
 }
 
 void GlfwDisplay::Show(const ProjectorImage& image) {
-  CheckStillThere();
-  if (image.codes.size() != Resolution()) {
-    throw IoError(Name() + ": image is " + std::to_string(image.codes.cols) + "x" +
-                  std::to_string(image.codes.rows) + ", the monitor runs at " +
-                  std::to_string(monitor_.width) + "x" + std::to_string(monitor_.height));
-  }
-  image.codes.convertTo(shown_, CV_16UC3, 65535.0 / ((1 << image.bits) - 1));
-  Draw();
-  glfwSwapBuffers(static_cast<GLFWwindow*>(window_));
+  Draw(image);
+  Present();
 }
 
-void GlfwDisplay::Draw() {
+void GlfwDisplay::Draw(const ProjectorImage& image) {
+  CheckStillThere();
+  CheckSize(image.codes.cols, image.codes.rows);
+  image.codes.convertTo(shown_, CV_16UC3, 65535.0 / ((1 << image.bits) - 1));
+  DrawShown();
+}
+
+void GlfwDisplay::Draw(GlProjectorRenderer& renderer, const FramePlan& plan) {
+  CheckStillThere();
+  CheckSize(renderer.width(), renderer.height());
+  MakeContextCurrent();
+  renderer.Draw(plan);
+}
+
+int64_t GlfwDisplay::Present() {
+  glfwSwapBuffers(static_cast<GLFWwindow*>(window_));
+  return SteadyNowNs();
+}
+
+void GlfwDisplay::MakeContextCurrent() {
+  glfwMakeContextCurrent(static_cast<GLFWwindow*>(window_));
+}
+
+void GlfwDisplay::DrawShown() {
   GLFWwindow* window = static_cast<GLFWwindow*>(window_);
   glfwMakeContextCurrent(window);
   int width = 0, height = 0;
@@ -354,7 +379,7 @@ cv::Mat GlfwDisplay::ReadBack() {
   glfwGetFramebufferSize(window, &width, &height);
   // The front buffer cannot be read on every driver (Mesa under Xvfb returns black): draw the
   // shown image into the back buffer again, exactly as Show() did, and read that.
-  Draw();
+  DrawShown();
   cv::Mat bottom_up(height, width, CV_8UC3);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
   glReadBuffer(GL_BACK);

@@ -6,15 +6,23 @@
 // pixel (no scaling or filtering: image pixel (c, r) lights projector pixel (c, r)).
 //
 // GLFW's threading rules apply: make, show on and destroy windows on the process's main thread.
+//
+// A display node draws a frame and presents it separately, so that a frame barrier can sit
+// between the two: Draw (a projector image rendered on the GPU from a frame plan, or a CPU image)
+// into the back buffer, then Present, which swaps and says when. Show is Draw then Present.
 
+#include <cstdint>
 #include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
 
 #include "capture/display.h"
+#include "projection/frame_plan.h"
 #include "projection/projector_images.h"
 
 namespace procam {
+
+class GlProjectorRenderer;
 
 struct MonitorInfo {
   int index = 0;     // position in GLFW's list; 0 is the primary monitor
@@ -78,6 +86,18 @@ class GlfwDisplay : public PatternDisplay {
   void Show(const cv::Mat& pattern) override;
   // Shows a projector image (codes in R, G, B; 10-bit codes scaled to the output's depth).
   void Show(const ProjectorImage& image);
+  // Draws a projector image into the back buffer, not shown until Present(). Throws like Show.
+  void Draw(const ProjectorImage& image);
+  // Renders a frame plan on the GPU into the back buffer (GlProjectorRenderer::Draw, with the
+  // window's context current), not shown until Present(). The renderer must have been made with
+  // this window's context current (MakeContextCurrent). Throws IoError like Show when the
+  // projector is gone or the renderer's image size is not the monitor's.
+  void Draw(GlProjectorRenderer& renderer, const FramePlan& plan);
+  // Swaps the buffers (waiting for the vertical blank: swap interval 1) and returns the steady
+  // clock's time (SteadyNowNs of capture/camera.h) right after the swap returned.
+  int64_t Present();
+  // Makes the window's OpenGL context current on this thread (for making a GlProjectorRenderer).
+  void MakeContextCurrent();
   // What the window shows, read back from its framebuffer (the last image drawn again into the
   // back buffer through the same path, then read): CV_8UC3, R, G, B, row 0 = top.
   cv::Mat ReadBack();
@@ -91,7 +111,8 @@ class GlfwDisplay : public PatternDisplay {
   void CheckStillThere();
 
  private:
-  void Draw();
+  void DrawShown();                                           // shown_ into the back buffer
+  void CheckSize(int width, int height) const;                // IoError unless the monitor's
   void OpenWindow(void* monitor, WindowPlacement placement);  // GLFWmonitor; sets window_
   std::string WindowRectangle() const;  // where the window is now: "WxH at (x, y)"
   bool OnMonitor() const;               // whether that is exactly the monitor's rectangle
@@ -99,7 +120,7 @@ class GlfwDisplay : public PatternDisplay {
   MonitorInfo monitor_;
   WindowPlacement placement_ = WindowPlacement::kAuto;  // kWindowManager or kByHand once open
   void* window_ = nullptr;                              // GLFWwindow
-  cv::Mat shown_;  // CV_16UC3, R, G, B: what Draw() puts on screen
+  cv::Mat shown_;  // CV_16UC3, R, G, B: what DrawShown() puts on screen
 };
 
 }  // namespace procam

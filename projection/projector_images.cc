@@ -14,86 +14,17 @@
 #include "base/io.h"
 #include "base/timing.h"
 #include "geometry/ray_scene.h"
+#include "projection/frame_plan.h"
+#include "projection/render_steps.h"
 
 namespace procam {
 namespace {
 
-constexpr double kInfinity = std::numeric_limits<double>::infinity();
-
-// 8×8 Bayer matrix: thresholds (b + ½)/64 spread evenly over (0, 1).
-constexpr std::array<uint8_t, 64> kBayer = {
-    0,  32, 8,  40, 2,  34, 10, 42, 48, 16, 56, 24, 50, 18, 58, 26, 12, 44, 4,  36, 14, 46,
-    6,  38, 60, 28, 52, 20, 62, 30, 54, 22, 3,  35, 11, 43, 1,  33, 9,  41, 51, 19, 59, 27,
-    49, 17, 57, 25, 15, 47, 7,  39, 13, 45, 5,  37, 63, 31, 55, 23, 61, 29, 53, 21};
-
-double BayerThreshold(int x, int y) { return (kBayer[(y & 7) * 8 + (x & 7)] + 0.5) / 64.0; }
-
-// Code values ↔ relative light for one channel of one projector.
-class CodeTable {
- public:
-  CodeTable(const ResponseCurve& response, int max_code)
-      : max_code_(max_code), light_(max_code + 2) {
-    for (int q = 0; q <= max_code; ++q) light_[q] = response.Light(double(q) / max_code);
-    light_[max_code + 1] = kInfinity;  // sentinel: never below any r
-    first_.resize(kBins + 1);
-    int q = 0;
-    for (int b = 0; b <= kBins; ++b) {
-      const double r = double(b) / kBins;
-      while (q < max_code && light_[q + 1] <= r) ++q;
-      first_[b] = static_cast<uint16_t>(q);
-    }
-  }
-  double Light(int code) const { return light_[code]; }
-  // Largest code whose light is ≤ r (r in [0,1]).
-  int Below(double r) const {
-    int q = first_[static_cast<int>(r * kBins)];
-    while (light_[q + 1] <= r) ++q;
-    return q;
-  }
-  // The code for light r: the upper of the bracketing pair when r's position between them
-  // exceeds `threshold` (½: nearest in linear light).
-  int Quantise(double r, double threshold) const {
-    const int q = Below(r);
-    if (q >= max_code_) return max_code_;
-    // (r − light_q) / (light_q+1 − light_q) > threshold, without the division.
-    return r - light_[q] > threshold * (light_[q + 1] - light_[q]) ? q + 1 : q;
-  }
-  int max_code() const { return max_code_; }
-
- private:
-  static constexpr int kBins = 4096;  // 8 KB per channel: stays in L1
-  int max_code_;
-  std::vector<double> light_;
-  std::vector<uint16_t> first_;
-};
-
-struct ProjectorTables {
-  explicit ProjectorTables(const Projector& projector)
-      : photometry(projector.photometry),
-        delta(projector.photometry.max - projector.photometry.black),
-        inverse_delta(delta.cwiseInverse()),
-        mixing_inverse(projector.photometry.mixing.inverse()),
-        identity_mixing(projector.photometry.mixing.isIdentity(0.0)),
-        codes{CodeTable(photometry.response[0], photometry.MaxCode()),
-              CodeTable(photometry.response[1], photometry.MaxCode()),
-              CodeTable(photometry.response[2], photometry.MaxCode())} {}
-  const ProjectorPhotometry& photometry;
-  Vec3 delta, inverse_delta;
-  Eigen::Matrix3d mixing_inverse;
-  bool identity_mixing;
-  std::array<CodeTable, 3> codes;
-};
-
-// Relative light r ∈ [0,1]³ for relative above-black output s; true if r had to be clipped.
-inline bool LightFor(const ProjectorTables& tables, const Vec3& s, Vec3* r) {
-  if (tables.identity_mixing) {
-    *r = s;
-    return false;
-  }
-  const Vec3 raw = tables.mixing_inverse * s;
-  *r = raw.cwiseMax(0.0).cwiseMin(1.0);
-  return (*r - raw).cwiseAbs().maxCoeff() > 1e-9;
-}
+using internal::BayerThreshold;
+using internal::CodeTable;
+using internal::kInfinity;
+using internal::LightFor;
+using internal::ProjectorTables;
 
 void QuantiseErrorDiffusion(const ProjectorMap& map, const ProjectorTables& tables,
                             const std::vector<Vec3>& light, cv::Mat* codes) {
@@ -349,57 +280,6 @@ void CheckRenderInputs(const ProjectionRig& rig, const Scene& scene,
   }
 }
 
-// Step 2 of RenderProjectorImages, per patch: Newton from below on Σ_p min(w a τ, Ω Δ) = Φ (each
-// evaluation one pass over the patch's pixels; the first one is all most patches need). Raises
-// `level` (τ per patch and channel) where pixels saturate; returns the most passes a patch took.
-int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& tables,
-                 const std::vector<std::vector<Eigen::Vector3f>>& detail,
-                 const Eigen::MatrixX3d& flux, const RenderOptions& options,
-                 Eigen::MatrixX3d* level_out) {
-  Eigen::MatrixX3d& level = *level_out;
-  const int n = rig.size();
-  const int projector_count = static_cast<int>(rig.projectors.size());
-  int most_passes = 0;
-#pragma omp parallel for schedule(dynamic, 16) reduction(max : most_passes)
-  for (int i = 0; i < n; ++i) {
-    for (int pass = 1; pass <= options.max_level_passes; ++pass) {
-      most_passes = std::max(most_passes, pass);
-      Vec3 free_area = Vec3::Zero(), clamped = Vec3::Zero();
-      for (int k = 0; k < projector_count; ++k) {
-        const ProjectorMap& map = rig.maps[k];
-        const ProjectorTables& table = tables[k];
-        const double scale = rig.coverage_scale(i, k);
-        const Eigen::Vector3f* pixel_detail = detail.empty() ? nullptr : detail[k].data();
-        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
-          const double plain_share = map.share[map.pixels_by_patch[position]];  // w a / Ω
-          for (int c = 0; c < 3; ++c) {
-            if (level(i, c) == kInfinity) continue;
-            const double share =
-                pixel_detail ? plain_share * pixel_detail[position][c] : plain_share;
-            if (share * level(i, c) * table.inverse_delta[c] >= 1.0) {
-              clamped[c] += scale * map.pixel_solid_angle * table.delta[c];
-            } else {
-              free_area[c] += scale * share * map.pixel_solid_angle;
-            }
-          }
-        }
-      }
-      bool changed = false;
-      for (int c = 0; c < 3; ++c) {
-        if (level(i, c) == kInfinity || clamped[c] <= 0.0) continue;
-        const double remaining = std::max(0.0, flux(i, c) - clamped[c]);
-        const double updated = free_area[c] > 0.0 ? remaining / free_area[c] : kInfinity;
-        if (updated > level(i, c) * (1.0 + 1e-12)) {
-          level(i, c) = updated;
-          changed = true;
-        }
-      }
-      if (!changed) break;
-    }
-  }
-  return most_passes;
-}
-
 // The flux each patch receives from the codes of the images (per patch and channel: the pixels'
 // light, mixed, times their solid angle and the patch's coverage).
 Eigen::MatrixX3d FluxOfCodes(const ProjectionRig& rig, const std::vector<ProjectorTables>& tables,
@@ -431,54 +311,95 @@ Eigen::MatrixX3d FluxOfCodes(const ProjectionRig& rig, const std::vector<Project
 
 }  // namespace
 
-std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, const Scene& scene,
-                                                  const Eigen::MatrixX3d& emittance,
-                                                  const RenderOptions& options,
-                                                  RenderSummary* summary) {
-  CheckRenderInputs(rig, scene, emittance, options);
-  const int n = rig.size();
-  const auto start = Clock::now();
-  const int projector_count = static_cast<int>(rig.projectors.size());
-  RenderSummary local;
-  RenderSummary& s = summary ? *summary : local;
-  s = RenderSummary();
-  s.saturated_pixels.assign(projector_count, 0);
-  s.clipped_pixels.assign(projector_count, 0);
-  s.detail_saturated_pixels.assign(projector_count, 0);
-  std::vector<ProjectorTables> tables;
-  tables.reserve(projector_count);
-  for (const Projector& projector : rig.projectors) tables.emplace_back(projector);
+namespace internal {
 
-  // Step 1: the flux above black each patch needs, and the first guess of its level τ.
-  const Eigen::MatrixX3d target = emittance.cwiseMax(rig.lower).cwiseMin(rig.upper);
-  Eigen::MatrixX3d flux(n, 3), level(n, 3);
+FirstLevels ComputeFirstLevels(const ProjectionRig& rig, const Eigen::MatrixX3d& emittance) {
+  const int n = rig.size();
+  FirstLevels first;
+  first.target = emittance.cwiseMax(rig.lower).cwiseMin(rig.upper);
+  first.flux.resize(n, 3);
+  first.level.resize(n, 3);
   for (int i = 0; i < n; ++i) {
     if ((emittance.row(i).array() < rig.lower.row(i).array() - 1e-12).any())
-      ++s.patches_below_lower;
+      ++first.patches_below_lower;
     if ((emittance.row(i).array() > rig.upper.row(i).array() + 1e-12).any())
-      ++s.patches_above_upper;
-    if (!(rig.blended_area[i] > 0.0)) ++s.patches_unreached;
+      ++first.patches_above_upper;
+    if (!(rig.blended_area[i] > 0.0)) ++first.patches_unreached;
     for (int c = 0; c < 3; ++c) {
       const double rho = rig.reflectance(i, c);
-      level(i, c) = 0.0;
-      flux(i, c) = 0.0;
+      first.level(i, c) = 0.0;
+      first.flux(i, c) = 0.0;
       if (!(rig.blended_area[i] > 0.0) || !(rho > 0.0)) continue;
-      flux(i, c) = rig.area[i] * (target(i, c) - rig.lower(i, c)) / rho;
+      first.flux(i, c) = rig.area[i] * (first.target(i, c) - rig.lower(i, c)) / rho;
       const double capacity = rig.area[i] * (rig.upper(i, c) - rig.lower(i, c)) / rho;
-      level(i, c) =
-          flux(i, c) >= capacity * (1.0 - 1e-12) ? kInfinity : flux(i, c) / rig.blended_area[i];
+      first.level(i, c) = first.flux(i, c) >= capacity * (1.0 - 1e-12)
+                              ? kInfinity
+                              : first.flux(i, c) / rig.blended_area[i];
     }
   }
+  return first;
+}
 
-  const std::vector<std::vector<Eigen::Vector3f>> detail =
-      PixelFactors(rig, scene, flux, options, &s.detail_pixels);
+int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& tables,
+                 const std::vector<std::vector<Eigen::Vector3f>>& factors,
+                 const Eigen::MatrixX3d& flux, int max_level_passes,
+                 const std::vector<char>* refine, Eigen::MatrixX3d* level_out) {
+  Eigen::MatrixX3d& level = *level_out;
+  const int n = rig.size();
+  const int projector_count = static_cast<int>(rig.projectors.size());
+  int most_passes = n > 0 ? 1 : 0;
+#pragma omp parallel for schedule(dynamic, 16) reduction(max : most_passes)
+  for (int i = 0; i < n; ++i) {
+    if (refine != nullptr && !(*refine)[i]) continue;
+    for (int pass = 1; pass <= max_level_passes; ++pass) {
+      most_passes = std::max(most_passes, pass);
+      Vec3 free_area = Vec3::Zero(), clamped = Vec3::Zero();
+      for (int k = 0; k < projector_count; ++k) {
+        const ProjectorMap& map = rig.maps[k];
+        const ProjectorTables& table = tables[k];
+        const double scale = rig.coverage_scale(i, k);
+        const Eigen::Vector3f* pixel_factor = factors.empty() ? nullptr : factors[k].data();
+        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+          const double plain_share = map.share[map.pixels_by_patch[position]];  // w a / Ω
+          for (int c = 0; c < 3; ++c) {
+            if (level(i, c) == kInfinity) continue;
+            const double share =
+                pixel_factor ? plain_share * pixel_factor[position][c] : plain_share;
+            if (share * level(i, c) * table.inverse_delta[c] >= 1.0) {
+              clamped[c] += scale * map.pixel_solid_angle * table.delta[c];
+            } else {
+              free_area[c] += scale * share * map.pixel_solid_angle;
+            }
+          }
+        }
+      }
+      bool changed = false;
+      for (int c = 0; c < 3; ++c) {
+        if (level(i, c) == kInfinity || clamped[c] <= 0.0) continue;
+        const double remaining = std::max(0.0, flux(i, c) - clamped[c]);
+        const double updated = free_area[c] > 0.0 ? remaining / free_area[c] : kInfinity;
+        if (updated > level(i, c) * (1.0 + 1e-12)) {
+          level(i, c) = updated;
+          changed = true;
+        }
+      }
+      if (!changed) break;
+    }
+  }
+  return most_passes;
+}
 
-  // Step 2, per patch: Newton from below on Σ_p min(w a τ, Ω Δ) = Φ.
-  s.level_passes = RefineLevels(rig, tables, detail, flux, options, &level);
-
-  // Step 3: per pixel relative output → light → dithered codes; the flux they deliver.
+std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
+                                        const std::vector<ProjectorTables>& tables,
+                                        const Eigen::MatrixX3d& level,
+                                        const std::vector<std::vector<Eigen::Vector3f>>& factors,
+                                        DitherMethod dither, const Eigen::MatrixX3d& target,
+                                        RenderSummary* summary) {
+  RenderSummary& s = *summary;
+  const int n = rig.size();
+  const int projector_count = static_cast<int>(rig.projectors.size());
   std::vector<ProjectorImage> images(projector_count);
-  const bool diffuse = options.dither == DitherMethod::kErrorDiffusion;
+  const bool diffuse = dither == DitherMethod::kErrorDiffusion;
   std::vector<std::vector<Vec3>> light(projector_count);
   for (int k = 0; k < projector_count; ++k) {
     images[k].bits = rig.projectors[k].photometry.bits;
@@ -500,7 +421,7 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
         const ProjectorMap& map = rig.maps[k];
         const ProjectorTables& table = tables[k];
         auto* codes = reinterpret_cast<cv::Vec3w*>(images[k].codes.data);
-        const Eigen::Vector3f* pixel_detail = detail.empty() ? nullptr : detail[k].data();
+        const Eigen::Vector3f* pixel_factor = factors.empty() ? nullptr : factors[k].data();
         Vec3 projector_light = Vec3::Zero();
         int row = -1, row_begin = 0,
             row_end = 0;  // the row of the current pixel, found incrementally
@@ -515,30 +436,29 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
           // Light is linear in the codes' light and mixing: the patch's delivered flux is summed
           // in relative light and mixed once per patch and projector.
           Vec3 relative;
-          bool saturated_by_detail = false;
+          bool saturated_by_factor = false;
           for (int c = 0; c < 3; ++c) {
             if (tau[c] == kInfinity) {
               relative[c] = 1.0;
               continue;
             }
             relative[c] = share * tau[c] * table.inverse_delta[c];
-            if (pixel_detail) {
-              relative[c] *= pixel_detail[position][c];
-              saturated_by_detail |= relative[c] >= 1.0 && pixel_detail[position][c] > 1.0f;
+            if (pixel_factor) {
+              relative[c] *= pixel_factor[position][c];
+              saturated_by_factor |= relative[c] >= 1.0 && pixel_factor[position][c] > 1.0f;
             }
             relative[c] = std::min(1.0, relative[c]);
           }
           if (relative.maxCoeff() >= 1.0) ++my_saturated[k];
-          if (saturated_by_detail) ++my_detail_saturated[k];
+          if (saturated_by_factor) ++my_detail_saturated[k];
           Vec3 r;
           if (LightFor(table, relative, &r)) ++my_clipped[k];
           if (diffuse) {
             light[k][index] = r;
             continue;
           }
-          const double threshold = options.dither == DitherMethod::kOrdered
-                                       ? BayerThreshold(index - row_begin, row)
-                                       : 0.5;
+          const double threshold =
+              dither == DitherMethod::kOrdered ? BayerThreshold(index - row_begin, row) : 0.5;
           cv::Vec3w& code = codes[index];
           for (int c = 0; c < 3; ++c) {
             code[c] = static_cast<uint16_t>(table.codes[c].Quantise(r[c], threshold));
@@ -579,6 +499,44 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
   }
   const double scale = std::max(rig.upper.maxCoeff(), std::numeric_limits<double>::min());
   s.max_relative_error = n > 0 ? (s.delivered - target).cwiseAbs().maxCoeff() / scale : 0.0;
+  return images;
+}
+
+}  // namespace internal
+
+std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, const Scene& scene,
+                                                  const Eigen::MatrixX3d& emittance,
+                                                  const RenderOptions& options,
+                                                  RenderSummary* summary) {
+  CheckRenderInputs(rig, scene, emittance, options);
+  const auto start = Clock::now();
+  RenderSummary local;
+  RenderSummary& s = summary ? *summary : local;
+  if (!options.detail) {
+    // A frame plan (levels per patch, the seamless field's node values) shaded on the CPU.
+    const FramePlanner planner(rig, options);
+    const FramePlan plan = planner.Plan(emittance);
+    std::vector<ProjectorImage> images = ShadeProjectorImages(planner, plan, &s);
+    s.seconds = SecondsSince(start);
+    return images;
+  }
+  s = RenderSummary();
+  std::vector<ProjectorTables> tables;
+  tables.reserve(rig.projectors.size());
+  for (const Projector& projector : rig.projectors) tables.emplace_back(projector);
+  // Step 1: the flux above black each patch needs, and the first guess of its level τ.
+  internal::FirstLevels first = internal::ComputeFirstLevels(rig, emittance);
+  s.patches_below_lower = first.patches_below_lower;
+  s.patches_above_upper = first.patches_above_upper;
+  s.patches_unreached = first.patches_unreached;
+  const std::vector<std::vector<Eigen::Vector3f>> factors =
+      PixelFactors(rig, scene, first.flux, options, &s.detail_pixels);
+  // Step 2, per patch: Newton from below on Σ_p min(w a τ, Ω Δ) = Φ.
+  s.level_passes = internal::RefineLevels(rig, tables, factors, first.flux,
+                                          options.max_level_passes, nullptr, &first.level);
+  // Step 3: per pixel relative output → light → dithered codes; the flux they deliver.
+  std::vector<ProjectorImage> images =
+      internal::ShadeImages(rig, tables, first.level, factors, options.dither, first.target, &s);
   s.seconds = SecondsSince(start);
   return images;
 }

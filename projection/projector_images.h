@@ -18,6 +18,9 @@
 //    brackets r, the upper one is chosen with probability proportional to r's position between
 //    them, so the expected light of every pixel is exactly r.
 // Pixels that light nothing show code 0 (the projector's black level).
+// Steps 1–2 are per patch and step 3 per pixel: frame_plan.h splits them (a frame plan shaded on
+// the CPU, or on a GPU by gl_renderer.h); without detail this renderer is that plan and its CPU
+// shading.
 //
 // Detail (RenderOptions::detail, the paper's Fig. 2): E is constant per patch, but a surface's
 // desired appearance may be a texture with detail finer than the patches. With detail on, the

@@ -21,6 +21,7 @@
 // and leaves no visible step. m_p = v(x_p) / mean_i(v).
 
 #include <Eigen/Core>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -40,6 +41,65 @@ struct SeamlessLightOptions {
   // this fraction of the larger, in [0, 1].
   double tolerance = 0.05;
   bool Check(std::string* why) const;
+};
+
+// The field's static part for one rig and options: per patch its node list (FieldNodes, then
+// DropNodesOutOfReach in seamless_light.cc), each node's bump radius² and the matrix A whose row i
+// is the mean of the normalised bumps over patch i's pixels (weights w a), so that the field's
+// patch means are A v̂. Building it visits every lit pixel once; afterwards the node values
+// (NodeValues), the means (PatchMeans) and the factor at any point (Factor) cost O(nodes) each,
+// which is what a frame plan (frame_plan.h) and a GPU shader (gl_renderer.h) need. Keeps a
+// reference to the rig.
+class SeamlessField {
+ public:
+  // Throws std::invalid_argument if the options fail Check() or the rig has no centroids, hit
+  // points or a valid adjacency.
+  SeamlessField(const ProjectionRig& rig, const SeamlessLightOptions& options);
+  ~SeamlessField();
+  SeamlessField(const SeamlessField&) = delete;
+  SeamlessField& operator=(const SeamlessField&) = delete;
+
+  // Node values v̂ (n,3) for patches whose exitance above black is `exitance` (n,3, ≥ 0): the
+  // exitance corrected `iterations` times (header comment).
+  Eigen::MatrixX3d NodeValues(const Eigen::MatrixX3d& exitance) const;
+  // mean_i(v) = (A v̂)_i per patch and channel (n,3).
+  Eigen::MatrixX3d PatchMeans(const Eigen::MatrixX3d& node_value) const;
+  // m at `point` (metres, on patch i): v(point) / mean_i(v) per channel, in single precision as
+  // SeamlessLightFactors gives it; 1 on flat patches and on channels whose mean is 0.
+  Eigen::Vector3f Factor(int i, const Eigen::Vector3f& point, const Eigen::MatrixX3d& node_value,
+                         const Eigen::MatrixX3d& means) const;
+  // Factor at every lit pixel of the rig (per projector, in pixels_by_patch order).
+  std::vector<std::vector<Eigen::Vector3f>> Factors(const Eigen::MatrixX3d& node_value,
+                                                    const Eigen::MatrixX3d& means) const;
+  // Whether patch i's field is its own value alone (m = 1 over it).
+  bool Flat(int i) const { return node_begin_[i + 1] - node_begin_[i] <= 1; }
+
+  // Patch i's nodes are node_list()[node_begin()[i] .. node_begin()[i + 1]), i itself first.
+  const std::vector<int>& node_begin() const { return node_begin_; }  // (n + 1)
+  const std::vector<int>& node_list() const { return node_list_; }
+  const std::vector<double>& radius2() const { return radius2_; }  // (n) r_j², m²
+  // Aligned with node_list(): reach_ij, the largest normalised bump K̃_j (K_j / Σ K) of the
+  // node over patch i's pixels. With Σ_j K̃_j = 1 at every pixel they bound the field within a
+  // patch without visiting its pixels (frame_plan.h).
+  const std::vector<double>& node_reach() const { return node_reach_; }
+  // Aligned with node_list(): the largest share_p · K̃_j(x_p) over patch i's pixels p of every
+  // projector (share: ProjectorMap::share, w a / Ω).
+  const std::vector<double>& node_share_reach() const { return node_share_reach_; }
+  const ProjectionRig& rig() const { return rig_; }
+
+ private:
+  // Calls visit(i, k, position, bumps) for every lit pixel of every patch that is not flat.
+  template <typename Visit>
+  void ForEachPixel(Visit visit) const;
+  void FormPatchMeans();
+
+  const ProjectionRig& rig_;
+  SeamlessLightOptions options_;
+  std::vector<int> node_begin_, node_list_;
+  std::vector<double> radius2_;
+  std::vector<double> node_reach_, node_share_reach_;
+  struct Means;  // A (sparse, row-major)
+  std::unique_ptr<Means> means_;
 };
 
 // The factors m (header comment) per projector, lit pixel (in pixels_by_patch order) and channel,

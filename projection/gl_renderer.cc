@@ -1,0 +1,426 @@
+#include "projection/gl_renderer.h"
+
+#include <epoxy/gl.h>
+
+#include <algorithm>
+#include <array>
+#include <opencv2/core.hpp>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "base/io.h"
+#include "projection/render_steps.h"
+
+namespace procam {
+namespace {
+
+constexpr const char* kVertexShader = R"(#version 330 core
+// One triangle covering the viewport: corners (−1, −1), (3, −1), (−1, 3).
+void main() {
+  vec2 corner = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
+  gl_Position = vec4(corner * 2.0 - 1.0, 0.0, 1.0);
+}
+)";
+
+// Step 3 of projector_images.h per pixel (gl_renderer.h); the names follow the CPU's.
+constexpr const char* kFragmentShader = R"(#version 330 core
+uniform isampler2D pixel_patch;       // patch the pixel lights, −1: none (texel row = image row)
+uniform sampler2D pixel_point;        // xyz: world point its ray hits; w: its share (w a / Ω)
+uniform samplerBuffer patch_centroid; // per patch: xyz c_j, w r_j²
+uniform isamplerBuffer node_begin;    // (n + 1) CSR of the seamless field's node lists
+uniform isamplerBuffer node_list;
+uniform samplerBuffer code_light;     // light of code q of channel c at c (max_code + 1) + q
+uniform samplerBuffer level;          // per patch τ (rgb); negative: +inf (full drive)
+uniform samplerBuffer node_value;     // per patch v̂ (rgb)
+uniform samplerBuffer patch_mean;     // per patch mean_i(v) (rgb)
+uniform vec3 inverse_delta;
+uniform mat3 mixing_inverse;
+uniform int identity_mixing;
+uniform int max_code;
+uniform int ordered_dither;
+uniform int smooth_light;
+uniform int image_height;
+uniform int bayer[64];
+layout(location = 0) out vec4 colour;
+
+// m = v(x) / mean_i per channel: v the bumps' weighted mean of the node values.
+vec3 SeamlessFactor(int i, vec3 x) {
+  int begin = texelFetch(node_begin, i).r, end = texelFetch(node_begin, i + 1).r;
+  if (end - begin <= 1) return vec3(1.0);
+  float weight_sum = 0.0;
+  vec3 value = vec3(0.0);
+  for (int node = begin; node < end; ++node) {
+    int j = texelFetch(node_list, node).r;
+    vec4 bump = texelFetch(patch_centroid, j);
+    vec3 d = x - bump.xyz;
+    float d2 = dot(d, d);
+    if (d2 >= bump.w) continue;
+    float t = 1.0 - d2 / bump.w;
+    weight_sum += t * t;
+    value += (t * t) * texelFetch(node_value, j).rgb;
+  }
+  // Only where no bump reaches (a patch far outside the designed shapes): the patch's own value.
+  value = weight_sum > 0.0 ? value / weight_sum : texelFetch(node_value, i).rgb;
+  vec3 mean = texelFetch(patch_mean, i).rgb;
+  vec3 m = vec3(1.0);
+  for (int c = 0; c < 3; ++c) {
+    if (mean[c] > 0.0) m[c] = value[c] / mean[c];
+  }
+  return m;
+}
+
+// CodeTable::Quantise: the largest code whose light is ≤ r, or the next one where r lies more
+// than `threshold` of the way to it.
+int Quantise(int c, float r, float threshold) {
+  int base = c * (max_code + 1);
+  int low = 0, high = max_code;
+  while (low < high) {
+    int middle = (low + high + 1) / 2;
+    if (texelFetch(code_light, base + middle).r <= r) low = middle; else high = middle - 1;
+  }
+  if (low >= max_code) return max_code;
+  float below = texelFetch(code_light, base + low).r;
+  float above = texelFetch(code_light, base + low + 1).r;
+  return r - below > threshold * (above - below) ? low + 1 : low;
+}
+
+void main() {
+  ivec2 pixel = ivec2(int(gl_FragCoord.x), image_height - 1 - int(gl_FragCoord.y));
+  int i = texelFetch(pixel_patch, pixel, 0).r;
+  if (i < 0) {
+    colour = vec4(0.0, 0.0, 0.0, 1.0);
+    return;
+  }
+  vec4 point = texelFetch(pixel_point, pixel, 0);
+  vec3 tau = texelFetch(level, i).rgb;
+  vec3 m = smooth_light != 0 ? SeamlessFactor(i, point.xyz) : vec3(1.0);
+  vec3 relative;
+  for (int c = 0; c < 3; ++c)
+    relative[c] = tau[c] < 0.0 ? 1.0 : min(1.0, point.w * tau[c] * inverse_delta[c] * m[c]);
+  vec3 r = identity_mixing != 0 ? relative : clamp(mixing_inverse * relative, 0.0, 1.0);
+  float threshold = ordered_dither != 0
+                        ? (float(bayer[(pixel.y & 7) * 8 + (pixel.x & 7)]) + 0.5) / 64.0
+                        : 0.5;
+  vec3 code = vec3(Quantise(0, r.r, threshold), Quantise(1, r.g, threshold),
+                   Quantise(2, r.b, threshold));
+  colour = vec4(code / float(max_code), 1.0);
+}
+)";
+
+// The driver's log of a shader or program, on one line.
+std::string OneLine(std::string log) {
+  while (!log.empty() && (log.back() == '\n' || log.back() == '\0')) log.pop_back();
+  std::replace(log.begin(), log.end(), '\n', ' ');
+  return log;
+}
+
+GLuint CompileShader(GLenum type, const char* source) {
+  const GLuint shader = glCreateShader(type);
+  glShaderSource(shader, 1, &source, nullptr);
+  glCompileShader(shader);
+  GLint ok = GL_FALSE;
+  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
+  if (ok != GL_TRUE) {
+    GLint length = 0;
+    glGetShaderiv(shader, GL_INFO_LOG_LENGTH, &length);
+    std::string log(std::max(length, 1), '\0');
+    glGetShaderInfoLog(shader, length, nullptr, log.data());
+    glDeleteShader(shader);
+    throw IoError(std::string("GlProjectorRenderer: the ") +
+                  (type == GL_VERTEX_SHADER ? "vertex" : "fragment") +
+                  " shader does not compile: " + OneLine(log));
+  }
+  return shader;
+}
+
+GLuint LinkProgram() {
+  const GLuint vertex = CompileShader(GL_VERTEX_SHADER, kVertexShader);
+  GLuint fragment = 0;
+  try {
+    fragment = CompileShader(GL_FRAGMENT_SHADER, kFragmentShader);
+  } catch (...) {
+    glDeleteShader(vertex);
+    throw;
+  }
+  const GLuint program = glCreateProgram();
+  glAttachShader(program, vertex);
+  glAttachShader(program, fragment);
+  glLinkProgram(program);
+  glDeleteShader(vertex);
+  glDeleteShader(fragment);
+  GLint ok = GL_FALSE;
+  glGetProgramiv(program, GL_LINK_STATUS, &ok);
+  if (ok != GL_TRUE) {
+    GLint length = 0;
+    glGetProgramiv(program, GL_INFO_LOG_LENGTH, &length);
+    std::string log(std::max(length, 1), '\0');
+    glGetProgramInfoLog(program, length, nullptr, log.data());
+    glDeleteProgram(program);
+    throw IoError("GlProjectorRenderer: the shaders do not link: " + OneLine(log));
+  }
+  return program;
+}
+
+// Texture units of the shader's samplers.
+enum Unit : int {
+  kPixelPatch,
+  kPixelPoint,
+  kPatchCentroid,
+  kNodeBegin,
+  kNodeList,
+  kCodeLight,
+  kLevel,
+  kNodeValue,
+  kPatchMean,
+  kUnits
+};
+constexpr std::array<const char*, kUnits> kSamplerNames = {
+    "pixel_patch", "pixel_point", "patch_centroid", "node_begin", "node_list",
+    "code_light",  "level",       "node_value",     "patch_mean"};
+
+}  // namespace
+
+std::string OpenGlDescription() {
+  const auto text = [](GLenum name) {
+    const GLubyte* value = glGetString(name);
+    return value ? std::string(reinterpret_cast<const char*>(value)) : std::string("?");
+  };
+  return text(GL_VERSION) + ", " + text(GL_RENDERER);
+}
+
+struct GlProjectorRenderer::State {
+  int width = 0, height = 0, bits = 8, patches = 0;
+  LightField light = LightField::kSmooth;
+  GLuint program = 0, vertex_array = 0;
+  std::array<GLuint, kUnits> textures = {};
+  std::array<GLuint, kUnits> buffers = {};  // behind the texture buffers (0 for 2D textures)
+  GLint max_texels = 0;
+
+  // A texture buffer of `count` texels of `format` on `unit` (at least one texel).
+  void MakeTextureBuffer(Unit unit, GLenum format, const void* data, size_t bytes, size_t count,
+                         GLenum usage) {
+    if (count > static_cast<size_t>(max_texels)) {
+      throw IoError("GlProjectorRenderer: " + std::string(kSamplerNames[unit]) + " needs " +
+                    std::to_string(count) + " texels, the driver's texture buffers hold " +
+                    std::to_string(max_texels));
+    }
+    glGenBuffers(1, &buffers[unit]);
+    glBindBuffer(GL_TEXTURE_BUFFER, buffers[unit]);
+    const std::array<float, 4> zero = {0, 0, 0, 0};
+    glBufferData(GL_TEXTURE_BUFFER, bytes > 0 ? bytes : sizeof(zero),
+                 bytes > 0 ? data : zero.data(), usage);
+    glGenTextures(1, &textures[unit]);
+    glBindTexture(GL_TEXTURE_BUFFER, textures[unit]);
+    glTexBuffer(GL_TEXTURE_BUFFER, format, buffers[unit]);
+    glBindTexture(GL_TEXTURE_BUFFER, 0);
+    glBindBuffer(GL_TEXTURE_BUFFER, 0);
+  }
+
+  void MakeTexture2D(Unit unit, GLenum internal_format, GLenum format, GLenum type,
+                     const void* data) {
+    glGenTextures(1, &textures[unit]);
+    glBindTexture(GL_TEXTURE_2D, textures[unit]);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL, 0);
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+    glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+    glTexImage2D(GL_TEXTURE_2D, 0, internal_format, width, height, 0, format, type, data);
+    glBindTexture(GL_TEXTURE_2D, 0);
+  }
+
+  // Replaces a per-patch texture buffer's contents (rgb of (n,3) as rgba floats).
+  void Upload(Unit unit, const Eigen::MatrixX3d& values, bool infinity_negative) {
+    std::vector<float> texels(4 * static_cast<size_t>(std::max(patches, 1)), 0.0f);
+    for (int i = 0; i < patches; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        const double value = values(i, c);
+        texels[4 * i + c] =
+            infinity_negative && value == internal::kInfinity ? -1.0f : static_cast<float>(value);
+      }
+    }
+    glBindBuffer(GL_TEXTURE_BUFFER, buffers[unit]);
+    // Orphaning: the driver may keep the previous frame's contents for a draw still in flight.
+    glBufferData(GL_TEXTURE_BUFFER, texels.size() * sizeof(float), texels.data(), GL_STREAM_DRAW);
+    glBindBuffer(GL_TEXTURE_BUFFER, 0);
+  }
+
+  ~State() {
+    glDeleteTextures(kUnits, textures.data());
+    glDeleteBuffers(kUnits, buffers.data());
+    if (vertex_array != 0) glDeleteVertexArrays(1, &vertex_array);
+    if (program != 0) glDeleteProgram(program);
+  }
+};
+
+GlProjectorRenderer::GlProjectorRenderer(const FramePlanner& planner, int projector) {
+  const ProjectionRig& rig = planner.rig();
+  const RenderOptions& options = planner.options();
+  if (projector < 0 || projector >= static_cast<int>(rig.projectors.size())) {
+    throw std::invalid_argument("GlProjectorRenderer: no projector " + std::to_string(projector) +
+                                " in a rig of " + std::to_string(rig.projectors.size()));
+  }
+  if (options.dither == DitherMethod::kErrorDiffusion) {
+    throw std::invalid_argument(
+        "GlProjectorRenderer: error diffusion is sequential per image and renders on the CPU only "
+        "(ShadeProjectorImages)");
+  }
+  if (!epoxy_is_desktop_gl() || epoxy_gl_version() < 33) {
+    throw IoError("GlProjectorRenderer: needs OpenGL 3.3, the context has " +
+                  std::string(epoxy_is_desktop_gl() ? "" : "OpenGL ES ") +
+                  std::to_string(epoxy_gl_version() / 10) + "." +
+                  std::to_string(epoxy_gl_version() % 10));
+  }
+  state_ = std::make_unique<State>();
+  State& state = *state_;
+  const ProjectorMap& map = rig.maps[projector];
+  const internal::ProjectorTables& tables = planner.tables()[projector];
+  state.width = map.width;
+  state.height = map.height;
+  state.bits = rig.projectors[projector].photometry.bits;
+  state.patches = rig.size();
+  state.light = options.light;
+  glGetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &state.max_texels);
+  state.program = LinkProgram();
+  glGenVertexArrays(1, &state.vertex_array);
+
+  // Per pixel: the patch, and the hit point with the share.
+  const size_t pixels = static_cast<size_t>(map.width) * map.height;
+  std::vector<float> point_share(4 * pixels, 0.0f);
+  for (int position = 0; position < map.lit_pixels; ++position) {
+    const int32_t index = map.pixels_by_patch[position];
+    if (!map.point_by_patch.empty()) {
+      for (int axis = 0; axis < 3; ++axis)
+        point_share[4 * index + axis] = map.point_by_patch[position][axis];
+    }
+    point_share[4 * index + 3] = map.share[index];
+  }
+  state.MakeTexture2D(kPixelPatch, GL_R32I, GL_RED_INTEGER, GL_INT, map.patch.data());
+  state.MakeTexture2D(kPixelPoint, GL_RGBA32F, GL_RGBA, GL_FLOAT, point_share.data());
+
+  // Per patch: the seamless field's bumps and node lists (a flat field: every list just i).
+  const int n = rig.size();
+  std::vector<float> centroid(4 * static_cast<size_t>(n), 0.0f);
+  std::vector<int32_t> node_begin(n + 1), node_list;
+  if (const SeamlessField* field = planner.field()) {
+    for (int i = 0; i < n; ++i) {
+      for (int axis = 0; axis < 3; ++axis) centroid[4 * i + axis] = float(rig.centroid(i, axis));
+      centroid[4 * i + 3] = static_cast<float>(field->radius2()[i]);
+    }
+    node_begin.assign(field->node_begin().begin(), field->node_begin().end());
+    node_list.assign(field->node_list().begin(), field->node_list().end());
+  } else {
+    for (int i = 0; i <= n; ++i) node_begin[i] = i;
+    for (int i = 0; i < n; ++i) node_list.push_back(i);
+  }
+  state.MakeTextureBuffer(kPatchCentroid, GL_RGBA32F, centroid.data(),
+                          centroid.size() * sizeof(float), n, GL_STATIC_DRAW);
+  state.MakeTextureBuffer(kNodeBegin, GL_R32I, node_begin.data(),
+                          node_begin.size() * sizeof(int32_t), node_begin.size(), GL_STATIC_DRAW);
+  state.MakeTextureBuffer(kNodeList, GL_R32I, node_list.data(), node_list.size() * sizeof(int32_t),
+                          node_list.size(), GL_STATIC_DRAW);
+
+  // Per channel the light of every code value.
+  const int max_code = tables.codes[0].max_code();
+  std::vector<float> code_light(3 * static_cast<size_t>(max_code + 1));
+  for (int c = 0; c < 3; ++c) {
+    for (int q = 0; q <= max_code; ++q)
+      code_light[c * (max_code + 1) + q] = static_cast<float>(tables.codes[c].Light(q));
+  }
+  state.MakeTextureBuffer(kCodeLight, GL_R32F, code_light.data(), code_light.size() * sizeof(float),
+                          code_light.size(), GL_STATIC_DRAW);
+  for (const Unit unit : {kLevel, kNodeValue, kPatchMean}) {
+    state.MakeTextureBuffer(unit, GL_RGBA32F, nullptr, 0, n, GL_STREAM_DRAW);
+  }
+
+  glUseProgram(state.program);
+  for (int unit = 0; unit < kUnits; ++unit)
+    glUniform1i(glGetUniformLocation(state.program, kSamplerNames[unit]), unit);
+  const Eigen::Vector3f inverse_delta = tables.inverse_delta.cast<float>();
+  glUniform3fv(glGetUniformLocation(state.program, "inverse_delta"), 1, inverse_delta.data());
+  const Eigen::Matrix3f mixing_inverse = tables.mixing_inverse.cast<float>();  // column-major
+  glUniformMatrix3fv(glGetUniformLocation(state.program, "mixing_inverse"), 1, GL_FALSE,
+                     mixing_inverse.data());
+  glUniform1i(glGetUniformLocation(state.program, "identity_mixing"), tables.identity_mixing);
+  glUniform1i(glGetUniformLocation(state.program, "max_code"), max_code);
+  glUniform1i(glGetUniformLocation(state.program, "ordered_dither"),
+              options.dither == DitherMethod::kOrdered);
+  glUniform1i(glGetUniformLocation(state.program, "smooth_light"),
+              options.light == LightField::kSmooth);
+  glUniform1i(glGetUniformLocation(state.program, "image_height"), map.height);
+  std::array<GLint, 64> bayer;
+  std::copy(internal::kBayer.begin(), internal::kBayer.end(), bayer.begin());
+  glUniform1iv(glGetUniformLocation(state.program, "bayer"), 64, bayer.data());
+  glUseProgram(0);
+  if (const GLenum error = glGetError(); error != GL_NO_ERROR) {
+    throw IoError("GlProjectorRenderer: OpenGL error " + std::to_string(error) +
+                  " uploading projector '" + rig.projectors[projector].name + "'");
+  }
+}
+
+GlProjectorRenderer::~GlProjectorRenderer() = default;
+
+int GlProjectorRenderer::width() const { return state_->width; }
+int GlProjectorRenderer::height() const { return state_->height; }
+int GlProjectorRenderer::bits() const { return state_->bits; }
+
+void GlProjectorRenderer::Draw(const FramePlan& plan) {
+  State& state = *state_;
+  const bool smooth = state.light == LightField::kSmooth;
+  if (plan.level.rows() != state.patches || plan.light != state.light ||
+      (smooth && (plan.node_value.rows() != state.patches || plan.mean.rows() != state.patches))) {
+    throw std::invalid_argument("GlProjectorRenderer: the plan is not one of this rig's (" +
+                                std::to_string(plan.level.rows()) + " patches, light " +
+                                LightFieldName(plan.light) + "; the rig " +
+                                std::to_string(state.patches) + ", light " +
+                                LightFieldName(state.light) + ")");
+  }
+  state.Upload(kLevel, plan.level, true);
+  if (smooth) {
+    state.Upload(kNodeValue, plan.node_value, false);
+    state.Upload(kPatchMean, plan.mean, false);
+  }
+  glViewport(0, 0, state.width, state.height);
+  glDisable(GL_BLEND);
+  glDisable(GL_DEPTH_TEST);
+  glDisable(GL_SCISSOR_TEST);
+  glDisable(GL_DITHER);  // codes are exact fractions of the framebuffer's levels: no GL dither
+  glUseProgram(state.program);
+  for (int unit = 0; unit < kUnits; ++unit) {
+    glActiveTexture(GL_TEXTURE0 + unit);
+    glBindTexture(unit <= kPixelPoint ? GL_TEXTURE_2D : GL_TEXTURE_BUFFER, state.textures[unit]);
+  }
+  glBindVertexArray(state.vertex_array);
+  glDrawArrays(GL_TRIANGLES, 0, 3);
+  glBindVertexArray(0);
+  glUseProgram(0);
+  for (int unit = kUnits - 1; unit >= 0; --unit) {
+    glActiveTexture(GL_TEXTURE0 + unit);
+    glBindTexture(unit <= kPixelPoint ? GL_TEXTURE_2D : GL_TEXTURE_BUFFER, 0);
+  }
+}
+
+void GlProjectorRenderer::Finish() const { glFinish(); }
+
+ProjectorImage GlProjectorRenderer::ReadBack() const {
+  const State& state = *state_;
+  ProjectorImage image;
+  image.bits = state.bits;
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glPixelStorei(GL_PACK_ROW_LENGTH, 0);
+  cv::Mat bottom_up;
+  if (state.bits == 8) {
+    bottom_up = cv::Mat(state.height, state.width, CV_8UC3);
+    glReadPixels(0, 0, state.width, state.height, GL_RGB, GL_UNSIGNED_BYTE, bottom_up.data);
+    bottom_up.convertTo(bottom_up, CV_16UC3);
+  } else {
+    bottom_up = cv::Mat(state.height, state.width, CV_16UC3);
+    glReadPixels(0, 0, state.width, state.height, GL_RGB, GL_UNSIGNED_SHORT, bottom_up.data);
+    bottom_up.convertTo(bottom_up, CV_16UC3, ((1 << state.bits) - 1) / 65535.0);
+  }
+  cv::flip(bottom_up, image.codes, 0);
+  return image;
+}
+
+}  // namespace procam

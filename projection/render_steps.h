@@ -1,0 +1,121 @@
+#pragma once
+// The steps of RenderProjectorImages (projector_images.h) shared by the renderer, the frame plan
+// (frame_plan.h) and the GPU renderer's uploads (gl_renderer.h): not a public interface.
+
+#include <Eigen/Core>
+#include <Eigen/LU>
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "projection/projection_rig.h"
+#include "projection/projector_images.h"
+
+namespace procam::internal {
+
+inline constexpr double kInfinity = std::numeric_limits<double>::infinity();
+
+// 8×8 Bayer matrix: thresholds (b + ½)/64 spread evenly over (0, 1).
+inline constexpr std::array<uint8_t, 64> kBayer = {
+    0,  32, 8,  40, 2,  34, 10, 42, 48, 16, 56, 24, 50, 18, 58, 26, 12, 44, 4,  36, 14, 46,
+    6,  38, 60, 28, 52, 20, 62, 30, 54, 22, 3,  35, 11, 43, 1,  33, 9,  41, 51, 19, 59, 27,
+    49, 17, 57, 25, 15, 47, 7,  39, 13, 45, 5,  37, 63, 31, 55, 23, 61, 29, 53, 21};
+
+inline double BayerThreshold(int x, int y) { return (kBayer[(y & 7) * 8 + (x & 7)] + 0.5) / 64.0; }
+
+// Code values ↔ relative light for one channel of one projector.
+class CodeTable {
+ public:
+  CodeTable(const ResponseCurve& response, int max_code)
+      : max_code_(max_code), light_(max_code + 2) {
+    for (int q = 0; q <= max_code; ++q) light_[q] = response.Light(double(q) / max_code);
+    light_[max_code + 1] = kInfinity;  // sentinel: never below any r
+    first_.resize(kBins + 1);
+    int q = 0;
+    for (int b = 0; b <= kBins; ++b) {
+      const double r = double(b) / kBins;
+      while (q < max_code && light_[q + 1] <= r) ++q;
+      first_[b] = static_cast<uint16_t>(q);
+    }
+  }
+  double Light(int code) const { return light_[code]; }
+  // Largest code whose light is ≤ r (r in [0,1]).
+  int Below(double r) const {
+    int q = first_[static_cast<int>(r * kBins)];
+    while (light_[q + 1] <= r) ++q;
+    return q;
+  }
+  // The code for light r: the upper of the bracketing pair when r's position between them
+  // exceeds `threshold` (½: nearest in linear light).
+  int Quantise(double r, double threshold) const {
+    const int q = Below(r);
+    if (q >= max_code_) return max_code_;
+    // (r − light_q) / (light_q+1 − light_q) > threshold, without the division.
+    return r - light_[q] > threshold * (light_[q + 1] - light_[q]) ? q + 1 : q;
+  }
+  int max_code() const { return max_code_; }
+
+ private:
+  static constexpr int kBins = 4096;  // 8 KB per channel: stays in L1
+  int max_code_;
+  std::vector<double> light_;
+  std::vector<uint16_t> first_;
+};
+
+struct ProjectorTables {
+  explicit ProjectorTables(const Projector& projector)
+      : photometry(projector.photometry),
+        delta(projector.photometry.max - projector.photometry.black),
+        inverse_delta(delta.cwiseInverse()),
+        mixing_inverse(projector.photometry.mixing.inverse()),
+        identity_mixing(projector.photometry.mixing.isIdentity(0.0)),
+        codes{CodeTable(photometry.response[0], photometry.MaxCode()),
+              CodeTable(photometry.response[1], photometry.MaxCode()),
+              CodeTable(photometry.response[2], photometry.MaxCode())} {}
+  const ProjectorPhotometry& photometry;
+  Vec3 delta, inverse_delta;
+  Eigen::Matrix3d mixing_inverse;
+  bool identity_mixing;
+  std::array<CodeTable, 3> codes;
+};
+
+// Relative light r ∈ [0,1]³ for relative above-black output s; true if r had to be clipped.
+inline bool LightFor(const ProjectorTables& tables, const Vec3& s, Vec3* r) {
+  if (tables.identity_mixing) {
+    *r = s;
+    return false;
+  }
+  const Vec3 raw = tables.mixing_inverse * s;
+  *r = raw.cwiseMax(0.0).cwiseMin(1.0);
+  return (*r - raw).cwiseAbs().maxCoeff() > 1e-9;
+}
+
+// Step 1 of RenderProjectorImages: E clipped to the bounds (`target`), the flux above black each
+// patch needs and its first level τ (+inf: the patch needs every pixel at full drive), and the
+// summary's counts of patches outside the bounds or unreached.
+struct FirstLevels {
+  Eigen::MatrixX3d target, flux, level;  // (n,3)
+  int patches_below_lower = 0, patches_above_upper = 0, patches_unreached = 0;
+};
+FirstLevels ComputeFirstLevels(const ProjectionRig& rig, const Eigen::MatrixX3d& emittance);
+
+// Step 2, per patch: Newton from below on Σ_p min(w a f τ, Ω Δ) = Φ, f the pixel factors
+// (`factors` per projector in pixels_by_patch order; empty: f = 1). Only the patches `refine`
+// marks (null: all), which must have their factors. Raises `level` where pixels saturate;
+// returns the most passes a patch took (1 for every patch not refined).
+int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& tables,
+                 const std::vector<std::vector<Eigen::Vector3f>>& factors,
+                 const Eigen::MatrixX3d& flux, int max_level_passes,
+                 const std::vector<char>* refine, Eigen::MatrixX3d* level);
+
+// Step 3: per pixel relative output → light → dithered codes, and the summary's pixel counts,
+// delivered exitance and error against `target`.
+std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
+                                        const std::vector<ProjectorTables>& tables,
+                                        const Eigen::MatrixX3d& level,
+                                        const std::vector<std::vector<Eigen::Vector3f>>& factors,
+                                        DitherMethod dither, const Eigen::MatrixX3d& target,
+                                        RenderSummary* summary);
+
+}  // namespace procam::internal

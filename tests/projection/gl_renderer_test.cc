@@ -1,0 +1,335 @@
+// The GPU renderer of projector images (gl_renderer.h) against the CPU's (frame_plan.h), on
+// Mesa's llvmpipe under a virtual X server: on a stage lit by two overlapping projectors (one
+// with colour mixing), for flat and smooth light, without and with ordered dithering, on
+// emittance between the bounds and near the upper bound (saturated patches), every pixel's codes
+// are within one code step of the CPU's and few differ at all. A frame plan shaded on the CPU is
+// RenderProjectorImages's images bit for bit; detail and error diffusion are refused; a display
+// draws and presents frames separately. DISABLED_Timings is the benchmark of docs/projection.md.
+#include "projection/gl_renderer.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <opencv2/core.hpp>
+#include <random>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "base/io.h"
+#include "base/timing.h"
+#include "capture/camera.h"
+#include "projection/frame_plan.h"
+#include "projection/glfw_display.h"
+#include "tests/projection/stage.h"
+#include "tests/projection/xvfb.h"
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+using testing::MakeStage;
+using testing::Stage;
+using testing::StageOptions;
+
+// The screen holds a 1080p window (the benchmark's); the small stages draw into its lower left.
+constexpr int kScreenWidth = 1920, kScreenHeight = 1080;
+
+::testing::Environment* const xvfb =
+    ::testing::AddGlobalTestEnvironment(new testing::XvfbEnvironment(kScreenWidth, kScreenHeight));
+
+// The stage of the projection tests (two 320×240 projectors overlapping on the wall, a plate in
+// front), the second projector with colour mixing so that the shader's mixing inverse and
+// gamut clip are exercised.
+struct Rig {
+  Stage stage;
+  ProjectionRig rig;
+};
+const Rig& SmallRig() {
+  static const Rig* rig = [] {
+    auto* made = new Rig{MakeStage({}), {}};
+    made->stage.projectors[1].photometry.mixing << 0.9, 0.1, 0.0, 0.05, 0.9, 0.05, 0.0, 0.2, 0.8;
+    made->stage.projectors[0].photometry.response[1] = ResponseCurve::Gamma(1.8);
+    made->rig = BuildProjectionRig(made->stage.patches.fine, made->stage.projectors, {});
+    return made;
+  }();
+  return *rig;
+}
+
+// E per patch and channel at lower + t (upper − lower), t uniform in [t_low, t_high], clipped by
+// the renderer where t > 1.
+Eigen::MatrixX3d Emittance(const ProjectionRig& rig, double t_low, double t_high, unsigned seed) {
+  std::mt19937 random(seed);
+  std::uniform_real_distribution<double> t(t_low, t_high);
+  Eigen::MatrixX3d emittance(rig.size(), 3);
+  for (int i = 0; i < rig.size(); ++i) {
+    for (int c = 0; c < 3; ++c)
+      emittance(i, c) = rig.lower(i, c) + t(random) * (rig.upper(i, c) - rig.lower(i, c));
+  }
+  return emittance;
+}
+
+// A smooth E across the room, within [0.1, 0.6] of the range (run shifts it a little).
+Eigen::MatrixX3d RampEmittance(const Stage& stage, const ProjectionRig& rig, int run) {
+  Eigen::MatrixX3d emittance(rig.size(), 3);
+  for (int i = 0; i < rig.size(); ++i) {
+    const Vec3& c = stage.patches.fine.patches[i].centroid;
+    const Eigen::RowVector3d t(0.1 + 0.1 * c.x() + 0.01 * run, 0.2 + 0.08 * c.x() + 0.05 * c.z(),
+                               0.45);
+    emittance.row(i) = rig.lower.row(i) + t.cwiseProduct(rig.upper.row(i) - rig.lower.row(i));
+  }
+  return emittance;
+}
+
+struct Difference {
+  int largest = 0;        // largest |GPU − CPU| code over pixels and channels
+  double fraction = 0.0;  // of the pixels, those with some channel different
+};
+Difference Compare(const ProjectorImage& gpu, const ProjectorImage& cpu) {
+  Difference difference;
+  long long differing = 0;
+  for (int y = 0; y < cpu.codes.rows; ++y) {
+    for (int x = 0; x < cpu.codes.cols; ++x) {
+      const cv::Vec3w a = gpu.codes.at<cv::Vec3w>(y, x), b = cpu.codes.at<cv::Vec3w>(y, x);
+      int largest = 0;
+      for (int c = 0; c < 3; ++c) largest = std::max(largest, std::abs(int(a[c]) - int(b[c])));
+      difference.largest = std::max(difference.largest, largest);
+      differing += largest > 0;
+    }
+  }
+  difference.fraction = double(differing) / cpu.codes.total();
+  return difference;
+}
+
+struct Case {
+  LightField light;
+  DitherMethod dither;
+  double t_low, t_high;  // emittance between the bounds (see Emittance)
+};
+
+class GlRendererTest : public ::testing::TestWithParam<Case> {};
+
+TEST_P(GlRendererTest, EqualsTheCpuWithinOneCodeStep) {
+  SKIP_WITHOUT_XVFB();
+  const Case& test = GetParam();
+  const ProjectionRig& rig = SmallRig().rig;
+  RenderOptions options;
+  options.light = test.light;
+  options.dither = test.dither;
+  const FramePlanner planner(rig, options);
+  const FramePlan plan = planner.Plan(Emittance(rig, test.t_low, test.t_high, 11));
+  const std::vector<ProjectorImage> cpu = ShadeProjectorImages(planner, plan, nullptr);
+
+  GlfwDisplay display(FindMonitor("0"));
+  display.MakeContextCurrent();
+  std::printf("OpenGL %s\n", OpenGlDescription().c_str());
+  for (int k = 0; k < static_cast<int>(rig.projectors.size()); ++k) {
+    GlProjectorRenderer renderer(planner, k);
+    renderer.Draw(plan);
+    const ProjectorImage gpu = renderer.ReadBack();
+    ASSERT_EQ(gpu.codes.size(), cpu[k].codes.size());
+    const Difference difference = Compare(gpu, cpu[k]);
+    std::printf(
+        "%s light, dither %s, t in [%.2f, %.2f], projector %d: %d of %d patches refined, "
+        "%.4f%% of the pixels differ, by at most %d\n",
+        LightFieldName(test.light), DitherName(test.dither), test.t_low, test.t_high, k,
+        plan.refined_patches, rig.size(), 100.0 * difference.fraction, difference.largest);
+    EXPECT_LE(difference.largest, 1);
+    EXPECT_LT(difference.fraction, 0.01);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Cases, GlRendererTest,
+    ::testing::Values(Case{LightField::kFlat, DitherMethod::kNone, 0.0, 1.0},
+                      Case{LightField::kFlat, DitherMethod::kOrdered, 0.0, 1.0},
+                      Case{LightField::kSmooth, DitherMethod::kNone, 0.0, 1.0},
+                      Case{LightField::kSmooth, DitherMethod::kOrdered, 0.0, 1.0},
+                      // Near and above the upper bound: many patches saturate (step 2 refines
+                      // them; τ = +inf where a patch needs every pixel at full drive).
+                      Case{LightField::kFlat, DitherMethod::kOrdered, 0.8, 1.1},
+                      Case{LightField::kSmooth, DitherMethod::kOrdered, 0.8, 1.1},
+                      Case{LightField::kSmooth, DitherMethod::kNone, 1.0, 1.0}));
+
+// The plan and its CPU shading are RenderProjectorImages, bit for bit, and the planner refines
+// only the patches whose bound reaches full drive.
+TEST(FramePlan, ShadedOnTheCpuIsRenderProjectorImages) {
+  const ProjectionRig& rig = SmallRig().rig;
+  for (const LightField light : {LightField::kFlat, LightField::kSmooth}) {
+    for (const DitherMethod dither :
+         {DitherMethod::kNone, DitherMethod::kOrdered, DitherMethod::kErrorDiffusion}) {
+      for (const double t_high : {1.0, 1.1}) {
+        RenderOptions options;
+        options.light = light;
+        options.dither = dither;
+        const Eigen::MatrixX3d emittance = Emittance(rig, t_high - 0.9, t_high, 5);
+        RenderSummary reference_summary, summary;
+        const std::vector<ProjectorImage> reference =
+            RenderProjectorImages(rig, emittance, options, &reference_summary);
+        const FramePlan plan = PlanFrame(rig, emittance, options);
+        const std::vector<ProjectorImage> shaded =
+            ShadeProjectorImages(FramePlanner(rig, options), plan, &summary);
+        EXPECT_LT(plan.refined_patches, rig.size());
+        ASSERT_EQ(shaded.size(), reference.size());
+        for (size_t k = 0; k < reference.size(); ++k) {
+          EXPECT_EQ(cv::norm(shaded[k].codes, reference[k].codes, cv::NORM_INF), 0.0)
+              << LightFieldName(light) << " " << DitherName(dither) << " projector " << k;
+        }
+        EXPECT_EQ(summary.delivered, reference_summary.delivered);
+        EXPECT_EQ(summary.level_passes, reference_summary.level_passes);
+        EXPECT_EQ(summary.saturated_pixels, reference_summary.saturated_pixels);
+        EXPECT_EQ(summary.clipped_pixels, reference_summary.clipped_pixels);
+        EXPECT_EQ(summary.patches_above_upper, reference_summary.patches_above_upper);
+      }
+    }
+  }
+}
+
+TEST(FramePlan, RefusesDetail) {
+  const ProjectionRig& rig = SmallRig().rig;
+  RenderOptions options;
+  options.detail = true;
+  try {
+    FramePlanner planner(rig, options);
+    FAIL() << "no error";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_EQ(std::string(error.what()),
+              "RenderOptions::detail: frame plans carry no per-pixel texture detail (render it "
+              "with RenderProjectorImages and the scene)");
+  }
+  EXPECT_THROW(PlanFrame(rig, Eigen::MatrixX3d::Zero(3, 3), RenderOptions()),
+               std::invalid_argument);
+}
+
+// Checked before any OpenGL call: no context needed.
+TEST(GlProjectorRenderer, RefusesErrorDiffusionAndBadProjectors) {
+  const ProjectionRig& rig = SmallRig().rig;
+  RenderOptions options;
+  options.dither = DitherMethod::kErrorDiffusion;
+  const FramePlanner planner(rig, options);
+  try {
+    GlProjectorRenderer renderer(planner, 0);
+    FAIL() << "no error";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_EQ(std::string(error.what()),
+              "GlProjectorRenderer: error diffusion is sequential per image and renders on the "
+              "CPU only (ShadeProjectorImages)");
+  }
+  EXPECT_THROW(GlProjectorRenderer(FramePlanner(rig, RenderOptions()), 2), std::invalid_argument);
+}
+
+// A display node's frame: drawn into the back buffer, then presented (the swap's time
+// returned); a CPU image the same way; the renderer's size must be the monitor's.
+TEST(GlfwDisplay, DrawsAndPresentsSeparately) {
+  SKIP_WITHOUT_XVFB();
+  GlfwDisplay display(FindMonitor("0"));
+  ProjectorImage image;
+  image.codes = cv::Mat(kScreenHeight, kScreenWidth, CV_16UC3);
+  cv::RNG(3).fill(image.codes, cv::RNG::UNIFORM, cv::Scalar::all(0), cv::Scalar::all(256));
+  const int64_t before = SteadyNowNs();
+  display.Draw(image);
+  const int64_t presented = display.Present();
+  EXPECT_GE(presented, before);
+  cv::Mat expected;
+  image.codes.convertTo(expected, CV_8UC3);
+  EXPECT_EQ(cv::norm(display.ReadBack(), expected, cv::NORM_INF), 0.0);
+
+  const ProjectionRig& rig = SmallRig().rig;
+  const FramePlanner planner(rig, RenderOptions());
+  display.MakeContextCurrent();
+  GlProjectorRenderer renderer(planner, 0);
+  try {
+    display.Draw(renderer, planner.Plan(Emittance(rig, 0.0, 1.0, 1)));
+    FAIL() << "no error";
+  } catch (const IoError& error) {
+    EXPECT_EQ(std::string(error.what()),
+              display.Name() + ": image is 320x240, the monitor runs at 1920x1080");
+  }
+}
+
+// The benchmark of docs/projection.md: three 1080p projectors on the stage at ~3000 patches;
+// PlanFrame's time, the CPU shading's, and the GPU's for one projector (plan upload + draw +
+// glFinish), medians of 20. Run by hand: build/release/tests/projection_gl_renderer_test
+// --gtest_also_run_disabled_tests --gtest_filter='*Timings*'
+TEST(GlProjectorRenderer, DISABLED_Timings) {
+  SKIP_WITHOUT_XVFB();
+  StageOptions stage_options;
+  stage_options.width = kScreenWidth;
+  stage_options.height = kScreenHeight;
+  stage_options.target_patches = 3000;
+  Stage stage = MakeStage(stage_options);
+  stage.projectors.push_back(testing::MakeStageProjector("middle", Vec3(2.0, -1.5, 1.6),
+                                                         Vec3(2.0, 3.0, 1.0), stage_options));
+  auto start = Clock::now();
+  const ProjectionRig rig = BuildProjectionRig(stage.patches.fine, stage.projectors, {});
+  std::printf("rig: %d patches, %zu projectors %dx%d, built in %.2f s\n", rig.size(),
+              rig.projectors.size(), kScreenWidth, kScreenHeight, SecondsSince(start));
+  const auto median = [](std::vector<double> seconds) {
+    std::sort(seconds.begin(), seconds.end());
+    return 1e3 * seconds[seconds.size() / 2];
+  };
+  constexpr int kRuns = 20;
+  GlfwDisplay display(FindMonitor("0"));
+  display.MakeContextCurrent();
+  std::printf("OpenGL %s\n", OpenGlDescription().c_str());
+  for (const LightField light : {LightField::kFlat, LightField::kSmooth}) {
+    RenderOptions options;
+    options.light = light;
+    start = Clock::now();
+    const FramePlanner planner(rig, options);
+    const double planner_seconds = SecondsSince(start);
+    // PlanFrame on E uniform between the bounds (many patches saturate: the worst case for
+    // step 2; neighbours' E differ as much as they can: the worst case for the seamless bound),
+    // uniform within [0.1, 0.6] of the range, and a smooth ramp across the room within it (as
+    // compensation solutions mostly are).
+    std::vector<FramePlan> plans;
+    std::vector<double> shade_seconds, gpu_seconds;
+    std::string planning;
+    for (const int kind : {0, 1, 2}) {
+      std::vector<double> plan_seconds;
+      int refined = 0;
+      for (int run = 0; run < kRuns; ++run) {
+        const Eigen::MatrixX3d emittance = kind == 0   ? Emittance(rig, 0.0, 1.0, run)
+                                           : kind == 1 ? Emittance(rig, 0.1, 0.6, run)
+                                                       : RampEmittance(stage, rig, run);
+        start = Clock::now();
+        const FramePlan plan = planner.Plan(emittance);
+        plan_seconds.push_back(SecondsSince(start));
+        refined = plan.refined_patches;
+        if (kind == 0) plans.push_back(plan);
+      }
+      char line[200];
+      std::snprintf(line, sizeof(line), "%s%.1f ms (%d patches refined) for %s",
+                    planning.empty() ? "" : ", ", median(plan_seconds), refined,
+                    kind == 0   ? "E in [0, 1]"
+                    : kind == 1 ? "E in [0.1, 0.6]"
+                                : "a ramp");
+      planning += line;
+    }
+    for (int run = 0; run < 3; ++run) {
+      start = Clock::now();
+      ShadeProjectorImages(planner, plans[run], nullptr);
+      shade_seconds.push_back(SecondsSince(start));
+    }
+    GlProjectorRenderer renderer(planner, 0);
+    renderer.Draw(plans[0]);  // first draw: the driver compiles the shader for real
+    renderer.Finish();
+    for (int run = 0; run < kRuns; ++run) {
+      start = Clock::now();
+      renderer.Draw(plans[run]);
+      renderer.Finish();
+      gpu_seconds.push_back(SecondsSince(start));
+    }
+    std::printf(
+        "%s light: planner (static) %.0f ms; PlanFrame median %s; CPU shading of %zu "
+        "images median of 3 %.0f ms; GPU one image (upload + draw + glFinish) median "
+        "%.1f ms\n",
+        LightFieldName(light), 1e3 * planner_seconds, planning.c_str(), rig.projectors.size(),
+        median(shade_seconds), median(gpu_seconds));
+  }
+}
+
+}  // namespace
+}  // namespace procam
