@@ -153,6 +153,7 @@ FramePlan FramePlanner::Plan(const Eigen::MatrixX3d& emittance) const {
   }
   plan.level_passes = internal::RefineLevels(rig_, *tables_, factors, first.flux,
                                              options_.max_level_passes, &refine, &plan.level);
+  plan.refined = std::move(refine);
   plan.seconds = SecondsSince(start);
   return plan;
 }

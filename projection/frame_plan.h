@@ -59,6 +59,7 @@ struct FramePlan {
   Eigen::MatrixX3d target;      // (n,3) E clipped to [lower, upper]
   int level_passes = 0;         // most evaluations of step 2 a patch needed (1: none saturated)
   int refined_patches = 0;      // patches whose bound reached full drive (refined per pixel)
+  std::vector<char> refined;    // (n) which ones
   int patches_below_lower = 0, patches_above_upper = 0, patches_unreached = 0;
   double seconds = 0.0;
 };

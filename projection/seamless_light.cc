@@ -206,7 +206,6 @@ void SeamlessField::FormPatchMeans() {
   std::vector<std::vector<double>> rows(n);  // Σ w K̃ per node of patch i's list
   for (int i = 0; i < n; ++i) rows[i].assign(node_begin_[i + 1] - node_begin_[i], 0.0);
   std::vector<double> row_weight(n, 0.0);
-  node_reach_.assign(node_list_.size(), 0.0);
   node_share_reach_.assign(node_list_.size(), 0.0);
   ForEachPixel(
       [&](int i, size_t k, int position, const std::vector<std::pair<int, double>>& bumps) {
@@ -215,8 +214,6 @@ void SeamlessField::FormPatchMeans() {
         const double weight = rig_.coverage_scale(i, k) * map.pixel_solid_angle * share;
         for (const auto& [node, value] : bumps) {
           rows[i][node] += weight * value;
-          double& reach = node_reach_[node_begin_[i] + node];
-          reach = std::max(reach, value);
           double& share_reach = node_share_reach_[node_begin_[i] + node];
           share_reach = std::max(share_reach, share * value);
         }

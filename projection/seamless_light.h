@@ -78,12 +78,9 @@ class SeamlessField {
   const std::vector<int>& node_begin() const { return node_begin_; }  // (n + 1)
   const std::vector<int>& node_list() const { return node_list_; }
   const std::vector<double>& radius2() const { return radius2_; }  // (n) r_j², m²
-  // Aligned with node_list(): reach_ij, the largest normalised bump K̃_j (K_j / Σ K) of the
-  // node over patch i's pixels. With Σ_j K̃_j = 1 at every pixel they bound the field within a
-  // patch without visiting its pixels (frame_plan.h).
-  const std::vector<double>& node_reach() const { return node_reach_; }
   // Aligned with node_list(): the largest share_p · K̃_j(x_p) over patch i's pixels p of every
-  // projector (share: ProjectorMap::share, w a / Ω).
+  // projector (share: ProjectorMap::share, w a / Ω; K̃_j = K_j / Σ K the normalised bump). They
+  // bound the light within a patch without visiting its pixels (frame_plan.h).
   const std::vector<double>& node_share_reach() const { return node_share_reach_; }
   const ProjectionRig& rig() const { return rig_; }
 
@@ -97,7 +94,7 @@ class SeamlessField {
   SeamlessLightOptions options_;
   std::vector<int> node_begin_, node_list_;
   std::vector<double> radius2_;
-  std::vector<double> node_reach_, node_share_reach_;
+  std::vector<double> node_share_reach_;
   struct Means;  // A (sparse, row-major)
   std::unique_ptr<Means> means_;
 };

@@ -3,14 +3,16 @@
 // with colour mixing), for flat and smooth light, without and with ordered dithering, on
 // emittance between the bounds and near the upper bound (saturated patches), every pixel's codes
 // are within one code step of the CPU's and few differ at all. A frame plan shaded on the CPU is
-// RenderProjectorImages's images bit for bit; detail and error diffusion are refused; a display
-// draws and presents frames separately. DISABLED_Timings is the benchmark of docs/projection.md.
+// RenderProjectorImages's images bit for bit; on the patches the planner does not refine, no
+// pixel reaches full drive (its saturation bound holds); detail and error diffusion are refused;
+// a display draws and presents frames separately. DISABLED_Timings is the benchmark of docs/projection.md.
 #include "projection/gl_renderer.h"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <opencv2/core.hpp>
 #include <random>
@@ -183,6 +185,47 @@ TEST(FramePlan, ShadedOnTheCpuIsRenderProjectorImages) {
         EXPECT_EQ(summary.clipped_pixels, reference_summary.clipped_pixels);
         EXPECT_EQ(summary.patches_above_upper, reference_summary.patches_above_upper);
       }
+    }
+  }
+}
+
+// The saturation bound holds: on every patch the planner did not refine, no pixel of any
+// projector reaches full drive (share · τ · m / Δ < 1 with m the pixel's exact seamless factor),
+// so step 2 would have left its τ unchanged.
+TEST(FramePlan, UnrefinedPatchesHaveNoPixelAtFullDrive) {
+  const ProjectionRig& rig = SmallRig().rig;
+  for (const LightField light : {LightField::kFlat, LightField::kSmooth}) {
+    RenderOptions options;
+    options.light = light;
+    const FramePlanner planner(rig, options);
+    for (const double t_high : {0.6, 1.0, 1.1}) {
+      const FramePlan plan = planner.Plan(Emittance(rig, t_high - 0.6, t_high, 9));
+      ASSERT_EQ(static_cast<int>(plan.refined.size()), rig.size());
+      double highest = 0.0;  // of share · τ · m / Δ over the unrefined patches' pixels
+      for (size_t k = 0; k < rig.maps.size(); ++k) {
+        const ProjectorMap& map = rig.maps[k];
+        const ProjectorPhotometry& photometry = rig.projectors[k].photometry;
+        for (int i = 0; i < rig.size(); ++i) {
+          if (plan.refined[i]) continue;
+          for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+            const Eigen::Vector3f m =
+                planner.field() ? planner.field()->Factor(i, map.point_by_patch[position],
+                                                          plan.node_value, plan.mean)
+                                : Eigen::Vector3f::Ones();
+            for (int c = 0; c < 3; ++c) {
+              if (std::isinf(plan.level(i, c))) continue;
+              highest = std::max(highest, map.share[map.pixels_by_patch[position]] *
+                                              plan.level(i, c) * m[c] /
+                                              (photometry.max[c] - photometry.black[c]));
+            }
+          }
+        }
+      }
+      std::printf("%s light, t in [%.1f, %.1f]: %d of %d patches refined; the others' pixels "
+                  "reach at most %.3f of full drive\n",
+                  LightFieldName(light), t_high - 0.6, t_high, plan.refined_patches, rig.size(),
+                  highest);
+      EXPECT_LT(highest, 1.0);
     }
   }
 }
