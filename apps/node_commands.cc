@@ -22,13 +22,14 @@ std::atomic<bool> g_stop{false};
 void OnSignal(int) { g_stop = true; }
 
 struct NodeArguments {
-  std::string rig, scene, listen = "tcp://*:5600", name = "node";
+  std::string rig, scene, listen = "tcp://*:5600", name = "node", render = "gpu";
   double seconds = 0.0;
   std::vector<std::string> projectors, display = {"memory"};
 };
 
 struct PlayArguments {
-  std::string scene, rig, desired, solution, out, method = "perceptual", device = "cpu", dither = "ordered";
+  std::string scene, rig, desired, solution, out, method = "perceptual", device = "cpu", dither = "ordered",
+              render = "gpu";
   std::vector<std::string> nodes, display = {"memory"};
   LightField light = LightField::kSmooth;
   double fps = 30.0, alpha = 0.5, frame_timeout_ms = 500.0, setup_timeout = 120.0;
@@ -52,6 +53,7 @@ void RunPlayCommand(const PlayArguments& args) {
   if (!ParseDither(args.dither, &options.dither)) throw std::invalid_argument("--dither: unknown method " + args.dither);
   options.light = args.light;
   options.frame_timeout_s = 1e-3 * args.frame_timeout_ms;
+  options.local_gpu = args.render == "gpu";
   for (size_t k = 0; k < args.nodes.size(); ++k) options.nodes.push_back(ParseNodeAddress(args.nodes[k], int(k)));
   if (options.nodes.empty()) options.local_outputs = MakeNodeOutputs(args.display);
   options.progress = PrintProgress();
@@ -89,6 +91,10 @@ void AddNodeCommands(CLI::App& app) {
       ->capture_default_str();
   node->add_option("--listen", node_args->listen, "Endpoint to listen at (tcp://ADDRESS:PORT)")->capture_default_str();
   node->add_option("--name", node_args->name, "The node's name in logs")->capture_default_str();
+  node->add_option("--render", node_args->render,
+                   "gpu: each output's images rendered on the GPU (OpenGL) | cpu: the reference renderer")
+      ->check(CLI::IsMember({"gpu", "cpu"}))
+      ->capture_default_str();
   node->add_option("--seconds", node_args->seconds, "Run at most this long (0: until interrupted)")
       ->check(CLI::NonNegativeNumber);
   node->callback([node_args] {
@@ -99,6 +105,7 @@ void AddNodeCommands(CLI::App& app) {
     options.projectors = node_args->projectors;
     options.listen = node_args->listen;
     options.max_seconds = node_args->seconds;
+    options.gpu = node_args->render == "gpu";
     options.log = [](const std::string& line) { std::cout << line << std::endl; };
     std::signal(SIGINT, OnSignal);
     std::signal(SIGTERM, OnSignal);
@@ -134,6 +141,10 @@ void AddNodeCommands(CLI::App& app) {
   play->add_option("--alpha", play_args->alpha, "Weight of the absolute term, (0,1]")->check(CLI::Range(1e-9, 1.0));
   play->add_option("--dither", play_args->dither, "none | ordered | error-diffusion")->capture_default_str();
   AddLightOption(play, &play_args->light);
+  play->add_option("--render", play_args->render,
+                   "Without --nodes: gpu (the node's images rendered with OpenGL) | cpu (the reference renderer)")
+      ->check(CLI::IsMember({"gpu", "cpu"}))
+      ->capture_default_str();
   play->add_option("--frame-timeout-ms", play_args->frame_timeout_ms,
                    "A node that does not answer a frame in this time is reported lost; the others go on")
       ->check(CLI::Range(1.0, 60000.0))

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <optional>
 
@@ -24,6 +25,8 @@ struct NodeSetup {
   RenderOptions render;
   double feather = 0.1;
   ProjectionRig rig;
+  std::unique_ptr<FramePlanner> planner;  // when some output renders on the GPU (refers to rig)
+  std::vector<bool> gpu;                  // per output: renders plans itself
 };
 
 // Reads a kSetup's body into *setup (not the rig). Throws std::invalid_argument naming the key.
@@ -131,7 +134,9 @@ class Node {
   }
 
   nlohmann::json Status() const {
-    nlohmann::json status = {{"node", options_.name}, {"setup", setup_ ? setup_->id : ""}, {"render", "cpu"}};
+    nlohmann::json status = {{"node", options_.name},
+                             {"setup", setup_ ? setup_->id : ""},
+                             {"render", setup_ && setup_->planner ? "gpu" : "cpu"}};
     for (size_t k = 0; k < outputs_.size(); ++k)
       status["projectors"].push_back({{"name", own_projectors_[k].name}, {"output", outputs_[k]->Describe()}});
     return status;
@@ -163,6 +168,7 @@ class Node {
       ProjectionRigOptions rig_options;
       rig_options.feather = setup->feather;
       setup->rig = BuildProjectionRig(patches.fine, rig_dir_.projectors, rig_options);
+      PrepareOutputs(setup.get());
       setup_ = std::move(setup);
       rendered_.reset();
       done["patches"] = setup_->patches;
@@ -175,6 +181,25 @@ class Node {
     Reply(MessageType::kSetupDone, message.sequence, done);
   }
 
+  // The GPU where the options and outputs allow; the planner is made only then.
+  void PrepareOutputs(NodeSetup* setup) {
+    setup->gpu.assign(outputs_.size(), false);
+    if (!options_.gpu) return;
+    try {
+      setup->planner = std::make_unique<FramePlanner>(setup->rig, setup->render);
+    } catch (const std::invalid_argument& e) {  // detail or error diffusion: the CPU renders
+      Log(fmt::format("node {}: rendering on the CPU: {}", options_.name, e.what()));
+      return;
+    }
+    int on_gpu = 0;
+    for (size_t k = 0; k < outputs_.size(); ++k) {
+      setup->gpu[k] = outputs_[k]->PrepareGpu(*setup->planner, own_[k]);
+      on_gpu += setup->gpu[k];
+    }
+    if (on_gpu == 0) setup->planner.reset();
+    Log(fmt::format("node {}: {} of {} projector(s) rendered on the GPU", options_.name, on_gpu, outputs_.size()));
+  }
+
   void Render(const Message& message) {
     if (!setup_) return Fail(message.sequence, "frame before setup");
     const int n = setup_->rig.size();
@@ -184,17 +209,29 @@ class Node {
     const auto start = Clock::now();
     const Eigen::MatrixX3d emittance =
         Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(message.emittance.data(), n, 3);
-    RenderSummary summary;
-    const std::vector<ProjectorImage> images = RenderProjectorImages(setup_->rig, emittance, setup_->render, &summary);
-    const double render_ms = 1e3 * SecondsSince(start);
-    const auto draw_start = Clock::now();
+    const bool cpu_outputs = std::find(setup_->gpu.begin(), setup_->gpu.end(), false) != setup_->gpu.end();
+    std::vector<ProjectorImage> images;
+    double plan_ms = 0.0;
+    if (setup_->planner) {
+      const FramePlan plan = setup_->planner->Plan(emittance);
+      plan_ms = 1e3 * SecondsSince(start);
+      for (size_t k = 0; k < outputs_.size(); ++k) {
+        if (!faulty_[k] && setup_->gpu[k]) outputs_[k]->DrawPlan(plan);
+      }
+      if (cpu_outputs) images = ShadeProjectorImages(*setup_->planner, plan, nullptr);
+    } else {
+      RenderSummary summary;
+      images = RenderProjectorImages(setup_->rig, emittance, setup_->render, &summary);
+    }
     for (size_t k = 0; k < outputs_.size(); ++k) {
-      if (faulty_[k]) continue;
-      outputs_[k]->Draw(images[own_[k]]);
+      if (!faulty_[k] && !setup_->gpu[k]) outputs_[k]->Draw(images[own_[k]]);
     }
     rendered_ = message.sequence;
     Reply(MessageType::kReady, message.sequence,
-          {{"node", options_.name}, {"render_ms", render_ms}, {"draw_ms", 1e3 * SecondsSince(draw_start)}});
+          {{"node", options_.name},
+           {"render_ms", 1e3 * SecondsSince(start)},
+           {"plan_ms", plan_ms},
+           {"render", setup_->planner ? (cpu_outputs ? "gpu+cpu" : "gpu") : "cpu"}});
   }
 
   void Present(uint64_t frame) {

@@ -9,7 +9,9 @@
 // the controller's patch count, applies the rig's reflectance, and casts every projector's rays
 // (BuildProjectionRig: the maps of all projectors, since the blending weights and the level of
 // every patch depend on all of them). Each kFrame's per-patch emittance is then rendered into
-// its outputs' back buffers with the same renderer `procam project` uses, and shown at kPresent.
+// its outputs' back buffers — on the GPU (the frame's per-patch plan once, then each output's
+// shader: projection/gl_renderer.h, within one code step of the CPU's) or with the CPU renderer
+// `procam project` uses (the same images, byte for byte) — and shown at kPresent.
 // A monitor that disappears is reported to the controller (kFailed) and the node goes on with
 // the others.
 
@@ -23,6 +25,7 @@
 #include <zmq.hpp>
 
 #include "projection/projector.h"
+#include "projection/frame_plan.h"
 #include "projection/projector_images.h"
 
 namespace procam {
@@ -34,8 +37,13 @@ class NodeOutput {
   virtual std::string Describe() const = 0;  // e.g. "glfw:HDMI-1" or "record:DIR/left.png"
   // Puts the image into the back buffer (nothing visible changes).
   virtual void Draw(const ProjectorImage& image) = 0;
-  // Shows what Draw put there.
+  // Shows what Draw (or DrawPlan) put there.
   virtual void Present(uint64_t frame) = 0;
+  // Outputs that render on the GPU: told the rig's planner and their projector's index once per
+  // setup (true: this output renders plans itself from now on), then drawn from each frame's
+  // plan. The others get CPU images through Draw.
+  virtual bool PrepareGpu(const FramePlanner& /*planner*/, int /*projector*/) { return false; }
+  virtual void DrawPlan(const FramePlan& /*plan*/) {}
   // "" while the output works; else one line saying why not (e.g. its monitor is gone).
   virtual std::string Fault() { return ""; }
 };
@@ -65,6 +73,9 @@ struct NodeOptions {
   std::string listen;                   // tcp://ADDRESS:PORT, or inproc://NAME (no keys)
   double max_seconds = 0.0;             // > 0: return after this long (tests, timed shows)
   std::function<void(const std::string&)> log;  // a line per event (setup, faults, refusals)
+  // Render on the GPU where the outputs can (PrepareGpu) and the render options allow (not
+  // detail or error diffusion: then the CPU renderer); false: the CPU renderer everywhere.
+  bool gpu = true;
 };
 
 // Makes the outputs, one per projector of `projectors` (the node's, in order).

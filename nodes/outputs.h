@@ -5,6 +5,10 @@
 //   record:DIR     DIR/NAME.png rewritten at every frame (for tests and headless trials)
 //   memory         kept in memory only (render and present, show nothing)
 //
+// Every output renders on the GPU when the node does (NodeOptions::gpu): a window with its own
+// context, record and memory with an offscreen EGL context (projection/offscreen_gl.h; on the
+// CPU where none can be made).
+//
 // A single entry record:DIR or memory applies to every projector.
 
 #include <string>

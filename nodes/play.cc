@@ -362,6 +362,7 @@ PlaySummary RunPlay(const PlayOptions& options) {
       for (const Projector& projector : rig.projectors) node.projectors.push_back(projector.name);
       node.listen = nodes[0].endpoint;
       node.log = options.progress;
+      node.gpu = options.local_gpu;
       RunNode(context, node, options.local_outputs, node_stop);
     } catch (...) {
       node_failed = true;

@@ -53,6 +53,7 @@ struct PlayOptions {
   // `local_outputs` (made on the calling thread, which runs the node: GLFW's main thread).
   std::vector<NodeAddress> nodes;
   NodeOutputFactory local_outputs;
+  bool local_gpu = true;  // the in-process node renders on the GPU (NodeOptions::gpu)
   ProgressCallback progress;
 };
 
