@@ -205,7 +205,69 @@ struct PlaneSurface {
   int snapped = 0;
 };
 
-// Step 4: outlines of the plane's points, simplified.
+// Places each edge of a simplified ring where the sampled surface most likely ends. The outermost
+// points lie inside the true edge: a band of points along the edge, cut into bins of width w, has
+// about ρ·w points per unit depth in each bin (ρ: points per m²), so the first point of a bin lies
+// on average 1/(2ρw) inside the edge (half the depth spacing; exact for a lattice of samples, the
+// camera's pixels, at any orientation). The edge moves to the bins' mean first depth minus that.
+// `uv`: the plane's points; counter-clockwise outer rings and clockwise holes alike have the
+// surface on their left.
+void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, Polygon2* ring) {
+  const int n = static_cast<int>(ring->size());
+  std::vector<Vec2> corner(n), outward(n);
+  std::vector<double> shift(n, 0.0);
+  for (int k = 0; k < n; ++k) corner[k] = Vec2((*ring)[k].x(), (*ring)[k].y());
+  const double band = 6 * spacing, bin_width = 2 * spacing;
+  for (int k = 0; k < n; ++k) {
+    const Vec2 a = corner[k], b = corner[(k + 1) % n];
+    const double length = (b - a).norm();
+    outward[k] = Vec2((b - a).y(), -(b - a).x()) / std::max(length, 1e-12);
+    if (length < 2 * bin_width) continue;
+    const int bins = static_cast<int>(length / bin_width);
+    std::vector<double> first(bins, 1e300);
+    for (const Point2& point : uv) {
+      const Vec2 p(point.x(), point.y());
+      const double along = (p - a).dot(b - a) / length;
+      const double depth = -(p - a).dot(outward[k]);
+      if (along < 0 || along >= length || depth < -band || depth > band) continue;
+      const int bin = std::min(bins - 1, static_cast<int>(along / length * bins));
+      first[bin] = std::min(first[bin], depth);
+    }
+    double sum = 0;
+    int filled = 0;
+    for (double depth : first)
+      if (depth < 1e300) sum += depth, ++filled;
+    if (filled < std::max(2, bins / 2)) continue;  // not an edge of this point set
+    const double true_width = length / bins;
+    const double edge_depth = sum / filled - 1.0 / (2 * density * true_width);
+    shift[k] = std::clamp(-edge_depth, -band / 2, band / 2);
+  }
+  Polygon2 placed;
+  for (int k = 0; k < n; ++k) {
+    const int prev = (k + n - 1) % n;
+    // The corner where the moved edges prev and k meet: (p − c)·outward = shift for both.
+    Eigen::Matrix2d m;
+    m.row(0) = outward[prev].transpose();
+    m.row(1) = outward[k].transpose();
+    Vec2 p = corner[k];
+    const double largest = std::max(std::abs(shift[prev]), std::abs(shift[k]));
+    const Vec2 move = std::abs(m.determinant()) > 0.1 ? Vec2(m.inverse() * Vec2(shift[prev], shift[k])) : Vec2(1e300, 0);
+    if (move.norm() <= 2 * largest) {
+      p += move;
+    } else {  // nearly parallel edges: along their mean normal
+      p += 0.5 * (shift[prev] + shift[k]) * (outward[prev] + outward[k]).normalized();
+    }
+    placed.push_back(Point2(p.x(), p.y()));
+  }
+  static const Kernel traits;
+  if (CGAL::is_simple_2(placed.vertices_begin(), placed.vertices_end(), traits) &&
+      placed.orientation() == ring->orientation()) {
+    *ring = placed;
+  }
+}
+
+// Step 4: outlines of the plane's points, simplified, each edge where the surface ends.
+// `spacing`: the points' typical spacing on this plane (1/√density).
 std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const PlaneSurface& surface,
                                         double spacing, const SceneFromPointsOptions& options) {
   std::vector<Point2> uv;
@@ -232,9 +294,15 @@ std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const P
   }
   namespace simplification = CGAL::Polyline_simplification_2;
   const double tolerance2 = options.outline_tolerance * options.outline_tolerance;
+  const double density = 1.0 / (spacing * spacing);
   for (PolygonWithHoles2& polygon : polygons) {
     polygon = simplification::simplify(polygon, simplification::Squared_distance_cost(),
                                        simplification::Stop_above_cost_threshold(tolerance2));
+    if (getenv("SCAN_DEBUG")) { fprintf(stderr, "before place:"); for (const Point2& p : polygon.outer_boundary().vertices()) { Vec3 q = surface.plane.FromPlane(Vec2(p.x(), p.y())); fprintf(stderr, " (%.3f %.3f %.3f)", q.x(), q.y(), q.z()); } fprintf(stderr, "\n"); }
+    PlaceEdges(uv, density, spacing, &polygon.outer_boundary());
+    for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) {
+      PlaceEdges(uv, density, spacing, &*hole);
+    }
   }
   return polygons;
 }
@@ -281,24 +349,29 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
     const Vec2 uv = plane.ToPlane(q);
     snapped.push_back(Point2(uv.x(), uv.y()));
   }
-  // Corners that snapped onto one point, or into a straight line, are one corner.
-  Polygon2 cleaned;
-  const int n = static_cast<int>(snapped.size());
-  for (int k = 0; k < n; ++k) {
-    const Point2& prev = cleaned.is_empty() ? snapped[(k + n - 1) % n] : cleaned[cleaned.size() - 1];
-    const Point2& at = snapped[k];
-    const Point2& next = snapped[(k + 1) % n];
-    if (CGAL::squared_distance(prev, at) < 4e-6) continue;
-    const double twice_area = std::abs(CGAL::to_double(CGAL::area(prev, at, next))) * 2;
-    const double base = std::sqrt(CGAL::to_double(CGAL::squared_distance(prev, next)));
-    if (base > 0 && twice_area / base < 5e-4) continue;  // within 0.5 mm of the line prev→next
-    cleaned.push_back(at);
+  // Corners that snapped onto one point, or onto a straight line between their neighbours, go.
+  std::vector<Point2> cleaned(snapped.vertices_begin(), snapped.vertices_end());
+  for (bool removed = true; removed && cleaned.size() > 3;) {
+    removed = false;
+    for (size_t k = 0; k < cleaned.size() && cleaned.size() > 3; ++k) {
+      const size_t count = cleaned.size();
+      const Vec2 prev(cleaned[(k + count - 1) % count].x(), cleaned[(k + count - 1) % count].y());
+      const Vec2 at(cleaned[k].x(), cleaned[k].y());
+      const Vec2 next(cleaned[(k + 1) % count].x(), cleaned[(k + 1) % count].y());
+      const Vec2 base = next - prev;
+      const double along = base.squaredNorm() > 0 ? (at - prev).dot(base) / base.squaredNorm() : -1;
+      const double off_line = base.norm() > 0 ? std::abs(base.x() * (at - prev).y() - base.y() * (at - prev).x()) / base.norm() : 0;
+      if ((at - prev).norm() < 2e-3 || (along > 0 && along < 1 && off_line < 5e-4)) {
+        cleaned.erase(cleaned.begin() + k);
+        removed = true;
+      }
+    }
   }
   // (A named traits object: GCC 12 takes the empty temporary Polygon_2::is_simple passes for
   // uninitialised.)
   static const Kernel traits;
-  if (cleaned.size() >= 3 && CGAL::is_simple_2(cleaned.vertices_begin(), cleaned.vertices_end(), traits)) {
-    *ring = cleaned;
+  if (cleaned.size() >= 3 && CGAL::is_simple_2(cleaned.begin(), cleaned.end(), traits)) {
+    *ring = Polygon2(cleaned.begin(), cleaned.end());
   }
   return moved;
 }
@@ -348,6 +421,16 @@ Surface ToSurface(const PlaneSurface& plane_surface, const SceneFromPointsOption
     }
   }
   surface.mesh_vertices = welder.points();
+  if (getenv("SCAN_DEBUG")) {
+    double polygon_area = 0;
+    for (const PolygonWithHoles2& polygon : plane_surface.polygons) {
+      polygon_area += CGAL::to_double(polygon.outer_boundary().area());
+      for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) polygon_area += CGAL::to_double(hole->area());
+      fprintf(stderr, "polygon simple %d holes %d\n", int(polygon.outer_boundary().is_simple()), int(polygon.number_of_holes()));
+      for (const Point2& p : polygon.outer_boundary().vertices()) { Vec3 q = to3(p); fprintf(stderr, "  %.3f %.3f %.3f\n", q.x(), q.y(), q.z()); }
+    }
+    fprintf(stderr, "polygon area %.4f mesh area %.4f\n", polygon_area, surface.Area());
+  }
   return surface;
 }
 
@@ -380,6 +463,24 @@ std::vector<int> GrowPlanarRegions(const std::vector<Vec3>& points, const SceneF
       if (j != i) (*neighbours)[i].push_back(static_cast<int>(j));
   }
   return label;
+}
+
+// The typical spacing 1/√ρ of a region's points, ρ (points per m²) the median over its points of
+// k / (π r²), r the distance to the k-th nearest neighbour: right where the camera samples a
+// surface at a grazing angle (rows far apart, points close along them), where the nearest
+// neighbour's distance is not.
+double RegionSpacing(const std::vector<Vec3>& points, const std::vector<int>& indices,
+                     const std::vector<std::vector<int>>& neighbours) {
+  std::vector<double> density;
+  density.reserve(indices.size());
+  for (int i : indices) {
+    double r2 = 0;
+    for (int j : neighbours[i]) r2 = std::max(r2, (points[j] - points[i]).squaredNorm());
+    if (r2 > 0) density.push_back(neighbours[i].size() / (kPi * r2));
+  }
+  if (density.empty()) return 0.01;
+  std::nth_element(density.begin(), density.begin() + density.size() / 2, density.end());
+  return 1.0 / std::sqrt(density[density.size() / 2]);
 }
 
 std::vector<std::vector<int>> Members(const std::vector<int>& label, int regions) {
@@ -543,7 +644,7 @@ ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPoi
     PlaneSurface surface;
     surface.plane = planes[r];
     surface.indices = members[r];
-    surface.polygons = Outlines(points, surface, result.mean_spacing, options);
+    surface.polygons = Outlines(points, surface, RegionSpacing(points, members[r], neighbours), options);
     if (surface.polygons.empty()) continue;
     surface_of_region[r] = static_cast<int>(plane_surfaces.size());
     plane_surfaces.push_back(std::move(surface));
