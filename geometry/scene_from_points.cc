@@ -267,9 +267,11 @@ void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, P
 }
 
 // Step 4: outlines of the plane's points, simplified, each edge where the surface ends.
-// `spacing`: the points' typical spacing on this plane (1/√density).
+// `spacing`: the points' typical spacing on this plane (1/√density); the alpha shape's radius is
+// the larger of outline_alpha_spacings spacings and 1.5 × `neighbour_radius` (RegionSpacing).
 std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const PlaneSurface& surface,
-                                        double spacing, const SceneFromPointsOptions& options) {
+                                        double spacing, double neighbour_radius,
+                                        const SceneFromPointsOptions& options) {
   std::vector<Point2> uv;
   uv.reserve(surface.indices.size());
   for (int i : surface.indices) {
@@ -277,7 +279,8 @@ std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const P
     uv.emplace_back(p.x(), p.y());
   }
   std::vector<Polygon2> outers, holes;
-  for (Polygon2& cycle : AlphaShapeCycles(uv, options.outline_alpha_spacings * spacing)) {
+  const double alpha = std::max(options.outline_alpha_spacings * spacing, 1.5 * neighbour_radius);
+  for (Polygon2& cycle : AlphaShapeCycles(uv, alpha)) {
     const double area = CGAL::to_double(cycle.area());
     if (area >= options.min_surface_area) outers.push_back(std::move(cycle));
     else if (-area >= options.min_hole_area) holes.push_back(std::move(cycle));
@@ -293,12 +296,13 @@ std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const P
     }
   }
   namespace simplification = CGAL::Polyline_simplification_2;
-  const double tolerance2 = options.outline_tolerance * options.outline_tolerance;
+  // Sparse rows (a grazing view) make the alpha shape's boundary zig-zag by about the rows' gap.
+  const double tolerance = std::max(options.outline_tolerance, 0.5 * neighbour_radius);
+  const double tolerance2 = tolerance * tolerance;
   const double density = 1.0 / (spacing * spacing);
   for (PolygonWithHoles2& polygon : polygons) {
     polygon = simplification::simplify(polygon, simplification::Squared_distance_cost(),
                                        simplification::Stop_above_cost_threshold(tolerance2));
-    if (getenv("SCAN_DEBUG")) { fprintf(stderr, "before place:"); for (const Point2& p : polygon.outer_boundary().vertices()) { Vec3 q = surface.plane.FromPlane(Vec2(p.x(), p.y())); fprintf(stderr, " (%.3f %.3f %.3f)", q.x(), q.y(), q.z()); } fprintf(stderr, "\n"); }
     PlaceEdges(uv, density, spacing, &polygon.outer_boundary());
     for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) {
       PlaceEdges(uv, density, spacing, &*hole);
@@ -421,16 +425,6 @@ Surface ToSurface(const PlaneSurface& plane_surface, const SceneFromPointsOption
     }
   }
   surface.mesh_vertices = welder.points();
-  if (getenv("SCAN_DEBUG")) {
-    double polygon_area = 0;
-    for (const PolygonWithHoles2& polygon : plane_surface.polygons) {
-      polygon_area += CGAL::to_double(polygon.outer_boundary().area());
-      for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) polygon_area += CGAL::to_double(hole->area());
-      fprintf(stderr, "polygon simple %d holes %d\n", int(polygon.outer_boundary().is_simple()), int(polygon.number_of_holes()));
-      for (const Point2& p : polygon.outer_boundary().vertices()) { Vec3 q = to3(p); fprintf(stderr, "  %.3f %.3f %.3f\n", q.x(), q.y(), q.z()); }
-    }
-    fprintf(stderr, "polygon area %.4f mesh area %.4f\n", polygon_area, surface.Area());
-  }
   return surface;
 }
 
@@ -469,18 +463,22 @@ std::vector<int> GrowPlanarRegions(const std::vector<Vec3>& points, const SceneF
 // k / (π r²), r the distance to the k-th nearest neighbour: right where the camera samples a
 // surface at a grazing angle (rows far apart, points close along them), where the nearest
 // neighbour's distance is not.
+// `radius`: that median r (the neighbourhood's reach: along the far-apart rows of a grazing view it
+// spans the gap between rows, which the mean spacing does not).
 double RegionSpacing(const std::vector<Vec3>& points, const std::vector<int>& indices,
-                     const std::vector<std::vector<int>>& neighbours) {
-  std::vector<double> density;
-  density.reserve(indices.size());
+                     const std::vector<std::vector<int>>& neighbours, double* radius) {
+  std::vector<double> r2s;
+  r2s.reserve(indices.size());
   for (int i : indices) {
     double r2 = 0;
     for (int j : neighbours[i]) r2 = std::max(r2, (points[j] - points[i]).squaredNorm());
-    if (r2 > 0) density.push_back(neighbours[i].size() / (kPi * r2));
+    if (r2 > 0) r2s.push_back(r2);
   }
-  if (density.empty()) return 0.01;
-  std::nth_element(density.begin(), density.begin() + density.size() / 2, density.end());
-  return 1.0 / std::sqrt(density[density.size() / 2]);
+  if (r2s.empty()) return *radius = 0.01;
+  std::nth_element(r2s.begin(), r2s.begin() + r2s.size() / 2, r2s.end());
+  *radius = std::sqrt(r2s[r2s.size() / 2]);
+  const double density = neighbours[indices[0]].size() / (kPi * r2s[r2s.size() / 2]);
+  return 1.0 / std::sqrt(density);
 }
 
 std::vector<std::vector<int>> Members(const std::vector<int>& label, int regions) {
@@ -526,6 +524,7 @@ bool SceneFromPointsOptions::Check(std::string* why) const {
   if (!(min_hole_area >= 0) || !(min_surface_area >= 0)) return fail("min_hole_area and min_surface_area must be ≥ 0");
   if (min_mesh_points < 3) return fail("min_mesh_points must be ≥ 3");
   if (smoothing_neighbors != 0 && smoothing_neighbors < 6) return fail("smoothing_neighbors must be 0 or ≥ 6");
+  if (!(mesh_vertex_spacing >= 0)) return fail("mesh_vertex_spacing must be ≥ 0");
   if (!((reflectance.array() >= 0).all() && (reflectance.array() < 1).all()))
     return fail("reflectance: each value must be in [0, 1)");
   if (!((desired_srgb.array() >= 0).all() && (desired_srgb.array() <= 1).all()))
@@ -644,7 +643,9 @@ ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPoi
     PlaneSurface surface;
     surface.plane = planes[r];
     surface.indices = members[r];
-    surface.polygons = Outlines(points, surface, RegionSpacing(points, members[r], neighbours), options);
+    double radius = 0;
+    const double spacing = RegionSpacing(points, members[r], neighbours, &radius);
+    surface.polygons = Outlines(points, surface, spacing, radius, options);
     if (surface.polygons.empty()) continue;
     surface_of_region[r] = static_cast<int>(plane_surfaces.size());
     plane_surfaces.push_back(std::move(surface));
@@ -732,7 +733,9 @@ ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPoi
     for (int i : indices) group_points.push_back(points[i]);
     std::vector<Vec3> vertices;
     std::vector<std::array<int, 3>> triangles;
-    ReconstructMesh(group_points, viewpoint, options.smoothing_neighbors, &vertices, &triangles);
+    double smoothing_rms = 0;
+    ReconstructMesh(group_points, viewpoint, options.smoothing_neighbors, options.mesh_vertex_spacing, &vertices,
+                    &triangles, &smoothing_rms);
     Surface surface;
     surface.kind = Surface::Kind::kMesh;
     surface.reflectance = options.reflectance;
@@ -760,12 +763,8 @@ ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPoi
     ScannedSurfaceStats stats;
     stats.kind = ScannedSurfaceStats::kMesh;
     stats.points = static_cast<int>(indices.size());
-    double sum_squares = 0;
-    for (size_t k = 0; k < indices.size(); ++k) {
-      sum_squares += (vertices[k] - group_points[k]).squaredNorm();
-      on_surface[indices[k]] = true;
-    }
-    stats.rms_mm = 1000 * std::sqrt(sum_squares / indices.size());
+    for (int i : indices) on_surface[i] = true;
+    stats.rms_mm = 1000 * smoothing_rms;
     stats.area_m2 = surface.Area();
     stats.outline_vertices = static_cast<int>(surface.mesh_triangles.size());
     result.scene.surfaces.push_back(std::move(surface));

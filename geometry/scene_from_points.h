@@ -26,7 +26,8 @@
 //     neighbouring plane are moved onto that line; vertices near two such lines onto the point
 //     where the three planes meet, so neighbouring polygons share their edges exactly.
 //  6. Meshes: curved regions and points no plane took, in connected groups, smoothed (CGAL
-//     jet_smooth_point_set) and meshed by advancing-front surface reconstruction (CGAL
+//     jet_smooth_point_set), thinned to one point per mesh_vertex_spacing cell (CGAL
+//     grid_simplify_point_set) and meshed by advancing-front surface reconstruction (CGAL
 //     Advancing_front_surface_reconstruction); each triangle faces the viewpoint.
 //
 // Planar polygons become scene surfaces: a convex 4-corner polygon without holes a quad, any other
@@ -64,6 +65,8 @@ struct SceneFromPointsOptions {
   double min_surface_area = 0.02;   // smaller polygons and meshes are left out, m², ≥ 0
   int min_mesh_points = 300;        // smaller groups of non-planar points are left out, ≥ 3
   int smoothing_neighbors = 24;     // k of the jet smoothing before meshing, ≥ 6 (0: none)
+  double mesh_vertex_spacing = 0.02;  // meshes keep one smoothed point per cell this wide, m, ≥ 0
+                                      // (0: every point)
   // What the written scene says of each surface: reflectance (each in [0,1)) and a neutral
   // desired colour (sRGB); the patch target.
   Vec3 reflectance = Vec3::Constant(0.9);
@@ -78,7 +81,7 @@ struct ScannedSurfaceStats {
   Kind kind = kPlane;
   int points = 0;          // cloud points assigned to it
   double rms_mm = 0.0;     // planes: RMS distance of its points to the plane; meshes: of its
-                           // points to their smoothed positions (the mesh's vertices)
+                           // points to their smoothed positions (on the fitted surface)
   double area_m2 = 0.0;    // of the polygon (holes removed) or mesh
   int outline_vertices = 0;  // planes: corners of its outlines; meshes: triangles
   int holes = 0;             // planes: holes in its outlines
