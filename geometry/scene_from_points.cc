@@ -240,7 +240,9 @@ void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, P
     if (filled < std::max(2, bins / 2)) continue;  // not an edge of this point set
     const double true_width = length / bins;
     const double edge_depth = sum / filled - 1.0 / (2 * density * true_width);
-    shift[k] = std::clamp(-edge_depth, -band / 2, band / 2);
+    // Never inwards: the simplified edge runs through boundary points already, and where it
+    // bridges a notch its bins' first points lie deep inside.
+    shift[k] = std::clamp(-edge_depth, 0.0, band / 2);
   }
   Polygon2 placed;
   for (int k = 0; k < n; ++k) {
