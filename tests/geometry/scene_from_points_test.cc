@@ -286,6 +286,65 @@ TEST(SceneFromPoints, Columns) { CheckScene({"columns", 480, 320, 1.0, 25.0}); }
 TEST(SceneFromPoints, LShaped) { CheckScene({"l_shaped", 480, 320, 2.0, 2.0}); }
 TEST(SceneFromPoints, BlueCurves) { CheckScene({"blue_curves", 480, 320, 1.5, 1.5}); }
 
+// A floor with a hole (a 0.6 × 0.5 m opening) meeting a wall: the hole comes out as one, and the
+// floor's and the wall's shared edge is one line (the planes' intersection, on the true corner).
+TEST(SceneFromPoints, HoleAndSharedEdge) {
+  std::mt19937 random(3);
+  std::normal_distribution<double> gauss(0.0, 0.0025);
+  auto noise = [&] { return Vec3(gauss(random), gauss(random), gauss(random)); };
+  std::vector<Vec3> points;
+  const double step = 0.012;  // a lattice slightly turned against the edges, as pixels would be
+  const Vec2 a(std::cos(0.1), std::sin(0.1)), b(-std::sin(0.1), std::cos(0.1));
+  for (int i = -400; i <= 400; ++i) {
+    for (int j = -400; j <= 400; ++j) {
+      const Vec2 p = step * (i * a + j * b) + Vec2(1.5, 1.0);
+      const bool in_floor = p.x() >= 0 && p.x() <= 3 && p.y() >= 0 && p.y() <= 2;
+      const bool in_hole = p.x() > 1.2 && p.x() < 1.8 && p.y() > 0.7 && p.y() < 1.2;
+      if (in_floor && !in_hole) points.push_back(Vec3(p.x(), p.y(), 0) + noise());
+      const Vec2 q = p - Vec2(0, 0.25);  // the wall y = 2: x along, z up to 1.5 m
+      if (q.x() >= 0 && q.x() <= 3 && q.y() >= 0 && q.y() <= 1.5) points.push_back(Vec3(q.x(), 2, q.y()) + noise());
+    }
+  }
+  SceneFromPointsOptions options;
+  options.viewpoint = Vec3(1.5, -1.0, 2.0);
+  const ScannedScene scanned = SceneFromPoints(points, options);
+  std::cout << scanned.Report();
+  ASSERT_EQ(scanned.scene.surfaces.size(), 2u);
+  const Surface& floor = scanned.scene.surfaces[0].name == "floor" ? scanned.scene.surfaces[0] : scanned.scene.surfaces[1];
+  const Surface& wall = &floor == &scanned.scene.surfaces[0] ? scanned.scene.surfaces[1] : scanned.scene.surfaces[0];
+  const ScannedSurfaceStats& floor_stats = scanned.stats[&floor == &scanned.scene.surfaces[0] ? 0 : 1];
+  EXPECT_EQ(floor.name, "floor");
+  EXPECT_EQ(wall.name, "wall_0");
+  EXPECT_EQ(floor_stats.holes, 1);
+  EXPECT_NEAR(floor.Area(), 6.0 - 0.3, 0.01 * 5.7);
+  EXPECT_NEAR(wall.Area(), 4.5, 0.01 * 4.5);
+  // The shared edge: the floor's corners along it and the wall's lie on one line, the true corner
+  // (y = 2, z = 0), and span the same stretch of it.
+  auto corners = [](const Surface& surface) {
+    return surface.kind == Surface::Kind::kQuad ? std::vector<Vec3>(surface.quad.begin(), surface.quad.end())
+                                                : surface.mesh_vertices;
+  };
+  auto on_edge = [](const std::vector<Vec3>& vertices, bool floor_side, double* x_min, double* x_max) {
+    int count = 0;
+    *x_min = 1e9, *x_max = -1e9;
+    for (const Vec3& v : vertices) {
+      if (floor_side ? v.y() < 1.995 : v.z() > 0.005) continue;  // not snapped onto the edge
+      EXPECT_NEAR(v.y(), 2.0, 0.002);
+      EXPECT_NEAR(v.z(), 0.0, 0.002);
+      *x_min = std::min(*x_min, v.x()), *x_max = std::max(*x_max, v.x());
+      ++count;
+    }
+    return count;
+  };
+  double floor_min, floor_max, wall_min, wall_max;
+  EXPECT_GE(on_edge(corners(floor), true, &floor_min, &floor_max), 2);
+  EXPECT_GE(on_edge(corners(wall), false, &wall_min, &wall_max), 2);
+  EXPECT_NEAR(floor_min, 0.0, 0.02);
+  EXPECT_NEAR(wall_min, 0.0, 0.02);
+  EXPECT_NEAR(floor_max, 3.0, 0.02);
+  EXPECT_NEAR(wall_max, 3.0, 0.02);
+}
+
 TEST(SceneFromPoints, RefusesTooFewPointsAndBadOptions) {
   SceneFromPointsOptions options;
   std::vector<Vec3> points(50, Vec3::Zero());
