@@ -503,6 +503,225 @@ std::map<std::pair<int, int>, int> Adjacency(const std::vector<int>& label,
   return count;
 }
 
+// Points left between regions (at edges, where the normals blend two planes) join a neighbouring
+// region whose plane they lie on; a few passes close gaps of a few spacings.
+void AbsorbEdgePoints(const std::vector<Vec3>& points, const std::vector<std::vector<int>>& neighbours,
+                      const std::vector<Plane>& planes, double plane_distance, std::vector<int>* label) {
+  for (int pass = 0; pass < 4; ++pass) {
+    std::vector<int> next = *label;
+    for (size_t i = 0; i < points.size(); ++i) {
+      if ((*label)[i] >= 0) continue;
+      double best = plane_distance;
+      for (int j : neighbours[i]) {
+        if ((*label)[j] < 0) continue;
+        const double distance = std::abs(planes[(*label)[j]].Distance(points[i]));
+        if (distance <= best) best = distance, next[i] = (*label)[j];
+      }
+    }
+    label->swap(next);
+  }
+}
+
+// Step 3: merges coplanar neighbouring regions (renumbering `label`, refitting `planes`), then
+// sorts curved from planar. Returns whether each region is curved.
+std::vector<bool> MergeAndClassify(const std::vector<Vec3>& points, const std::vector<std::vector<int>>& neighbours,
+                                   const Vec3& viewpoint, const SceneFromPointsOptions& options,
+                                   std::vector<int>* label, std::vector<Plane>* planes) {
+  int regions = static_cast<int>(planes->size());
+  std::map<std::pair<int, int>, int> adjacency = Adjacency(*label, neighbours);
+  std::vector<int> parent(regions);
+  std::iota(parent.begin(), parent.end(), 0);
+  for (const auto& [pair, count] : adjacency) {
+    const Plane& a = (*planes)[pair.first];
+    const Plane& b = (*planes)[pair.second];
+    if (count >= kMinAdjacentEdges && AngleDeg(a.normal, b.normal) <= options.coplanar_angle_deg &&
+        std::abs(a.Distance(b.origin)) <= options.plane_distance && std::abs(b.Distance(a.origin)) <= options.plane_distance) {
+      parent[Find(parent, pair.first)] = Find(parent, pair.second);
+    }
+  }
+  std::vector<int> renumber(regions, -1);
+  int merged = 0;
+  for (int r = 0; r < regions; ++r)
+    if (Find(parent, r) == r) renumber[r] = merged++;
+  for (int& l : *label)
+    if (l >= 0) l = renumber[Find(parent, l)];
+  regions = merged;
+  const std::vector<std::vector<int>> members = Members(*label, regions);
+  planes->assign(regions, Plane());
+  std::vector<bool> curved(regions, false);
+  for (int r = 0; r < regions; ++r) {
+    (*planes)[r] = FitPlane(points, members[r], viewpoint);
+    double plane_rms = 0, quadratic_rms = 0;
+    PlaneAndQuadraticRms(points, members[r], (*planes)[r], &plane_rms, &quadratic_rms);
+    curved[r] = std::sqrt(std::max(0.0, plane_rms * plane_rms - quadratic_rms * quadratic_rms)) >
+                options.curvature_tolerance;
+  }
+  adjacency = Adjacency(*label, neighbours);
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (const auto& [pair, count] : adjacency) {
+      if (count < kMinAdjacentEdges) continue;
+      if (AngleDeg((*planes)[pair.first].normal, (*planes)[pair.second].normal) >= options.smooth_angle_deg) continue;
+      // A smooth join: both are one curved surface (two planes here would have merged above).
+      if (!curved[pair.first] || !curved[pair.second]) {
+        curved[pair.first] = curved[pair.second] = true;
+        changed = true;
+      }
+    }
+  }
+  return curved;
+}
+
+// Steps 4–5: outlines of the planar regions, snapped to their neighbours' edge lines.
+// `surface_of_region`: the index of each region's surface, −1 for none.
+std::vector<PlaneSurface> PlaneSurfaces(const std::vector<Vec3>& points, const std::vector<std::vector<int>>& neighbours,
+                                        const std::vector<int>& label, const std::vector<Plane>& planes,
+                                        const std::vector<bool>& curved, const SceneFromPointsOptions& options,
+                                        std::vector<int>* surface_of_region) {
+  const int regions = static_cast<int>(planes.size());
+  const std::vector<std::vector<int>> members = Members(label, regions);
+  std::vector<PlaneSurface> plane_surfaces;
+  surface_of_region->assign(regions, -1);
+  for (int r = 0; r < regions; ++r) {
+    if (curved[r] || static_cast<int>(members[r].size()) < options.min_plane_points) continue;
+    PlaneSurface surface;
+    surface.plane = planes[r];
+    surface.indices = members[r];
+    double radius = 0;
+    const double spacing = RegionSpacing(points, members[r], neighbours, &radius);
+    surface.polygons = Outlines(points, surface, spacing, radius, options);
+    if (surface.polygons.empty()) continue;
+    (*surface_of_region)[r] = static_cast<int>(plane_surfaces.size());
+    plane_surfaces.push_back(std::move(surface));
+  }
+  std::vector<std::vector<const Plane*>> plane_neighbours(plane_surfaces.size());
+  for (const auto& [pair, count] : Adjacency(label, neighbours)) {
+    const int a = (*surface_of_region)[pair.first], b = (*surface_of_region)[pair.second];
+    if (count < kMinAdjacentEdges || a < 0 || b < 0) continue;
+    plane_neighbours[a].push_back(&plane_surfaces[b].plane);
+    plane_neighbours[b].push_back(&plane_surfaces[a].plane);
+  }
+  for (size_t s = 0; s < plane_surfaces.size(); ++s) {
+    PlaneSurface& surface = plane_surfaces[s];
+    for (PolygonWithHoles2& polygon : surface.polygons) {
+      surface.snapped += SnapRing(surface.plane, plane_neighbours[s], options.snap_distance, &polygon.outer_boundary());
+      for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) {
+        surface.snapped += SnapRing(surface.plane, plane_neighbours[s], options.snap_distance, &*hole);
+      }
+    }
+  }
+  return plane_surfaces;
+}
+
+// The planar surfaces into `result`, named by their orientation; marks their points.
+void AddPlaneSurfaces(const std::vector<Vec3>& points, const std::vector<PlaneSurface>& plane_surfaces,
+                      const SceneFromPointsOptions& options, ScannedScene* result, std::vector<bool>* on_surface) {
+  const double weld = result->scene.weld_tolerance;
+  double floor_z = 1e300, ceiling_z = -1e300;
+  int floor = -1, ceiling = -1;
+  const double vertical_cos = std::cos((90.0 - options.smooth_angle_deg) * kPi / 180.0);
+  const double level_cos = std::cos(options.smooth_angle_deg * kPi / 180.0);
+  for (size_t s = 0; s < plane_surfaces.size(); ++s) {
+    const Plane& plane = plane_surfaces[s].plane;
+    if (plane.normal.z() > level_cos && plane.origin.z() < floor_z) floor_z = plane.origin.z(), floor = int(s);
+    if (plane.normal.z() < -level_cos && plane.origin.z() > ceiling_z) ceiling_z = plane.origin.z(), ceiling = int(s);
+  }
+  int walls = 0, others = 0;
+  for (size_t s = 0; s < plane_surfaces.size(); ++s) {
+    const PlaneSurface& plane_surface = plane_surfaces[s];
+    Surface surface = ToSurface(plane_surface, options, weld);
+    if (surface.kind == Surface::Kind::kMesh && surface.mesh_triangles.empty()) continue;
+    const double area = surface.Area();
+    if (area < options.min_surface_area) continue;
+    if (int(s) == floor) surface.name = "floor";
+    else if (int(s) == ceiling) surface.name = "ceiling";
+    else if (std::abs(plane_surface.plane.normal.z()) < vertical_cos) surface.name = fmt::format("wall_{}", walls++);
+    else surface.name = fmt::format("plane_{}", others++);
+    if (surface.kind == Surface::Kind::kMesh) surface.mesh_path = surface.name + ".obj";
+    ScannedSurfaceStats stats;
+    stats.kind = ScannedSurfaceStats::kPlane;
+    stats.points = static_cast<int>(plane_surface.indices.size());
+    double sum_squares = 0;
+    for (int i : plane_surface.indices) {
+      sum_squares += std::pow(plane_surface.plane.Distance(points[i]), 2);
+      (*on_surface)[i] = true;
+    }
+    stats.rms_mm = 1000 * std::sqrt(sum_squares / plane_surface.indices.size());
+    stats.area_m2 = area;
+    for (const PolygonWithHoles2& polygon : plane_surface.polygons) {
+      stats.outline_vertices += static_cast<int>(polygon.outer_boundary().size());
+      for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) {
+        stats.outline_vertices += static_cast<int>(hole->size());
+        ++stats.holes;
+      }
+    }
+    stats.snapped_vertices = plane_surface.snapped;
+    result->scene.surfaces.push_back(std::move(surface));
+    result->stats.push_back(stats);
+  }
+
+}
+
+// Step 6: the points marked `for_mesh`, in connected groups, as mesh surfaces into `result`.
+void AddMeshSurfaces(const std::vector<Vec3>& points, const std::vector<std::vector<int>>& neighbours,
+                     const std::vector<bool>& for_mesh, const Vec3& viewpoint, const SceneFromPointsOptions& options,
+                     ScannedScene* result, std::vector<bool>* on_surface) {
+  const double weld = result->scene.weld_tolerance;
+  std::vector<int> group(points.size(), -1);
+  int meshes = 0;
+  for (size_t seed = 0; seed < points.size(); ++seed) {
+    if (!for_mesh[seed] || group[seed] >= 0) continue;
+    std::vector<int> indices = {static_cast<int>(seed)};
+    group[seed] = static_cast<int>(seed);
+    for (size_t k = 0; k < indices.size(); ++k) {
+      for (int j : neighbours[indices[k]]) {
+        if (for_mesh[j] && group[j] < 0) group[j] = static_cast<int>(seed), indices.push_back(j);
+      }
+    }
+    if (static_cast<int>(indices.size()) < options.min_mesh_points) continue;
+    std::vector<Vec3> group_points;
+    for (int i : indices) group_points.push_back(points[i]);
+    std::vector<Vec3> vertices;
+    std::vector<std::array<int, 3>> triangles;
+    double smoothing_rms = 0;
+    ReconstructMesh(group_points, viewpoint, options.smoothing_neighbors, options.mesh_vertex_spacing, &vertices,
+                    &triangles, &smoothing_rms);
+    Surface surface;
+    surface.kind = Surface::Kind::kMesh;
+    surface.reflectance = options.reflectance;
+    surface.desired.srgb = options.desired_srgb;
+    // Keep the vertices the triangles use, and no sliver the scene reader would refuse.
+    std::vector<int> new_index(vertices.size(), -1);
+    for (const std::array<int, 3>& t : triangles) {
+      std::array<Vec3, 3> corners = {vertices[t[0]], vertices[t[1]], vertices[t[2]]};
+      std::string sliver;
+      if (!CheckPlanarConvexPolygon(corners.data(), 3, 2 * weld, &sliver)) continue;
+      MeshTriangle mesh_triangle;
+      for (int k = 0; k < 3; ++k) {
+        if (new_index[t[k]] < 0) {
+          new_index[t[k]] = static_cast<int>(surface.mesh_vertices.size());
+          surface.mesh_vertices.push_back(vertices[t[k]]);
+        }
+        mesh_triangle.vertex[k] = new_index[t[k]];
+        mesh_triangle.uv[k] = Vec2::Zero();
+      }
+      surface.mesh_triangles.push_back(mesh_triangle);
+    }
+    if (surface.mesh_triangles.empty() || surface.Area() < options.min_surface_area) continue;
+    surface.name = fmt::format("mesh_{}", meshes++);
+    surface.mesh_path = surface.name + ".obj";
+    ScannedSurfaceStats stats;
+    stats.kind = ScannedSurfaceStats::kMesh;
+    stats.points = static_cast<int>(indices.size());
+    for (int i : indices) (*on_surface)[i] = true;
+    stats.rms_mm = 1000 * smoothing_rms;
+    stats.area_m2 = surface.Area();
+    stats.outline_vertices = static_cast<int>(surface.mesh_triangles.size());
+    result->scene.surfaces.push_back(std::move(surface));
+    result->stats.push_back(stats);
+  }
+}
+
 }  // namespace
 
 bool SceneFromPointsOptions::Check(std::string* why) const {
@@ -572,206 +791,24 @@ ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPoi
   result.points = static_cast<int>(points.size());
   std::vector<std::vector<int>> neighbours;
   std::vector<int> label = GrowPlanarRegions(points, options, &result.mean_spacing, &neighbours);
-  int regions = 1 + *std::max_element(label.begin(), label.end());
+  const int regions = 1 + *std::max_element(label.begin(), label.end());
 
-  // Points left between regions (at edges, where the normals blend two planes) join a neighbouring
-  // region whose plane they lie on; a few passes close gaps of a few spacings.
   std::vector<Plane> planes(regions);
-  std::vector<std::vector<int>> members = Members(label, regions);
+  const std::vector<std::vector<int>> members = Members(label, regions);
   for (int r = 0; r < regions; ++r) planes[r] = FitPlane(points, members[r], viewpoint);
-  for (int pass = 0; pass < 4; ++pass) {
-    std::vector<int> next = label;
-    for (size_t i = 0; i < points.size(); ++i) {
-      if (label[i] >= 0) continue;
-      double best = options.plane_distance;
-      for (int j : neighbours[i]) {
-        if (label[j] < 0) continue;
-        const double distance = std::abs(planes[label[j]].Distance(points[i]));
-        if (distance <= best) best = distance, next[i] = label[j];
-      }
-    }
-    label.swap(next);
-  }
-
-  // Step 3: merge coplanar neighbours, then sort curved from planar.
-  std::map<std::pair<int, int>, int> adjacency = Adjacency(label, neighbours);
-  std::vector<int> parent(regions);
-  std::iota(parent.begin(), parent.end(), 0);
-  for (const auto& [pair, count] : adjacency) {
-    const Plane& a = planes[pair.first];
-    const Plane& b = planes[pair.second];
-    if (count >= kMinAdjacentEdges && AngleDeg(a.normal, b.normal) <= options.coplanar_angle_deg &&
-        std::abs(a.Distance(b.origin)) <= options.plane_distance && std::abs(b.Distance(a.origin)) <= options.plane_distance) {
-      parent[Find(parent, pair.first)] = Find(parent, pair.second);
-    }
-  }
-  std::vector<int> renumber(regions, -1);
-  int merged = 0;
-  for (int r = 0; r < regions; ++r)
-    if (Find(parent, r) == r) renumber[r] = merged++;
-  for (int& l : label)
-    if (l >= 0) l = renumber[Find(parent, l)];
-  regions = merged;
-  members = Members(label, regions);
-  planes.assign(regions, Plane());
-  std::vector<bool> curved(regions, false);
-  for (int r = 0; r < regions; ++r) {
-    planes[r] = FitPlane(points, members[r], viewpoint);
-    double plane_rms = 0, quadratic_rms = 0;
-    PlaneAndQuadraticRms(points, members[r], planes[r], &plane_rms, &quadratic_rms);
-    curved[r] = std::sqrt(std::max(0.0, plane_rms * plane_rms - quadratic_rms * quadratic_rms)) >
-                options.curvature_tolerance;
-  }
-  adjacency = Adjacency(label, neighbours);
-  for (bool changed = true; changed;) {
-    changed = false;
-    for (const auto& [pair, count] : adjacency) {
-      if (count < kMinAdjacentEdges) continue;
-      if (AngleDeg(planes[pair.first].normal, planes[pair.second].normal) >= options.smooth_angle_deg) continue;
-      // A smooth join: both are one curved surface (two planes here would have merged above).
-      if (!curved[pair.first] || !curved[pair.second]) {
-        curved[pair.first] = curved[pair.second] = true;
-        changed = true;
-      }
-    }
-  }
-
-  // Steps 4–5: outlines of the planar regions, snapped to their neighbours' edge lines.
-  const double weld = result.scene.weld_tolerance;
-  std::vector<PlaneSurface> plane_surfaces;
-  std::vector<int> surface_of_region(regions, -1);
-  for (int r = 0; r < regions; ++r) {
-    if (curved[r] || static_cast<int>(members[r].size()) < options.min_plane_points) continue;
-    PlaneSurface surface;
-    surface.plane = planes[r];
-    surface.indices = members[r];
-    double radius = 0;
-    const double spacing = RegionSpacing(points, members[r], neighbours, &radius);
-    surface.polygons = Outlines(points, surface, spacing, radius, options);
-    if (surface.polygons.empty()) continue;
-    surface_of_region[r] = static_cast<int>(plane_surfaces.size());
-    plane_surfaces.push_back(std::move(surface));
-  }
-  std::vector<std::vector<const Plane*>> plane_neighbours(plane_surfaces.size());
-  for (const auto& [pair, count] : adjacency) {
-    const int a = surface_of_region[pair.first], b = surface_of_region[pair.second];
-    if (count < kMinAdjacentEdges || a < 0 || b < 0) continue;
-    plane_neighbours[a].push_back(&plane_surfaces[b].plane);
-    plane_neighbours[b].push_back(&plane_surfaces[a].plane);
-  }
-  for (size_t s = 0; s < plane_surfaces.size(); ++s) {
-    PlaneSurface& surface = plane_surfaces[s];
-    for (PolygonWithHoles2& polygon : surface.polygons) {
-      surface.snapped += SnapRing(surface.plane, plane_neighbours[s], options.snap_distance, &polygon.outer_boundary());
-      for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) {
-        surface.snapped += SnapRing(surface.plane, plane_neighbours[s], options.snap_distance, &*hole);
-      }
-    }
-  }
-
-  // Planar surfaces, named by their orientation.
-  double floor_z = 1e300, ceiling_z = -1e300;
-  int floor = -1, ceiling = -1;
-  const double vertical_cos = std::cos((90.0 - options.smooth_angle_deg) * kPi / 180.0);
-  const double level_cos = std::cos(options.smooth_angle_deg * kPi / 180.0);
-  for (size_t s = 0; s < plane_surfaces.size(); ++s) {
-    const Plane& plane = plane_surfaces[s].plane;
-    if (plane.normal.z() > level_cos && plane.origin.z() < floor_z) floor_z = plane.origin.z(), floor = int(s);
-    if (plane.normal.z() < -level_cos && plane.origin.z() > ceiling_z) ceiling_z = plane.origin.z(), ceiling = int(s);
-  }
-  int walls = 0, others = 0;
+  AbsorbEdgePoints(points, neighbours, planes, options.plane_distance, &label);
+  const std::vector<bool> curved = MergeAndClassify(points, neighbours, viewpoint, options, &label, &planes);
+  std::vector<int> surface_of_region;
+  const std::vector<PlaneSurface> plane_surfaces =
+      PlaneSurfaces(points, neighbours, label, planes, curved, options, &surface_of_region);
   std::vector<bool> on_surface(points.size(), false);
-  for (size_t s = 0; s < plane_surfaces.size(); ++s) {
-    const PlaneSurface& plane_surface = plane_surfaces[s];
-    Surface surface = ToSurface(plane_surface, options, weld);
-    if (surface.kind == Surface::Kind::kMesh && surface.mesh_triangles.empty()) continue;
-    const double area = surface.Area();
-    if (area < options.min_surface_area) continue;
-    if (int(s) == floor) surface.name = "floor";
-    else if (int(s) == ceiling) surface.name = "ceiling";
-    else if (std::abs(plane_surface.plane.normal.z()) < vertical_cos) surface.name = fmt::format("wall_{}", walls++);
-    else surface.name = fmt::format("plane_{}", others++);
-    if (surface.kind == Surface::Kind::kMesh) surface.mesh_path = surface.name + ".obj";
-    ScannedSurfaceStats stats;
-    stats.kind = ScannedSurfaceStats::kPlane;
-    stats.points = static_cast<int>(plane_surface.indices.size());
-    double sum_squares = 0;
-    for (int i : plane_surface.indices) {
-      sum_squares += std::pow(plane_surface.plane.Distance(points[i]), 2);
-      on_surface[i] = true;
-    }
-    stats.rms_mm = 1000 * std::sqrt(sum_squares / plane_surface.indices.size());
-    stats.area_m2 = area;
-    for (const PolygonWithHoles2& polygon : plane_surface.polygons) {
-      stats.outline_vertices += static_cast<int>(polygon.outer_boundary().size());
-      for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) {
-        stats.outline_vertices += static_cast<int>(hole->size());
-        ++stats.holes;
-      }
-    }
-    stats.snapped_vertices = plane_surface.snapped;
-    result.scene.surfaces.push_back(std::move(surface));
-    result.stats.push_back(stats);
-  }
-
+  AddPlaneSurfaces(points, plane_surfaces, options, &result, &on_surface);
   // Step 6: what no plane took, in connected groups, as meshes.
   std::vector<bool> for_mesh(points.size(), false);
   for (size_t i = 0; i < points.size(); ++i) {
     for_mesh[i] = label[i] < 0 ? true : curved[label[i]] || surface_of_region[label[i]] < 0;
   }
-  std::vector<int> group(points.size(), -1);
-  int meshes = 0;
-  for (size_t seed = 0; seed < points.size(); ++seed) {
-    if (!for_mesh[seed] || group[seed] >= 0) continue;
-    std::vector<int> indices = {static_cast<int>(seed)};
-    group[seed] = static_cast<int>(seed);
-    for (size_t k = 0; k < indices.size(); ++k) {
-      for (int j : neighbours[indices[k]]) {
-        if (for_mesh[j] && group[j] < 0) group[j] = static_cast<int>(seed), indices.push_back(j);
-      }
-    }
-    if (static_cast<int>(indices.size()) < options.min_mesh_points) continue;
-    std::vector<Vec3> group_points;
-    for (int i : indices) group_points.push_back(points[i]);
-    std::vector<Vec3> vertices;
-    std::vector<std::array<int, 3>> triangles;
-    double smoothing_rms = 0;
-    ReconstructMesh(group_points, viewpoint, options.smoothing_neighbors, options.mesh_vertex_spacing, &vertices,
-                    &triangles, &smoothing_rms);
-    Surface surface;
-    surface.kind = Surface::Kind::kMesh;
-    surface.reflectance = options.reflectance;
-    surface.desired.srgb = options.desired_srgb;
-    // Keep the vertices the triangles use, and no sliver the scene reader would refuse.
-    std::vector<int> new_index(vertices.size(), -1);
-    for (const std::array<int, 3>& t : triangles) {
-      std::array<Vec3, 3> corners = {vertices[t[0]], vertices[t[1]], vertices[t[2]]};
-      std::string sliver;
-      if (!CheckPlanarConvexPolygon(corners.data(), 3, 2 * weld, &sliver)) continue;
-      MeshTriangle mesh_triangle;
-      for (int k = 0; k < 3; ++k) {
-        if (new_index[t[k]] < 0) {
-          new_index[t[k]] = static_cast<int>(surface.mesh_vertices.size());
-          surface.mesh_vertices.push_back(vertices[t[k]]);
-        }
-        mesh_triangle.vertex[k] = new_index[t[k]];
-        mesh_triangle.uv[k] = Vec2::Zero();
-      }
-      surface.mesh_triangles.push_back(mesh_triangle);
-    }
-    if (surface.mesh_triangles.empty() || surface.Area() < options.min_surface_area) continue;
-    surface.name = fmt::format("mesh_{}", meshes++);
-    surface.mesh_path = surface.name + ".obj";
-    ScannedSurfaceStats stats;
-    stats.kind = ScannedSurfaceStats::kMesh;
-    stats.points = static_cast<int>(indices.size());
-    for (int i : indices) on_surface[i] = true;
-    stats.rms_mm = 1000 * smoothing_rms;
-    stats.area_m2 = surface.Area();
-    stats.outline_vertices = static_cast<int>(surface.mesh_triangles.size());
-    result.scene.surfaces.push_back(std::move(surface));
-    result.stats.push_back(stats);
-  }
+  AddMeshSurfaces(points, neighbours, for_mesh, viewpoint, options, &result, &on_surface);
   result.unassigned = static_cast<int>(std::count(on_surface.begin(), on_surface.end(), false));
   result.scene.name = "scan";
   result.scene.target_patches = options.target_patches;
