@@ -16,6 +16,7 @@
 
 #include <fmt/format.h>
 
+#include "base/io.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "geometry/patches.h"
 #include "geometry/ray_scene.h"
@@ -316,6 +317,19 @@ TEST(SceneFromPoints, HoleAndSharedEdge) {
   EXPECT_EQ(floor.name, "floor");
   EXPECT_EQ(wall.name, "wall_0");
   EXPECT_EQ(floor_stats.holes, 1);
+  const std::string report = scanned.Report();
+  EXPECT_NE(report.find("floor: plane, "), std::string::npos) << report;
+  EXPECT_NE(report.find(", 1 holes, "), std::string::npos) << report;
+  EXPECT_NE(report.find("2 surfaces from "), std::string::npos) << report;
+  // Writing where a file stands is an IoError naming the path.
+  testing::TempDir dir;
+  const std::filesystem::path blocked = dir.Write("blocked", "a file, not a directory");
+  try {
+    WriteScannedScene(blocked, scanned);
+    ADD_FAILURE() << "no error writing into a file";
+  } catch (const IoError& error) {
+    EXPECT_NE(std::string(error.what()).find("blocked"), std::string::npos) << error.what();
+  }
   EXPECT_NEAR(floor.Area(), 6.0 - 0.3, 0.01 * 5.7);
   EXPECT_NEAR(wall.Area(), 4.5, 0.01 * 4.5);
   // The shared edge: the floor's corners along it and the wall's lie on one line, the true corner
