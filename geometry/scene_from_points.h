@@ -19,9 +19,11 @@
 //     is curved too. Adjacent planar regions on one plane (normals within coplanar_angle_deg,
 //     offsets within plane_distance) are merged.
 //  4. Outlines: the regularised alpha shape of each plane's points in the plane (CGAL
-//     Alpha_shape_2, α = outline_alpha_spacings × the points' mean spacing), its boundary cycles
-//     as the outer polygons and holes, simplified to outline_tolerance (CGAL
-//     Polyline_simplification_2, topology kept).
+//     Alpha_shape_2; radius outline_alpha_spacings × the points' spacing 1/√density, or 1.5 × the
+//     reach of their 12 nearest neighbours where a grazing view leaves rows far apart), its
+//     boundary cycles as the outer polygons and holes, simplified to outline_tolerance (CGAL
+//     Polyline_simplification_2, topology kept). The outermost points lie inside the true edge:
+//     each edge moves out by the expected gap, half the depth spacing of the points along it.
 //  5. Edges: outline vertices within snap_distance of the line where the plane meets a
 //     neighbouring plane are moved onto that line; vertices near two such lines onto the point
 //     where the three planes meet, so neighbouring polygons share their edges exactly.
