@@ -24,21 +24,6 @@ std::string FileStem(const std::string& text) {
   return stem;
 }
 
-// The surface's mesh as OBJ text: its vertices, one `vt` per triangle corner, faces v/vt.
-std::string ObjText(const Surface& surface) {
-  std::string text = "# " + surface.name + ", written by procam scene write\n";
-  for (const Vec3& v : surface.mesh_vertices) text += fmt::format("v {:.17g} {:.17g} {:.17g}\n", v.x(), v.y(), v.z());
-  for (const MeshTriangle& triangle : surface.mesh_triangles)
-    for (const Vec2& uv : triangle.uv) text += fmt::format("vt {:.17g} {:.17g}\n", uv.x(), uv.y());
-  int corner = 1;
-  for (const MeshTriangle& triangle : surface.mesh_triangles) {
-    text += "f";
-    for (int k = 0; k < 3; ++k) text += fmt::format(" {}/{}", triangle.vertex[k] + 1, corner++);
-    text += "\n";
-  }
-  return text;
-}
-
 // A linear RGB texture (CV_32FC3, row 0 = top) as a 16-bit sRGB PNG (B, G, R as PNGs store it).
 void WriteTexture(const std::filesystem::path& path, const cv::Mat& linear_rgb) {
   cv::Mat bgr(linear_rgb.size(), CV_16UC3);
@@ -81,7 +66,7 @@ std::filesystem::path WriteSyntheticSceneFile(const std::string& name, int patch
       entry["quad"] = json::array();
       for (const Vec3& corner : surface.quad) entry["quad"].push_back(Triple(corner));
     } else {
-      WriteFileAtomically(dir / (stem + ".obj"), ObjText(surface));
+      WriteFileAtomically(dir / (stem + ".obj"), ObjMeshText(surface, "written by procam scene write"));
       entry["mesh"] = stem + ".obj";
     }
     if (surface.desired.HasTexture()) {

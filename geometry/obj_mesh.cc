@@ -10,6 +10,8 @@
 #include <unordered_map>
 #include <vector>
 
+#include <fmt/format.h>
+
 #include "base/io.h"
 #include "geometry/polygon.h"
 #include "geometry/scene.h"
@@ -218,6 +220,23 @@ void LoadObjMesh(const std::filesystem::path& path, double weld_tolerance, Surfa
     }
   }
   if (surface->mesh_triangles.empty()) throw IoError(file + ": mesh has no faces");
+}
+
+std::string ObjMeshText(const Surface& surface, const std::string& comment) {
+  std::string text = "# " + surface.name + ", " + comment + "\n";
+  for (const Vec3& v : surface.mesh_vertices) {
+    text += fmt::format("v {:.17g} {:.17g} {:.17g}\n", v.x(), v.y(), v.z());
+  }
+  for (const MeshTriangle& triangle : surface.mesh_triangles) {
+    for (const Vec2& uv : triangle.uv) text += fmt::format("vt {:.17g} {:.17g}\n", uv.x(), uv.y());
+  }
+  int corner = 1;
+  for (const MeshTriangle& triangle : surface.mesh_triangles) {
+    text += "f";
+    for (int k = 0; k < 3; ++k) text += fmt::format(" {}/{}", triangle.vertex[k] + 1, corner++);
+    text += "\n";
+  }
+  return text;
 }
 
 }  // namespace procam

@@ -84,6 +84,10 @@ void ValidateScene(const Scene& scene);
 // Loads an OBJ mesh into `surface` (kMesh). Throws IoError naming the file and line.
 void LoadObjMesh(const std::filesystem::path& path, double weld_tolerance, Surface* surface);
 
+// A mesh surface as OBJ text that LoadObjMesh reads back: a comment line (`# NAME, comment`),
+// its vertices (17 significant digits), one `vt` per triangle corner, faces `v/vt`.
+std::string ObjMeshText(const Surface& surface, const std::string& comment);
+
 // Loads an 8- or 16-bit image as linear RGB (sRGB-decoded). Throws IoError naming the file.
 cv::Mat LoadSrgbTextureAsLinear(const std::filesystem::path& path);
 

@@ -1,0 +1,383 @@
+// SceneFromPoints against the truth: built-in synthetic rooms scanned as the camera sees them
+// (one point per camera pixel whose ray meets a surface, Gaussian noise of 2.5 mm), rebuilt, and
+// every rebuilt surface measured against the true surfaces: the distance of its area to them, its
+// area against the area the camera sees of the true surface (computed by casting rays to a fine
+// grid on the true surfaces, never from the rebuilt scene).
+
+#include "geometry/scene_from_points.h"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <random>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+#include "base/io.h"
+#include "datasets_synthetic/paper_scenes.h"
+#include "geometry/patches.h"
+#include "geometry/ray_scene.h"
+#include "tests/testing/testing.h"
+
+namespace procam {
+namespace {
+
+using Triangle = std::array<Vec3, 3>;
+
+std::vector<Triangle> TrianglesOf(const Surface& surface) {
+  if (surface.kind == Surface::Kind::kQuad) {
+    return {{surface.quad[0], surface.quad[1], surface.quad[2]}, {surface.quad[0], surface.quad[2], surface.quad[3]}};
+  }
+  std::vector<Triangle> triangles;
+  for (const MeshTriangle& t : surface.mesh_triangles) {
+    triangles.push_back({surface.mesh_vertices[t.vertex[0]], surface.mesh_vertices[t.vertex[1]],
+                         surface.mesh_vertices[t.vertex[2]]});
+  }
+  return triangles;
+}
+
+// Points on a triangle at the centroids of its m² congruent sub-triangles (each of area A / m²),
+// m chosen so that the sub-triangles' sides are at most `cell` metres.
+template <typename Visit>
+void SampleTriangle(const Triangle& t, double cell, Visit visit) {
+  const Vec3 e1 = t[1] - t[0], e2 = t[2] - t[0];
+  const double longest = std::max({e1.norm(), e2.norm(), (t[2] - t[1]).norm()});
+  const int m = std::max(1, static_cast<int>(std::ceil(longest / cell)));
+  const double weight = 0.5 * e1.cross(e2).norm() / (double(m) * m);
+  for (int i = 0; i < m; ++i) {
+    for (int j = 0; i + j < m; ++j) {
+      visit(t[0] + ((3 * i + 1) * e1 + (3 * j + 1) * e2) / (3.0 * m), weight);
+      if (i + j < m - 1) visit(t[0] + ((3 * i + 2) * e1 + (3 * j + 2) * e2) / (3.0 * m), weight);
+    }
+  }
+}
+
+double PointTriangleDistance(const Vec3& p, const Triangle& t) {
+  const Vec3 normal = (t[1] - t[0]).cross(t[2] - t[0]);
+  const double n2 = normal.squaredNorm();
+  const Vec3 q = p - normal * normal.dot(p - t[0]) / n2;  // projection onto the plane
+  bool inside = true;
+  for (int k = 0; k < 3; ++k) {
+    if ((t[(k + 1) % 3] - t[k]).cross(q - t[k]).dot(normal) < 0) inside = false;
+  }
+  if (inside) return (p - q).norm();
+  double best = 1e300;
+  for (int k = 0; k < 3; ++k) {
+    const Vec3 a = t[k], b = t[(k + 1) % 3];
+    const double s = std::clamp((p - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
+    best = std::min(best, (p - (a + s * (b - a))).norm());
+  }
+  return best;
+}
+
+bool IsPlanar(const Surface& surface) {
+  const std::vector<Triangle> triangles = TrianglesOf(surface);
+  const Vec3 normal = (triangles[0][1] - triangles[0][0]).cross(triangles[0][2] - triangles[0][0]).normalized();
+  for (const Triangle& t : triangles)
+    for (const Vec3& v : t)
+      if (std::abs(normal.dot(v - triangles[0][0])) > 1e-6) return false;
+  return true;
+}
+
+// The camera of a synthetic scene at a chosen resolution: a pinhole at `centre` looking at
+// `target`, the synthetic scenes' convention (paper_scenes.h).
+struct Pinhole {
+  Vec3 centre, forward, right, up;
+  double tan_x, tan_y;
+  int width, height;
+  Pinhole(const DevicePlacement& placement, int width_, int height_) : width(width_), height(height_) {
+    centre = placement.centre;
+    forward = (placement.target - placement.centre).normalized();
+    right = forward.cross(placement.up).normalized();
+    up = right.cross(forward);
+    tan_x = std::tan(placement.horizontal_fov_deg * M_PI / 360.0);
+    tan_y = tan_x * height / width;
+  }
+  Vec3 Ray(int x, int y) const {
+    return forward + ((x + 0.5) / width * 2 - 1) * tan_x * right - ((y + 0.5) / height * 2 - 1) * tan_y * up;
+  }
+  bool InView(const Vec3& p) const {
+    const Vec3 d = p - centre;
+    const double z = d.dot(forward);
+    return z > 0 && std::abs(d.dot(right)) <= tan_x * z && std::abs(d.dot(up)) <= tan_y * z;
+  }
+};
+
+struct Scan {
+  std::vector<Vec3> points;
+  std::vector<int> count_of_surface;        // true points per true surface
+  std::vector<double> incidence_deg;         // mean angle between camera ray and surface normal
+  std::vector<double> covered_area;          // of each true surface, seen by the camera, m²
+};
+
+// One point per camera pixel whose ray meets the room, moved by isotropic Gaussian noise.
+Scan ScanScene(const Scene& truth, const Pinhole& camera, double noise, unsigned seed) {
+  const RayScene rays(truth);
+  Scan scan;
+  scan.count_of_surface.assign(truth.surfaces.size(), 0);
+  scan.incidence_deg.assign(truth.surfaces.size(), 0.0);
+  std::mt19937 random(seed);
+  std::normal_distribution<double> gauss(0.0, noise);
+  for (int y = 0; y < camera.height; ++y) {
+    for (int x = 0; x < camera.width; ++x) {
+      double t = 0;
+      int surface = -1;
+      const Vec3 direction = camera.Ray(x, y);
+      if (!rays.Intersect(camera.centre, direction, 1e-6, 1e3, &t, &surface)) continue;
+      scan.points.push_back(camera.centre + t * direction + Vec3(gauss(random), gauss(random), gauss(random)));
+      ++scan.count_of_surface[surface];
+      const std::vector<Triangle> triangles = TrianglesOf(truth.surfaces[surface]);
+      const Vec3 normal = (triangles[0][1] - triangles[0][0]).cross(triangles[0][2] - triangles[0][0]).normalized();
+      scan.incidence_deg[surface] += std::acos(std::abs(normal.dot(direction.normalized()))) * 180 / M_PI;
+    }
+  }
+  for (size_t s = 0; s < truth.surfaces.size(); ++s) {
+    scan.incidence_deg[s] /= std::max(1, scan.count_of_surface[s]);
+  }
+  // The truth the areas are checked against: what of each surface the camera sees, by rays to
+  // the centres of 1 cm cells on it (2 cm on meshes).
+  for (const Surface& surface : truth.surfaces) {
+    double area = 0;
+    for (const Triangle& t : TrianglesOf(surface)) {
+      SampleTriangle(t, surface.kind == Surface::Kind::kQuad ? 0.01 : 0.02, [&](const Vec3& p, double weight) {
+        if (camera.InView(p) && !rays.Occluded(camera.centre, p, 1e-4)) area += weight;
+      });
+    }
+    scan.covered_area.push_back(area);
+  }
+  return scan;
+}
+
+// A rebuilt surface measured against the truth.
+struct Match {
+  int truth = -1;          // the true surface most of its area lies nearest to
+  double rms_mm = 0;       // RMS distance of its area to the nearest true surface
+  double far_fraction = 0; // of its area more than 2 cm from every true surface
+};
+
+Match MatchSurface(const Surface& rebuilt, const Scene& truth) {
+  std::vector<std::vector<Triangle>> true_triangles;
+  for (const Surface& surface : truth.surfaces) true_triangles.push_back(TrianglesOf(surface));
+  std::vector<double> area_nearest(truth.surfaces.size(), 0.0);
+  double sum_squares = 0, total = 0, far = 0;
+  // At most about 20000 triangles (every stride-th, weighted by stride): dense meshes are measured
+  // by a sample of their triangles.
+  const std::vector<Triangle> triangles = TrianglesOf(rebuilt);
+  const size_t stride = std::max<size_t>(1, triangles.size() / 20000);
+  for (size_t k = 0; k < triangles.size(); k += stride) {
+    const Triangle& t = triangles[k];
+    SampleTriangle(t, 0.03, [&](const Vec3& p, double sample_weight) {
+      const double weight = sample_weight * stride;
+      double best = 1e300;
+      int nearest = -1;
+      for (size_t s = 0; s < true_triangles.size(); ++s) {
+        for (const Triangle& true_triangle : true_triangles[s]) {
+          const double d = PointTriangleDistance(p, true_triangle);
+          if (d < best) best = d, nearest = static_cast<int>(s);
+        }
+      }
+      area_nearest[nearest] += weight;
+      sum_squares += weight * best * best;
+      total += weight;
+      if (best > 0.02) far += weight;
+    });
+  }
+  Match match;
+  match.truth = static_cast<int>(std::max_element(area_nearest.begin(), area_nearest.end()) - area_nearest.begin());
+  match.rms_mm = 1000 * std::sqrt(sum_squares / total);
+  match.far_fraction = far / total;
+  return match;
+}
+
+struct SceneCheck {
+  std::string name;
+  int width, height;  // camera resolution of the scan
+  // Largest area error of planar surfaces seen at up to 70° incidence, and beyond (grazing views,
+  // where the camera's rows lie far apart on the surface), percent.
+  double area_percent = 1.0, grazing_area_percent = 1.0;
+};
+
+// Scans, rebuilds, checks against the truth; prints the table row of docs/scan.md.
+void CheckScene(const SceneCheck& check) {
+  const SyntheticScene synthetic = MakeSyntheticScene(check.name);
+  const Scene& truth = synthetic.scene;
+  const Pinhole camera(synthetic.camera, check.width, check.height);
+  const auto t0 = std::chrono::steady_clock::now();
+  const Scan scan = ScanScene(truth, camera, 0.0025, 7);
+  const auto t1 = std::chrono::steady_clock::now();
+  SceneFromPointsOptions options;
+  options.viewpoint = camera.centre;
+  const ScannedScene scanned = SceneFromPoints(scan.points, options);
+  std::cout << scanned.Report();
+
+  std::vector<Match> matches;
+  std::vector<double> rebuilt_area(truth.surfaces.size(), 0.0);
+  std::vector<double> worst_rms(truth.surfaces.size(), 0.0);
+  double spurious_area = 0;
+  for (const Surface& surface : scanned.scene.surfaces) {
+    const Match match = MatchSurface(surface, truth);
+    matches.push_back(match);
+    if (match.far_fraction > 0.5) {
+      spurious_area += surface.Area();
+      continue;
+    }
+    rebuilt_area[match.truth] += surface.Area();
+    worst_rms[match.truth] = std::max(worst_rms[match.truth], match.rms_mm);
+  }
+  int found = 0, seen = 0;
+  double planar_rms = 0, area_error = 0, curved_rms = 0;
+  for (size_t s = 0; s < truth.surfaces.size(); ++s) {
+    const Surface& surface = truth.surfaces[s];
+    if (scan.count_of_surface[s] < 500 || scan.covered_area[s] < 0.05) continue;  // hardly seen
+    ++seen;
+    const double error_percent = 100 * (rebuilt_area[s] - scan.covered_area[s]) / scan.covered_area[s];
+    std::cout << fmt::format("  truth {}: {} points at {:.0f}°, covered {:.3f} of {:.3f} m², rebuilt {:.3f} m² "
+                             "({:+.2f}%), RMS {:.2f} mm\n", surface.name, scan.count_of_surface[s],
+                             scan.incidence_deg[s], scan.covered_area[s], surface.Area(), rebuilt_area[s],
+                             error_percent, worst_rms[s]);
+    EXPECT_GT(rebuilt_area[s], 0) << check.name << ": " << surface.name << " not found";
+    if (rebuilt_area[s] > 0) ++found;
+    if (IsPlanar(surface)) {
+      EXPECT_LE(worst_rms[s], 5.0) << check.name << ": " << surface.name;
+      const bool grazing = scan.incidence_deg[s] > 70;
+      EXPECT_LE(std::abs(error_percent), grazing ? check.grazing_area_percent : check.area_percent)
+          << check.name << ": " << surface.name << (grazing ? " (grazing view)" : "");
+      planar_rms = std::max(planar_rms, worst_rms[s]);
+      area_error = std::max(area_error, std::abs(error_percent));
+    } else {
+      EXPECT_LE(worst_rms[s], 10.0) << check.name << ": " << surface.name;
+      curved_rms = std::max(curved_rms, worst_rms[s]);
+    }
+  }
+  EXPECT_LE(spurious_area, 0.01 * truth.Area()) << check.name;
+  const auto t2 = std::chrono::steady_clock::now();
+  std::cout << fmt::format("  (scan {:.1f} s, measuring {:.1f} s)\n", std::chrono::duration<double>(t1 - t0).count(),
+                           std::chrono::duration<double>(t2 - t1).count() - scanned.time_s);
+  std::cout << fmt::format("| {} | {} | {}/{} | {:.2f} | {:.2f} | {} | {:.3f} m² ({:.2f}%) | {:.2f} s |\n",
+                           check.name, scan.points.size(), found, seen, planar_rms, area_error,
+                           curved_rms > 0 ? fmt::format("{:.2f}", curved_rms) : "—", spurious_area,
+                           100 * spurious_area / truth.Area(), scanned.time_s);
+
+  // The written scene reads back and subdivides into patches.
+  testing::TempDir dir;
+  const std::filesystem::path path = WriteScannedScene(dir.path() / "scan", scanned);
+  const Scene loaded = LoadScene(path);
+  ASSERT_EQ(loaded.surfaces.size(), scanned.scene.surfaces.size());
+  for (size_t s = 0; s < loaded.surfaces.size(); ++s) {
+    EXPECT_EQ(loaded.surfaces[s].name, scanned.scene.surfaces[s].name);
+    EXPECT_NEAR(loaded.surfaces[s].Area(), scanned.scene.surfaces[s].Area(), 1e-4 * scanned.scene.surfaces[s].Area());
+  }
+  SubdivisionOptions subdivision;
+  subdivision.target_patches = 400;
+  const PatchHierarchy patches = SubdividePatches(loaded, subdivision);
+  EXPECT_GE(patches.fine.size(), 400 / 2);
+}
+
+// The scenes' own cameras (tiny_box: 240 × 160) or half their resolution (960 × 640), to keep the
+// tests short. Known limits (docs/scan.md), bounded here as measured: surfaces seen obliquely lose
+// area at their free edges, where they meet no other plane: tiny_box's side walls at 74°
+// incidence 3.2%, the columns' sides at 82° (six pixel columns across 0.4 m) 21%, l_shaped's floor
+// at 63° (its right and front edges free) 1.7%, blue_curves' floor at 67° (its arc meets the
+// curved wall, a mesh, not a plane to snap to) 1.2%.
+TEST(SceneFromPoints, TinyBox) { CheckScene({"tiny_box", 240, 160, 1.0, 4.0}); }
+TEST(SceneFromPoints, Columns) { CheckScene({"columns", 480, 320, 1.0, 25.0}); }
+TEST(SceneFromPoints, LShaped) { CheckScene({"l_shaped", 480, 320, 2.0, 2.0}); }
+TEST(SceneFromPoints, BlueCurves) { CheckScene({"blue_curves", 480, 320, 1.5, 1.5}); }
+
+// A floor with a hole (a 0.6 × 0.5 m opening) meeting a wall: the hole comes out as one, and the
+// floor's and the wall's shared edge is one line (the planes' intersection, on the true corner).
+TEST(SceneFromPoints, HoleAndSharedEdge) {
+  std::mt19937 random(3);
+  std::normal_distribution<double> gauss(0.0, 0.0025);
+  auto noise = [&] { return Vec3(gauss(random), gauss(random), gauss(random)); };
+  std::vector<Vec3> points;
+  const double step = 0.012;  // a lattice slightly turned against the edges, as pixels would be
+  const Vec2 a(std::cos(0.1), std::sin(0.1)), b(-std::sin(0.1), std::cos(0.1));
+  for (int i = -400; i <= 400; ++i) {
+    for (int j = -400; j <= 400; ++j) {
+      const Vec2 p = step * (i * a + j * b) + Vec2(1.5, 1.0);
+      const bool in_floor = p.x() >= 0 && p.x() <= 3 && p.y() >= 0 && p.y() <= 2;
+      const bool in_hole = p.x() > 1.2 && p.x() < 1.8 && p.y() > 0.7 && p.y() < 1.2;
+      if (in_floor && !in_hole) points.push_back(Vec3(p.x(), p.y(), 0) + noise());
+      const Vec2 q = p - Vec2(0, 0.25);  // the wall y = 2: x along, z up to 1.5 m
+      if (q.x() >= 0 && q.x() <= 3 && q.y() >= 0 && q.y() <= 1.5) points.push_back(Vec3(q.x(), 2, q.y()) + noise());
+    }
+  }
+  SceneFromPointsOptions options;
+  options.viewpoint = Vec3(1.5, -1.0, 2.0);
+  const ScannedScene scanned = SceneFromPoints(points, options);
+  std::cout << scanned.Report();
+  ASSERT_EQ(scanned.scene.surfaces.size(), 2u);
+  const Surface& floor = scanned.scene.surfaces[0].name == "floor" ? scanned.scene.surfaces[0] : scanned.scene.surfaces[1];
+  const Surface& wall = &floor == &scanned.scene.surfaces[0] ? scanned.scene.surfaces[1] : scanned.scene.surfaces[0];
+  const ScannedSurfaceStats& floor_stats = scanned.stats[&floor == &scanned.scene.surfaces[0] ? 0 : 1];
+  EXPECT_EQ(floor.name, "floor");
+  EXPECT_EQ(wall.name, "wall_0");
+  EXPECT_EQ(floor_stats.holes, 1);
+  const std::string report = scanned.Report();
+  EXPECT_NE(report.find("floor: plane, "), std::string::npos) << report;
+  EXPECT_NE(report.find(", 1 holes, "), std::string::npos) << report;
+  EXPECT_NE(report.find("2 surfaces from "), std::string::npos) << report;
+  // Writing where a file stands is an IoError naming the path.
+  testing::TempDir dir;
+  const std::filesystem::path blocked = dir.Write("blocked", "a file, not a directory");
+  try {
+    WriteScannedScene(blocked, scanned);
+    ADD_FAILURE() << "no error writing into a file";
+  } catch (const IoError& error) {
+    EXPECT_NE(std::string(error.what()).find("blocked"), std::string::npos) << error.what();
+  }
+  EXPECT_NEAR(floor.Area(), 6.0 - 0.3, 0.01 * 5.7);
+  EXPECT_NEAR(wall.Area(), 4.5, 0.01 * 4.5);
+  // The shared edge: the floor's corners along it and the wall's lie on one line, the true corner
+  // (y = 2, z = 0), and span the same stretch of it.
+  auto corners = [](const Surface& surface) {
+    return surface.kind == Surface::Kind::kQuad ? std::vector<Vec3>(surface.quad.begin(), surface.quad.end())
+                                                : surface.mesh_vertices;
+  };
+  auto on_edge = [](const std::vector<Vec3>& vertices, bool floor_side, double* x_min, double* x_max) {
+    int count = 0;
+    *x_min = 1e9, *x_max = -1e9;
+    for (const Vec3& v : vertices) {
+      if (floor_side ? v.y() < 1.995 : v.z() > 0.005) continue;  // not snapped onto the edge
+      EXPECT_NEAR(v.y(), 2.0, 0.002);
+      EXPECT_NEAR(v.z(), 0.0, 0.002);
+      *x_min = std::min(*x_min, v.x()), *x_max = std::max(*x_max, v.x());
+      ++count;
+    }
+    return count;
+  };
+  double floor_min, floor_max, wall_min, wall_max;
+  EXPECT_GE(on_edge(corners(floor), true, &floor_min, &floor_max), 2);
+  EXPECT_GE(on_edge(corners(wall), false, &wall_min, &wall_max), 2);
+  EXPECT_NEAR(floor_min, 0.0, 0.02);
+  EXPECT_NEAR(wall_min, 0.0, 0.02);
+  EXPECT_NEAR(floor_max, 3.0, 0.02);
+  EXPECT_NEAR(wall_max, 3.0, 0.02);
+}
+
+TEST(SceneFromPoints, RefusesTooFewPointsAndBadOptions) {
+  SceneFromPointsOptions options;
+  std::vector<Vec3> points(50, Vec3::Zero());
+  try {
+    SceneFromPoints(points, options);
+    ADD_FAILURE() << "no error for 50 points";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("50 points are too few"), std::string::npos) << error.what();
+  }
+  options.plane_distance = 0;
+  std::string why;
+  EXPECT_FALSE(options.Check(&why));
+  EXPECT_NE(why.find("plane_distance"), std::string::npos);
+  EXPECT_THROW(SceneFromPoints(std::vector<Vec3>(1000, Vec3::Zero()), options), std::invalid_argument);
+  options = SceneFromPointsOptions();
+  std::vector<Vec3> nan_points(1000, Vec3::Zero());
+  nan_points[7].x() = std::nan("");
+  EXPECT_THROW(SceneFromPoints(nan_points, options), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace procam
