@@ -119,6 +119,23 @@ TEST(NodeTransport, MalformedMessagesAreDroppedAndTheNodeGoesOn) {
   EXPECT_NE(node.Log().find("2 frames"), std::string::npos) << node.Log();
 }
 
+// A message longer than any frame (kMaxMessageBytes) is cut off by libzmq before procam reads a
+// byte: the connection drops, the node receives nothing, and the controller, reconnected, is
+// answered again.
+TEST(NodeTransport, AnOversizedMessageIsDroppedAndTheNodeGoesOn) {
+  testing::TempDir dir;
+  const RigKeys keys = MakeRigKeys(dir.path(), false);
+  TestNode node(keys);
+  zmq::context_t context;
+  ControllerSocket controller(context, node.socket.endpoint(), &keys);
+  ASSERT_TRUE(PingUntilReceived(controller, node));
+  const std::string huge(static_cast<size_t>(kMaxMessageBytes) + 1, 'x');
+  ASSERT_TRUE(controller.socket().send(zmq::buffer(huge), zmq::send_flags::none));
+  EXPECT_FALSE(node.socket.Receive(1000));
+  EXPECT_TRUE(PingUntilReceived(controller, node)) << node.Log();
+  EXPECT_EQ(node.socket.malformed(), 0);  // never reached the parser
+}
+
 TEST(NodeTransport, KeysAreMadeOnceAndReadWithErrorsNamingTheFile) {
   testing::TempDir dir;
   const RigKeys made = MakeRigKeys(dir.path(), false);
