@@ -159,6 +159,47 @@ TEST(Nodes, AKilledNodeIsReportedWithinASecondAndRejoins) {
   EXPECT_NE(log.find("node n3 rejoins at frame"), std::string::npos) << log;
 }
 
+// A node that stops answering with its connection still open — what the controller sees when
+// the node's network goes (no FIN): here the process is frozen (SIGSTOP) for 2 s. It is reported
+// lost within a second, the others go on, and once it runs again it takes part again.
+TEST(Nodes, ANodeThatGoesSilentIsReportedWithinASecondAndComesBack) {
+  testing::TempDir dir;
+  const Rig rig(dir);
+  const std::string room = (rig.root / "room").string();
+  testing::CommandRun run = testing::RunProcam("compensate " + rig.scene + " --rig " + room + " --patches 100 --out " +
+                                               (dir / "solution").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  const std::string script =
+      rig.StartNode(0) + rig.StartNode(1) + "node2=$!\n" + rig.StartNode(2) + "timeout 120 " + Binary() + " play " +
+      rig.scene + " --rig " + room + " --solution " + (dir / "solution").string() +
+      " --frames 80 --fps 10 --nodes " + rig.Nodes() + " --out " + (dir / "play").string() + " > " +
+      (dir / "play.log").string() + " 2>&1 &\nplay=$!\n" + "for i in $(seq 300); do grep -q \"play: frame\" " +
+      (dir / "play.log").string() + " && break; sleep 0.1; done\nsleep 0.5\nkill -STOP $node2\ndate +%s%N > " +
+      (dir / "stopped").string() + "\nsleep 2\nkill -CONT $node2\n" +
+      "wait $play\nstatus=$?\nkill %1 %2 %3 2>/dev/null\nwait\nexit $status\n";
+  run = testing::RunShell("bash -c '" + script + "'");
+  const std::string log = ReadFile(dir / "play.log");
+  ASSERT_EQ(run.exit_code, 0) << run.output << log;
+  const int64_t stopped = std::stoll(ReadFile(dir / "stopped"));
+  const nlohmann::json result = ReadResult(dir / "play" / "result.json");
+  int64_t first_missed = 0;
+  bool back = false;
+  for (const nlohmann::json& frame : result.at("frames")) {
+    const nlohmann::json& nodes = frame.at("nodes");
+    EXPECT_EQ(nodes.at("n1").at("state"), "shown");
+    EXPECT_EQ(nodes.at("n3").at("state"), "shown");
+    if (nodes.at("n2").at("state") != "shown" && first_missed == 0) first_missed = nodes.at("n1").at("presented_ns");
+    if (first_missed != 0 && nodes.at("n2").at("state") == "shown") back = true;
+  }
+  ASSERT_NE(first_missed, 0) << log;
+  EXPECT_LT(double(first_missed - stopped) * 1e-9, 1.0) << log;
+  EXPECT_TRUE(back) << log;
+  EXPECT_NE(log.find("node n2 (tcp://127.0.0.1:" + std::to_string(rig.ports[1]) + ") lost at frame"), std::string::npos)
+      << log;
+  std::cout << "node n2 frozen: the first frame without it was shown " << 1e-9 * double(first_missed - stopped)
+            << " s later\n";
+}
+
 TEST(Nodes, ANodeWithAnotherRigsKeysRefusesTheController) {
   testing::TempDir dir;
   const Rig rig(dir);
