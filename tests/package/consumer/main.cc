@@ -1,5 +1,6 @@
 // Uses an installed procam as a library: colour (CIEDE2000 against a published pair), .npy and
-// .cameramodel files through the base module, a projector model. Exit 0 when all agree.
+// .cameramodel files through the base module, a projector model, a display-node message. Exit 0
+// when all agree.
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -7,6 +8,7 @@
 #include "base/camera_model.h"
 #include "base/io.h"
 #include "compensation/colour.h"
+#include "nodes/messages.h"
 #include "procam/config.h"
 #include "projection/projector.h"
 
@@ -33,7 +35,15 @@ int main(int argc, char** argv) {
   const procam::CameraModel model = procam::ReadCameraModelFile(dir / "p.cameramodel");
   if (model.width != 1280 || model.intrinsics[0] != 1000.0) ++failures;
 
-  std::printf("procam %s as a package: CIEDE2000 %.4f, .npy and .cameramodel round trips: %s\n",
+  procam::Message frame;
+  frame.type = procam::MessageType::kFrame;
+  frame.emittance = {0.25, 0.5, 0.75};
+  const std::string bytes = procam::EncodeMessage(frame);
+  procam::Message parsed;
+  std::string why;
+  if (!procam::ParseMessage(bytes.data(), bytes.size(), &parsed, &why) || parsed.emittance != frame.emittance) ++failures;
+
+  std::printf("procam %s as a package: CIEDE2000 %.4f, .npy, .cameramodel and node message round trips: %s\n",
               PROCAM_VERSION, delta_e, failures == 0 ? "ok" : "FAILED");
   return failures == 0 ? 0 : 1;
 }
