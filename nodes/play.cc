@@ -353,6 +353,10 @@ PlaySummary RunPlay(const PlayOptions& options) {
   if (!local) {
     control();
   } else {
+    // The outputs first, on this thread (GLFW's): a --display that does not fit the rig fails
+    // at once, before the form factors are computed.
+    auto outputs = std::make_shared<std::vector<std::unique_ptr<NodeOutput>>>(options.local_outputs(rig.projectors));
+    const NodeOutputFactory made = [outputs](const std::vector<Projector>&) { return std::move(*outputs); };
     std::thread controller_thread(control);
     try {
       NodeOptions node;
@@ -363,7 +367,7 @@ PlaySummary RunPlay(const PlayOptions& options) {
       node.listen = nodes[0].endpoint;
       node.log = options.progress;
       node.gpu = options.local_gpu;
-      RunNode(context, node, options.local_outputs, node_stop);
+      RunNode(context, node, made, node_stop);
     } catch (...) {
       node_failed = true;
       controller_thread.join();

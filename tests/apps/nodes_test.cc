@@ -231,6 +231,22 @@ TEST(Nodes, ANodeWithAnotherRigsKeysRefusesTheController) {
   EXPECT_FALSE(std::filesystem::exists(dir / "play" / "result.json"));
 }
 
+// A --display that does not fit the rig's projectors is refused at once, in one line, before
+// anything is computed or written.
+TEST(Nodes, PlayRefusesADisplayListThatDoesNotFitTheRig) {
+  testing::TempDir dir;
+  const Rig rig(dir);
+  const std::string room = (rig.root / "room").string();
+  dir.Write("frames/f0.ppm", std::string("P6\n1 1\n255\n") + "abc");
+  const auto start = std::chrono::steady_clock::now();
+  const testing::CommandRun run = testing::RunProcamStderr(
+      "play " + rig.scene + " --rig " + room + " --desired " + (dir / "frames").string() + " --display record:" + (dir / "a").string() +
+      ",record:" + (dir / "b").string() + " --out " + (dir / "play").string());
+  testing::ExpectOneErrorLine(run, "--display: 2 outputs for 3 projectors", "play with two outputs");
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 10.0);
+  EXPECT_FALSE(std::filesystem::exists(dir / "play" / "result.json"));
+}
+
 // Rendered on the GPU without a window (EGL; llvmpipe where there is no GPU): the images read
 // back are procam project's within one code step, and rarely off by one.
 TEST(Nodes, GpuRenderedImagesAreProjectsWithinOneCodeStep) {
