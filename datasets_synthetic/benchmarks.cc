@@ -416,11 +416,6 @@ std::vector<Projector> BenchProjectors(int count, int width, int height) {
   return projectors;
 }
 
-double MedianOf(std::vector<double> values) {
-  std::sort(values.begin(), values.end());
-  return values.empty() ? 0.0 : values[values.size() / 2];
-}
-
 }  // namespace
 
 void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
@@ -486,8 +481,8 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
   Report(args.progress,
          fmt::format("  per frame, median of {}: solve (warm) {:.1f} ms ({:.0f} iterations), render 3 images (CPU) "
                      "{:.1f} ms; new desired appearance -> every image ready {:.1f} ms",
-                     args.frames, MedianOf(solve_ms), MedianOf(iteration_values), MedianOf(render_ms),
-                     MedianOf(total_ms)));
+                     args.frames, Median(solve_ms), Median(iteration_values), Median(render_ms),
+                     Median(total_ms)));
   if (!args.json.empty()) {
     const nlohmann::json result = {{"benchmark", "play"},
                                    {"patches", problem.size()},
@@ -498,10 +493,10 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
                                    {"device", DeviceName(args.device)},
                                    {"frames", args.frames},
                                    {"first_frame_ms", first_ms},
-                                   {"median_solve_ms", MedianOf(solve_ms)},
-                                   {"median_render_ms", MedianOf(render_ms)},
-                                   {"median_total_ms", MedianOf(total_ms)},
-                                   {"median_iterations", MedianOf(iteration_values)}};
+                                   {"median_solve_ms", Median(solve_ms)},
+                                   {"median_render_ms", Median(render_ms)},
+                                   {"median_total_ms", Median(total_ms)},
+                                   {"median_iterations", Median(iteration_values)}};
     WriteFileAtomically(args.json, result.dump(2) + "\n");
   }
 }

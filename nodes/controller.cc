@@ -14,8 +14,6 @@ namespace {
 
 constexpr double kPingIntervalS = 0.2;
 
-double MsSince(Clock::time_point start) { return 1e3 * SecondsSince(start); }
-
 }  // namespace
 
 NodeAddress ParseNodeAddress(const std::string& text, int index) {

@@ -25,8 +25,6 @@
 namespace procam {
 namespace {
 
-double MsSince(Clock::time_point start) { return 1e3 * SecondsSince(start); }
-
 // The desired appearance's frames: the images of a directory in name order, or a video's frames.
 class FrameSource {
  public:
@@ -94,12 +92,6 @@ nlohmann::json FrameJson(const PlayFrame& frame, const std::vector<NodeAddress>&
                                     {"render_ms", node.render_ms}, {"presented_ns", node.presented_ns}};
   }
   return json;
-}
-
-double Median(std::vector<double> values) {
-  if (values.empty()) return 0.0;
-  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-  return values[values.size() / 2];
 }
 
 // Everything the frames share: the problem with the rig's bounds and reflectance, the camera's

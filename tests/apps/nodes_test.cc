@@ -61,6 +61,18 @@ struct Rig {
            std::to_string(ports[k]) + " --name n" + std::to_string(k + 1) + " > " +
            (root / ("node" + std::to_string(k + 1) + ".log")).string() + " 2>&1 &\n";
   }
+  // procam compensate on the room with the rig into ROOT/solution and, with `images`, procam
+  // project of that solution into ROOT/images.
+  ::testing::AssertionResult Solve(int patches, bool images = false) const {
+    testing::CommandRun run = testing::RunProcam("compensate " + scene + " --rig " + (root / "room").string() +
+                                                 " --patches " + std::to_string(patches) + " --out " +
+                                                 (root / "solution").string());
+    if (run.exit_code != 0) return ::testing::AssertionFailure() << run.output;
+    if (!images) return ::testing::AssertionSuccess();
+    run = testing::RunProcam("project " + (root / "solution").string() + " --out " + (root / "images").string());
+    if (run.exit_code != 0) return ::testing::AssertionFailure() << run.output;
+    return ::testing::AssertionSuccess();
+  }
   std::string Nodes() const {
     std::string text;
     for (int k = 0; k < 3; ++k)
@@ -79,11 +91,8 @@ TEST(Nodes, ThreeNodesShowWhatProjectMakesAndHoldTheBarrier) {
   testing::TempDir dir;
   const Rig rig(dir);
   const std::string room = (rig.root / "room").string();
-  testing::CommandRun run = testing::RunProcam("compensate " + rig.scene + " --rig " + room + " --patches 150 --out " +
-                                               (dir / "solution").string());
-  ASSERT_EQ(run.exit_code, 0) << run.output;
-  run = testing::RunProcam("project " + (dir / "solution").string() + " --out " + (dir / "images").string());
-  ASSERT_EQ(run.exit_code, 0) << run.output;
+  ASSERT_TRUE(rig.Solve(150, /*images=*/true));
+  testing::CommandRun run;
   const std::string script = rig.StartNode(0, "", "cpu") + rig.StartNode(1, "", "cpu") + rig.StartNode(2, "", "cpu") +
                              "timeout 120 " + Binary() + " play " + rig.scene + " --rig " + room + " --solution " + (dir / "solution").string() +
                              " --frames 12 --fps 5 --nodes " + rig.Nodes() + " --out " + (dir / "play").string() +
@@ -118,9 +127,8 @@ TEST(Nodes, AKilledNodeIsReportedWithinASecondAndRejoins) {
   testing::TempDir dir;
   const Rig rig(dir);
   const std::string room = (rig.root / "room").string();
-  testing::CommandRun run = testing::RunProcam("compensate " + rig.scene + " --rig " + room + " --patches 100 --out " +
-                                               (dir / "solution").string());
-  ASSERT_EQ(run.exit_code, 0) << run.output;
+  ASSERT_TRUE(rig.Solve(100));
+  testing::CommandRun run;
   // 80 frames at 10 fps (8 s); node 3 is killed (SIGKILL, as a crash) half a second after the
   // first progress line (frames are being shown) and started again 1.5 s later.
   const std::string script =
@@ -166,9 +174,8 @@ TEST(Nodes, ANodeThatGoesSilentIsReportedWithinASecondAndComesBack) {
   testing::TempDir dir;
   const Rig rig(dir);
   const std::string room = (rig.root / "room").string();
-  testing::CommandRun run = testing::RunProcam("compensate " + rig.scene + " --rig " + room + " --patches 100 --out " +
-                                               (dir / "solution").string());
-  ASSERT_EQ(run.exit_code, 0) << run.output;
+  ASSERT_TRUE(rig.Solve(100));
+  testing::CommandRun run;
   const std::string script =
       rig.StartNode(0) + rig.StartNode(1) + "node2=$!\n" + rig.StartNode(2) + "timeout 120 " + Binary() + " play " +
       rig.scene + " --rig " + room + " --solution " + (dir / "solution").string() +
@@ -204,9 +211,8 @@ TEST(Nodes, ANodeWithAnotherRigsKeysRefusesTheController) {
   testing::TempDir dir;
   const Rig rig(dir);
   const std::string room = (rig.root / "room").string();
-  testing::CommandRun run = testing::RunProcam("compensate " + rig.scene + " --rig " + room + " --patches 60 --out " +
-                                               (dir / "solution").string());
-  ASSERT_EQ(run.exit_code, 0) << run.output;
+  ASSERT_TRUE(rig.Solve(60));
+  testing::CommandRun run;
   // Another rig directory with the same projectors and its own keys.
   const std::filesystem::path other = dir / "other";
   std::filesystem::create_directories(other);
@@ -253,11 +259,8 @@ TEST(Nodes, GpuRenderedImagesAreProjectsWithinOneCodeStep) {
   testing::TempDir dir;
   const Rig rig(dir);
   const std::string room = (rig.root / "room").string();
-  testing::CommandRun run = testing::RunProcam("compensate " + rig.scene + " --rig " + room + " --patches 150 --out " +
-                                               (dir / "solution").string());
-  ASSERT_EQ(run.exit_code, 0) << run.output;
-  run = testing::RunProcam("project " + (dir / "solution").string() + " --out " + (dir / "images").string());
-  ASSERT_EQ(run.exit_code, 0) << run.output;
+  ASSERT_TRUE(rig.Solve(150));
+  testing::CommandRun run;
   for (const char* light : {"smooth", "flat"}) {
     run = testing::RunProcam("project " + (dir / "solution").string() + " --light " + light + " --out " +
                              (dir / (std::string("images_") + light)).string());
@@ -306,11 +309,8 @@ TEST(Nodes, PlayShowsProjectsImagesOnThreeMonitors) {
   testing::TempDir dir;
   const Rig rig(dir);
   const std::string room = (rig.root / "room").string();
-  testing::CommandRun run = testing::RunProcam("compensate " + rig.scene + " --rig " + room + " --patches 150 --out " +
-                                               (dir / "solution").string());
-  ASSERT_EQ(run.exit_code, 0) << run.output;
-  run = testing::RunProcam("project " + (dir / "solution").string() + " --out " + (dir / "images").string());
-  ASSERT_EQ(run.exit_code, 0) << run.output;
+  ASSERT_TRUE(rig.Solve(150, /*images=*/true));
+  testing::CommandRun run;
   // sway and what runs in it run as an unprivileged user when the tests run as root: everything
   // lives where that user can read and write, the binary copied in.
   std::filesystem::copy_file(Binary(), dir / "procam");
