@@ -1,12 +1,12 @@
 // procam keys (the rig's CURVE keys), procam node (a display node) and procam play (light that
 // follows changing content): each parses, calls its library function, prints.
+#include <fmt/format.h>
+
 #include <csignal>
 #include <iostream>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <fmt/format.h>
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
@@ -28,8 +28,8 @@ struct NodeArguments {
 };
 
 struct PlayArguments {
-  std::string scene, rig, desired, solution, out, method = "perceptual", device = "cpu", dither = "ordered",
-              render = "gpu";
+  std::string scene, rig, desired, solution, out, method = "perceptual", device = "cpu",
+                                                  dither = "ordered", render = "gpu";
   std::vector<std::string> nodes, display = {"memory"};
   LightField light = LightField::kSmooth;
   double fps = 30.0, alpha = 0.5, frame_timeout_ms = 500.0, setup_timeout = 120.0;
@@ -50,11 +50,13 @@ void RunPlayCommand(const PlayArguments& args) {
   options.alpha = args.alpha;
   ParseMethod(args.method, &options.solver.method);
   ParseDevice(args.device, &options.solver.device);
-  if (!ParseDither(args.dither, &options.dither)) throw std::invalid_argument("--dither: unknown method " + args.dither);
+  if (!ParseDither(args.dither, &options.dither))
+    throw std::invalid_argument("--dither: unknown method " + args.dither);
   options.light = args.light;
   options.frame_timeout_s = 1e-3 * args.frame_timeout_ms;
   options.local_gpu = args.render == "gpu";
-  for (size_t k = 0; k < args.nodes.size(); ++k) options.nodes.push_back(ParseNodeAddress(args.nodes[k], int(k)));
+  for (size_t k = 0; k < args.nodes.size(); ++k)
+    options.nodes.push_back(ParseNodeAddress(args.nodes[k], int(k)));
   if (options.nodes.empty()) options.local_outputs = MakeNodeOutputs(args.display);
   options.progress = PrintProgress();
   const PlaySummary summary = RunPlay(options);
@@ -67,32 +69,42 @@ void RunPlayCommand(const PlayArguments& args) {
 void AddNodeCommands(CLI::App& app) {
   auto keys_rig = std::make_shared<std::string>();
   auto keys_replace = std::make_shared<bool>(false);
-  CLI::App* keys = app.add_subcommand("keys", "Make the rig's CURVE keys for its controller and display nodes");
+  CLI::App* keys =
+      app.add_subcommand("keys", "Make the rig's CURVE keys for its controller and display nodes");
   keys->add_option("--rig", *keys_rig, "Rig directory (keys go into RIG_DIR/keys/)")->required();
   keys->add_flag("--replace", *keys_replace, "Replace existing keys (nodes must get the new ones)");
   keys->callback([keys_rig, keys_replace] {
     const RigKeys made = MakeRigKeys(*keys_rig, *keys_replace);
-    std::cout << "wrote " << *keys_rig << "/keys/: controller.key, controller.pub, node.key, node.pub\n"
-              << "controller public key " << made.controller.public_key << "\nnode public key " << made.node.public_key
-              << "\ndisplay PCs need node.key, node.pub, controller.pub; the controller controller.key, "
-                 "controller.pub, node.pub\n";
+    std::cout
+        << "wrote " << *keys_rig << "/keys/: controller.key, controller.pub, node.key, node.pub\n"
+        << "controller public key " << made.controller.public_key << "\nnode public key "
+        << made.node.public_key
+        << "\ndisplay PCs need node.key, node.pub, controller.pub; the controller controller.key, "
+           "controller.pub, node.pub\n";
   });
 
   auto node_args = std::make_shared<NodeArguments>();
-  CLI::App* node = app.add_subcommand("node", "Run a display node: show the frames a controller sends on this PC's projectors");
-  node->add_option("--rig", node_args->rig, "Rig directory (rig.json, the projectors' models, keys/)")->required();
-  node->add_option("--scene", node_args->scene, "The room (scene file), as the controller's")->required();
-  node->add_option("--projectors", node_args->projectors, "Projectors of the rig this node shows, in --display's order")
+  CLI::App* node = app.add_subcommand(
+      "node", "Run a display node: show the frames a controller sends on this PC's projectors");
+  node->add_option("--rig", node_args->rig,
+                   "Rig directory (rig.json, the projectors' models, keys/)")
+      ->required();
+  node->add_option("--scene", node_args->scene, "The room (scene file), as the controller's")
+      ->required();
+  node->add_option("--projectors", node_args->projectors,
+                   "Projectors of the rig this node shows, in --display's order")
       ->delimiter(',')
       ->required();
   node->add_option("--display", node_args->display,
                    "Per projector: glfw:MONITOR, record:DIR (DIR/NAME.png every frame) or memory")
       ->delimiter(',')
       ->capture_default_str();
-  node->add_option("--listen", node_args->listen, "Endpoint to listen at (tcp://ADDRESS:PORT)")->capture_default_str();
+  node->add_option("--listen", node_args->listen, "Endpoint to listen at (tcp://ADDRESS:PORT)")
+      ->capture_default_str();
   node->add_option("--name", node_args->name, "The node's name in logs")->capture_default_str();
-  node->add_option("--render", node_args->render,
-                   "gpu: each output's images rendered on the GPU (OpenGL) | cpu: the reference renderer")
+  node->add_option(
+          "--render", node_args->render,
+          "gpu: each output's images rendered on the GPU (OpenGL) | cpu: the reference renderer")
       ->check(CLI::IsMember({"gpu", "cpu"}))
       ->capture_default_str();
   node->add_option("--seconds", node_args->seconds, "Run at most this long (0: until interrupted)")
@@ -114,39 +126,55 @@ void AddNodeCommands(CLI::App& app) {
   });
 
   auto play_args = std::make_shared<PlayArguments>();
-  CLI::App* play = app.add_subcommand("play", "Light that follows changing content: solve, send and show every frame");
+  CLI::App* play = app.add_subcommand(
+      "play", "Light that follows changing content: solve, send and show every frame");
   play->add_option("scene", play_args->scene, "The room (scene file)")->required();
-  play->add_option("--rig", play_args->rig, "Rig directory (projectors, registered camera, keys)")->required();
-  play->add_option("--desired", play_args->desired,
-                   "The desired appearance as the rig's camera sees the room: a directory of images or a video");
-  play->add_option("--solution", play_args->solution,
-                   "Instead of --desired: show a compensation solution's emittance (procam compensate --out) "
-                   "as every frame");
-  play->add_option("--out", play_args->out, "Output directory (result.json with per-frame timings)")->required();
-  play->add_option("--nodes", play_args->nodes, "Display nodes NAME=tcp://HOST:PORT,...; none: a node in this process")
+  play->add_option("--rig", play_args->rig, "Rig directory (projectors, registered camera, keys)")
+      ->required();
+  play->add_option(
+      "--desired", play_args->desired,
+      "The desired appearance as the rig's camera sees the room: a directory of images or a video");
+  play->add_option(
+      "--solution", play_args->solution,
+      "Instead of --desired: show a compensation solution's emittance (procam compensate --out) "
+      "as every frame");
+  play->add_option("--out", play_args->out, "Output directory (result.json with per-frame timings)")
+      ->required();
+  play->add_option("--nodes", play_args->nodes,
+                   "Display nodes NAME=tcp://HOST:PORT,...; none: a node in this process")
       ->delimiter(',');
   play->add_option("--display", play_args->display,
                    "Without --nodes, per projector: glfw:MONITOR, record:DIR or memory")
       ->delimiter(',')
       ->capture_default_str();
-  play->add_option("--fps", play_args->fps, "Target frame rate (frames due while one is shown are dropped)")
+  play->add_option("--fps", play_args->fps,
+                   "Target frame rate (frames due while one is shown are dropped)")
       ->check(CLI::Range(0.01, 1000.0))
       ->capture_default_str();
-  play->add_option("--frames", play_args->frames, "Frames to play (0: the whole source)")->check(CLI::NonNegativeNumber);
-  play->add_option("--patches", play_args->patches, "Target patch count (0: the room's)")->check(CLI::NonNegativeNumber);
-  play->add_option("--method", play_args->method, "naive | reverse | linear | perceptual | perceptual2000")
+  play->add_option("--frames", play_args->frames, "Frames to play (0: the whole source)")
+      ->check(CLI::NonNegativeNumber);
+  play->add_option("--patches", play_args->patches, "Target patch count (0: the room's)")
+      ->check(CLI::NonNegativeNumber);
+  play->add_option("--method", play_args->method,
+                   "naive | reverse | linear | perceptual | perceptual2000")
       ->check(CLI::IsMember({"naive", "reverse", "linear", "perceptual", "perceptual2000"}))
       ->capture_default_str();
-  play->add_option("--device", play_args->device, "cpu | cuda")->check(CLI::IsMember({"cpu", "cuda"}))->capture_default_str();
-  play->add_option("--alpha", play_args->alpha, "Weight of the absolute term, (0,1]")->check(CLI::Range(1e-9, 1.0));
-  play->add_option("--dither", play_args->dither, "none | ordered | error-diffusion")->capture_default_str();
+  play->add_option("--device", play_args->device, "cpu | cuda")
+      ->check(CLI::IsMember({"cpu", "cuda"}))
+      ->capture_default_str();
+  play->add_option("--alpha", play_args->alpha, "Weight of the absolute term, (0,1]")
+      ->check(CLI::Range(1e-9, 1.0));
+  play->add_option("--dither", play_args->dither, "none | ordered | error-diffusion")
+      ->capture_default_str();
   AddLightOption(play, &play_args->light);
   play->add_option("--render", play_args->render,
-                   "Without --nodes: gpu (the node's images rendered with OpenGL) | cpu (the reference renderer)")
+                   "Without --nodes: gpu (the node's images rendered with OpenGL) | cpu (the "
+                   "reference renderer)")
       ->check(CLI::IsMember({"gpu", "cpu"}))
       ->capture_default_str();
-  play->add_option("--frame-timeout-ms", play_args->frame_timeout_ms,
-                   "A node that does not answer a frame in this time is reported lost; the others go on")
+  play->add_option(
+          "--frame-timeout-ms", play_args->frame_timeout_ms,
+          "A node that does not answer a frame in this time is reported lost; the others go on")
       ->check(CLI::Range(1.0, 60000.0))
       ->capture_default_str();
   play->add_option("--setup-timeout", play_args->setup_timeout,

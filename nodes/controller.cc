@@ -19,7 +19,8 @@ constexpr double kPingIntervalS = 0.2;
 NodeAddress ParseNodeAddress(const std::string& text, int index) {
   NodeAddress address;
   const size_t equals = text.find('=');
-  address.name = equals == std::string::npos ? "node" + std::to_string(index) : text.substr(0, equals);
+  address.name =
+      equals == std::string::npos ? "node" + std::to_string(index) : text.substr(0, equals);
   address.endpoint = equals == std::string::npos ? text : text.substr(equals + 1);
   if (address.name.empty() || address.endpoint.empty() ||
       !(address.endpoint.starts_with("tcp://") || address.endpoint.starts_with("inproc://"))) {
@@ -46,7 +47,8 @@ Controller::Controller(zmq::context_t& context, std::vector<NodeAddress> nodes, 
                        ControllerOptions options)
     : addresses_(std::move(nodes)), options_(std::move(options)) {
   if (addresses_.empty()) throw std::invalid_argument("controller: no nodes");
-  if (!(options_.frame_timeout_s > 0.0)) throw std::invalid_argument("controller: frame timeout must be > 0");
+  if (!(options_.frame_timeout_s > 0.0))
+    throw std::invalid_argument("controller: frame timeout must be > 0");
   for (const NodeAddress& address : addresses_) {
     auto node = std::make_unique<Node>();
     node->address = address;
@@ -60,8 +62,9 @@ Controller::~Controller() = default;
 const std::vector<NodeAddress>& Controller::nodes() const { return addresses_; }
 
 int Controller::live() const {
-  return static_cast<int>(std::count_if(nodes_.begin(), nodes_.end(),
-                                        [](const auto& node) { return node->state == Node::State::kLive; }));
+  return static_cast<int>(std::count_if(nodes_.begin(), nodes_.end(), [](const auto& node) {
+    return node->state == Node::State::kLive;
+  }));
 }
 
 void Controller::Log(const std::string& line) const {
@@ -71,8 +74,11 @@ void Controller::Log(const std::string& line) const {
 void Controller::Lose(Node& node, const std::string& why) {
   if (node.state != Node::State::kLive) return;
   node.state = Node::State::kJoining;
-  Log(fmt::format("controller: node {} ({}) lost at frame {}: {}; last heard {:.0f} ms ago; {} other node(s) go on",
-                  node.address.name, node.address.endpoint, current_frame_, why, MsSince(node.last_heard), live()));
+  Log(
+      fmt::format("controller: node {} ({}) lost at frame {}: {}; last heard {:.0f} ms ago; {} "
+                  "other node(s) go on",
+                  node.address.name, node.address.endpoint, current_frame_, why,
+                  MsSince(node.last_heard), live()));
 }
 
 void Controller::Handle(Node& node, const Message& message) {
@@ -82,14 +88,17 @@ void Controller::Handle(Node& node, const Message& message) {
       // A node being set up that answers without our setup has restarted since it was sent
       // (or answers a ping sent before it): it is sent again (the same id is cheap to repeat).
       if (node.state == Node::State::kSettingUp &&
-          message.body.value("setup", std::string()) != options_.setup.value("setup", std::string())) {
+          message.body.value("setup", std::string()) !=
+              options_.setup.value("setup", std::string())) {
         node.state = Node::State::kJoining;
       }
       if (node.state != Node::State::kJoining) break;
-      if (message.body.value("setup", std::string()) == options_.setup.value("setup", std::string()) &&
+      if (message.body.value("setup", std::string()) ==
+              options_.setup.value("setup", std::string()) &&
           node.ever_live) {
         node.state = Node::State::kLive;
-        Log(fmt::format("controller: node {} is back at frame {}", node.address.name, current_frame_ + 1));
+        Log(fmt::format("controller: node {} is back at frame {}", node.address.name,
+                        current_frame_ + 1));
         break;
       }
       {
@@ -103,21 +112,25 @@ void Controller::Handle(Node& node, const Message& message) {
     case MessageType::kSetupDone:
       if (node.state != Node::State::kSettingUp) break;
       if (message.body.contains("error")) {
-        node.error = message.body["error"].is_string() ? message.body["error"].get<std::string>() : "setup failed";
+        node.error = message.body["error"].is_string() ? message.body["error"].get<std::string>()
+                                                       : "setup failed";
         node.state = Node::State::kJoining;
         Log(fmt::format("controller: node {}: {}", node.address.name, node.error));
         break;
       }
       node.error.clear();
       node.state = Node::State::kLive;
-      if (node.ever_live) Log(fmt::format("controller: node {} rejoins at frame {}", node.address.name, current_frame_ + 1));
+      if (node.ever_live)
+        Log(fmt::format("controller: node {} rejoins at frame {}", node.address.name,
+                        current_frame_ + 1));
       node.ever_live = true;
       break;
     case MessageType::kReady:
       if (message.sequence == current_frame_ && node.in_frame && node.state == Node::State::kLive) {
         node.ready = true;
         const nlohmann::json& body = message.body;
-        if (body.contains("render_ms") && body["render_ms"].is_number()) node.render_ms = body["render_ms"].get<double>();
+        if (body.contains("render_ms") && body["render_ms"].is_number())
+          node.render_ms = body["render_ms"].get<double>();
       }
       break;
     case MessageType::kPresented:
@@ -134,13 +147,15 @@ void Controller::Handle(Node& node, const Message& message) {
       break;
     }
     default:
-      Log(fmt::format("controller: node {} sent an unexpected '{}'", node.address.name, MessageTypeName(message.type)));
+      Log(fmt::format("controller: node {} sent an unexpected '{}'", node.address.name,
+                      MessageTypeName(message.type)));
   }
 }
 
 void Controller::Pump(int timeout_ms) {
   std::vector<zmq::pollitem_t> items;
-  for (const auto& node : nodes_) items.push_back({node->socket->socket().handle(), 0, ZMQ_POLLIN, 0});
+  for (const auto& node : nodes_)
+    items.push_back({node->socket->socket().handle(), 0, ZMQ_POLLIN, 0});
   zmq::poll(items.data(), items.size(), std::chrono::milliseconds(std::max(0, timeout_ms)));
   for (size_t k = 0; k < nodes_.size(); ++k) {
     if (!(items[k].revents & ZMQ_POLLIN)) continue;
@@ -151,7 +166,8 @@ void Controller::Pump(int timeout_ms) {
       if (message) {
         Handle(*nodes_[k], *message);
       } else if (!why.empty()) {
-        Log(fmt::format("controller: node {} sent a malformed message: {}", nodes_[k]->address.name, why));
+        Log(fmt::format("controller: node {} sent a malformed message: {}", nodes_[k]->address.name,
+                        why));
       } else {
         break;
       }
@@ -178,21 +194,25 @@ void Controller::Service() {
 void Controller::Connect() {
   const auto start = Clock::now();
   while (SecondsSince(start) < options_.setup_timeout_s) {
-    if (options_.cancelled && options_.cancelled()) throw IoError("controller: cancelled while the nodes were set up");
+    if (options_.cancelled && options_.cancelled())
+      throw IoError("controller: cancelled while the nodes were set up");
     Service();
     Pump(50);
     for (const auto& node : nodes_) {
-      if (!node->error.empty()) throw IoError("node " + node->address.name + " (" + node->address.endpoint + "): " + node->error);
+      if (!node->error.empty())
+        throw IoError("node " + node->address.name + " (" + node->address.endpoint +
+                      "): " + node->error);
     }
     if (live() == static_cast<int>(nodes_.size())) return;
   }
   for (const auto& node : nodes_) {
     if (node->state == Node::State::kLive) continue;
-    throw IoError(fmt::format("node {} ({}): {} in {:.0f} s (not running, not reachable, or it refused this "
-                              "controller's key: see the node's log)",
-                              node->address.name, node->address.endpoint,
-                              node->state == Node::State::kSettingUp ? "not set up" : "no answer",
-                              options_.setup_timeout_s));
+    throw IoError(
+        fmt::format("node {} ({}): {} in {:.0f} s (not running, not reachable, or it refused this "
+                    "controller's key: see the node's log)",
+                    node->address.name, node->address.endpoint,
+                    node->state == Node::State::kSettingUp ? "not set up" : "no answer",
+                    options_.setup_timeout_s));
   }
 }
 
@@ -206,8 +226,8 @@ FrameReport Controller::Show(uint64_t frame, const Eigen::MatrixX3d& emittance) 
   message.type = MessageType::kFrame;
   message.sequence = frame;
   message.emittance.resize(emittance.size());
-  Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(message.emittance.data(), emittance.rows(), 3) =
-      emittance;
+  Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
+      message.emittance.data(), emittance.rows(), 3) = emittance;
   const std::string bytes = EncodeMessage(message);  // once, for every node
   const auto sent = Clock::now();
   // Only the nodes live now take part: one that rejoins while the frame is under way waits for
@@ -219,9 +239,12 @@ FrameReport Controller::Show(uint64_t frame, const Eigen::MatrixX3d& emittance) 
     node->ready = node->presented = false;
     node->ready_ms = node->render_ms = 0.0;
     if (!node->in_frame) continue;
-    if (!node->socket->socket().send(zmq::buffer(bytes), zmq::send_flags::dontwait)) Lose(*node, "not connected");
+    if (!node->socket->socket().send(zmq::buffer(bytes), zmq::send_flags::dontwait))
+      Lose(*node, "not connected");
   }
-  auto taking_part = [](const Node& node) { return node.in_frame && node.state == Node::State::kLive; };
+  auto taking_part = [](const Node& node) {
+    return node.in_frame && node.state == Node::State::kLive;
+  };
   auto waiting = [&](bool presented) {
     return std::any_of(nodes_.begin(), nodes_.end(), [&](const auto& node) {
       return taking_part(*node) && !(presented ? node->presented : node->ready);
@@ -236,7 +259,8 @@ FrameReport Controller::Show(uint64_t frame, const Eigen::MatrixX3d& emittance) 
   }
   for (const auto& node : nodes_) {
     if (taking_part(*node) && !node->ready)
-      Lose(*node, fmt::format("no answer to frame {} in {:.0f} ms", frame, 1e3 * options_.frame_timeout_s));
+      Lose(*node, fmt::format("no answer to frame {} in {:.0f} ms", frame,
+                              1e3 * options_.frame_timeout_s));
   }
   report.ready_ms = MsSince(sent);
   Message present;
@@ -247,10 +271,12 @@ FrameReport Controller::Show(uint64_t frame, const Eigen::MatrixX3d& emittance) 
     if (taking_part(*node) && !node->socket->Send(present)) Lose(*node, "not connected");
   }
   while (waiting(true) && Clock::now() - present_sent < timeout)
-    Pump(static_cast<int>(std::ceil(1e3 * (options_.frame_timeout_s - SecondsSince(present_sent)))));
+    Pump(
+        static_cast<int>(std::ceil(1e3 * (options_.frame_timeout_s - SecondsSince(present_sent)))));
   for (const auto& node : nodes_) {
     if (taking_part(*node) && !node->presented)
-      Lose(*node, fmt::format("frame {} not presented in {:.0f} ms", frame, 1e3 * options_.frame_timeout_s));
+      Lose(*node, fmt::format("frame {} not presented in {:.0f} ms", frame,
+                              1e3 * options_.frame_timeout_s));
   }
   report.present_ms = MsSince(present_sent);
   int64_t earliest = 0, latest = 0;

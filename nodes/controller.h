@@ -17,7 +17,6 @@
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
 #include <zmq.hpp>
 
 #include "nodes/transport.h"
@@ -51,10 +50,10 @@ struct NodeFrame {
 
 struct FrameReport {
   uint64_t frame = 0;
-  double ready_ms = 0.0;    // kFrame sent → the last live node ready
-  double present_ms = 0.0;  // kPresent sent → the last kPresented
-  double skew_ms = 0.0;     // latest − earliest presentation among the nodes that showed it
-  int shown = 0;            // nodes that showed it
+  double ready_ms = 0.0;         // kFrame sent → the last live node ready
+  double present_ms = 0.0;       // kPresent sent → the last kPresented
+  double skew_ms = 0.0;          // latest − earliest presentation among the nodes that showed it
+  int shown = 0;                 // nodes that showed it
   std::vector<NodeFrame> nodes;  // in the controller's node order
 };
 

@@ -16,7 +16,8 @@ constexpr char kMagic[4] = {'P', 'C', 'N', '1'};
 bool CarriesJson(MessageType type) {
   return type == MessageType::kSetup || type == MessageType::kSetupDone ||
          type == MessageType::kPong || type == MessageType::kReady ||
-         type == MessageType::kFailed || type == MessageType::kPresented || type == MessageType::kStop;
+         type == MessageType::kFailed || type == MessageType::kPresented ||
+         type == MessageType::kStop;
 }
 
 bool KnownType(uint8_t type) {
@@ -50,8 +51,10 @@ bool ParseJsonPayload(const unsigned char* bytes, size_t begin, size_t size, nlo
                          std::to_string(kMaxTextBytes) + ")");
   }
   *body = nlohmann::json::parse(bytes + begin, bytes + size, nullptr, /*allow_exceptions=*/false);
-  if (body->is_discarded()) return Fail(why, "text payload at offset " + std::to_string(begin) + " is not JSON");
-  if (!body->is_object()) return Fail(why, "text payload at offset " + std::to_string(begin) + " is not a JSON object");
+  if (body->is_discarded())
+    return Fail(why, "text payload at offset " + std::to_string(begin) + " is not JSON");
+  if (!body->is_object())
+    return Fail(why, "text payload at offset " + std::to_string(begin) + " is not a JSON object");
   return true;
 }
 
@@ -59,16 +62,26 @@ bool ParseJsonPayload(const unsigned char* bytes, size_t begin, size_t size, nlo
 
 const char* MessageTypeName(MessageType type) {
   switch (type) {
-    case MessageType::kPing: return "ping";
-    case MessageType::kPong: return "pong";
-    case MessageType::kSetup: return "setup";
-    case MessageType::kSetupDone: return "setup-done";
-    case MessageType::kFrame: return "frame";
-    case MessageType::kReady: return "ready";
-    case MessageType::kPresent: return "present";
-    case MessageType::kPresented: return "presented";
-    case MessageType::kFailed: return "failed";
-    case MessageType::kStop: return "stop";
+    case MessageType::kPing:
+      return "ping";
+    case MessageType::kPong:
+      return "pong";
+    case MessageType::kSetup:
+      return "setup";
+    case MessageType::kSetupDone:
+      return "setup-done";
+    case MessageType::kFrame:
+      return "frame";
+    case MessageType::kReady:
+      return "ready";
+    case MessageType::kPresent:
+      return "present";
+    case MessageType::kPresented:
+      return "presented";
+    case MessageType::kFailed:
+      return "failed";
+    case MessageType::kStop:
+      return "stop";
   }
   return "?";
 }
@@ -79,10 +92,11 @@ std::string EncodeMessage(const Message& message) {
   bytes.append(3, '\0');
   Append(&bytes, message.sequence);
   if (message.type == MessageType::kFrame) {
-    if (message.emittance.empty() || message.emittance.size() % 3 != 0 || message.emittance.size() / 3 > kMaxFramePatches) {
-      throw std::invalid_argument("frame message: emittance of " +
-                                  std::to_string(message.emittance.size()) +
-                                  " values is not n x 3 with 1 <= n <= " + std::to_string(kMaxFramePatches));
+    if (message.emittance.empty() || message.emittance.size() % 3 != 0 ||
+        message.emittance.size() / 3 > kMaxFramePatches) {
+      throw std::invalid_argument(
+          "frame message: emittance of " + std::to_string(message.emittance.size()) +
+          " values is not n x 3 with 1 <= n <= " + std::to_string(kMaxFramePatches));
     }
     Append(&bytes, static_cast<uint32_t>(message.emittance.size() / 3));
     Append(&bytes, uint32_t{0});
@@ -99,9 +113,9 @@ std::string EncodeMessage(const Message& message) {
     }
     const std::string text = body.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
     if (text.size() > kMaxTextBytes) {
-      throw std::invalid_argument(std::string(MessageTypeName(message.type)) + " message: payload of " +
-                                  std::to_string(text.size()) + " bytes (at most " +
-                                  std::to_string(kMaxTextBytes) + ")");
+      throw std::invalid_argument(std::string(MessageTypeName(message.type)) +
+                                  " message: payload of " + std::to_string(text.size()) +
+                                  " bytes (at most " + std::to_string(kMaxTextBytes) + ")");
     }
     bytes += text;
   }
@@ -114,9 +128,12 @@ bool ParseMessage(const void* data, size_t size, Message* message, std::string* 
     return Fail(why, "message of " + std::to_string(size) + " bytes, shorter than the " +
                          std::to_string(kMessageHeaderBytes) + "-byte header");
   }
-  if (std::memcmp(bytes, kMagic, sizeof(kMagic)) != 0) return Fail(why, "not a procam node message (magic)");
-  if (!KnownType(bytes[4])) return Fail(why, "unknown message type " + std::to_string(int(bytes[4])));
-  if (bytes[5] != 0 || bytes[6] != 0 || bytes[7] != 0) return Fail(why, "reserved bytes 5-7 are not zero");
+  if (std::memcmp(bytes, kMagic, sizeof(kMagic)) != 0)
+    return Fail(why, "not a procam node message (magic)");
+  if (!KnownType(bytes[4]))
+    return Fail(why, "unknown message type " + std::to_string(int(bytes[4])));
+  if (bytes[5] != 0 || bytes[6] != 0 || bytes[7] != 0)
+    return Fail(why, "reserved bytes 5-7 are not zero");
   *message = Message();
   message->type = static_cast<MessageType>(bytes[4]);
   message->sequence = Read<uint64_t>(bytes + 8);
@@ -126,13 +143,16 @@ bool ParseMessage(const void* data, size_t size, Message* message, std::string* 
     case MessageType::kPing:
     case MessageType::kPresent:
       if (size != offset) {
-        return Fail(why, name + " message of " + std::to_string(size) + " bytes (carries no payload)");
+        return Fail(why,
+                    name + " message of " + std::to_string(size) + " bytes (carries no payload)");
       }
       return true;
     case MessageType::kFrame: {
-      if (size < offset + 8) return Fail(why, "frame message of " + std::to_string(size) + " bytes: no patch count");
+      if (size < offset + 8)
+        return Fail(why, "frame message of " + std::to_string(size) + " bytes: no patch count");
       const uint32_t patches = Read<uint32_t>(bytes + offset);
-      if (Read<uint32_t>(bytes + offset + 4) != 0) return Fail(why, "frame message: reserved bytes 20-23 are not zero");
+      if (Read<uint32_t>(bytes + offset + 4) != 0)
+        return Fail(why, "frame message: reserved bytes 20-23 are not zero");
       offset += 8;
       if (patches == 0) return Fail(why, "frame message of 0 patches");
       if (patches > kMaxFramePatches) {
@@ -145,7 +165,8 @@ bool ParseMessage(const void* data, size_t size, Message* message, std::string* 
                              std::to_string(patches) + " patches need " + std::to_string(expected));
       }
       message->emittance.resize(size_t{patches} * 3);
-      std::memcpy(message->emittance.data(), bytes + offset, message->emittance.size() * sizeof(double));
+      std::memcpy(message->emittance.data(), bytes + offset,
+                  message->emittance.size() * sizeof(double));
       for (size_t i = 0; i < message->emittance.size(); ++i) {
         if (!std::isfinite(message->emittance[i])) {
           return Fail(why, "frame message: emittance of patch " + std::to_string(i / 3) +
@@ -155,7 +176,8 @@ bool ParseMessage(const void* data, size_t size, Message* message, std::string* 
       return true;
     }
     case MessageType::kPresented:
-      if (size < offset + 8) return Fail(why, "presented message of " + std::to_string(size) + " bytes: no time");
+      if (size < offset + 8)
+        return Fail(why, "presented message of " + std::to_string(size) + " bytes: no time");
       message->presented_ns = Read<int64_t>(bytes + offset);
       offset += 8;
       return ParseJsonPayload(bytes, offset, size, &message->body, why);

@@ -33,24 +33,23 @@
 // that is not exactly a message of this protocol. It never throws and never reads past `size`.
 
 #include <cstdint>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 namespace procam {
 
 enum class MessageType : uint8_t {
-  kPing = 1,        // controller → node: are you there (answered by kPong)
-  kPong = 2,        // node → controller: its status (name, projectors, monitors, render device)
-  kSetup = 3,       // controller → node: the rig to render (scene, patches, options)
-  kSetupDone = 4,   // node → controller: the rig is built (or why not: "error")
-  kFrame = 5,       // controller → node: per-patch emittance of frame `sequence`
-  kReady = 6,       // node → controller: frame `sequence` is rendered into the back buffers
-  kPresent = 7,     // controller → node: show frame `sequence`
-  kPresented = 8,   // node → controller: frame `sequence` is on its monitors, and when
-  kFailed = 9,      // node → controller: something went wrong (a monitor gone, a bad frame)
-  kStop = 10,       // controller → node: the show is over ({"exit": true}: the node returns)
+  kPing = 1,       // controller → node: are you there (answered by kPong)
+  kPong = 2,       // node → controller: its status (name, projectors, monitors, render device)
+  kSetup = 3,      // controller → node: the rig to render (scene, patches, options)
+  kSetupDone = 4,  // node → controller: the rig is built (or why not: "error")
+  kFrame = 5,      // controller → node: per-patch emittance of frame `sequence`
+  kReady = 6,      // node → controller: frame `sequence` is rendered into the back buffers
+  kPresent = 7,    // controller → node: show frame `sequence`
+  kPresented = 8,  // node → controller: frame `sequence` is on its monitors, and when
+  kFailed = 9,     // node → controller: something went wrong (a monitor gone, a bad frame)
+  kStop = 10,      // controller → node: the show is over ({"exit": true}: the node returns)
 };
 const char* MessageTypeName(MessageType type);
 
@@ -59,14 +58,15 @@ constexpr size_t kMaxTextBytes = 64 * 1024;
 // Patches a kFrame may carry: 4 million (a message of 96 MiB), past any room procam solves.
 constexpr uint32_t kMaxFramePatches = 1u << 22;
 // What the transport lets through at most (ZMQ_MAXMSGSIZE): a kFrame of kMaxFramePatches.
-constexpr int64_t kMaxMessageBytes = int64_t{kMessageHeaderBytes} + 8 + int64_t{24} * kMaxFramePatches;
+constexpr int64_t kMaxMessageBytes =
+    int64_t{kMessageHeaderBytes} + 8 + int64_t{24} * kMaxFramePatches;
 
 struct Message {
   MessageType type = MessageType::kPing;
   uint64_t sequence = 0;
   std::vector<double> emittance;  // kFrame: n × 3, row-major (patch, channel)
-  int64_t presented_ns = 0;      // kPresented
-  nlohmann::json body;           // the JSON payload of the types that carry one; else null
+  int64_t presented_ns = 0;       // kPresented
+  nlohmann::json body;            // the JSON payload of the types that carry one; else null
 };
 
 // The bytes of `message` (its type decides which fields are written). Throws

@@ -38,24 +38,32 @@ void ParseSetup(const nlohmann::json& body, NodeSetup* setup) {
   const nlohmann::json& id = need("setup");
   const nlohmann::json& target = need("target_patches");
   const nlohmann::json& patches = need("patches");
-  if (!id.is_string() || id.get<std::string>().size() > 256) throw std::invalid_argument("setup: \"setup\" must be a string");
-  if (!target.is_number_integer() || target.get<long long>() < 4 || target.get<long long>() > kMaxFramePatches)
-    throw std::invalid_argument("setup: \"target_patches\" must be an integer in [4, " + std::to_string(kMaxFramePatches) + "]");
-  if (!patches.is_number_integer() || patches.get<long long>() < 1 || patches.get<long long>() > kMaxFramePatches)
-    throw std::invalid_argument("setup: \"patches\" must be an integer in [1, " + std::to_string(kMaxFramePatches) + "]");
+  if (!id.is_string() || id.get<std::string>().size() > 256)
+    throw std::invalid_argument("setup: \"setup\" must be a string");
+  if (!target.is_number_integer() || target.get<long long>() < 4 ||
+      target.get<long long>() > kMaxFramePatches)
+    throw std::invalid_argument("setup: \"target_patches\" must be an integer in [4, " +
+                                std::to_string(kMaxFramePatches) + "]");
+  if (!patches.is_number_integer() || patches.get<long long>() < 1 ||
+      patches.get<long long>() > kMaxFramePatches)
+    throw std::invalid_argument("setup: \"patches\" must be an integer in [1, " +
+                                std::to_string(kMaxFramePatches) + "]");
   setup->id = id.get<std::string>();
   setup->target_patches = target.get<int>();
   setup->patches = patches.get<int>();
   if (body.contains("dither")) {
-    if (!body["dither"].is_string() || !ParseDither(body["dither"].get<std::string>(), &setup->render.dither))
+    if (!body["dither"].is_string() ||
+        !ParseDither(body["dither"].get<std::string>(), &setup->render.dither))
       throw std::invalid_argument("setup: \"dither\" must be none, ordered or error-diffusion");
   }
   if (body.contains("light")) {
-    if (!body["light"].is_string() || !ParseLightField(body["light"].get<std::string>(), &setup->render.light))
+    if (!body["light"].is_string() ||
+        !ParseLightField(body["light"].get<std::string>(), &setup->render.light))
       throw std::invalid_argument("setup: \"light\" must be smooth or flat");
   }
   if (body.contains("feather")) {
-    if (!body["feather"].is_number() || !(body["feather"].get<double>() > 0.0 && body["feather"].get<double>() <= 0.5))
+    if (!body["feather"].is_number() ||
+        !(body["feather"].get<double>() > 0.0 && body["feather"].get<double>() <= 0.5))
       throw std::invalid_argument("setup: \"feather\" must be a number in (0, 0.5]");
     setup->feather = body["feather"].get<double>();
   }
@@ -65,7 +73,8 @@ class Node {
  public:
   Node(zmq::context_t& context, const NodeOptions& options, const NodeOutputFactory& make_outputs)
       : options_(options), rig_dir_(ReadRigDirectory(options.rig_dir)) {
-    if (options.projectors.empty()) throw IoError("node " + options.name + ": no projectors to show (--projectors)");
+    if (options.projectors.empty())
+      throw IoError("node " + options.name + ": no projectors to show (--projectors)");
     for (const std::string& name : options.projectors) {
       int found = -1;
       for (size_t k = 0; k < rig_dir_.projectors.size(); ++k) {
@@ -73,7 +82,8 @@ class Node {
       }
       if (found < 0) {
         std::string names;
-        for (const Projector& p : rig_dir_.projectors) names += (names.empty() ? "" : ", ") + p.name;
+        for (const Projector& p : rig_dir_.projectors)
+          names += (names.empty() ? "" : ", ") + p.name;
         throw IoError((options.rig_dir / "rig.json").string() + ": no projector '" + name +
                       "' (the rig has " + names + ")");
       }
@@ -81,12 +91,15 @@ class Node {
       own_projectors_.push_back(rig_dir_.projectors[found]);
     }
     outputs_ = make_outputs(own_projectors_);
-    if (outputs_.size() != own_.size()) throw IoError("node " + options.name + ": one output per projector needed");
+    if (outputs_.size() != own_.size())
+      throw IoError("node " + options.name + ": one output per projector needed");
     const bool local = options.listen.starts_with("inproc://");
     std::optional<RigKeys> keys;
     if (!local) keys = ReadRigKeys(options.rig_dir, KeyRole::kNode);
-    socket_ = std::make_unique<NodeSocket>(context, options.listen, keys ? &*keys : nullptr, options.log);
-    Log(fmt::format("node {}: listening at {}, showing {}", options.name, socket_->endpoint(), Describe()));
+    socket_ =
+        std::make_unique<NodeSocket>(context, options.listen, keys ? &*keys : nullptr, options.log);
+    Log(fmt::format("node {}: listening at {}, showing {}", options.name, socket_->endpoint(),
+                    Describe()));
   }
 
   // Returns when `stop` is set or a controller asked the node to exit.
@@ -119,17 +132,26 @@ class Node {
 
   void Handle(const Message& message) {
     switch (message.type) {
-      case MessageType::kPing: Reply(MessageType::kPong, message.sequence, Status()); break;
-      case MessageType::kSetup: SetUp(message); break;
-      case MessageType::kFrame: Render(message); break;
-      case MessageType::kPresent: Present(message.sequence); break;
+      case MessageType::kPing:
+        Reply(MessageType::kPong, message.sequence, Status());
+        break;
+      case MessageType::kSetup:
+        SetUp(message);
+        break;
+      case MessageType::kFrame:
+        Render(message);
+        break;
+      case MessageType::kPresent:
+        Present(message.sequence);
+        break;
       case MessageType::kStop:
         rendered_.reset();
         Log(fmt::format("node {}: stopped by the controller", options_.name));
         exit_ = message.body.is_object() && message.body.value("exit", false);
         break;
       default:
-        Fail(message.sequence, std::string("unexpected message '") + MessageTypeName(message.type) + "' from the controller");
+        Fail(message.sequence, std::string("unexpected message '") + MessageTypeName(message.type) +
+                                   "' from the controller");
     }
   }
 
@@ -138,7 +160,8 @@ class Node {
                              {"setup", setup_ ? setup_->id : ""},
                              {"render", setup_ && setup_->planner ? "gpu" : "cpu"}};
     for (size_t k = 0; k < outputs_.size(); ++k)
-      status["projectors"].push_back({{"name", own_projectors_[k].name}, {"output", outputs_[k]->Describe()}});
+      status["projectors"].push_back(
+          {{"name", own_projectors_[k].name}, {"output", outputs_[k]->Describe()}});
     return status;
   }
 
@@ -154,15 +177,17 @@ class Node {
         Reply(MessageType::kSetupDone, message.sequence, done);
         return;
       }
-      Log(fmt::format("node {}: setting up {} patches (target {})", options_.name, setup->patches, setup->target_patches));
+      Log(fmt::format("node {}: setting up {} patches (target {})", options_.name, setup->patches,
+                      setup->target_patches));
       Scene scene = LoadSceneArgument(options_.scene);
       SubdivisionOptions subdivision;
       subdivision.target_patches = setup->target_patches;
       PatchHierarchy patches = SubdividePatches(scene, subdivision);
       if (patches.fine.size() != setup->patches) {
-        throw IoError(fmt::format("{}: subdivides into {} patches for target {}, the controller's room into {}: "
-                                  "the display PC's copy of the room differs",
-                                  scene.path.string(), patches.fine.size(), setup->target_patches, setup->patches));
+        throw IoError(fmt::format(
+            "{}: subdivides into {} patches for target {}, the controller's room into {}: "
+            "the display PC's copy of the room differs",
+            scene.path.string(), patches.fine.size(), setup->target_patches, setup->patches));
       }
       ApplyRigReflectance(rig_dir_, &patches);
       ProjectionRigOptions rig_options;
@@ -197,19 +222,23 @@ class Node {
       on_gpu += setup->gpu[k];
     }
     if (on_gpu == 0) setup->planner.reset();
-    Log(fmt::format("node {}: {} of {} projector(s) rendered on the GPU", options_.name, on_gpu, outputs_.size()));
+    Log(fmt::format("node {}: {} of {} projector(s) rendered on the GPU", options_.name, on_gpu,
+                    outputs_.size()));
   }
 
   void Render(const Message& message) {
     if (!setup_) return Fail(message.sequence, "frame before setup");
     const int n = setup_->rig.size();
     if (static_cast<int>(message.emittance.size()) != 3 * n) {
-      return Fail(message.sequence, fmt::format("frame of {} patches, the rig has {}", message.emittance.size() / 3, n));
+      return Fail(message.sequence, fmt::format("frame of {} patches, the rig has {}",
+                                                message.emittance.size() / 3, n));
     }
     const auto start = Clock::now();
     const Eigen::MatrixX3d emittance =
-        Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(message.emittance.data(), n, 3);
-    const bool cpu_outputs = std::find(setup_->gpu.begin(), setup_->gpu.end(), false) != setup_->gpu.end();
+        Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
+            message.emittance.data(), n, 3);
+    const bool cpu_outputs =
+        std::find(setup_->gpu.begin(), setup_->gpu.end(), false) != setup_->gpu.end();
     std::vector<ProjectorImage> images;
     double plan_ms = 0.0;
     if (setup_->planner) {
@@ -264,7 +293,8 @@ class Node {
 
   void Fail(uint64_t sequence, const std::string& why) {
     Log(fmt::format("node {}: {}", options_.name, why));
-    if (!peer_.empty()) Reply(MessageType::kFailed, sequence, {{"node", options_.name}, {"error", why}});
+    if (!peer_.empty())
+      Reply(MessageType::kFailed, sequence, {{"node", options_.name}, {"error", why}});
   }
 
   void Reply(MessageType type, uint64_t sequence, nlohmann::json body) {
@@ -294,7 +324,9 @@ class Node {
 
 }  // namespace
 
-std::string RecordOutput::Describe() const { return path_.empty() ? "memory" : "record:" + path_.string(); }
+std::string RecordOutput::Describe() const {
+  return path_.empty() ? "memory" : "record:" + path_.string();
+}
 
 void RecordOutput::Present(uint64_t) {
   presented_ = drawn_;

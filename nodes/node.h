@@ -21,11 +21,10 @@
 #include <memory>
 #include <string>
 #include <vector>
-
 #include <zmq.hpp>
 
-#include "projection/projector.h"
 #include "projection/frame_plan.h"
+#include "projection/projector.h"
 #include "projection/projector_images.h"
 
 namespace procam {

@@ -96,11 +96,15 @@ class GpuRecordOutput : public RecordOutput {
 NodeOutputFactory MakeNodeOutputs(const std::vector<std::string>& display) {
   if (display.empty()) throw std::invalid_argument("--display: give one output per projector");
   for (const std::string& entry : display) {
-    const bool known = entry == "memory" || entry.starts_with("record:") || entry.starts_with("glfw:");
-    if (!known) throw std::invalid_argument("--display: '" + entry + "' is not glfw:MONITOR, record:DIR or memory");
+    const bool known =
+        entry == "memory" || entry.starts_with("record:") || entry.starts_with("glfw:");
+    if (!known)
+      throw std::invalid_argument("--display: '" + entry +
+                                  "' is not glfw:MONITOR, record:DIR or memory");
 #if !PROCAM_WITH_GLFW
     if (entry.starts_with("glfw:"))
-      throw std::invalid_argument("--display " + entry + ": this procam was built without the GLFW backend");
+      throw std::invalid_argument("--display " + entry +
+                                  ": this procam was built without the GLFW backend");
 #endif
   }
   return [display](const std::vector<Projector>& projectors) {

@@ -5,12 +5,11 @@
 #include <algorithm>
 #include <chrono>
 #include <exception>
-#include <random>
-#include <thread>
-
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
+#include <random>
+#include <thread>
 
 #include "base/io.h"
 #include "base/timing.h"
@@ -33,16 +32,19 @@ class FrameSource {
       for (const auto& entry : std::filesystem::directory_iterator(path)) {
         std::string extension = entry.path().extension().string();
         std::transform(extension.begin(), extension.end(), extension.begin(), ::tolower);
-        if (extension == ".png" || extension == ".jpg" || extension == ".jpeg" || extension == ".tif" ||
-            extension == ".tiff" || extension == ".ppm" || extension == ".pnm")
+        if (extension == ".png" || extension == ".jpg" || extension == ".jpeg" ||
+            extension == ".tif" || extension == ".tiff" || extension == ".ppm" ||
+            extension == ".pnm")
           files_.push_back(entry.path());
       }
       std::sort(files_.begin(), files_.end());
-      if (files_.empty()) throw IoError(path.string() + ": no images (.png, .jpg, .tif, .ppm) in the directory");
+      if (files_.empty())
+        throw IoError(path.string() + ": no images (.png, .jpg, .tif, .ppm) in the directory");
       count_ = static_cast<int>(files_.size());
       return;
     }
-    if (!std::filesystem::exists(path)) throw IoError(path.string() + ": no such file or directory");
+    if (!std::filesystem::exists(path))
+      throw IoError(path.string() + ": no such file or directory");
     if (!video_.open(path.string(), cv::CAP_ANY) || !video_.isOpened()) {
       throw IoError(path.string() + ": not a video OpenCV can read (nor a directory of images)");
     }
@@ -80,16 +82,18 @@ std::string RandomId() {
 }
 
 nlohmann::json FrameJson(const PlayFrame& frame, const std::vector<NodeAddress>& nodes) {
-  nlohmann::json json = {{"frame", frame.shown.frame},     {"source", frame.source},
-                         {"read_ms", frame.read_ms},       {"desired_ms", frame.desired_ms},
-                         {"solve_ms", frame.solve_ms},     {"iterations", frame.iterations},
+  nlohmann::json json = {{"frame", frame.shown.frame},       {"source", frame.source},
+                         {"read_ms", frame.read_ms},         {"desired_ms", frame.desired_ms},
+                         {"solve_ms", frame.solve_ms},       {"iterations", frame.iterations},
                          {"ready_ms", frame.shown.ready_ms}, {"present_ms", frame.shown.present_ms},
-                         {"skew_ms", frame.shown.skew_ms}, {"total_ms", frame.total_ms},
+                         {"skew_ms", frame.shown.skew_ms},   {"total_ms", frame.total_ms},
                          {"nodes_shown", frame.shown.shown}};
   for (size_t k = 0; k < frame.shown.nodes.size(); ++k) {
     const NodeFrame& node = frame.shown.nodes[k];
-    json["nodes"][nodes[k].name] = {{"state", node.state}, {"ready_ms", node.ready_ms},
-                                    {"render_ms", node.render_ms}, {"presented_ns", node.presented_ns}};
+    json["nodes"][nodes[k].name] = {{"state", node.state},
+                                    {"ready_ms", node.ready_ms},
+                                    {"render_ms", node.render_ms},
+                                    {"presented_ns", node.presented_ns}};
   }
   return json;
 }
@@ -130,10 +134,11 @@ PlayScene PreparePlay(const PlayOptions& options, const RigDirectory& rig) {
   const PatchLevel& fine = play.geometry.patches.fine;
   if (solution) {
     if (solution->patches != fine.size()) {
-      throw IoError(fmt::format("{}: the solution has {} patches, {} subdivides into {} (give --patches as "
-                                "compensate was given it)",
-                                (options.solution / "result.json").string(), solution->patches, options.scene,
-                                fine.size()));
+      throw IoError(
+          fmt::format("{}: the solution has {} patches, {} subdivides into {} (give --patches as "
+                      "compensate was given it)",
+                      (options.solution / "result.json").string(), solution->patches, options.scene,
+                      fine.size()));
     }
     play.solution = solution->emittance;
   }
@@ -150,9 +155,10 @@ PlayScene PreparePlay(const PlayOptions& options, const RigDirectory& rig) {
     return play;
   }
   if (rig.file.camera.model.empty()) {
-    throw IoError((options.rig_dir / "rig.json").string() +
-                  ": camera.model: the rig has no registered camera, which play needs to map the desired "
-                  "images onto the room (run procam calibrate all)");
+    throw IoError(
+        (options.rig_dir / "rig.json").string() +
+        ": camera.model: the rig has no registered camera, which play needs to map the desired "
+        "images onto the room (run procam calibrate all)");
   }
   Report(options.progress, "play: casting the camera's rays into the room");
   const ProjectorGeometry camera = ReadCameraModel(options.rig_dir / rig.file.camera.model);
@@ -164,8 +170,8 @@ PlayScene PreparePlay(const PlayOptions& options, const RigDirectory& rig) {
   return play;
 }
 
-void WritePlayResult(const PlayOptions& options, const PlaySummary& summary, const std::vector<NodeAddress>& nodes,
-                     const PlayScene& play) {
+void WritePlayResult(const PlayOptions& options, const PlaySummary& summary,
+                     const std::vector<NodeAddress>& nodes, const PlayScene& play) {
   nlohmann::json result = {{"scene", options.scene},
                            {"rig", options.rig_dir.string()},
                            {"desired", options.desired.string()},
@@ -185,17 +191,21 @@ void WritePlayResult(const PlayOptions& options, const PlaySummary& summary, con
     skew.push_back(frame.shown.skew_ms);
     total.push_back(frame.total_ms);
   }
-  result["median_ms"] = {{"solve", Median(solve)}, {"ready", Median(ready)}, {"skew", Median(skew)}, {"total", Median(total)}};
-  for (const NodeAddress& node : nodes) result["nodes"].push_back({{"name", node.name}, {"endpoint", node.endpoint}});
+  result["median_ms"] = {{"solve", Median(solve)},
+                         {"ready", Median(ready)},
+                         {"skew", Median(skew)},
+                         {"total", Median(total)}};
+  for (const NodeAddress& node : nodes)
+    result["nodes"].push_back({{"name", node.name}, {"endpoint", node.endpoint}});
   std::filesystem::create_directories(options.out);
   WriteFileAtomically(options.out / "result.json", result.dump(2) + "\n");
 }
 
 // The show itself: frames through the controller until the source ends.
-PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& controller, FrameSource* source,
-                       Clock::time_point start) {
+PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& controller,
+                       FrameSource* source, Clock::time_point start) {
   PlaySummary summary;
-  const int limit = options.frames > 0   ? options.frames
+  const int limit = options.frames > 0  ? options.frames
                     : source == nullptr ? 1
                                         : (source->count() > 0 ? source->count() : INT32_MAX);
   const auto period = std::chrono::duration<double>(1.0 / options.fps);
@@ -214,8 +224,8 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
       if (image.empty()) break;  // the end of a video
       frame.read_ms = MsSince(frame_start);
       auto step = Clock::now();
-      play.problem.desired =
-          DesiredFromImage(image, play.pixel_patch, play.camera_width, play.camera_height, room_desired);
+      play.problem.desired = DesiredFromImage(image, play.pixel_patch, play.camera_width,
+                                              play.camera_height, room_desired);
       frame.desired_ms = MsSince(step);
       step = Clock::now();
       SolverSummary solver_summary;
@@ -230,7 +240,8 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
     }
     frame.shown = controller.Show(static_cast<uint64_t>(summary.frames.size()), previous);
     frame.total_ms = MsSince(frame_start);
-    if (summary.frames.empty()) t0 = Clock::now() - std::chrono::duration_cast<Clock::duration>(period * index);
+    if (summary.frames.empty())
+      t0 = Clock::now() - std::chrono::duration_cast<Clock::duration>(period * index);
     summary.frames.push_back(frame);
     // The next frame is the one due now: frames whose time passed are dropped, not shown late.
     const auto next_due = t0 + std::chrono::duration_cast<Clock::duration>(period * (index + 1));
@@ -242,12 +253,13 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
     if (SecondsSince(last_progress) >= 1.0 || index >= limit) {
       last_progress = Clock::now();
       Report(options.progress,
-             fmt::format("play: frame {}/{} ({:.1f} fps), solve {:.1f} ms ({} it), ready {:.1f} ms, skew {:.2f} ms, "
+             fmt::format("play: frame {}/{} ({:.1f} fps), solve {:.1f} ms ({} it), ready {:.1f} "
+                         "ms, skew {:.2f} ms, "
                          "dropped {}, nodes {}/{}",
                          std::min(index, limit), limit == INT32_MAX ? 0 : limit,
-                         summary.frames.size() / std::max(1e-9, SecondsSince(t0)), frame.solve_ms, frame.iterations,
-                         frame.shown.ready_ms, frame.shown.skew_ms, summary.dropped, controller.live(),
-                         controller.nodes().size()));
+                         summary.frames.size() / std::max(1e-9, SecondsSince(t0)), frame.solve_ms,
+                         frame.iterations, frame.shown.ready_ms, frame.shown.skew_ms,
+                         summary.dropped, controller.live(), controller.nodes().size()));
     }
   }
   summary.seconds = SecondsSince(start);
@@ -256,8 +268,8 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
 
 }  // namespace
 
-Eigen::MatrixX3d DesiredFromImage(const cv::Mat& image, const std::vector<int>& pixel_patch, int width, int height,
-                                  const Eigen::MatrixX3d& fallback) {
+Eigen::MatrixX3d DesiredFromImage(const cv::Mat& image, const std::vector<int>& pixel_patch,
+                                  int width, int height, const Eigen::MatrixX3d& fallback) {
   if (image.empty() || image.channels() != 3 || (image.depth() != CV_8U && image.depth() != CV_16U))
     throw std::invalid_argument("desired image: need 8- or 16-bit colour");
   if (static_cast<long long>(pixel_patch.size()) != 1LL * width * height)
@@ -300,7 +312,8 @@ Eigen::MatrixX3d DesiredFromImage(const cv::Mat& image, const std::vector<int>& 
 
 PlaySummary RunPlay(const PlayOptions& options) {
   const auto start = Clock::now();
-  if (!(options.fps > 0.0 && options.fps <= 1000.0)) throw std::invalid_argument("--fps must be in (0, 1000]");
+  if (!(options.fps > 0.0 && options.fps <= 1000.0))
+    throw std::invalid_argument("--fps must be in (0, 1000]");
   const RigDirectory rig = ReadRigDirectory(options.rig_dir);
   std::optional<RigKeys> keys;
   std::vector<NodeAddress> nodes = options.nodes;
@@ -311,7 +324,8 @@ PlaySummary RunPlay(const PlayOptions& options) {
     keys = ReadRigKeys(options.rig_dir, KeyRole::kController);
   }
   if (options.desired.empty() == options.solution.empty())
-    throw std::invalid_argument("play: give the desired appearance (--desired) or a solution (--solution), not both");
+    throw std::invalid_argument(
+        "play: give the desired appearance (--desired) or a solution (--solution), not both");
   std::optional<FrameSource> source;
   if (!options.desired.empty()) source.emplace(options.desired);
   zmq::context_t context;
@@ -347,8 +361,11 @@ PlaySummary RunPlay(const PlayOptions& options) {
   } else {
     // The outputs first, on this thread (GLFW's): a --display that does not fit the rig fails
     // at once, before the form factors are computed.
-    auto outputs = std::make_shared<std::vector<std::unique_ptr<NodeOutput>>>(options.local_outputs(rig.projectors));
-    const NodeOutputFactory made = [outputs](const std::vector<Projector>&) { return std::move(*outputs); };
+    auto outputs = std::make_shared<std::vector<std::unique_ptr<NodeOutput>>>(
+        options.local_outputs(rig.projectors));
+    const NodeOutputFactory made = [outputs](const std::vector<Projector>&) {
+      return std::move(*outputs);
+    };
     std::thread controller_thread(control);
     try {
       NodeOptions node;

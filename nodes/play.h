@@ -13,13 +13,12 @@
 // of the linearised pixels that see it. Patches the camera does not see keep the room's own
 // desired colours.
 
+#include <Eigen/Core>
 #include <atomic>
 #include <filesystem>
+#include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <opencv2/core/mat.hpp>
 #include <zmq.hpp>
 
 #include "base/progress.h"
@@ -31,24 +30,24 @@
 namespace procam {
 
 struct PlayOptions {
-  std::string scene;                // the room (LoadSceneArgument)
-  std::filesystem::path rig_dir;    // projectors, reflectance, camera, keys
-  std::filesystem::path desired;    // a directory of images (sorted by name) or a video file
+  std::string scene;              // the room (LoadSceneArgument)
+  std::filesystem::path rig_dir;  // projectors, reflectance, camera, keys
+  std::filesystem::path desired;  // a directory of images (sorted by name) or a video file
   // Instead of `desired`: a compensation solution (procam compensate's directory) whose
   // emittance every frame shows (`frames` of them, default 1): a computed compensation shown
   // through the display nodes, the images `procam project` makes for it.
   std::filesystem::path solution;
-  std::filesystem::path out;        // result.json (created)
-  double fps = 30.0;                // target frame rate, > 0
-  int frames = 0;                   // frames to play (0: the whole source)
-  int patches = 0;                  // target patch count (0: the room's)
+  std::filesystem::path out;  // result.json (created)
+  double fps = 30.0;          // target frame rate, > 0
+  int frames = 0;             // frames to play (0: the whole source)
+  int patches = 0;            // target patch count (0: the room's)
   double alpha = 0.5;
-  SolverOptions solver;             // method (default perceptual), device
+  SolverOptions solver;  // method (default perceptual), device
   DitherMethod dither = DitherMethod::kOrdered;
   LightField light = LightField::kSmooth;
   double feather = 0.1;
-  double frame_timeout_s = 0.5;     // a node silent this long in a frame is reported lost
-  double setup_timeout_s = 120.0;   // every node set up before the first frame, or an error
+  double frame_timeout_s = 0.5;    // a node silent this long in a frame is reported lost
+  double setup_timeout_s = 120.0;  // every node set up before the first frame, or an error
   // Display nodes; empty: one node in this process showing every projector of the rig on
   // `local_outputs` (made on the calling thread, which runs the node: GLFW's main thread).
   std::vector<NodeAddress> nodes;

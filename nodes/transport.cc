@@ -22,7 +22,9 @@ std::filesystem::path KeyFile(const std::filesystem::path& rig_dir, const std::s
 
 // The 32 bytes of a Z85 key; throws IoError naming `where` if it is not one.
 std::string DecodeKey(const std::string& z85, const std::string& where) {
-  if (z85.size() != 40) throw IoError(where + ": not a CURVE key (40 Z85 characters); make the rig's keys with `procam keys`");
+  if (z85.size() != 40)
+    throw IoError(where +
+                  ": not a CURVE key (40 Z85 characters); make the rig's keys with `procam keys`");
   uint8_t bytes[32];
   if (zmq_z85_decode(bytes, z85.c_str()) == nullptr) {
     throw IoError(where + ": not a CURVE key (Z85); make the rig's keys with `procam keys`");
@@ -32,11 +34,13 @@ std::string DecodeKey(const std::string& z85, const std::string& where) {
 
 std::string ReadKey(const std::filesystem::path& path) {
   if (!std::filesystem::exists(path)) {
-    throw IoError(path.string() + ": no such key file; make the rig's keys with `procam keys --rig " +
+    throw IoError(path.string() +
+                  ": no such key file; make the rig's keys with `procam keys --rig " +
                   path.parent_path().parent_path().string() + "` and copy them (docs/nodes.md)");
   }
   std::string text = ReadFile(path, 4096);
-  while (!text.empty() && (text.back() == '\n' || text.back() == '\r' || text.back() == ' ')) text.pop_back();
+  while (!text.empty() && (text.back() == '\n' || text.back() == '\r' || text.back() == ' '))
+    text.pop_back();
   DecodeKey(text, path.string());
   return text;
 }
@@ -58,11 +62,13 @@ int64_t SystemNowNs() {
 }
 
 RigKeys MakeRigKeys(const std::filesystem::path& rig_dir, bool replace) {
-  if (!std::filesystem::is_directory(rig_dir)) throw IoError(rig_dir.string() + ": no such rig directory");
+  if (!std::filesystem::is_directory(rig_dir))
+    throw IoError(rig_dir.string() + ": no such rig directory");
   for (const char* name : {"controller.key", "controller.pub", "node.key", "node.pub"}) {
     const std::filesystem::path path = KeyFile(rig_dir, name);
     if (!replace && std::filesystem::exists(path)) {
-      throw IoError(path.string() + ": the rig already has keys (nodes set up with them would refuse a "
+      throw IoError(path.string() +
+                    ": the rig already has keys (nodes set up with them would refuse a "
                     "controller with new ones); give --replace to make new ones anyway");
     }
   }
@@ -81,8 +87,10 @@ RigKeys MakeRigKeys(const std::filesystem::path& rig_dir, bool replace) {
   }
   // Secrets first, each written atomically and then made readable by its owner only.
   const std::pair<std::string, std::string> files[] = {
-      {"controller.key", keys.controller.secret_key}, {"node.key", keys.node.secret_key},
-      {"controller.pub", keys.controller.public_key}, {"node.pub", keys.node.public_key}};
+      {"controller.key", keys.controller.secret_key},
+      {"node.key", keys.node.secret_key},
+      {"controller.pub", keys.controller.public_key},
+      {"node.pub", keys.node.public_key}};
   for (const auto& [name, key] : files) {
     const std::filesystem::path path = KeyFile(rig_dir, name);
     WriteFileAtomically(path, key + "\n");
@@ -111,8 +119,10 @@ class NodeSocket::ZapHandler {
  public:
   ZapHandler(zmq::context_t& context, const std::string& allowed_key,
              std::function<void(const std::string&)> log)
-      : handler_(context, zmq::socket_type::rep), monitor_(context, zmq::socket_type::pair),
-        allowed_(allowed_key), log_(std::move(log)) {
+      : handler_(context, zmq::socket_type::rep),
+        monitor_(context, zmq::socket_type::pair),
+        allowed_(allowed_key),
+        log_(std::move(log)) {
     handler_.set(zmq::sockopt::linger, 0);
     handler_.bind("inproc://zeromq.zap.01");
   }
@@ -170,7 +180,8 @@ class NodeSocket::ZapHandler {
       text = "CURVE required";
       Refuse("node: refused a peer at " + address + ": mechanism " + mechanism + ", not CURVE");
     }
-    const std::string version = "1.0", status = admit ? "200" : "400", status_text = admit ? "OK" : text;
+    const std::string version = "1.0", status = admit ? "200" : "400",
+                      status_text = admit ? "OK" : text;
     handler_.send(zmq::buffer(version), zmq::send_flags::sndmore);
     handler_.send(request[1], zmq::send_flags::sndmore);
     handler_.send(zmq::buffer(status), zmq::send_flags::sndmore);
@@ -213,7 +224,8 @@ NodeSocket::NodeSocket(zmq::context_t& context, const std::string& endpoint, con
                        std::function<void(const std::string&)> log)
     : log_(std::move(log)) {
   if (keys != nullptr) {
-    zap_ = std::make_unique<ZapHandler>(context, DecodeKey(keys->controller.public_key, "keys/controller.pub"), log_);
+    zap_ = std::make_unique<ZapHandler>(
+        context, DecodeKey(keys->controller.public_key, "keys/controller.pub"), log_);
   }
   socket_ = zmq::socket_t(context, zmq::socket_type::router);
   CommonOptions(socket_);
@@ -221,9 +233,11 @@ NodeSocket::NodeSocket(zmq::context_t& context, const std::string& endpoint, con
   if (keys != nullptr) {
     socket_.set(zmq::sockopt::curve_server, 1);
     socket_.set(zmq::sockopt::curve_secretkey, DecodeKey(keys->node.secret_key, "keys/node.key"));
-    const std::string monitor = "inproc://procam-node-monitor-" + std::to_string(reinterpret_cast<uintptr_t>(this));
-    if (zmq_socket_monitor(socket_.handle(), monitor.c_str(),
-                           ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL | ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL) != 0) {
+    const std::string monitor =
+        "inproc://procam-node-monitor-" + std::to_string(reinterpret_cast<uintptr_t>(this));
+    if (zmq_socket_monitor(
+            socket_.handle(), monitor.c_str(),
+            ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL | ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL) != 0) {
       throw IoError("node: cannot monitor the socket: " + std::string(zmq_strerror(zmq_errno())));
     }
     zap_->Start(monitor);
@@ -249,7 +263,8 @@ long long NodeSocket::refused() const { return zap_ ? zap_->refused() : 0; }
 std::optional<Envelope> NodeSocket::Receive(int timeout_ms) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   for (;;) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+        deadline - std::chrono::steady_clock::now());
     zmq::pollitem_t item = {socket_.handle(), 0, ZMQ_POLLIN, 0};
     zmq::poll(&item, 1, std::max(left, std::chrono::milliseconds(0)));
     if (!(item.revents & ZMQ_POLLIN)) return std::nullopt;
@@ -277,14 +292,16 @@ std::optional<Envelope> NodeSocket::Receive(int timeout_ms) {
 bool NodeSocket::Send(const std::string& peer, const Message& message) {
   const std::string bytes = EncodeMessage(message);
   try {
-    if (!socket_.send(zmq::buffer(peer), zmq::send_flags::sndmore | zmq::send_flags::dontwait)) return false;
+    if (!socket_.send(zmq::buffer(peer), zmq::send_flags::sndmore | zmq::send_flags::dontwait))
+      return false;
     return socket_.send(zmq::buffer(bytes), zmq::send_flags::dontwait).has_value();
   } catch (const zmq::error_t&) {
     return false;  // EHOSTUNREACH: the peer is gone (router_mandatory)
   }
 }
 
-ControllerSocket::ControllerSocket(zmq::context_t& context, const std::string& endpoint, const RigKeys* keys)
+ControllerSocket::ControllerSocket(zmq::context_t& context, const std::string& endpoint,
+                                   const RigKeys* keys)
     : socket_(context, zmq::socket_type::dealer), endpoint_(endpoint) {
   CommonOptions(socket_);
   socket_.set(zmq::sockopt::immediate, 1);
@@ -292,8 +309,10 @@ ControllerSocket::ControllerSocket(zmq::context_t& context, const std::string& e
   socket_.set(zmq::sockopt::reconnect_ivl_max, 500);
   if (keys != nullptr) {
     socket_.set(zmq::sockopt::curve_serverkey, DecodeKey(keys->node.public_key, "keys/node.pub"));
-    socket_.set(zmq::sockopt::curve_publickey, DecodeKey(keys->controller.public_key, "keys/controller.pub"));
-    socket_.set(zmq::sockopt::curve_secretkey, DecodeKey(keys->controller.secret_key, "keys/controller.key"));
+    socket_.set(zmq::sockopt::curve_publickey,
+                DecodeKey(keys->controller.public_key, "keys/controller.pub"));
+    socket_.set(zmq::sockopt::curve_secretkey,
+                DecodeKey(keys->controller.secret_key, "keys/controller.key"));
   } else if (!endpoint.starts_with("inproc://")) {
     throw IoError("controller: node " + endpoint + " is on the network: the rig's keys are needed");
   }

@@ -38,7 +38,8 @@ EGLDisplay OpenDisplay(std::string* kind) {
     }
   }
   if (epoxy_has_egl_extension(EGL_NO_DISPLAY, "EGL_MESA_platform_surfaceless")) {
-    EGLDisplay display = eglGetPlatformDisplayEXT(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
+    EGLDisplay display =
+        eglGetPlatformDisplayEXT(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
     EGLint major = 0, minor = 0;
     if (display != EGL_NO_DISPLAY && eglInitialize(display, &major, &minor)) {
       *kind = "EGL surfaceless";
@@ -56,8 +57,8 @@ OffscreenGl::OffscreenGl(int width, int height) : state_(std::make_unique<State>
   if (state_->display == EGL_NO_DISPLAY) {
     throw IoError("offscreen OpenGL: no EGL device and no surfaceless EGL platform");
   }
-  const EGLint config_attributes[] = {EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT,
-                                      EGL_NONE};
+  const EGLint config_attributes[] = {EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_RENDERABLE_TYPE,
+                                      EGL_OPENGL_BIT, EGL_NONE};
   EGLConfig config;
   EGLint configs = 0;
   if (!eglChooseConfig(state_->display, config_attributes, &config, 1, &configs) || configs < 1) {
@@ -66,14 +67,21 @@ OffscreenGl::OffscreenGl(int width, int height) : state_(std::make_unique<State>
     if (!eglChooseConfig(state_->display, any, &config, 1, &configs) || configs < 1)
       throw IoError("offscreen OpenGL (" + kind + "): no OpenGL config");
   }
-  if (!eglBindAPI(EGL_OPENGL_API)) throw IoError("offscreen OpenGL (" + kind + "): cannot bind the OpenGL API");
-  const EGLint context_attributes[] = {EGL_CONTEXT_MAJOR_VERSION, 3, EGL_CONTEXT_MINOR_VERSION, 3,
-                                       EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
+  if (!eglBindAPI(EGL_OPENGL_API))
+    throw IoError("offscreen OpenGL (" + kind + "): cannot bind the OpenGL API");
+  const EGLint context_attributes[] = {EGL_CONTEXT_MAJOR_VERSION,
+                                       3,
+                                       EGL_CONTEXT_MINOR_VERSION,
+                                       3,
+                                       EGL_CONTEXT_OPENGL_PROFILE_MASK,
+                                       EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
                                        EGL_NONE};
   state_->context = eglCreateContext(state_->display, config, EGL_NO_CONTEXT, context_attributes);
-  if (state_->context == EGL_NO_CONTEXT) throw IoError("offscreen OpenGL (" + kind + "): no OpenGL 3.3 core context");
+  if (state_->context == EGL_NO_CONTEXT)
+    throw IoError("offscreen OpenGL (" + kind + "): no OpenGL 3.3 core context");
   if (!eglMakeCurrent(state_->display, EGL_NO_SURFACE, EGL_NO_SURFACE, state_->context)) {
-    throw IoError("offscreen OpenGL (" + kind + "): cannot make the context current without a surface");
+    throw IoError("offscreen OpenGL (" + kind +
+                  "): cannot make the context current without a surface");
   }
   glGenFramebuffers(1, &state_->framebuffer);
   glGenRenderbuffers(1, &state_->colour);
@@ -82,15 +90,16 @@ OffscreenGl::OffscreenGl(int width, int height) : state_(std::make_unique<State>
   glBindFramebuffer(GL_FRAMEBUFFER, state_->framebuffer);
   glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, state_->colour);
   if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
-    throw IoError("offscreen OpenGL (" + kind + "): the " + std::to_string(width) + "x" + std::to_string(height) +
-                  " framebuffer is not complete");
+    throw IoError("offscreen OpenGL (" + kind + "): the " + std::to_string(width) + "x" +
+                  std::to_string(height) + " framebuffer is not complete");
   }
   glReadBuffer(GL_COLOR_ATTACHMENT0);
   state_->description = kind + ", " + reinterpret_cast<const char*>(glGetString(GL_RENDERER));
 }
 
 OffscreenGl::~OffscreenGl() {
-  if (state_->context != EGL_NO_CONTEXT && eglMakeCurrent(state_->display, EGL_NO_SURFACE, EGL_NO_SURFACE, state_->context)) {
+  if (state_->context != EGL_NO_CONTEXT &&
+      eglMakeCurrent(state_->display, EGL_NO_SURFACE, EGL_NO_SURFACE, state_->context)) {
     glDeleteFramebuffers(1, &state_->framebuffer);
     glDeleteRenderbuffers(1, &state_->colour);
     eglMakeCurrent(state_->display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);

@@ -7,14 +7,13 @@
 
 #include <chrono>
 #include <cstdio>
-#include <cstring>
 #include <cstdlib>
-#include <nlohmann/json.hpp>
+#include <cstring>
 #include <iostream>
-#include <string>
-
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <string>
 
 #include "base/io.h"
 #include "tests/testing/testing.h"
@@ -32,7 +31,8 @@ std::string Binary() {
 // true models and photometry), a third projector `centre` sharing left's model, the scene's
 // camera as the registered camera, and CURVE keys.
 struct Rig {
-  explicit Rig(const testing::TempDir& dir) : root(dir.path()), scene((dir / "room" / "tiny_box.json").string()) {
+  explicit Rig(const testing::TempDir& dir)
+      : root(dir.path()), scene((dir / "room" / "tiny_box.json").string()) {
     const std::filesystem::path room = root / "room";
     testing::CommandRun run = testing::RunProcam("scene write tiny_box --out " + room.string());
     EXPECT_EQ(run.exit_code, 0) << run.output;
@@ -53,30 +53,35 @@ struct Rig {
   }
   // The shell line that starts node k (n1, n2, n3 show left, right, centre) in the background
   // (its process id in $!), bounded to 60 s, its log in node<k>.log.
-  std::string StartNode(int k, const std::string& rig_dir = "", const std::string& render = "gpu") const {
+  std::string StartNode(int k, const std::string& rig_dir = "",
+                        const std::string& render = "gpu") const {
     static const char* names[] = {"left", "right", "centre"};
-    return Binary() + " node --seconds 60 --render " + render + " --rig " + (rig_dir.empty() ? (root / "room").string() : rig_dir) +
-           " --scene " + scene + " --projectors " + names[k] + " --display record:" +
-           (root / ("n" + std::to_string(k + 1))).string() + " --listen tcp://127.0.0.1:" +
-           std::to_string(ports[k]) + " --name n" + std::to_string(k + 1) + " > " +
+    return Binary() + " node --seconds 60 --render " + render + " --rig " +
+           (rig_dir.empty() ? (root / "room").string() : rig_dir) + " --scene " + scene +
+           " --projectors " + names[k] +
+           " --display record:" + (root / ("n" + std::to_string(k + 1))).string() +
+           " --listen tcp://127.0.0.1:" + std::to_string(ports[k]) + " --name n" +
+           std::to_string(k + 1) + " > " +
            (root / ("node" + std::to_string(k + 1) + ".log")).string() + " 2>&1 &\n";
   }
   // procam compensate on the room with the rig into ROOT/solution and, with `images`, procam
   // project of that solution into ROOT/images.
   ::testing::AssertionResult Solve(int patches, bool images = false) const {
-    testing::CommandRun run = testing::RunProcam("compensate " + scene + " --rig " + (root / "room").string() +
-                                                 " --patches " + std::to_string(patches) + " --out " +
-                                                 (root / "solution").string());
+    testing::CommandRun run = testing::RunProcam(
+        "compensate " + scene + " --rig " + (root / "room").string() + " --patches " +
+        std::to_string(patches) + " --out " + (root / "solution").string());
     if (run.exit_code != 0) return ::testing::AssertionFailure() << run.output;
     if (!images) return ::testing::AssertionSuccess();
-    run = testing::RunProcam("project " + (root / "solution").string() + " --out " + (root / "images").string());
+    run = testing::RunProcam("project " + (root / "solution").string() + " --out " +
+                             (root / "images").string());
     if (run.exit_code != 0) return ::testing::AssertionFailure() << run.output;
     return ::testing::AssertionSuccess();
   }
   std::string Nodes() const {
     std::string text;
     for (int k = 0; k < 3; ++k)
-      text += (k ? "," : "") + std::string("n") + std::to_string(k + 1) + "=tcp://127.0.0.1:" + std::to_string(ports[k]);
+      text += (k ? "," : "") + std::string("n") + std::to_string(k + 1) +
+              "=tcp://127.0.0.1:" + std::to_string(ports[k]);
     return text;
   }
   std::filesystem::path root;
@@ -84,7 +89,9 @@ struct Rig {
   std::vector<int> ports;
 };
 
-nlohmann::json ReadResult(const std::filesystem::path& path) { return nlohmann::json::parse(ReadFile(path)); }
+nlohmann::json ReadResult(const std::filesystem::path& path) {
+  return nlohmann::json::parse(ReadFile(path));
+}
 
 // With the CPU renderer (--render cpu) the nodes' images are project's byte for byte.
 TEST(Nodes, ThreeNodesShowWhatProjectMakesAndHoldTheBarrier) {
@@ -93,10 +100,11 @@ TEST(Nodes, ThreeNodesShowWhatProjectMakesAndHoldTheBarrier) {
   const std::string room = (rig.root / "room").string();
   ASSERT_TRUE(rig.Solve(150, /*images=*/true));
   testing::CommandRun run;
-  const std::string script = rig.StartNode(0, "", "cpu") + rig.StartNode(1, "", "cpu") + rig.StartNode(2, "", "cpu") +
-                             "timeout 120 " + Binary() + " play " + rig.scene + " --rig " + room + " --solution " + (dir / "solution").string() +
-                             " --frames 12 --fps 5 --nodes " + rig.Nodes() + " --out " + (dir / "play").string() +
-                             "\nstatus=$?\nkill %1 %2 %3 2>/dev/null\nwait\nexit $status\n";
+  const std::string script =
+      rig.StartNode(0, "", "cpu") + rig.StartNode(1, "", "cpu") + rig.StartNode(2, "", "cpu") +
+      "timeout 120 " + Binary() + " play " + rig.scene + " --rig " + room + " --solution " +
+      (dir / "solution").string() + " --frames 12 --fps 5 --nodes " + rig.Nodes() + " --out " +
+      (dir / "play").string() + "\nstatus=$?\nkill %1 %2 %3 2>/dev/null\nwait\nexit $status\n";
   run = testing::RunShell("bash -c '" + script + "'");
   ASSERT_EQ(run.exit_code, 0) << run.output << ReadFile(dir / "node1.log");
   // The images on the nodes are procam project's, byte for byte.
@@ -117,7 +125,8 @@ TEST(Nodes, ThreeNodesShowWhatProjectMakesAndHoldTheBarrier) {
       earliest = std::min(earliest, node.at("presented_ns").get<int64_t>());
       latest = std::max(latest, node.at("presented_ns").get<int64_t>());
     }
-    EXPECT_GE(earliest, previous_latest) << "frame " << frame.at("frame") << " shown before the last was everywhere";
+    EXPECT_GE(earliest, previous_latest)
+        << "frame " << frame.at("frame") << " shown before the last was everywhere";
     EXPECT_NEAR(frame.at("skew_ms").get<double>(), 1e-6 * double(latest - earliest), 1e-6);
     previous_latest = latest;
   }
@@ -132,12 +141,14 @@ TEST(Nodes, AKilledNodeIsReportedWithinASecondAndRejoins) {
   // 80 frames at 10 fps (8 s); node 3 is killed (SIGKILL, as a crash) half a second after the
   // first progress line (frames are being shown) and started again 1.5 s later.
   const std::string script =
-      rig.StartNode(0) + rig.StartNode(1) + rig.StartNode(2) + "node3=$!\n" + "timeout 120 " + Binary() + " play " +
-      rig.scene + " --rig " + room + " --solution " + (dir / "solution").string() +
-      " --frames 80 --fps 10 --nodes " + rig.Nodes() + " --out " + (dir / "play").string() +
-      " > " + (dir / "play.log").string() + " 2>&1 &\nplay=$!\n" +
+      rig.StartNode(0) + rig.StartNode(1) + rig.StartNode(2) + "node3=$!\n" + "timeout 120 " +
+      Binary() + " play " + rig.scene + " --rig " + room + " --solution " +
+      (dir / "solution").string() + " --frames 80 --fps 10 --nodes " + rig.Nodes() + " --out " +
+      (dir / "play").string() + " > " + (dir / "play.log").string() + " 2>&1 &\nplay=$!\n" +
       "for i in $(seq 300); do grep -q \"play: frame\" " + (dir / "play.log").string() +
-      " && break; sleep 0.1; done\nsleep 0.5\nkill -KILL $node3\ndate +%s%N > " + (dir / "killed").string() + "\nsleep 1.5\n" + rig.StartNode(2) + "date +%s%N > " + (dir / "restarted").string() + "\n" +
+      " && break; sleep 0.1; done\nsleep 0.5\nkill -KILL $node3\ndate +%s%N > " +
+      (dir / "killed").string() + "\nsleep 1.5\n" + rig.StartNode(2) + "date +%s%N > " +
+      (dir / "restarted").string() + "\n" +
       "wait $play\nstatus=$?\nkill %1 %2 %5 2>/dev/null\nwait\nexit $status\n";
   run = testing::RunShell("bash -c '" + script + "'");
   const std::string log = ReadFile(dir / "play.log");
@@ -151,7 +162,8 @@ TEST(Nodes, AKilledNodeIsReportedWithinASecondAndRejoins) {
     const nlohmann::json& nodes = frame.at("nodes");
     EXPECT_EQ(nodes.at("n1").at("state"), "shown");  // the others go on
     EXPECT_EQ(nodes.at("n2").at("state"), "shown");
-    if (nodes.at("n3").at("state") != "shown" && first_missed == 0) first_missed = nodes.at("n1").at("presented_ns");
+    if (nodes.at("n3").at("state") != "shown" && first_missed == 0)
+      first_missed = nodes.at("n1").at("presented_ns");
     if (first_missed != 0 && nodes.at("n3").at("state") == "shown" && !rejoined) {
       rejoined = true;
       back = nodes.at("n3").at("presented_ns");
@@ -160,9 +172,13 @@ TEST(Nodes, AKilledNodeIsReportedWithinASecondAndRejoins) {
   ASSERT_NE(first_missed, 0) << log;
   EXPECT_LT(double(first_missed - killed) * 1e-9, 1.0) << log;  // reported within a second
   EXPECT_TRUE(rejoined) << log;
-  std::cout << "node n3 killed: reported with the frame shown " << 1e-9 * double(first_missed - killed)
-            << " s later; restarted, it showed a frame again " << 1e-9 * double(back - restarted) << " s later\n";
-  EXPECT_NE(log.find("node n3 (tcp://127.0.0.1:" + std::to_string(rig.ports[2]) + ") lost at frame"), std::string::npos)
+  std::cout << "node n3 killed: reported with the frame shown "
+            << 1e-9 * double(first_missed - killed)
+            << " s later; restarted, it showed a frame again " << 1e-9 * double(back - restarted)
+            << " s later\n";
+  EXPECT_NE(
+      log.find("node n3 (tcp://127.0.0.1:" + std::to_string(rig.ports[2]) + ") lost at frame"),
+      std::string::npos)
       << log;
   EXPECT_NE(log.find("node n3 rejoins at frame"), std::string::npos) << log;
 }
@@ -177,11 +193,12 @@ TEST(Nodes, ANodeThatGoesSilentIsReportedWithinASecondAndComesBack) {
   ASSERT_TRUE(rig.Solve(100));
   testing::CommandRun run;
   const std::string script =
-      rig.StartNode(0) + rig.StartNode(1) + "node2=$!\n" + rig.StartNode(2) + "timeout 120 " + Binary() + " play " +
-      rig.scene + " --rig " + room + " --solution " + (dir / "solution").string() +
-      " --frames 80 --fps 10 --nodes " + rig.Nodes() + " --out " + (dir / "play").string() + " > " +
-      (dir / "play.log").string() + " 2>&1 &\nplay=$!\n" + "for i in $(seq 300); do grep -q \"play: frame\" " +
-      (dir / "play.log").string() + " && break; sleep 0.1; done\nsleep 0.5\nkill -STOP $node2\ndate +%s%N > " +
+      rig.StartNode(0) + rig.StartNode(1) + "node2=$!\n" + rig.StartNode(2) + "timeout 120 " +
+      Binary() + " play " + rig.scene + " --rig " + room + " --solution " +
+      (dir / "solution").string() + " --frames 80 --fps 10 --nodes " + rig.Nodes() + " --out " +
+      (dir / "play").string() + " > " + (dir / "play.log").string() + " 2>&1 &\nplay=$!\n" +
+      "for i in $(seq 300); do grep -q \"play: frame\" " + (dir / "play.log").string() +
+      " && break; sleep 0.1; done\nsleep 0.5\nkill -STOP $node2\ndate +%s%N > " +
       (dir / "stopped").string() + "\nsleep 2\nkill -CONT $node2\n" +
       "wait $play\nstatus=$?\nkill %1 %2 %3 2>/dev/null\nwait\nexit $status\n";
   run = testing::RunShell("bash -c '" + script + "'");
@@ -195,16 +212,19 @@ TEST(Nodes, ANodeThatGoesSilentIsReportedWithinASecondAndComesBack) {
     const nlohmann::json& nodes = frame.at("nodes");
     EXPECT_EQ(nodes.at("n1").at("state"), "shown");
     EXPECT_EQ(nodes.at("n3").at("state"), "shown");
-    if (nodes.at("n2").at("state") != "shown" && first_missed == 0) first_missed = nodes.at("n1").at("presented_ns");
+    if (nodes.at("n2").at("state") != "shown" && first_missed == 0)
+      first_missed = nodes.at("n1").at("presented_ns");
     if (first_missed != 0 && nodes.at("n2").at("state") == "shown") back = true;
   }
   ASSERT_NE(first_missed, 0) << log;
   EXPECT_LT(double(first_missed - stopped) * 1e-9, 1.0) << log;
   EXPECT_TRUE(back) << log;
-  EXPECT_NE(log.find("node n2 (tcp://127.0.0.1:" + std::to_string(rig.ports[1]) + ") lost at frame"), std::string::npos)
+  EXPECT_NE(
+      log.find("node n2 (tcp://127.0.0.1:" + std::to_string(rig.ports[1]) + ") lost at frame"),
+      std::string::npos)
       << log;
-  std::cout << "node n2 frozen: the first frame without it was shown " << 1e-9 * double(first_missed - stopped)
-            << " s later\n";
+  std::cout << "node n2 frozen: the first frame without it was shown "
+            << 1e-9 * double(first_missed - stopped) << " s later\n";
 }
 
 TEST(Nodes, ANodeWithAnotherRigsKeysRefusesTheController) {
@@ -217,20 +237,23 @@ TEST(Nodes, ANodeWithAnotherRigsKeysRefusesTheController) {
   const std::filesystem::path other = dir / "other";
   std::filesystem::create_directories(other);
   for (const auto& entry : std::filesystem::directory_iterator(rig.root / "room"))
-    if (entry.is_regular_file()) std::filesystem::copy_file(entry.path(), other / entry.path().filename());
+    if (entry.is_regular_file())
+      std::filesystem::copy_file(entry.path(), other / entry.path().filename());
   run = testing::RunProcam("keys --rig " + other.string());
   ASSERT_EQ(run.exit_code, 0) << run.output;
   std::filesystem::copy_file(rig.root / "room" / "keys" / "node.pub", other / "keys" / "node.pub",
                              std::filesystem::copy_options::overwrite_existing);
   std::filesystem::copy_file(rig.root / "room" / "keys" / "node.key", other / "keys" / "node.key",
                              std::filesystem::copy_options::overwrite_existing);
-  const std::string script = rig.StartNode(0, other.string()) + "timeout 60 " + Binary() + " play " + rig.scene +
-                             " --rig " + room + " --solution " + (dir / "solution").string() +
-                             " --setup-timeout 2 --nodes n1=tcp://127.0.0.1:" + std::to_string(rig.ports[0]) +
-                             " --out " + (dir / "play").string() + " 2>&1 >/dev/null\nstatus=$?\nkill %1\nwait\nexit $status\n";
+  const std::string script =
+      rig.StartNode(0, other.string()) + "timeout 60 " + Binary() + " play " + rig.scene +
+      " --rig " + room + " --solution " + (dir / "solution").string() +
+      " --setup-timeout 2 --nodes n1=tcp://127.0.0.1:" + std::to_string(rig.ports[0]) + " --out " +
+      (dir / "play").string() + " 2>&1 >/dev/null\nstatus=$?\nkill %1\nwait\nexit $status\n";
   run = testing::RunShell("bash -c '" + script + "'");
   EXPECT_EQ(run.exit_code, 1) << run.output;
-  EXPECT_NE(run.output.find("procam: error: node n1 (tcp://127.0.0.1:"), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("procam: error: node n1 (tcp://127.0.0.1:"), std::string::npos)
+      << run.output;
   EXPECT_NE(run.output.find("no answer in 2 s"), std::string::npos) << run.output;
   const std::string node_log = ReadFile(dir / "node1.log");
   EXPECT_NE(node_log.find("refused a controller at 127.0.0.1"), std::string::npos) << node_log;
@@ -246,9 +269,11 @@ TEST(Nodes, PlayRefusesADisplayListThatDoesNotFitTheRig) {
   dir.Write("frames/f0.ppm", std::string("P6\n1 1\n255\n") + "abc");
   const auto start = std::chrono::steady_clock::now();
   const testing::CommandRun run = testing::RunProcamStderr(
-      "play " + rig.scene + " --rig " + room + " --desired " + (dir / "frames").string() + " --display record:" + (dir / "a").string() +
-      ",record:" + (dir / "b").string() + " --out " + (dir / "play").string());
-  testing::ExpectOneErrorLine(run, "--display: 2 outputs for 3 projectors", "play with two outputs");
+      "play " + rig.scene + " --rig " + room + " --desired " + (dir / "frames").string() +
+      " --display record:" + (dir / "a").string() + ",record:" + (dir / "b").string() + " --out " +
+      (dir / "play").string());
+  testing::ExpectOneErrorLine(run, "--display: 2 outputs for 3 projectors",
+                              "play with two outputs");
   EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 10.0);
   EXPECT_FALSE(std::filesystem::exists(dir / "play" / "result.json"));
 }
@@ -262,24 +287,29 @@ TEST(Nodes, GpuRenderedImagesAreProjectsWithinOneCodeStep) {
   ASSERT_TRUE(rig.Solve(150));
   testing::CommandRun run;
   for (const char* light : {"smooth", "flat"}) {
-    run = testing::RunProcam("project " + (dir / "solution").string() + " --light " + light + " --out " +
-                             (dir / (std::string("images_") + light)).string());
+    run = testing::RunProcam("project " + (dir / "solution").string() + " --light " + light +
+                             " --out " + (dir / (std::string("images_") + light)).string());
     ASSERT_EQ(run.exit_code, 0) << run.output;
-    run = testing::RunProcam("play " + rig.scene + " --rig " + room + " --solution " + (dir / "solution").string() +
-                             " --light " + light + " --render gpu --display record:" +
-                             (dir / (std::string("gpu_") + light)).string() + " --out " + (dir / "play").string());
+    run = testing::RunProcam(
+        "play " + rig.scene + " --rig " + room + " --solution " + (dir / "solution").string() +
+        " --light " + light + " --render gpu --display record:" +
+        (dir / (std::string("gpu_") + light)).string() + " --out " + (dir / "play").string());
     ASSERT_EQ(run.exit_code, 0) << run.output;
-    EXPECT_NE(run.output.find("3 of 3 projector(s) rendered on the GPU"), std::string::npos) << run.output;
+    EXPECT_NE(run.output.find("3 of 3 projector(s) rendered on the GPU"), std::string::npos)
+        << run.output;
     for (const char* name : {"left", "right", "centre"}) {
-      const cv::Mat cpu = cv::imread((dir / (std::string("images_") + light) / (std::string(name) + ".png")).string());
-      const cv::Mat gpu = cv::imread((dir / (std::string("gpu_") + light) / (std::string(name) + ".png")).string());
+      const cv::Mat cpu = cv::imread(
+          (dir / (std::string("images_") + light) / (std::string(name) + ".png")).string());
+      const cv::Mat gpu =
+          cv::imread((dir / (std::string("gpu_") + light) / (std::string(name) + ".png")).string());
       ASSERT_FALSE(cpu.empty() || gpu.empty()) << name;
       EXPECT_LE(cv::norm(cpu, gpu, cv::NORM_INF), 1.0) << light << " " << name;
       cv::Mat differs;
       cv::compare(cpu, gpu, differs, cv::CMP_NE);
       const double fraction = cv::countNonZero(differs.reshape(1)) / (3.0 * cpu.total());
       EXPECT_LT(fraction, 0.01) << light << " " << name;
-      std::cout << light << " light, " << name << ": " << 100.0 * fraction << "% of codes one step off\n";
+      std::cout << light << " light, " << name << ": " << 100.0 * fraction
+                << "% of codes one step off\n";
     }
   }
 }
@@ -288,7 +318,8 @@ TEST(Nodes, GpuRenderedImagesAreProjectsWithinOneCodeStep) {
 cv::Mat ReadPpm(const std::filesystem::path& path) {
   const std::string bytes = std::filesystem::exists(path) ? ReadFile(path) : std::string();
   int width = 0, height = 0, max_value = 0, header = 0;
-  if (std::sscanf(bytes.c_str(), "P6 %d %d %d%n", &width, &height, &max_value, &header) != 3 || max_value != 255)
+  if (std::sscanf(bytes.c_str(), "P6 %d %d %d%n", &width, &height, &max_value, &header) != 3 ||
+      max_value != 255)
     return {};
   const size_t start = static_cast<size_t>(header) + 1;
   if (bytes.size() < start + size_t{3} * width * height) return {};
@@ -315,14 +346,17 @@ TEST(Nodes, PlayShowsProjectsImagesOnThreeMonitors) {
   // lives where that user can read and write, the binary copied in.
   std::filesystem::copy_file(Binary(), dir / "procam");
   testing::RunShell("chmod -R a+rwX " + dir.path().string());
-  dir.Write("show.sh", "cd \"$(dirname \"$0\")\"\n"
-                       "./procam play room/tiny_box.json --rig room --solution solution --display "
-                       "glfw:XWAYLAND0,glfw:XWAYLAND1,glfw:XWAYLAND2 --frames 16 --fps 2 --out play >play.log 2>&1 &\n"
-                       "pid=$!\n"
-                       "i=0; until grep -q \"play: frame\" play.log 2>/dev/null; do i=$((i+1)); [ $i -ge 300 ] && break; "
-                       "sleep 0.1; done\nsleep 1\n"
-                       "for k in 1 2 3; do grim -t ppm -o HEADLESS-$k output$k.ppm; done\n"
-                       "wait $pid\nstatus=$?\ncat play.log\nexit $status\n");
+  dir.Write("show.sh",
+            "cd \"$(dirname \"$0\")\"\n"
+            "./procam play room/tiny_box.json --rig room --solution solution --display "
+            "glfw:XWAYLAND0,glfw:XWAYLAND1,glfw:XWAYLAND2 --frames 16 --fps 2 --out play >play.log "
+            "2>&1 &\n"
+            "pid=$!\n"
+            "i=0; until grep -q \"play: frame\" play.log 2>/dev/null; do i=$((i+1)); [ $i -ge 300 "
+            "] && break; "
+            "sleep 0.1; done\nsleep 1\n"
+            "for k in 1 2 3; do grim -t ppm -o HEADLESS-$k output$k.ppm; done\n"
+            "wait $pid\nstatus=$?\ncat play.log\nexit $status\n");
   run = testing::RunShell((testing::SourceDir() / "scripts" / "multi_monitor.sh").string() +
                           " --mode 320x200 --timeout 90 3 -- sh " + (dir / "show.sh").string());
   ASSERT_EQ(run.exit_code, 0) << run.output;
@@ -330,7 +364,8 @@ TEST(Nodes, PlayShowsProjectsImagesOnThreeMonitors) {
   for (int k = 0; k < 3; ++k) {
     const cv::Mat shown = ReadPpm(dir / ("output" + std::to_string(k + 1) + ".ppm"));
     ASSERT_FALSE(shown.empty()) << "HEADLESS-" << k + 1 << "\n" << run.output;
-    cv::Mat expected = cv::imread((dir / "images" / (std::string(names[k]) + ".png")).string(), cv::IMREAD_COLOR);
+    cv::Mat expected =
+        cv::imread((dir / "images" / (std::string(names[k]) + ".png")).string(), cv::IMREAD_COLOR);
     cv::cvtColor(expected, expected, cv::COLOR_BGR2RGB);
     // Rendered on the GPU (the default): within one code step of the CPU's, and rarely off.
     EXPECT_LE(cv::norm(shown, expected, cv::NORM_INF), 1.0) << names[k] << " on HEADLESS-" << k + 1;
@@ -338,7 +373,8 @@ TEST(Nodes, PlayShowsProjectsImagesOnThreeMonitors) {
     cv::compare(shown, expected, differs, cv::CMP_NE);
     EXPECT_LT(cv::countNonZero(differs.reshape(1)), 0.01 * shown.total() * 3) << names[k];
   }
-  EXPECT_NE(ReadFile(dir / "play.log").find("3 of 3 projector(s) rendered on the GPU"), std::string::npos)
+  EXPECT_NE(ReadFile(dir / "play.log").find("3 of 3 projector(s) rendered on the GPU"),
+            std::string::npos)
       << ReadFile(dir / "play.log");
 }
 

@@ -22,7 +22,8 @@ Message Parsed(const std::string& bytes) {
 std::string Refusal(const std::string& bytes) {
   Message message;
   std::string why;
-  EXPECT_FALSE(ParseMessage(bytes.data(), bytes.size(), &message, &why)) << "accepted " << bytes.size() << " bytes";
+  EXPECT_FALSE(ParseMessage(bytes.data(), bytes.size(), &message, &why))
+      << "accepted " << bytes.size() << " bytes";
   EXPECT_FALSE(why.empty());
   EXPECT_EQ(why.find('\n'), std::string::npos) << why;
   return why;
@@ -41,8 +42,8 @@ TEST(NodeMessages, EveryTypeRoundTrips) {
   EXPECT_EQ(back.sequence, frame.sequence);
   EXPECT_EQ(back.emittance, frame.emittance);  // float64 on the wire: exact
 
-  for (MessageType type : {MessageType::kPong, MessageType::kSetup, MessageType::kSetupDone, MessageType::kReady,
-                           MessageType::kFailed, MessageType::kStop}) {
+  for (MessageType type : {MessageType::kPong, MessageType::kSetup, MessageType::kSetupDone,
+                           MessageType::kReady, MessageType::kFailed, MessageType::kStop}) {
     Message message;
     message.type = type;
     message.sequence = 42;
@@ -115,7 +116,8 @@ TEST(NodeMessages, MalformedMessagesAreRefusedWithOneLine) {
   const std::string header = EncodeMessage(ready).substr(0, kMessageHeaderBytes);
   EXPECT_NE(Refusal(header + "{\"a\":").find("not JSON"), std::string::npos);
   EXPECT_NE(Refusal(header + "[1,2]").find("not a JSON object"), std::string::npos);
-  EXPECT_NE(Refusal(header + "{\"a\":\"" + std::string(kMaxTextBytes, 'x') + "\"}").find("at most"), std::string::npos);
+  EXPECT_NE(Refusal(header + "{\"a\":\"" + std::string(kMaxTextBytes, 'x') + "\"}").find("at most"),
+            std::string::npos);
   Message presented;
   presented.type = MessageType::kPresented;
   EXPECT_NE(Refusal(EncodeMessage(presented).substr(0, 20)).find("no time"), std::string::npos);
@@ -152,9 +154,15 @@ TEST(NodeMessages, RandomBytesNeverCrashTheParser) {
     for (int e = 0; e < edits; ++e) {
       const size_t at = random() % (bytes.size() + 1);
       switch (random() % 3) {
-        case 0: if (at < bytes.size()) bytes[at] = static_cast<char>(random()); break;
-        case 1: bytes.insert(at, 1, static_cast<char>(random())); break;
-        default: if (at < bytes.size()) bytes.erase(at, 1); break;
+        case 0:
+          if (at < bytes.size()) bytes[at] = static_cast<char>(random());
+          break;
+        case 1:
+          bytes.insert(at, 1, static_cast<char>(random()));
+          break;
+        default:
+          if (at < bytes.size()) bytes.erase(at, 1);
+          break;
       }
     }
     Message message;
@@ -164,7 +172,9 @@ TEST(NodeMessages, RandomBytesNeverCrashTheParser) {
     if (ParseMessage(exact.data(), exact.size(), &message, &why)) {
       ++accepted;
       Message again;
-      ASSERT_TRUE(ParseMessage(EncodeMessage(message).data(), EncodeMessage(message).size(), &again, &why)) << why;
+      ASSERT_TRUE(
+          ParseMessage(EncodeMessage(message).data(), EncodeMessage(message).size(), &again, &why))
+          << why;
       EXPECT_EQ(again.type, message.type);
       EXPECT_EQ(again.emittance, message.emittance);
     } else {

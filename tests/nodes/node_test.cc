@@ -7,13 +7,13 @@
 
 #include <cmath>
 #include <mutex>
+#include <opencv2/videoio.hpp>
 #include <thread>
 
 #include "base/io.h"
 #include "datasets_synthetic/scene_files.h"
 #include "nodes/controller.h"
 #include "nodes/play.h"
-#include <opencv2/videoio.hpp>
 #include "tests/testing/testing.h"
 
 namespace procam {
@@ -28,7 +28,8 @@ class VanishingOutput : public NodeOutput {
   void Draw(const ProjectorImage&) override {}
   void Present(uint64_t) override { ++*presented_; }
   std::string Fault() override {
-    return fail_after_ >= 0 && *presented_ >= fail_after_ ? "monitor TEST-" + name_ + " disappeared" : "";
+    return fail_after_ >= 0 && *presented_ >= fail_after_ ? "monitor TEST-" + name_ + " disappeared"
+                                                          : "";
   }
 
  private:
@@ -41,8 +42,9 @@ class VanishingOutput : public NodeOutput {
 std::string WriteRig(const testing::TempDir& dir) {
   const std::filesystem::path scene = WriteSyntheticSceneFile("tiny_box", 80, dir.path());
   const nlohmann::json file = nlohmann::json::parse(ReadFile(scene));
-  WriteFileAtomically(dir / "rig.json",
-                      nlohmann::json{{"format_version", 1}, {"projectors", file.at("projectors")}}.dump());
+  WriteFileAtomically(
+      dir / "rig.json",
+      nlohmann::json{{"format_version", 1}, {"projectors", file.at("projectors")}}.dump());
   return scene.string();
 }
 
@@ -59,14 +61,15 @@ TEST(Node, AMonitorThatDisappearsIsReportedAndTheOtherProjectorGoesOn) {
   zmq::context_t context;
   std::atomic<bool> stop{false};
   std::thread node([&] {
-    RunNode(context, options,
-            [&](const std::vector<Projector>&) {
-              std::vector<std::unique_ptr<NodeOutput>> outputs;
-              outputs.push_back(std::make_unique<VanishingOutput>("left", 2, &presented_left));
-              outputs.push_back(std::make_unique<VanishingOutput>("right", -1, &presented_right));
-              return outputs;
-            },
-            stop);
+    RunNode(
+        context, options,
+        [&](const std::vector<Projector>&) {
+          std::vector<std::unique_ptr<NodeOutput>> outputs;
+          outputs.push_back(std::make_unique<VanishingOutput>("left", 2, &presented_left));
+          outputs.push_back(std::make_unique<VanishingOutput>("right", -1, &presented_right));
+          return outputs;
+        },
+        stop);
   });
   std::mutex mutex;
   std::string log;
@@ -94,7 +97,9 @@ TEST(Node, AMonitorThatDisappearsIsReportedAndTheOtherProjectorGoesOn) {
   node.join();
   EXPECT_EQ(presented_right, 5);
   EXPECT_EQ(presented_left, 2);  // not shown on once its monitor was gone
-  EXPECT_NE(log.find("node n says: projector left: monitor TEST-left disappeared"), std::string::npos) << log;
+  EXPECT_NE(log.find("node n says: projector left: monitor TEST-left disappeared"),
+            std::string::npos)
+      << log;
   EXPECT_EQ(log.find("right:"), std::string::npos) << log;
 }
 
@@ -109,24 +114,27 @@ TEST(Node, ASetupTheRoomDoesNotGiveIsRefusedNamingTheScene) {
   zmq::context_t context;
   std::atomic<bool> stop{false};
   std::thread node([&] {
-    RunNode(context, options,
-            [](const std::vector<Projector>&) {
-              std::vector<std::unique_ptr<NodeOutput>> outputs;
-              outputs.push_back(std::make_unique<RecordOutput>());
-              return outputs;
-            },
-            stop);
+    RunNode(
+        context, options,
+        [](const std::vector<Projector>&) {
+          std::vector<std::unique_ptr<NodeOutput>> outputs;
+          outputs.push_back(std::make_unique<RecordOutput>());
+          return outputs;
+        },
+        stop);
   });
   ControllerOptions controller_options;
-  controller_options.setup = {{"setup", "x"}, {"target_patches", 80}, {"patches", 99}};  // not tiny_box's
+  controller_options.setup = {
+      {"setup", "x"}, {"target_patches", 80}, {"patches", 99}};  // not tiny_box's
   controller_options.setup_timeout_s = 30.0;
   Controller controller(context, {{"n", "inproc://node-test-2"}}, nullptr, controller_options);
   try {
     controller.Connect();
     ADD_FAILURE() << "a node set up on another room";
   } catch (const IoError& e) {
-    EXPECT_NE(std::string(e.what()).find("tiny_box.json: subdivides into 64 patches for target 80, the controller's "
-                                         "room into 99"),
+    EXPECT_NE(std::string(e.what()).find(
+                  "tiny_box.json: subdivides into 64 patches for target 80, the controller's "
+                  "room into 99"),
               std::string::npos)
         << e.what();
   }
@@ -145,11 +153,15 @@ TEST(Node, AProjectorNotInTheRigIsRefusedAtStart) {
   zmq::context_t context;
   std::atomic<bool> stop{false};
   try {
-    RunNode(context, options,
-            [](const std::vector<Projector>&) { return std::vector<std::unique_ptr<NodeOutput>>(); }, stop);
+    RunNode(
+        context, options,
+        [](const std::vector<Projector>&) { return std::vector<std::unique_ptr<NodeOutput>>(); },
+        stop);
     ADD_FAILURE() << "started";
   } catch (const IoError& e) {
-    EXPECT_NE(std::string(e.what()).find("rig.json: no projector 'middle' (the rig has left, right)"), std::string::npos)
+    EXPECT_NE(
+        std::string(e.what()).find("rig.json: no projector 'middle' (the rig has left, right)"),
+        std::string::npos)
         << e.what();
   }
 }
@@ -160,7 +172,8 @@ TEST(Play, DesiredFromImageIsThePerPatchMeanOfTheLinearisedPixels) {
   const std::vector<int> pixel_patch = {0, 0, 1, 1, 0, -1, 1, 1};
   cv::Mat image(height, width, CV_8UC3);
   const int values[8] = {0, 255, 128, 128, 255, 17, 64, 200};  // grey levels
-  for (int k = 0; k < 8; ++k) image.at<cv::Vec3b>(k / width, k % width) = cv::Vec3b(values[k], values[k], values[k]);
+  for (int k = 0; k < 8; ++k)
+    image.at<cv::Vec3b>(k / width, k % width) = cv::Vec3b(values[k], values[k], values[k]);
   image.at<cv::Vec3b>(0, 0) = cv::Vec3b(255, 0, 0);  // blue (OpenCV's B, G, R)
   Eigen::MatrixX3d fallback(3, 3);
   fallback << 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9;
@@ -207,16 +220,19 @@ TEST(Play, AVideosFramesAreSolvedAndShownAndTheLightFollowsThem) {
   testing::TempDir dir;
   const std::filesystem::path scene = WriteSyntheticSceneFile("tiny_box", 80, dir.path());
   const nlohmann::json file = nlohmann::json::parse(ReadFile(scene));
-  WriteFileAtomically(dir / "rig.json", nlohmann::json{{"format_version", 1},
-                                                       {"camera", {{"model", file.at("cameras").at(0).at("model")}}},
-                                                       {"projectors", file.at("projectors")}}
-                                            .dump());
+  WriteFileAtomically(dir / "rig.json",
+                      nlohmann::json{{"format_version", 1},
+                                     {"camera", {{"model", file.at("cameras").at(0).at("model")}}},
+                                     {"projectors", file.at("projectors")}}
+                          .dump());
   const std::filesystem::path video = dir / "content.avi";
   {
-    cv::VideoWriter writer(video.string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 10.0, cv::Size(64, 48));
+    cv::VideoWriter writer(video.string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 10.0,
+                           cv::Size(64, 48));
     ASSERT_TRUE(writer.isOpened());
     for (int k = 0; k < 6; ++k) {
-      const cv::Scalar colour = k % 2 == 0 ? cv::Scalar(30, 30, 220) : cv::Scalar(220, 30, 30);  // B, G, R
+      const cv::Scalar colour =
+          k % 2 == 0 ? cv::Scalar(30, 30, 220) : cv::Scalar(220, 30, 30);  // B, G, R
       writer.write(cv::Mat(48, 64, CV_8UC3, colour));
     }
   }

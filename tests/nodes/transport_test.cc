@@ -73,7 +73,8 @@ TEST(NodeTransport, AControllerWithAnotherRigsKeyIsRefusedAndLogged) {
   testing::TempDir dir, other_dir;
   const RigKeys keys = MakeRigKeys(dir.path(), false);
   RigKeys impostor = MakeRigKeys(other_dir.path(), false);
-  impostor.node.public_key = keys.node.public_key;  // it knows the node's public key, not our secret
+  impostor.node.public_key =
+      keys.node.public_key;  // it knows the node's public key, not our secret
   TestNode node(keys);
   zmq::context_t context;
   ControllerSocket controller(context, node.socket.endpoint(), &impostor);
@@ -107,7 +108,8 @@ TEST(NodeTransport, MalformedMessagesAreDroppedAndTheNodeGoesOn) {
   zmq::context_t context;
   ControllerSocket controller(context, node.socket.endpoint(), &keys);
   ASSERT_TRUE(PingUntilReceived(controller, node));
-  (void)controller.socket().send(zmq::str_buffer("not a procam message at all"), zmq::send_flags::none);
+  (void)controller.socket().send(zmq::str_buffer("not a procam message at all"),
+                                 zmq::send_flags::none);
   (void)controller.socket().send(zmq::str_buffer("PCN1"), zmq::send_flags::sndmore);
   (void)controller.socket().send(zmq::str_buffer("two frames"), zmq::send_flags::none);
   controller.Send(Ping(99));
@@ -115,7 +117,9 @@ TEST(NodeTransport, MalformedMessagesAreDroppedAndTheNodeGoesOn) {
   ASSERT_TRUE(envelope);
   EXPECT_EQ(envelope->message.sequence, 99u);
   EXPECT_EQ(node.socket.malformed(), 2);
-  EXPECT_NE(node.Log().find("dropped a malformed message: not a procam node message"), std::string::npos) << node.Log();
+  EXPECT_NE(node.Log().find("dropped a malformed message: not a procam node message"),
+            std::string::npos)
+      << node.Log();
   EXPECT_NE(node.Log().find("2 frames"), std::string::npos) << node.Log();
 }
 
@@ -148,7 +152,9 @@ TEST(NodeTransport, KeysAreMadeOnceAndReadWithErrorsNamingTheFile) {
     MakeRigKeys(dir.path(), false);
     ADD_FAILURE() << "replaced existing keys";
   } catch (const IoError& e) {
-    EXPECT_NE(std::string(e.what()).find("keys/controller.key: the rig already has keys"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("keys/controller.key: the rig already has keys"),
+              std::string::npos)
+        << e.what();
   }
   const RigKeys node = ReadRigKeys(dir.path(), KeyRole::kNode);
   EXPECT_EQ(node.node.secret_key, made.node.secret_key);
@@ -160,14 +166,16 @@ TEST(NodeTransport, KeysAreMadeOnceAndReadWithErrorsNamingTheFile) {
     ReadRigKeys(dir.path(), KeyRole::kController);
     ADD_FAILURE() << "read a missing key";
   } catch (const IoError& e) {
-    EXPECT_NE(std::string(e.what()).find("controller.key: no such key file"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("controller.key: no such key file"), std::string::npos)
+        << e.what();
   }
   dir.Write("keys/node.pub", "too short\n");
   try {
     ReadRigKeys(dir.path(), KeyRole::kNode);
     ADD_FAILURE() << "read a bad key";
   } catch (const IoError& e) {
-    EXPECT_NE(std::string(e.what()).find("node.pub: not a CURVE key"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("node.pub: not a CURVE key"), std::string::npos)
+        << e.what();
   }
   const RigKeys replaced = MakeRigKeys(dir.path(), true);
   EXPECT_NE(replaced.node.public_key, made.node.public_key);
