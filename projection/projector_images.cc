@@ -422,7 +422,7 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
         const ProjectorTables& table = tables[k];
         auto* codes = reinterpret_cast<cv::Vec3w*>(images[k].codes.data);
         const Eigen::Vector3f* pixel_factor = factors.empty() ? nullptr : factors[k].data();
-        Vec3 projector_light = Vec3::Zero();
+        double light_0 = 0.0, light_1 = 0.0, light_2 = 0.0;
         int row = -1, row_begin = 0,
             row_end = 0;  // the row of the current pixel, found incrementally
         for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
@@ -434,37 +434,47 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
           }
           const double share = map.share[index];
           // Light is linear in the codes' light and mixing: the patch's delivered flux is summed
-          // in relative light and mixed once per patch and projector.
-          Vec3 relative;
-          bool saturated_by_factor = false;
+          // in relative light and mixed once per patch and projector. Scalars throughout: a
+          // vector's max over three lanes stalls on store forwarding in this, the hottest loop.
+          double r[3];
+          bool saturated_by_factor = false, saturated_pixel = false;
           for (int c = 0; c < 3; ++c) {
-            if (tau[c] == kInfinity) {
-              relative[c] = 1.0;
-              continue;
+            double value = 1.0;
+            if (tau[c] != kInfinity) {
+              value = share * tau[c] * table.inverse_delta[c];
+              if (pixel_factor) {
+                value *= pixel_factor[position][c];
+                saturated_by_factor |= value >= 1.0 && pixel_factor[position][c] > 1.0f;
+              }
+              value = std::min(1.0, value);
             }
-            relative[c] = share * tau[c] * table.inverse_delta[c];
-            if (pixel_factor) {
-              relative[c] *= pixel_factor[position][c];
-              saturated_by_factor |= relative[c] >= 1.0 && pixel_factor[position][c] > 1.0f;
-            }
-            relative[c] = std::min(1.0, relative[c]);
+            saturated_pixel |= value >= 1.0;
+            r[c] = value;
           }
-          if (relative.maxCoeff() >= 1.0) ++my_saturated[k];
-          if (saturated_by_factor) ++my_detail_saturated[k];
-          Vec3 r;
-          if (LightFor(table, relative, &r)) ++my_clipped[k];
+          my_saturated[k] += saturated_pixel;
+          my_detail_saturated[k] += saturated_by_factor;
+          if (!table.identity_mixing) {
+            Vec3 mixed;
+            if (LightFor(table, Vec3(r[0], r[1], r[2]), &mixed)) ++my_clipped[k];
+            for (int c = 0; c < 3; ++c) r[c] = mixed[c];
+          }
           if (diffuse) {
-            light[k][index] = r;
+            light[k][index] = Vec3(r[0], r[1], r[2]);
             continue;
           }
           const double threshold =
               dither == DitherMethod::kOrdered ? BayerThreshold(index - row_begin, row) : 0.5;
-          cv::Vec3w& code = codes[index];
-          for (int c = 0; c < 3; ++c) {
-            code[c] = static_cast<uint16_t>(table.codes[c].Quantise(r[c], threshold));
-            projector_light[c] += table.codes[c].Light(code[c]);
-          }
+          // Written out per channel so that the three sums stay in registers.
+          const int q0 = table.codes[0].Quantise(r[0], threshold);
+          const int q1 = table.codes[1].Quantise(r[1], threshold);
+          const int q2 = table.codes[2].Quantise(r[2], threshold);
+          codes[index] = cv::Vec3w(static_cast<uint16_t>(q0), static_cast<uint16_t>(q1),
+                                   static_cast<uint16_t>(q2));
+          light_0 += table.codes[0].Light(q0);
+          light_1 += table.codes[1].Light(q1);
+          light_2 += table.codes[2].Light(q2);
         }
+        const Vec3 projector_light(light_0, light_1, light_2);
         if (!diffuse) {
           const Vec3 mixed = table.identity_mixing
                                  ? projector_light

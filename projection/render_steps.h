@@ -50,9 +50,9 @@ class CodeTable {
   // exceeds `threshold` (½: nearest in linear light).
   int Quantise(double r, double threshold) const {
     const int q = Below(r);
-    if (q >= max_code_) return max_code_;
-    // (r − light_q) / (light_q+1 − light_q) > threshold, without the division.
-    return r - light_[q] > threshold * (light_[q + 1] - light_[q]) ? q + 1 : q;
+    // (r − light_q) / (light_q+1 − light_q) > threshold, without the division. At the top code
+    // the sentinel's infinite gap keeps q. No branch: under dithering the test is a coin toss.
+    return q + static_cast<int>(r - light_[q] > threshold * (light_[q + 1] - light_[q]));
   }
   int max_code() const { return max_code_; }
 
