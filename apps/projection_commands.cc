@@ -12,6 +12,7 @@
 #include "base/timing.h"
 #include "calibration/rig_directory.h"
 #include "datasets_synthetic/benchmarks.h"
+#include "datasets_synthetic/play_benchmark.h"
 #include "procam/config.h"
 #include "projection/projector_images.h"
 #include "projection/stage.h"
@@ -174,7 +175,8 @@ void AddProjectionCommands(CLI::App& app) {
   });
 
   auto play_args = std::make_shared<PlayBenchmarkOptions>();
-  auto play_strings = std::make_shared<std::array<std::string, 3>>(std::array<std::string, 3>{"perceptual", "cpu", "ordered"});
+  auto play_strings = std::make_shared<std::array<std::string, 4>>(
+      std::array<std::string, 4>{"perceptual", "cpu", "ordered", "cpu"});
   CLI::App* bench_play = bench->add_subcommand(
       "play", "One frame of procam play: new desired colours -> warm-started solve -> images of 3 projectors");
   bench_play->add_option("--width", play_args->width, "Projector width, pixels")->capture_default_str();
@@ -188,12 +190,18 @@ void AddProjectionCommands(CLI::App& app) {
       ->capture_default_str();
   bench_play->add_option("--device", (*play_strings)[1], "cpu | cuda")->check(CLI::IsMember({"cpu", "cuda"}))->capture_default_str();
   bench_play->add_option("--dither", (*play_strings)[2], "none | ordered")->check(CLI::IsMember({"none", "ordered"}))->capture_default_str();
+  bench_play->add_option("--render", (*play_strings)[3],
+                         "cpu | gpu: the images shaded on the CPU, or drawn by OpenGL into an offscreen "
+                         "context (EGL: a GPU, or Mesa's llvmpipe)")
+      ->check(CLI::IsMember({"cpu", "gpu"}))
+      ->capture_default_str();
   AddLightOption(bench_play, &play_args->light);
   bench_play->add_option("--json", play_args->json, "Also write the timings as JSON");
   bench_play->callback([play_args, play_strings] {
     ParseMethod((*play_strings)[0], &play_args->method);
     ParseDevice((*play_strings)[1], &play_args->device);
     ParseDither((*play_strings)[2], &play_args->dither);
+    play_args->render = (*play_strings)[3] == "gpu" ? PlayRender::kGpu : PlayRender::kCpu;
     play_args->progress = PrintProgress();
     RunPlayBenchmark(*play_args);
   });

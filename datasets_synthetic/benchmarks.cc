@@ -19,6 +19,7 @@
 #include "compensation/problem.h"
 #include "compensation/radiosity.h"
 #include "compensation/solver.h"
+#include "datasets_synthetic/bench_projectors.h"
 #include "datasets_synthetic/rooms.h"
 #include "geometry/form_factors.h"
 #include "geometry/patches.h"
@@ -396,125 +397,9 @@ void RunScaleBenchmark(const BenchmarkOptions& args) {
 
 namespace {
 
-// `count` projectors (2 or 3) near the front wall of the box room, overlapping on the back wall
-// and the occluder.
-std::vector<Projector> BenchProjectors(int count, int width, int height) {
-  const std::vector<double> xs = count == 2 ? std::vector<double>{1.2, 2.8} : std::vector<double>{1.2, 2.0, 2.8};
-  const char* names[] = {"left", "centre", "right"};
-  std::vector<Projector> projectors;
-  for (size_t k = 0; k < xs.size(); ++k) {
-    const double x = xs[k];
-    Projector projector;
-    projector.name = count == 2 ? (k == 0 ? "left" : "right") : names[k];
-    projector.geometry = ProjectorGeometry(
-        "LENSMODEL_OPENCV4",
-        {1.0 * width, 1.0 * width, 0.5 * (width - 1), 0.9 * height, -0.05, 0.01, 0.0, 0.0}, width, height,
-        ProjFromWorldLookingAt(Vec3(x, 0.2, 2.2), Vec3(4.0 - x, 3.0, 0.8), Vec3::UnitZ()));
-    projector.photometry.black = Vec3::Constant(0.01);
-    projector.photometry.max = Vec3(9.0, 10.0, 8.5);
-    projectors.push_back(projector);
-  }
-  return projectors;
-}
 
 }  // namespace
 
-void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
-  BoxRoomOptions room;
-  room.target_patches = args.patches;
-  const Scene scene = MakeBoxRoom(room);
-  SubdivisionOptions subdivision;
-  subdivision.target_patches = args.patches;
-  const PatchHierarchy hierarchy = SubdividePatches(scene, subdivision);
-  const PatchLevel& fine = hierarchy.fine;
-  auto start = Clock::now();
-  Eigen::MatrixXd form_factors = ComputeFormFactors(scene, fine, FormFactorOptions(), nullptr);
-  const double form_factor_seconds = SecondsSince(start);
-  ProjectionRigSummary rig_summary;
-  const ProjectionRig rig =
-      BuildProjectionRig(fine, BenchProjectors(3, args.width, args.height), ProjectionRigOptions(), &rig_summary);
-  CompensationProblem problem = MakeProblem(scene, fine, std::move(form_factors), 0.5);
-  problem.lower = rig.lower;
-  problem.upper = rig.upper;
-  const Eigen::MatrixX3d base = problem.desired;
-  SolverOptions solver;
-  solver.method = args.method;
-  solver.device = args.device;
-  RenderOptions render;
-  render.light = args.light;
-  render.dither = args.dither;
-  // As a display node: the planner's static part (seamless field, share bounds, code tables) is
-  // made once per rig; each frame is a plan (per patch) and its shading (per pixel).
-  start = Clock::now();
-  const FramePlanner planner(rig, render);
-  const double planner_seconds = SecondsSince(start);
-  WarmStart warm;
-  std::vector<double> solve_ms, plan_ms, shade_ms, render_ms, total_ms;
-  std::vector<int> iterations;
-  // Frame 0 factorises K (or forms K⁻¹ on the device) and starts cold: reported apart.
-  double first_ms = 0.0;
-  for (int frame = 0; frame <= args.frames; ++frame) {
-    // Changing content: every patch's desired colour drifts by a few percent per frame.
-    for (int i = 0; i < problem.size(); ++i) {
-      for (int c = 0; c < 3; ++c)
-        problem.desired(i, c) = std::clamp(base(i, c) * (1.0 + 0.15 * std::sin(0.3 * frame + 0.01 * i + 2.0 * c)), 0.0, 1.0);
-    }
-    start = Clock::now();
-    SolverSummary summary;
-    const CompensationSolution solution = Solve(solver, problem, &summary, {}, warm);
-    const double solved = MsSince(start);
-    warm = WarmStart{solution.radiosity_system, solution.emittance};
-    const auto render_start = Clock::now();
-    const FramePlan plan = planner.Plan(solution.emittance);
-    const double planned = MsSince(render_start);
-    const auto shade_start = Clock::now();
-    const std::vector<ProjectorImage> images = ShadeProjectorImages(planner, plan, nullptr);
-    const double shaded = MsSince(shade_start);
-    const double rendered = MsSince(render_start);
-    if (frame == 0) {
-      first_ms = solved + rendered;
-      continue;
-    }
-    solve_ms.push_back(solved);
-    plan_ms.push_back(planned);
-    shade_ms.push_back(shaded);
-    render_ms.push_back(rendered);
-    total_ms.push_back(solved + rendered);
-    iterations.push_back(summary.iterations);
-  }
-  std::vector<double> iteration_values(iterations.begin(), iterations.end());
-  Report(args.progress, fmt::format("play: box room, {} patches ({} variables), 3 projectors {}x{}, {} {}, {} light",
-                                    problem.size(), 3 * problem.size(), args.width, args.height, MethodName(args.method),
-                                    DeviceName(args.device), LightFieldName(args.light)));
-  Report(args.progress, fmt::format("  once: form factors {:.2f} s, projector maps {:.2f} s, frame planner {:.2f} s, "
-                                    "first frame (factorise K, cold solve, render) {:.1f} ms",
-                                    form_factor_seconds, rig_summary.seconds, planner_seconds,
-                                    first_ms));
-  Report(args.progress,
-         fmt::format("  per frame, median of {}: solve (warm) {:.1f} ms ({:.0f} iterations), render 3 images (CPU) "
-                     "{:.1f} ms (plan {:.1f}, shade {:.1f}); new desired appearance -> every image "
-                     "ready {:.1f} ms",
-                     args.frames, Median(solve_ms), Median(iteration_values), Median(render_ms),
-                     Median(plan_ms), Median(shade_ms), Median(total_ms)));
-  if (!args.json.empty()) {
-    const nlohmann::json result = {{"benchmark", "play"},
-                                   {"patches", problem.size()},
-                                   {"width", args.width},
-                                   {"height", args.height},
-                                   {"projectors", 3},
-                                   {"method", MethodName(args.method)},
-                                   {"device", DeviceName(args.device)},
-                                   {"frames", args.frames},
-                                   {"first_frame_ms", first_ms},
-                                   {"median_solve_ms", Median(solve_ms)},
-                                   {"median_render_ms", Median(render_ms)},
-                                   {"median_plan_ms", Median(plan_ms)},
-                                   {"median_shade_ms", Median(shade_ms)},
-                                   {"median_total_ms", Median(total_ms)},
-                                   {"median_iterations", Median(iteration_values)}};
-    WriteFileAtomically(args.json, result.dump(2) + "\n");
-  }
-}
 
 void RunProjectionBenchmark(const ProjectionBenchmarkOptions& args) {
   const DitherMethod dither = args.dither;
@@ -528,7 +413,7 @@ void RunProjectionBenchmark(const ProjectionBenchmarkOptions& args) {
   SubdivisionOptions subdivision;
   subdivision.target_patches = args.patches;
   const PatchHierarchy hierarchy = SubdividePatches(scene, subdivision);
-  const std::vector<Projector> projectors = BenchProjectors(2, args.width, args.height);
+  const std::vector<Projector> projectors = BoxRoomProjectors(2, args.width, args.height);
   ProjectionRigSummary rig_summary;
   ProjectionRigOptions rig_options;
   rig_options.texture_coordinates = args.detail;

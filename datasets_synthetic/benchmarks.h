@@ -54,21 +54,5 @@ struct ProjectionBenchmarkOptions {
 // maps once, then rendering and PNG encoding, median over the runs.
 void RunProjectionBenchmark(const ProjectionBenchmarkOptions& options);
 
-// `procam bench play`: what one frame of light that follows changing content costs, from a new
-// desired appearance to every projector image ready: the box room at `patches`, three
-// projectors, each frame's desired colours drifting by a few percent, solved warm-started from
-// the last frame (K factorised once) and rendered (the CPU renderer). Medians over `frames`.
-struct PlayBenchmarkOptions {
-  int width = 1920, height = 1080;
-  int patches = 1000;  // about 3 000 variables
-  int frames = 20;
-  CompensationMethod method = CompensationMethod::kPerceptual;
-  Device device = Device::kCpu;
-  LightField light = LightField::kSmooth;
-  DitherMethod dither = DitherMethod::kOrdered;
-  std::string json;
-  ProgressCallback progress;
-};
-void RunPlayBenchmark(const PlayBenchmarkOptions& options);
 
 }  // namespace procam

@@ -31,6 +31,7 @@ uniform samplerBuffer patch_centroid; // per patch: xyz c_j, w r_j²
 uniform isamplerBuffer node_begin;    // (n + 1) CSR of the seamless field's node lists
 uniform isamplerBuffer node_list;
 uniform samplerBuffer code_light;     // light of code q of channel c at c (max_code + 1) + q
+uniform isamplerBuffer code_first;    // CodeTable's bins: channel c's bin b at c (code_bins + 1) + b
 uniform samplerBuffer level;          // per patch τ (rgb); negative: +inf (full drive)
 uniform samplerBuffer node_value;     // per patch v̂ (rgb)
 uniform samplerBuffer patch_mean;     // per patch mean_i(v) (rgb)
@@ -38,6 +39,7 @@ uniform vec3 inverse_delta;
 uniform mat3 mixing_inverse;
 uniform int identity_mixing;
 uniform int max_code;
+uniform int code_bins;
 uniform int ordered_dither;
 uniform int smooth_light;
 uniform int image_height;
@@ -70,19 +72,17 @@ vec3 SeamlessFactor(int i, vec3 x) {
   return m;
 }
 
-// CodeTable::Quantise: the largest code whose light is ≤ r, or the next one where r lies more
-// than `threshold` of the way to it.
+// CodeTable::Quantise: the largest code whose light is ≤ r (from r's bin, as CodeTable::Below:
+// the bin's first code, then up while the next code's light is still ≤ r: rarely a step), or the
+// next one where r lies more than `threshold` of the way to it.
 int Quantise(int c, float r, float threshold) {
   int base = c * (max_code + 1);
-  int low = 0, high = max_code;
-  while (low < high) {
-    int middle = (low + high + 1) / 2;
-    if (texelFetch(code_light, base + middle).r <= r) low = middle; else high = middle - 1;
-  }
-  if (low >= max_code) return max_code;
-  float below = texelFetch(code_light, base + low).r;
-  float above = texelFetch(code_light, base + low + 1).r;
-  return r - below > threshold * (above - below) ? low + 1 : low;
+  int q = texelFetch(code_first, c * (code_bins + 1) + int(r * float(code_bins))).r;
+  while (q < max_code && texelFetch(code_light, base + q + 1).r <= r) ++q;
+  if (q >= max_code) return max_code;
+  float below = texelFetch(code_light, base + q).r;
+  float above = texelFetch(code_light, base + q + 1).r;
+  return r - below > threshold * (above - below) ? q + 1 : q;
 }
 
 void main() {
@@ -170,6 +170,7 @@ enum Unit : int {
   kNodeBegin,
   kNodeList,
   kCodeLight,
+  kCodeFirst,
   kLevel,
   kNodeValue,
   kPatchMean,
@@ -177,7 +178,7 @@ enum Unit : int {
 };
 constexpr std::array<const char*, kUnits> kSamplerNames = {
     "pixel_patch", "pixel_point", "patch_centroid", "node_begin", "node_list",
-    "code_light",  "level",       "node_value",     "patch_mean"};
+    "code_light",  "code_first",  "level",          "node_value",  "patch_mean"};
 
 }  // namespace
 
@@ -330,6 +331,16 @@ GlProjectorRenderer::GlProjectorRenderer(const FramePlanner& planner, int projec
   }
   state.MakeTextureBuffer(kCodeLight, GL_R32F, code_light.data(), code_light.size() * sizeof(float),
                           code_light.size(), GL_STATIC_DRAW);
+  // and where each bin of light starts its search (CodeTable's table: r's bin is exact in
+  // single precision too, r · 2^k, and a code whose light is ≤ the bin's start in double is so
+  // in single precision, so the walk only ever goes up, to the code the CPU finds).
+  constexpr int kBins = internal::CodeTable::bins();
+  std::vector<int32_t> code_first(3 * static_cast<size_t>(kBins + 1));
+  for (int c = 0; c < 3; ++c) {
+    for (int b = 0; b <= kBins; ++b) code_first[c * (kBins + 1) + b] = tables.codes[c].FirstOfBin(b);
+  }
+  state.MakeTextureBuffer(kCodeFirst, GL_R32I, code_first.data(),
+                          code_first.size() * sizeof(int32_t), code_first.size(), GL_STATIC_DRAW);
   for (const Unit unit : {kLevel, kNodeValue, kPatchMean}) {
     state.MakeTextureBuffer(unit, GL_RGBA32F, nullptr, 0, n, GL_STREAM_DRAW);
   }
@@ -344,6 +355,7 @@ GlProjectorRenderer::GlProjectorRenderer(const FramePlanner& planner, int projec
                      mixing_inverse.data());
   glUniform1i(glGetUniformLocation(state.program, "identity_mixing"), tables.identity_mixing);
   glUniform1i(glGetUniformLocation(state.program, "max_code"), max_code);
+  glUniform1i(glGetUniformLocation(state.program, "code_bins"), internal::CodeTable::bins());
   glUniform1i(glGetUniformLocation(state.program, "ordered_dither"),
               options.dither == DitherMethod::kOrdered);
   glUniform1i(glGetUniformLocation(state.program, "smooth_light"),
@@ -402,6 +414,18 @@ void GlProjectorRenderer::Draw(const FramePlan& plan) {
 }
 
 void GlProjectorRenderer::Finish() const { glFinish(); }
+
+double GlProjectorRenderer::TimedDraw(const FramePlan& plan) {
+  GLuint query = 0;
+  glGenQueries(1, &query);
+  glBeginQuery(GL_TIME_ELAPSED, query);
+  Draw(plan);
+  glEndQuery(GL_TIME_ELAPSED);
+  GLuint64 nanoseconds = 0;
+  glGetQueryObjectui64v(query, GL_QUERY_RESULT, &nanoseconds);  // waits for the GPU
+  glDeleteQueries(1, &query);
+  return 1e-6 * static_cast<double>(nanoseconds);
+}
 
 ProjectorImage GlProjectorRenderer::ReadBack() const {
   const State& state = *state_;

@@ -55,6 +55,10 @@ class CodeTable {
     return q + static_cast<int>(r - light_[q] > threshold * (light_[q + 1] - light_[q]));
   }
   int max_code() const { return max_code_; }
+  // The bins behind Below: bin b (0 ≤ b ≤ bins()) holds the largest code whose light is ≤
+  // b / bins(), where Below starts its walk for r in [b, b + 1) / bins().
+  static constexpr int bins() { return kBins; }
+  int FirstOfBin(int bin) const { return first_[bin]; }
 
  private:
   static constexpr int kBins = 4096;  // 8 KB per channel: stays in L1

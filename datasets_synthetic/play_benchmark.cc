@@ -1,0 +1,206 @@
+#include "datasets_synthetic/play_benchmark.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+#include <vector>
+
+#include "base/io.h"
+#include "base/timing.h"
+#include "compensation/problem.h"
+#include "datasets_synthetic/bench_projectors.h"
+#include "datasets_synthetic/rooms.h"
+#include "geometry/form_factors.h"
+#include "geometry/patches.h"
+#include "procam/config.h"
+#include "projection/frame_plan.h"
+#include "projection/projection_rig.h"
+#if PROCAM_WITH_GLFW
+#include "projection/gl_renderer.h"
+#include "projection/offscreen_gl.h"
+#endif
+
+namespace procam {
+namespace {
+
+// The three projectors' images of a plan: shaded on the CPU, or drawn by the GPU (each image
+// into the offscreen framebuffer in turn, then glFinish: every image ready).
+class PlayRenderer {
+ public:
+  PlayRenderer(const FramePlanner& planner, PlayRender render) : planner_(planner), render_(render) {
+    if (render != PlayRender::kGpu) return;
+#if PROCAM_WITH_GLFW
+    const ProjectorMap& map = planner.rig().maps.front();
+    gl_ = std::make_unique<OffscreenGl>(map.width, map.height);
+    for (size_t k = 0; k < planner.rig().projectors.size(); ++k)
+      gpu_.push_back(std::make_unique<GlProjectorRenderer>(planner, static_cast<int>(k)));
+    description_ = gl_->description();
+#else
+    throw IoError("procam bench play --render gpu: procam was built without OpenGL (PROCAM_WITH_GLFW)");
+#endif
+  }
+  ~PlayRenderer() {
+#if PROCAM_WITH_GLFW
+    gpu_.clear();  // with the context still current
+#endif
+  }
+
+  void Render(const FramePlan& plan) {
+    if (render_ == PlayRender::kCpu) {
+      ShadeProjectorImages(planner_, plan, nullptr);
+      return;
+    }
+#if PROCAM_WITH_GLFW
+    for (const auto& renderer : gpu_) renderer->Draw(plan);
+    gpu_.front()->Finish();
+#endif
+  }
+
+  // One projector's image alone: upload + draw + glFinish (wall clock), and the draw as the GPU
+  // times it, ms.
+  void TimeOneImage(const FramePlan& plan, double* wall_ms, double* gpu_ms) {
+#if PROCAM_WITH_GLFW
+    const auto start = Clock::now();
+    gpu_.front()->Draw(plan);
+    gpu_.front()->Finish();
+    *wall_ms = MsSince(start);
+    *gpu_ms = gpu_.front()->TimedDraw(plan);
+#else
+    (void)plan, (void)wall_ms, (void)gpu_ms;
+#endif
+  }
+
+  const std::string& description() const { return description_; }
+
+ private:
+  const FramePlanner& planner_;
+  PlayRender render_;
+  std::string description_ = "CPU";
+#if PROCAM_WITH_GLFW
+  std::unique_ptr<OffscreenGl> gl_;
+  std::vector<std::unique_ptr<GlProjectorRenderer>> gpu_;
+#endif
+};
+
+}  // namespace
+
+void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
+  if (args.frames < 1) throw std::invalid_argument("bench play: frames must be at least 1");
+  BoxRoomOptions room;
+  room.target_patches = args.patches;
+  const Scene scene = MakeBoxRoom(room);
+  SubdivisionOptions subdivision;
+  subdivision.target_patches = args.patches;
+  const PatchHierarchy hierarchy = SubdividePatches(scene, subdivision);
+  const PatchLevel& fine = hierarchy.fine;
+  auto start = Clock::now();
+  Eigen::MatrixXd form_factors = ComputeFormFactors(scene, fine, FormFactorOptions(), nullptr);
+  const double form_factor_seconds = SecondsSince(start);
+  ProjectionRigSummary rig_summary;
+  const ProjectionRig rig =
+      BuildProjectionRig(fine, BoxRoomProjectors(3, args.width, args.height), ProjectionRigOptions(), &rig_summary);
+  CompensationProblem problem = MakeProblem(scene, fine, std::move(form_factors), 0.5);
+  problem.lower = rig.lower;
+  problem.upper = rig.upper;
+  const Eigen::MatrixX3d base = problem.desired;
+  SolverOptions solver;
+  solver.method = args.method;
+  solver.device = args.device;
+  RenderOptions render;
+  render.light = args.light;
+  render.dither = args.dither;
+  // As a display node: the planner's static part (seamless field, share bounds, code tables) is
+  // made once per rig; each frame is a plan (per patch) and its shading (per pixel).
+  start = Clock::now();
+  const FramePlanner planner(rig, render);
+  const double planner_seconds = SecondsSince(start);
+  PlayRenderer renderer(planner, args.render);
+  WarmStart warm;
+  std::vector<double> solve_ms, plan_ms, shade_ms, render_ms, total_ms, one_image_ms,
+      one_image_gpu_ms;
+  std::vector<int> iterations;
+  // Frame 0 factorises K (or forms K⁻¹ on the device) and starts cold: reported apart.
+  double first_ms = 0.0;
+  for (int frame = 0; frame <= args.frames; ++frame) {
+    // Changing content: every patch's desired colour drifts by a few percent per frame.
+    for (int i = 0; i < problem.size(); ++i) {
+      for (int c = 0; c < 3; ++c)
+        problem.desired(i, c) = std::clamp(base(i, c) * (1.0 + 0.15 * std::sin(0.3 * frame + 0.01 * i + 2.0 * c)), 0.0, 1.0);
+    }
+    start = Clock::now();
+    SolverSummary summary;
+    const CompensationSolution solution = Solve(solver, problem, &summary, {}, warm);
+    const double solved = MsSince(start);
+    warm = WarmStart{solution.radiosity_system, solution.emittance};
+    const auto render_start = Clock::now();
+    const FramePlan plan = planner.Plan(solution.emittance);
+    const double planned = MsSince(render_start);
+    const auto shade_start = Clock::now();
+    renderer.Render(plan);
+    const double shaded = MsSince(shade_start);
+    const double rendered = MsSince(render_start);
+    if (args.render == PlayRender::kGpu) {
+      renderer.TimeOneImage(plan, &one_image_ms.emplace_back(), &one_image_gpu_ms.emplace_back());
+    }
+    if (frame == 0) {
+      first_ms = solved + rendered;
+      continue;
+    }
+    solve_ms.push_back(solved);
+    plan_ms.push_back(planned);
+    shade_ms.push_back(shaded);
+    render_ms.push_back(rendered);
+    total_ms.push_back(solved + rendered);
+    iterations.push_back(summary.iterations);
+  }
+  std::vector<double> iteration_values(iterations.begin(), iterations.end());
+  Report(args.progress, fmt::format("play: box room, {} patches ({} variables), 3 projectors {}x{}, {} {}, {} light",
+                                    problem.size(), 3 * problem.size(), args.width, args.height, MethodName(args.method),
+                                    DeviceName(args.device), LightFieldName(args.light)));
+  Report(args.progress, fmt::format("  once: form factors {:.2f} s, projector maps {:.2f} s, frame planner {:.2f} s, "
+                                    "first frame (factorise K, cold solve, render) {:.1f} ms",
+                                    form_factor_seconds, rig_summary.seconds, planner_seconds,
+                                    first_ms));
+  const bool gpu = args.render == PlayRender::kGpu;
+  Report(args.progress, fmt::format("  render on {}", renderer.description()));
+  Report(args.progress,
+         fmt::format("  per frame, median of {}: solve (warm) {:.1f} ms ({:.0f} iterations), render 3 images "
+                     "({}) {:.1f} ms (plan {:.1f}, {} {:.1f}); new desired appearance -> every image "
+                     "ready {:.1f} ms",
+                     args.frames, Median(solve_ms), Median(iteration_values), gpu ? "GPU" : "CPU",
+                     Median(render_ms), Median(plan_ms), gpu ? "draw + glFinish" : "shade",
+                     Median(shade_ms), Median(total_ms)));
+  if (gpu) {
+    Report(args.progress, fmt::format("  one {}x{} image on the GPU, median: {:.2f} ms upload + draw + glFinish "
+                                      "(wall clock), {:.2f} ms drawing (the GPU's timer)",
+                                      args.width, args.height, Median(one_image_ms), Median(one_image_gpu_ms)));
+  }
+  if (!args.json.empty()) {
+    const nlohmann::json result = {{"benchmark", "play"},
+                                   {"patches", problem.size()},
+                                   {"width", args.width},
+                                   {"height", args.height},
+                                   {"projectors", 3},
+                                   {"method", MethodName(args.method)},
+                                   {"device", DeviceName(args.device)},
+                                   {"frames", args.frames},
+                                   {"first_frame_ms", first_ms},
+                                   {"median_solve_ms", Median(solve_ms)},
+                                   {"median_render_ms", Median(render_ms)},
+                                   {"median_plan_ms", Median(plan_ms)},
+                                   {"median_shade_ms", Median(shade_ms)},  // or draw + glFinish
+                                   {"median_total_ms", Median(total_ms)},
+                                   {"median_iterations", Median(iteration_values)},
+                                   {"render", gpu ? "gpu" : "cpu"},
+                                   {"renderer", renderer.description()},
+                                   {"median_one_image_ms", gpu ? Median(one_image_ms) : 0.0},
+                                   {"median_one_image_gpu_ms", gpu ? Median(one_image_gpu_ms) : 0.0}};
+    WriteFileAtomically(args.json, result.dump(2) + "\n");
+  }
+}
+
+}  // namespace procam
