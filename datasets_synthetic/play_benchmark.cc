@@ -123,6 +123,7 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
   std::vector<double> solve_ms, plan_ms, shade_ms, render_ms, total_ms, one_image_ms,
       one_image_gpu_ms;
   std::vector<int> iterations;
+  std::vector<double> refined;  // patches whose light may saturate: refined per pixel
   // Frame 0 factorises K (or forms K⁻¹ on the device) and starts cold: reported apart.
   double first_ms = 0.0;
   for (int frame = 0; frame <= args.frames; ++frame) {
@@ -139,6 +140,7 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
     const auto render_start = Clock::now();
     const FramePlan plan = planner.Plan(solution.emittance);
     const double planned = MsSince(render_start);
+    refined.push_back(plan.refined_patches);
     const auto shade_start = Clock::now();
     renderer.Render(plan);
     const double shaded = MsSince(shade_start);
@@ -169,10 +171,10 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
   Report(args.progress, fmt::format("  render on {}", renderer.description()));
   Report(args.progress,
          fmt::format("  per frame, median of {}: solve (warm) {:.1f} ms ({:.0f} iterations), render 3 images "
-                     "({}) {:.1f} ms (plan {:.1f}, {} {:.1f}); new desired appearance -> every image "
-                     "ready {:.1f} ms",
+                     "({}) {:.1f} ms (plan {:.1f} with {:.0f} patches refined per pixel, {} {:.1f}); new desired "
+                     "appearance -> every image ready {:.1f} ms",
                      args.frames, Median(solve_ms), Median(iteration_values), gpu ? "GPU" : "CPU",
-                     Median(render_ms), Median(plan_ms), gpu ? "draw + glFinish" : "shade",
+                     Median(render_ms), Median(plan_ms), Median(refined), gpu ? "draw + glFinish" : "shade",
                      Median(shade_ms), Median(total_ms)));
   if (gpu) {
     Report(args.progress, fmt::format("  one {}x{} image on the GPU, median: {:.2f} ms upload + draw + glFinish "
@@ -192,6 +194,7 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
                                    {"median_solve_ms", Median(solve_ms)},
                                    {"median_render_ms", Median(render_ms)},
                                    {"median_plan_ms", Median(plan_ms)},
+                                   {"median_refined_patches", Median(refined)},
                                    {"median_shade_ms", Median(shade_ms)},  // or draw + glFinish
                                    {"median_total_ms", Median(total_ms)},
                                    {"median_iterations", Median(iteration_values)},

@@ -25,7 +25,7 @@ struct NodeSetup {
   RenderOptions render;
   double feather = 0.1;
   ProjectionRig rig;
-  std::unique_ptr<FramePlanner> planner;  // when some output renders on the GPU (refers to rig)
+  std::unique_ptr<FramePlanner> planner;  // refers to rig; null for detail (no frame plans)
   std::vector<bool> gpu;                  // per output: renders plans itself
 };
 
@@ -206,22 +206,29 @@ class Node {
     Reply(MessageType::kSetupDone, message.sequence, done);
   }
 
-  // The GPU where the options and outputs allow; the planner is made only then.
+  // A frame planner for the rig (the static part of every frame's rendering, made once), and the
+  // GPU for the outputs where the options and outputs allow. Detail has no frame plans: then
+  // every frame renders from scratch on the CPU.
   void PrepareOutputs(NodeSetup* setup) {
     setup->gpu.assign(outputs_.size(), false);
-    if (!options_.gpu) return;
     try {
       setup->planner = std::make_unique<FramePlanner>(setup->rig, setup->render);
-    } catch (const std::invalid_argument& e) {  // detail or error diffusion: the CPU renders
-      Log(fmt::format("node {}: rendering on the CPU: {}", options_.name, e.what()));
+    } catch (const std::invalid_argument& e) {
+      Log(fmt::format("node {}: rendering on the CPU without frame plans: {}", options_.name,
+                      e.what()));
       return;
     }
+    if (!options_.gpu) return;
     int on_gpu = 0;
     for (size_t k = 0; k < outputs_.size(); ++k) {
-      setup->gpu[k] = outputs_[k]->PrepareGpu(*setup->planner, own_[k]);
+      try {
+        setup->gpu[k] = outputs_[k]->PrepareGpu(*setup->planner, own_[k]);
+      } catch (const std::invalid_argument& e) {  // error diffusion: the CPU renders
+        Log(fmt::format("node {}: rendering on the CPU: {}", options_.name, e.what()));
+        setup->gpu[k] = false;
+      }
       on_gpu += setup->gpu[k];
     }
-    if (on_gpu == 0) setup->planner.reset();
     Log(fmt::format("node {}: {} of {} projector(s) rendered on the GPU", options_.name, on_gpu,
                     outputs_.size()));
   }
@@ -239,6 +246,7 @@ class Node {
             message.emittance.data(), n, 3);
     const bool cpu_outputs =
         std::find(setup_->gpu.begin(), setup_->gpu.end(), false) != setup_->gpu.end();
+    const long on_gpu = std::count(setup_->gpu.begin(), setup_->gpu.end(), true);
     std::vector<ProjectorImage> images;
     double plan_ms = 0.0;
     if (setup_->planner) {
@@ -247,7 +255,14 @@ class Node {
       for (size_t k = 0; k < outputs_.size(); ++k) {
         if (!faulty_[k] && setup_->gpu[k]) outputs_[k]->DrawPlan(plan);
       }
-      if (cpu_outputs) images = ShadeProjectorImages(*setup_->planner, plan, nullptr);
+      if (cpu_outputs) {
+        // Only this node's projectors (those not on the GPU).
+        std::vector<int> shade;
+        for (size_t k = 0; k < outputs_.size(); ++k) {
+          if (!setup_->gpu[k]) shade.push_back(own_[k]);
+        }
+        images = ShadeProjectorImages(*setup_->planner, plan, nullptr, shade);
+      }
     } else {
       RenderSummary summary;
       images = RenderProjectorImages(setup_->rig, emittance, setup_->render, &summary);
@@ -260,7 +275,7 @@ class Node {
           {{"node", options_.name},
            {"render_ms", 1e3 * SecondsSince(start)},
            {"plan_ms", plan_ms},
-           {"render", setup_->planner ? (cpu_outputs ? "gpu+cpu" : "gpu") : "cpu"}});
+           {"render", !cpu_outputs ? "gpu" : on_gpu > 0 ? "gpu+cpu" : "cpu"}});
   }
 
   void Present(uint64_t frame) {

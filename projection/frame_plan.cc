@@ -164,7 +164,8 @@ FramePlan PlanFrame(const ProjectionRig& rig, const Eigen::MatrixX3d& emittance,
 }
 
 std::vector<ProjectorImage> ShadeProjectorImages(const FramePlanner& planner, const FramePlan& plan,
-                                                 RenderSummary* summary) {
+                                                 RenderSummary* summary,
+                                                 const std::vector<int>& projectors) {
   const ProjectionRig& rig = planner.rig();
   const int n = rig.size();
   const bool smooth = planner.field() != nullptr;
@@ -176,6 +177,18 @@ std::vector<ProjectorImage> ShadeProjectorImages(const FramePlanner& planner, co
                                 std::to_string(n) + ", light " +
                                 LightFieldName(planner.options().light) + ")");
   }
+  std::vector<char> wanted;
+  if (!projectors.empty()) {
+    wanted.assign(rig.projectors.size(), 0);
+    for (const int k : projectors) {
+      if (k < 0 || k >= static_cast<int>(rig.projectors.size())) {
+        throw std::invalid_argument("ShadeProjectorImages: no projector " + std::to_string(k) +
+                                    " in a rig of " + std::to_string(rig.projectors.size()));
+      }
+      wanted[k] = 1;
+    }
+  }
+  const std::vector<char>* subset = projectors.empty() ? nullptr : &wanted;
   const auto start = Clock::now();
   RenderSummary local;
   RenderSummary& s = summary ? *summary : local;
@@ -185,9 +198,10 @@ std::vector<ProjectorImage> ShadeProjectorImages(const FramePlanner& planner, co
   s.patches_above_upper = plan.patches_above_upper;
   s.patches_unreached = plan.patches_unreached;
   std::vector<std::vector<Eigen::Vector3f>> factors;
-  if (smooth) factors = planner.field()->Factors(plan.node_value, plan.mean);
-  std::vector<ProjectorImage> images = internal::ShadeImages(
-      rig, planner.tables(), plan.level, factors, planner.options().dither, plan.target, &s);
+  if (smooth) factors = planner.field()->Factors(plan.node_value, plan.mean, subset);
+  std::vector<ProjectorImage> images =
+      internal::ShadeImages(rig, planner.tables(), plan.level, factors, planner.options().dither,
+                            plan.target, &s, subset);
   s.seconds = SecondsSince(start);
   return images;
 }

@@ -102,9 +102,13 @@ FramePlan PlanFrame(const ProjectionRig& rig, const Eigen::MatrixX3d& emittance,
 
 // The CPU shading of a plan (step 3 of projector_images.h, every pixel's seamless factor from
 // the plan): the images RenderProjectorImages gives for the planner's options, bit for bit, and
-// its summary (the plan's counts; `seconds` the shading's). Throws std::invalid_argument if the
-// plan does not fit the planner's rig or light.
+// its summary (the plan's counts; `seconds` the shading's). With `projectors` (indices into the
+// rig's, as a display node owns them) only those images are shaded, the others left empty
+// (codes.empty()), and the summary's delivered exitance is left empty: the rest of the rig's
+// light is not known. Throws std::invalid_argument if the plan does not fit the planner's rig or
+// light, or a projector index is out of range.
 std::vector<ProjectorImage> ShadeProjectorImages(const FramePlanner& planner, const FramePlan& plan,
-                                                 RenderSummary* summary);
+                                                 RenderSummary* summary,
+                                                 const std::vector<int>& projectors = {});
 
 }  // namespace procam

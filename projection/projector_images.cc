@@ -394,14 +394,19 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
                                         const Eigen::MatrixX3d& level,
                                         const std::vector<std::vector<Eigen::Vector3f>>& factors,
                                         DitherMethod dither, const Eigen::MatrixX3d& target,
-                                        RenderSummary* summary) {
+                                        RenderSummary* summary,
+                                        const std::vector<char>* projectors) {
   RenderSummary& s = *summary;
   const int n = rig.size();
   const int projector_count = static_cast<int>(rig.projectors.size());
+  std::vector<char> wanted(projector_count, 1);
+  if (projectors != nullptr) wanted = *projectors;
+  const bool all = std::find(wanted.begin(), wanted.end(), 0) == wanted.end();
   std::vector<ProjectorImage> images(projector_count);
   const bool diffuse = dither == DitherMethod::kErrorDiffusion;
   std::vector<std::vector<Vec3>> light(projector_count);
   for (int k = 0; k < projector_count; ++k) {
+    if (!wanted[k]) continue;
     images[k].bits = rig.projectors[k].photometry.bits;
     images[k].codes = cv::Mat(rig.maps[k].height, rig.maps[k].width, CV_16UC3, cv::Scalar::all(0));
     if (diffuse) light[k].assign(rig.maps[k].patch.size(), Vec3::Zero());
@@ -418,6 +423,7 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
       const Vec3 tau = level.row(i).transpose();
       Vec3 patch_flux = Vec3::Zero();
       for (int k = 0; k < projector_count; ++k) {
+        if (!wanted[k]) continue;
         const ProjectorMap& map = rig.maps[k];
         const ProjectorTables& table = tables[k];
         auto* codes = reinterpret_cast<cv::Vec3w*>(images[k].codes.data);
@@ -495,13 +501,19 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
   if (diffuse) {
     // Error diffusion runs in raster order per image; then the flux per patch from the codes.
 #pragma omp parallel for schedule(static, 1)
-    for (int k = 0; k < projector_count; ++k)
-      QuantiseErrorDiffusion(rig.maps[k], tables[k], light[k], &images[k].codes);
-    delivered_flux = FluxOfCodes(rig, tables, images);
+    for (int k = 0; k < projector_count; ++k) {
+      if (wanted[k]) QuantiseErrorDiffusion(rig.maps[k], tables[k], light[k], &images[k].codes);
+    }
+    if (all) delivered_flux = FluxOfCodes(rig, tables, images);
   }
   s.saturated_pixels = saturated;
   s.clipped_pixels = clipped;
   s.detail_saturated_pixels = detail_saturated;
+  if (!all) {
+    s.delivered.resize(0, 3);
+    s.max_relative_error = 0.0;
+    return images;
+  }
   s.delivered = rig.lower;
   for (int i = 0; i < n; ++i) {
     s.delivered.row(i) +=

@@ -114,12 +114,15 @@ int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& t
                  const std::vector<char>* refine, Eigen::MatrixX3d* level);
 
 // Step 3: per pixel relative output → light → dithered codes, and the summary's pixel counts,
-// delivered exitance and error against `target`.
+// delivered exitance and error against `target`. With `projectors` (one flag per projector) only
+// those images are made (the others left empty, their counts 0) and the summary's delivered
+// exitance and error are left empty and 0: the flux of the others is not known.
 std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
                                         const std::vector<ProjectorTables>& tables,
                                         const Eigen::MatrixX3d& level,
                                         const std::vector<std::vector<Eigen::Vector3f>>& factors,
                                         DitherMethod dither, const Eigen::MatrixX3d& target,
-                                        RenderSummary* summary);
+                                        RenderSummary* summary,
+                                        const std::vector<char>* projectors = nullptr);
 
 }  // namespace procam::internal

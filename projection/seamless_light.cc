@@ -292,15 +292,19 @@ Eigen::Vector3f SeamlessField::Factor(int i, const Eigen::Vector3f& point,
 }
 
 std::vector<std::vector<Eigen::Vector3f>> SeamlessField::Factors(
-    const Eigen::MatrixX3d& node_value, const Eigen::MatrixX3d& means) const {
+    const Eigen::MatrixX3d& node_value, const Eigen::MatrixX3d& means,
+    const std::vector<char>* projectors) const {
   const int n = rig_.size();
+  const auto wanted = [projectors](size_t k) { return projectors == nullptr || (*projectors)[k]; };
   std::vector<std::vector<Eigen::Vector3f>> factors(rig_.maps.size());
-  for (size_t k = 0; k < rig_.maps.size(); ++k)
-    factors[k].assign(rig_.maps[k].lit_pixels, Eigen::Vector3f::Ones());
+  for (size_t k = 0; k < rig_.maps.size(); ++k) {
+    if (wanted(k)) factors[k].assign(rig_.maps[k].lit_pixels, Eigen::Vector3f::Ones());
+  }
 #pragma omp parallel for schedule(dynamic, 16)
   for (int i = 0; i < n; ++i) {
     if (Flat(i)) continue;
     for (size_t k = 0; k < rig_.maps.size(); ++k) {
+      if (!wanted(k)) continue;
       const ProjectorMap& map = rig_.maps[k];
       for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position)
         factors[k][position] = Factor(i, map.point_by_patch[position], node_value, means);

@@ -68,9 +68,11 @@ class SeamlessField {
   // SeamlessLightFactors gives it; 1 on flat patches and on channels whose mean is 0.
   Eigen::Vector3f Factor(int i, const Eigen::Vector3f& point, const Eigen::MatrixX3d& node_value,
                          const Eigen::MatrixX3d& means) const;
-  // Factor at every lit pixel of the rig (per projector, in pixels_by_patch order).
-  std::vector<std::vector<Eigen::Vector3f>> Factors(const Eigen::MatrixX3d& node_value,
-                                                    const Eigen::MatrixX3d& means) const;
+  // Factor at every lit pixel of the rig (per projector, in pixels_by_patch order); with
+  // `projectors` (one flag per projector) only theirs, the others' lists left empty.
+  std::vector<std::vector<Eigen::Vector3f>> Factors(
+      const Eigen::MatrixX3d& node_value, const Eigen::MatrixX3d& means,
+      const std::vector<char>* projectors = nullptr) const;
   // Whether patch i's field is its own value alone (m = 1 over it).
   bool Flat(int i) const { return node_begin_[i + 1] - node_begin_[i] <= 1; }
 

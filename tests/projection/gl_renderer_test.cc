@@ -190,6 +190,38 @@ TEST(FramePlan, ShadedOnTheCpuIsRenderProjectorImages) {
   }
 }
 
+// A display node shades only its own projectors: their images are those of the whole rig's
+// shading, bit for bit, the others are left empty, and so is the delivered exitance (the rest of
+// the rig's light is not known); an index outside the rig is refused.
+TEST(FramePlan, ShadesOnlyTheProjectorsAsked) {
+  const ProjectionRig& rig = SmallRig().rig;
+  ASSERT_EQ(rig.projectors.size(), 2u);
+  for (const LightField light : {LightField::kFlat, LightField::kSmooth}) {
+    for (const DitherMethod dither : {DitherMethod::kOrdered, DitherMethod::kErrorDiffusion}) {
+      RenderOptions options;
+      options.light = light;
+      options.dither = dither;
+      const FramePlanner planner(rig, options);
+      const FramePlan plan = planner.Plan(Emittance(rig, 0.2, 1.05, 9));
+      RenderSummary all_summary, one_summary;
+      const std::vector<ProjectorImage> all = ShadeProjectorImages(planner, plan, &all_summary);
+      for (const int k : {0, 1}) {
+        const std::vector<ProjectorImage> one =
+            ShadeProjectorImages(planner, plan, &one_summary, {k});
+        ASSERT_EQ(one.size(), 2u);
+        EXPECT_EQ(cv::norm(one[k].codes, all[k].codes, cv::NORM_INF), 0.0)
+            << LightFieldName(light) << " " << DitherName(dither) << " projector " << k;
+        EXPECT_TRUE(one[1 - k].codes.empty());
+        EXPECT_EQ(one_summary.saturated_pixels[k], all_summary.saturated_pixels[k]);
+        EXPECT_EQ(one_summary.saturated_pixels[1 - k], 0);
+        EXPECT_EQ(one_summary.delivered.rows(), 0);
+      }
+      EXPECT_EQ(all_summary.delivered.rows(), rig.size());
+      EXPECT_THROW(ShadeProjectorImages(planner, plan, nullptr, {2}), std::invalid_argument);
+    }
+  }
+}
+
 // The saturation bound holds: on every patch the planner did not refine, no pixel of any
 // projector reaches full drive (share · τ · m / Δ < 1 with m the pixel's exact seamless factor),
 // so step 2 would have left its τ unchanged.
