@@ -147,6 +147,11 @@ SeamlessField::SeamlessField(const ProjectionRig& rig, const SeamlessLightOption
   node_list_.reserve(node_begin_[n]);
   for (const std::vector<int>& list : nodes)
     node_list_.insert(node_list_.end(), list.begin(), list.end());
+  node_bump_.reserve(node_list_.size());
+  for (const int j : node_list_) {
+    node_bump_.emplace_back(rig.centroid(j, 0), rig.centroid(j, 1), rig.centroid(j, 2),
+                            radius2_[j]);
+  }
   FormPatchMeans();
 }
 
@@ -164,12 +169,10 @@ void Bumps(const SeamlessField& field, int i, const Eigen::Vector3f& point,
   const Eigen::Vector3d x = point.cast<double>();
   const int begin = field.node_begin()[i], end = field.node_begin()[i + 1];
   for (int node = 0; node < end - begin; ++node) {
-    const int j = field.node_list()[begin + node];
-    const double d2 = (x - field.rig().centroid.row(j).transpose()).squaredNorm();
-    if (d2 >= field.radius2()[j]) continue;
-    const double t = 1.0 - d2 / field.radius2()[j];
-    bumps->emplace_back(node, t * t);
-    weight_sum += t * t;
+    const double t2 = field.BumpSquared(begin + node, x);
+    if (t2 < 0.0) continue;
+    bumps->emplace_back(node, t2);
+    weight_sum += t2;
   }
   if (!(weight_sum > 0.0)) {
     bumps->assign(1, {0, 1.0});
@@ -264,24 +267,23 @@ Eigen::Vector3f SeamlessField::Factor(int i, const Eigen::Vector3f& point,
   // Bumps() without its list: the same operations in the same order, so the same bits.
   const int begin = node_begin_[i], end = node_begin_[i + 1];
   const Eigen::Vector3d x = point.cast<double>();
+  // The bumps' t² kept for the second pass (lists are short: a handful to a few dozen nodes).
+  constexpr int kKept = 64;
+  double kept[kKept];
   double weight_sum = 0.0;
   for (int node = begin; node < end; ++node) {
-    const int j = node_list_[node];
-    const double d2 = (x - rig_.centroid.row(j).transpose()).squaredNorm();
-    if (d2 >= radius2_[j]) continue;
-    const double t = 1.0 - d2 / radius2_[j];
-    weight_sum += t * t;
+    const double t2 = BumpSquared(node, x);
+    if (node - begin < kKept) kept[node - begin] = t2;
+    if (t2 >= 0.0) weight_sum += t2;
   }
   Eigen::Vector3d value = Eigen::Vector3d::Zero();
   if (!(weight_sum > 0.0)) {
     value += 1.0 * node_value.row(i).transpose();
   } else {
     for (int node = begin; node < end; ++node) {
-      const int j = node_list_[node];
-      const double d2 = (x - rig_.centroid.row(j).transpose()).squaredNorm();
-      if (d2 >= radius2_[j]) continue;
-      const double t = 1.0 - d2 / radius2_[j];
-      value += ((t * t) / weight_sum) * node_value.row(j).transpose();
+      const double t2 = node - begin < kKept ? kept[node - begin] : BumpSquared(node, x);
+      if (t2 < 0.0) continue;
+      value += (t2 / weight_sum) * node_value.row(node_list_[node]).transpose();
     }
   }
   // m = v / mean(v) per patch and channel: the weighted mean of m is 1, so the flux is kept.

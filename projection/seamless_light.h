@@ -73,6 +73,14 @@ class SeamlessField {
   std::vector<std::vector<Eigen::Vector3f>> Factors(
       const Eigen::MatrixX3d& node_value, const Eigen::MatrixX3d& means,
       const std::vector<char>* projectors = nullptr) const;
+  // (1 − |x − c_j|²/r_j²)² of node_list()[node] at x, or −1 where x is outside its radius.
+  double BumpSquared(int node, const Eigen::Vector3d& x) const {
+    const Eigen::Vector4d& bump = node_bump_[node];
+    const double d2 = (x - bump.head<3>()).squaredNorm();
+    if (d2 >= bump[3]) return -1.0;
+    const double t = 1.0 - d2 / bump[3];
+    return t * t;
+  }
   // Whether patch i's field is its own value alone (m = 1 over it).
   bool Flat(int i) const { return node_begin_[i + 1] - node_begin_[i] <= 1; }
 
@@ -96,6 +104,9 @@ class SeamlessField {
   SeamlessLightOptions options_;
   std::vector<int> node_begin_, node_list_;
   std::vector<double> radius2_;
+  // Aligned with node_list_: the node's centroid (xyz) and r² (w), side by side for the per-pixel
+  // loops (the rig's centroids are stored by column).
+  std::vector<Eigen::Vector4d> node_bump_;
   std::vector<double> node_share_reach_;
   struct Means;  // A (sparse, row-major)
   std::unique_ptr<Means> means_;
