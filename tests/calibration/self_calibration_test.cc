@@ -1,0 +1,284 @@
+// Self-calibration of the room (no model, no camera-pose guess) against the synthetic rigs'
+// ground truth. Correspondences come from the geometry, as registration_test's exact ones do:
+// every `step`-th camera pixel whose surface point a projector lights unoccluded, with the
+// projector pixel of that point plus Gaussian decoding noise (0.3 px per coordinate). The scale
+// input (the camera's height above the floor) is given its true value.
+#include "calibration/self_calibration.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <random>
+
+#include "datasets_synthetic/simulated_rig.h"
+#include "geometry/ray_scene.h"
+
+namespace procam {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDecodingNoisePx = 0.3;
+
+// The synthetic scene `name`'s rig; `camera_scale` < 1 shrinks the camera's image (same field of
+// view). `shift_cy` (optional) moves projector k's principal point down by shift_cy[k] pixels
+// (a lens shift), its pose kept.
+std::unique_ptr<SimulatedRig> MakeRig(const std::string& name, double camera_scale = 1.0,
+                                      const std::vector<double>& shift_cy = {}) {
+  SyntheticScene synthetic = MakeSyntheticScene(name, 60);
+  synthetic.camera.width = static_cast<int>(std::lround(synthetic.camera.width * camera_scale));
+  synthetic.camera.height = static_cast<int>(std::lround(synthetic.camera.height * camera_scale));
+  std::vector<Projector> projectors;
+  for (size_t k = 0; k < synthetic.projectors.size(); ++k) {
+    Projector projector = ProjectorFromPlacement(synthetic.projectors[k]);
+    if (k < shift_cy.size()) {
+      const ProjectorGeometry& g = projector.geometry;
+      const std::vector<double>& in = g.intrinsics();
+      projector.geometry = ProjectorGeometry::Pinhole(in[0], in[1], in[2], in[3] + shift_cy[k],
+                                                      g.width(), g.height(), g.proj_from_world());
+    }
+    projectors.push_back(projector);
+  }
+  SimulatedRigOptions options;
+  options.solver_patches = 60;
+  options.world_factor = 1;
+  return std::make_unique<SimulatedRig>(synthetic.scene, projectors,
+                                        CameraFromPlacement(synthetic.camera), options);
+}
+
+// Projector k's correspondences: every `step`-th camera pixel whose point it lights unoccluded,
+// the projector pixel of that point plus N(0, noise²) per coordinate. `keep` (optional) selects
+// by the point in the room.
+ProjectorObservations NoisyObservations(const SimulatedRig& rig, int k, int step, double noise,
+                                        const std::function<bool(const Vec3&)>& keep = nullptr) {
+  const ProjectorGeometry& projector = rig.projectors()[k].geometry;
+  const RayScene surfaces(rig.scene());
+  std::mt19937 random(1000 + k);
+  std::normal_distribution<double> decoding(0.0, noise);
+  ProjectorObservations out;
+  out.name = rig.projectors()[k].name;
+  out.width = projector.width();
+  out.height = projector.height();
+  for (int row = 0; row < rig.camera().height(); row += step)
+    for (int col = 0; col < rig.camera().width(); col += step) {
+      Vec3 point, normal;
+      Vec2 pixel;
+      if (!rig.PointSeenByPixel(row, col, &point, &normal)) continue;
+      if (projector.Gain(point, normal, &pixel) <= 0.0 || !projector.InImage(pixel)) continue;
+      if (surfaces.Occluded(point, projector.CentreInWorld(), 1e-4)) continue;
+      if (keep && !keep(point)) continue;
+      out.camera_pixels.push_back(Vec2(col, row));
+      out.projector_pixels.push_back(pixel + Vec2(decoding(random), decoding(random)));
+    }
+  return out;
+}
+
+RoomCalibrationProblem MakeProblem(const SimulatedRig& rig, int step) {
+  RoomCalibrationProblem problem;
+  problem.camera_lens_model = rig.camera().lens_model();
+  problem.camera_intrinsics = rig.camera().intrinsics();
+  for (int k = 0; k < static_cast<int>(rig.projectors().size()); ++k)
+    problem.projectors.push_back(NoisyObservations(rig, k, step, kDecodingNoisePx));
+  return problem;
+}
+
+double TurnDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
+  return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / kPi;
+}
+
+double CameraHeight(const SimulatedRig& rig) {
+  return rig.camera().proj_from_world().inverse().translation().z();  // the floor is z = 0
+}
+
+struct ProjectorErrors {
+  double fx = 0, fy = 0;      // relative
+  double cx = 0, cy = 0;      // px
+  double position_mm = 0;     // the projector's centre in the camera frame
+  double orientation_deg = 0; // its orientation relative to the camera
+};
+
+// Errors of projector k relative to the camera (the room frames of the truth and the estimate
+// differ by a turn about the vertical and a shift, so the poses are compared in the camera frame).
+ProjectorErrors Compare(const RoomCalibration& calibration, const SimulatedRig& rig, int k) {
+  const RoomProjector& estimate = calibration.projectors[k];
+  const ProjectorGeometry& truth = rig.projectors()[k].geometry;
+  const Eigen::Isometry3d world_from_cam = rig.camera().proj_from_world().inverse();
+  const Eigen::Isometry3d true_proj_from_cam = truth.proj_from_world() * world_from_cam;
+  const Eigen::Isometry3d proj_from_cam = estimate.proj_from_room * calibration.room_from_camera;
+  ProjectorErrors e;
+  e.fx = std::abs(estimate.intrinsics[0] / truth.intrinsics()[0] - 1.0);
+  e.fy = std::abs(estimate.intrinsics[1] / truth.intrinsics()[1] - 1.0);
+  e.cx = std::abs(estimate.intrinsics[2] - truth.intrinsics()[2]);
+  e.cy = std::abs(estimate.intrinsics[3] - truth.intrinsics()[3]);
+  e.position_mm = 1e3 * (proj_from_cam.inverse().translation() -
+                         true_proj_from_cam.inverse().translation())
+                            .norm();
+  e.orientation_deg = TurnDeg(proj_from_cam.linear(), true_proj_from_cam.linear());
+  return e;
+}
+
+// Angle between the estimated room's up (+z) and the true one, both in the camera frame.
+double FloorNormalErrorDeg(const RoomCalibration& calibration, const SimulatedRig& rig) {
+  const Vec3 up_estimate = calibration.room_from_camera.linear().transpose() * Vec3::UnitZ();
+  const Vec3 up_truth = rig.camera().proj_from_world().linear() * Vec3::UnitZ();
+  return std::acos(std::clamp(up_estimate.dot(up_truth), -1.0, 1.0)) * 180.0 / kPi;
+}
+
+// RMS distance (mm) of the points, taken into the camera frame, to the surface points their
+// camera pixels see.
+double PointRmsMm(const std::vector<SelfCalibrationPoint>& points,
+                  const RoomCalibration& calibration, const SimulatedRig& rig) {
+  const Eigen::Isometry3d camera_from_room = calibration.room_from_camera.inverse();
+  double sum = 0.0;
+  int count = 0;
+  std::vector<double> errs; double st=0, ss=0;
+  for (const SelfCalibrationPoint& point : points) {
+    Vec3 truth;
+    if (!rig.PointSeenByPixel(static_cast<int>(point.camera_pixel.y()),
+                              static_cast<int>(point.camera_pixel.x()), &truth))
+      continue;
+    const Vec3 e = camera_from_room * point.p_in_room, t = rig.camera().proj_from_world() * truth;
+    sum += (e - t).squaredNorm();
+    errs.push_back((e-t).norm()); st += e.dot(t); ss += e.dot(e);
+    if ((e-t).norm() > 0.02 && count % 20 == 0) std::printf("big: px %g %g n %d e %g %g %g t %g %g %g\n", point.camera_pixel.x(), point.camera_pixel.y(), point.projectors, e.x(), e.y(), e.z(), t.x(), t.y(), t.z());
+    ++count;
+  }
+  {
+    std::vector<Vec3> fl; Vec3 c = Vec3::Zero();
+    for (const SelfCalibrationPoint& point : points) {
+      Vec3 truth;
+      if (!rig.PointSeenByPixel(static_cast<int>(point.camera_pixel.y()), static_cast<int>(point.camera_pixel.x()), &truth)) continue;
+      if (std::abs(truth.z()) < 1e-6) { fl.push_back(camera_from_room * point.p_in_room); c += fl.back(); }
+    }
+    c /= fl.size();
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (auto& q : fl) cov += (q - c) * (q - c).transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+    Vec3 nn = es.eigenvectors().col(0);
+    std::printf("DEBUG true-floor points %zu, their plane distance %.5f, rms %.3f mm\n", fl.size(), std::abs(nn.dot(c)), 1e3*std::sqrt(es.eigenvalues()[0]/fl.size()));
+  }
+  std::sort(errs.begin(), errs.end());
+  std::printf("DEBUG median %.2f mm p90 %.2f mm best scale %.5f\n", 1e3*errs[errs.size()/2], 1e3*errs[errs.size()*9/10], st/ss);
+  return 1e3 * std::sqrt(sum / std::max(count, 1));
+}
+
+struct Bounds {
+  double focal = 0.01;           // relative
+  double principal_point = 5.0;  // px
+  double position_mm = 5.0;
+  double orientation_deg = 0.1;
+  double floor_deg = 0.5;
+};
+
+void CalibrateAndCheck(const std::string& name, const SimulatedRig& rig, int step,
+                       const Bounds& bounds) {
+  const RoomCalibrationProblem problem = MakeProblem(rig, step);
+  SelfCalibrationOptions options;
+  options.camera_height = CameraHeight(rig);
+  RoomCalibration calibration;
+  std::vector<SelfCalibrationPoint> points;
+  SelfCalibrationSummary summary;
+  ASSERT_TRUE(SelfCalibrateRoom(options, problem, &calibration, &points, &summary))
+      << summary.BriefReport();
+  std::printf("%s: %s\n", name.c_str(), summary.BriefReport().c_str());
+  const double floor_deg = FloorNormalErrorDeg(calibration, rig);
+  const double point_rms_mm = PointRmsMm(points, calibration, rig);
+  std::printf("  floor normal %.4f deg; points RMS %.2f mm to the true surfaces\n", floor_deg,
+              point_rms_mm);
+  EXPECT_LT(floor_deg, bounds.floor_deg);
+  EXPECT_NEAR(calibration.room_from_camera.translation().z(), options.camera_height, 1e-9);
+  for (int k = 0; k < static_cast<int>(calibration.projectors.size()); ++k) {
+    const ProjectorErrors e = Compare(calibration, rig, k);
+    std::printf("  projector %d: fx %.4f%%, fy %.4f%%, cx %.3f px, cy %.3f px, position %.3f mm, "
+                "orientation %.4f deg\n",
+                k, 100 * e.fx, 100 * e.fy, e.cx, e.cy, e.position_mm, e.orientation_deg);
+    EXPECT_LT(e.fx, bounds.focal) << "projector " << k;
+    EXPECT_LT(e.fy, bounds.focal) << "projector " << k;
+    EXPECT_LT(e.cx, bounds.principal_point) << "projector " << k;
+    EXPECT_LT(e.cy, bounds.principal_point) << "projector " << k;
+    EXPECT_LT(e.position_mm, bounds.position_mm) << "projector " << k;
+    EXPECT_LT(e.orientation_deg, bounds.orientation_deg) << "projector " << k;
+    // The reprojection RMS per coordinate is the decoding noise (a few % below it: the fit
+    // absorbs the parameters' share).
+    EXPECT_LT(summary.projectors[k].rms, 1.1 * kDecodingNoisePx) << "projector " << k;
+    EXPECT_GT(summary.projectors[k].rms, 0.8 * kDecodingNoisePx) << "projector " << k;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+
+// The tiny box (1 m, 320 × 200 projectors, 240 × 160 camera): every second camera pixel.
+TEST(SelfCalibrateRoom, TinyBox) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("tiny_box");
+  CalibrateAndCheck("tiny_box", *rig, 2, Bounds());
+}
+
+// The L-shaped stage (3 m, two 1280 × 800 projectors 4–5 m from the back wall; camera 960 × 640
+// at half size).
+TEST(SelfCalibrateRoom, LShaped) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("l_shaped", 0.5);
+  CalibrateAndCheck("l_shaped", *rig, 2, Bounds());
+}
+
+// Columns: three projectors, occlusions by the two columns.
+TEST(SelfCalibrateRoom, Columns) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("columns", 0.5);
+  CalibrateAndCheck("columns", *rig, 2, Bounds());
+}
+
+// ---------------------------------------------------------------------------------------------
+
+TEST(SelfCalibrateRoom, TooFewCorrespondencesNameTheProjector) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("tiny_box");
+  RoomCalibrationProblem problem = MakeProblem(*rig, 4);
+  problem.projectors[1].camera_pixels.resize(20);
+  problem.projectors[1].projector_pixels.resize(20);
+  RoomCalibration calibration;
+  calibration.camera_lens_model = "untouched";
+  SelfCalibrationSummary summary;
+  EXPECT_FALSE(SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr,
+                                 &summary));
+  EXPECT_EQ(summary.termination, SelfCalibrationSummary::kTooFewPoints);
+  EXPECT_NE(summary.message.find("projector 'right'"), std::string::npos) << summary.message;
+  EXPECT_EQ(calibration.camera_lens_model, "untouched");
+}
+
+// A projector that lights the back wall only: its correspondences are one homography.
+TEST(SelfCalibrateRoom, OnePlaneIsDegenerate) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("tiny_box");
+  RoomCalibrationProblem problem = MakeProblem(*rig, 2);
+  problem.projectors[0] = NoisyObservations(*rig, 0, 2, kDecodingNoisePx,
+                                            [](const Vec3& p) { return p.y() > 1.0 - 1e-6; });
+  SelfCalibrationSummary summary;
+  RoomCalibration calibration;
+  EXPECT_FALSE(SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr,
+                                 &summary));
+  EXPECT_EQ(summary.termination, SelfCalibrationSummary::kDegenerate) << summary.BriefReport();
+  EXPECT_NE(summary.message.find("projector 'left'"), std::string::npos) << summary.message;
+}
+
+TEST(SelfCalibrateRoom, OptionsAndInputsAreChecked) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("tiny_box");
+  const RoomCalibrationProblem problem = MakeProblem(*rig, 8);
+  RoomCalibration calibration;
+  SelfCalibrationSummary summary;
+  SelfCalibrationOptions options;
+  options.camera_height = 0.0;
+  EXPECT_THROW(SelfCalibrateRoom(options, problem, &calibration, nullptr, &summary),
+               std::invalid_argument);
+  RoomCalibrationProblem no_projector = problem;
+  no_projector.projectors.clear();
+  EXPECT_THROW(SelfCalibrateRoom(SelfCalibrationOptions(), no_projector, &calibration, nullptr,
+                                 &summary),
+               std::invalid_argument);
+  RoomCalibrationProblem unequal = problem;
+  unequal.projectors[0].projector_pixels.pop_back();
+  EXPECT_THROW(
+      SelfCalibrateRoom(SelfCalibrationOptions(), unequal, &calibration, nullptr, &summary),
+      std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace procam
