@@ -126,10 +126,10 @@ SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& 
     projector_points.emplace_back(o.projector_pixel.x(), o.projector_pixel.y());
   }
   std::vector<uchar> f_mask, h_mask;
-  const cv::Mat f_cv = cv::findFundamentalMat(camera_points, projector_points, cv::FM_RANSAC,
+  const cv::Mat f_cv = cv::findFundamentalMat(camera_points, projector_points, cv::USAC_ACCURATE,
                                               options.ransac_threshold, 0.999, 10000, f_mask);
   summary->seed_inliers = f_cv.rows == 3 ? cv::countNonZero(f_mask) : 0;
-  const cv::Mat h_cv = cv::findHomography(camera_points, projector_points, cv::RANSAC,
+  const cv::Mat h_cv = cv::findHomography(camera_points, projector_points, cv::USAC_ACCURATE,
                                           options.ransac_threshold, h_mask, 10000, 0.999);
   summary->homography_inliers = h_cv.empty() ? 0 : cv::countNonZero(h_mask);
   if (summary->seed_inliers < options.min_correspondences) {
