@@ -7,7 +7,6 @@
 
 #include <gtest/gtest.h>
 
-#include <Eigen/Eigenvalues>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -133,34 +132,15 @@ double PointRmsMm(const std::vector<SelfCalibrationPoint>& points,
   const Eigen::Isometry3d camera_from_room = calibration.room_from_camera.inverse();
   double sum = 0.0;
   int count = 0;
-  std::vector<double> errs; double st=0, ss=0;
   for (const SelfCalibrationPoint& point : points) {
     Vec3 truth;
     if (!rig.PointSeenByPixel(static_cast<int>(point.camera_pixel.y()),
                               static_cast<int>(point.camera_pixel.x()), &truth))
       continue;
-    const Vec3 e = camera_from_room * point.p_in_room, t = rig.camera().proj_from_world() * truth;
-    sum += (e - t).squaredNorm();
-    errs.push_back((e-t).norm()); st += e.dot(t); ss += e.dot(e);
-    if ((e-t).norm() > 0.02 && count % 20 == 0) std::printf("big: px %g %g n %d e %g %g %g t %g %g %g\n", point.camera_pixel.x(), point.camera_pixel.y(), point.projectors, e.x(), e.y(), e.z(), t.x(), t.y(), t.z());
+    sum += (camera_from_room * point.p_in_room - rig.camera().proj_from_world() * truth)
+               .squaredNorm();
     ++count;
   }
-  {
-    std::vector<Vec3> fl; Vec3 c = Vec3::Zero();
-    for (const SelfCalibrationPoint& point : points) {
-      Vec3 truth;
-      if (!rig.PointSeenByPixel(static_cast<int>(point.camera_pixel.y()), static_cast<int>(point.camera_pixel.x()), &truth)) continue;
-      if (std::abs(truth.z()) < 1e-6) { fl.push_back(camera_from_room * point.p_in_room); c += fl.back(); }
-    }
-    c /= fl.size();
-    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-    for (auto& q : fl) cov += (q - c) * (q - c).transpose();
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
-    Vec3 nn = es.eigenvectors().col(0);
-    std::printf("DEBUG true-floor points %zu, their plane distance %.5f, rms %.3f mm\n", fl.size(), std::abs(nn.dot(c)), 1e3*std::sqrt(es.eigenvalues()[0]/fl.size()));
-  }
-  std::sort(errs.begin(), errs.end());
-  std::printf("DEBUG median %.2f mm p90 %.2f mm best scale %.5f\n", 1e3*errs[errs.size()/2], 1e3*errs[errs.size()*9/10], st/ss);
   return 1e3 * std::sqrt(sum / std::max(count, 1));
 }
 
@@ -170,11 +150,16 @@ struct Bounds {
   double position_mm = 5.0;
   double orientation_deg = 0.1;
   double floor_deg = 0.5;
+  // RMS distance of the points to the true surface points of their camera pixels: triangulation
+  // noise (σ_depth ≈ σ_px · pixel footprint · depth / baseline), not a scene-fit accuracy.
+  double point_rms_mm = 5.0;
 };
 
-void CalibrateAndCheck(const std::string& name, const SimulatedRig& rig, int step,
-                       const Bounds& bounds) {
-  const RoomCalibrationProblem problem = MakeProblem(rig, step);
+// Calibrates `problem` of `rig` and checks the result against the truth; the summary (optional)
+// is returned.
+void CalibrateAndCheck(const std::string& name, const SimulatedRig& rig,
+                       const RoomCalibrationProblem& problem, const Bounds& bounds,
+                       SelfCalibrationSummary* summary_out = nullptr) {
   SelfCalibrationOptions options;
   options.camera_height = CameraHeight(rig);
   RoomCalibration calibration;
@@ -182,12 +167,14 @@ void CalibrateAndCheck(const std::string& name, const SimulatedRig& rig, int ste
   SelfCalibrationSummary summary;
   ASSERT_TRUE(SelfCalibrateRoom(options, problem, &calibration, &points, &summary))
       << summary.BriefReport();
+  if (summary_out) *summary_out = summary;
   std::printf("%s: %s\n", name.c_str(), summary.BriefReport().c_str());
   const double floor_deg = FloorNormalErrorDeg(calibration, rig);
   const double point_rms_mm = PointRmsMm(points, calibration, rig);
   std::printf("  floor normal %.4f deg; points RMS %.2f mm to the true surfaces\n", floor_deg,
               point_rms_mm);
   EXPECT_LT(floor_deg, bounds.floor_deg);
+  EXPECT_LT(point_rms_mm, bounds.point_rms_mm);
   EXPECT_NEAR(calibration.room_from_camera.translation().z(), options.camera_height, 1e-9);
   for (int k = 0; k < static_cast<int>(calibration.projectors.size()); ++k) {
     const ProjectorErrors e = Compare(calibration, rig, k);
@@ -200,32 +187,54 @@ void CalibrateAndCheck(const std::string& name, const SimulatedRig& rig, int ste
     EXPECT_LT(e.cy, bounds.principal_point) << "projector " << k;
     EXPECT_LT(e.position_mm, bounds.position_mm) << "projector " << k;
     EXPECT_LT(e.orientation_deg, bounds.orientation_deg) << "projector " << k;
-    // The reprojection RMS per coordinate is the decoding noise (a few % below it: the fit
-    // absorbs the parameters' share).
+    // The reprojection RMS per coordinate is below the decoding noise: each point's depth
+    // absorbs one of its 2 (one projector) or 4 (two) residuals, σ·√(1/2) to σ·√(3/4).
     EXPECT_LT(summary.projectors[k].rms, 1.1 * kDecodingNoisePx) << "projector " << k;
-    EXPECT_GT(summary.projectors[k].rms, 0.8 * kDecodingNoisePx) << "projector " << k;
+    EXPECT_GT(summary.projectors[k].rms, 0.65 * kDecodingNoisePx) << "projector " << k;
   }
 }
 
 // ---------------------------------------------------------------------------------------------
 
-// The tiny box (1 m, 320 × 200 projectors, 240 × 160 camera): every second camera pixel.
+// The tiny box (1 m, 320 × 200 projectors, 240 × 160 camera): every second camera pixel. Its
+// pixels are millimetres wide and the projectors 0.4 m from the camera: a point's depth is
+// ~10 mm uncertain.
 TEST(SelfCalibrateRoom, TinyBox) {
   const std::unique_ptr<SimulatedRig> rig = MakeRig("tiny_box");
-  CalibrateAndCheck("tiny_box", *rig, 2, Bounds());
+  Bounds bounds;
+  bounds.point_rms_mm = 15.0;
+  CalibrateAndCheck("tiny_box", *rig, MakeProblem(*rig, 2), bounds);
 }
 
 // The L-shaped stage (3 m, two 1280 × 800 projectors 4–5 m from the back wall; camera 960 × 640
 // at half size).
 TEST(SelfCalibrateRoom, LShaped) {
   const std::unique_ptr<SimulatedRig> rig = MakeRig("l_shaped", 0.5);
-  CalibrateAndCheck("l_shaped", *rig, 2, Bounds());
+  CalibrateAndCheck("l_shaped", *rig, MakeProblem(*rig, 2), Bounds());
 }
 
 // Columns: three projectors, occlusions by the two columns.
 TEST(SelfCalibrateRoom, Columns) {
   const std::unique_ptr<SimulatedRig> rig = MakeRig("columns", 0.5);
-  CalibrateAndCheck("columns", *rig, 2, Bounds());
+  CalibrateAndCheck("columns", *rig, MakeProblem(*rig, 2), Bounds());
+}
+
+// Lens-shifted projectors (principal points 120 and 200 px below the centre, as a ceiling
+// projector's offset puts it): the seed assumes the centre, the shared points pin the truth.
+TEST(SelfCalibrateRoom, LensShiftedProjectors) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("l_shaped", 0.5, {120.0, 200.0});
+  CalibrateAndCheck("l_shaped, lens shift", *rig, MakeProblem(*rig, 2), Bounds());
+}
+
+// One projector: its principal point is not observable (header) and is held at the centre,
+// which is the truth here; the rest is checked as usual.
+TEST(SelfCalibrateRoom, OneProjectorHoldsItsPrincipalPoint) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("l_shaped", 0.5);
+  RoomCalibrationProblem problem = MakeProblem(*rig, 2);
+  problem.projectors.resize(1);
+  SelfCalibrationSummary summary;
+  CalibrateAndCheck("l_shaped, one projector", *rig, problem, Bounds(), &summary);
+  EXPECT_TRUE(summary.projectors[0].principal_point_held);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -257,6 +266,30 @@ TEST(SelfCalibrateRoom, OnePlaneIsDegenerate) {
                                  &summary));
   EXPECT_EQ(summary.termination, SelfCalibrationSummary::kDegenerate) << summary.BriefReport();
   EXPECT_NE(summary.message.find("projector 'left'"), std::string::npos) << summary.message;
+}
+
+// Two projectors that light disjoint halves of the camera image share no point: no common scale.
+TEST(SelfCalibrateRoom, ProjectorsSharingNoPointAreRefused) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("l_shaped", 0.5);
+  RoomCalibrationProblem problem = MakeProblem(*rig, 2);
+  for (int k = 0; k < 2; ++k) {
+    ProjectorObservations& p = problem.projectors[k];
+    ProjectorObservations half = p;
+    half.camera_pixels.clear();
+    half.projector_pixels.clear();
+    for (size_t i = 0; i < p.camera_pixels.size(); ++i)
+      if ((p.camera_pixels[i].x() < 240) == (k == 0)) {
+        half.camera_pixels.push_back(p.camera_pixels[i]);
+        half.projector_pixels.push_back(p.projector_pixels[i]);
+      }
+    p = half;
+  }
+  RoomCalibration calibration;
+  SelfCalibrationSummary summary;
+  EXPECT_FALSE(SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr,
+                                 &summary));
+  EXPECT_EQ(summary.termination, SelfCalibrationSummary::kDisconnected) << summary.BriefReport();
+  EXPECT_NE(summary.message.find("projector '"), std::string::npos) << summary.message;
 }
 
 TEST(SelfCalibrateRoom, OptionsAndInputsAreChecked) {
