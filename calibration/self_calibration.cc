@@ -424,6 +424,78 @@ FittedPlane RefinePlane(const FittedPlane& plane, const std::vector<Vec3>& point
   return refined;
 }
 
+// The room frame of step 5 in the camera frame: z the floor's unit normal `up` (camera frame),
+// x the optical axis projected on the floor (the image's x axis when the camera looks straight
+// down), origin the camera's foot, `height` below its centre.
+Eigen::Isometry3d RoomFromCamera(const Vec3& up, double height) {
+  Vec3 x_axis = Vec3::UnitZ() - Vec3::UnitZ().dot(up) * up;
+  if (x_axis.norm() < 1e-6) x_axis = Vec3::UnitX() - Vec3::UnitX().dot(up) * up;
+  x_axis.normalize();
+  Eigen::Isometry3d room_from_camera = Eigen::Isometry3d::Identity();
+  room_from_camera.linear().row(0) = x_axis.transpose();
+  room_from_camera.linear().row(1) = up.cross(x_axis).transpose();
+  room_from_camera.linear().row(2) = up.transpose();
+  room_from_camera.translation() = Vec3(0.0, 0.0, height);
+  return room_from_camera;
+}
+
+// Marks projector p's observations whose residual norm is within the threshold as inliers;
+// returns how many.
+int MarkInliers(const SelfCalibrationOptions& options, const std::vector<Track>& tracks,
+                ProjectorState* p) {
+  p->inlier.assign(p->observations.size(), false);
+  int inliers = 0;
+  for (size_t i = 0; i < p->observations.size(); ++i) {
+    const Track& track = tracks[p->observations[i].track];
+    if (track.depth <= 0.0) continue;
+    const Vec2 r = Residual(*p, track, p->observations[i].projector_pixel, options.square_pixels);
+    p->inlier[i] = r.norm() <= options.outlier_threshold;
+    inliers += p->inlier[i];
+  }
+  return inliers;
+}
+
+// Projector p's RMS per coordinate and largest residual norm over its inliers; false when a
+// residual is not finite. Counts the inlier views of each track into `inlier_views`.
+bool InlierResiduals(const SelfCalibrationOptions& options, const std::vector<Track>& tracks,
+                     const ProjectorState& p, SelfCalibrationProjectorSummary* summary,
+                     std::vector<int>* inlier_views) {
+  double sum_squared = 0.0, max_norm = 0.0;
+  int count = 0;
+  for (size_t i = 0; i < p.observations.size(); ++i) {
+    if (!p.inlier[i]) continue;
+    const Vec2 r = Residual(p, tracks[p.observations[i].track], p.observations[i].projector_pixel,
+                            options.square_pixels);
+    if (!r.allFinite()) return false;
+    sum_squared += r.squaredNorm();
+    max_norm = std::max(max_norm, r.norm());
+    ++count;
+    ++(*inlier_views)[p.observations[i].track];
+  }
+  summary->rms = std::sqrt(sum_squared / (2.0 * std::max(count, 1)));
+  summary->max_norm = max_norm;
+  return true;
+}
+
+// Projector k of the result: its pinhole lens and proj_from_room, the solve's translation in
+// metres (× scale).
+RoomProjector ResultProjector(const ProjectorObservations& given, const ProjectorState& p,
+                              double scale, const Eigen::Isometry3d& camera_from_room) {
+  RoomProjector projector;
+  projector.name = given.name;
+  projector.lens_model = "LENSMODEL_PINHOLE";
+  projector.intrinsics.assign(p.intrinsics, p.intrinsics + 4);
+  projector.width = given.width;
+  projector.height = given.height;
+  Eigen::Matrix3d rotation;
+  ceres::AngleAxisToRotationMatrix(p.rotation, rotation.data());  // column-major
+  Eigen::Isometry3d proj_from_cam = Eigen::Isometry3d::Identity();
+  proj_from_cam.linear() = rotation;
+  proj_from_cam.translation() = scale * Vec3(p.translation[0], p.translation[1], p.translation[2]);
+  projector.proj_from_room = proj_from_cam * camera_from_room;
+  return projector;
+}
+
 }  // namespace
 
 bool SelfCalibrationOptions::Check(std::string* why) const {
@@ -524,7 +596,13 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options,
   // 1. Thinning: the smallest common stride that keeps every projector within the limit.
   std::vector<Track> tracks;
   std::vector<ProjectorState> projectors;
-  for (int stride = 1;; ++stride) {
+  // A stride s keeps about 1/s² of a dense projector's pixels: start just below that.
+  int most_given = 0;
+  for (const ProjectorObservations& p : problem.projectors)
+    most_given = std::max(most_given, static_cast<int>(p.camera_pixels.size()));
+  const int first_stride = std::max(
+      1, static_cast<int>(std::sqrt(static_cast<double>(most_given) / options.max_correspondences)));
+  for (int stride = first_stride;; ++stride) {
     Thin(problem, stride, &tracks, &projectors);
     bool fits = true;
     for (const ProjectorState& p : projectors)
@@ -567,17 +645,9 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options,
                   "the robust bundle adjustment failed: " + robust_summary.message);
   summary->initial_cost = robust_summary.final_cost;
   for (int k = 0; k < n; ++k) {
-    ProjectorState& p = projectors[k];
-    p.inlier.assign(p.observations.size(), false);
-    int inliers = 0;
-    for (size_t i = 0; i < p.observations.size(); ++i) {
-      const Track& track = tracks[p.observations[i].track];
-      if (track.depth <= 0.0) continue;
-      const Vec2 r = Residual(p, track, p.observations[i].projector_pixel, options.square_pixels);
-      p.inlier[i] = r.norm() <= options.outlier_threshold;
-      inliers += p.inlier[i];
-    }
-    summary->projectors[k].outliers = static_cast<int>(p.observations.size()) - inliers;
+    const int inliers = MarkInliers(options, tracks, &projectors[k]);
+    summary->projectors[k].outliers =
+        static_cast<int>(projectors[k].observations.size()) - inliers;
     if (inliers < options.min_correspondences)
       return finish(SelfCalibrationSummary::kTooFewPoints,
                     projector_name(k) + "only " + std::to_string(inliers) +
@@ -590,25 +660,10 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options,
   summary->ceres_iterations = static_cast<int>(robust_summary.iterations.size() +
                                                final_summary.iterations.size());
   std::vector<int> inlier_views(tracks.size(), 0);
-  for (int k = 0; k < n; ++k) {
-    const ProjectorState& p = projectors[k];
-    double sum_squared = 0.0, max_norm = 0.0;
-    int count = 0;
-    for (size_t i = 0; i < p.observations.size(); ++i) {
-      if (!p.inlier[i]) continue;
-      const Vec2 r = Residual(p, tracks[p.observations[i].track], p.observations[i].projector_pixel,
-                              options.square_pixels);
-      if (!r.allFinite())
-        return finish(SelfCalibrationSummary::kSolverFailed,
-                      projector_name(k) + "the bundle adjustment left a non-finite residual");
-      sum_squared += r.squaredNorm();
-      max_norm = std::max(max_norm, r.norm());
-      ++count;
-      ++inlier_views[p.observations[i].track];
-    }
-    summary->projectors[k].rms = std::sqrt(sum_squared / (2.0 * count));
-    summary->projectors[k].max_norm = max_norm;
-  }
+  for (int k = 0; k < n; ++k)
+    if (!InlierResiduals(options, tracks, projectors[k], &summary->projectors[k], &inlier_views))
+      return finish(SelfCalibrationSummary::kSolverFailed,
+                    projector_name(k) + "the bundle adjustment left a non-finite residual");
 
   // 5. The floor, the metric scale and the room frame.
   std::vector<Vec3> cloud;
@@ -637,37 +692,17 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options,
   summary->floor_inliers = floor_plane.inliers;
   summary->floor_rms_mm = floor_plane.rms_mm * scale;
 
-  const Vec3 z_axis = floor_plane.normal;
-  Vec3 x_axis = Vec3::UnitZ() - Vec3::UnitZ().dot(z_axis) * z_axis;
-  if (x_axis.norm() < 1e-6) x_axis = Vec3::UnitX() - Vec3::UnitX().dot(z_axis) * z_axis;
-  x_axis.normalize();
-  Eigen::Isometry3d room_from_camera = Eigen::Isometry3d::Identity();
-  room_from_camera.linear().row(0) = x_axis.transpose();
-  room_from_camera.linear().row(1) = z_axis.cross(x_axis).transpose();
-  room_from_camera.linear().row(2) = z_axis.transpose();
-  room_from_camera.translation() = Vec3(0.0, 0.0, options.camera_height);
+  const Eigen::Isometry3d room_from_camera =
+      RoomFromCamera(floor_plane.normal, options.camera_height);
   const Eigen::Isometry3d camera_from_room = room_from_camera.inverse();
 
   RoomCalibration result;
   result.room_from_camera = room_from_camera;
   result.camera_lens_model = problem.camera_lens_model;
   result.camera_intrinsics = problem.camera_intrinsics;
-  for (int k = 0; k < n; ++k) {
-    const ProjectorState& p = projectors[k];
-    RoomProjector projector;
-    projector.name = problem.projectors[k].name;
-    projector.lens_model = "LENSMODEL_PINHOLE";
-    projector.intrinsics.assign(p.intrinsics, p.intrinsics + 4);
-    projector.width = problem.projectors[k].width;
-    projector.height = problem.projectors[k].height;
-    Eigen::Matrix3d rotation;
-    ceres::AngleAxisToRotationMatrix(p.rotation, rotation.data());  // column-major
-    Eigen::Isometry3d proj_from_cam = Eigen::Isometry3d::Identity();
-    proj_from_cam.linear() = rotation;
-    proj_from_cam.translation() = scale * Vec3(p.translation[0], p.translation[1], p.translation[2]);
-    projector.proj_from_room = proj_from_cam * camera_from_room;
-    result.projectors.push_back(projector);
-  }
+  for (int k = 0; k < n; ++k)
+    result.projectors.push_back(
+        ResultProjector(problem.projectors[k], projectors[k], scale, camera_from_room));
   if (points) {
     points->clear();
     for (size_t i = 0; i < cloud.size(); ++i) {
