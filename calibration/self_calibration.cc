@@ -4,7 +4,6 @@
 #include <ceres/rotation.h>
 
 #include <Eigen/Eigenvalues>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -39,7 +38,7 @@ struct Observation {
 // length) and the parameters the bundle adjustment refines.
 struct ProjectorState {
   std::vector<Observation> observations;
-  std::vector<double> seed_depth;  // per observation, 0 when not a seed inlier
+  std::vector<double> seed_depth;       // per observation, 0 when not a seed inlier
   double intrinsics[4] = {0, 0, 0, 0};  // fx, fy, cx, cy
   double rotation[3] = {0, 0, 0};       // proj_from_cam, angle-axis
   double translation[3] = {0, 0, 0};
@@ -76,7 +75,8 @@ void Thin(const RoomCalibrationProblem& problem, int stride, std::vector<Track>*
       auto [it, inserted] = chosen_in_cell.emplace(cell, static_cast<int>(i));
       if (inserted) continue;
       const Vec2& old = given.camera_pixels[it->second];
-      if (std::make_pair(std::lround(given.camera_pixels[i].y()), std::lround(given.camera_pixels[i].x())) <
+      if (std::make_pair(std::lround(given.camera_pixels[i].y()),
+                         std::lround(given.camera_pixels[i].x())) <
           std::make_pair(std::lround(old.y()), std::lround(old.x())))
         it->second = static_cast<int>(i);
     }
@@ -169,8 +169,10 @@ SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& 
   const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
   for (int i = 0; i < 60; ++i) {
     const double c = b - golden * (b - a), d = a + golden * (b - a);
-    if (gap_at(c) < gap_at(d)) b = d;
-    else a = c;
+    if (gap_at(c) < gap_at(d))
+      b = d;
+    else
+      a = c;
   }
   const double focal = std::exp(0.5 * (a + b));
   summary->seed_focal = focal;
@@ -212,8 +214,8 @@ SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& 
   for (size_t i = 0; i < state->observations.size(); ++i) {
     if (!pose_mask.at<uchar>(static_cast<int>(i))) continue;
     const Vec3& r = tracks[state->observations[i].track].ray;
-    const Vec3 d = rotation.transpose() *
-                   Vec3(projector_normalised[i].x, projector_normalised[i].y, 1.0);
+    const Vec3 d =
+        rotation.transpose() * Vec3(projector_normalised[i].x, projector_normalised[i].y, 1.0);
     Eigen::Matrix2d a_matrix;
     a_matrix << r.dot(r), -r.dot(d), r.dot(d), -d.dot(d);
     const Eigen::Vector2d rhs(r.dot(centre), d.dot(centre));
@@ -338,8 +340,8 @@ bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track
       ceres_problem.AddResidualBlock(
           new ceres::AutoDiffCostFunction<DepthReprojection, 2, 4, 3, 3, 1>(
               new DepthReprojection(track.ray, o.projector_pixel, options.square_pixels)),
-          robust ? new ceres::CauchyLoss(options.loss_scale) : nullptr, p.intrinsics,
-          p.rotation, p.translation, &track.depth);
+          robust ? new ceres::CauchyLoss(options.loss_scale) : nullptr, p.intrinsics, p.rotation,
+          p.translation, &track.depth);
       ++seen_by[o.track];
     }
   }
@@ -349,8 +351,7 @@ bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track
     std::vector<int> held;
     if (options.square_pixels) held.push_back(1);
     if (p.principal_point_held) held.insert(held.end(), {2, 3});
-    if (!held.empty())
-      ceres_problem.SetManifold(p.intrinsics, new ceres::SubsetManifold(4, held));
+    if (!held.empty()) ceres_problem.SetManifold(p.intrinsics, new ceres::SubsetManifold(4, held));
   }
   const int most = *std::max_element(seen_by.begin(), seen_by.end());
   std::vector<double> candidate_depths;
@@ -359,9 +360,8 @@ bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track
   const double median = Median(candidate_depths);
   int gauge = -1;
   for (size_t t = 0; t < tracks->size(); ++t)
-    if (seen_by[t] == most &&
-        (gauge < 0 ||
-         std::abs((*tracks)[t].depth - median) < std::abs((*tracks)[gauge].depth - median)))
+    if (seen_by[t] == most && (gauge < 0 || std::abs((*tracks)[t].depth - median) <
+                                                std::abs((*tracks)[gauge].depth - median)))
       gauge = static_cast<int>(t);
   ceres_problem.SetParameterBlockConstant(&(*tracks)[gauge].depth);
 
@@ -518,8 +518,9 @@ bool SelfCalibrationOptions::Check(std::string* why) const {
   }
   if (min_correspondences < 12 || max_correspondences < min_correspondences ||
       min_shared_points < 1 || max_iterations < 1) {
-    *why = "need min_correspondences >= 12, max_correspondences >= min_correspondences, "
-           "min_shared_points >= 1, max_iterations >= 1";
+    *why =
+        "need min_correspondences >= 12, max_correspondences >= min_correspondences, "
+        "min_shared_points >= 1, max_iterations >= 1";
     return false;
   }
   if (!(plane_distance > 0.0 && plane_distance < 0.1) ||
@@ -547,17 +548,17 @@ std::string SelfCalibrationSummary::BriefReport() const {
     std::snprintf(line, sizeof(line),
                   "\n  projector %zu: %d of %d used, seed f %.1f px (%d F / %d H inliers), %d "
                   "shared, principal point %s; %d outliers, RMS %.3f px, max %.3f px",
-                  k, p.used, p.correspondences, p.seed_focal, p.seed_inliers,
-                  p.homography_inliers, p.shared, p.principal_point_held ? "held" : "refined",
-                  p.outliers, p.rms, p.max_norm);
+                  k, p.used, p.correspondences, p.seed_focal, p.seed_inliers, p.homography_inliers,
+                  p.shared, p.principal_point_held ? "held" : "refined", p.outliers, p.rms,
+                  p.max_norm);
     text += line;
   }
   return text;
 }
 
-bool SelfCalibrateRoom(const SelfCalibrationOptions& options,
-                       const RoomCalibrationProblem& problem, RoomCalibration* calibration,
-                       std::vector<SelfCalibrationPoint>* points, SelfCalibrationSummary* summary) {
+bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrationProblem& problem,
+                       RoomCalibration* calibration, std::vector<SelfCalibrationPoint>* points,
+                       SelfCalibrationSummary* summary) {
   const auto start = std::chrono::steady_clock::now();
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("SelfCalibrationOptions: " + why);
@@ -600,8 +601,8 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options,
   int most_given = 0;
   for (const ProjectorObservations& p : problem.projectors)
     most_given = std::max(most_given, static_cast<int>(p.camera_pixels.size()));
-  const int first_stride = std::max(
-      1, static_cast<int>(std::sqrt(static_cast<double>(most_given) / options.max_correspondences)));
+  const int first_stride = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(most_given) /
+                                                                  options.max_correspondences)));
   for (int stride = first_stride;; ++stride) {
     Thin(problem, stride, &tracks, &projectors);
     bool fits = true;
@@ -622,7 +623,8 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options,
     const SelfCalibrationSummary::Termination seeded =
         SeedProjector(options, tracks, problem.projectors[k].width, problem.projectors[k].height,
                       &projectors[k], &summary->projectors[k], &why);
-    if (seeded != SelfCalibrationSummary::kConverged) return finish(seeded, projector_name(k) + why);
+    if (seeded != SelfCalibrationSummary::kConverged)
+      return finish(seeded, projector_name(k) + why);
   }
 
   // 3. One unit of length for all.
@@ -646,8 +648,7 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options,
   summary->initial_cost = robust_summary.final_cost;
   for (int k = 0; k < n; ++k) {
     const int inliers = MarkInliers(options, tracks, &projectors[k]);
-    summary->projectors[k].outliers =
-        static_cast<int>(projectors[k].observations.size()) - inliers;
+    summary->projectors[k].outliers = static_cast<int>(projectors[k].observations.size()) - inliers;
     if (inliers < options.min_correspondences)
       return finish(SelfCalibrationSummary::kTooFewPoints,
                     projector_name(k) + "only " + std::to_string(inliers) +
@@ -657,8 +658,8 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options,
     return finish(SelfCalibrationSummary::kSolverFailed,
                   "the bundle adjustment failed: " + final_summary.message);
   summary->final_cost = final_summary.final_cost;
-  summary->ceres_iterations = static_cast<int>(robust_summary.iterations.size() +
-                                               final_summary.iterations.size());
+  summary->ceres_iterations =
+      static_cast<int>(robust_summary.iterations.size() + final_summary.iterations.size());
   std::vector<int> inlier_views(tracks.size(), 0);
   for (int k = 0; k < n; ++k)
     if (!InlierResiduals(options, tracks, projectors[k], &summary->projectors[k], &inlier_views))
@@ -707,8 +708,8 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options,
     points->clear();
     for (size_t i = 0; i < cloud.size(); ++i) {
       const Track& track = tracks[cloud_track[i]];
-      points->push_back(
-          {room_from_camera * (scale * cloud[i]), track.camera_pixel, inlier_views[cloud_track[i]]});
+      points->push_back({room_from_camera * (scale * cloud[i]), track.camera_pixel,
+                         inlier_views[cloud_track[i]]});
     }
   }
   *calibration = std::move(result);

@@ -105,16 +105,16 @@ struct SelfCalibrationOptions {
 };
 
 struct SelfCalibrationProjectorSummary {
-  int correspondences = 0;        // given
-  int used = 0;                   // after thinning
-  int seed_inliers = 0;           // of the RANSAC fundamental matrix
-  int homography_inliers = 0;     // of a RANSAC homography (degeneracy test)
-  double seed_focal = 0.0;        // f of the seed (equal singular values of E), px
-  int shared = 0;                 // thinned camera pixels some other projector lights too
+  int correspondences = 0;            // given
+  int used = 0;                       // after thinning
+  int seed_inliers = 0;               // of the RANSAC fundamental matrix
+  int homography_inliers = 0;         // of a RANSAC homography (degeneracy test)
+  double seed_focal = 0.0;            // f of the seed (equal singular values of E), px
+  int shared = 0;                     // thinned camera pixels some other projector lights too
   bool principal_point_held = false;  // held at the image centre (see the header)
-  int outliers = 0;               // residual norm > outlier_threshold after the robust pass
-  double rms = 0.0;               // RMS per coordinate over inliers, px
-  double max_norm = 0.0;          // largest inlier residual norm, px
+  int outliers = 0;                   // residual norm > outlier_threshold after the robust pass
+  double rms = 0.0;                   // RMS per coordinate over inliers, px
+  double max_norm = 0.0;              // largest inlier residual norm, px
 };
 
 struct SelfCalibrationSummary {
@@ -132,12 +132,12 @@ struct SelfCalibrationSummary {
   };
   Termination termination = kSolverFailed;
   std::vector<SelfCalibrationProjectorSummary> projectors;
-  int points = 0;           // 3D points (thinned camera pixels) in the bundle adjustment
+  int points = 0;            // 3D points (thinned camera pixels) in the bundle adjustment
   int ceres_iterations = 0;  // of both solves
   double initial_cost = 0.0, final_cost = 0.0;  // of the robust and the inlier solve
-  double scale = 0.0;          // metres per unit of the solve (from camera_height)
-  int floor_inliers = 0;       // points on the floor plane
-  double floor_rms_mm = 0.0;   // their distance to it, millimetres
+  double scale = 0.0;                           // metres per unit of the solve (from camera_height)
+  int floor_inliers = 0;                        // points on the floor plane
+  double floor_rms_mm = 0.0;                    // their distance to it, millimetres
   double time_s = 0.0;
   std::string message;
   std::string BriefReport() const;
@@ -157,8 +157,8 @@ struct SelfCalibrationPoint {
 // the options fail Check(), the camera lens is unsupported, there is no projector, or a
 // projector's sizes are wrong. Returns true for kConverged; otherwise summary->message says why,
 // naming the projector where one is to blame, and `calibration` is left unchanged.
-bool SelfCalibrateRoom(const SelfCalibrationOptions& options,
-                       const RoomCalibrationProblem& problem, RoomCalibration* calibration,
-                       std::vector<SelfCalibrationPoint>* points, SelfCalibrationSummary* summary);
+bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrationProblem& problem,
+                       RoomCalibration* calibration, std::vector<SelfCalibrationPoint>* points,
+                       SelfCalibrationSummary* summary);
 
 }  // namespace procam

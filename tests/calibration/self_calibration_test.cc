@@ -118,10 +118,10 @@ double CameraHeight(const SimulatedRig& rig) {
 }
 
 struct ProjectorErrors {
-  double fx = 0, fy = 0;      // relative
-  double cx = 0, cy = 0;      // px
-  double position_mm = 0;     // the projector's centre in the camera frame
-  double orientation_deg = 0; // its orientation relative to the camera
+  double fx = 0, fy = 0;       // relative
+  double cx = 0, cy = 0;       // px
+  double position_mm = 0;      // the projector's centre in the camera frame
+  double orientation_deg = 0;  // its orientation relative to the camera
 };
 
 // Errors of projector k relative to the camera (the room frames of the truth and the estimate
@@ -137,9 +137,9 @@ ProjectorErrors Compare(const RoomCalibration& calibration, const SimulatedRig& 
   e.fy = std::abs(estimate.intrinsics[1] / truth.intrinsics()[1] - 1.0);
   e.cx = std::abs(estimate.intrinsics[2] - truth.intrinsics()[2]);
   e.cy = std::abs(estimate.intrinsics[3] - truth.intrinsics()[3]);
-  e.position_mm = 1e3 * (proj_from_cam.inverse().translation() -
-                         true_proj_from_cam.inverse().translation())
-                            .norm();
+  e.position_mm =
+      1e3 *
+      (proj_from_cam.inverse().translation() - true_proj_from_cam.inverse().translation()).norm();
   e.orientation_deg = TurnDeg(proj_from_cam.linear(), true_proj_from_cam.linear());
   return e;
 }
@@ -163,8 +163,8 @@ double PointRmsMm(const std::vector<SelfCalibrationPoint>& points,
     if (!rig.PointSeenByPixel(static_cast<int>(point.camera_pixel.y()),
                               static_cast<int>(point.camera_pixel.x()), &truth))
       continue;
-    sum += (camera_from_room * point.p_in_room - rig.camera().proj_from_world() * truth)
-               .squaredNorm();
+    sum +=
+        (camera_from_room * point.p_in_room - rig.camera().proj_from_world() * truth).squaredNorm();
     ++count;
   }
   return 1e3 * std::sqrt(sum / std::max(count, 1));
@@ -206,9 +206,10 @@ void CalibrateAndCheck(const std::string& name, const SimulatedRig& rig,
   EXPECT_NEAR(calibration.room_from_camera.translation().z(), options.camera_height, 1e-9);
   for (int k = 0; k < static_cast<int>(calibration.projectors.size()); ++k) {
     const ProjectorErrors e = Compare(calibration, rig, k);
-    std::printf("  projector %d: fx %.4f%%, fy %.4f%%, cx %.3f px, cy %.3f px, position %.3f mm, "
-                "orientation %.4f deg\n",
-                k, 100 * e.fx, 100 * e.fy, e.cx, e.cy, e.position_mm, e.orientation_deg);
+    std::printf(
+        "  projector %d: fx %.4f%%, fy %.4f%%, cx %.3f px, cy %.3f px, position %.3f mm, "
+        "orientation %.4f deg\n",
+        k, 100 * e.fx, 100 * e.fy, e.cx, e.cy, e.position_mm, e.orientation_deg);
     EXPECT_LT(e.fx, bounds.focal) << "projector " << k;
     EXPECT_LT(e.fy, bounds.focal) << "projector " << k;
     EXPECT_LT(e.cx, bounds.principal_point) << "projector " << k;
@@ -291,8 +292,8 @@ TEST(SelfCalibrateRoom, TooFewCorrespondencesNameTheProjector) {
   RoomCalibration calibration;
   calibration.camera_lens_model = "untouched";
   SelfCalibrationSummary summary;
-  EXPECT_FALSE(SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr,
-                                 &summary));
+  EXPECT_FALSE(
+      SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr, &summary));
   EXPECT_EQ(summary.termination, SelfCalibrationSummary::kTooFewPoints);
   EXPECT_NE(summary.message.find("projector 'right'"), std::string::npos) << summary.message;
   EXPECT_EQ(calibration.camera_lens_model, "untouched");
@@ -306,8 +307,8 @@ TEST(SelfCalibrateRoom, OnePlaneIsDegenerate) {
                                             [](const Vec3& p) { return p.y() > 1.0 - 1e-6; });
   SelfCalibrationSummary summary;
   RoomCalibration calibration;
-  EXPECT_FALSE(SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr,
-                                 &summary));
+  EXPECT_FALSE(
+      SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr, &summary));
   EXPECT_EQ(summary.termination, SelfCalibrationSummary::kDegenerate) << summary.BriefReport();
   EXPECT_NE(summary.message.find("projector 'left'"), std::string::npos) << summary.message;
 }
@@ -330,8 +331,8 @@ TEST(SelfCalibrateRoom, ProjectorsSharingNoPointAreRefused) {
   }
   RoomCalibration calibration;
   SelfCalibrationSummary summary;
-  EXPECT_FALSE(SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr,
-                                 &summary));
+  EXPECT_FALSE(
+      SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr, &summary));
   EXPECT_EQ(summary.termination, SelfCalibrationSummary::kDisconnected) << summary.BriefReport();
   EXPECT_NE(summary.message.find("projector '"), std::string::npos) << summary.message;
 }
@@ -347,9 +348,9 @@ TEST(SelfCalibrateRoom, OptionsAndInputsAreChecked) {
                std::invalid_argument);
   RoomCalibrationProblem no_projector = problem;
   no_projector.projectors.clear();
-  EXPECT_THROW(SelfCalibrateRoom(SelfCalibrationOptions(), no_projector, &calibration, nullptr,
-                                 &summary),
-               std::invalid_argument);
+  EXPECT_THROW(
+      SelfCalibrateRoom(SelfCalibrationOptions(), no_projector, &calibration, nullptr, &summary),
+      std::invalid_argument);
   RoomCalibrationProblem unequal = problem;
   unequal.projectors[0].projector_pixels.pop_back();
   EXPECT_THROW(
