@@ -16,6 +16,7 @@
 #include "datasets_synthetic/simulated_rig.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "geometry/ray_scene.h"
+#include "geometry/scene_from_points.h"
 
 namespace procam {
 namespace {
@@ -281,6 +282,42 @@ TEST(SelfCalibrateRoom, OneProjectorHoldsItsPrincipalPoint) {
   SelfCalibrationSummary summary;
   CalibrateAndCheck("l_shaped, one projector", *rig, problem, Bounds(), &summary);
   EXPECT_TRUE(summary.projectors[0].principal_point_held);
+}
+
+// The chain to a scene: the self-calibration's result triangulates every correspondence
+// (Triangulate, as for CalibrateRoom's result), SceneFromPoints builds the room from the points in
+// the room frame. The l_shaped room's three surfaces come back, the floor at height 0.
+TEST(SelfCalibrateRoom, ResultFeedsTriangulateAndSceneFromPoints) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("l_shaped", 0.5);
+  const RoomCalibrationProblem problem = MakeProblem(*rig, 1);
+  SelfCalibrationOptions options;
+  options.camera_height = CameraHeight(*rig);
+  RoomCalibration calibration;
+  SelfCalibrationSummary summary;
+  ASSERT_TRUE(SelfCalibrateRoom(options, problem, &calibration, nullptr, &summary))
+      << summary.BriefReport();
+  std::vector<Vec3> points_in_room;
+  for (const TriangulatedPoint& point : Triangulate(problem, calibration))
+    points_in_room.push_back(calibration.room_from_camera * point.p_in_cam);
+  SceneFromPointsOptions scene_options;
+  scene_options.viewpoint = calibration.room_from_camera.translation();
+  const ScannedScene scanned = SceneFromPoints(points_in_room, scene_options);
+  std::printf("%zu points\n%s\n", points_in_room.size(), scanned.Report().c_str());
+  EXPECT_EQ(scanned.scene.surfaces.size(), 3u);
+  bool found_floor = false;
+  double floor_height_mm = 0.0;
+  for (size_t i = 0; i < scanned.scene.surfaces.size(); ++i) {
+    const Surface& surface = scanned.scene.surfaces[i];
+    if (surface.name != "floor") continue;
+    found_floor = true;
+    const bool quad = surface.kind == Surface::Kind::kQuad;
+    for (const Vec3& corner :
+         quad ? std::vector<Vec3>(surface.quad.begin(), surface.quad.end()) : surface.mesh_vertices)
+      floor_height_mm = std::max(floor_height_mm, 1e3 * std::abs(corner.z()));
+  }
+  std::printf("  floor: largest |z| of its corners %.2f mm\n", floor_height_mm);
+  EXPECT_LT(floor_height_mm, 3.0);
+  EXPECT_TRUE(found_floor);
 }
 
 // ---------------------------------------------------------------------------------------------
