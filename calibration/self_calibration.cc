@@ -10,9 +10,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <limits>
-#include <numeric>
 #include <opencv2/calib3d.hpp>
-#include <queue>
 #include <stdexcept>
 #include <unordered_map>
 
@@ -354,6 +352,7 @@ bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track
     if (!held.empty()) ceres_problem.SetManifold(p.intrinsics, new ceres::SubsetManifold(4, held));
   }
   const int most = *std::max_element(seen_by.begin(), seen_by.end());
+  if (most == 0) return false;  // no residual: the callers' point counts exclude it
   std::vector<double> candidate_depths;
   for (size_t t = 0; t < tracks->size(); ++t)
     if (seen_by[t] == most) candidate_depths.push_back((*tracks)[t].depth);
