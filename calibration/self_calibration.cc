@@ -48,6 +48,13 @@ std::int64_t PixelKey(int col, int row) {
   return (static_cast<std::int64_t>(row) << 32) ^ static_cast<std::uint32_t>(col);
 }
 
+// A number for a message: %g, 4 significant digits.
+std::string Number(double value) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.4g", value);
+  return text;
+}
+
 double Median(std::vector<double> values) {
   if (values.empty()) return 0.0;
   const size_t middle = values.size() / 2;
@@ -175,10 +182,9 @@ SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& 
   const double focal = std::exp(0.5 * (a + b));
   summary->seed_focal = focal;
   if (gap_at(std::log(focal)) > 0.25 || best == 0 || best == kSamples - 1) {
-    *why = "no focal length with throw ratio in [" + std::to_string(options.min_throw_ratio) +
-           ", " + std::to_string(options.max_throw_ratio) +
-           "] makes its fundamental matrix an essential matrix (best f " + std::to_string(focal) +
-           " px)";
+    *why = "no focal length with throw ratio in [" + Number(options.min_throw_ratio) + ", " +
+           Number(options.max_throw_ratio) +
+           "] makes its fundamental matrix an essential matrix (best f " + Number(focal) + " px)";
     return SelfCalibrationSummary::kDegenerate;
   }
   Eigen::Matrix3d k_projector;
@@ -685,7 +691,7 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
     return finish(SelfCalibrationSummary::kNoFloor,
                   "no floor: none of the " + std::to_string(planes.size()) +
                       " planes fitted to the points faces the camera's image-up within " +
-                      std::to_string(options.max_floor_tilt_deg) + " deg");
+                      Number(options.max_floor_tilt_deg) + " deg");
   const FittedPlane floor_plane = RefinePlane(planes[floor], cloud);
   const double scale = options.camera_height / floor_plane.offset;
   summary->scale = scale;

@@ -335,6 +335,7 @@ TEST(SelfCalibrateRoom, TooFewCorrespondencesNameTheProjector) {
   EXPECT_EQ(summary.termination, SelfCalibrationSummary::kTooFewPoints);
   EXPECT_NE(summary.message.find("projector 'right'"), std::string::npos) << summary.message;
   EXPECT_EQ(calibration.camera_lens_model, "untouched");
+  std::printf("%s\n", summary.message.c_str());
 }
 
 // A projector that lights the back wall only: its correspondences are one homography.
@@ -349,6 +350,7 @@ TEST(SelfCalibrateRoom, OnePlaneIsDegenerate) {
       SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr, &summary));
   EXPECT_EQ(summary.termination, SelfCalibrationSummary::kDegenerate) << summary.BriefReport();
   EXPECT_NE(summary.message.find("projector 'left'"), std::string::npos) << summary.message;
+  std::printf("%s\n", summary.message.c_str());
 }
 
 // Two projectors that light disjoint halves of the camera image share no point: no common scale.
@@ -373,6 +375,22 @@ TEST(SelfCalibrateRoom, ProjectorsSharingNoPointAreRefused) {
       SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr, &summary));
   EXPECT_EQ(summary.termination, SelfCalibrationSummary::kDisconnected) << summary.BriefReport();
   EXPECT_NE(summary.message.find("projector '"), std::string::npos) << summary.message;
+  std::printf("%s\n", summary.message.c_str());
+}
+
+// Only the walls lit (no floor point): the calibration is found, but no room frame.
+TEST(SelfCalibrateRoom, NoFloorIsRefused) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("l_shaped", 0.5);
+  RoomCalibrationProblem problem = MakeProblem(*rig, 2);
+  for (int k = 0; k < 2; ++k)
+    problem.projectors[k] =
+        NoisyObservations(*rig, k, 2, kDecodingNoisePx, [](const Vec3& p) { return p.z() > 0.05; });
+  RoomCalibration calibration;
+  SelfCalibrationSummary summary;
+  EXPECT_FALSE(
+      SelfCalibrateRoom(SelfCalibrationOptions(), problem, &calibration, nullptr, &summary));
+  EXPECT_EQ(summary.termination, SelfCalibrationSummary::kNoFloor) << summary.BriefReport();
+  std::printf("%s\n", summary.message.c_str());
 }
 
 TEST(SelfCalibrateRoom, OptionsAndInputsAreChecked) {
