@@ -260,6 +260,18 @@ TEST(SelfCalibrateRoom, LShaped) {
   CalibrateAndCheck("l_shaped", *rig, MakeProblem(*rig, 2), Bounds());
 }
 
+// The same from simulated captures decoded by DecodeStructuredLight.
+TEST(SelfCalibrateRoom, LShapedDecoded) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("l_shaped", 0.5);
+  RoomCalibrationProblem problem;
+  problem.camera_lens_model = rig->camera().lens_model();
+  problem.camera_intrinsics = rig->camera().intrinsics();
+  for (int k = 0; k < 2; ++k) problem.projectors.push_back(DecodedObservations(*rig, k));
+  Bounds bounds;
+  bounds.decoding_noise_px = 0.0;  // unknown: not checked
+  CalibrateAndCheck("l_shaped decoded", *rig, problem, bounds);
+}
+
 // Columns: three projectors, occlusions by the two columns.
 TEST(SelfCalibrateRoom, Columns) {
   const std::unique_ptr<SimulatedRig> rig = MakeRig("columns", 0.5);
