@@ -114,10 +114,12 @@ double SingularValueGap(const Eigen::Matrix3d& f_matrix, double f, double cx, do
   return (s[0] - s[1]) / std::max(s[1], 1e-300);
 }
 
-// Step 2 for one projector (unit translation); the termination it ends in, kConverged for a seed.
+// Step 2 for one projector (unit translation), its principal point assumed at `principal_point`;
+// the termination it ends in, kConverged for a seed.
 SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& options,
                                                   const std::vector<Track>& tracks, int width,
-                                                  int height, ProjectorState* state,
+                                                  const Vec2& principal_point,
+                                                  ProjectorState* state,
                                                   SelfCalibrationProjectorSummary* summary,
                                                   std::string* why) {
   // F between camera points in normalised coordinates and projector pixels; OpenCV's Hartley
@@ -158,7 +160,7 @@ SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& 
   f_matrix = f_matrix * Eigen::Vector3d(kCameraScale, kCameraScale, 1.0).asDiagonal();
 
   // Focal length: equal singular values of E(f), principal point at the centre.
-  const double cx = 0.5 * (width - 1), cy = 0.5 * (height - 1);
+  const double cx = principal_point.x(), cy = principal_point.y();
   const double log_lo = std::log(options.min_throw_ratio * width);
   const double log_hi = std::log(options.max_throw_ratio * width);
   constexpr int kSamples = 80;
@@ -181,7 +183,7 @@ SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& 
   }
   const double focal = std::exp(0.5 * (a + b));
   summary->seed_focal = focal;
-  if (gap_at(std::log(focal)) > 0.25 || best == 0 || best == kSamples - 1) {
+  if (gap_at(std::log(focal)) > options.max_seed_gap || best == 0 || best == kSamples - 1) {
     *why = "no focal length with throw ratio in [" + Number(options.min_throw_ratio) + ", " +
            Number(options.max_throw_ratio) +
            "] makes its fundamental matrix an essential matrix (best f " + Number(focal) + " px)";
@@ -517,6 +519,19 @@ bool SelfCalibrationOptions::Check(std::string* why) const {
     *why = "ransac_threshold, loss_scale and outlier_threshold must be > 0";
     return false;
   }
+  if (!(max_outlier_fraction >= 0.0 && max_outlier_fraction <= 1.0)) {
+    *why = "max_outlier_fraction must be in [0, 1]";
+    return false;
+  }
+  if (!(max_seed_gap > 0.0)) {
+    *why = "max_seed_gap must be > 0";
+    return false;
+  }
+  for (const Vec2& guess : principal_point_guesses)
+    if (!guess.allFinite()) {
+      *why = "principal_point_guesses must be finite";
+      return false;
+    }
   if (!(degenerate_homography_fraction > 0.0 && degenerate_homography_fraction <= 1.0)) {
     *why = "degenerate_homography_fraction must be in (0, 1]";
     return false;
@@ -538,7 +553,8 @@ bool SelfCalibrationOptions::Check(std::string* why) const {
 
 std::string SelfCalibrationSummary::BriefReport() const {
   static const char* const kNames[] = {"converged",    "too few points", "degenerate",
-                                       "disconnected", "no floor",       "solver failed"};
+                                       "disconnected", "inconsistent",   "no floor",
+                                       "solver failed"};
   std::string text = std::string("Room self-calibration: ") + kNames[termination];
   char line[400];
   std::snprintf(line, sizeof(line),
@@ -577,6 +593,12 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
     if (p.width < 1 || p.height < 1 || p.camera_pixels.size() != p.projector_pixels.size())
       throw std::invalid_argument("self-calibration: projector '" + p.name +
                                   "' has a size < 1 or unequal pixel lists");
+  if (!options.principal_point_guesses.empty() &&
+      options.principal_point_guesses.size() != problem.projectors.size())
+    throw std::invalid_argument("self-calibration: principal_point_guesses has " +
+                                std::to_string(options.principal_point_guesses.size()) +
+                                " entries for " + std::to_string(problem.projectors.size()) +
+                                " projectors");
 
   const int n = static_cast<int>(problem.projectors.size());
   *summary = SelfCalibrationSummary();
@@ -625,9 +647,13 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
 
   // 2. Seeds.
   for (int k = 0; k < n; ++k) {
+    const ProjectorObservations& given = problem.projectors[k];
+    const Vec2 principal_point = options.principal_point_guesses.empty()
+                                     ? Vec2(0.5 * (given.width - 1), 0.5 * (given.height - 1))
+                                     : options.principal_point_guesses[k];
     const SelfCalibrationSummary::Termination seeded =
-        SeedProjector(options, tracks, problem.projectors[k].width, problem.projectors[k].height,
-                      &projectors[k], &summary->projectors[k], &why);
+        SeedProjector(options, tracks, given.width, principal_point, &projectors[k],
+                      &summary->projectors[k], &why);
     if (seeded != SelfCalibrationSummary::kConverged)
       return finish(seeded, projector_name(k) + why);
   }
@@ -651,9 +677,18 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
     return finish(SelfCalibrationSummary::kSolverFailed,
                   "the robust bundle adjustment failed: " + robust_summary.message);
   summary->initial_cost = robust_summary.final_cost;
+  summary->ceres_iterations = static_cast<int>(robust_summary.iterations.size());
   for (int k = 0; k < n; ++k) {
     const int inliers = MarkInliers(options, tracks, &projectors[k]);
-    summary->projectors[k].outliers = static_cast<int>(projectors[k].observations.size()) - inliers;
+    const int used = static_cast<int>(projectors[k].observations.size());
+    summary->projectors[k].outliers = used - inliers;
+    if (used - inliers > options.max_outlier_fraction * used)
+      return finish(SelfCalibrationSummary::kInconsistent,
+                    projector_name(k) + std::to_string(used - inliers) + " of " +
+                        std::to_string(used) +
+                        " correspondences are outliers after the robust bundle adjustment: the "
+                        "solve went astray (a principal point far from its guess? give "
+                        "principal_point_guesses) or the decoding is bad");
     if (inliers < options.min_correspondences)
       return finish(SelfCalibrationSummary::kTooFewPoints,
                     projector_name(k) + "only " + std::to_string(inliers) +
@@ -663,8 +698,7 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
     return finish(SelfCalibrationSummary::kSolverFailed,
                   "the bundle adjustment failed: " + final_summary.message);
   summary->final_cost = final_summary.final_cost;
-  summary->ceres_iterations =
-      static_cast<int>(robust_summary.iterations.size() + final_summary.iterations.size());
+  summary->ceres_iterations += static_cast<int>(final_summary.iterations.size());
   std::vector<int> inlier_views(tracks.size(), 0);
   for (int k = 0; k < n; ++k)
     if (!InlierResiduals(options, tracks, projectors[k], &summary->projectors[k], &inlier_views))
@@ -718,7 +752,10 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
     }
   }
   *calibration = std::move(result);
-  return finish(SelfCalibrationSummary::kConverged, "");
+  return finish(SelfCalibrationSummary::kConverged,
+                final_summary.termination_type == ceres::NO_CONVERGENCE
+                    ? "the final solve stopped at max_iterations before converging"
+                    : "");
 }
 
 }  // namespace procam

@@ -11,14 +11,14 @@
 //      pixels and the projector pixels by RANSAC with local optimisation (OpenCV
 //      findFundamentalMat, USAC_ACCURATE; plain RANSAC's best 7-point model left 17% of exact
 //      correspondences out on a small rig). The projector's intrinsics are unknown: its
-//      principal point is taken at the image centre and its pixels square (fx = fy = f), and f is
-//      the one for which E(f) = K_p(f)ᵀ F K_c has two equal singular values (Mendonça &
-//      Cipolla's criterion; a log-spaced search over the throw ratios f / width in
-//      [min_throw_ratio, max_throw_ratio], refined by golden section). E is
-//      decomposed into the projector's rotation and unit translation, the one of four that puts
-//      the inliers in front of both devices (cv::recoverPose). A projector whose correspondences
-//      fit one homography about as well as F (it lights one plane only, or sits at the camera's
-//      centre) has no epipolar geometry: kDegenerate, naming it.
+//      principal point is taken at its guess (principal_point_guesses, by default the image
+//      centre) and its pixels square (fx = fy = f), and f is the one for which E(f) = K_p(f)ᵀ F
+//      K_c has two equal singular values (Mendonça & Cipolla's criterion; a log-spaced search
+//      over the throw ratios f / width in [min_throw_ratio, max_throw_ratio], refined by golden
+//      section). E is decomposed into the projector's rotation and unit translation, the one of
+//      four that puts the inliers in front of both devices (cv::recoverPose). A projector whose
+//      correspondences fit one homography about as well as F (it lights one plane only, or sits
+//      at the camera's centre) has no epipolar geometry: kDegenerate, naming it.
 //   3. Scales. Each projector's seed has its own unit of length. Two projectors that light the
 //      same camera pixel triangulate the same point, whose depth along the camera ray they must
 //      agree on: the median ratio of the depths ties their units, projector by projector along a
@@ -45,10 +45,11 @@
 // from it (with square pixels, its principal point stays a one-parameter family). Two or more
 // projectors lighting common camera pixels pin all of them: the points the first triangulates
 // must be seen by the second through a zero-skew, square-pixel lens. Hence: with square_pixels
-// the principal point is refined for projectors that share at least min_shared_points camera
-// pixels with another projector, and held at the image centre (summary: principal_point_held)
-// for a projector that does not, or when the rig has only one projector. Lens-shifted projectors
-// (principal point far off the centre) need the shared points.
+// the principal points are refined when there are two or more projectors (each shares at least
+// min_shared_points camera pixels with another, or the calibration stops at kDisconnected), and
+// held at their guess (principal_point_guesses, else the image centre; summary:
+// principal_point_held) for a rig of one projector. A principal point far from its guess can lead
+// the solve astray: kInconsistent (see principal_point_guesses for what was measured).
 //
 // The metric scale: `camera_height` is the distance from the camera's centre to the floor plane,
 // metres. It is meant to come from the chessboard: one photo of the board lying flat on the floor
@@ -83,6 +84,17 @@ struct SelfCalibrationOptions {
   // (the throw ratio of a projector with its principal point at the centre), 0 < min < max.
   double min_throw_ratio = 0.3;
   double max_throw_ratio = 4.0;
+  // The seed's principal point per projector (problem order), pixels, e.g. from the projector's
+  // lens-shift specification (a 100% vertical offset puts cy at the bottom row); empty: every
+  // image's centre. It is also where a held principal point stays (see the header). Measured on
+  // the synthetic rigs (projectors 800 px tall): from the centre seed, principal points 120 and
+  // 200 px below the centre and 300 or 400 px above it are recovered on l_shaped; on columns, 300
+  // px above it, the solve goes astray (kInconsistent) and the true guess recovers them.
+  std::vector<Vec2> principal_point_guesses;
+  // The seed's focal length is refused (kDegenerate) when E(f) is farther than this from an
+  // essential matrix, (σ1 − σ2) / σ2 > max_seed_gap, > 0. A wrong principal point guess alone
+  // raises it: 0.32–0.48 measured for guesses 300–400 px off on 800 px tall projectors.
+  double max_seed_gap = 0.75;
   // RANSAC inlier distance of the seed's fundamental matrix, projector pixels, > 0.
   double ransac_threshold = 1.5;
   // A projector is degenerate when one homography explains at least this fraction of the
@@ -90,7 +102,12 @@ struct SelfCalibrationOptions {
   double degenerate_homography_fraction = 0.95;
   double loss_scale = 1.0;         // Cauchy scale of the robust pass, projector pixels, > 0
   double outlier_threshold = 2.0;  // inlier residual norm, projector pixels, > 0
-  int min_correspondences = 50;    // per projector, fewest usable ones, ≥ 12
+  // A projector with more than this fraction of its correspondences outliers after the robust
+  // pass ends the calibration (kInconsistent), [0, 1]. Decoded structured light leaves under 1%;
+  // a solve the seed led astray leaves 7–57% (measured: columns, principal points 300–400 px off
+  // the centre guess).
+  double max_outlier_fraction = 0.2;
+  int min_correspondences = 50;  // per projector, fewest usable ones, ≥ 12
   // Per projector, at most this many correspondences are used (thinned on a camera-pixel grid
   // shared by all projectors), ≥ min_correspondences.
   int max_correspondences = 4000;
@@ -113,7 +130,7 @@ struct SelfCalibrationProjectorSummary {
   int homography_inliers = 0;         // of a RANSAC homography (degeneracy test)
   double seed_focal = 0.0;            // f of the seed (equal singular values of E), px
   int shared = 0;                     // thinned camera pixels some other projector lights too
-  bool principal_point_held = false;  // held at the image centre (see the header)
+  bool principal_point_held = false;  // held at its guess (see the header)
   int outliers = 0;                   // residual norm > outlier_threshold after the robust pass
   double rms = 0.0;                   // RMS per coordinate over inliers, px
   double max_norm = 0.0;              // largest inlier residual norm, px
@@ -129,6 +146,9 @@ struct SelfCalibrationSummary {
                     // or no focal length in the throw-ratio range gives an essential matrix
     kDisconnected,  // a projector shares fewer than min_shared_points camera pixels with the
                     // others: its scale relative to theirs is unknown
+    kInconsistent,  // a projector has more than max_outlier_fraction outliers after the robust
+                    // pass: the solve went astray (e.g. a principal point far from its guess:
+                    // give principal_point_guesses) or its decoding is bad (message names it)
     kNoFloor,       // no fitted plane faces the camera's image-up within max_floor_tilt_deg
     kSolverFailed,  // Ceres failed or the result is not finite
   };

@@ -185,12 +185,12 @@ struct Bounds {
   double decoding_noise_px = kDecodingNoisePx;
 };
 
-// Calibrates `problem` of `rig` and checks the result against the truth; the summary (optional)
-// is returned.
+// Calibrates `problem` of `rig` with `options` (camera_height set to the truth) and checks the
+// result against the truth; the summary (optional) is returned.
 void CalibrateAndCheck(const std::string& name, const SimulatedRig& rig,
                        const RoomCalibrationProblem& problem, const Bounds& bounds,
-                       SelfCalibrationSummary* summary_out = nullptr) {
-  SelfCalibrationOptions options;
+                       SelfCalibrationSummary* summary_out = nullptr,
+                       SelfCalibrationOptions options = SelfCalibrationOptions()) {
   options.camera_height = CameraHeight(rig);
   RoomCalibration calibration;
   std::vector<SelfCalibrationPoint> points;
@@ -283,6 +283,34 @@ TEST(SelfCalibrateRoom, Columns) {
 TEST(SelfCalibrateRoom, LensShiftedProjectors) {
   const std::unique_ptr<SimulatedRig> rig = MakeRig("l_shaped", 0.5, {120.0, 200.0});
   CalibrateAndCheck("l_shaped, lens shift", *rig, MakeProblem(*rig, 2), Bounds());
+}
+
+// Principal points 400 px above the centre of 800 px tall projectors: the centre seed still
+// finds them on l_shaped.
+TEST(SelfCalibrateRoom, LargeLensShiftFromTheCentreSeed) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("l_shaped", 0.5, {-400.0, -400.0});
+  CalibrateAndCheck("l_shaped, lens shift -400 px", *rig, MakeProblem(*rig, 2), Bounds());
+}
+
+// On columns, 300 px above the centre, the centre seed leads the solve astray: refused
+// (kInconsistent, naming a projector) rather than returned; with the principal points given as
+// guesses (a lens-shift specification) the truth is recovered.
+TEST(SelfCalibrateRoom, FarLensShiftNeedsItsGuess) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("columns", 0.5, {-300.0, -300.0, -300.0});
+  const RoomCalibrationProblem problem = MakeProblem(*rig, 2);
+  SelfCalibrationOptions options;
+  options.camera_height = CameraHeight(*rig);
+  RoomCalibration calibration;
+  SelfCalibrationSummary summary;
+  EXPECT_FALSE(SelfCalibrateRoom(options, problem, &calibration, nullptr, &summary));
+  EXPECT_EQ(summary.termination, SelfCalibrationSummary::kInconsistent) << summary.BriefReport();
+  EXPECT_NE(summary.message.find("projector '"), std::string::npos) << summary.message;
+  std::printf("%s\n", summary.message.c_str());
+  for (const Projector& projector : rig->projectors())
+    options.principal_point_guesses.push_back(
+        Vec2(projector.geometry.intrinsics()[2], projector.geometry.intrinsics()[3]));
+  CalibrateAndCheck("columns, lens shift -300 px, guessed", *rig, problem, Bounds(), nullptr,
+                    options);
 }
 
 // One projector: its principal point is not observable (header) and is held at the centre,
