@@ -114,11 +114,47 @@ double SingularValueGap(const Eigen::Matrix3d& f_matrix, double f, double cx, do
   return (s[0] - s[1]) / std::max(s[1], 1e-300);
 }
 
+// The focal length f for which E(f) = K_p(f)ᵀ F is closest to an essential matrix, the principal
+// point (cx, cy) given: a log-spaced search over the throw-ratio range, refined by golden section.
+struct FocalFit {
+  double focal = 0.0;
+  double gap = 0.0;           // SingularValueGap at focal
+  bool at_range_end = false;  // the best sample was the first or last: no minimum inside
+};
+FocalFit FitFocal(const SelfCalibrationOptions& options, const Eigen::Matrix3d& f_matrix, int width,
+                  double cx, double cy) {
+  const double log_lo = std::log(options.min_throw_ratio * width);
+  const double log_hi = std::log(options.max_throw_ratio * width);
+  constexpr int kSamples = 80;
+  auto gap_at = [&](double log_f) { return SingularValueGap(f_matrix, std::exp(log_f), cx, cy); };
+  int best = 0;
+  double best_gap = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < kSamples; ++i) {
+    const double gap = gap_at(log_lo + (log_hi - log_lo) * i / (kSamples - 1));
+    if (gap < best_gap) best_gap = gap, best = i;
+  }
+  double a = log_lo + (log_hi - log_lo) * std::max(best - 1, 0) / (kSamples - 1);
+  double b = log_lo + (log_hi - log_lo) * std::min(best + 1, kSamples - 1) / (kSamples - 1);
+  const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
+  for (int i = 0; i < 60; ++i) {
+    const double c = b - golden * (b - a), d = a + golden * (b - a);
+    if (gap_at(c) < gap_at(d))
+      b = d;
+    else
+      a = c;
+  }
+  FocalFit fit;
+  fit.focal = std::exp(0.5 * (a + b));
+  fit.gap = gap_at(0.5 * (a + b));
+  fit.at_range_end = best == 0 || best == kSamples - 1;
+  return fit;
+}
+
 // Step 2 for one projector (unit translation), its principal point assumed at `principal_point`;
 // the termination it ends in, kConverged for a seed.
 SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& options,
                                                   const std::vector<Track>& tracks, int width,
-                                                  const Vec2& principal_point,
+                                                  int height, const Vec2& principal_point,
                                                   ProjectorState* state,
                                                   SelfCalibrationProjectorSummary* summary,
                                                   std::string* why) {
@@ -159,31 +195,38 @@ SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& 
   // Camera points back to normalised coordinates: F_norm = F · diag(s, s, 1).
   f_matrix = f_matrix * Eigen::Vector3d(kCameraScale, kCameraScale, 1.0).asDiagonal();
 
-  // Focal length: equal singular values of E(f), principal point at the centre.
-  const double cx = principal_point.x(), cy = principal_point.y();
-  const double log_lo = std::log(options.min_throw_ratio * width);
-  const double log_hi = std::log(options.max_throw_ratio * width);
-  constexpr int kSamples = 80;
-  auto gap_at = [&](double log_f) { return SingularValueGap(f_matrix, std::exp(log_f), cx, cy); };
-  int best = 0;
-  double best_gap = std::numeric_limits<double>::infinity();
-  for (int i = 0; i < kSamples; ++i) {
-    const double gap = gap_at(log_lo + (log_hi - log_lo) * i / (kSamples - 1));
-    if (gap < best_gap) best_gap = gap, best = i;
+  // Focal length: equal singular values of E(f), the principal point at its guess; with
+  // search_principal_point_y, also along the image's vertical where that makes E far closer to an
+  // essential matrix (a lens shift the guess misses).
+  const double cx = principal_point.x();
+  double cy = principal_point.y();
+  FocalFit fit = FitFocal(options, f_matrix, width, cx, cy);
+  if (options.search_principal_point_y && fit.gap > 0.02) {
+    auto fit_at = [&](double y) { return FitFocal(options, f_matrix, width, cx, y); };
+    constexpr int kRows = 81;  // cy from −height/2 to 3·height/2
+    double best_y = cy;
+    FocalFit best = fit;
+    for (int i = 0; i < kRows; ++i) {
+      const double y = -0.5 * height + 2.0 * height * i / (kRows - 1);
+      const FocalFit trial = fit_at(y);
+      if (trial.gap < best.gap) best = trial, best_y = y;
+    }
+    double a = best_y - 2.0 * height / (kRows - 1), b = best_y + 2.0 * height / (kRows - 1);
+    const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
+    for (int i = 0; i < 40; ++i) {
+      const double c = b - golden * (b - a), d = a + golden * (b - a);
+      if (fit_at(c).gap < fit_at(d).gap)
+        b = d;
+      else
+        a = c;
+    }
+    const FocalFit refined = fit_at(0.5 * (a + b));
+    if (refined.gap < 0.25 * fit.gap) cy = 0.5 * (a + b), fit = refined;
   }
-  double a = log_lo + (log_hi - log_lo) * std::max(best - 1, 0) / (kSamples - 1);
-  double b = log_lo + (log_hi - log_lo) * std::min(best + 1, kSamples - 1) / (kSamples - 1);
-  const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
-  for (int i = 0; i < 60; ++i) {
-    const double c = b - golden * (b - a), d = a + golden * (b - a);
-    if (gap_at(c) < gap_at(d))
-      b = d;
-    else
-      a = c;
-  }
-  const double focal = std::exp(0.5 * (a + b));
+  const double focal = fit.focal;
   summary->seed_focal = focal;
-  if (gap_at(std::log(focal)) > options.max_seed_gap || best == 0 || best == kSamples - 1) {
+  summary->seed_principal_point = Vec2(cx, cy);
+  if (fit.gap > options.max_seed_gap || fit.at_range_end) {
     *why = "no focal length with throw ratio in [" + Number(options.min_throw_ratio) + ", " +
            Number(options.max_throw_ratio) +
            "] makes its fundamental matrix an essential matrix (best f " + Number(focal) + " px)";
@@ -567,11 +610,11 @@ std::string SelfCalibrationSummary::BriefReport() const {
   for (size_t k = 0; k < projectors.size(); ++k) {
     const SelfCalibrationProjectorSummary& p = projectors[k];
     std::snprintf(line, sizeof(line),
-                  "\n  projector %zu: %d of %d used, seed f %.1f px (%d F / %d H inliers), %d "
-                  "shared, principal point %s; %d outliers, RMS %.3f px, max %.3f px",
-                  k, p.used, p.correspondences, p.seed_focal, p.seed_inliers, p.homography_inliers,
-                  p.shared, p.principal_point_held ? "held" : "refined", p.outliers, p.rms,
-                  p.max_norm);
+                  "\n  projector %zu: %d of %d used, seed f %.1f px cy %.1f px (%d F / %d H "
+                  "inliers), %d shared, principal point %s; %d outliers, RMS %.3f px, max %.3f px",
+                  k, p.used, p.correspondences, p.seed_focal, p.seed_principal_point.y(),
+                  p.seed_inliers, p.homography_inliers, p.shared,
+                  p.principal_point_held ? "held" : "refined", p.outliers, p.rms, p.max_norm);
     text += line;
   }
   return text;
@@ -652,7 +695,7 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
                                      ? Vec2(0.5 * (given.width - 1), 0.5 * (given.height - 1))
                                      : options.principal_point_guesses[k];
     const SelfCalibrationSummary::Termination seeded =
-        SeedProjector(options, tracks, given.width, principal_point, &projectors[k],
+        SeedProjector(options, tracks, given.width, given.height, principal_point, &projectors[k],
                       &summary->projectors[k], &why);
     if (seeded != SelfCalibrationSummary::kConverged)
       return finish(seeded, projector_name(k) + why);

@@ -86,11 +86,18 @@ struct SelfCalibrationOptions {
   double max_throw_ratio = 4.0;
   // The seed's principal point per projector (problem order), pixels, e.g. from the projector's
   // lens-shift specification (a 100% vertical offset puts cy at the bottom row); empty: every
-  // image's centre. It is also where a held principal point stays (see the header). Measured on
-  // the synthetic rigs (projectors 800 px tall): from the centre seed, principal points 120 and
-  // 200 px below the centre and 300 or 400 px above it are recovered on l_shaped; on columns, 300
-  // px above it, the solve goes astray (kInconsistent) and the true guess recovers them.
+  // image's centre. It is also where a held principal point stays (see the header), and where
+  // the seed's cy search (below) starts.
   std::vector<Vec2> principal_point_guesses;
+  // The seed searches the principal point's cy too (cy in [−height/2, 3·height/2]) and takes the
+  // cy that brings E(f) far closer (gap below a quarter, from above 0.02) to an essential matrix
+  // than the guess does: one pair's F determines two of the projector's intrinsics, f and the
+  // lens shift, unless the projector sits straight above or below the camera (then cy is not
+  // seen, the gap stays small at the guess and the guess is kept). Measured on the synthetic rigs
+  // (800 px tall projectors, default guesses): principal points 120–200 px below and 300–400 px
+  // above the centre recovered on l_shaped and columns; without the search, columns 300 px above
+  // goes astray (kInconsistent) unless the true principal points are given as guesses.
+  bool search_principal_point_y = true;
   // The seed's focal length is refused (kDegenerate) when E(f) is farther than this from an
   // essential matrix, (σ1 − σ2) / σ2 > max_seed_gap, > 0. A wrong principal point guess alone
   // raises it: 0.32–0.48 measured for guesses 300–400 px off on 800 px tall projectors.
@@ -105,7 +112,7 @@ struct SelfCalibrationOptions {
   // A projector with more than this fraction of its correspondences outliers after the robust
   // pass ends the calibration (kInconsistent), [0, 1]. Decoded structured light leaves under 1%;
   // a solve the seed led astray leaves 7–57% (measured: columns, principal points 300–400 px off
-  // the centre guess).
+  // the centre guess, search_principal_point_y off).
   double max_outlier_fraction = 0.2;
   int min_correspondences = 50;  // per projector, fewest usable ones, ≥ 12
   // Per projector, at most this many correspondences are used (thinned on a camera-pixel grid
@@ -124,11 +131,12 @@ struct SelfCalibrationOptions {
 };
 
 struct SelfCalibrationProjectorSummary {
-  int correspondences = 0;            // given
-  int used = 0;                       // after thinning
-  int seed_inliers = 0;               // of the RANSAC fundamental matrix
-  int homography_inliers = 0;         // of a RANSAC homography (degeneracy test)
-  double seed_focal = 0.0;            // f of the seed (equal singular values of E), px
+  int correspondences = 0;                   // given
+  int used = 0;                              // after thinning
+  int seed_inliers = 0;                      // of the RANSAC fundamental matrix
+  int homography_inliers = 0;                // of a RANSAC homography (degeneracy test)
+  double seed_focal = 0.0;                   // f of the seed (equal singular values of E), px
+  Vec2 seed_principal_point = Vec2::Zero();  // of the seed, px (see search_principal_point_y)
   int shared = 0;                     // thinned camera pixels some other projector lights too
   bool principal_point_held = false;  // held at its guess (see the header)
   int outliers = 0;                   // residual norm > outlier_threshold after the robust pass
