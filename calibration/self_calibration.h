@@ -15,10 +15,11 @@
 //      centre) and its pixels square (fx = fy = f), and f is the one for which E(f) = K_p(f)ᵀ F
 //      K_c has two equal singular values (Mendonça & Cipolla's criterion; a log-spaced search
 //      over the throw ratios f / width in [min_throw_ratio, max_throw_ratio], refined by golden
-//      section). E is decomposed into the projector's rotation and unit translation, the one of
-//      four that puts the inliers in front of both devices (cv::recoverPose). A projector whose
-//      correspondences fit one homography about as well as F (it lights one plane only, or sits
-//      at the camera's centre) has no epipolar geometry: kDegenerate, naming it.
+//      section); with search_principal_point_y also over cy, where that brings E far closer to an
+//      essential matrix. E is decomposed into the projector's rotation and unit translation, the
+//      one of four that puts the inliers in front of both devices (cv::recoverPose). A projector
+//      whose correspondences fit one homography about as well as F (it lights one plane only, or
+//      sits at the camera's centre) has no epipolar geometry: kDegenerate, naming it.
 //   3. Scales. Each projector's seed has its own unit of length. Two projectors that light the
 //      same camera pixel triangulate the same point, whose depth along the camera ray they must
 //      agree on: the median ratio of the depths ties their units, projector by projector along a
