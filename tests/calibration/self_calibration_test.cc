@@ -348,7 +348,13 @@ TEST(SelfCalibrateRoom, ResultFeedsTriangulateAndSceneFromPoints) {
   scene_options.viewpoint = calibration.room_from_camera.translation();
   const ScannedScene scanned = SceneFromPoints(points_in_room, scene_options);
   std::printf("%zu points\n%s\n", points_in_room.size(), scanned.Report().c_str());
-  EXPECT_EQ(scanned.scene.surfaces.size(), 3u);
+  // The three true surfaces; anything else below the spurious-surface bound (1% of the
+  // scanned area: with other noise seeds the scene stage may add a small plane at a corner).
+  double total_area = 0.0;
+  for (const ScannedSurfaceStats& stats : scanned.stats) total_area += stats.area_m2;
+  int large = 0;
+  for (const ScannedSurfaceStats& stats : scanned.stats) large += stats.area_m2 > 0.01 * total_area;
+  EXPECT_EQ(large, 3);
   bool found_floor = false;
   double floor_height_mm = 0.0;
   for (size_t i = 0; i < scanned.scene.surfaces.size(); ++i) {
