@@ -235,7 +235,7 @@ void CalibrateAndCheck(const std::string& name, const SimulatedRig& rig,
 TEST(SelfCalibrateRoom, TinyBox) {
   const std::unique_ptr<SimulatedRig> rig = MakeRig("tiny_box");
   Bounds bounds;
-  bounds.point_rms_mm = 15.0;
+  bounds.point_rms_mm = 20.0;  // 11.5 mm measured; up to 14.5 mm over five other noise seeds
   CalibrateAndCheck("tiny_box", *rig, MakeProblem(*rig, 2), bounds);
 }
 
