@@ -375,8 +375,9 @@ Vec2 Residual(const ProjectorState& p, const Track& track, const Vec2& observed,
   return r;
 }
 
-// One Ceres solve over the observations `use` allows (all in the robust pass); the gauge is the
-// depth of the used track closest to the median depth among those seen by the most projectors.
+// One Ceres solve: the robust pass over every observation of a seeded track under a Cauchy loss,
+// the final one over the inliers without a loss. The gauge is the depth of the track closest to
+// the median depth among those seen by the most projectors.
 bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track>* tracks,
            std::vector<ProjectorState>* projectors, ceres::Solver::Summary* ceres_summary) {
   ceres::Problem ceres_problem;
