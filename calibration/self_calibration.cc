@@ -1,0 +1,805 @@
+#include "calibration/self_calibration.h"
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <limits>
+#include <opencv2/calib3d.hpp>
+#include <stdexcept>
+#include <unordered_map>
+
+namespace procam {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// A thinned camera pixel: the 3D point z · ray of the camera frame that every projector lighting
+// it sees.
+struct Track {
+  Vec2 camera_pixel = Vec2::Zero();
+  Vec3 ray = Vec3::UnitZ();  // undistorted normalised coordinate, z = 1
+  double depth = 0.0;        // z in the camera frame; 0 until seeded
+};
+
+struct Observation {
+  int track = 0;
+  Vec2 projector_pixel = Vec2::Zero();
+};
+
+// A projector's state through the steps: its thinned observations, its seed (in its own unit of
+// length) and the parameters the bundle adjustment refines.
+struct ProjectorState {
+  std::vector<Observation> observations;
+  std::vector<double> seed_depth;       // per observation, 0 when not a seed inlier
+  double intrinsics[4] = {0, 0, 0, 0};  // fx, fy, cx, cy
+  double rotation[3] = {0, 0, 0};       // proj_from_cam, angle-axis
+  double translation[3] = {0, 0, 0};
+  std::vector<bool> inlier;  // per observation, after the robust pass
+  bool principal_point_held = false;
+};
+
+std::int64_t PixelKey(int col, int row) {
+  return (static_cast<std::int64_t>(row) << 32) ^ static_cast<std::uint32_t>(col);
+}
+
+// A number for a message: %g, 4 significant digits.
+std::string Number(double value) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.4g", value);
+  return text;
+}
+
+double Median(std::vector<double> values) {
+  if (values.empty()) return 0.0;
+  const size_t middle = values.size() / 2;
+  std::nth_element(values.begin(), values.begin() + middle, values.end());
+  return values[middle];
+}
+
+// Step 1: per projector, in every stride × stride cell of the camera image, the correspondence of
+// the smallest camera pixel (row-major); the same pixel is then chosen by every projector that
+// lights the whole cell, and is one track.
+void Thin(const RoomCalibrationProblem& problem, int stride, std::vector<Track>* tracks,
+          std::vector<ProjectorState>* projectors) {
+  std::unordered_map<std::int64_t, int> track_of_pixel;
+  tracks->clear();
+  projectors->assign(problem.projectors.size(), ProjectorState());
+  for (size_t k = 0; k < problem.projectors.size(); ++k) {
+    const ProjectorObservations& given = problem.projectors[k];
+    std::unordered_map<std::int64_t, int> chosen_in_cell;  // cell → index into `given`
+    for (size_t i = 0; i < given.camera_pixels.size(); ++i) {
+      const int col = static_cast<int>(std::lround(given.camera_pixels[i].x()));
+      const int row = static_cast<int>(std::lround(given.camera_pixels[i].y()));
+      const std::int64_t cell = PixelKey(col / stride, row / stride);
+      auto [it, inserted] = chosen_in_cell.emplace(cell, static_cast<int>(i));
+      if (inserted) continue;
+      const Vec2& old = given.camera_pixels[it->second];
+      if (std::make_pair(std::lround(given.camera_pixels[i].y()),
+                         std::lround(given.camera_pixels[i].x())) <
+          std::make_pair(std::lround(old.y()), std::lround(old.x())))
+        it->second = static_cast<int>(i);
+    }
+    std::vector<int> kept;
+    for (const auto& [cell, index] : chosen_in_cell) kept.push_back(index);
+    std::sort(kept.begin(), kept.end());
+    for (const int i : kept) {
+      const Vec2& pixel = given.camera_pixels[i];
+      const std::int64_t key = PixelKey(static_cast<int>(std::lround(pixel.x())),
+                                        static_cast<int>(std::lround(pixel.y())));
+      auto [it, inserted] = track_of_pixel.emplace(key, static_cast<int>(tracks->size()));
+      if (inserted) {
+        Track track;
+        track.camera_pixel = pixel;
+        UnprojectCameraPixel(problem.camera_lens_model, problem.camera_intrinsics, pixel,
+                             &track.ray);
+        tracks->push_back(track);
+      }
+      (*projectors)[k].observations.push_back({it->second, given.projector_pixels[i]});
+    }
+  }
+}
+
+// (σ1 − σ2) / σ2 of E(f) = K_p(f)ᵀ F: zero for the focal length of an essential matrix.
+double SingularValueGap(const Eigen::Matrix3d& f_matrix, double f, double cx, double cy) {
+  Eigen::Matrix3d k;
+  k << f, 0, cx, 0, f, cy, 0, 0, 1;
+  const Eigen::Vector3d s =
+      Eigen::JacobiSVD<Eigen::Matrix3d>(k.transpose() * f_matrix).singularValues();
+  return (s[0] - s[1]) / std::max(s[1], 1e-300);
+}
+
+// The focal length f for which E(f) = K_p(f)ᵀ F is closest to an essential matrix, the principal
+// point (cx, cy) given: a log-spaced search over the throw-ratio range, refined by golden section.
+struct FocalFit {
+  double focal = 0.0;
+  double gap = 0.0;           // SingularValueGap at focal
+  bool at_range_end = false;  // the best sample was the first or last: no minimum inside
+};
+FocalFit FitFocal(const SelfCalibrationOptions& options, const Eigen::Matrix3d& f_matrix, int width,
+                  double cx, double cy) {
+  const double log_lo = std::log(options.min_throw_ratio * width);
+  const double log_hi = std::log(options.max_throw_ratio * width);
+  constexpr int kSamples = 80;
+  auto gap_at = [&](double log_f) { return SingularValueGap(f_matrix, std::exp(log_f), cx, cy); };
+  int best = 0;
+  double best_gap = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < kSamples; ++i) {
+    const double gap = gap_at(log_lo + (log_hi - log_lo) * i / (kSamples - 1));
+    if (gap < best_gap) best_gap = gap, best = i;
+  }
+  double a = log_lo + (log_hi - log_lo) * std::max(best - 1, 0) / (kSamples - 1);
+  double b = log_lo + (log_hi - log_lo) * std::min(best + 1, kSamples - 1) / (kSamples - 1);
+  const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
+  for (int i = 0; i < 60; ++i) {
+    const double c = b - golden * (b - a), d = a + golden * (b - a);
+    if (gap_at(c) < gap_at(d))
+      b = d;
+    else
+      a = c;
+  }
+  FocalFit fit;
+  fit.focal = std::exp(0.5 * (a + b));
+  fit.gap = gap_at(0.5 * (a + b));
+  fit.at_range_end = best == 0 || best == kSamples - 1;
+  return fit;
+}
+
+// Step 2 for one projector (unit translation), its principal point assumed at `principal_point`;
+// the termination it ends in, kConverged for a seed.
+SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& options,
+                                                  const std::vector<Track>& tracks, int width,
+                                                  int height, const Vec2& principal_point,
+                                                  ProjectorState* state,
+                                                  SelfCalibrationProjectorSummary* summary,
+                                                  std::string* why) {
+  // F between camera points in normalised coordinates and projector pixels; OpenCV's Hartley
+  // normalisation makes the mixed scales harmless, but RANSAC's threshold is a distance in the
+  // second image only when the first is in pixels too: scale the camera's by a nominal focal.
+  constexpr double kCameraScale = 1000.0;
+  std::vector<cv::Point2d> camera_points, projector_points;
+  for (const Observation& o : state->observations) {
+    const Vec3& ray = tracks[o.track].ray;
+    camera_points.emplace_back(kCameraScale * ray.x(), kCameraScale * ray.y());
+    projector_points.emplace_back(o.projector_pixel.x(), o.projector_pixel.y());
+  }
+  std::vector<uchar> f_mask, h_mask;
+  const cv::Mat f_cv = cv::findFundamentalMat(camera_points, projector_points, cv::USAC_ACCURATE,
+                                              options.ransac_threshold, 0.999, 10000, f_mask);
+  summary->seed_inliers = f_cv.rows == 3 ? cv::countNonZero(f_mask) : 0;
+  const cv::Mat h_cv = cv::findHomography(camera_points, projector_points, cv::USAC_ACCURATE,
+                                          options.ransac_threshold, h_mask, 10000, 0.999);
+  summary->homography_inliers = h_cv.empty() ? 0 : cv::countNonZero(h_mask);
+  if (summary->seed_inliers < options.min_correspondences) {
+    *why = "only " + std::to_string(summary->seed_inliers) +
+           " correspondences fit one fundamental matrix (fewer than min_correspondences " +
+           std::to_string(options.min_correspondences) + ")";
+    return SelfCalibrationSummary::kTooFewPoints;
+  }
+  if (summary->homography_inliers >=
+      options.degenerate_homography_fraction * summary->seed_inliers) {
+    *why = "one homography explains " + std::to_string(summary->homography_inliers) + " of the " +
+           std::to_string(summary->seed_inliers) +
+           " epipolar inliers: it lights one plane only (or sits at the camera's centre), so its "
+           "pose and focal length do not follow from it; light two or more surfaces";
+    return SelfCalibrationSummary::kDegenerate;
+  }
+  Eigen::Matrix3d f_matrix;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) f_matrix(r, c) = f_cv.at<double>(r, c);
+  // Camera points back to normalised coordinates: F_norm = F · diag(s, s, 1).
+  f_matrix = f_matrix * Eigen::Vector3d(kCameraScale, kCameraScale, 1.0).asDiagonal();
+
+  // Focal length: equal singular values of E(f), the principal point at its guess; with
+  // search_principal_point_y, also along the image's vertical where that makes E far closer to an
+  // essential matrix (a lens shift the guess misses).
+  const double cx = principal_point.x();
+  double cy = principal_point.y();
+  FocalFit fit = FitFocal(options, f_matrix, width, cx, cy);
+  if (options.search_principal_point_y && fit.gap > 0.02) {
+    auto fit_at = [&](double y) { return FitFocal(options, f_matrix, width, cx, y); };
+    constexpr int kRows = 81;  // cy from −height/2 to 3·height/2
+    double best_y = cy;
+    FocalFit best = fit;
+    for (int i = 0; i < kRows; ++i) {
+      const double y = -0.5 * height + 2.0 * height * i / (kRows - 1);
+      const FocalFit trial = fit_at(y);
+      if (trial.gap < best.gap) best = trial, best_y = y;
+    }
+    double a = best_y - 2.0 * height / (kRows - 1), b = best_y + 2.0 * height / (kRows - 1);
+    const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
+    for (int i = 0; i < 40; ++i) {
+      const double c = b - golden * (b - a), d = a + golden * (b - a);
+      if (fit_at(c).gap < fit_at(d).gap)
+        b = d;
+      else
+        a = c;
+    }
+    const FocalFit refined = fit_at(0.5 * (a + b));
+    if (refined.gap < 0.25 * fit.gap) cy = 0.5 * (a + b), fit = refined;
+  }
+  const double focal = fit.focal;
+  summary->seed_focal = focal;
+  summary->seed_principal_point = Vec2(cx, cy);
+  if (fit.gap > options.max_seed_gap || fit.at_range_end) {
+    *why = "no focal length with throw ratio in [" + Number(options.min_throw_ratio) + ", " +
+           Number(options.max_throw_ratio) +
+           "] makes its fundamental matrix an essential matrix (best f " + Number(focal) + " px)";
+    return SelfCalibrationSummary::kDegenerate;
+  }
+  Eigen::Matrix3d k_projector;
+  k_projector << focal, 0, cx, 0, focal, cy, 0, 0, 1;
+  const Eigen::Matrix3d essential = k_projector.transpose() * f_matrix;
+
+  std::vector<cv::Point2d> camera_normalised, projector_normalised;
+  for (const Observation& o : state->observations) {
+    const Vec3& ray = tracks[o.track].ray;
+    camera_normalised.emplace_back(ray.x(), ray.y());
+    projector_normalised.emplace_back((o.projector_pixel.x() - cx) / focal,
+                                      (o.projector_pixel.y() - cy) / focal);
+  }
+  cv::Mat essential_cv(3, 3, CV_64F), rotation_cv, translation_cv;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) essential_cv.at<double>(r, c) = essential(r, c);
+  cv::Mat pose_mask(f_mask, true);
+  cv::recoverPose(essential_cv, camera_normalised, projector_normalised, rotation_cv,
+                  translation_cv, 1.0, cv::Point2d(0, 0), pose_mask);
+  Eigen::Matrix3d rotation;
+  Vec3 translation;
+  for (int r = 0; r < 3; ++r) {
+    translation[r] = translation_cv.at<double>(r);
+    for (int c = 0; c < 3; ++c) rotation(r, c) = rotation_cv.at<double>(r, c);
+  }
+  // Depth along each camera ray: the midpoint of the camera ray z·r and the projector ray
+  // c + s·d (c the projector's centre, d its ray, both in the camera frame).
+  const Vec3 centre = -rotation.transpose() * translation;
+  state->seed_depth.assign(state->observations.size(), 0.0);
+  int in_front = 0;
+  for (size_t i = 0; i < state->observations.size(); ++i) {
+    if (!pose_mask.at<uchar>(static_cast<int>(i))) continue;
+    const Vec3& r = tracks[state->observations[i].track].ray;
+    const Vec3 d =
+        rotation.transpose() * Vec3(projector_normalised[i].x, projector_normalised[i].y, 1.0);
+    Eigen::Matrix2d a_matrix;
+    a_matrix << r.dot(r), -r.dot(d), r.dot(d), -d.dot(d);
+    const Eigen::Vector2d rhs(r.dot(centre), d.dot(centre));
+    const Eigen::Vector2d zs = a_matrix.colPivHouseholderQr().solve(rhs);
+    if (!(zs[0] > 0.0 && zs[1] > 0.0)) continue;
+    state->seed_depth[i] = zs[0];
+    ++in_front;
+  }
+  if (in_front < options.min_correspondences) {
+    *why = "only " + std::to_string(in_front) +
+           " correspondences triangulate in front of both devices after decomposing E";
+    return SelfCalibrationSummary::kTooFewPoints;
+  }
+  state->intrinsics[0] = state->intrinsics[1] = focal;
+  state->intrinsics[2] = cx;
+  state->intrinsics[3] = cy;
+  ceres::RotationMatrixToAngleAxis(rotation.data(), state->rotation);  // column-major
+  for (int i = 0; i < 3; ++i) state->translation[i] = translation[i];
+  return SelfCalibrationSummary::kConverged;
+}
+
+// Step 3: scales every projector's seed into the unit of the one with the most seed points along
+// a maximum spanning tree of shared tracks, then sets the tracks' depths to the median over the
+// projectors and rescales so that the median depth is 1. Returns the index of a projector not
+// reached, or −1.
+int TieScales(const SelfCalibrationOptions& options, std::vector<Track>* tracks,
+              std::vector<ProjectorState>* projectors,
+              std::vector<SelfCalibrationProjectorSummary>* summaries) {
+  const int n = static_cast<int>(projectors->size());
+  // Per track, the seed depth each projector gives it.
+  std::vector<std::vector<std::pair<int, double>>> depths(tracks->size());
+  for (int k = 0; k < n; ++k) {
+    const ProjectorState& p = (*projectors)[k];
+    for (size_t i = 0; i < p.observations.size(); ++i)
+      if (p.seed_depth[i] > 0.0) depths[p.observations[i].track].push_back({k, p.seed_depth[i]});
+  }
+  std::vector<std::vector<std::vector<double>>> ratios(n, std::vector<std::vector<double>>(n));
+  std::vector<int> shared(n, 0);
+  for (const auto& seen : depths) {
+    if (seen.size() > 1)
+      for (const auto& [k, depth] : seen) ++shared[k];
+    for (const auto& [k, depth_k] : seen)
+      for (const auto& [l, depth_l] : seen)
+        if (k != l) ratios[k][l].push_back(depth_k / depth_l);
+  }
+  for (int k = 0; k < n; ++k) (*summaries)[k].shared = shared[k];
+  int root = 0;
+  for (int k = 1; k < n; ++k)
+    if ((*summaries)[k].seed_inliers > (*summaries)[root].seed_inliers) root = k;
+  // Prim's algorithm on the number of shared tracks: scale[l] converts l's unit into root's.
+  std::vector<double> scale(n, 0.0);
+  scale[root] = 1.0;
+  for (int added = 1; added < n; ++added) {
+    int best_k = -1, best_l = -1;
+    size_t best_count = 0;
+    for (int k = 0; k < n; ++k)
+      for (int l = 0; l < n; ++l)
+        if (scale[k] > 0.0 && scale[l] == 0.0 && ratios[l][k].size() > best_count)
+          best_count = ratios[l][k].size(), best_k = k, best_l = l;
+    if (best_l < 0 || best_count < static_cast<size_t>(options.min_shared_points)) {
+      for (int l = 0; l < n; ++l)
+        if (scale[l] == 0.0) return l;
+    }
+    // depth_k · scale_k = depth_l · scale_l.
+    scale[best_l] = scale[best_k] / Median(ratios[best_l][best_k]);
+  }
+  std::vector<double> all_depths;
+  for (size_t t = 0; t < tracks->size(); ++t) {
+    std::vector<double> scaled;
+    for (const auto& [k, depth] : depths[t]) scaled.push_back(depth * scale[k]);
+    (*tracks)[t].depth = Median(scaled);
+    if (!scaled.empty()) all_depths.push_back((*tracks)[t].depth);
+  }
+  const double unit = Median(all_depths);
+  for (Track& track : *tracks) track.depth /= unit;
+  for (int k = 0; k < n; ++k)
+    for (double& t : (*projectors)[k].translation) t *= scale[k] / unit;
+  return -1;
+}
+
+// Step 4's residual: the point depth · ray (camera frame) seen by a projector, minus the decoded
+// projector pixel. With square pixels fy is fx.
+struct DepthReprojection {
+  DepthReprojection(const Vec3& ray, const Vec2& observed, bool square_pixels)
+      : ray_(ray), observed_(observed), square_pixels_(square_pixels) {}
+  template <typename T>
+  bool operator()(const T* intrinsics, const T* rotation, const T* translation, const T* depth,
+                  T* residual) const {
+    const T p[3] = {depth[0] * ray_.x(), depth[0] * ray_.y(), depth[0]};
+    T q[3];
+    ceres::AngleAxisRotatePoint(rotation, p, q);
+    for (int i = 0; i < 3; ++i) q[i] += translation[i];
+    const T& fy = square_pixels_ ? intrinsics[0] : intrinsics[1];
+    residual[0] = intrinsics[0] * q[0] / q[2] + intrinsics[2] - T(observed_.x());
+    residual[1] = fy * q[1] / q[2] + intrinsics[3] - T(observed_.y());
+    return true;
+  }
+  Vec3 ray_;
+  Vec2 observed_;
+  bool square_pixels_;
+};
+
+Vec2 Residual(const ProjectorState& p, const Track& track, const Vec2& observed,
+              bool square_pixels) {
+  Vec2 r;
+  DepthReprojection(track.ray, observed, square_pixels)(p.intrinsics, p.rotation, p.translation,
+                                                        &track.depth, r.data());
+  return r;
+}
+
+// One Ceres solve: the robust pass over every observation of a seeded track under a Cauchy loss,
+// the final one over the inliers without a loss. The gauge is the depth of the track closest to
+// the median depth among those seen by the most projectors.
+bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track>* tracks,
+           std::vector<ProjectorState>* projectors, ceres::Solver::Summary* ceres_summary) {
+  ceres::Problem ceres_problem;
+  std::vector<int> seen_by(tracks->size(), 0);
+  for (ProjectorState& p : *projectors) {
+    for (size_t i = 0; i < p.observations.size(); ++i) {
+      const Observation& o = p.observations[i];
+      Track& track = (*tracks)[o.track];
+      if (track.depth <= 0.0 || (!robust && !p.inlier[i])) continue;
+      ceres_problem.AddResidualBlock(
+          new ceres::AutoDiffCostFunction<DepthReprojection, 2, 4, 3, 3, 1>(
+              new DepthReprojection(track.ray, o.projector_pixel, options.square_pixels)),
+          robust ? new ceres::CauchyLoss(options.loss_scale) : nullptr, p.intrinsics, p.rotation,
+          p.translation, &track.depth);
+      ++seen_by[o.track];
+    }
+  }
+  for (size_t k = 0; k < projectors->size(); ++k) {
+    ProjectorState& p = (*projectors)[k];
+    if (!ceres_problem.HasParameterBlock(p.intrinsics)) continue;
+    std::vector<int> held;
+    if (options.square_pixels) held.push_back(1);
+    if (p.principal_point_held) held.insert(held.end(), {2, 3});
+    if (!held.empty()) ceres_problem.SetManifold(p.intrinsics, new ceres::SubsetManifold(4, held));
+  }
+  const int most = *std::max_element(seen_by.begin(), seen_by.end());
+  if (most == 0) return false;  // no residual: the callers' point counts exclude it
+  std::vector<double> candidate_depths;
+  for (size_t t = 0; t < tracks->size(); ++t)
+    if (seen_by[t] == most) candidate_depths.push_back((*tracks)[t].depth);
+  const double median = Median(candidate_depths);
+  int gauge = -1;
+  for (size_t t = 0; t < tracks->size(); ++t)
+    if (seen_by[t] == most && (gauge < 0 || std::abs((*tracks)[t].depth - median) <
+                                                std::abs((*tracks)[gauge].depth - median)))
+      gauge = static_cast<int>(t);
+  ceres_problem.SetParameterBlockConstant(&(*tracks)[gauge].depth);
+
+  ceres::Solver::Options solver_options;
+  solver_options.linear_solver_type = ceres::DENSE_SCHUR;
+  solver_options.max_num_iterations = options.max_iterations;
+  solver_options.function_tolerance = 1e-12;
+  solver_options.gradient_tolerance = 1e-12;
+  solver_options.parameter_tolerance = 1e-12;
+  solver_options.num_threads = 2;
+  ceres::Solve(solver_options, &ceres_problem, ceres_summary);
+  if (options.square_pixels)
+    for (ProjectorState& p : *projectors) p.intrinsics[1] = p.intrinsics[0];
+  return ceres_summary->IsSolutionUsable();
+}
+
+// Step 5: the floor among the planes fitted to `points` (camera frame); -1 when none.
+int FindFloor(const SelfCalibrationOptions& options, const std::vector<FittedPlane>& planes,
+              const std::vector<Vec3>& points, double distance) {
+  const Vec3 image_up(0.0, -1.0, 0.0);
+  const double min_cos = std::cos(options.max_floor_tilt_deg * kPi / 180.0);
+  int floor = -1, floor_lit = -1;
+  for (size_t i = 0; i < planes.size(); ++i) {
+    const FittedPlane& plane = planes[i];
+    if (plane.normal.dot(image_up) < min_cos || plane.offset <= 0.0) continue;
+    int lit = 0;
+    for (const Vec3& p : points) lit += plane.normal.dot(p) + plane.offset >= -distance;
+    if (lit > floor_lit || (lit == floor_lit && plane.inliers > planes[floor].inliers))
+      floor = static_cast<int>(i), floor_lit = lit;
+  }
+  return floor;
+}
+
+// The floor again by least squares on the points within 2.5 σ of it, σ its inliers' RMS, a few
+// times: RANSAC's band (2 cm at 4 m) takes in the feet of walls and columns, which tilt and lift
+// the plane, and the metric scale comes from its offset.
+FittedPlane RefinePlane(const FittedPlane& plane, const std::vector<Vec3>& points) {
+  FittedPlane refined = plane;
+  double band = 2.5 * 1e-3 * plane.rms_mm;
+  for (int round = 0; round < 5; ++round) {
+    Vec3 centroid = Vec3::Zero();
+    std::vector<const Vec3*> inliers;
+    for (const Vec3& p : points)
+      if (std::abs(refined.normal.dot(p) + refined.offset) <= band) inliers.push_back(&p);
+    if (inliers.size() < 3) return refined;
+    for (const Vec3* p : inliers) centroid += *p;
+    centroid /= static_cast<double>(inliers.size());
+    Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+    for (const Vec3* p : inliers) covariance += (*p - centroid) * (*p - centroid).transpose();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(covariance);
+    Vec3 normal = eigen.eigenvectors().col(0);
+    if (normal.dot(refined.normal) < 0.0) normal = -normal;
+    refined.normal = normal;
+    refined.offset = -normal.dot(centroid);
+    refined.centroid = centroid;
+    refined.inliers = static_cast<int>(inliers.size());
+    refined.rms_mm = 1e3 * std::sqrt(std::max(eigen.eigenvalues()[0], 0.0) / inliers.size());
+    band = 2.5 * 1e-3 * refined.rms_mm;
+  }
+  return refined;
+}
+
+// The room frame of step 5 in the camera frame: z the floor's unit normal `up` (camera frame),
+// x the optical axis projected on the floor (the image's x axis when the camera looks straight
+// down), origin the camera's foot, `height` below its centre.
+Eigen::Isometry3d RoomFromCamera(const Vec3& up, double height) {
+  Vec3 x_axis = Vec3::UnitZ() - Vec3::UnitZ().dot(up) * up;
+  if (x_axis.norm() < 1e-6) x_axis = Vec3::UnitX() - Vec3::UnitX().dot(up) * up;
+  x_axis.normalize();
+  Eigen::Isometry3d room_from_camera = Eigen::Isometry3d::Identity();
+  room_from_camera.linear().row(0) = x_axis.transpose();
+  room_from_camera.linear().row(1) = up.cross(x_axis).transpose();
+  room_from_camera.linear().row(2) = up.transpose();
+  room_from_camera.translation() = Vec3(0.0, 0.0, height);
+  return room_from_camera;
+}
+
+// Marks projector p's observations whose residual norm is within the threshold as inliers;
+// returns how many.
+int MarkInliers(const SelfCalibrationOptions& options, const std::vector<Track>& tracks,
+                ProjectorState* p) {
+  p->inlier.assign(p->observations.size(), false);
+  int inliers = 0;
+  for (size_t i = 0; i < p->observations.size(); ++i) {
+    const Track& track = tracks[p->observations[i].track];
+    if (track.depth <= 0.0) continue;
+    const Vec2 r = Residual(*p, track, p->observations[i].projector_pixel, options.square_pixels);
+    p->inlier[i] = r.norm() <= options.outlier_threshold;
+    inliers += p->inlier[i];
+  }
+  return inliers;
+}
+
+// Projector p's RMS per coordinate and largest residual norm over its inliers; false when a
+// residual is not finite. Counts the inlier views of each track into `inlier_views`.
+bool InlierResiduals(const SelfCalibrationOptions& options, const std::vector<Track>& tracks,
+                     const ProjectorState& p, SelfCalibrationProjectorSummary* summary,
+                     std::vector<int>* inlier_views) {
+  double sum_squared = 0.0, max_norm = 0.0;
+  int count = 0;
+  for (size_t i = 0; i < p.observations.size(); ++i) {
+    if (!p.inlier[i]) continue;
+    const Vec2 r = Residual(p, tracks[p.observations[i].track], p.observations[i].projector_pixel,
+                            options.square_pixels);
+    if (!r.allFinite()) return false;
+    sum_squared += r.squaredNorm();
+    max_norm = std::max(max_norm, r.norm());
+    ++count;
+    ++(*inlier_views)[p.observations[i].track];
+  }
+  summary->rms = std::sqrt(sum_squared / (2.0 * std::max(count, 1)));
+  summary->max_norm = max_norm;
+  return true;
+}
+
+// Projector k of the result: its pinhole lens and proj_from_room, the solve's translation in
+// metres (× scale).
+RoomProjector ResultProjector(const ProjectorObservations& given, const ProjectorState& p,
+                              double scale, const Eigen::Isometry3d& camera_from_room) {
+  RoomProjector projector;
+  projector.name = given.name;
+  projector.lens_model = "LENSMODEL_PINHOLE";
+  projector.intrinsics.assign(p.intrinsics, p.intrinsics + 4);
+  projector.width = given.width;
+  projector.height = given.height;
+  Eigen::Matrix3d rotation;
+  ceres::AngleAxisToRotationMatrix(p.rotation, rotation.data());  // column-major
+  Eigen::Isometry3d proj_from_cam = Eigen::Isometry3d::Identity();
+  proj_from_cam.linear() = rotation;
+  proj_from_cam.translation() = scale * Vec3(p.translation[0], p.translation[1], p.translation[2]);
+  projector.proj_from_room = proj_from_cam * camera_from_room;
+  return projector;
+}
+
+}  // namespace
+
+bool SelfCalibrationOptions::Check(std::string* why) const {
+  if (!(camera_height > 0.0) || !std::isfinite(camera_height)) {
+    *why = "camera_height must be a finite distance > 0 metres";
+    return false;
+  }
+  if (!(min_throw_ratio > 0.0 && max_throw_ratio > min_throw_ratio) ||
+      !std::isfinite(max_throw_ratio)) {
+    *why = "need 0 < min_throw_ratio < max_throw_ratio";
+    return false;
+  }
+  if (!(ransac_threshold > 0.0) || !(loss_scale > 0.0) || !(outlier_threshold > 0.0)) {
+    *why = "ransac_threshold, loss_scale and outlier_threshold must be > 0";
+    return false;
+  }
+  if (!(max_outlier_fraction >= 0.0 && max_outlier_fraction <= 1.0)) {
+    *why = "max_outlier_fraction must be in [0, 1]";
+    return false;
+  }
+  if (!(max_seed_gap > 0.0)) {
+    *why = "max_seed_gap must be > 0";
+    return false;
+  }
+  for (const Vec2& guess : principal_point_guesses)
+    if (!guess.allFinite()) {
+      *why = "principal_point_guesses must be finite";
+      return false;
+    }
+  if (!(degenerate_homography_fraction > 0.0 && degenerate_homography_fraction <= 1.0)) {
+    *why = "degenerate_homography_fraction must be in (0, 1]";
+    return false;
+  }
+  if (min_correspondences < 12 || max_correspondences < min_correspondences ||
+      min_shared_points < 1 || max_iterations < 1) {
+    *why =
+        "need min_correspondences >= 12, max_correspondences >= min_correspondences, "
+        "min_shared_points >= 1, max_iterations >= 1";
+    return false;
+  }
+  if (!(plane_distance > 0.0 && plane_distance < 0.1) ||
+      !(max_floor_tilt_deg > 0.0 && max_floor_tilt_deg < 90.0)) {
+    *why = "need plane_distance in (0, 0.1) and max_floor_tilt_deg in (0, 90)";
+    return false;
+  }
+  return true;
+}
+
+std::string SelfCalibrationSummary::BriefReport() const {
+  static const char* const kNames[] = {"converged",    "too few points", "degenerate",
+                                       "disconnected", "inconsistent",   "no floor",
+                                       "solver failed"};
+  std::string text = std::string("Room self-calibration: ") + kNames[termination];
+  char line[400];
+  std::snprintf(line, sizeof(line),
+                "; %d points; %d iterations, cost %.4g -> %.4g; %.4g m per unit; floor %d "
+                "points, RMS %.2f mm; %.2f s",
+                points, ceres_iterations, initial_cost, final_cost, scale, floor_inliers,
+                floor_rms_mm, time_s);
+  text += line;
+  if (!message.empty()) text += "\n  " + message;
+  for (size_t k = 0; k < projectors.size(); ++k) {
+    const SelfCalibrationProjectorSummary& p = projectors[k];
+    std::snprintf(line, sizeof(line),
+                  "\n  projector %zu: %d of %d used, seed f %.1f px cy %.1f px (%d F / %d H "
+                  "inliers), %d shared, principal point %s; %d outliers, RMS %.3f px, max %.3f px",
+                  k, p.used, p.correspondences, p.seed_focal, p.seed_principal_point.y(),
+                  p.seed_inliers, p.homography_inliers, p.shared,
+                  p.principal_point_held ? "held" : "refined", p.outliers, p.rms, p.max_norm);
+    text += line;
+  }
+  return text;
+}
+
+bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrationProblem& problem,
+                       RoomCalibration* calibration, std::vector<SelfCalibrationPoint>* points,
+                       SelfCalibrationSummary* summary) {
+  const auto start = std::chrono::steady_clock::now();
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument("SelfCalibrationOptions: " + why);
+  if (problem.projectors.empty()) throw std::invalid_argument("self-calibration: no projector");
+  Vec3 probe;
+  if (!UnprojectCameraPixel(problem.camera_lens_model, problem.camera_intrinsics, Vec2(0, 0),
+                            &probe))
+    throw std::invalid_argument("self-calibration: unsupported camera lens '" +
+                                problem.camera_lens_model + "' or wrong number of intrinsics");
+  for (const ProjectorObservations& p : problem.projectors)
+    if (p.width < 1 || p.height < 1 || p.camera_pixels.size() != p.projector_pixels.size())
+      throw std::invalid_argument("self-calibration: projector '" + p.name +
+                                  "' has a size < 1 or unequal pixel lists");
+  if (!options.principal_point_guesses.empty() &&
+      options.principal_point_guesses.size() != problem.projectors.size())
+    throw std::invalid_argument("self-calibration: principal_point_guesses has " +
+                                std::to_string(options.principal_point_guesses.size()) +
+                                " entries for " + std::to_string(problem.projectors.size()) +
+                                " projectors");
+
+  const int n = static_cast<int>(problem.projectors.size());
+  *summary = SelfCalibrationSummary();
+  summary->projectors.resize(n);
+  auto finish = [&](SelfCalibrationSummary::Termination termination, const std::string& message) {
+    summary->termination = termination;
+    summary->message = message;
+    summary->time_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return termination == SelfCalibrationSummary::kConverged;
+  };
+  auto projector_name = [&](int k) { return "projector '" + problem.projectors[k].name + "': "; };
+  for (int k = 0; k < n; ++k) {
+    const int given = static_cast<int>(problem.projectors[k].camera_pixels.size());
+    summary->projectors[k].correspondences = given;
+    if (given < options.min_correspondences)
+      return finish(SelfCalibrationSummary::kTooFewPoints,
+                    projector_name(k) + std::to_string(given) +
+                        " correspondences, fewer than min_correspondences " +
+                        std::to_string(options.min_correspondences));
+  }
+
+  // 1. Thinning: the smallest common stride that keeps every projector within the limit.
+  std::vector<Track> tracks;
+  std::vector<ProjectorState> projectors;
+  // A stride s keeps about 1/s² of a dense projector's pixels: start just below that.
+  int most_given = 0;
+  for (const ProjectorObservations& p : problem.projectors)
+    most_given = std::max(most_given, static_cast<int>(p.camera_pixels.size()));
+  const int first_stride = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(most_given) /
+                                                                  options.max_correspondences)));
+  for (int stride = first_stride;; ++stride) {
+    Thin(problem, stride, &tracks, &projectors);
+    bool fits = true;
+    for (const ProjectorState& p : projectors)
+      fits = fits && static_cast<int>(p.observations.size()) <= options.max_correspondences;
+    if (fits) break;
+  }
+  for (int k = 0; k < n; ++k) {
+    summary->projectors[k].used = static_cast<int>(projectors[k].observations.size());
+    if (summary->projectors[k].used < options.min_correspondences)
+      return finish(SelfCalibrationSummary::kTooFewPoints,
+                    projector_name(k) + "only " + std::to_string(summary->projectors[k].used) +
+                        " correspondences left after thinning to the common grid");
+  }
+
+  // 2. Seeds.
+  for (int k = 0; k < n; ++k) {
+    const ProjectorObservations& given = problem.projectors[k];
+    const Vec2 principal_point = options.principal_point_guesses.empty()
+                                     ? Vec2(0.5 * (given.width - 1), 0.5 * (given.height - 1))
+                                     : options.principal_point_guesses[k];
+    const SelfCalibrationSummary::Termination seeded =
+        SeedProjector(options, tracks, given.width, given.height, principal_point, &projectors[k],
+                      &summary->projectors[k], &why);
+    if (seeded != SelfCalibrationSummary::kConverged)
+      return finish(seeded, projector_name(k) + why);
+  }
+
+  // 3. One unit of length for all.
+  const int unreached = TieScales(options, &tracks, &projectors, &summary->projectors);
+  if (unreached >= 0)
+    return finish(SelfCalibrationSummary::kDisconnected,
+                  projector_name(unreached) + "shares fewer than min_shared_points (" +
+                      std::to_string(options.min_shared_points) +
+                      ") camera pixels with the other projectors: its scale is unknown");
+  for (int k = 0; k < n; ++k) {
+    projectors[k].principal_point_held =
+        n == 1 || summary->projectors[k].shared < options.min_shared_points;
+    summary->projectors[k].principal_point_held = projectors[k].principal_point_held;
+  }
+
+  // 4. Bundle adjustment: a robust pass, then the inliers.
+  ceres::Solver::Summary robust_summary, final_summary;
+  if (!Solve(options, true, &tracks, &projectors, &robust_summary))
+    return finish(SelfCalibrationSummary::kSolverFailed,
+                  "the robust bundle adjustment failed: " + robust_summary.message);
+  summary->initial_cost = robust_summary.final_cost;
+  summary->ceres_iterations = static_cast<int>(robust_summary.iterations.size());
+  for (int k = 0; k < n; ++k) {
+    const int inliers = MarkInliers(options, tracks, &projectors[k]);
+    const int used = static_cast<int>(projectors[k].observations.size());
+    summary->projectors[k].outliers = used - inliers;
+    if (used - inliers > options.max_outlier_fraction * used)
+      return finish(SelfCalibrationSummary::kInconsistent,
+                    projector_name(k) + std::to_string(used - inliers) + " of " +
+                        std::to_string(used) +
+                        " correspondences are outliers after the robust bundle adjustment: the "
+                        "solve went astray (a principal point far from its guess? give "
+                        "principal_point_guesses) or the decoding is bad");
+    if (inliers < options.min_correspondences)
+      return finish(SelfCalibrationSummary::kTooFewPoints,
+                    projector_name(k) + "only " + std::to_string(inliers) +
+                        " inliers after the robust bundle adjustment");
+  }
+  if (!Solve(options, false, &tracks, &projectors, &final_summary))
+    return finish(SelfCalibrationSummary::kSolverFailed,
+                  "the bundle adjustment failed: " + final_summary.message);
+  summary->final_cost = final_summary.final_cost;
+  summary->ceres_iterations += static_cast<int>(final_summary.iterations.size());
+  std::vector<int> inlier_views(tracks.size(), 0);
+  for (int k = 0; k < n; ++k)
+    if (!InlierResiduals(options, tracks, projectors[k], &summary->projectors[k], &inlier_views))
+      return finish(SelfCalibrationSummary::kSolverFailed,
+                    projector_name(k) + "the bundle adjustment left a non-finite residual");
+
+  // 5. The floor, the metric scale and the room frame.
+  std::vector<Vec3> cloud;
+  std::vector<double> depths;
+  std::vector<int> cloud_track;
+  for (size_t t = 0; t < tracks.size(); ++t) {
+    if (inlier_views[t] == 0) continue;
+    cloud.push_back(tracks[t].depth * tracks[t].ray);
+    depths.push_back(tracks[t].depth);
+    cloud_track.push_back(static_cast<int>(t));
+  }
+  summary->points = static_cast<int>(cloud.size());
+  PlaneFitOptions plane_options;
+  plane_options.distance = options.plane_distance * Median(depths);
+  plane_options.min_inliers = std::clamp(static_cast<int>(cloud.size()) / 50, 3, 200);
+  const std::vector<FittedPlane> planes = FitPlanes(plane_options, cloud);
+  const int floor = FindFloor(options, planes, cloud, plane_options.distance);
+  if (floor < 0)
+    return finish(SelfCalibrationSummary::kNoFloor,
+                  "no floor: none of the " + std::to_string(planes.size()) +
+                      " planes fitted to the points faces the camera's image-up within " +
+                      Number(options.max_floor_tilt_deg) + " deg");
+  const FittedPlane floor_plane = RefinePlane(planes[floor], cloud);
+  const double scale = options.camera_height / floor_plane.offset;
+  summary->scale = scale;
+  summary->floor_inliers = floor_plane.inliers;
+  summary->floor_rms_mm = floor_plane.rms_mm * scale;
+
+  const Eigen::Isometry3d room_from_camera =
+      RoomFromCamera(floor_plane.normal, options.camera_height);
+  const Eigen::Isometry3d camera_from_room = room_from_camera.inverse();
+
+  RoomCalibration result;
+  result.room_from_camera = room_from_camera;
+  result.camera_lens_model = problem.camera_lens_model;
+  result.camera_intrinsics = problem.camera_intrinsics;
+  for (int k = 0; k < n; ++k)
+    result.projectors.push_back(
+        ResultProjector(problem.projectors[k], projectors[k], scale, camera_from_room));
+  if (points) {
+    points->clear();
+    for (size_t i = 0; i < cloud.size(); ++i) {
+      const Track& track = tracks[cloud_track[i]];
+      points->push_back({room_from_camera * (scale * cloud[i]), track.camera_pixel,
+                         inlier_views[cloud_track[i]]});
+    }
+  }
+  *calibration = std::move(result);
+  return finish(SelfCalibrationSummary::kConverged,
+                final_summary.termination_type == ceres::NO_CONVERGENCE
+                    ? "the final solve stopped at max_iterations before converging"
+                    : "");
+}
+
+}  // namespace procam
