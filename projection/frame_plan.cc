@@ -201,7 +201,7 @@ std::vector<ProjectorImage> ShadeProjectorImages(const FramePlanner& planner, co
   if (smooth) factors = planner.field()->Factors(plan.node_value, plan.mean, subset);
   std::vector<ProjectorImage> images =
       internal::ShadeImages(rig, planner.tables(), plan.level, factors, planner.options().dither,
-                            plan.target, &s, subset);
+                            plan.target, summary ? &s : nullptr, subset);
   s.seconds = SecondsSince(start);
   return images;
 }

@@ -105,8 +105,9 @@ FramePlan PlanFrame(const ProjectionRig& rig, const Eigen::MatrixX3d& emittance,
 // its summary (the plan's counts; `seconds` the shading's). With `projectors` (indices into the
 // rig's, as a display node owns them) only those images are shaded, the others left empty
 // (codes.empty()), and the summary's delivered exitance is left empty: the rest of the rig's
-// light is not known. Throws std::invalid_argument if the plan does not fit the planner's rig or
-// light, or a projector index is out of range.
+// light is not known. A null summary: the pixels' light is not summed at all (a display node's
+// frames; about a tenth of the shading). Throws std::invalid_argument if the plan does not fit
+// the planner's rig or light, or a projector index is out of range.
 std::vector<ProjectorImage> ShadeProjectorImages(const FramePlanner& planner, const FramePlan& plan,
                                                  RenderSummary* summary,
                                                  const std::vector<int>& projectors = {});

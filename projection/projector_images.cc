@@ -396,7 +396,10 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
                                         DitherMethod dither, const Eigen::MatrixX3d& target,
                                         RenderSummary* summary,
                                         const std::vector<char>* projectors) {
-  RenderSummary& s = *summary;
+  // Without a summary nobody reads the delivered flux: the pixels' light is not summed.
+  const bool account = summary != nullptr;
+  RenderSummary local;
+  RenderSummary& s = account ? *summary : local;
   const int n = rig.size();
   const int projector_count = static_cast<int>(rig.projectors.size());
   std::vector<char> wanted(projector_count, 1);
@@ -476,9 +479,11 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
           const int q2 = table.codes[2].Quantise(r[2], threshold);
           codes[index] = cv::Vec3w(static_cast<uint16_t>(q0), static_cast<uint16_t>(q1),
                                    static_cast<uint16_t>(q2));
-          light_0 += table.codes[0].Light(q0);
-          light_1 += table.codes[1].Light(q1);
-          light_2 += table.codes[2].Light(q2);
+          if (account) {
+            light_0 += table.codes[0].Light(q0);
+            light_1 += table.codes[1].Light(q1);
+            light_2 += table.codes[2].Light(q2);
+          }
         }
         const Vec3 projector_light(light_0, light_1, light_2);
         if (!diffuse) {
@@ -504,8 +509,9 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
     for (int k = 0; k < projector_count; ++k) {
       if (wanted[k]) QuantiseErrorDiffusion(rig.maps[k], tables[k], light[k], &images[k].codes);
     }
-    if (all) delivered_flux = FluxOfCodes(rig, tables, images);
+    if (all && account) delivered_flux = FluxOfCodes(rig, tables, images);
   }
+  if (!account) return images;
   s.saturated_pixels = saturated;
   s.clipped_pixels = clipped;
   s.detail_saturated_pixels = detail_saturated;

@@ -114,7 +114,8 @@ int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& t
                  const std::vector<char>* refine, Eigen::MatrixX3d* level);
 
 // Step 3: per pixel relative output → light → dithered codes, and the summary's pixel counts,
-// delivered exitance and error against `target`. With `projectors` (one flag per projector) only
+// delivered exitance and error against `target` (none of it with a null summary: the pixels'
+// light is then not summed). With `projectors` (one flag per projector) only
 // those images are made (the others left empty, their counts 0) and the summary's delivered
 // exitance and error are left empty and 0: the flux of the others is not known.
 std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
