@@ -119,6 +119,8 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
   const FramePlanner planner(rig, render);
   const double planner_seconds = SecondsSince(start);
   PlayRenderer renderer(planner, args.render);
+  const double nodes_per_patch =
+      planner.field() ? double(planner.field()->node_list().size()) / problem.size() : 1.0;
   WarmStart warm;
   std::vector<double> solve_ms, plan_ms, shade_ms, render_ms, total_ms, one_image_ms,
       one_image_gpu_ms;
@@ -168,7 +170,8 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
                                     form_factor_seconds, rig_summary.seconds, planner_seconds,
                                     first_ms));
   const bool gpu = args.render == PlayRender::kGpu;
-  Report(args.progress, fmt::format("  render on {}", renderer.description()));
+  Report(args.progress, fmt::format("  render on {}; {:.1f} seamless-field nodes per patch on average",
+                                    renderer.description(), nodes_per_patch));
   Report(args.progress,
          fmt::format("  per frame, median of {}: solve (warm) {:.1f} ms ({:.0f} iterations), render 3 images "
                      "({}) {:.1f} ms (plan {:.1f} with {:.0f} patches refined per pixel, {} {:.1f}); new desired "
