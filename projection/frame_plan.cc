@@ -139,7 +139,9 @@ FramePlan FramePlanner::Plan(const Eigen::MatrixX3d& emittance) const {
   if (field_ && plan.refined_patches > 0) {
     factors.resize(rig_.maps.size());
     for (size_t k = 0; k < rig_.maps.size(); ++k) factors[k].resize(rig_.maps[k].lit_pixels);
-#pragma omp parallel for schedule(dynamic, 16)
+    // One patch at a time: the refined patches are few and clustered (a bright region), so
+    // chunks of neighbours would leave most threads idle.
+#pragma omp parallel for schedule(dynamic, 1)
     for (int i = 0; i < n; ++i) {
       if (!refine[i]) continue;
       for (size_t k = 0; k < rig_.maps.size(); ++k) {

@@ -27,6 +27,9 @@ void main() {
 constexpr const char* kFragmentShader = R"(#version 330 core
 uniform isampler2D pixel_patch;       // patch the pixel lights, −1: none (texel row = image row)
 uniform sampler2D pixel_point;        // xyz: world point its ray hits; w: its share (w a / Ω)
+uniform isampler2D pixel_nodes;       // kSmooth: the nodes j of the pixel's bumps (−1: unused);
+                                      // x = −1: flat patch (m = 1); w = −2: more than four
+uniform sampler2D pixel_weights;      // their normalised bumps K̃_j at the pixel
 uniform samplerBuffer patch_centroid; // per patch: xyz c_j, w r_j²
 uniform isamplerBuffer node_begin;    // (n + 1) CSR of the seamless field's node lists
 uniform isamplerBuffer node_list;
@@ -46,10 +49,10 @@ uniform int image_height;
 uniform int bayer[64];
 layout(location = 0) out vec4 colour;
 
-// m = v(x) / mean_i per channel: v the bumps' weighted mean of the node values.
-vec3 SeamlessFactor(int i, vec3 x) {
+// v(x): the bumps' weighted mean of the node values, the bumps evaluated here (pixels reached by
+// more than four).
+vec3 FieldValue(int i, vec3 x) {
   int begin = texelFetch(node_begin, i).r, end = texelFetch(node_begin, i + 1).r;
-  if (end - begin <= 1) return vec3(1.0);
   float weight_sum = 0.0;
   vec3 value = vec3(0.0);
   for (int node = begin; node < end; ++node) {
@@ -63,7 +66,23 @@ vec3 SeamlessFactor(int i, vec3 x) {
     value += (t * t) * texelFetch(node_value, j).rgb;
   }
   // Only where no bump reaches (a patch far outside the designed shapes): the patch's own value.
-  value = weight_sum > 0.0 ? value / weight_sum : texelFetch(node_value, i).rgb;
+  return weight_sum > 0.0 ? value / weight_sum : texelFetch(node_value, i).rgb;
+}
+
+// m = v(x) / mean_i per channel, v from the pixel's precomputed bumps (up to four).
+vec3 SeamlessFactor(int i, vec3 x, ivec2 pixel) {
+  ivec4 nodes = texelFetch(pixel_nodes, pixel, 0);
+  if (nodes.x < 0) return vec3(1.0);
+  vec3 value;
+  if (nodes.w == -2) {
+    value = FieldValue(i, x);
+  } else {
+    vec4 weight = texelFetch(pixel_weights, pixel, 0);
+    value = weight.x * texelFetch(node_value, nodes.x).rgb;
+    if (nodes.y >= 0) value += weight.y * texelFetch(node_value, nodes.y).rgb;
+    if (nodes.z >= 0) value += weight.z * texelFetch(node_value, nodes.z).rgb;
+    if (nodes.w >= 0) value += weight.w * texelFetch(node_value, nodes.w).rgb;
+  }
   vec3 mean = texelFetch(patch_mean, i).rgb;
   vec3 m = vec3(1.0);
   for (int c = 0; c < 3; ++c) {
@@ -94,7 +113,7 @@ void main() {
   }
   vec4 point = texelFetch(pixel_point, pixel, 0);
   vec3 tau = texelFetch(level, i).rgb;
-  vec3 m = smooth_light != 0 ? SeamlessFactor(i, point.xyz) : vec3(1.0);
+  vec3 m = smooth_light != 0 ? SeamlessFactor(i, point.xyz, pixel) : vec3(1.0);
   vec3 relative;
   for (int c = 0; c < 3; ++c)
     relative[c] = tau[c] < 0.0 ? 1.0 : min(1.0, point.w * tau[c] * inverse_delta[c] * m[c]);
@@ -164,8 +183,10 @@ GLuint LinkProgram() {
 
 // Texture units of the shader's samplers.
 enum Unit : int {
-  kPixelPatch,
+  kPixelPatch,  // the 2D textures first (kLastTexture2D)
   kPixelPoint,
+  kPixelNodes,
+  kPixelWeights,
   kPatchCentroid,
   kNodeBegin,
   kNodeList,
@@ -176,8 +197,9 @@ enum Unit : int {
   kPatchMean,
   kUnits
 };
+constexpr int kLastTexture2D = kPixelWeights;
 constexpr std::array<const char*, kUnits> kSamplerNames = {
-    "pixel_patch", "pixel_point", "patch_centroid", "node_begin", "node_list",
+    "pixel_patch", "pixel_point", "pixel_nodes", "pixel_weights", "patch_centroid", "node_begin", "node_list",
     "code_light",  "code_first",  "level",          "node_value",  "patch_mean"};
 
 }  // namespace
@@ -218,8 +240,9 @@ struct GlProjectorRenderer::State {
     glBindBuffer(GL_TEXTURE_BUFFER, 0);
   }
 
+  // A texture of the image's size, or 1 × 1 with `single` (a sampler the shader does not read).
   void MakeTexture2D(Unit unit, GLenum internal_format, GLenum format, GLenum type,
-                     const void* data) {
+                     const void* data, bool single = false) {
     glGenTextures(1, &textures[unit]);
     glBindTexture(GL_TEXTURE_2D, textures[unit]);
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
@@ -227,7 +250,8 @@ struct GlProjectorRenderer::State {
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL, 0);
     glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
     glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
-    glTexImage2D(GL_TEXTURE_2D, 0, internal_format, width, height, 0, format, type, data);
+    glTexImage2D(GL_TEXTURE_2D, 0, internal_format, single ? 1 : width, single ? 1 : height, 0,
+                 format, type, data);
     glBindTexture(GL_TEXTURE_2D, 0);
   }
 
@@ -299,6 +323,44 @@ GlProjectorRenderer::GlProjectorRenderer(const FramePlanner& planner, int projec
   }
   state.MakeTexture2D(kPixelPatch, GL_R32I, GL_RED_INTEGER, GL_INT, map.patch.data());
   state.MakeTexture2D(kPixelPoint, GL_RGBA32F, GL_RGBA, GL_FLOAT, point_share.data());
+  point_share = {};
+
+  // kSmooth, per pixel: its bumps' nodes and normalised weights (static: they depend on where
+  // the pixel's ray hits only), so that the shader sums at most four node values.
+  if (const SeamlessField* field = planner.field()) {
+    std::vector<int32_t> nodes(4 * pixels, -1);
+    std::vector<float> weights(4 * pixels, 0.0f);
+    const int n = rig.size();
+#pragma omp parallel
+    {
+      std::vector<std::pair<int, double>> bumps;
+#pragma omp for schedule(dynamic, 16)
+      for (int i = 0; i < n; ++i) {
+        if (field->Flat(i)) continue;  // x = −1: m = 1
+        const int begin = field->node_begin()[i];
+        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+          const size_t index = static_cast<size_t>(map.pixels_by_patch[position]);
+          field->Bumps(i, map.point_by_patch[position], &bumps);
+          if (bumps.size() > 4) {
+            nodes[4 * index] = i;
+            nodes[4 * index + 3] = -2;  // the shader evaluates them
+            continue;
+          }
+          for (size_t b = 0; b < bumps.size(); ++b) {
+            nodes[4 * index + b] = field->node_list()[begin + bumps[b].first];
+            weights[4 * index + b] = static_cast<float>(bumps[b].second);
+          }
+        }
+      }
+    }
+    state.MakeTexture2D(kPixelNodes, GL_RGBA32I, GL_RGBA_INTEGER, GL_INT, nodes.data());
+    state.MakeTexture2D(kPixelWeights, GL_RGBA32F, GL_RGBA, GL_FLOAT, weights.data());
+  } else {
+    const std::array<int32_t, 4> none = {-1, -1, -1, -1};
+    const std::array<float, 4> zero = {0, 0, 0, 0};
+    state.MakeTexture2D(kPixelNodes, GL_RGBA32I, GL_RGBA_INTEGER, GL_INT, none.data(), true);
+    state.MakeTexture2D(kPixelWeights, GL_RGBA32F, GL_RGBA, GL_FLOAT, zero.data(), true);
+  }
 
   // Per patch: the seamless field's bumps and node lists (a flat field: every list just i).
   const int n = rig.size();
@@ -401,7 +463,7 @@ void GlProjectorRenderer::Draw(const FramePlan& plan) {
   glUseProgram(state.program);
   for (int unit = 0; unit < kUnits; ++unit) {
     glActiveTexture(GL_TEXTURE0 + unit);
-    glBindTexture(unit <= kPixelPoint ? GL_TEXTURE_2D : GL_TEXTURE_BUFFER, state.textures[unit]);
+    glBindTexture(unit <= kLastTexture2D ? GL_TEXTURE_2D : GL_TEXTURE_BUFFER, state.textures[unit]);
   }
   glBindVertexArray(state.vertex_array);
   glDrawArrays(GL_TRIANGLES, 0, 3);
@@ -409,7 +471,7 @@ void GlProjectorRenderer::Draw(const FramePlan& plan) {
   glUseProgram(0);
   for (int unit = kUnits - 1; unit >= 0; --unit) {
     glActiveTexture(GL_TEXTURE0 + unit);
-    glBindTexture(unit <= kPixelPoint ? GL_TEXTURE_2D : GL_TEXTURE_BUFFER, 0);
+    glBindTexture(unit <= kLastTexture2D ? GL_TEXTURE_2D : GL_TEXTURE_BUFFER, 0);
   }
 }
 

@@ -5,13 +5,17 @@
 // functions are loaded through libepoxy.
 //
 // Static data, uploaded once when the renderer is made: per pixel the patch it lights (−1:
-// none), its share (w a / Ω) and the world point its ray hits; per patch the centroid c_j and
+// none), its share (w a / Ω) and the world point its ray hits, and for kSmooth its bumps: the
+// nodes j whose bump reaches the point and their normalised weights K̃_j (SeamlessField::Bumps,
+// in double, stored as floats; up to four, else the shader evaluates them from the centroids);
+// per patch the centroid c_j and
 // r_j² and the node lists of the seamless field (SeamlessField, CSR); per channel the light of
 // each code value (the response, as CodeTable); the mixing inverse, 1/Δ and the 8×8 Bayer
 // matrix of projector_images.cc. Per frame only the plan's per-patch arrays go up (τ, and for
 // kSmooth v̂ and the patch means: 48 bytes a patch), then one fullscreen triangle is drawn whose
 // fragment shader does step 3 of projector_images.h for its pixel p of patch i:
-//   m      = v(x_p) / mean_i (kSmooth; 1 on flat patches and channels whose mean is 0),
+//   m      = v(x_p) / mean_i, v(x_p) = Σ_j K̃_j(x_p) v̂_j (kSmooth; 1 on flat patches and
+//            channels whose mean is 0),
 //   s      = min(1, share_p · τ_i · m / Δ) per channel, 1 where τ_i is +inf,
 //   r      = clip(mixing⁻¹ s, 0, 1),
 //   code_c = Quantise(r_c, threshold): the largest code whose light ≤ r_c, raised by one where

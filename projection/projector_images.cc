@@ -348,7 +348,8 @@ int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& t
   const int n = rig.size();
   const int projector_count = static_cast<int>(rig.projectors.size());
   int most_passes = n > 0 ? 1 : 0;
-#pragma omp parallel for schedule(dynamic, 16) reduction(max : most_passes)
+  // One patch at a time where only some are refined: they cluster (see FramePlanner::Plan).
+#pragma omp parallel for schedule(dynamic, refine != nullptr ? 1 : 16) reduction(max : most_passes)
   for (int i = 0; i < n; ++i) {
     if (refine != nullptr && !(*refine)[i]) continue;
     for (int pass = 1; pass <= max_level_passes; ++pass) {

@@ -157,19 +157,14 @@ SeamlessField::SeamlessField(const ProjectionRig& rig, const SeamlessLightOption
 
 SeamlessField::~SeamlessField() = default;
 
-namespace {
-
-// The bumps at a point of patch i, normalised to sum 1, each by its node's position in i's node
-// list. Only where a patch is so elongated that no bump reaches (outside the designed range):
-// the patch's own value (its list starts with i).
-void Bumps(const SeamlessField& field, int i, const Eigen::Vector3f& point,
-           std::vector<std::pair<int, double>>* bumps) {
+void SeamlessField::Bumps(int i, const Eigen::Vector3f& point,
+                          std::vector<std::pair<int, double>>* bumps) const {
   bumps->clear();
   double weight_sum = 0.0;
   const Eigen::Vector3d x = point.cast<double>();
-  const int begin = field.node_begin()[i], end = field.node_begin()[i + 1];
+  const int begin = node_begin_[i], end = node_begin_[i + 1];
   for (int node = 0; node < end - begin; ++node) {
-    const double t2 = field.BumpSquared(begin + node, x);
+    const double t2 = BumpSquared(begin + node, x);
     if (t2 < 0.0) continue;
     bumps->emplace_back(node, t2);
     weight_sum += t2;
@@ -180,8 +175,6 @@ void Bumps(const SeamlessField& field, int i, const Eigen::Vector3f& point,
   }
   for (auto& bump : *bumps) bump.second /= weight_sum;
 }
-
-}  // namespace
 
 template <typename Visit>
 void SeamlessField::ForEachPixel(Visit visit) const {
@@ -195,7 +188,7 @@ void SeamlessField::ForEachPixel(Visit visit) const {
       for (size_t k = 0; k < rig_.maps.size(); ++k) {
         const ProjectorMap& map = rig_.maps[k];
         for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
-          Bumps(*this, i, map.point_by_patch[position], &bumps);
+          Bumps(i, map.point_by_patch[position], &bumps);
           visit(i, k, position, bumps);
         }
       }

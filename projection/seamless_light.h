@@ -23,6 +23,7 @@
 #include <Eigen/Core>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "projection/projection_rig.h"
@@ -73,6 +74,11 @@ class SeamlessField {
   std::vector<std::vector<Eigen::Vector3f>> Factors(
       const Eigen::MatrixX3d& node_value, const Eigen::MatrixX3d& means,
       const std::vector<char>* projectors = nullptr) const;
+  // The bumps at `point` on patch i, normalised to sum 1 (K̃_j), each by its node's position in
+  // i's node list (node_list()[node_begin()[i] + first]). Only where a patch is so elongated
+  // that no bump reaches (outside the designed range): the patch's own value (its list starts
+  // with i), weight 1.
+  void Bumps(int i, const Eigen::Vector3f& point, std::vector<std::pair<int, double>>* bumps) const;
   // (1 − |x − c_j|²/r_j²)² of node_list()[node] at x, or −1 where x is outside its radius.
   double BumpSquared(int node, const Eigen::Vector3d& x) const {
     const Eigen::Vector4d& bump = node_bump_[node];
