@@ -216,6 +216,7 @@ struct GlProjectorRenderer::State {
   int width = 0, height = 0, bits = 8, patches = 0;
   LightField light = LightField::kSmooth;
   GLuint program = 0, vertex_array = 0;
+  GLuint timer_query = 0;  // while TimedDraw runs: a GL_TIME_ELAPSED query around the draw call
   std::array<GLuint, kUnits> textures = {};
   std::array<GLuint, kUnits> buffers = {};  // behind the texture buffers (0 for 2D textures)
   GLint max_texels = 0;
@@ -466,7 +467,9 @@ void GlProjectorRenderer::Draw(const FramePlan& plan) {
     glBindTexture(unit <= kLastTexture2D ? GL_TEXTURE_2D : GL_TEXTURE_BUFFER, state.textures[unit]);
   }
   glBindVertexArray(state.vertex_array);
+  if (state.timer_query != 0) glBeginQuery(GL_TIME_ELAPSED, state.timer_query);
   glDrawArrays(GL_TRIANGLES, 0, 3);
+  if (state.timer_query != 0) glEndQuery(GL_TIME_ELAPSED);
   glBindVertexArray(0);
   glUseProgram(0);
   for (int unit = kUnits - 1; unit >= 0; --unit) {
@@ -478,14 +481,19 @@ void GlProjectorRenderer::Draw(const FramePlan& plan) {
 void GlProjectorRenderer::Finish() const { glFinish(); }
 
 double GlProjectorRenderer::TimedDraw(const FramePlan& plan) {
-  GLuint query = 0;
-  glGenQueries(1, &query);
-  glBeginQuery(GL_TIME_ELAPSED, query);
-  Draw(plan);
-  glEndQuery(GL_TIME_ELAPSED);
+  State& state = *state_;
+  glGenQueries(1, &state.timer_query);
+  try {
+    Draw(plan);  // the query brackets the draw call alone, not the uploads
+  } catch (...) {
+    glDeleteQueries(1, &state.timer_query);
+    state.timer_query = 0;
+    throw;
+  }
   GLuint64 nanoseconds = 0;
-  glGetQueryObjectui64v(query, GL_QUERY_RESULT, &nanoseconds);  // waits for the GPU
-  glDeleteQueries(1, &query);
+  glGetQueryObjectui64v(state.timer_query, GL_QUERY_RESULT, &nanoseconds);  // waits for the GPU
+  glDeleteQueries(1, &state.timer_query);
+  state.timer_query = 0;
   return 1e-6 * static_cast<double>(nanoseconds);
 }
 

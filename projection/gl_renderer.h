@@ -70,8 +70,8 @@ class GlProjectorRenderer {
   void Draw(const FramePlan& plan);
   // Waits until the GPU has drawn (glFinish): for timing, or before a frame barrier.
   void Finish() const;
-  // Draw, timed by the GPU itself (a GL_TIME_ELAPSED query around the draw call: the shading of
-  // every pixel, not the upload or the wait for it), in milliseconds; waits for the result.
+  // Draw, timed by the GPU itself (a GL_TIME_ELAPSED query around the draw call alone: the
+  // shading of every pixel, not the plan's upload), in milliseconds; waits for the result.
   double TimedDraw(const FramePlan& plan);
   // The image as the current read framebuffer holds it (glReadPixels of the back buffer after
   // Draw): codes at the projector's bit depth, read at 8 bits per channel for 8-bit projectors
