@@ -31,6 +31,10 @@ struct CalibrateAllArguments {
   double timeout_ms = SequencerOptions().grab_timeout_ms;
   std::vector<double> exposures_us;
   std::string levels = "0,32,64,96,128,160,192,224,255";
+  bool scan = false;
+  std::string floor_chessboard;
+  double camera_height = 0.0;
+  double board_thickness = 0.0;
 };
 
 void CalibrateAll(const CalibrateAllArguments& args) {
@@ -54,6 +58,10 @@ void CalibrateAll(const CalibrateAllArguments& args) {
   options.grab_timeout_ms = args.timeout_ms;
   options.exposures_us = args.exposures_us;
   options.levels = ParseIntegerList("--levels", args.levels, "8-bit levels, comma-separated");
+  options.scan = args.scan;
+  options.floor_chessboard = args.floor_chessboard;
+  options.camera_height = args.camera_height;
+  options.board_thickness = args.board_thickness;
   options.progress = PrintProgress();
   RunCalibrateAll(options);
 }
@@ -69,8 +77,22 @@ void AddCalibrateAllCommand(CLI::App& calibrate) {
                   "Camera URI (v4l2:..., aravis:..., synthetic:SCENE for the simulated rig)")
       ->required();
   all->add_option("--scene", args->scene,
-                  "The room model (scene JSON, or synthetic:NAME; default for a synthetic camera: "
-                  "its scene)");
+                  "The room model (scene JSON, or synthetic:NAME); without it a real camera scans "
+                  "the room into RIG_DIR/room.json; a synthetic camera uses its own scene unless "
+                  "--scan");
+  all->add_flag("--scan", args->scan,
+                "Scan the room (no room model, no camera guess): poses and projector lenses from "
+                "the structured light, the room written as RIG_DIR/room.json");
+  all->add_option("--floor-chessboard", args->floor_chessboard,
+                  "Scanning: a photo of the chessboard (--corners, --square) lying flat on the "
+                  "floor, taken by the camera from where it stands: the scan's metric scale (a "
+                  "synthetic camera takes its own)");
+  all->add_option("--camera-height", args->camera_height,
+                  "Scanning: the camera's height above the floor, metres, instead of "
+                  "--floor-chessboard");
+  all->add_option("--board-thickness", args->board_thickness,
+                  "Scanning: height of the floor chessboard's printed face above the floor, metres")
+      ->capture_default_str();
   all->add_option("--out", args->out, "Rig directory")->required();
   all->add_option("--patches", args->patches,
                   "Patch target the per-patch reflectance is estimated for (default: the scene's; "

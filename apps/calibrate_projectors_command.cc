@@ -1,5 +1,5 @@
-// procam calibrate projectors SESSION_DIR... --scene SCENE --out RIG_DIR
-// (calibration/projectors_stage.h).
+// procam calibrate projectors SESSION_DIR... --scene SCENE --out RIG_DIR, or without --scene
+// (the room scanned: --floor-chessboard PHOTO or --camera-height M) (calibration/projectors_stage.h).
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -22,6 +22,13 @@ struct CalibrateProjectorsArguments {
   std::vector<std::string> names;
   bool refine_camera_aspect = false;
   RoomCalibrationOptions options;
+  // Scanning (no --scene).
+  std::string floor_chessboard;
+  double camera_height = 0.0;
+  std::string corners = "9x6";
+  double square = 0.03;
+  double board_thickness = 0.0;
+  int patches = SceneFromPointsOptions().target_patches;
 };
 
 // A scene file, or a synthetic scene by name ("c_shaped" or "synthetic:c_shaped").
@@ -39,7 +46,20 @@ std::string ResolveScene(const std::string& text) {
 void RunCalibrateProjectors(const CalibrateProjectorsArguments& args) {
   ProjectorsStageOptions options;
   options.sessions.assign(args.sessions.begin(), args.sessions.end());
-  options.scene = ResolveScene(args.scene);
+  if (!args.scene.empty()) {
+    options.scene = ResolveScene(args.scene);
+    if (!args.floor_chessboard.empty() || args.camera_height != 0.0)
+      throw std::invalid_argument(
+          "--floor-chessboard, --camera-height: only without --scene (scanning the room)");
+  } else {
+    if (!args.camera_guess.empty())
+      throw std::invalid_argument("--camera-guess: only with --scene (a scan needs no guess)");
+    options.floor_chessboard = args.floor_chessboard;
+    if (args.camera_height != 0.0) options.camera_height = args.camera_height;
+    options.board = ParseChessboard(args.corners, args.square);
+    options.board_thickness = args.board_thickness;
+    options.scan.target_patches = args.patches;
+  }
   options.out = args.out;
   if (!args.camera_guess.empty()) options.room_from_camera_guess = RoomFromCameraGuess(args.camera_guess, args.camera_up);
   options.names = args.names;
@@ -56,15 +76,31 @@ void AddCalibrateProjectorsCommand(CLI::App& calibrate) {
   CLI::App* command = calibrate.add_subcommand(
       "projectors",
       "Projectors' intrinsics and poses and the camera's pose in the room, from structured-light "
-      "sessions (one per projector) and the scene model; camera intrinsics held fixed unless "
+      "sessions (one per projector) and the scene model, or without --scene from the structured "
+      "light alone (the room scanned into RIG_DIR/room.json); camera intrinsics held fixed unless "
       "--refine-camera");
   command
       ->add_option("sessions", args->sessions,
                    "Capture sessions of `procam capture --sequence structured_light`, one per "
                    "projector")
       ->required();
-  command->add_option("--scene", args->scene, "Scene JSON, or a synthetic scene name")
-      ->required();
+  command->add_option("--scene", args->scene,
+                      "Scene JSON, or a synthetic scene name; without it the room is scanned");
+  command->add_option("--floor-chessboard", args->floor_chessboard,
+                      "Scanning: a photo of the chessboard lying flat on the floor, taken by the "
+                      "camera from where it stands (the scan's metric scale)");
+  command->add_option("--camera-height", args->camera_height,
+                      "Scanning: the camera's height above the floor, metres, instead of "
+                      "--floor-chessboard");
+  command->add_option("--corners", args->corners, "Scanning: chessboard inner corners, COLUMNSxROWS")
+      ->capture_default_str();
+  command->add_option("--square", args->square, "Scanning: chessboard square size, metres")
+      ->capture_default_str();
+  command->add_option("--board-thickness", args->board_thickness,
+                      "Scanning: height of the board's printed face above the floor, metres")
+      ->capture_default_str();
+  command->add_option("--patches", args->patches, "Scanning: patch target written into room.json")
+      ->capture_default_str();
   command
       ->add_option("--out", args->out,
                    "Rig directory holding camera.cameramodel; gets NAME.cameramodel, rig.json, "

@@ -41,7 +41,8 @@ void ShowCommand(const ProgressCallback& progress, const std::vector<std::string
 struct RigPlan {
   std::optional<SimulatedCamera> simulated;
   std::vector<std::string> names;
-  std::string scene;
+  std::string scene;  // scanning: RIG_DIR/room.json, once step 3 has written it
+  bool scan = false;
   int patches = 0;
   std::filesystem::path captures;
   std::vector<std::shared_ptr<PatternDisplay>> displays;  // one per projector
@@ -72,9 +73,20 @@ RigPlan Plan(const CalibrateAllOptions& args) {
                                 std::to_string(count) + " projectors");
   }
   plan.scene = args.scene;
-  if (plan.scene.empty()) {
-    if (!simulated)
-      throw std::invalid_argument("--scene: required for a real rig (the room model)");
+  plan.scan = args.scan || (plan.scene.empty() && !simulated);
+  if (plan.scan) {
+    if (!plan.scene.empty())
+      throw std::invalid_argument("--scan: not with --scene (scan the room, or register a model)");
+    if (!args.camera_guess.empty())
+      throw std::invalid_argument("--camera-guess: only with --scene (a scan needs no guess)");
+    if (args.floor_chessboard.empty() && !(args.camera_height > 0.0) && !simulated)
+      throw std::invalid_argument(
+          "--floor-chessboard: required to scan the room: a photo of the chessboard lying flat "
+          "on the floor, taken by the camera from where it stands (or --camera-height, metres)");
+    if (!args.floor_chessboard.empty() && !std::filesystem::is_regular_file(args.floor_chessboard))
+      throw IoError(args.floor_chessboard.string() + ": file not found (--floor-chessboard)");
+    plan.scene = (args.out / "room.json").string();
+  } else if (plan.scene.empty()) {
     plan.scene = plan.simulated->scene;
   }
   plan.patches = args.patches > 0 ? args.patches : simulated ? plan.simulated->patches : 0;
@@ -203,14 +215,44 @@ void ProjectorsStep(const CalibrateAllOptions& args, const RigPlan& plan,
   Report(args.progress, "\n== 3/4 projectors and registration");
   ProjectorsStageOptions projectors;
   projectors.sessions = sessions;
-  projectors.scene = plan.scene;
   projectors.out = args.out;
   projectors.names = plan.names;
   projectors.progress = args.progress;
   std::vector<std::string> command = {"calibrate", "projectors"};
   for (const std::filesystem::path& session : sessions) command.push_back(session.string());
-  command.insert(command.end(), {"--scene", plan.scene, "--out", args.out.string(), "--names",
-                                 Join(plan.names, ",")});
+  command.insert(command.end(), {"--out", args.out.string(), "--names", Join(plan.names, ",")});
+  if (plan.scan) {
+    projectors.board = args.board;
+    projectors.board_thickness = args.board_thickness;
+    if (plan.patches > 0) projectors.scan.target_patches = plan.patches;
+    projectors.floor_chessboard = args.floor_chessboard;
+    if (args.camera_height > 0.0 && args.floor_chessboard.empty()) {
+      projectors.camera_height = args.camera_height;
+      command.insert(command.end(), {"--camera-height", fmt::format("{}", args.camera_height)});
+    } else {
+      if (projectors.floor_chessboard.empty()) {  // a simulated camera photographs its floor
+        projectors.floor_chessboard = plan.captures / "floor_chessboard.png";
+        projectors.board.square_size = plan.simulated->render_floor_chessboard(
+            projectors.board.corners_x, projectors.board.corners_y, projectors.floor_chessboard);
+        Report(args.progress, "rendered the synthetic camera's photo of a chessboard on the floor: " +
+                                  projectors.floor_chessboard.string());
+      }
+      command.insert(command.end(),
+                     {"--floor-chessboard", projectors.floor_chessboard.string(), "--corners",
+                      fmt::format("{}x{}", projectors.board.corners_x, projectors.board.corners_y),
+                      "--square", fmt::format("{}", projectors.board.square_size)});
+      if (args.board_thickness > 0.0)
+        command.insert(command.end(),
+                       {"--board-thickness", fmt::format("{}", args.board_thickness)});
+    }
+    if (plan.patches > 0)
+      command.insert(command.end(), {"--patches", std::to_string(plan.patches)});
+    ShowCommand(args.progress, command);
+    RunProjectorsStage(projectors);
+    return;
+  }
+  projectors.scene = plan.scene;
+  command.insert(command.end(), {"--scene", plan.scene});
   std::string guess = args.camera_guess;
   if (guess.empty() && plan.simulated) guess = plan.simulated->camera_guess;
   if (!guess.empty()) {
@@ -360,10 +402,13 @@ void RunCalibrateAll(const CalibrateAllOptions& args) {
                           args.progress);
   Report(args.progress,
          fmt::format(
-             "\nrig calibrated: {} (rig.json, camera.cameramodel, {}, reflectance.npy); use it "
-             "with `procam compensate SCENE --rig {}`",
+             "\nrig calibrated: {} (rig.json, camera.cameramodel, {}, reflectance.npy{}); use "
+             "it with `procam compensate {} --rig {}`",
              args.out.string(), Join(plan.names, ".cameramodel, ").append(".cameramodel"),
-             args.out.string()));
+             plan.scan ? ", room.json: the scanned room; give its surfaces their desired colours "
+                         "by name (docs/scan.md)"
+                       : "",
+             plan.scan ? plan.scene : std::string("SCENE"), args.out.string()));
 }
 
 }  // namespace procam

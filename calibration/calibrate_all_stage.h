@@ -8,7 +8,9 @@
 //   1. camera intrinsics: the camera stage on chessboard photos, or a given camera model copied;
 //      a simulated camera photographs a simulated chessboard held in front of it;
 //   2. per projector: a structured-light and a photometric capture into RIG_DIR/captures/;
-//   3. the projectors stage on every structured-light session (joint refinement, registration);
+//   3. the projectors stage on every structured-light session (joint refinement, registration),
+//      or, scanning the room (no room model), the self-calibration and the room built from the
+//      scan, written as RIG_DIR/room.json, which the photometry then uses;
 //   4. per projector: the photometric stage in the scene's units (per-patch reflectance);
 //   5. the projectors' black levels separated from one another (every black field shows all
 //      projectors at black).
@@ -29,8 +31,17 @@ namespace procam {
 
 struct CalibrateAllOptions {
   std::string camera;  // camera URI; a simulated camera's world supplies what a real rig needs
-  // The room model (a scene file or PREFIX:NAME); empty: a simulated camera's own scene.
+  // The room model (a scene file or PREFIX:NAME); empty: a real camera scans the room, a
+  // simulated camera uses its own scene unless `scan`.
   std::string scene;
+  // Scan the room instead of registering a model (what a real camera does without `scene`): the
+  // metric scale from `floor_chessboard` (a photo of the chessboard, `board`, lying flat on the
+  // floor, taken from the camera's pose; a simulated camera takes one itself) or `camera_height`
+  // (metres above the floor).
+  bool scan = false;
+  std::filesystem::path floor_chessboard;
+  double camera_height = 0.0;  // 0: unset
+  double board_thickness = 0.0;
   std::filesystem::path out;  // the rig directory
   int patches = 0;  // patch target of the reflectance (0: the scene's; simulated: its world's)
   std::filesystem::path chessboard;    // chessboard photos (a folder or a capture session)

@@ -12,6 +12,7 @@
 #include "base/io.h"
 #include "base/json_fields.h"
 #include "base/parse.h"
+#include "calibration/floor_chessboard.h"
 #include "calibration/rig_directory.h"
 #include "calibration/structured_light.h"
 #include "capture/session.h"
@@ -115,6 +116,31 @@ ProjectorObservations ReadSession(const std::filesystem::path& directory, int ca
   return out;
 }
 
+// Every session's decoded correspondences, with the camera's lens.
+RoomCalibrationProblem ReadProblem(const ProjectorsStageOptions& args, const CameraModel& camera,
+                                   const std::filesystem::path& camera_path) {
+  RoomCalibrationProblem problem;
+  problem.camera_lens_model = camera.lens_model;
+  problem.camera_intrinsics = camera.intrinsics;
+  std::set<std::string> names;
+  for (size_t k = 0; k < args.sessions.size(); ++k) {
+    ProjectorObservations observations =
+        ReadSession(args.sessions[k], camera.width, camera.height, camera_path,
+                    args.names.empty() ? "" : args.names[k], args.progress);
+    if (!ValidName(observations.name)) observations.name = "projector" + std::to_string(k);
+    if (!names.insert(observations.name).second)
+      throw std::invalid_argument("projector name '" + observations.name + "' of " +
+                                  args.sessions[k].string() +
+                                  " is used twice (name them with --names)");
+    problem.projectors.push_back(std::move(observations));
+  }
+
+  return problem;
+}
+
+ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const CameraModel& camera,
+                                 const RoomCalibrationProblem& problem);
+
 }  // namespace
 
 ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
@@ -137,6 +163,8 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
   if (!args.names.empty() && args.names.size() != args.sessions.size())
     throw std::invalid_argument("--names: " + std::to_string(args.names.size()) + " names for " +
                                 std::to_string(args.sessions.size()) + " sessions");
+
+  if (args.scene.empty()) return ScanRoom(args, camera, ReadProblem(args, camera, camera_path));
 
   // The guess: --camera-guess, else the pose camera.cameramodel already holds.
   Eigen::Isometry3d guess;
@@ -167,22 +195,7 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
                   args.scene, scene.surfaces.size(), model.facets().size(), camera.lens_model,
                   camera.width, camera.height, intrinsics_treatment, guess_source,
                   guess.translation().x(), guess.translation().y(), guess.translation().z()));
-
-  RoomCalibrationProblem problem;
-  problem.camera_lens_model = camera.lens_model;
-  problem.camera_intrinsics = camera.intrinsics;
-  std::set<std::string> names;
-  for (size_t k = 0; k < args.sessions.size(); ++k) {
-    ProjectorObservations observations =
-        ReadSession(args.sessions[k], camera.width, camera.height, camera_path,
-                    args.names.empty() ? "" : args.names[k], args.progress);
-    if (!ValidName(observations.name)) observations.name = "projector" + std::to_string(k);
-    if (!names.insert(observations.name).second)
-      throw std::invalid_argument("projector name '" + observations.name + "' of " +
-                                  args.sessions[k].string() +
-                                  " is used twice (name them with --names)");
-    problem.projectors.push_back(std::move(observations));
-  }
+  const RoomCalibrationProblem problem = ReadProblem(args, camera, camera_path);
 
   ProjectorsStageSummary stage;
   RoomCalibration& calibration = stage.calibration;
@@ -363,6 +376,43 @@ nlohmann::json ResultSection(const ProjectorsStageOptions& args,
   return result_section;
 }
 
+// Every projector's model, the camera's with its pose in the room (and intrinsics when refined),
+// and the rig.json and result.json entries.
+void WriteDeviceModels(const std::filesystem::path& out, const CameraModel& camera,
+                       const RoomCalibration& calibration, bool refined_camera,
+                       const std::string& room, const nlohmann::json& registration_json,
+                       const nlohmann::json& result_section) {
+  for (const RoomProjector& p : calibration.projectors) {
+    CameraModel model_file;
+    model_file.lens_model = p.lens_model;
+    model_file.intrinsics = p.intrinsics;
+    model_file.width = p.width;
+    model_file.height = p.height;
+    model_file.cam_from_ref = p.proj_from_room;
+    WriteCameraModelFile(out / (p.name + ".cameramodel"), model_file,
+                         "procam projector model (procam calibrate projectors); extrinsics = "
+                         "rt_proj_room, the room = " + room);
+  }
+  CameraModel camera_out = camera;
+  camera_out.cam_from_ref = calibration.room_from_camera.inverse();
+  if (refined_camera) camera_out.intrinsics = calibration.camera_intrinsics;
+  WriteCameraModelFile(out / "camera.cameramodel", camera_out,
+                       (refined_camera
+                            ? "procam camera model (procam calibrate camera; fx, fy, cx, cy and "
+                              "pose by procam calibrate projectors --refine-camera); extrinsics "
+                              "= rt_cam_room, the room = "
+                            : "procam camera model (procam calibrate camera; pose by procam "
+                              "calibrate projectors); extrinsics = rt_cam_room, the room = ") +
+                           room);
+  UpdateRigFile(out, [&](RigFile& rig) {
+    rig.camera.model = "camera.cameramodel";
+    for (const RoomProjector& p : calibration.projectors)
+      rig.Projector(p.name).model = p.name + ".cameramodel";
+    rig.registration = registration_json;
+  });
+  UpdateRigResult(out, {"projectors"}, result_section);
+}
+
 void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraModel& camera,
                             const Eigen::Isometry3d& guess, const std::string& guess_source,
                             const Scene& scene, const ProjectorsStageSummary& stage,
@@ -376,35 +426,8 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
   // rig.json is read before anything is written, so a malformed one stops here.
   ReadRigFile(out);
 
-  for (const RoomProjector& p : calibration.projectors) {
-    CameraModel model_file;
-    model_file.lens_model = p.lens_model;
-    model_file.intrinsics = p.intrinsics;
-    model_file.width = p.width;
-    model_file.height = p.height;
-    model_file.cam_from_ref = p.proj_from_room;
-    WriteCameraModelFile(out / (p.name + ".cameramodel"), model_file,
-                         "procam projector model (procam calibrate projectors); extrinsics = "
-                         "rt_proj_room, the room = the scene's frame");
-  }
-  CameraModel camera_out = camera;
-  camera_out.cam_from_ref = calibration.room_from_camera.inverse();
-  if (args.options.refine_camera_intrinsics) camera_out.intrinsics = calibration.camera_intrinsics;
-  WriteCameraModelFile(camera_path, camera_out,
-                       args.options.refine_camera_intrinsics
-                           ? "procam camera model (procam calibrate camera; fx, fy, cx, cy and "
-                             "pose by procam calibrate projectors --refine-camera); extrinsics "
-                             "= rt_cam_room, the room = the scene's frame"
-                           : "procam camera model (procam calibrate camera; pose by procam "
-                             "calibrate projectors); extrinsics = rt_cam_room, the room = the "
-                             "scene's frame");
-  UpdateRigFile(out, [&](RigFile& rig) {
-    rig.camera.model = "camera.cameramodel";
-    for (const RoomProjector& p : calibration.projectors)
-      rig.Projector(p.name).model = p.name + ".cameramodel";
-    rig.registration = registration_json;
-  });
-  UpdateRigResult(out, {"projectors"}, result_section);
+  WriteDeviceModels(out, camera, calibration, args.options.refine_camera_intrinsics,
+                    "the scene's frame", registration_json, result_section);
   Report(args.progress,
          fmt::format("wrote {} projector models, camera.cameramodel (pose in the room{}), rig.json "
                      "and result.json in {}",
@@ -413,6 +436,166 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
                      out.string()));
 }
 
+
+// The metric scale of a scan: measured from the floor chessboard, else given.
+double ScanCameraHeight(const ProjectorsStageOptions& args, const CameraModel& camera,
+                        nlohmann::json* scale_json) {
+  if (!args.floor_chessboard.empty()) {
+    const FloorChessboard floor =
+        MeasureFloorChessboard(camera, args.board, args.floor_chessboard, args.board_thickness);
+    Report(args.progress, floor.BriefReport());
+    *scale_json = {{"source", "floor chessboard"},
+                   {"photo", args.floor_chessboard.string()},
+                   {"corners", {args.board.corners_x, args.board.corners_y}},
+                   {"square_m", args.board.square_size},
+                   {"board_thickness_m", args.board_thickness},
+                   {"camera_height_m", floor.camera_height},
+                   {"board_distance_m", floor.cam_from_board.translation().norm()},
+                   {"reprojection_rms_px", floor.rms_px}};
+    return floor.camera_height;
+  }
+  if (args.camera_height) {
+    if (!(*args.camera_height > 0.0) || !std::isfinite(*args.camera_height))
+      throw std::invalid_argument("--camera-height: must be a positive number of metres");
+    *scale_json = {{"source", "--camera-height"}, {"camera_height_m", *args.camera_height}};
+    return *args.camera_height;
+  }
+  throw std::invalid_argument(
+      "--floor-chessboard: required without --scene: the scan's metric scale comes from a photo "
+      "of the chessboard lying flat on the floor, taken by the camera from where it stands (or "
+      "give --camera-height, the camera's height above the floor in metres)");
+}
+
+nlohmann::json SelfCalibrationJson(const ProjectorsStageSummary& stage) {
+  const SelfCalibrationSummary& summary = *stage.self_calibration;
+  nlohmann::json projectors = nlohmann::json::array();
+  for (size_t k = 0; k < summary.projectors.size(); ++k) {
+    const SelfCalibrationProjectorSummary& p = summary.projectors[k];
+    projectors.push_back({{"name", stage.calibration.projectors[k].name},
+                          {"correspondences", p.correspondences},
+                          {"used", p.used},
+                          {"seed_inliers", p.seed_inliers},
+                          {"seed_focal_px", p.seed_focal},
+                          {"shared_points", p.shared},
+                          {"principal_point_held", p.principal_point_held},
+                          {"outliers", p.outliers},
+                          {"rms_px_per_coordinate", p.rms},
+                          {"max_norm_px", p.max_norm}});
+  }
+  return {{"points", summary.points},
+          {"ceres_iterations", summary.ceres_iterations},
+          {"metres_per_unit", summary.scale},
+          {"floor_inliers", summary.floor_inliers},
+          {"floor_rms_mm", summary.floor_rms_mm},
+          {"time_s", summary.time_s},
+          {"projectors", projectors}};
+}
+
+ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const CameraModel& camera,
+                                 const RoomCalibrationProblem& problem) {
+  const std::filesystem::path& out = args.out;
+  nlohmann::json scale_json;
+  SelfCalibrationOptions options = args.self_calibration;
+  options.camera_height = ScanCameraHeight(args, camera, &scale_json);
+  Report(args.progress,
+         fmt::format("no room model: the room is scanned ({} projectors; camera {:.4f} m above "
+                     "the floor, from {})",
+                     problem.projectors.size(), options.camera_height,
+                     scale_json["source"].get<std::string>()));
+  ProjectorsStageSummary stage;
+  SelfCalibrationSummary summary;
+  if (!SelfCalibrateRoom(options, problem, &stage.calibration, nullptr, &summary))
+    throw std::runtime_error("projector calibration from the scan failed: " + summary.message +
+                             " (the captures are kept: run the same command again after "
+                             "mending it)");
+  Report(args.progress, summary.BriefReport());
+  stage.self_calibration = summary;
+
+  // The room: every correspondence triangulated (rays more than 2 cm apart left out), in the
+  // room frame, at most 400 000 points.
+  std::vector<Vec3> points;
+  std::vector<double> gaps;
+  for (const TriangulatedPoint& p : Triangulate(problem, stage.calibration, 0.02)) {
+    points.push_back(stage.calibration.room_from_camera * p.p_in_cam);
+    gaps.push_back(p.gap);
+  }
+  const DistanceStats gap = ComputeDistanceStats(gaps);
+  const size_t stride = std::max<size_t>(1, (points.size() + 399999) / 400000);
+  std::vector<Vec3> thinned;
+  for (size_t i = 0; i < points.size(); i += stride) thinned.push_back(points[i]);
+  Report(args.progress,
+         fmt::format("triangulated {} points (ray gap median {:.2f} mm, 95% {:.2f} mm); the room "
+                     "from {} of them",
+                     points.size(), gap.median_mm, gap.p95_mm, thinned.size()));
+  SceneFromPointsOptions scan = args.scan;
+  scan.viewpoint = stage.calibration.room_from_camera.translation();
+  // Curved parts are meshed no finer than the patches will be (the room's bounding-box diagonal
+  // over √patches, halved): a finer mesh only makes patches the subdivision cannot merge.
+  Eigen::AlignedBox3d box;
+  for (const Vec3& p : thinned) box.extend(p);
+  scan.mesh_vertex_spacing =
+      std::max(scan.mesh_vertex_spacing,
+               0.5 * box.diagonal().norm() / std::sqrt(std::max(1, scan.target_patches)));
+  try {
+    stage.scanned = SceneFromPoints(thinned, scan);
+  } catch (const std::invalid_argument& error) {
+    throw std::runtime_error(std::string("the scan: ") + error.what());
+  }
+  Report(args.progress, stage.scanned->Report());
+  if (stage.scanned->scene.surfaces.empty())
+    throw std::runtime_error("the scan: no surface found in " + std::to_string(thinned.size()) +
+                             " points");
+
+  nlohmann::json surfaces = nlohmann::json::array();
+  for (size_t s = 0; s < stage.scanned->stats.size(); ++s) {
+    const ScannedSurfaceStats& stats = stage.scanned->stats[s];
+    surfaces.push_back({{"name", stage.scanned->scene.surfaces[s].name},
+                        {"kind", stats.kind == ScannedSurfaceStats::kPlane ? "plane" : "mesh"},
+                        {"points", stats.points},
+                        {"rms_mm", stats.rms_mm},
+                        {"area_m2", stats.area_m2},
+                        {"holes", stats.holes}});
+  }
+  const nlohmann::json registration_json = {
+      {"method",
+       "scan: poses and projector intrinsics from the structured light alone, room frame z up "
+       "from the floor (no room model)"},
+      {"room", "room.json"},
+      {"room_from_camera", PoseJson(stage.calibration.room_from_camera)},
+      {"camera_centre_m", JsonTriple(stage.calibration.room_from_camera.translation())},
+      {"scale", scale_json},
+      {"self_calibration", SelfCalibrationJson(stage)},
+      {"ray_gap", StatsJson(gap)}};
+  nlohmann::json sessions = nlohmann::json::array();
+  for (const std::filesystem::path& session : args.sessions) sessions.push_back(session.string());
+  nlohmann::json projectors_json = nlohmann::json::array();
+  for (const RoomProjector& p : stage.calibration.projectors)
+    projectors_json.push_back({{"name", p.name},
+                               {"model", p.name + ".cameramodel"},
+                               {"lens_model", p.lens_model},
+                               {"intrinsics", p.intrinsics},
+                               {"imagersize", {p.width, p.height}},
+                               {"centre_room_m", JsonTriple(p.proj_from_room.inverse().translation())}});
+  const nlohmann::json result_section = {{"sessions", sessions},
+                                         {"scene", "room.json (scanned)"},
+                                         {"registration", registration_json},
+                                         {"scan",
+                                          {{"points", stage.scanned->points},
+                                           {"unassigned", stage.scanned->unassigned},
+                                           {"time_s", stage.scanned->time_s},
+                                           {"surfaces", surfaces}}},
+                                         {"projectors", projectors_json}};
+  ReadRigFile(out);  // a malformed rig.json stops here, before anything is written
+  stage.room = WriteScannedScene(out, *stage.scanned);
+  WriteDeviceModels(out, camera, stage.calibration, false, "the scanned room's frame (room.json)",
+                    registration_json, result_section);
+  Report(args.progress,
+         fmt::format("wrote {} ({} surfaces), {} projector models, camera.cameramodel (pose in "
+                     "the scanned room), rig.json and result.json in {}",
+                     stage.room.string(), stage.scanned->scene.surfaces.size(),
+                     stage.calibration.projectors.size(), out.string()));
+  return stage;
+}
 }  // namespace
 
 Eigen::Isometry3d RoomFromCameraGuess(const std::string& guess, const std::string& up) {

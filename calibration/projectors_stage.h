@@ -8,6 +8,13 @@
 // ICP from the same guess, and RANSAC planes. Writes RIG_DIR/NAME.cameramodel per projector,
 // rewrites RIG_DIR/camera.cameramodel with its pose in the room (and refined intrinsics), and
 // updates RIG_DIR/rig.json and RIG_DIR/result.json. What `procam calibrate projectors` runs.
+//
+// Without a room model (`scene` empty) the room is scanned instead: the projectors' intrinsics and
+// poses and the camera's pose from the structured light alone (self_calibration.h), the metric
+// scale from the camera's height above the floor (given, or measured from a photo of the
+// chessboard lying on the floor: floor_chessboard.h), the room frame z up from the floor, and
+// the room built from the triangulated points (scene_from_points.h) and written as
+// RIG_DIR/room.json (with its meshes), the scene the later stages use.
 
 #include <Eigen/Geometry>
 #include <filesystem>
@@ -16,13 +23,16 @@
 #include <vector>
 
 #include "base/progress.h"
+#include "calibration/camera_calibration.h"
 #include "calibration/registration.h"
+#include "calibration/self_calibration.h"
+#include "geometry/scene_from_points.h"
 
 namespace procam {
 
 struct ProjectorsStageOptions {
   std::vector<std::filesystem::path> sessions;  // structured-light sessions, one per projector
-  std::string scene;                            // the room model: a scene file or PREFIX:NAME
+  std::string scene;  // the room model: a scene file or PREFIX:NAME; empty: scan the room
   std::filesystem::path out;                    // the rig directory holding camera.cameramodel
   // The camera's pose in the room to start from (a few cm and degrees off is fine); unset:
   // the pose camera.cameramodel already holds (an error if it holds none).
@@ -30,12 +40,25 @@ struct ProjectorsStageOptions {
   std::vector<std::string> names;     // one per session; empty: each session's display name
   bool refine_camera_aspect = false;  // with options.refine_camera_intrinsics: fx, fy free
   RoomCalibrationOptions options;
+  // Scanning (no scene). The metric scale: the camera centre's height above the floor, metres,
+  // or a photo of `board` lying flat on the floor taken from the structured-light pose (its
+  // printed face `board_thickness` metres above the floor); one of the two is required.
+  std::optional<double> camera_height;
+  std::filesystem::path floor_chessboard;
+  ChessboardSpec board;
+  double board_thickness = 0.0;
+  SelfCalibrationOptions self_calibration;  // its camera_height is set from the above
+  SceneFromPointsOptions scan;  // the written room: reflectance, desired colour, patch target
   ProgressCallback progress;  // decoding per session, the solve, the scan check, files written
 };
 
 struct ProjectorsStageSummary {
   RoomCalibration calibration;
   RoomCalibrationSummary summary;  // termination and residuals: summary.BriefReport()
+  // Scanned rooms only: the self-calibration's summary, the room built and where it was written.
+  std::optional<SelfCalibrationSummary> self_calibration;
+  std::optional<ScannedScene> scanned;
+  std::filesystem::path room;  // RIG_DIR/room.json
 };
 
 // room_from_camera of a camera at x,y,z looking at look_x,look_y,look_z (`guess`, metres, the

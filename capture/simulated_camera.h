@@ -53,6 +53,12 @@ struct SimulatedCamera {
   std::function<int(int corners_x, int corners_y, double square,
                     const std::filesystem::path& folder)>
       render_chessboard;
+  // A photo (written to `file`, a PNG) of a board of corners_x × corners_y inner corners lying
+  // flat on the floor in the camera's view, taken from the camera's pose: the metric scale of a
+  // scan (calibration/floor_chessboard.h); returns the board's square size, metres (sized to the
+  // camera's view, as a user would pick a board large enough to see).
+  std::function<double(int corners_x, int corners_y, const std::filesystem::path& file)>
+      render_floor_chessboard;
 };
 // For camera URIs of `scheme`: the simulated camera behind a URI, or an IoError naming it. The
 // synthetic world registers "synthetic"; a URI of any other scheme is a real camera.

@@ -398,6 +398,58 @@ int RenderSyntheticChessboard(const SyntheticWorld& world, const ChessboardSpec&
   return static_cast<int>(poses.size());
 }
 
+// A photo of a chessboard of `corners_x` × `corners_y` inner corners lying flat on the floor
+// (z = 0) in front of the camera, from the camera's own pose (calibration/floor_chessboard.h: the
+// scan's metric scale); returns its square size, metres. The board's rows run along the camera's
+// image rows; it is centred on the floor point seen at the image's centre column and the lowest
+// row (of 80%, 75%, ... 55% of the height) from which the whole board is in view, its squares
+// sized (whole centimetres) so that it spans about 45% of the image's width there.
+double RenderSyntheticFloorChessboard(const SyntheticWorld& world, int corners_x, int corners_y,
+                                      const std::filesystem::path& file) {
+  const CameraGeometry& camera = world.rig->camera();
+  const Eigen::Isometry3d world_from_cam = camera.proj_from_world().inverse();
+  Vec3 x_axis = world_from_cam.linear().col(0);
+  x_axis.z() = 0.0;
+  if (x_axis.norm() < 1e-6)
+    throw IoError("synthetic:" + world.scene + ": the camera looks straight down or up");
+  x_axis.normalize();
+  const Vec3 z_axis = Vec3::UnitZ(), y_axis = z_axis.cross(x_axis);
+  for (const double fraction : {0.88, 0.84, 0.8, 0.75, 0.7, 0.65, 0.6, 0.55}) {
+    const Vec3 ray = world_from_cam.linear() *
+                     camera.Unproject(Vec2(camera.width() / 2.0, fraction * camera.height()));
+    if (!(ray.z() < 0.0)) continue;
+    const Vec3 eye = world_from_cam.translation();
+    const Vec3 centre = eye - eye.z() / ray.z() * ray;
+    ChessboardSpec board;
+    board.corners_x = corners_x;
+    board.corners_y = corners_y;
+    const double width = 0.6 * camera.width() * (centre - eye).norm() / camera.intrinsics()[0];
+    board.square_size = std::max(0.01, std::round(100.0 * width / (corners_x + 1)) / 100.0);
+    const double s = board.square_size;
+    Eigen::Isometry3d world_from_board = Eigen::Isometry3d::Identity();
+    world_from_board.linear().col(0) = x_axis;
+    world_from_board.linear().col(1) = y_axis;
+    world_from_board.linear().col(2) = z_axis;
+    world_from_board.translation() =
+        centre - (corners_x - 1) * s / 2.0 * x_axis - (corners_y - 1) * s / 2.0 * y_axis;
+    bool in_view = true;
+    for (const double u : {-1.0, corners_x + 0.0})
+      for (const double v : {-1.0, corners_y + 0.0}) {
+        Vec2 pixel;
+        in_view = in_view && camera.Project(world_from_board * Vec3(u * s, v * s, 0.0), &pixel) &&
+                  pixel.x() > 0.03 * camera.width() && pixel.x() < 0.97 * camera.width() &&
+                  pixel.y() > 0.03 * camera.height() && pixel.y() < 0.97 * camera.height();
+      }
+    if (!in_view) continue;
+    const Eigen::Isometry3d cam_from_board = camera.proj_from_world() * world_from_board;
+    std::filesystem::create_directories(file.parent_path());
+    WritePng(file, RenderChessboard(camera, board, cam_from_board, 0.01, 7));
+    return s;
+  }
+  throw IoError("synthetic:" + world.scene +
+                ": no place on the floor (z = 0) shows the whole chessboard to the camera");
+}
+
 }  // namespace
 
 void RegisterSyntheticWorld() {
@@ -433,6 +485,10 @@ void RegisterSyntheticWorld() {
         board.corners_y = corners_y;
         board.square_size = square;
         return RenderSyntheticChessboard(*world, board, folder);
+      };
+      camera.render_floor_chessboard = [world](int corners_x, int corners_y,
+                                               const std::filesystem::path& file) {
+        return RenderSyntheticFloorChessboard(*world, corners_x, corners_y, file);
       };
       camera.value_per_exitance = [uri, world](const nlohmann::json& manifest, bool hdr, double full_scale,
                                                double black) {
