@@ -72,13 +72,20 @@ std::vector<ChessboardView> NoisyViews(double sigma, uint32_t seed) {
   return views;
 }
 
-CameraCalibration Calibrate(double sigma, uint32_t seed) {
+// `outliers` corners of the views are knocked 8 px off (as a misdetection would), for mrcal's
+// outlier rejection to find.
+CameraCalibration Calibrate(double sigma, uint32_t seed, bool regularization = true,
+                            int outliers = 0) {
   CameraCalibrationOptions options;
+  options.regularization = regularization;
+  std::vector<ChessboardView> views = NoisyViews(sigma, seed);
+  for (int k = 0; k < outliers; ++k) views[2 * k].corners[5 + 7 * k] += Vec2(8.0, -6.0);
   CameraCalibration calibration;
   CameraCalibrationSummary summary;
-  EXPECT_TRUE(CalibrateCamera(options, Board(), NoisyViews(sigma, seed), kWidth, kHeight,
-                              &calibration, &summary))
+  EXPECT_TRUE(CalibrateCamera(options, Board(), views, kWidth, kHeight, &calibration, &summary))
       << summary.BriefReport();
+  std::printf("%s\n", summary.BriefReport().c_str());
+  EXPECT_GE(summary.outliers, outliers);
   return calibration;
 }
 
@@ -148,15 +155,14 @@ TEST(ProjectionUncertainty, WithoutSolveIsAStatus) {
   EXPECT_NE(why.find("no chessboard solve"), std::string::npos) << why;
 }
 
+// Debian's python3-mrcal installs into Debian's interpreter (not a pyenv or venv python3).
+constexpr char kPython[] = "/usr/bin/python3";
+bool HaveMrcal() { return testing::RunShell(std::string(kPython) + " -c 'import mrcal'").exit_code == 0; }
+
 // The same solve in mrcal's hands: procam writes camera.cameramodel with the optimization inputs,
-// python3-mrcal reads it and computes its projection uncertainty.
-TEST(ProjectionUncertainty, MatchesMrcal) {
-  // Debian's python3-mrcal installs into Debian's interpreter (not a pyenv or venv python3).
-  const std::string python = "/usr/bin/python3";
-  if (testing::RunShell(python + " -c 'import mrcal'").exit_code != 0) {
-    GTEST_SKIP() << "python3-mrcal is not installed (apt-get install python3-mrcal)";
-  }
-  const CameraCalibration calibration = Calibrate(0.2, 5);
+// python3-mrcal reads it and computes its projection uncertainty; procam's must agree.
+void ExpectMatchesMrcal(const CameraCalibration& calibration) {
+  const std::string python = kPython;
   ProjectionUncertainty uncertainty;
   std::string why;
   ASSERT_TRUE(uncertainty.Compute(calibration, &why)) << why;
@@ -206,6 +212,19 @@ TEST(ProjectionUncertainty, MatchesMrcal) {
       }
     }
   }
+}
+
+TEST(ProjectionUncertainty, MatchesMrcal) {
+  if (!HaveMrcal()) GTEST_SKIP() << "python3-mrcal is not installed (apt-get install python3-mrcal)";
+  ExpectMatchesMrcal(Calibrate(0.2, 5));
+}
+
+// Rejected corners (zero rows of J, left out of σ) and the solve without regularisation (where
+// mrcal takes its shorter formula σ² (JᵀJ)⁻¹).
+TEST(ProjectionUncertainty, MatchesMrcalWithOutliersAndWithoutRegularization) {
+  if (!HaveMrcal()) GTEST_SKIP() << "python3-mrcal is not installed (apt-get install python3-mrcal)";
+  ExpectMatchesMrcal(Calibrate(0.2, 11, /*regularization=*/true, /*outliers=*/5));
+  ExpectMatchesMrcal(Calibrate(0.2, 13, /*regularization=*/false));
 }
 
 }  // namespace
