@@ -31,7 +31,8 @@ mrcal_problem_selections_t ChessboardSelections(bool regularization, bool reject
 MrcalChessboardProblem ToMrcal(const CameraCalibration& calibration) {
   const ChessboardSolve& solve = calibration.solve;
   const int views = static_cast<int>(calibration.cam_from_board.size());
-  if (views == 0 || solve.corners.size() != static_cast<size_t>(views) * solve.board.CornerCount()) {
+  if (views == 0 ||
+      solve.corners.size() != static_cast<size_t>(views) * solve.board.CornerCount()) {
     throw std::invalid_argument("camera calibration: no chessboard solve to evaluate (" +
                                 std::to_string(solve.corners.size()) + " corners for " +
                                 std::to_string(views) + " views)");
@@ -52,8 +53,8 @@ MrcalChessboardProblem ToMrcal(const CameraCalibration& calibration) {
   }
   problem.pool.resize(solve.corners.size());
   for (size_t k = 0; k < solve.corners.size(); ++k) {
-    problem.pool[k] = mrcal_point3_t{{solve.corners[k].x(), solve.corners[k].y(),
-                                      solve.corners[k].z()}};
+    problem.pool[k] =
+        mrcal_point3_t{{solve.corners[k].x(), solve.corners[k].y(), solve.corners[k].z()}};
   }
   problem.selections = ChessboardSelections(solve.regularization, solve.reject_outliers);
   problem.imager_size[0] = calibration.width;
@@ -69,8 +70,8 @@ int MrcalChessboardProblem::StateCount() const {
 }
 
 int MrcalChessboardProblem::MeasurementCount() const {
-  return mrcal_num_measurements(Frames(), 0, corners_x, corners_y, 1, 0, Frames(), 0, 0,
-                                selections, &lens);
+  return mrcal_num_measurements(Frames(), 0, corners_x, corners_y, 1, 0, Frames(), 0, 0, selections,
+                                &lens);
 }
 
 int MrcalChessboardProblem::BoardMeasurementCount() const {
@@ -154,16 +155,16 @@ std::string Zip(const std::vector<std::pair<std::string, std::string>>& members)
     const uint32_t crc = Crc32(data);
     const uint32_t offset = static_cast<uint32_t>(archive.size());
     auto common = [&](std::string* out) {
-      Put16(out, 20);       // version needed: 2.0
-      Put16(out, 0);        // flags
-      Put16(out, 0);        // method: stored
-      Put16(out, 0);        // time
-      Put16(out, 0x21);     // date: 1980-01-01
+      Put16(out, 20);    // version needed: 2.0
+      Put16(out, 0);     // flags
+      Put16(out, 0);     // method: stored
+      Put16(out, 0);     // time
+      Put16(out, 0x21);  // date: 1980-01-01
       Put32(out, crc);
       Put32(out, static_cast<uint32_t>(data.size()));  // compressed size
       Put32(out, static_cast<uint32_t>(data.size()));  // uncompressed size
       Put16(out, static_cast<uint32_t>(name.size()));
-      Put16(out, 0);        // extra field length
+      Put16(out, 0);  // extra field length
     };
     Put32(&archive, 0x04034b50);
     common(&archive);
@@ -171,10 +172,10 @@ std::string Zip(const std::vector<std::pair<std::string, std::string>>& members)
     Put32(&directory, 0x02014b50);
     Put16(&directory, 20);  // version made by
     common(&directory);
-    Put16(&directory, 0);   // comment length
-    Put16(&directory, 0);   // disk number
-    Put16(&directory, 0);   // internal attributes
-    Put32(&directory, 0);   // external attributes
+    Put16(&directory, 0);  // comment length
+    Put16(&directory, 0);  // disk number
+    Put16(&directory, 0);  // internal attributes
+    Put32(&directory, 0);  // external attributes
     Put32(&directory, offset);
     directory += name;
   }
@@ -224,17 +225,18 @@ std::string MrcalOptimizationInputs(const CameraCalibration& calibration) {
   std::memcpy(pool.data(), problem.pool.data(), sizeof(double) * pool.size());
   std::vector<int32_t> indices;  // iframe, icam_intrinsics, icam_extrinsics per observation
   for (const mrcal_observation_board_t& observation : problem.observations) {
-    indices.insert(indices.end(), {observation.iframe, observation.icam.intrinsics,
-                                   observation.icam.extrinsics});
+    indices.insert(indices.end(),
+                   {observation.iframe, observation.icam.intrinsics, observation.icam.extrinsics});
   }
   const mrcal_problem_selections_t& selections = problem.selections;
   const std::vector<std::pair<std::string, std::string>> members = {
-      {"intrinsics", NpyDoubles(problem.intrinsics, fmt::format("(1, {})", problem.intrinsics.size()))},
+      {"intrinsics",
+       NpyDoubles(problem.intrinsics, fmt::format("(1, {})", problem.intrinsics.size()))},
       {"extrinsics_rt_fromref", NpyString("")},
       {"frames_rt_toref", NpyDoubles(frames, fmt::format("({}, 6)", views))},
       {"points", NpyString("")},
-      {"observations_board",
-       NpyDoubles(pool, fmt::format("({}, {}, {}, 3)", views, problem.corners_y, problem.corners_x))},
+      {"observations_board", NpyDoubles(pool, fmt::format("({}, {}, {}, 3)", views,
+                                                          problem.corners_y, problem.corners_x))},
       {"indices_frame_camintrinsics_camextrinsics",
        NpyInts(indices, fmt::format("({}, 3)", views))},
       {"observations_point", NpyString("")},

@@ -56,14 +56,14 @@ bool ProjectionUncertainty::Compute(const CameraCalibration& calibration, std::s
   jt.dtype = CHOLMOD_DOUBLE;
   jt.sorted = 1;
   jt.packed = 1;
-  if (!mrcal_optimizer_callback(
-          b_packed.data(), state_count * sizeof(double), x.data(),
-          measurement_count * sizeof(double), &jt,
-          problem.intrinsics.data(), nullptr, problem.frames.data(), nullptr, nullptr,
-          /*Ncameras_intrinsics=*/1, /*Ncameras_extrinsics=*/0, problem.Frames(), 0, 0,
-          problem.observations.data(), nullptr, problem.Frames(), 0, problem.pool.data(),
-          &problem.lens, problem.imager_size, problem.selections, &kChessboardConstants,
-          problem.spacing, problem.corners_x, problem.corners_y, false)) {
+  if (!mrcal_optimizer_callback(b_packed.data(), state_count * sizeof(double), x.data(),
+                                measurement_count * sizeof(double), &jt, problem.intrinsics.data(),
+                                nullptr, problem.frames.data(), nullptr, nullptr,
+                                /*Ncameras_intrinsics=*/1, /*Ncameras_extrinsics=*/0,
+                                problem.Frames(), 0, 0, problem.observations.data(), nullptr,
+                                problem.Frames(), 0, problem.pool.data(), &problem.lens,
+                                problem.imager_size, problem.selections, &kChessboardConstants,
+                                problem.spacing, problem.corners_x, problem.corners_y, false)) {
     *why = "mrcal_optimizer_callback failed on the chessboard solve";
     return false;
   }
@@ -97,8 +97,8 @@ bool ProjectionUncertainty::Compute(const CameraCalibration& calibration, std::s
 
   // D: mrcal's unpacking of a vector of ones.
   scale_ = Eigen::VectorXd::Ones(state_count);
-  mrcal_unpack_solver_state_vector(scale_.data(), 1, 0, problem.Frames(), 0, 0,
-                                   problem.selections, &problem.lens);
+  mrcal_unpack_solver_state_vector(scale_.data(), 1, 0, problem.Frames(), 0, 0, problem.selections,
+                                   &problem.lens);
 
   // σ: numpy.std of the inlier corners' residuals (x and y together), mrcal's estimate.
   double sum = 0.0, sum_squares = 0.0;
@@ -157,10 +157,8 @@ Eigen::Matrix<double, 2, Eigen::Dynamic> ProjectionUncertainty::ProjectionGradie
       gradient.middleCols<3>(column) = share * dq_dp * dp_dr;
     } else {
       Eigen::Matrix<double, 3, 6, Eigen::RowMajor> dp_drt;
-      mrcal_transform_point_rt_inverted(p_in_board.data(), nullptr, nullptr, rt.data(),
-                                        p.data());
-      mrcal_transform_point_rt(p_back.data(), dp_drt.data(), nullptr, rt.data(),
-                               p_in_board.data());
+      mrcal_transform_point_rt_inverted(p_in_board.data(), nullptr, nullptr, rt.data(), p.data());
+      mrcal_transform_point_rt(p_back.data(), dp_drt.data(), nullptr, rt.data(), p_in_board.data());
       gradient.middleCols<6>(column) = share * dq_dp * dp_drt;
     }
   }

@@ -39,7 +39,8 @@ class ProjectionUncertainty {
   static constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
   // False, with the reason in `why`, when the calibration has no solve (CameraCalibration::solve
-  // empty), libmrcal cannot evaluate it, or JᵀJ is not positive definite (a degenerate solve).
+  // empty), libmrcal cannot evaluate it, or JᵀJ is not positive definite (a degenerate solve);
+  // the object is then not to be queried.
   bool Compute(const CameraCalibration& calibration, std::string* why);
 
   // σ, pixels: the standard deviation of the inlier corner residuals at the optimum (both
@@ -75,7 +76,8 @@ class ProjectionUncertainty {
 struct ProjectionUncertaintyMap {
   double observed_pixel_sigma = 0.0;  // σ, px
   double centre = 0.0;                // at ((width − 1)/2, (height − 1)/2), px
-  // At the corner pixels (0, 0), (width − 1, 0), (0, height − 1), (width − 1, height − 1), px.
+  // At the corner pixels (0, 0), (width − 1, 0), (0, height − 1), (width − 1, height − 1),
+  // px.
   std::array<double, 4> corners{};
   // Grid of grid_width × grid_height pixels spanning the image corner to corner (x = i (width −
   // 1)/(grid_width − 1), likewise y; mrcal.sample_imager's grid), row-major, px.
@@ -84,7 +86,8 @@ struct ProjectionUncertaintyMap {
   std::string BriefReport() const;
 };
 
-// Evaluates `uncertainty` at infinity over a `width` × `height` image. grid_width, grid_height ≥ 2.
+// Evaluates `uncertainty` at infinity over a `width` × `height` image; grid_width and grid_height
+// at least 2 (std::invalid_argument otherwise).
 ProjectionUncertaintyMap MapProjectionUncertainty(const ProjectionUncertainty& uncertainty,
                                                   int width, int height, int grid_width = 16,
                                                   int grid_height = 12);

@@ -9,9 +9,8 @@
 
 #include <cmath>
 #include <cstdio>
-#include <random>
-
 #include <nlohmann/json.hpp>
+#include <random>
 
 #include "base/camera_model.h"
 #include "calibration/camera_calibration.h"
@@ -157,7 +156,9 @@ TEST(ProjectionUncertainty, WithoutSolveIsAStatus) {
 
 // Debian's python3-mrcal installs into Debian's interpreter (not a pyenv or venv python3).
 constexpr char kPython[] = "/usr/bin/python3";
-bool HaveMrcal() { return testing::RunShell(std::string(kPython) + " -c 'import mrcal'").exit_code == 0; }
+bool HaveMrcal() {
+  return testing::RunShell(std::string(kPython) + " -c 'import mrcal'").exit_code == 0;
+}
 
 // The same solve in mrcal's hands: procam writes camera.cameramodel with the optimization inputs,
 // python3-mrcal reads it and computes its projection uncertainty; procam's must agree.
@@ -170,10 +171,10 @@ void ExpectMatchesMrcal(const CameraCalibration& calibration) {
   WriteCalibrationModel(dir / "camera.cameramodel", calibration);
 
   const double right = kWidth - 1.0, bottom = kHeight - 1.0, distance = 1.0;
-  const std::vector<Vec2> pixels = {{right / 2, bottom / 2}, {0, 0},          {right, 0},
-                                    {0, bottom},             {right, bottom}, {100, 350}};
-  const char* names[] = {"centre", "top left", "top right", "bottom left", "bottom right",
-                         "(100, 350)"};
+  const std::vector<Vec2> pixels = {{right / 2, bottom / 2}, {0, 0},    {right, 0}, {0, bottom},
+                                    {right, bottom},         {100, 350}};
+  const char* names[] = {"centre",      "top left",     "top right",
+                         "bottom left", "bottom right", "(100, 350)"};
   std::string command = fmt::format(
       "{} {} {} {}", python,
       (testing::SourceDir() / "tests/calibration/projection_uncertainty_mrcal.py").string(),
@@ -193,10 +194,10 @@ void ExpectMatchesMrcal(const CameraCalibration& calibration) {
     const double procam_distance = uncertainty.WorstDirectionStdev(pixels[k], distance);
     const double mrcal_infinity = mrcal["at_infinity"][k].get<double>();
     const double mrcal_distance = mrcal["at_distance"][k].get<double>();
-    std::printf("%-12s at infinity: procam %.6f px, mrcal %.6f px; at %.1f m: procam %.6f px, "
-                "mrcal %.6f px\n",
-                names[k], procam_infinity, mrcal_infinity, distance, procam_distance,
-                mrcal_distance);
+    std::printf(
+        "%-12s at infinity: procam %.6f px, mrcal %.6f px; at %.1f m: procam %.6f px, "
+        "mrcal %.6f px\n",
+        names[k], procam_infinity, mrcal_infinity, distance, procam_distance, mrcal_distance);
     // Same J, same formula: they agree to rounding (measured: 7 digits), so 0.01% is checked.
     EXPECT_NEAR(procam_infinity, mrcal_infinity, 1e-4 * mrcal_infinity) << names[k];
     EXPECT_NEAR(procam_distance, mrcal_distance, 1e-4 * mrcal_distance) << names[k];
@@ -215,14 +216,16 @@ void ExpectMatchesMrcal(const CameraCalibration& calibration) {
 }
 
 TEST(ProjectionUncertainty, MatchesMrcal) {
-  if (!HaveMrcal()) GTEST_SKIP() << "python3-mrcal is not installed (apt-get install python3-mrcal)";
+  if (!HaveMrcal())
+    GTEST_SKIP() << "python3-mrcal is not installed (apt-get install python3-mrcal)";
   ExpectMatchesMrcal(Calibrate(0.2, 5));
 }
 
 // Rejected corners (zero rows of J, left out of σ) and the solve without regularisation (where
 // mrcal takes its shorter formula σ² (JᵀJ)⁻¹).
 TEST(ProjectionUncertainty, MatchesMrcalWithOutliersAndWithoutRegularization) {
-  if (!HaveMrcal()) GTEST_SKIP() << "python3-mrcal is not installed (apt-get install python3-mrcal)";
+  if (!HaveMrcal())
+    GTEST_SKIP() << "python3-mrcal is not installed (apt-get install python3-mrcal)";
   ExpectMatchesMrcal(Calibrate(0.2, 11, /*regularization=*/true, /*outliers=*/5));
   ExpectMatchesMrcal(Calibrate(0.2, 13, /*regularization=*/false));
 }
