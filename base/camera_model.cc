@@ -129,7 +129,12 @@ std::string CameraModelText(const CameraModel& model, const std::string& comment
   return "# " + comment + "\n{\n  'lensmodel':  '" + model.lens_model +
          "',\n  'intrinsics': " + list(model.intrinsics) + ",\n  'imagersize': [ " +
          std::to_string(model.width) + ", " + std::to_string(model.height) +
-         " ],\n  'extrinsics': " + list(RtFromPose(model.cam_from_ref)) + "\n}\n";
+         " ],\n  'extrinsics': " + list(RtFromPose(model.cam_from_ref)) +
+         (model.optimization_inputs.empty()
+              ? std::string()
+              : ",\n  'icam_intrinsics': " + std::to_string(model.icam_intrinsics) +
+                    ",\n  'optimization_inputs': b'" + model.optimization_inputs + "'") +
+         "\n}\n";
 }
 
 void WriteCameraModelFile(const std::filesystem::path& path, const CameraModel& model,

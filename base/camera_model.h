@@ -30,6 +30,13 @@ struct CameraModel {
   // mrcal's extrinsics (rt_cam_ref): the camera frame from the reference frame (the room once
   // a rig is registered; the camera itself for a fresh intrinsic calibration).
   Eigen::Isometry3d cam_from_ref = Eigen::Isometry3d::Identity();
+  // The solve that made this model, as mrcal's tools read it (mrcal-show-projection-uncertainty,
+  // mrcal.projection_uncertainty): the `optimization_inputs` entry, mrcal.optimize()'s arguments
+  // at the optimum as a NumPy .npz in base-85 text (calibration/mrcal_optimization_inputs.h), and
+  // `icam_intrinsics`, this camera's index in that solve. Written when not empty; the reader leaves
+  // it empty (libmrcal's C parser skips both keys).
+  std::string optimization_inputs;
+  int icam_intrinsics = 0;
 };
 
 // Reads a .cameramodel through libmrcal (its own diagnostics silenced). Throws IoError naming

@@ -16,10 +16,7 @@
 
 #include "base/camera_model.h"
 #include "base/io.h"
-
-extern "C" {
-#include <mrcal/mrcal.h>
-}
+#include "calibration/mrcal_chessboard.h"
 
 namespace procam {
 
@@ -243,15 +240,9 @@ bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSp
           mrcal_point3_t{{views[v].corners[k].x(), views[v].corners[k].y(), 1.0}};
     }
   }
-  mrcal_problem_selections_t selections{};
-  selections.do_optimize_intrinsics_core = true;
-  selections.do_optimize_intrinsics_distortions = true;
-  selections.do_optimize_extrinsics = false;
-  selections.do_optimize_frames = true;
-  selections.do_optimize_calobject_warp = false;
-  selections.do_apply_regularization = options.regularization;
-  selections.do_apply_outlier_rejection = options.reject_outliers;
-  const mrcal_problem_constants_t constants{0.0, 1e6};
+  const mrcal_problem_selections_t selections =
+      ChessboardSelections(options.regularization, options.reject_outliers);
+  const mrcal_problem_constants_t constants = kChessboardConstants;
   const int imager_size[2] = {width, height};
   const mrcal_stats_t stats = mrcal_optimize(
       nullptr, 0, nullptr, 0, intrinsics.data(), nullptr, frames.data(), nullptr, nullptr,
@@ -280,6 +271,13 @@ bool CalibrateCamera(const CameraCalibrationOptions& options, const ChessboardSp
   calibration->intrinsics = intrinsics;
   calibration->width = width;
   calibration->height = height;
+  calibration->solve.board = board;
+  calibration->solve.corners.resize(pool.size());
+  for (size_t k = 0; k < pool.size(); ++k) {
+    calibration->solve.corners[k] = Vec3(pool[k].x, pool[k].y, pool[k].z);
+  }
+  calibration->solve.regularization = options.regularization;
+  calibration->solve.reject_outliers = options.reject_outliers;
   if (!ResidualStatistics(board, lens_fitted, frames, pool, calibration, summary)) {
     return finish(CameraCalibrationSummary::kSolverFailed, "every corner is an outlier");
   }
@@ -292,6 +290,10 @@ CameraModel CameraCalibration::Model() const {
   model.intrinsics = intrinsics;
   model.width = width;
   model.height = height;
+  if (!solve.corners.empty()) {
+    model.optimization_inputs = MrcalOptimizationInputs(*this);
+    model.icam_intrinsics = 0;
+  }
   return model;  // the camera is the reference frame
 }
 

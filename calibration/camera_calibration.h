@@ -59,6 +59,18 @@ struct CameraCalibrationOptions {
   bool Check(std::string* why) const;
 };
 
+// The chessboard solve as mrcal_optimize left it, beyond the lens and the board poses: what
+// re-evaluating the solve needs (its projection uncertainty, calibration/projection_uncertainty.h,
+// and the optimization inputs written for mrcal's own tools).
+struct ChessboardSolve {
+  ChessboardSpec board;
+  // Every view's corners, view after view, row-major within a view: the observed pixel (x, y)
+  // and mrcal's weight z (1; −1 marks a corner mrcal rejected as an outlier). mrcal's pool.
+  std::vector<Vec3> corners;
+  bool regularization = true;    // CameraCalibrationOptions::regularization of the solve
+  bool reject_outliers = true;   // CameraCalibrationOptions::reject_outliers of the solve
+};
+
 // A calibrated camera: the lens (mrcal model name and intrinsics), image size, and the pose of
 // the board in every view that was used (same order as the views given).
 struct CameraCalibration {
@@ -66,7 +78,9 @@ struct CameraCalibration {
   std::vector<double> intrinsics;  // mrcal order, pixels (distortion unitless)
   int width = 0, height = 0;
   std::vector<Eigen::Isometry3d> cam_from_board;
-  // As a .cameramodel: the camera is the reference frame (extrinsics zero).
+  ChessboardSolve solve;
+  // As a .cameramodel: the camera is the reference frame (extrinsics zero); with the solve's
+  // optimization inputs (CameraModel::optimization_inputs) when `solve` has corners.
   CameraModel Model() const;
 };
 

@@ -79,6 +79,16 @@ CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
   Report(args.progress, summary.BriefReport());
   if (!converged) throw std::runtime_error("calibration failed: " + summary.BriefReport());
 
+  // What the calibration is sure of (projection_uncertainty.h): a failure here is reported, not
+  // fatal, since the lens itself converged.
+  ProjectionUncertainty uncertainty;
+  if (uncertainty.Compute(calibration, &stage.uncertainty_error)) {
+    stage.uncertainty = MapProjectionUncertainty(uncertainty, width, height);
+    Report(args.progress, stage.uncertainty.BriefReport());
+  } else {
+    Report(args.progress, "projection uncertainty: not computed: " + stage.uncertainty_error);
+  }
+
   const std::filesystem::path out(args.out);
   std::filesystem::create_directories(out);
   WriteCalibrationModel(out / "camera.cameramodel", calibration);
@@ -99,6 +109,25 @@ CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
                          {"median_norm_px", summary.median_norm}, {"max_norm_px", summary.max_norm},
                          {"seed_rms_px", summary.seed_rms},       {"corners", summary.corners},
                          {"outliers", summary.outliers}};
+  if (stage.uncertainty_error.empty()) {
+    const ProjectionUncertaintyMap& map = stage.uncertainty;
+    nlohmann::json grid = nlohmann::json::array();
+    for (int j = 0; j < map.grid_height; ++j) {
+      grid.push_back(std::vector<double>(map.grid.begin() + j * map.grid_width,
+                                         map.grid.begin() + (j + 1) * map.grid_width));
+    }
+    result["projection_uncertainty"] = {
+        {"what", "1-sigma worst-direction projection error at infinity, px (mrcal 2.2's "
+                 "projection_uncertainty, mean-frames)"},
+        {"observed_pixel_sigma_px", map.observed_pixel_sigma},
+        {"centre_px", map.centre},
+        {"corners_px", {{"top_left", map.corners[0]}, {"top_right", map.corners[1]},
+                        {"bottom_left", map.corners[2]}, {"bottom_right", map.corners[3]}}},
+        {"grid_size", {map.grid_width, map.grid_height}},
+        {"grid_px", grid}};
+  } else {
+    result["projection_uncertainty"] = {{"error", stage.uncertainty_error}};
+  }
   UpdateRigResult(out, {"camera"}, result);
   Report(args.progress, "wrote " + (out / "camera.cameramodel").string() + " and " +
                             (out / "result.json").string() + " (section camera)");

@@ -7,6 +7,7 @@
 
 #include "base/progress.h"
 #include "calibration/camera_calibration.h"
+#include "calibration/projection_uncertainty.h"
 
 namespace procam {
 
@@ -23,6 +24,11 @@ struct CameraStageOptions {
 struct CameraStageSummary {
   CameraCalibration calibration;
   CameraCalibrationSummary summary;  // termination, residuals: summary.BriefReport()
+  // The projection uncertainty at infinity over the image (result.json's
+  // camera.projection_uncertainty); empty grid when it could not be computed, then
+  // `uncertainty_error` says why.
+  ProjectionUncertaintyMap uncertainty;
+  std::string uncertainty_error;
 };
 
 // Detects the board in every photo, calibrates, and writes the model and the result section.

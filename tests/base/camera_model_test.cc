@@ -32,6 +32,27 @@ TEST(CameraModelFile, WriteReadIsLossless) {
   EXPECT_EQ(ReadFile(dir / "m.cameramodel").rfind("# a test model\n", 0), 0u);
 }
 
+// mrcal's optimization inputs ride along as two more keys, which libmrcal's parser skips
+// (mrcal's Python reader is checked in tests/calibration/projection_uncertainty_test.cc).
+TEST(CameraModelFile, OptimizationInputsAreWrittenAndSkippedOnRead) {
+  testing::TempDir dir;
+  CameraModel model;
+  model.lens_model = "LENSMODEL_PINHOLE";
+  model.intrinsics = {500.0, 510.0, 319.5, 239.5};
+  model.width = 640;
+  model.height = 480;
+  model.optimization_inputs = "P)h>@6aWAK00000";  // base-85 text, as mrcal writes it
+  model.icam_intrinsics = 0;
+  WriteCameraModelFile(dir / "m.cameramodel", model, "with inputs");
+  const std::string text = ReadFile(dir / "m.cameramodel");
+  EXPECT_NE(text.find("'icam_intrinsics': 0,\n  'optimization_inputs': b'P)h>@6aWAK00000'\n}"),
+            std::string::npos)
+      << text;
+  const CameraModel back = ReadCameraModelFile(dir / "m.cameramodel");
+  EXPECT_EQ(back.intrinsics, model.intrinsics);
+  EXPECT_TRUE(back.optimization_inputs.empty());
+}
+
 TEST(CameraModelFile, BadFilesFailWithOneLineNamingTheFile) {
   testing::TempDir dir;
   try {

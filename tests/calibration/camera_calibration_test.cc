@@ -236,6 +236,15 @@ TEST(CalibrateCommand, WritesModelAndResiduals) {
   EXPECT_EQ(result["skipped_images"][0], "999_blank.png");
   EXPECT_LT(result["residuals"]["rms_px_per_coordinate"].get<double>(), 0.1);
   EXPECT_EQ(result["imagersize"][0], kWidth);
+  // What the calibration is sure of (the numbers themselves: projection_uncertainty_test.cc).
+  const nlohmann::json& uncertainty = result["projection_uncertainty"];
+  ASSERT_TRUE(uncertainty.contains("centre_px")) << uncertainty.dump();
+  EXPECT_GT(uncertainty["centre_px"].get<double>(), 0.0);
+  EXPECT_GT(uncertainty["corners_px"]["top_left"].get<double>(),
+            uncertainty["centre_px"].get<double>());
+  EXPECT_EQ(uncertainty["grid_px"].size(), 12u);
+  EXPECT_EQ(uncertainty["grid_px"][0].size(), 16u);
+  EXPECT_NE(run.output.find("projection uncertainty"), std::string::npos) << run.output;
 
   const testing::CommandRun missing = testing::RunProcam(
       "calibrate camera " + (dir / "nowhere").string() + " --out " + (dir / "rig2").string());
