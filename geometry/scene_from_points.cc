@@ -703,11 +703,30 @@ void AddMeshSurfaces(const std::vector<Vec3>& points, const std::vector<std::vec
           surface.mesh_vertices.push_back(vertices[t[k]]);
         }
         mesh_triangle.vertex[k] = new_index[t[k]];
-        mesh_triangle.uv[k] = Vec2::Zero();
       }
       surface.mesh_triangles.push_back(mesh_triangle);
     }
     if (surface.mesh_triangles.empty() || surface.Area() < options.min_surface_area) continue;
+    // Texture coordinates: the vertices projected on the mesh's two main directions (PCA),
+    // scaled to [0, 1] over its extent (a curved wall's texture lies along its chord).
+    Vec3 mean = Vec3::Zero();
+    for (const Vec3& v : surface.mesh_vertices) mean += v / surface.mesh_vertices.size();
+    Eigen::Matrix3d spread = Eigen::Matrix3d::Zero();
+    for (const Vec3& v : surface.mesh_vertices) spread += (v - mean) * (v - mean).transpose();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> axes(spread);
+    const Vec3 u_axis = axes.eigenvectors().col(2), v_axis = axes.eigenvectors().col(1);
+    Vec2 low = Vec2::Constant(1e300), high = Vec2::Constant(-1e300);
+    for (const Vec3& v : surface.mesh_vertices) {
+      const Vec2 uv((v - mean).dot(u_axis), (v - mean).dot(v_axis));
+      low = low.cwiseMin(uv), high = high.cwiseMax(uv);
+    }
+    const Vec2 size = (high - low).cwiseMax(Vec2::Constant(1e-9));
+    for (MeshTriangle& triangle : surface.mesh_triangles)
+      for (int k = 0; k < 3; ++k) {
+        const Vec3& v = surface.mesh_vertices[triangle.vertex[k]];
+        const Vec2 uv((v - mean).dot(u_axis), (v - mean).dot(v_axis));
+        triangle.uv[k] = ((uv - low).cwiseQuotient(size)).cwiseMax(0.0).cwiseMin(1.0);
+      }
     surface.name = fmt::format("mesh_{}", meshes++);
     surface.mesh_path = surface.name + ".obj";
     ScannedSurfaceStats stats;

@@ -4,6 +4,7 @@
 // the simulated rig's ground truth.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -218,17 +219,24 @@ TEST(CalibrateAll, ScansTheRoomWithoutAModel) {
     double squares = 0.0;
     for (double x : d) squares += x * x;
     const double rms = std::sqrt(squares / std::max<size_t>(1, d.size()));
-    // The true surface under the scanned surface's first facet's centroid.
-    Vec3 centroid = Vec3::Zero(), nearest;
-    double distance = 0.0;
+    // The true surfaces under the scanned surface: its facets' centroids vote for the nearest;
+    // every true surface with a quarter of some scanned surface's votes is found.
+    std::vector<int> votes(truth.scene.surfaces.size(), 0);
+    int facets = 0;
     for (const ModelFacet& facet : scanned_model.facets()) {
       if (facet.surface != static_cast<int>(s)) continue;
+      Vec3 centroid = Vec3::Zero(), nearest;
+      double distance = 0.0;
       for (const Vec3& corner : facet.corners) centroid += corner / facet.corners.size();
-      break;
+      ++votes[true_model.facets()[true_model.Closest(world_from_room * centroid, &nearest,
+                                                       &distance)]
+                  .surface];
+      ++facets;
     }
-    const int facet = true_model.Closest(world_from_room * centroid, &nearest, &distance);
-    const int true_surface = true_model.facets()[facet].surface;
-    found[true_surface] = true;
+    const int true_surface =
+        static_cast<int>(std::max_element(votes.begin(), votes.end()) - votes.begin());
+    for (size_t t = 0; t < votes.size(); ++t)
+      if (4 * votes[t] >= facets) found[t] = true;
     std::printf("scanned %s -> true %s: corners and centroids %.1f mm RMS from it\n",
                 room.surfaces[s].name.c_str(), truth.scene.surfaces[true_surface].name.c_str(),
                 1e3 * rms);

@@ -269,6 +269,16 @@ void CheckScene(const SceneCheck& check) {
   for (size_t s = 0; s < loaded.surfaces.size(); ++s) {
     EXPECT_EQ(loaded.surfaces[s].name, scanned.scene.surfaces[s].name);
     EXPECT_NEAR(loaded.surfaces[s].Area(), scanned.scene.surfaces[s].Area(), 1e-4 * scanned.scene.surfaces[s].Area());
+    // Every surface written as an OBJ (polygons and meshes) has texture coordinates spanning
+    // [0, 1] on both axes, so that a texture can be given to it by name.
+    if (loaded.surfaces[s].kind != Surface::Kind::kMesh) continue;
+    Vec2 low = Vec2::Constant(2.0), high = Vec2::Constant(-1.0);
+    for (const MeshTriangle& t : loaded.surfaces[s].mesh_triangles)
+      for (const Vec2& uv : t.uv) low = low.cwiseMin(uv), high = high.cwiseMax(uv);
+    EXPECT_NEAR(low.x(), 0.0, 1e-6) << loaded.surfaces[s].name;
+    EXPECT_NEAR(low.y(), 0.0, 1e-6) << loaded.surfaces[s].name;
+    EXPECT_NEAR(high.x(), 1.0, 1e-6) << loaded.surfaces[s].name;
+    EXPECT_NEAR(high.y(), 1.0, 1e-6) << loaded.surfaces[s].name;
   }
   SubdivisionOptions subdivision;
   subdivision.target_patches = 400;
