@@ -38,13 +38,12 @@ Vec3 ChessboardSpec::Corner(int k) const {
   return Vec3((k % corners_x) * square_size, (k / corners_x) * square_size, 0.0);
 }
 
-bool DetectChessboard(const cv::Mat& image, const ChessboardSpec& board,
-                      std::vector<Vec2>* corners) {
+cv::Mat ChessboardGrey(const cv::Mat& image) {
   cv::Mat grey = image;
   if (grey.channels() == 3) cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
   if (grey.channels() == 4) cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
   if (grey.depth() != CV_8U) {
-    // Scale to the full 8-bit range; the detector works on 8-bit images.
+    // Scale to the full 8-bit range; the detectors work on 8-bit images.
     double low = 0.0, high = 0.0;
     cv::minMaxLoc(grey, &low, &high);
     cv::Mat eight;
@@ -52,6 +51,12 @@ bool DetectChessboard(const cv::Mat& image, const ChessboardSpec& board,
                    high > low ? -255.0 * low / (high - low) : 0.0);
     grey = eight;
   }
+  return grey;
+}
+
+bool DetectChessboard(const cv::Mat& image, const ChessboardSpec& board,
+                      std::vector<Vec2>* corners) {
+  const cv::Mat grey = ChessboardGrey(image);
   const cv::Size pattern(board.corners_x, board.corners_y);
   std::vector<cv::Point2f> found;
   if (!cv::findChessboardCorners(grey, pattern, found,

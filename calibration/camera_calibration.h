@@ -40,6 +40,9 @@ struct ChessboardSpec {
 // start at either end of the grid, i.e. the board turned by 180°, which is just another pose).
 bool DetectChessboard(const cv::Mat& image, const ChessboardSpec& board,
                       std::vector<Vec2>* corners);
+// An 8- or 16-bit grey or colour image as the 8-bit grey image the corner detectors take
+// (16-bit stretched over its own range).
+cv::Mat ChessboardGrey(const cv::Mat& image);
 
 // The corners seen in one image.
 struct ChessboardView {

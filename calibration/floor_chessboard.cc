@@ -28,17 +28,7 @@ namespace {
 // one (DetectChessboard) gives up; the classic one is tried when it fails.
 bool DetectFloorChessboard(const cv::Mat& image, const ChessboardSpec& board,
                            std::vector<Vec2>* corners) {
-  cv::Mat grey = image;
-  if (grey.channels() == 3) cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
-  if (grey.channels() == 4) cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
-  if (grey.depth() != CV_8U) {
-    double low = 0.0, high = 0.0;
-    cv::minMaxLoc(grey, &low, &high);
-    cv::Mat eight;
-    grey.convertTo(eight, CV_8U, high > low ? 255.0 / (high - low) : 1.0,
-                   high > low ? -255.0 * low / (high - low) : 0.0);
-    grey = eight;
-  }
+  const cv::Mat grey = ChessboardGrey(image);
   std::vector<cv::Point2f> found;
   if (cv::findChessboardCornersSB(grey, cv::Size(board.corners_x, board.corners_y), found,
                                   cv::CALIB_CB_EXHAUSTIVE | cv::CALIB_CB_ACCURACY)) {

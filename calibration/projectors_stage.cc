@@ -334,6 +334,19 @@ nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const Camera
   return registration_json;
 }
 
+// result.json's list of the calibrated projectors.
+nlohmann::json ProjectorsJson(const RoomCalibration& calibration) {
+  nlohmann::json projectors = nlohmann::json::array();
+  for (const RoomProjector& p : calibration.projectors)
+    projectors.push_back({{"name", p.name},
+                          {"model", p.name + ".cameramodel"},
+                          {"lens_model", p.lens_model},
+                          {"intrinsics", p.intrinsics},
+                          {"imagersize", {p.width, p.height}},
+                          {"centre_room_m", JsonTriple(p.proj_from_room.inverse().translation())}});
+  return projectors;
+}
+
 // RIG_DIR/result.json's "projectors" section.
 nlohmann::json ResultSection(const ProjectorsStageOptions& args,
                              const nlohmann::json& registration_json,
@@ -364,15 +377,7 @@ nlohmann::json ResultSection(const ProjectorsStageOptions& args,
        "pose), normal . p + offset = 0"},
       {"distance_mm", 1e3 * PlaneFitOptions().distance},
       {"planes", planes_json}};
-  nlohmann::json projectors_json = nlohmann::json::array();
-  for (const RoomProjector& p : calibration.projectors)
-    projectors_json.push_back({{"name", p.name},
-                               {"model", p.name + ".cameramodel"},
-                               {"lens_model", p.lens_model},
-                               {"intrinsics", p.intrinsics},
-                               {"imagersize", {p.width, p.height}},
-                               {"centre_room_m", JsonTriple(p.proj_from_room.inverse().translation())}});
-  result_section["projectors"] = projectors_json;
+  result_section["projectors"] = ProjectorsJson(calibration);
   return result_section;
 }
 
@@ -568,14 +573,6 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
       {"ray_gap", StatsJson(gap)}};
   nlohmann::json sessions = nlohmann::json::array();
   for (const std::filesystem::path& session : args.sessions) sessions.push_back(session.string());
-  nlohmann::json projectors_json = nlohmann::json::array();
-  for (const RoomProjector& p : stage.calibration.projectors)
-    projectors_json.push_back({{"name", p.name},
-                               {"model", p.name + ".cameramodel"},
-                               {"lens_model", p.lens_model},
-                               {"intrinsics", p.intrinsics},
-                               {"imagersize", {p.width, p.height}},
-                               {"centre_room_m", JsonTriple(p.proj_from_room.inverse().translation())}});
   const nlohmann::json result_section = {{"sessions", sessions},
                                          {"scene", "room.json (scanned)"},
                                          {"registration", registration_json},
@@ -584,7 +581,7 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
                                            {"unassigned", stage.scanned->unassigned},
                                            {"time_s", stage.scanned->time_s},
                                            {"surfaces", surfaces}}},
-                                         {"projectors", projectors_json}};
+                                         {"projectors", ProjectorsJson(stage.calibration)}};
   ReadRigFile(out);  // a malformed rig.json stops here, before anything is written
   stage.room = WriteScannedScene(out, *stage.scanned);
   WriteDeviceModels(out, camera, stage.calibration, false, "the scanned room's frame (room.json)",
