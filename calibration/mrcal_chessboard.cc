@@ -151,7 +151,10 @@ void Put32(std::string* out, uint32_t value) {
 // local headers and data, the central directory, its end record). Dates are 1980-01-01.
 std::string Zip(const std::vector<std::pair<std::string, std::string>>& members) {
   std::string archive, directory;
-  for (const auto& [name, data] : members) {
+  for (const auto& member : members) {
+    // Plain references, not structured bindings: clang 14 (the fuzz build) cannot capture those.
+    const std::string& name = member.first;
+    const std::string& data = member.second;
     const uint32_t crc = Crc32(data);
     const uint32_t offset = static_cast<uint32_t>(archive.size());
     auto common = [&](std::string* out) {
