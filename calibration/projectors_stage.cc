@@ -164,7 +164,14 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
     throw std::invalid_argument("--names: " + std::to_string(args.names.size()) + " names for " +
                                 std::to_string(args.sessions.size()) + " sessions");
 
-  if (args.scene.empty()) return ScanRoom(args, camera, ReadProblem(args, camera, camera_path));
+  if (args.scene.empty()) {
+    // The scan holds the camera's lens and fits pinhole projectors (self_calibration.h).
+    if (args.options.refine_camera_intrinsics || args.options.refine_distortion)
+      throw std::invalid_argument(
+          "--refine-camera, --refine-distortion: only with --scene (a scan holds the camera's "
+          "lens and fits pinhole projectors)");
+    return ScanRoom(args, camera, ReadProblem(args, camera, camera_path));
+  }
 
   // The guess: --camera-guess, else the pose camera.cameramodel already holds.
   Eigen::Isometry3d guess;

@@ -270,6 +270,17 @@ TEST(CalibrateAll, ScanRefusals) {
   EXPECT_EQ(both.exit_code, 1);
   EXPECT_NE(both.output.find("--scan"), std::string::npos) << both.output;
   EXPECT_FALSE(std::filesystem::exists(dir / "rig"));  // refused before anything is written
+
+  // calibrate projectors: a scan refines neither the camera's lens nor projector distortion.
+  std::filesystem::create_directories(dir / "rig2");
+  WriteCameraModelFile(dir / "rig2/camera.cameramodel",
+                       CameraFromPlacement(MakeSyntheticScene("tiny_box", 20).camera).Model(),
+                       "test");
+  const testing::CommandRun refine = testing::RunProcam(
+      "calibrate projectors " + (dir / "no_session").string() + " --refine-camera --out " +
+      (dir / "rig2").string());
+  EXPECT_EQ(refine.exit_code, 1);
+  EXPECT_NE(refine.output.find("only with --scene"), std::string::npos) << refine.output;
 }
 
 TEST(CalibrateAll, RefusesWhatItCannotDo) {
