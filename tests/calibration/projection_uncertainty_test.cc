@@ -14,61 +14,20 @@
 
 #include "base/camera_model.h"
 #include "calibration/camera_calibration.h"
+#include "tests/calibration/chessboard_fixture.h"
 #include "tests/testing/testing.h"
 
 namespace procam {
 namespace {
 
-constexpr int kWidth = 640, kHeight = 480;
-const std::vector<double> kTrueIntrinsics = {520.0, 515.0, 322.3, 241.7,
-                                             -0.12, 0.05,  0.001, -0.0005};
+using testing::Board;
+using testing::kHeight;
+using testing::kTrueIntrinsics;
+using testing::kWidth;
 
-ChessboardSpec Board() {
-  ChessboardSpec board;
-  board.corners_x = 9;
-  board.corners_y = 6;
-  board.square_size = 0.04;
-  return board;
-}
-
-// Twelve board poses 0.6–1.0 m away, tilted up to ±35°, spread over the image; every corner is
-// projected through the true lens and given N(0, σ²) per coordinate.
+// All twelve board poses of chessboard_fixture.h, their corners plus N(0, σ²) per coordinate.
 std::vector<ChessboardView> NoisyViews(double sigma, uint32_t seed) {
-  struct Placement {
-    double x, y, z, tilt_x_deg, tilt_y_deg, roll_deg;
-  };
-  const Placement placements[] = {
-      {0.00, 0.00, 0.80, 0, 0, 0},       {-0.20, -0.12, 0.85, 20, -25, 5},
-      {0.20, -0.12, 0.85, -20, 25, -5},  {-0.20, 0.14, 0.90, -25, -20, 10},
-      {0.20, 0.14, 0.90, 25, 20, -10},   {0.00, 0.00, 0.60, 35, 0, 15},
-      {0.00, 0.00, 0.65, 0, 35, -15},    {-0.10, 0.05, 1.00, -30, 10, 30},
-      {0.12, -0.05, 0.95, 10, -30, -25}, {0.00, 0.10, 0.70, -15, -15, 90},
-      {-0.15, 0.00, 0.75, 10, 30, 45},   {0.15, 0.05, 0.80, -10, -30, -45},
-  };
-  const ChessboardSpec board = Board();
-  const LensModel lens("LENSMODEL_OPENCV4", kTrueIntrinsics);
-  const Vec3 board_centre((board.corners_x - 1) * board.square_size / 2,
-                          (board.corners_y - 1) * board.square_size / 2, 0.0);
-  std::mt19937 random(seed);
-  std::normal_distribution<double> noise(0.0, sigma);
-  std::vector<ChessboardView> views;
-  for (const Placement& p : placements) {
-    const double deg = M_PI / 180.0;
-    Eigen::Isometry3d cam_from_board = Eigen::Isometry3d::Identity();
-    cam_from_board.linear() = (Eigen::AngleAxisd(p.tilt_x_deg * deg, Vec3::UnitX()) *
-                               Eigen::AngleAxisd(p.tilt_y_deg * deg, Vec3::UnitY()) *
-                               Eigen::AngleAxisd(p.roll_deg * deg, Vec3::UnitZ()))
-                                  .toRotationMatrix();
-    cam_from_board.translation() = Vec3(p.x, p.y, p.z) - cam_from_board.linear() * board_centre;
-    ChessboardView view;
-    view.name = "pose" + std::to_string(views.size());
-    for (int k = 0; k < board.CornerCount(); ++k) {
-      const Vec2 pixel = lens.Project(cam_from_board * board.Corner(k));
-      view.corners.push_back(pixel + Vec2(noise(random), noise(random)));
-    }
-    views.push_back(view);
-  }
-  return views;
+  return testing::NoisyCorners(sigma, seed, 12);
 }
 
 // `outliers` corners of the views are knocked 8 px off (as a misdetection would), for mrcal's
