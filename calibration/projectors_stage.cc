@@ -407,7 +407,12 @@ void WriteDeviceModels(const std::filesystem::path& out, const CameraModel& came
   }
   CameraModel camera_out = camera;
   camera_out.cam_from_ref = calibration.room_from_camera.inverse();
-  if (refined_camera) camera_out.intrinsics = calibration.camera_intrinsics;
+  if (refined_camera) {
+    camera_out.intrinsics = calibration.camera_intrinsics;
+    // The chessboard solve's inputs no longer give these intrinsics: mrcal's tools would evaluate
+    // the uncertainty of a lens that is not the one written.
+    camera_out.optimization_inputs.clear();
+  }
   WriteCameraModelFile(out / "camera.cameramodel", camera_out,
                        (refined_camera
                             ? "procam camera model (procam calibrate camera; fx, fy, cx, cy and "
