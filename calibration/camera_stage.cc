@@ -11,6 +11,7 @@
 
 #include "base/image_io.h"
 #include "base/io.h"
+#include "calibration/camera_report.h"
 #include "calibration/rig_directory.h"
 
 namespace procam {
@@ -48,7 +49,7 @@ CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
   if (!args.options.Check(&why)) throw std::invalid_argument(why);
 
   std::vector<ChessboardView> views;
-  nlohmann::json skipped = nlohmann::json::array();
+  std::vector<std::string> skipped;
   int width = 0, height = 0;
   for (const std::filesystem::path& path : ChessboardImages(args.images)) {
     const cv::Mat image = ReadImage(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
@@ -129,8 +130,12 @@ CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
     result["projection_uncertainty"] = {{"error", stage.uncertainty_error}};
   }
   UpdateRigResult(out, {"camera"}, result);
-  Report(args.progress, "wrote " + (out / "camera.cameramodel").string() + " and " +
-                            (out / "result.json").string() + " (section camera)");
+  WriteCameraReport(out / "camera_report.html", calibration, summary, views, skipped,
+                    stage.uncertainty, stage.uncertainty_error);
+  Report(args.progress, "wrote " + (out / "camera.cameramodel").string() + ", " +
+                            (out / "result.json").string() + " (section camera) and " +
+                            (out / "camera_report.html").string() +
+                            " (the uncertainty map over the image)");
   return stage;
 }
 

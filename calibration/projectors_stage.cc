@@ -4,7 +4,9 @@
 
 #include <cctype>
 #include <cmath>
+#include <algorithm>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 #include <stdexcept>
 
@@ -455,12 +457,15 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
 
 
 // The metric scale of a scan: measured from the floor chessboard, else given.
+// The camera's height above the floor, from the floor chessboard (its plane's normal in the
+// camera frame into *board_normal, for the check against the scan's floor) or --camera-height.
 double ScanCameraHeight(const ProjectorsStageOptions& args, const CameraModel& camera,
-                        nlohmann::json* scale_json) {
+                        nlohmann::json* scale_json, std::optional<Vec3>* board_normal) {
   if (!args.floor_chessboard.empty()) {
     const FloorChessboard floor =
         MeasureFloorChessboard(camera, args.board, args.floor_chessboard, args.board_thickness);
     Report(args.progress, floor.BriefReport());
+    *board_normal = floor.floor_normal_in_cam;
     *scale_json = {{"source", "floor chessboard"},
                    {"photo", args.floor_chessboard.string()},
                    {"corners", {args.board.corners_x, args.board.corners_y}},
@@ -513,7 +518,8 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
   const std::filesystem::path& out = args.out;
   nlohmann::json scale_json;
   SelfCalibrationOptions options = args.self_calibration;
-  options.camera_height = ScanCameraHeight(args, camera, &scale_json);
+  std::optional<Vec3> board_normal;
+  options.camera_height = ScanCameraHeight(args, camera, &scale_json, &board_normal);
   Report(args.progress,
          fmt::format("no room model: the room is scanned ({} projectors; camera {:.4f} m above "
                      "the floor, from {})",
@@ -527,6 +533,20 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
                              "mending it)");
   Report(args.progress, summary.BriefReport());
   stage.self_calibration = summary;
+  if (board_normal) {
+    // The board must lie on the floor the scan found: its plane parallel to that floor (a board
+    // on a tilted surface, or a photo from another camera pose, would set a wrong scale).
+    const Vec3 scan_up = stage.calibration.room_from_camera.linear().transpose() * Vec3::UnitZ();
+    const double angle =
+        std::acos(std::clamp(scan_up.dot(*board_normal), -1.0, 1.0)) * 180.0 / M_PI;
+    scale_json["board_to_scanned_floor_deg"] = angle;
+    if (angle > args.max_board_floor_angle_deg)
+      throw IoError(fmt::format(
+          "{}: the board's plane is {:.1f} deg off the floor the scan found (at most {:g}): lay "
+          "it flat on the floor and take the photo with the camera where it stood for the "
+          "structured light (the captures are kept)",
+          args.floor_chessboard.string(), angle, args.max_board_floor_angle_deg));
+  }
 
   // The room: every correspondence triangulated (rays more than 2 cm apart left out), in the
   // room frame, at most 400 000 points.

@@ -47,6 +47,10 @@ struct ProjectorsStageOptions {
   std::filesystem::path floor_chessboard;
   ChessboardSpec board;
   double board_thickness = 0.0;
+  // The floor chessboard's plane and the scan's floor may differ by at most this, degrees:
+  // more stops the scan with one line naming the photo (the board not flat on the floor, or the
+  // photo taken from another pose). Measured 0.08–0.10° on the synthetic tiny box.
+  double max_board_floor_angle_deg = 3.0;
   SelfCalibrationOptions self_calibration;  // its camera_height is set from the above
   SceneFromPointsOptions scan;  // the written room: reflectance, desired colour, patch target
   ProgressCallback progress;  // decoding per session, the solve, the scan check, files written

@@ -11,6 +11,8 @@
 #include <optional>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "base/camera_model.h"
 #include "base/image_io.h"
@@ -264,7 +266,35 @@ TEST(CalibrateAll, ScansTheRoomWithoutAModel) {
 
   // result.json says where the scale came from.
   const nlohmann::json result = nlohmann::json::parse(ReadFile(dir / "rig/result.json"));
-  EXPECT_EQ(result["projectors"]["registration"]["scale"]["source"], "floor chessboard");
+  const nlohmann::json& scale = result["projectors"]["registration"]["scale"];
+  EXPECT_EQ(scale["source"], "floor chessboard");
+  std::printf("board plane to the scanned floor: %.2f deg\n",
+              scale["board_to_scanned_floor_deg"].get<double>());
+  EXPECT_LT(scale["board_to_scanned_floor_deg"].get<double>(), 1.0);
+
+  // The same captures with the floor photo turned by 5° about the board (which lies along the
+  // photo's bottom edge; moved up 20 px to stay whole in view): the board's plane is then about
+  // 5° off the scanned floor, and the scan stops naming the photo, writing no room.
+  const cv::Mat photo = ReadImage(dir / "rig/captures/floor_chessboard.png", cv::IMREAD_UNCHANGED);
+  cv::Mat turn = cv::getRotationMatrix2D(
+      cv::Point2f(0.5f * photo.cols, 0.83f * photo.rows), 5.0, 1.0);
+  turn.at<double>(1, 2) -= 20.0;
+  cv::Mat turned;
+  cv::warpAffine(photo, turned, turn, photo.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  WritePng(dir / "turned.png", turned);
+  std::filesystem::create_directories(dir / "rig2");
+  std::filesystem::copy_file(dir / "lens.cameramodel", dir / "rig2/camera.cameramodel");
+  const testing::CommandRun tilted = testing::RunProcam(
+      "calibrate projectors " + (dir / "rig/captures/structured_light_left").string() + " " +
+      (dir / "rig/captures/structured_light_right").string() + " --names left,right --out " +
+      (dir / "rig2").string() + " --floor-chessboard " + (dir / "turned.png").string() +
+      " --corners 9x6 --square 0.14");
+  EXPECT_EQ(tilted.exit_code, 1) << tilted.output;
+  const size_t error_line = tilted.output.find("procam: error");
+  if (error_line != std::string::npos) std::printf("%s", tilted.output.c_str() + error_line);
+  EXPECT_NE(tilted.output.find("turned.png: the board's plane is"), std::string::npos)
+      << tilted.output;
+  EXPECT_FALSE(std::filesystem::exists(dir / "rig2/room.json"));
 }
 
 // A scan needs its scale, and is not a registration.

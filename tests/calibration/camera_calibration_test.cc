@@ -2,6 +2,7 @@
 // noise) and chessboard images rendered through the lens (supersampled, with image noise),
 // detected by OpenCV and refined by mrcal. Truth: an OpenCV4 lens of 640×480 pixels.
 #include "calibration/camera_calibration.h"
+#include "calibration/camera_report.h"
 
 #include <gtest/gtest.h>
 
@@ -17,6 +18,8 @@
 #include "datasets_synthetic/chessboard_views.h"
 #include "projection/projector.h"
 #include "tests/calibration/chessboard_fixture.h"
+#include "base/html_report.h"
+#include "base/io.h"
 #include "tests/testing/testing.h"
 
 namespace procam {
@@ -196,12 +199,62 @@ TEST(CalibrateCommand, WritesModelAndResiduals) {
   EXPECT_EQ(uncertainty["grid_px"].size(), 12u);
   EXPECT_EQ(uncertainty["grid_px"][0].size(), 16u);
   EXPECT_NE(run.output.find("projection uncertainty"), std::string::npos) << run.output;
+  // The report page: well formed, with the map's picture and every image listed.
+  const std::string page = ReadFile(dir / "rig/camera_report.html");
+  EXPECT_TRUE(CheckReportStructure(page).empty()) << CheckReportStructure(page)[0];
+  EXPECT_NE(page.find("projection uncertainty over the image"), std::string::npos);
+  EXPECT_NE(page.find("999_blank.png"), std::string::npos);
 
   const testing::CommandRun missing = testing::RunProcam(
       "calibrate camera " + (dir / "nowhere").string() + " --out " + (dir / "rig2").string());
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.output.find("nowhere: not a directory"), std::string::npos) << missing.output;
   EXPECT_FALSE(std::filesystem::exists(dir / "rig2"));
+}
+
+
+// The uncertainty picture: at every grid node the colour of the node's value, between nodes the
+// bilinear mean, values above full scale clamped, board corners white. Checked on a grid whose
+// values are i + 10 j (nodes on the image's corner pixels: x = i (W−1)/(n−1)) at scale 1 and 2.
+TEST(CameraReport, DrawsTheUncertaintyMapWhereItsGridLies) {
+  ProjectionUncertaintyMap map;
+  map.grid_width = 4;
+  map.grid_height = 3;
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 4; ++i) map.grid.push_back(i + 10.0 * j);
+  const int width = 31, height = 21;  // nodes every 10 pixels
+  const double full_scale = 25.5;     // 0.1 px per level: value v is level 10 v
+  const auto colour = [](double level) {
+    cv::Mat one(1, 1, CV_8UC1, cv::Scalar(level)), out;
+    cv::applyColorMap(one, out, cv::COLORMAP_VIRIDIS);
+    return out.at<cv::Vec3b>(0, 0);
+  };
+  for (int scale : {1, 2}) {
+    const cv::Mat picture = DrawProjectionUncertainty(map, width, height, scale, full_scale, {});
+    ASSERT_EQ(picture.cols, width * scale);
+    ASSERT_EQ(picture.rows, height * scale);
+    const auto at = [&](int x, int y) { return picture.at<cv::Vec3b>(y, x); };
+    if (scale == 1) {
+      EXPECT_EQ(at(0, 0), colour(0));             // node (0, 0): 0
+      EXPECT_EQ(at(20, 10), colour(10 * 12.0));   // node (2, 1): 12
+      EXPECT_EQ(at(15, 10), colour(10 * 11.5));   // halfway between 11 and 12
+      EXPECT_EQ(at(10, 15), colour(10 * 16.0));   // halfway between 11 and 21
+      EXPECT_EQ(at(30, 20), colour(230));         // node (3, 2): 23
+    }
+    // The output's corner pixels lie on (or, at scale 2, a quarter pixel beyond) the corner
+    // nodes: 0, 3, 20, 23.
+    EXPECT_EQ(picture.at<cv::Vec3b>(0, 0), colour(0));
+    EXPECT_EQ(picture.at<cv::Vec3b>(0, picture.cols - 1), colour(30));
+    EXPECT_EQ(picture.at<cv::Vec3b>(picture.rows - 1, 0), colour(200));
+    EXPECT_EQ(picture.at<cv::Vec3b>(picture.rows - 1, picture.cols - 1), colour(230));
+  }
+  // Clamping: full scale 10 puts the bottom right corner (23) at the top of the map.
+  const cv::Mat clamped = DrawProjectionUncertainty(map, width, height, 1, 10.0, {Vec2(5, 5)});
+  EXPECT_EQ(clamped.at<cv::Vec3b>(20, 30), colour(255));
+  EXPECT_EQ(clamped.at<cv::Vec3b>(5, 5), cv::Vec3b(255, 255, 255));  // a corner's dot
+  EXPECT_THROW(DrawProjectionUncertainty(ProjectionUncertaintyMap(), width, height, 1, 1.0, {}),
+               std::invalid_argument);
+  EXPECT_THROW(DrawProjectionUncertainty(map, width, height, 0, 1.0, {}), std::invalid_argument);
 }
 
 }  // namespace
