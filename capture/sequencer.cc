@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 #include <thread>
 
@@ -127,6 +128,8 @@ bool SequencerOptions::Check(std::string* why) const {
     return Fail(why, "retry_delay_ms must be in [0, 60000]");
   if (max_stale_frames < 1 || max_stale_frames > 1000000)
     return Fail(why, "max_stale_frames must be in [1, 1e6]");
+  if (!(max_changed_fraction >= 0.0 && max_changed_fraction <= 1.0))
+    return Fail(why, "max_changed_fraction must be in [0, 1]");
   return hdr.Check(why);
 }
 
@@ -172,61 +175,102 @@ void PatternSequencer::WithRetries(PatternCapture* capture, Action action) {
   }
 }
 
+namespace {
+
+// The fraction of `a`'s values (every channel) that differ from `b`'s by more than `threshold`.
+double ChangedFraction(const cv::Mat& a, const cv::Mat& b, double threshold) {
+  cv::Mat difference, changed;
+  cv::absdiff(a, b, difference);
+  cv::compare(difference.reshape(1), threshold, changed, cv::CMP_GT);
+  return static_cast<double>(cv::countNonZero(changed)) / static_cast<double>(changed.total());
+}
+
+}  // namespace
+
 ExposureCapture PatternSequencer::CaptureExposure(int64_t settled_ns, double exposure_us,
                                                   PatternCapture* capture) {
   ExposureCapture result;
-  cv::Mat sum;
+  cv::Mat sum, first, last;
   int consecutive_failures = 0;
   int stale_in_a_row = 0;
+  int still_changing = 0;
   bool drop_buffered = true;
   const auto timeout = std::chrono::milliseconds(
       static_cast<int64_t>(std::ceil(options_.grab_timeout_ms + exposure_us * 1e-3)));
-  while (result.frames < options_.frames_per_pattern) {
-    try {
-      if (drop_buffered) {
-        result.buffered_dropped += camera_->DropBufferedFrames();
-        drop_buffered = false;
-      }
-      Frame frame = camera_->Grab(timeout);
-      consecutive_failures = 0;
-      if (frame.exposure_start_ns < settled_ns) {
-        ++result.stale_dropped;
-        if (++stale_in_a_row > options_.max_stale_frames) {
-          throw CaptureFault(
-              "camera '" + camera_->Info().uri + "': " + std::to_string(stale_in_a_row) +
-              " frames in a row were exposed before the pattern settled (frame clock not in step "
-              "with the host?)");
+  for (;;) {
+    while (result.frames < options_.frames_per_pattern) {
+      try {
+        if (drop_buffered) {
+          result.buffered_dropped += camera_->DropBufferedFrames();
+          drop_buffered = false;
         }
-        continue;
+        Frame frame = camera_->Grab(timeout);
+        consecutive_failures = 0;
+        if (frame.exposure_start_ns < settled_ns) {
+          ++result.stale_dropped;
+          if (++stale_in_a_row > options_.max_stale_frames) {
+            throw CaptureFault(
+                "camera '" + camera_->Info().uri + "': " + std::to_string(stale_in_a_row) +
+                " frames in a row were exposed before the pattern settled (frame clock not in step "
+                "with the host?)");
+          }
+          continue;
+        }
+        stale_in_a_row = 0;
+        if (result.discarded < options_.discard_frames) {
+          ++result.discarded;
+          continue;
+        }
+        cv::Mat value;
+        frame.image.convertTo(value, CV_32F);
+        last = value;
+        if (sum.empty()) {
+          first = value.clone();
+          sum = value.clone();
+          result.exposure_us = frame.exposure_us;
+          result.gain = frame.gain;
+          result.first_exposure_start_ns = frame.exposure_start_ns;
+        } else if (value.size() != sum.size() || value.type() != sum.type()) {
+          throw CaptureFault("camera '" + camera_->Info().uri +
+                             "': frame size or format changed within a pattern");
+        } else {
+          sum += value;
+        }
+        result.last_arrival_ns = frame.arrival_ns;
+        result.sequences.push_back(frame.sequence);
+        ++result.frames;
+      } catch (const CameraTimeout& error) {
+        Retry(error, capture, &consecutive_failures);
+        drop_buffered = true;
+      } catch (const CameraDisconnected& error) {
+        Retry(error, capture, &consecutive_failures);
+        drop_buffered = true;
       }
-      stale_in_a_row = 0;
-      if (result.discarded < options_.discard_frames) {
-        ++result.discarded;
-        continue;
-      }
-      cv::Mat value;
-      frame.image.convertTo(value, CV_32F);
-      if (sum.empty()) {
-        sum = value;
-        result.exposure_us = frame.exposure_us;
-        result.gain = frame.gain;
-        result.first_exposure_start_ns = frame.exposure_start_ns;
-      } else if (value.size() != sum.size() || value.type() != sum.type()) {
-        throw CaptureFault("camera '" + camera_->Info().uri +
-                           "': frame size or format changed within a pattern");
-      } else {
-        sum += value;
-      }
-      result.last_arrival_ns = frame.arrival_ns;
-      result.sequences.push_back(frame.sequence);
-      ++result.frames;
-    } catch (const CameraTimeout& error) {
-      Retry(error, capture, &consecutive_failures);
-      drop_buffered = true;
-    } catch (const CameraDisconnected& error) {
-      Retry(error, capture, &consecutive_failures);
-      drop_buffered = true;
     }
+    // Had the picture settled? The first and the last frame must show the same one.
+    const double changed = result.frames >= 2 && options_.max_changed_fraction < 1.0
+                               ? ChangedFraction(first, last, 0.1 * capture->full_scale)
+                               : 0.0;
+    if (changed <= options_.max_changed_fraction) break;
+    char percent[32];
+    std::snprintf(percent, sizeof(percent), "%.1f%%", 100.0 * changed);
+    const std::string reason = "camera '" + camera_->Info().uri +
+                               "': the picture was still changing during a pattern's frames (" +
+                               percent +
+                               " of the pixel values changed by over a tenth of full scale "
+                               "between the first and the last)";
+    if (++still_changing > options_.max_retries)
+      throw CaptureFault(reason + ", " + std::to_string(still_changing) +
+                         " times in a row: the display reaches the camera later than the settle "
+                         "time (raise --settle-ms)");
+    ++capture->retries;
+    capture->retry_reasons.push_back(reason + "; taken again");
+    // Frames from now on see the settled picture (a change lasts less than one frame).
+    settled_ns = SteadyNowNs();
+    result.frames = 0;
+    result.sequences.clear();
+    sum = cv::Mat();
+    drop_buffered = true;
   }
   result.mean = sum / static_cast<double>(result.frames);
   return result;

@@ -57,6 +57,13 @@ struct SequencerOptions {
   int max_retries = 3;               // consecutive failed grabs tolerated per pattern, [0, 100]
   double retry_delay_ms = 200.0;     // pause before a retry, milliseconds, [0, 60000]
   int max_stale_frames = 200;        // stale frames tolerated in a row before giving up, [1, 1e6]
+  // A display whose change reaches the camera later than settle_ms (a compositor's hiccup)
+  // leaves the first frames of a pattern showing the previous one. With two frames or more per
+  // exposure, the first and last averaged frames are compared: when more than this fraction of
+  // their pixel values differ by over a tenth of full scale, the picture was still changing, and
+  // the exposure's frames are taken again (a retry, counted with max_retries), [0, 1]; 1: never.
+  // Camera noise does not reach a tenth of full scale; a Gray-code stripe flipping does.
+  double max_changed_fraction = 0.005;
   HdrMergeOptions hdr;
   bool Check(std::string* why) const;
 };

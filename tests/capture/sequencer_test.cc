@@ -114,6 +114,42 @@ TEST(Sequencer, FramesExposedBeforeThePatternSettledAreNeverAveraged) {
   EXPECT_EQ(high, 180);
 }
 
+// A display that reaches the camera later than the settle time (a compositor's hiccup): the
+// first frames after settling still show the previous pattern, the last ones the new one. The
+// sequencer sees its first and last frames disagree and takes the frames again: the average is
+// the new pattern alone, one retry is counted with its reason. When every frame is late (no
+// disagreement to see) nothing can tell; that is the settle time's job.
+TEST(Sequencer, APictureStillChangingDuringItsFramesIsTakenAgain) {
+  TestCameraOptions camera_options = SmallCamera();
+  camera_options.display_latency_ms = 200;
+  camera_options.buffers = 4;
+  auto display = std::make_shared<MemoryDisplay>(cv::Size(16, 12));
+  TestCamera camera(camera_options, MakeLoopbackView(display));
+  SequencerOptions options = FastSequencer();
+  options.settle_ms = 20;            // 180 ms short of the latency (wide, for loaded machines)
+  options.frames_per_pattern = 100;  // 250 ms at 400 fps: spans the change
+  PatternSequencer sequencer(options, &camera, display.get());
+  sequencer.Capture(Uniform(display->Resolution(), 20));
+  const PatternCapture capture = sequencer.Capture(Uniform(display->Resolution(), 200));
+  double low = 0, high = 0;
+  cv::minMaxLoc(capture.exposures[0].mean, &low, &high);
+  EXPECT_EQ(low, 200);
+  EXPECT_EQ(high, 200);
+  ASSERT_EQ(capture.retries, 1);
+  EXPECT_NE(capture.retry_reasons[0].find("still changing"), std::string::npos)
+      << capture.retry_reasons[0];
+
+  // Off (max_changed_fraction 1): the same capture averages both pictures.
+  options.max_changed_fraction = 1.0;
+  PatternSequencer blind(options, &camera, display.get());
+  blind.Capture(Uniform(display->Resolution(), 20));
+  const PatternCapture mixed = blind.Capture(Uniform(display->Resolution(), 200));
+  cv::minMaxLoc(mixed.exposures[0].mean, &low, &high);
+  EXPECT_GT(low, 20);
+  EXPECT_LT(high, 200);
+  EXPECT_EQ(mixed.retries, 0);
+}
+
 TEST(Sequencer, BracketingMergesToTheTrueRadiance) {
   TestCameraOptions camera_options = SmallCamera();
   camera_options.width = 64;
