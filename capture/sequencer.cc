@@ -262,7 +262,7 @@ ExposureCapture PatternSequencer::CaptureExposure(int64_t settled_ns, double exp
     if (++still_changing > options_.max_retries)
       throw CaptureFault(reason + ", " + std::to_string(still_changing) +
                          " times in a row: the display reaches the camera later than the settle "
-                         "time (raise --settle-ms)");
+                         "time (raise --settle-ms), or something moves in the camera's view");
     ++capture->retries;
     capture->retry_reasons.push_back(reason + "; taken again");
     // Frames from now on see the settled picture (a change lasts less than one frame).

@@ -62,7 +62,8 @@ struct SequencerOptions {
   // exposure, the first and last averaged frames are compared: when more than this fraction of
   // their pixel values differ by over a tenth of full scale, the picture was still changing, and
   // the exposure's frames are taken again (a retry, counted with max_retries), [0, 1]; 1: never.
-  // Camera noise does not reach a tenth of full scale; a Gray-code stripe flipping does.
+  // Camera noise does not reach a tenth of full scale; a Gray-code stripe flipping does, and so
+  // does a person walking through the view (past max_retries the capture stops saying so).
   double max_changed_fraction = 0.005;
   HdrMergeOptions hdr;
   bool Check(std::string* why) const;

@@ -158,6 +158,7 @@ TEST_F(AravisFake, SequencerAveragesTheFramesItReports) {
   SequencerOptions options;
   options.settle_ms = 0;
   options.frames_per_pattern = 3;
+  options.max_changed_fraction = 1.0;  // the fake camera's ramp moves every frame, by design
   PatternSequencer sequencer(options, camera.get(), &display);
   const PatternCapture capture = sequencer.Capture(cv::Mat(8, 8, CV_8UC3, cv::Scalar::all(255)));
   const ExposureCapture& exposure = capture.exposures[0];
