@@ -62,6 +62,7 @@ struct SceneArguments {
   std::string out;
   int patches = 0;
   double alpha = 0.5;
+  bool no_scan = false;  // demo: skip the scan stage
 };
 
 // The demo on a rig: a camera (real, or a synthetic one treated like a real one), the projectors'
@@ -269,6 +270,9 @@ void AddDemoCommand(CLI::App& app) {
   demo->add_option("--iterations", rig->iterations, "With --camera: closed-loop photos at most")
       ->capture_default_str();
   AddLightOption(demo, &rig->light);
+  demo->add_flag("--no-scan", args->no_scan,
+                 "Synthetic rig: skip the scan stage (the rig calibrated and the room scanned "
+                 "without the model, compensated on the scan)");
   demo->callback([args, rig] {
     const std::filesystem::path out = args->out;
     std::filesystem::create_directories(out);
@@ -286,6 +290,7 @@ void AddDemoCommand(CLI::App& app) {
     demo.scene = args->scene;
     demo.patches = args->patches;
     demo.light = rig->light;
+    demo.scan = !args->no_scan;
     demo.out = out;
     demo.progress = LogProgress();
     demo.steps = PrintProgress();
@@ -297,6 +302,7 @@ void AddDemoCommand(CLI::App& app) {
     };
     for (const MethodEvaluation& m : summary.methods) row(MethodName(m.method), m, "");
     row("perceptual", summary.calibrated, "   (calibrated rig)");
+    if (summary.scanned) row("perceptual", *summary.scanned, "   (scanned room, no model)");
     std::cout << "\nverification (closed loop, calibrated rig): " << summary.verification << "\n";
     std::cout << "\nwrote " << (out / "report.html").string() << " (open it in a browser), pictures, result.json, "
               << "problem/ and per method E.npy, B.npy and projector images\n";

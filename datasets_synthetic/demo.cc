@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <opencv2/imgcodecs.hpp>
 
 #include "base/camera_model.h"
@@ -11,9 +12,12 @@
 #include "base/image_io.h"
 #include "base/io.h"
 #include "calibration/calibrate_all_stage.h"
+#include "calibration/registration.h"
 #include "calibration/rig_directory.h"
 #include "compensation/colour_image.h"
 #include "compensation/stage.h"
+#include "geometry/stage.h"
+#include "projection/camera_rays.h"
 #include "verification/verification.h"
 
 namespace procam {
@@ -29,6 +33,41 @@ struct CalibrationStage {
   MethodEvaluation perceptual;                     // with the recovered rig
   nlohmann::json json;
 };
+
+// Perceptual compensation of `geometry` (the patches the rig's projectors light, with the rig's
+// reflectance) by `projectors`, their images shown by the world's true projectors and
+// photographed in the true world; ΔE against the true desired appearance.
+MethodEvaluation CompensateAndPhotograph(const GeometryStage& geometry,
+                                         const std::vector<Projector>& projectors,
+                                         const SceneEvaluation& evaluation,
+                                         const EvaluationOptions& options,
+                                         const ProgressCallback& progress) {
+  const ProjectionRig recovered =
+      BuildProjectionRig(geometry.patches.fine, projectors, ProjectionRigOptions());
+  MethodEvaluation result;
+  CompensationOptions compensation;
+  compensation.solver.method = CompensationMethod::kPerceptual;
+  compensation.solver.multires = options.multires;
+  compensation.alpha = options.alpha;
+  compensation.lower = recovered.lower;
+  compensation.upper = recovered.upper;
+  compensation.progress = progress;
+  result.run = RunCompensation(geometry, compensation);
+  result.images = RenderProjectorImages(recovered, result.run.solution.emittance, options.render,
+                                        &result.render);
+  result.radiance = evaluation.world->RenderRadiance(result.images);
+  PixelDeltaE(result.radiance, evaluation, result.run.fine.rgb_to_xyz, result.run.fine.white_xyz,
+              &result);
+  return result;
+}
+
+nlohmann::json DeltaEJson(const MethodEvaluation& result) {
+  return {{"mean_delta_e76", result.mean_delta_e76},
+          {"max_delta_e76", result.max_delta_e76},
+          {"mean_delta_e2000", result.mean_delta_e2000},
+          {"max_delta_e2000", result.max_delta_e2000},
+          {"seam", result.seams.Json()}};
+}
 
 CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
                                      const EvaluationOptions& options,
@@ -110,27 +149,183 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
   // by the true projectors in the true world.
   GeometryStage& geometry = stage.geometry = evaluation.geometry;
   ApplyRigReflectance(rig, &geometry.patches);
-  const ProjectionRig recovered =
-      BuildProjectionRig(geometry.patches.fine, rig.projectors, ProjectionRigOptions());
-  MethodEvaluation& result = stage.perceptual;
-  CompensationOptions compensation;
-  compensation.solver.method = CompensationMethod::kPerceptual;
-  compensation.solver.multires = options.multires;
-  compensation.alpha = options.alpha;
-  compensation.lower = recovered.lower;
-  compensation.upper = recovered.upper;
-  compensation.progress = progress;
-  result.run = RunCompensation(geometry, compensation);
-  result.images = RenderProjectorImages(recovered, result.run.solution.emittance, options.render,
-                                        &result.render);
-  result.radiance = evaluation.world->RenderRadiance(result.images);
-  PixelDeltaE(result.radiance, evaluation, result.run.fine.rgb_to_xyz, result.run.fine.white_xyz,
-              &result);
-  stage.json["perceptual_with_calibrated_rig"] = {{"mean_delta_e76", result.mean_delta_e76},
-                                                  {"max_delta_e76", result.max_delta_e76},
-                                                  {"mean_delta_e2000", result.mean_delta_e2000},
-                                                  {"max_delta_e2000", result.max_delta_e2000},
-                                                  {"seam", result.seams.Json()}};
+  stage.perceptual =
+      CompensateAndPhotograph(geometry, rig.projectors, evaluation, options, progress);
+  stage.json["perceptual_with_calibrated_rig"] = DeltaEJson(stage.perceptual);
+  return stage;
+}
+
+// The demo's scan stage: the rig calibrated without the room model (`calibrate all --scan`),
+// the room from its own scan (RIG_DIR/room.json), the desired appearance carried onto the
+// scanned patches through the camera's view (each patch takes the mean of the true desired
+// picture over the camera pixels that see it), the perceptual compensation computed on the
+// scanned room and shown by the true projectors in the true world.
+struct ScanStage {
+  std::vector<std::vector<std::string>> surfaces;  // table rows, one per scanned surface
+  MethodEvaluation perceptual;                     // on the scanned room
+  cv::Mat surfaces_picture;  // camera view: true surfaces | scanned surfaces, by colour
+  nlohmann::json json;
+};
+
+// A distinct display colour (BGR) per index; grey for −1.
+cv::Vec3b SurfaceColour(int index) {
+  if (index < 0) return cv::Vec3b(40, 40, 40);
+  static const cv::Vec3b kColours[] = {{60, 180, 75},  {75, 25, 230},  {25, 225, 255},
+                                       {200, 130, 0},  {48, 130, 245}, {180, 30, 145},
+                                       {240, 240, 70}, {230, 50, 240}, {60, 245, 210},
+                                       {190, 190, 250}, {128, 128, 0}, {255, 190, 220}};
+  return kColours[index % (sizeof(kColours) / sizeof(kColours[0]))];
+}
+
+ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOptions& options,
+                       const std::filesystem::path& rig_dir, const ProgressCallback& progress,
+                       const ProgressCallback& steps) {
+  ScanStage stage;
+  const std::string camera = fmt::format(
+      "synthetic:{}?patches={}&albedo={}&fps=500&exposure_us=1000&reference_exposure_us=1000&black="
+      "8&noise=1",
+      evaluation.name, options.patches, options.albedo_variation);
+  Report(steps, fmt::format("\n$ procam calibrate all --camera {} --scan --out {} --frames 2 "
+                            "--settle-ms 1 --levels 0,32,64,128,192,255",
+                            camera, rig_dir.string()));
+  CalibrateAllOptions calibrate;
+  calibrate.camera = camera;
+  calibrate.scan = true;
+  calibrate.out = rig_dir;
+  calibrate.frames = 2;
+  calibrate.settle_ms = 1;
+  calibrate.levels = {0, 32, 64, 128, 192, 255};
+  calibrate.progress = steps;
+  RunCalibrateAll(calibrate);
+  const RigDirectory rig = ReadRigDirectory(rig_dir);
+
+  GeometryOptions geometry_options;
+  geometry_options.patches = options.patches;
+  GeometryStage geometry = RunGeometryStage((rig_dir / "room.json").string(), geometry_options);
+  ApplyRigReflectance(rig, &geometry.patches);
+
+  // The desired appearance through the camera: the true desired picture averaged per scanned
+  // patch over the pixels that see it; a patch no pixel sees takes the picture's mean.
+  const ProjectorGeometry rig_camera = ReadCameraModel(rig_dir / "camera.cameramodel");
+  PatchLevel& fine = geometry.patches.fine;
+  const CameraPixelRays rays = CastCameraPixels(geometry.scene, fine, {}, rig_camera);
+  Eigen::MatrixX3d sum = Eigen::MatrixX3d::Zero(fine.size(), 3);
+  Eigen::VectorXd count = Eigen::VectorXd::Zero(fine.size());
+  const cv::Mat& desired = evaluation.desired;
+  Vec3 mean = Vec3::Zero();
+  int seen = 0;
+  for (int y = 0; y < std::min(rays.height, desired.rows); ++y) {
+    for (int x = 0; x < std::min(rays.width, desired.cols); ++x) {
+      const cv::Vec3f& value = desired.at<cv::Vec3f>(y, x);
+      const Vec3 rgb(value[0], value[1], value[2]);  // linear R, G, B (RenderDesired)
+      const int patch = rays.patch[static_cast<size_t>(y) * rays.width + x];
+      if (patch < 0 || !(rgb.maxCoeff() > 0.0)) continue;
+      sum.row(patch) += rgb.transpose();
+      count[patch] += 1.0;
+      mean += rgb;
+      ++seen;
+    }
+  }
+  if (seen == 0) throw std::runtime_error("demo: the camera sees none of the scanned room");
+  mean /= seen;
+  int unseen = 0;
+  for (int i = 0; i < fine.size(); ++i) {
+    if (count[i] > 0.0) {
+      fine.desired_linear.row(i) = sum.row(i) / count[i];
+    } else {
+      fine.desired_linear.row(i) = mean.transpose();
+      ++unseen;
+    }
+  }
+  geometry.patches.coarse.desired_linear =
+      CoarsenPatchValues(fine.desired_linear, fine.Areas(), geometry.patches.coarse_of_fine,
+                         geometry.patches.coarse.size());
+  stage.perceptual =
+      CompensateAndPhotograph(geometry, rig.projectors, evaluation, options, progress);
+
+  // The scanned surfaces against the true ones: the frames differ by the camera's pose (true
+  // in the world, calibrated in the scanned room).
+  const CameraModel camera_model = ReadCameraModelFile(rig_dir / "camera.cameramodel");
+  const Eigen::Isometry3d world_from_room =
+      evaluation.world->camera().proj_from_world().inverse() * camera_model.cam_from_ref;
+  const Scene& true_scene = evaluation.geometry.scene;
+  const RoomModel true_model(true_scene);
+  const RoomModel scanned_model(geometry.scene);
+  const nlohmann::json scan_json =
+      nlohmann::json::parse(ReadFile(rig_dir / "result.json"))["projectors"]["scan"];
+  nlohmann::json surfaces = nlohmann::json::array();
+  for (size_t s = 0; s < geometry.scene.surfaces.size(); ++s) {
+    // Every facet's corners and centroid, their distance to the true room; the true surface
+    // under most of the facets.
+    double squares = 0.0, area = 0.0;
+    int samples = 0;
+    std::vector<int> votes(true_scene.surfaces.size(), 0);
+    for (const ModelFacet& facet : scanned_model.facets()) {
+      if (facet.surface != static_cast<int>(s)) continue;
+      Vec3 centroid = Vec3::Zero(), nearest;
+      for (const Vec3& corner : facet.corners) centroid += corner / facet.corners.size();
+      for (size_t k = 1; k + 1 < facet.corners.size(); ++k)
+        area += 0.5 * (facet.corners[k] - facet.corners[0])
+                          .cross(facet.corners[k + 1] - facet.corners[0])
+                          .norm();
+      std::vector<Vec3> points = facet.corners;
+      points.push_back(centroid);
+      for (const Vec3& p : points) {
+        double distance = 0.0;
+        true_model.Closest(world_from_room * p, &nearest, &distance);
+        squares += distance * distance;
+        ++samples;
+      }
+      double distance = 0.0;
+      ++votes[true_model.facets()[true_model.Closest(world_from_room * centroid, &nearest,
+                                                     &distance)]
+                  .surface];
+    }
+    const int true_surface =
+        static_cast<int>(std::max_element(votes.begin(), votes.end()) - votes.begin());
+    const double rms_mm = 1e3 * std::sqrt(squares / std::max(1, samples));
+    const std::string& name = geometry.scene.surfaces[s].name;
+    std::string kind = "?";
+    for (const nlohmann::json& entry : scan_json["surfaces"])
+      if (entry["name"] == name) kind = entry["kind"].get<std::string>();
+    stage.surfaces.push_back({name, kind, true_scene.surfaces[true_surface].name,
+                              fmt::format("{:.1f}", rms_mm), fmt::format("{:.3f}", area)});
+    surfaces.push_back({{"name", name},
+                        {"kind", kind},
+                        {"true_surface", true_scene.surfaces[true_surface].name},
+                        {"corners_and_centroids_rms_mm", rms_mm},
+                        {"area_m2", area}});
+  }
+
+  // The picture: each camera pixel coloured by the true surface it sees (left) and by the
+  // scanned surface it sees through the calibrated camera (right); a true surface's colour is
+  // that of the scanned surface lying on it, so that matching regions match in colour.
+  std::vector<int> colour_of_true(true_scene.surfaces.size(), -1);
+  for (size_t s = 0; s < stage.surfaces.size(); ++s)
+    for (size_t t = 0; t < true_scene.surfaces.size(); ++t)
+      if (true_scene.surfaces[t].name == stage.surfaces[s][2] && colour_of_true[t] < 0)
+        colour_of_true[t] = static_cast<int>(s);
+  const cv::Mat& true_patch = evaluation.camera_patch;
+  cv::Mat picture(rays.height, 2 * rays.width + 4, CV_8UC3, cv::Scalar(255, 255, 255));
+  for (int y = 0; y < rays.height; ++y) {
+    for (int x = 0; x < rays.width; ++x) {
+      int t = -1;
+      if (y < true_patch.rows && x < true_patch.cols) {
+        const int patch = true_patch.at<int32_t>(y, x);
+        if (patch >= 0) t = evaluation.geometry.patches.fine.patches[patch].surface;
+      }
+      picture.at<cv::Vec3b>(y, x) = SurfaceColour(t < 0 ? -1 : colour_of_true[t]);
+      const int scanned = rays.patch[static_cast<size_t>(y) * rays.width + x];
+      picture.at<cv::Vec3b>(y, rays.width + 4 + x) =
+          SurfaceColour(scanned < 0 ? -1 : fine.patches[scanned].surface);
+    }
+  }
+  stage.surfaces_picture = picture;
+  stage.json = {{"rig", rig_dir.string()},
+                {"surfaces", surfaces},
+                {"patches", fine.size()},
+                {"patches_unseen_by_the_camera", unseen},
+                {"perceptual_on_scanned_room", DeltaEJson(stage.perceptual)}};
   return stage;
 }
 
@@ -160,6 +355,15 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
          "calibrate all)");
   const CalibrationStage calibration =
       RunCalibrationStage(evaluation, options, out / "rig", demo.progress, demo.steps);
+  std::optional<ScanStage> scan;
+  if (demo.scan) {
+    Report(demo.progress,
+           "demo: scan stage — the rig calibrated without the room model, the room from its own "
+           "scan (procam calibrate all --scan), compensation on the scanned room");
+    scan = RunScanStage(evaluation, options, out / "rig_scan", demo.progress, demo.steps);
+    WritePng(out / "scanned_surfaces.png", scan->surfaces_picture);
+    WritePng(out / "perceptual_scanned.png", LinearToDisplay(scan->perceptual.radiance));
+  }
   // Verification: the calibrated solution photographed, compared with its prediction, and the
   // model refined from the photos (procam verify).
   Report(demo.progress,
@@ -184,6 +388,7 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
            HeatMapWithColourBar(calibration.perceptual.delta_e76, 30.0, "dE76"));
   nlohmann::json result = EvaluationJson(evaluation);
   result["calibration"] = calibration.json;
+  if (scan) result["scan"] = scan->json;
   result["verification"] = {{"summary", verified.BriefReport()},
                             {"best_iteration", verified.best},
                             {"result", (out / "verify" / "result.json").string()}};
@@ -246,6 +451,30 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
       {{"perceptual, calibrated rig", cv::imread((out / "perceptual_calibrated.png").string())},
        {"ΔE76, calibrated rig",
         cv::imread((out / "perceptual_calibrated_delta_e76.png").string())}});
+  if (scan) {
+    report.Heading("The room from its own scan");
+    const MethodEvaluation& on_model = calibration.perceptual;
+    report.Paragraph(fmt::format(
+        "procam calibrate all --scan: no room model and no guess; the projectors' lenses and "
+        "poses from the structured light alone, the scale from a photo of the chessboard on the "
+        "floor, the room's surfaces from the triangulated points (RIG_DIR/room.json), the "
+        "desired appearance carried onto them through the camera's view. Perceptual "
+        "compensation computed on the scanned room, shown by the true projectors in the true "
+        "room: mean ΔE2000 {:.2f} (ΔE76 {:.2f}, seam {:.2f}); computed on the true model with "
+        "the calibrated rig: mean ΔE2000 {:.2f} (ΔE76 {:.2f}): {:+.2f} ΔE2000 from the scan.",
+        scan->perceptual.mean_delta_e2000, scan->perceptual.mean_delta_e76,
+        scan->perceptual.seams.seam, on_model.mean_delta_e2000, on_model.mean_delta_e76,
+        scan->perceptual.mean_delta_e2000 - on_model.mean_delta_e2000));
+    report.Table({"scanned surface", "kind", "lies on (true)", "corners and centroids from the "
+                  "truth, RMS mm", "area m²"},
+                 scan->surfaces);
+    report.Figures(
+        {{"camera view: the true surfaces (left) and the scanned ones (right), a scanned "
+          "surface in the colour of the true one it lies on",
+          scan->surfaces_picture},
+         {"perceptual, computed on the scanned room",
+          cv::imread((out / "perceptual_scanned.png").string())}});
+  }
   AddVerificationReport(verified, &report);  // its own heading
   report.Heading("Pictures");
   std::vector<std::pair<std::string, cv::Mat>> figures;
@@ -270,6 +499,7 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
   summary.methods = evaluation.methods;
   summary.calibrated = calibration.perceptual;
   summary.verification = verified.BriefReport();
+  if (scan) summary.scanned = scan->perceptual;
   return summary;
 }
 
