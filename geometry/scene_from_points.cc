@@ -572,6 +572,36 @@ std::vector<bool> MergeAndClassify(const std::vector<Vec3>& points, const std::v
   return curved;
 }
 
+// Step 5b: what region growing left unplanar, in connected groups; a group flat within its own
+// noise (a quadratic fit no better than curvature_tolerance, its RMS to the plane at most
+// noisy_plane_rms) is a plane measured with more noise than plane_distance allows for (a far wall
+// triangulated along its normal): it becomes a planar region of its own.
+void PromoteNoisyPlanes(const std::vector<Vec3>& points, const std::vector<std::vector<int>>& neighbours,
+                        const Vec3& viewpoint, const SceneFromPointsOptions& options, std::vector<int>* label,
+                        std::vector<Plane>* planes, std::vector<bool>* curved) {
+  if (!(options.noisy_plane_rms > 0)) return;
+  const auto unplanar = [&](int i) { return (*label)[i] < 0 || (*curved)[(*label)[i]]; };
+  std::vector<bool> visited(points.size(), false);
+  for (size_t seed = 0; seed < points.size(); ++seed) {
+    if (visited[seed] || !unplanar(static_cast<int>(seed))) continue;
+    std::vector<int> group = {static_cast<int>(seed)};
+    visited[seed] = true;
+    for (size_t k = 0; k < group.size(); ++k)
+      for (int j : neighbours[group[k]])
+        if (!visited[j] && unplanar(j)) visited[j] = true, group.push_back(j);
+    if (static_cast<int>(group.size()) < options.min_plane_points) continue;
+    const Plane plane = FitPlane(points, group, viewpoint);
+    double plane_rms = 0, quadratic_rms = 0;
+    PlaneAndQuadraticRms(points, group, plane, &plane_rms, &quadratic_rms);
+    const double curvature = std::sqrt(std::max(0.0, plane_rms * plane_rms - quadratic_rms * quadratic_rms));
+    if (curvature > options.curvature_tolerance || plane_rms > options.noisy_plane_rms) continue;
+    const int region = static_cast<int>(planes->size());
+    planes->push_back(plane);
+    curved->push_back(false);
+    for (int i : group) (*label)[i] = region;
+  }
+}
+
 // Steps 4–5: outlines of the planar regions, snapped to their neighbours' edge lines.
 // `surface_of_region`: the index of each region's surface, −1 for none.
 std::vector<PlaneSurface> PlaneSurfaces(const std::vector<Vec3>& points, const std::vector<std::vector<int>>& neighbours,
@@ -752,6 +782,7 @@ bool SceneFromPointsOptions::Check(std::string* why) const {
   if (normal_neighbors < 6) return fail("normal_neighbors must be ≥ 6");
   if (growing_neighbors < 4) return fail("growing_neighbors must be ≥ 4");
   if (!(plane_distance > 0)) return fail("plane_distance must be > 0");
+  if (!(noisy_plane_rms >= 0)) return fail("noisy_plane_rms must be ≥ 0");
   if (!(plane_angle_deg > 0 && plane_angle_deg < 90)) return fail("plane_angle_deg must be in (0, 90)");
   if (min_plane_points < 3) return fail("min_plane_points must be ≥ 3");
   if (!(curvature_tolerance > 0)) return fail("curvature_tolerance must be > 0");
@@ -816,7 +847,8 @@ ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPoi
   const std::vector<std::vector<int>> members = Members(label, regions);
   for (int r = 0; r < regions; ++r) planes[r] = FitPlane(points, members[r], viewpoint);
   AbsorbEdgePoints(points, neighbours, planes, options.plane_distance, &label);
-  const std::vector<bool> curved = MergeAndClassify(points, neighbours, viewpoint, options, &label, &planes);
+  std::vector<bool> curved = MergeAndClassify(points, neighbours, viewpoint, options, &label, &planes);
+  PromoteNoisyPlanes(points, neighbours, viewpoint, options, &label, &planes, &curved);
   std::vector<int> surface_of_region;
   const std::vector<PlaneSurface> plane_surfaces =
       PlaneSurfaces(points, neighbours, label, planes, curved, options, &surface_of_region);

@@ -17,7 +17,10 @@
 //     points better than the plane by more than curvature_tolerance (RMS); a planar region that
 //     meets a curved one, or another planar one, at less than smooth_angle_deg (a faceted curve)
 //     is curved too. Adjacent planar regions on one plane (normals within coplanar_angle_deg,
-//     offsets within plane_distance) are merged.
+//     offsets within plane_distance) are merged. What is then left unplanar (curved regions and
+//     points no region took), in connected groups: a group flat by the same quadratic test with
+//     an RMS to its plane of at most noisy_plane_rms is a plane seen through more noise than
+//     region growing allows for (a far wall triangulated along its normal) and becomes one.
 //  4. Outlines: the regularised alpha shape of each plane's points in the plane (CGAL
 //     Alpha_shape_2; radius outline_alpha_spacings × the points' spacing 1/√density, or 1.5 × the
 //     reach of their 12 nearest neighbours where a grazing view leaves rows far apart), its
@@ -58,6 +61,10 @@ struct SceneFromPointsOptions {
   int min_plane_points = 200;     // a plane has at least this many points, ≥ 3
   // A region is curved when sqrt(plane RMS² − quadratic RMS²) exceeds this, metres, > 0.
   double curvature_tolerance = 0.002;
+  // Points left unplanar (too noisy for plane_distance and plane_angle_deg: a far wall
+  // triangulated along its normal) whose connected group is flat by the same test, its RMS to
+  // its plane at most this, become a plane instead of a mesh, metres, ≥ 0 (0: never).
+  double noisy_plane_rms = 0.02;
   double smooth_angle_deg = 15.0;   // regions meeting at less than this are one curved surface
   double coplanar_angle_deg = 3.0;  // adjacent regions within this are one plane, [0, smooth)
   double outline_alpha_spacings = 2.5;  // alpha-shape radius in mean point spacings, > 0.5

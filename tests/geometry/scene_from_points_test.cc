@@ -369,6 +369,58 @@ TEST(SceneFromPoints, HoleAndSharedEdge) {
   EXPECT_NEAR(wall_max, 3.0, 0.02);
 }
 
+// A floor (2.5 mm of noise) and a far wall triangulated along its normal with 9 mm of noise,
+// the tiny box's back wall: region growing (plane_distance 1 cm) leaves the wall in fragments,
+// but the fragments together are flat within their noise, so the wall is one plane on the true
+// one; with noisy_plane_rms 0 it is a mesh, as before. A curved wall with the same noise stays a
+// mesh (the quadratic fit explains its 10 cm sagitta).
+TEST(SceneFromPoints, ANoisyFlatWallIsAPlane) {
+  std::mt19937 random(5);
+  std::normal_distribution<double> fine(0.0, 0.0025), coarse(0.0, 0.009);
+  const auto cloud = [&](bool curved) {
+    std::vector<Vec3> points;
+    for (double x = 0.005; x < 3.0; x += 0.012) {
+      for (double y = 0.005; y < 2.0; y += 0.012) points.push_back(Vec3(x, y, fine(random)));
+      // The wall y = 2 (or bowed towards the viewer by up to 10 cm), 1.5 m high, noise along y.
+      const double bow = curved ? 0.1 * (1.0 - std::pow((x - 1.5) / 1.5, 2)) : 0.0;
+      for (double z = 0.005; z < 1.5; z += 0.012) points.push_back(Vec3(x, 2.0 - bow + coarse(random), z));
+    }
+    return points;
+  };
+  SceneFromPointsOptions options;
+  options.viewpoint = Vec3(1.5, -1.0, 1.2);
+  const ScannedScene flat = SceneFromPoints(cloud(false), options);
+  std::cout << flat.Report();
+  int wall = -1;
+  double wall_area = 0.0;
+  for (size_t s = 0; s < flat.stats.size(); ++s) {
+    EXPECT_EQ(flat.stats[s].kind, ScannedSurfaceStats::kPlane) << flat.scene.surfaces[s].name;
+    if (flat.scene.surfaces[s].name.rfind("wall_", 0) == 0 && flat.stats[s].area_m2 > wall_area)
+      wall = static_cast<int>(s), wall_area = flat.stats[s].area_m2;
+  }
+  ASSERT_GE(wall, 0) << flat.Report();
+  EXPECT_NEAR(wall_area, 4.5, 0.15);          // 3 × 1.5 m
+  EXPECT_NEAR(flat.stats[wall].rms_mm, 9.0, 1.0);  // its points' noise, nothing more
+  const Surface& rebuilt = flat.scene.surfaces[wall];
+  if (rebuilt.kind == Surface::Kind::kQuad) {
+    for (const Vec3& corner : rebuilt.quad) EXPECT_NEAR(corner.y(), 2.0, 0.01);
+  } else {
+    for (const Vec3& vertex : rebuilt.mesh_vertices) EXPECT_NEAR(vertex.y(), 2.0, 0.01);
+  }
+
+  options.noisy_plane_rms = 0.0;
+  const ScannedScene without = SceneFromPoints(cloud(false), options);
+  bool meshed = false;
+  for (const ScannedSurfaceStats& stats : without.stats) meshed |= stats.kind == ScannedSurfaceStats::kMesh;
+  EXPECT_TRUE(meshed) << without.Report();
+
+  options.noisy_plane_rms = SceneFromPointsOptions().noisy_plane_rms;
+  const ScannedScene bowed = SceneFromPoints(cloud(true), options);
+  meshed = false;
+  for (const ScannedSurfaceStats& stats : bowed.stats) meshed |= stats.kind == ScannedSurfaceStats::kMesh;
+  EXPECT_TRUE(meshed) << bowed.Report();
+}
+
 TEST(SceneFromPoints, RefusesTooFewPointsAndBadOptions) {
   SceneFromPointsOptions options;
   std::vector<Vec3> points(50, Vec3::Zero());
