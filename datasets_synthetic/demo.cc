@@ -34,6 +34,34 @@ struct CalibrationStage {
   nlohmann::json json;
 };
 
+// The synthetic camera of the evaluated scene, as `calibrate all --camera` takes it.
+std::string SyntheticCameraUri(const SceneEvaluation& evaluation, const EvaluationOptions& options) {
+  return fmt::format(
+      "synthetic:{}?patches={}&albedo={}&fps=500&exposure_us=1000&reference_exposure_us=1000&black="
+      "8&noise=1",
+      evaluation.name, options.patches, options.albedo_variation);
+}
+
+// `procam calibrate all --camera CAMERA [--scan] --out RIG_DIR` (the command line printed to
+// `steps`), and the rig directory it wrote.
+RigDirectory CalibrateSyntheticRig(const std::string& camera, bool scan,
+                                   const std::filesystem::path& rig_dir,
+                                   const ProgressCallback& steps) {
+  Report(steps, fmt::format("\n$ procam calibrate all --camera {}{} --out {} --frames 2 "
+                            "--settle-ms 1 --levels 0,32,64,128,192,255",
+                            camera, scan ? " --scan" : "", rig_dir.string()));
+  CalibrateAllOptions calibrate;
+  calibrate.camera = camera;
+  calibrate.scan = scan;
+  calibrate.out = rig_dir;
+  calibrate.frames = 2;
+  calibrate.settle_ms = 1;
+  calibrate.levels = {0, 32, 64, 128, 192, 255};
+  calibrate.progress = steps;
+  RunCalibrateAll(calibrate);
+  return ReadRigDirectory(rig_dir);
+}
+
 // Perceptual compensation of `geometry` (the patches the rig's projectors light, with the rig's
 // reflectance) by `projectors`, their images shown by the world's true projectors and
 // photographed in the true world; ΔE against the true desired appearance.
@@ -75,24 +103,8 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
                                      const ProgressCallback& progress,
                                      const ProgressCallback& steps) {
   CalibrationStage stage;
-  const std::string camera = stage.camera = fmt::format(
-      "synthetic:{}?patches={}&albedo={}&fps=500&exposure_us=1000&reference_exposure_us=1000&black="
-      "8&noise=1",
-      evaluation.name, options.patches, options.albedo_variation);
-  Report(
-      steps,
-      fmt::format("\n$ procam calibrate all --camera {} --out {} --frames 2 --settle-ms 1 --levels "
-                  "0,32,64,128,192,255",
-                  camera, rig_dir.string()));
-  CalibrateAllOptions calibrate;
-  calibrate.camera = camera;
-  calibrate.out = rig_dir;
-  calibrate.frames = 2;
-  calibrate.settle_ms = 1;
-  calibrate.levels = {0, 32, 64, 128, 192, 255};
-  calibrate.progress = steps;
-  RunCalibrateAll(calibrate);
-  const RigDirectory rig = ReadRigDirectory(rig_dir);
+  stage.camera = SyntheticCameraUri(evaluation, options);
+  const RigDirectory rig = CalibrateSyntheticRig(stage.camera, false, rig_dir, steps);
 
   // Accuracy against the world's true projectors and camera.
   const auto angle_deg = [](const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
@@ -181,23 +193,8 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
                        const std::filesystem::path& rig_dir, const ProgressCallback& progress,
                        const ProgressCallback& steps) {
   ScanStage stage;
-  const std::string camera = fmt::format(
-      "synthetic:{}?patches={}&albedo={}&fps=500&exposure_us=1000&reference_exposure_us=1000&black="
-      "8&noise=1",
-      evaluation.name, options.patches, options.albedo_variation);
-  Report(steps, fmt::format("\n$ procam calibrate all --camera {} --scan --out {} --frames 2 "
-                            "--settle-ms 1 --levels 0,32,64,128,192,255",
-                            camera, rig_dir.string()));
-  CalibrateAllOptions calibrate;
-  calibrate.camera = camera;
-  calibrate.scan = true;
-  calibrate.out = rig_dir;
-  calibrate.frames = 2;
-  calibrate.settle_ms = 1;
-  calibrate.levels = {0, 32, 64, 128, 192, 255};
-  calibrate.progress = steps;
-  RunCalibrateAll(calibrate);
-  const RigDirectory rig = ReadRigDirectory(rig_dir);
+  const RigDirectory rig =
+      CalibrateSyntheticRig(SyntheticCameraUri(evaluation, options), true, rig_dir, steps);
 
   GeometryOptions geometry_options;
   geometry_options.patches = options.patches;
