@@ -19,6 +19,7 @@
 #include "capture/session.h"
 #include "capture/simulated_camera.h"
 #include "compensation/unit_light.h"
+#include "geometry/patches.h"
 #include "geometry/stage.h"
 #include "projection/camera_rays.h"
 #include "projection/projection_rig.h"
@@ -294,6 +295,61 @@ void PhotometryStep(const CalibrateAllOptions& args, const RigPlan& plan) {
   }
 }
 
+// A scanned room's surfaces take the photometry's reflectance: per surface, the area-weighted
+// mean over the patches the camera saw (reflectance.npy keeps a patch's nominal value, exactly,
+// where too few pixels saw it), written into the room file; the unseen patches in
+// reflectance.npy take their surface's mean instead of the nominal. A surface no pixel saw keeps
+// the nominal.
+void ReflectanceIntoScannedRoom(const std::filesystem::path& out, const std::string& room_path,
+                                int patches, const ProgressCallback& progress) {
+  const RigDirectory rig = ReadRigDirectory(out);
+  if (rig.reflectance.rows() == 0) return;
+  Scene scene = LoadScene(room_path);
+  if (patches > 0) scene.target_patches = patches;
+  SubdivisionOptions subdivision;
+  subdivision.target_patches = scene.target_patches;
+  const PatchHierarchy hierarchy = SubdividePatches(scene, subdivision);
+  const PatchLevel& fine = hierarchy.fine;
+  if (fine.size() != rig.reflectance.rows())
+    throw IoError(fmt::format("{}: {} rows, but {} subdivides into {} patches",
+                              (out / "reflectance.npy").string(), rig.reflectance.rows(),
+                              room_path, fine.size()));
+  const Eigen::VectorXd area = fine.Areas();
+  const size_t surfaces = scene.surfaces.size();
+  std::vector<Vec3> sum(surfaces, Vec3::Zero());
+  std::vector<double> weight(surfaces, 0.0);
+  std::vector<bool> seen(fine.size(), false);
+  for (int i = 0; i < fine.size(); ++i) {
+    const int s = fine.patches[i].surface;
+    const Vec3 rho = rig.reflectance.row(i).transpose();
+    if (rho == scene.surfaces[s].reflectance) continue;  // the nominal: not seen
+    seen[i] = true;
+    sum[s] += area[i] * rho;
+    weight[s] += area[i];
+  }
+  nlohmann::json room = nlohmann::json::parse(ReadFile(room_path));
+  RowMatrixXd per_patch = rig.reflectance;
+  std::string line = "reflectance per scanned surface (mean over the patches the camera saw):";
+  for (size_t s = 0; s < surfaces; ++s) {
+    if (!(weight[s] > 0.0)) {
+      line += fmt::format(" {} not seen (nominal kept);", scene.surfaces[s].name);
+      continue;
+    }
+    const Vec3 mean = sum[s] / weight[s];
+    for (nlohmann::json& entry : room["surfaces"])
+      if (entry["name"] == scene.surfaces[s].name) entry["reflectance"] = JsonTriple(mean);
+    for (int i = 0; i < fine.size(); ++i)
+      if (fine.patches[i].surface == static_cast<int>(s) && !seen[i])
+        per_patch.row(i) = mean.transpose();
+    line += fmt::format(" {} ({:.3f}, {:.3f}, {:.3f});", scene.surfaces[s].name, mean.x(),
+                        mean.y(), mean.z());
+  }
+  line.back() = '.';
+  WriteNpy(out / "reflectance.npy", per_patch);
+  WriteFileAtomically(room_path, room.dump(2) + "\n");
+  Report(progress, line);
+}
+
 // Every photometric session's black field shows all projectors at black, so each projector's
 // fitted black is the sum of all of them there. Separates them (SeparateBlackLevels) and moves
 // each max by the same amount (the fit's max − black is unbiased), in rig.json and in a
@@ -400,6 +456,7 @@ void RunCalibrateAll(const CalibrateAllOptions& args) {
   PhotometryStep(args, plan);
   SeparateProjectorBlacks(args.out, plan.names, plan.captures, plan.scene, plan.patches,
                           args.progress);
+  if (plan.scan) ReflectanceIntoScannedRoom(args.out, plan.scene, plan.patches, args.progress);
   Report(args.progress,
          fmt::format(
              "\nrig calibrated: {} (rig.json, camera.cameramodel, {}, reflectance.npy{}); use "
