@@ -328,23 +328,23 @@ void ReflectanceIntoScannedRoom(const std::filesystem::path& out, const std::str
     weight[s] += area[i];
   }
   nlohmann::json room = nlohmann::json::parse(ReadFile(room_path));
-  RowMatrixXd per_patch = rig.reflectance;
+  std::vector<Vec3> mean(surfaces);  // nominal where not seen
   std::string line = "reflectance per scanned surface (mean over the patches the camera saw):";
   for (size_t s = 0; s < surfaces; ++s) {
+    mean[s] = weight[s] > 0.0 ? Vec3(sum[s] / weight[s]) : scene.surfaces[s].reflectance;
     if (!(weight[s] > 0.0)) {
       line += fmt::format(" {} not seen (nominal kept);", scene.surfaces[s].name);
       continue;
     }
-    const Vec3 mean = sum[s] / weight[s];
     for (nlohmann::json& entry : room["surfaces"])
-      if (entry["name"] == scene.surfaces[s].name) entry["reflectance"] = JsonTriple(mean);
-    for (int i = 0; i < fine.size(); ++i)
-      if (fine.patches[i].surface == static_cast<int>(s) && !seen[i])
-        per_patch.row(i) = mean.transpose();
-    line += fmt::format(" {} ({:.3f}, {:.3f}, {:.3f});", scene.surfaces[s].name, mean.x(),
-                        mean.y(), mean.z());
+      if (entry["name"] == scene.surfaces[s].name) entry["reflectance"] = JsonTriple(mean[s]);
+    line += fmt::format(" {} ({:.3f}, {:.3f}, {:.3f});", scene.surfaces[s].name, mean[s].x(),
+                        mean[s].y(), mean[s].z());
   }
   line.back() = '.';
+  RowMatrixXd per_patch = rig.reflectance;
+  for (int i = 0; i < fine.size(); ++i)
+    if (!seen[i]) per_patch.row(i) = mean[fine.patches[i].surface].transpose();
   WriteNpy(out / "reflectance.npy", per_patch);
   WriteFileAtomically(room_path, room.dump(2) + "\n");
   Report(progress, line);

@@ -225,7 +225,7 @@ ExposureCapture PatternSequencer::CaptureExposure(int64_t settled_ns, double exp
         frame.image.convertTo(value, CV_32F);
         last = value;
         if (sum.empty()) {
-          first = value.clone();
+          first = value;  // each frame converts into a new matrix
           sum = value.clone();
           result.exposure_us = frame.exposure_us;
           result.gain = frame.gain;

@@ -16,6 +16,7 @@
 #include "calibration/rig_directory.h"
 #include "compensation/colour_image.h"
 #include "compensation/stage.h"
+#include "datasets_synthetic/scan_accuracy.h"
 #include "geometry/stage.h"
 #include "projection/camera_rays.h"
 #include "verification/verification.h"
@@ -242,9 +243,8 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
 
   // The scanned surfaces against the true ones: the frames differ by the camera's pose (true
   // in the world, calibrated in the scanned room).
-  const CameraModel camera_model = ReadCameraModelFile(rig_dir / "camera.cameramodel");
   const Eigen::Isometry3d world_from_room =
-      evaluation.world->camera().proj_from_world().inverse() * camera_model.cam_from_ref;
+      evaluation.world->camera().proj_from_world().inverse() * rig_camera.proj_from_world();
   const Scene& true_scene = evaluation.geometry.scene;
   const RoomModel true_model(true_scene);
   const RoomModel scanned_model(geometry.scene);
@@ -252,35 +252,10 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
       nlohmann::json::parse(ReadFile(rig_dir / "result.json"))["projectors"]["scan"];
   nlohmann::json surfaces = nlohmann::json::array();
   for (size_t s = 0; s < geometry.scene.surfaces.size(); ++s) {
-    // Every facet's corners and centroid, their distance to the true room; the true surface
-    // under most of the facets.
-    double squares = 0.0, area = 0.0;
-    int samples = 0;
-    std::vector<int> votes(true_scene.surfaces.size(), 0);
-    for (const ModelFacet& facet : scanned_model.facets()) {
-      if (facet.surface != static_cast<int>(s)) continue;
-      Vec3 centroid = Vec3::Zero(), nearest;
-      for (const Vec3& corner : facet.corners) centroid += corner / facet.corners.size();
-      for (size_t k = 1; k + 1 < facet.corners.size(); ++k)
-        area += 0.5 * (facet.corners[k] - facet.corners[0])
-                          .cross(facet.corners[k + 1] - facet.corners[0])
-                          .norm();
-      std::vector<Vec3> points = facet.corners;
-      points.push_back(centroid);
-      for (const Vec3& p : points) {
-        double distance = 0.0;
-        true_model.Closest(world_from_room * p, &nearest, &distance);
-        squares += distance * distance;
-        ++samples;
-      }
-      double distance = 0.0;
-      ++votes[true_model.facets()[true_model.Closest(world_from_room * centroid, &nearest,
-                                                     &distance)]
-                  .surface];
-    }
-    const int true_surface =
-        static_cast<int>(std::max_element(votes.begin(), votes.end()) - votes.begin());
-    const double rms_mm = 1e3 * std::sqrt(squares / std::max(1, samples));
+    const ScannedSurfaceAccuracy accuracy = MeasureScannedSurface(
+        true_model, scanned_model, static_cast<int>(s), world_from_room);
+    const int true_surface = accuracy.TrueSurface();
+    const double rms_mm = 1e3 * accuracy.RmsMetres(), area = accuracy.area_m2;
     const std::string& name = geometry.scene.surfaces[s].name;
     std::string kind = "?";
     for (const nlohmann::json& entry : scan_json["surfaces"])

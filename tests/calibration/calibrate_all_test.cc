@@ -25,6 +25,7 @@
 #include "capture/simulated_camera.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "datasets_synthetic/paper_scenes.h"
+#include "datasets_synthetic/scan_accuracy.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "tests/testing/testing.h"
 
@@ -138,27 +139,6 @@ TEST(FloorChessboard, GivesTheCameraHeightFromOnePhoto) {
   }
 }
 
-// Point-to-surface distances of a scanned surface's facets (corners and centroids), taken to the
-// true world by the true camera pose and the scan's own camera pose.
-std::vector<double> ScannedToTrueDistances(const RoomModel& truth, const RoomModel& scanned,
-                                           int surface, const Eigen::Isometry3d& world_from_room) {
-  std::vector<double> distances;
-  for (const ModelFacet& facet : scanned.facets()) {
-    if (facet.surface != surface) continue;
-    Vec3 centroid = Vec3::Zero();
-    for (const Vec3& corner : facet.corners) centroid += corner / facet.corners.size();
-    std::vector<Vec3> samples = facet.corners;
-    samples.push_back(centroid);
-    for (const Vec3& p : samples) {
-      Vec3 nearest;
-      double distance = 0.0;
-      truth.Closest(world_from_room * p, &nearest, &distance);
-      distances.push_back(distance);
-    }
-  }
-  return distances;
-}
-
 // No room model and no guess: calibrate all --scan on the tiny box self-calibrates from the
 // structured light, takes the metric scale from the synthetic camera's photo of a chessboard on
 // the floor, writes the scanned room as RIG_DIR/room.json and does the photometry on it. Checked
@@ -222,32 +202,14 @@ TEST(CalibrateAll, ScansTheRoomWithoutAModel) {
   const RoomModel scanned_model(room);
   std::vector<bool> found(truth.scene.surfaces.size(), false);
   for (size_t s = 0; s < room.surfaces.size(); ++s) {
-    const std::vector<double> d =
-        ScannedToTrueDistances(true_model, scanned_model, static_cast<int>(s), world_from_room);
-    double squares = 0.0;
-    for (double x : d) squares += x * x;
-    const double rms = std::sqrt(squares / std::max<size_t>(1, d.size()));
+    const ScannedSurfaceAccuracy accuracy =
+        MeasureScannedSurface(true_model, scanned_model, static_cast<int>(s), world_from_room);
+    const double rms = accuracy.RmsMetres(), area = accuracy.area_m2;
     // The true surfaces under the scanned surface: its facets' centroids vote for the nearest;
     // every true surface with a quarter of some scanned surface's votes is found.
-    std::vector<int> votes(truth.scene.surfaces.size(), 0);
-    int facets = 0;
-    double area = 0.0;
-    for (const ModelFacet& facet : scanned_model.facets()) {
-      if (facet.surface != static_cast<int>(s)) continue;
-      for (size_t k = 1; k + 1 < facet.corners.size(); ++k)
-        area += 0.5 * (facet.corners[k] - facet.corners[0])
-                          .cross(facet.corners[k + 1] - facet.corners[0])
-                          .norm();
-      Vec3 centroid = Vec3::Zero(), nearest;
-      double distance = 0.0;
-      for (const Vec3& corner : facet.corners) centroid += corner / facet.corners.size();
-      ++votes[true_model.facets()[true_model.Closest(world_from_room * centroid, &nearest,
-                                                       &distance)]
-                  .surface];
-      ++facets;
-    }
-    const int true_surface =
-        static_cast<int>(std::max_element(votes.begin(), votes.end()) - votes.begin());
+    const std::vector<int>& votes = accuracy.votes;
+    const int facets = accuracy.facets;
+    const int true_surface = accuracy.TrueSurface();
     for (size_t t = 0; t < votes.size(); ++t)
       if (4 * votes[t] >= facets) found[t] = true;
     std::printf("scanned %s (%.3f m²) -> true %s: corners and centroids %.1f mm RMS from it\n",

@@ -1,0 +1,46 @@
+#include "datasets_synthetic/scan_accuracy.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace procam {
+
+double ScannedSurfaceAccuracy::RmsMetres() const {
+  double squares = 0.0;
+  for (double d : distances) squares += d * d;
+  return std::sqrt(squares / std::max<size_t>(1, distances.size()));
+}
+
+int ScannedSurfaceAccuracy::TrueSurface() const {
+  return static_cast<int>(std::max_element(votes.begin(), votes.end()) - votes.begin());
+}
+
+ScannedSurfaceAccuracy MeasureScannedSurface(const RoomModel& truth, const RoomModel& scanned,
+                                             int surface,
+                                             const Eigen::Isometry3d& world_from_room) {
+  ScannedSurfaceAccuracy accuracy;
+  accuracy.votes.assign(truth.scene().surfaces.size(), 0);
+  for (const ModelFacet& facet : scanned.facets()) {
+    if (facet.surface != surface) continue;
+    ++accuracy.facets;
+    for (size_t k = 1; k + 1 < facet.corners.size(); ++k)
+      accuracy.area_m2 += 0.5 * (facet.corners[k] - facet.corners[0])
+                                    .cross(facet.corners[k + 1] - facet.corners[0])
+                                    .norm();
+    Vec3 centroid = Vec3::Zero();
+    for (const Vec3& corner : facet.corners) centroid += corner / facet.corners.size();
+    std::vector<Vec3> samples = facet.corners;
+    samples.push_back(centroid);
+    Vec3 nearest;
+    double distance = 0.0;
+    for (const Vec3& p : samples) {
+      truth.Closest(world_from_room * p, &nearest, &distance);
+      accuracy.distances.push_back(distance);
+    }
+    ++accuracy.votes[truth.facets()[truth.Closest(world_from_room * centroid, &nearest, &distance)]
+                         .surface];
+  }
+  return accuracy;
+}
+
+}  // namespace procam

@@ -1,0 +1,30 @@
+#pragma once
+// A scanned room against the true one (issue 19's accuracy): how far each scanned surface lies
+// from the true room and which true surface it lies on. Used by the demo's scan stage and the
+// scan tests.
+
+#include <Eigen/Geometry>
+#include <vector>
+
+#include "calibration/registration.h"
+
+namespace procam {
+
+struct ScannedSurfaceAccuracy {
+  // Distances to the true room of every facet's corners and centroid, metres.
+  std::vector<double> distances;
+  double area_m2 = 0.0;    // of the surface's facets
+  int facets = 0;
+  std::vector<int> votes;  // per true surface: the facets whose centroid lies nearest to it
+  double RmsMetres() const;
+  int TrueSurface() const;  // the true surface with the most votes
+};
+
+// Scanned surface `surface` of `scanned` (room frame) taken to the true world by
+// `world_from_room` (the true camera pose after the scan's own: true cam_from_world⁻¹ ·
+// scanned cam_from_room) and measured against `truth`.
+ScannedSurfaceAccuracy MeasureScannedSurface(const RoomModel& truth, const RoomModel& scanned,
+                                             int surface,
+                                             const Eigen::Isometry3d& world_from_room);
+
+}  // namespace procam
