@@ -269,6 +269,7 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
   rig.upper = Eigen::MatrixX3d::Zero(n, 3);
   rig.blended_area = Eigen::VectorXd::Zero(n);
   rig.coverage_scale = Eigen::MatrixXd::Ones(n, static_cast<Eigen::Index>(rig.projectors.size()));
+  std::vector<char> wholly_lit(n, 0);
   const RayScene rays(PatchScene(level));
   const int projector_count = static_cast<int>(rig.projectors.size());
   std::vector<Caster> casters(projector_count);
@@ -354,7 +355,10 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
           break;
         }
       }
-      if (whole) rig.coverage_scale(i, k) = rig.area[i] / footprint[i];
+      if (whole) {
+        rig.coverage_scale(i, k) = rig.area[i] / footprint[i];
+        wholly_lit[i] = 1;
+      }
     }
     for (int i = 0; i < n; ++i) {
       const double scale = rig.coverage_scale(i, k);
@@ -365,6 +369,17 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
         rig.upper(i, c) += rig.reflectance(i, c) * flux_per_area * projector.photometry.max[c];
       }
     }
+  }
+  // Partly lit patches: bounds of their lit part (header comment).
+  rig.lit_fraction = Eigen::VectorXd::Zero(n);
+  for (int i = 0; i < n; ++i) {
+    if (!(rig.blended_area[i] > 0.0)) continue;
+    const double fraction = wholly_lit[i] || !options.lit_part
+                                ? 1.0
+                                : std::min(1.0, rig.blended_area[i] / rig.area[i]);
+    rig.lit_fraction[i] = fraction;
+    rig.lower.row(i) /= fraction;
+    rig.upper.row(i) /= fraction;
   }
   if (summary) {
     summary->seconds =
@@ -388,7 +403,9 @@ Eigen::MatrixX3d UnitLightExitance(const PatchLevel& level, const Projector& pro
   Projector unit = projector;
   unit.photometry.black = Vec3::Zero();
   unit.photometry.max = Vec3::Ones();
-  return BuildProjectionRig(level, {unit}, ProjectionRigOptions()).upper;
+  ProjectionRigOptions options;
+  options.lit_part = false;  // the patch's mean, as a camera sees it
+  return BuildProjectionRig(level, {unit}, options).upper;
 }
 
 }  // namespace procam

@@ -26,6 +26,18 @@
 // light over neighbouring patches is delivered uniformly. Patches cut by an image border or a
 // shadow edge keep the pixel count (error about ½ pixel row along the cut).
 //
+// Partly lit patches: a patch that no projector lights wholly (cut by an image border or a shadow
+// edge) receives light on part of its area only. Its bounds, and the emittance E the renderer
+// delivers to it, are by default those of its LIT PART (`ProjectionRigOptions::lit_part`): the
+// patch's flux bounds divided by its lit fraction f = blended_area / A (≤ 1), so that E is the
+// exitance the lit part shows and the renderer spreads the flux f A (E − lower) / ρ over it. That
+// part then looks like its wholly lit neighbours at the same E. The alternative (lit_part off)
+// keeps E the patch's mean: the whole flux A (E − lower) / ρ crowds into the lit part, which
+// then shows 1/f times the light of its neighbours — a bright tile beside a dark remainder,
+// every patch along a shadow or the edge of the projectors' reach standing out as a seam. The
+// light transport's model still counts E over the whole patch, so it overestimates the bounce
+// from partly lit patches by 1/f (they are few: those along shadows and image borders).
+//
 // Blending: where projectors overlap, each pixel's share of the light above black is its
 // weight w = a_k / Σ_j a_j at the surface point, a_j = g_j · luminance(max_j − black_j) ·
 // feather_j, summed over the projectors j that reach the point unoccluded. feather_j ramps
@@ -59,6 +71,8 @@ struct ProjectionRigOptions {
   // Also record the texture coordinate of every lit pixel's hit (ProjectorMap::uv), which the
   // detail modulation of projector_images.h needs; off by default (8 bytes per pixel).
   bool texture_coordinates = false;
+  // Bounds of partly lit patches for their lit part (header comment); off: for the patch's mean.
+  bool lit_part = true;
   bool Check(std::string* why) const;
 };
 
@@ -94,13 +108,18 @@ struct ProjectionRig {
   Eigen::MatrixX3d centroid;       // (n,3) Patch::centroid, metres
   Eigen::MatrixX3d desired;        // (n,3) PatchLevel::desired_linear (empty if the level has none)
   std::vector<std::array<int, 2>> adjacency;  // PatchLevel::adjacency
-  Eigen::MatrixX3d lower, upper;              // (n,3) direct-light exitance bounds (ρ · flux / A)
+  // (n,3) direct-light exitance bounds: ρ · flux / (f A), f = lit_fraction (1 without lit_part).
+  Eigen::MatrixX3d lower, upper;
   // (n) Σ over the pixels lighting the patch of w · a · coverage_scale (m²): the patch's lit
   // area as the blending weights share it; 0 for a patch no projector reaches.
   Eigen::VectorXd blended_area;
   // (n, projectors) factor on the footprints of projector k's pixels on patch i: the patch's
   // area over their counted footprint where k lights it wholly, else 1.
   Eigen::MatrixXd coverage_scale;
+  // (n) the part of the patch's area the bounds and E describe (header comment): 1 where some
+  // projector lights the patch wholly, or without ProjectionRigOptions::lit_part; else
+  // min(1, blended_area / A); 0 for a patch no projector reaches.
+  Eigen::VectorXd lit_fraction;
 
   int size() const { return static_cast<int>(area.size()); }
 };
@@ -123,7 +142,8 @@ bool SetBoundsFromProjectors(const Scene& scene, const PatchLevel& level, Eigen:
                              Eigen::MatrixX3d* upper, const ProjectionRigOptions& options = {});
 
 // The direct exitance ρ ⊙ Ḡ per patch (n,3) of one projector at unit output (black 0, max 1):
-// the upper bound a rig of that projector alone gives (compensation/unit_light.h).
+// the upper bound a rig of that projector alone gives, as the patch's mean (lit_part off), which
+// is what a camera sees of it (compensation/unit_light.h).
 Eigen::MatrixX3d UnitLightExitance(const PatchLevel& level, const Projector& projector);
 
 // Texture coordinate of a point on (or within single precision of) a patch: the corners' uv

@@ -330,8 +330,9 @@ FirstLevels ComputeFirstLevels(const ProjectionRig& rig, const Eigen::MatrixX3d&
       first.level(i, c) = 0.0;
       first.flux(i, c) = 0.0;
       if (!(rig.blended_area[i] > 0.0) || !(rho > 0.0)) continue;
-      first.flux(i, c) = rig.area[i] * (first.target(i, c) - rig.lower(i, c)) / rho;
-      const double capacity = rig.area[i] * (rig.upper(i, c) - rig.lower(i, c)) / rho;
+      const double lit_area = rig.lit_fraction[i] * rig.area[i];  // projection_rig.h
+      first.flux(i, c) = lit_area * (first.target(i, c) - rig.lower(i, c)) / rho;
+      const double capacity = lit_area * (rig.upper(i, c) - rig.lower(i, c)) / rho;
       first.level(i, c) = first.flux(i, c) >= capacity * (1.0 - 1e-12)
                               ? kInfinity
                               : first.flux(i, c) / rig.blended_area[i];
@@ -523,8 +524,10 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
   }
   s.delivered = rig.lower;
   for (int i = 0; i < n; ++i) {
+    const double lit_area = rig.lit_fraction[i] * rig.area[i];
+    if (!(lit_area > 0.0)) continue;
     s.delivered.row(i) +=
-        (rig.reflectance.row(i).array() * delivered_flux.row(i).array() / rig.area[i]).matrix();
+        (rig.reflectance.row(i).array() * delivered_flux.row(i).array() / lit_area).matrix();
   }
   const double scale = std::max(rig.upper.maxCoeff(), std::numeric_limits<double>::min());
   s.max_relative_error = n > 0 ? (s.delivered - target).cwiseAbs().maxCoeff() / scale : 0.0;

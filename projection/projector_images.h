@@ -2,8 +2,10 @@
 // Emittance → projector images, and the reverse simulation (images → direct light on patches).
 //
 // Rendering (per patch i and channel c, with the rig's flux bookkeeping, projection_rig.h):
-// 1. The light above black the patch must receive is Φ = A_i (E_i − lower_i) / ρ_i, with E
-//    clipped to [lower, upper] (the summary counts the patches that were outside).
+// 1. The light above black the patch must receive is Φ = f_i A_i (E_i − lower_i) / ρ_i, with E
+//    clipped to [lower, upper] (the summary counts the patches that were outside) and f_i the
+//    part of the patch the bounds and E describe (ProjectionRig::lit_fraction: 1 for a patch
+//    some projector lights wholly; a partly lit patch's E is that of its lit part).
 // 2. It is spread as a uniform irradiance τ above black over the patch's lit area, shared among
 //    the projectors by the blending weights: pixel p (projector k, weight w, gain g) shows the
 //    relative level s = w τ / (g (max_k − black_k)), which sends flux w a τ (a = Ω_k / g its

@@ -154,14 +154,18 @@ void ComparePixels(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
 
 // Per patch: the mean exitance of its interior pixels (away from patch borders, where projector
 // pixels straddling two patches spill light), or of all its pixels when too few are interior;
-// patches with fewer than `min_pixels` pixels are unseen. ΔE area-weighted over the seen ones.
+// patches with fewer than `min_pixels` pixels are unseen. ΔE area-weighted over the seen ones:
+// against the desired colour, and against the per-pixel prediction's mean over the same pixels
+// (the model's view of that mean, also where a shadow or an image border darkens part of the
+// patch: the solution's B is then its lit part's, projection_rig.h).
 void ComparePatches(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
                     const std::vector<bool>& interior, const CompensationProblem& problem,
                     const LabConverter& lab, const std::vector<Eigen::Vector3d>& lab_desired,
-                    const std::vector<Eigen::Vector3d>& lab_predicted, int min_pixels,
-                    Comparison* result) {
+                    const std::vector<Eigen::Vector3d>& lab_predicted,
+                    const cv::Mat& predicted_pixels, int min_pixels, Comparison* result) {
   const int n = problem.size();
   Eigen::MatrixX3d sum_all = Eigen::MatrixX3d::Zero(n, 3), sum_interior = sum_all;
+  Eigen::MatrixX3d predicted_all = sum_all, predicted_interior = sum_all;
   std::vector<int> count_all(n, 0), count_interior(n, 0);
   for (int row = 0; row < exitance.rows; ++row) {
     for (int col = 0; col < exitance.cols; ++col) {
@@ -169,11 +173,14 @@ void ComparePatches(const cv::Mat& exitance, const std::vector<int>& pixel_patch
       const int i = pixel_patch[index];
       if (i < 0) continue;
       const cv::Vec3f& v = exitance.at<cv::Vec3f>(row, col);
-      const Eigen::RowVector3d x(v[0], v[1], v[2]);
+      const cv::Vec3f& p = predicted_pixels.at<cv::Vec3f>(row, col);
+      const Eigen::RowVector3d x(v[0], v[1], v[2]), predicted(p[0], p[1], p[2]);
       sum_all.row(i) += x;
+      predicted_all.row(i) += predicted;
       ++count_all[i];
       if (interior[index]) {
         sum_interior.row(i) += x;
+        predicted_interior.row(i) += predicted;
         ++count_interior[i];
       }
     }
@@ -187,17 +194,20 @@ void ComparePatches(const cv::Mat& exitance, const std::vector<int>& pixel_patch
     if (count_all[i] < min_pixels) continue;
     result->seen[i] = true;
     ++result->seen_patches;
-    result->patch_exitance.row(i) =
-        count_interior[i] >= min_pixels
-            ? Eigen::RowVector3d(sum_interior.row(i) / count_interior[i])
-            : Eigen::RowVector3d(sum_all.row(i) / count_all[i]);
+    const bool use_interior = count_interior[i] >= min_pixels;
+    result->patch_exitance.row(i) = use_interior ? sum_interior.row(i) / count_interior[i]
+                                                 : sum_all.row(i) / count_all[i];
+    const Eigen::RowVector3d predicted_mean = use_interior
+                                                  ? predicted_interior.row(i) / count_interior[i]
+                                                  : predicted_all.row(i) / count_all[i];
     const Eigen::Vector3d lab_measured = lab.Lab(result->patch_exitance.row(i).transpose());
+    const Eigen::Vector3d lab_model = lab.Lab(predicted_mean.transpose());
     const double a = problem.area[i];
     area += a;
     patch76 += a * DeltaE76(lab_measured, lab_desired[i]);
     patch2000 += a * DeltaE2000(lab_measured, lab_desired[i]);
-    model_patch76 += a * DeltaE76(lab_measured, lab_predicted[i]);
-    model_patch2000 += a * DeltaE2000(lab_measured, lab_predicted[i]);
+    model_patch76 += a * DeltaE76(lab_measured, lab_model);
+    model_patch2000 += a * DeltaE2000(lab_measured, lab_model);
     predicted76 += a * DeltaE76(lab_predicted[i], lab_desired[i]);
     predicted2000 += a * DeltaE2000(lab_predicted[i], lab_desired[i]);
   }
@@ -228,7 +238,7 @@ Comparison Compare(const cv::Mat& exitance, const std::vector<int>& pixel_patch,
   ComparePixels(exitance, pixel_patch, patch_surface, lab, lab_desired, lab_predicted,
                 predicted_pixels, &result);
   ComparePatches(exitance, pixel_patch, interior, problem, lab, lab_desired, lab_predicted,
-                 min_pixels, &result);
+                 predicted_pixels, min_pixels, &result);
   return result;
 }
 

@@ -133,21 +133,81 @@ TEST(ProjectionRig, OccludedPointsGetNoLightAndPixelsStopAtThePlate) {
   EXPECT_GT(on_plate, 500);
 }
 
+// A patch cut by the plate's shadow or an image border: its bounds are its lit part's, the
+// patch's mean bounds divided by its lit fraction, and that fraction is the part of the patch
+// some projector lights, measured here with 32² quadrature points tested against the images and
+// the plate by the ray–rectangle test above.
+TEST(ProjectionRig, PartlyLitPatchesBoundTheirLitPart) {
+  const Stage stage = MakeStage({});
+  const PatchLevel& level = stage.patches.fine;
+  const ProjectionRig rig = BuildProjectionRig(level, stage.projectors, {});
+  ProjectionRigOptions mean_options;
+  mean_options.lit_part = false;
+  const ProjectionRig mean = BuildProjectionRig(level, stage.projectors, mean_options);
+  const Surface& plate = stage.scene.surfaces[Stage::kPlate];
+  int partly = 0;
+  std::vector<PatchSample> samples;
+  for (int i = 0; i < level.size(); ++i) {
+    const Patch& patch = level.patches[i];
+    SamplePatch(patch, 32, &samples);
+    double lit_area = 0.0;
+    for (const PatchSample& sample : samples) {
+      bool lit = false;
+      for (const Projector& projector : stage.projectors) {
+        Vec2 q;
+        const Vec3 centre = projector.geometry.CentreInWorld();
+        lit |= projector.geometry.Project(sample.point, &q) && q.x() > -0.5 && q.y() > -0.5 &&
+               q.x() < projector.geometry.width() - 0.5 &&
+               q.y() < projector.geometry.height() - 0.5 &&
+               patch.normal.dot(centre - sample.point) > 0.0 &&
+               (patch.surface == Stage::kPlate ||
+                !SegmentCrossesRectangle(sample.point, centre, plate));
+      }
+      if (lit) lit_area += sample.weight;
+    }
+    const double fraction = lit_area / rig.area[i];
+    if (rig.lit_fraction[i] == 0.0) {
+      EXPECT_LT(fraction, 0.02) << "patch " << i << " unreached";
+      continue;
+    }
+    // The lit area counts the pixels whose centre falls on the patch: half a pixel row along
+    // the cut (patches here are about 20 pixels across).
+    EXPECT_NEAR(rig.lit_fraction[i], fraction, 0.05) << "patch " << i;
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(rig.upper(i, c) * rig.lit_fraction[i], mean.upper(i, c), 1e-12 * mean.upper(i, c));
+      EXPECT_NEAR(rig.lower(i, c) * rig.lit_fraction[i], mean.lower(i, c), 1e-12 * mean.lower(i, c));
+    }
+    if (rig.lit_fraction[i] < 0.9) ++partly;
+    EXPECT_EQ(mean.lit_fraction[i], 1.0);
+  }
+  EXPECT_GT(partly, 5);
+}
+
 TEST(ProjectionRig, CoarseBoundsAreTheAreaWeightedFineBounds) {
   const Stage stage = MakeStage({});
   const ProjectionRig fine = BuildProjectionRig(stage.patches.fine, stage.projectors, {});
   const ProjectionRig coarse = BuildProjectionRig(stage.patches.coarse, stage.projectors, {});
-  const Eigen::MatrixX3d upper = CoarsenPatchValues(fine.upper, fine.area, stage.patches.coarse_of_fine,
-                                               stage.patches.coarse.size());
-  const Eigen::MatrixX3d lower = CoarsenPatchValues(fine.lower, fine.area, stage.patches.coarse_of_fine,
-                                               stage.patches.coarse.size());
+  // Compared as each patch's mean (a partly lit patch's bounds are its lit part's: f × bound).
+  const auto mean = [](const ProjectionRig& rig, const Eigen::MatrixX3d& bound) {
+    return Eigen::MatrixX3d(rig.lit_fraction.asDiagonal() * bound);
+  };
+  const Eigen::MatrixX3d upper = CoarsenPatchValues(mean(fine, fine.upper), fine.area,
+                                                    stage.patches.coarse_of_fine,
+                                                    stage.patches.coarse.size());
+  const Eigen::MatrixX3d lower = CoarsenPatchValues(mean(fine, fine.lower), fine.area,
+                                                    stage.patches.coarse_of_fine,
+                                                    stage.patches.coarse.size());
   // Same pixels, same hit points, and the children tile their parent; what differs is where
   // the pixel count is rescaled to exact areas (projection_rig.h): per child or per parent, and
   // only where wholly lit. Both approximate the same integral to a fraction of a pixel row.
-  EXPECT_LT((upper - coarse.upper).cwiseAbs().maxCoeff(), 5e-3 * coarse.upper.maxCoeff());
-  EXPECT_LT((lower - coarse.lower).cwiseAbs().maxCoeff(), 5e-3 * coarse.lower.maxCoeff());
+  const Eigen::MatrixX3d coarse_upper = mean(coarse, coarse.upper);
+  const Eigen::MatrixX3d coarse_lower = mean(coarse, coarse.lower);
+  EXPECT_LT((upper - coarse_upper).cwiseAbs().maxCoeff(), 5e-3 * coarse_upper.maxCoeff());
+  EXPECT_LT((lower - coarse_lower).cwiseAbs().maxCoeff(), 5e-3 * coarse_lower.maxCoeff());
   // Summed over the room (exitance × area: reflected flux), the two levels agree closely.
-  EXPECT_NEAR(fine.area.dot(fine.upper.col(1)) / coarse.area.dot(coarse.upper.col(1)), 1.0, 2e-3);
+  EXPECT_NEAR(fine.area.dot(mean(fine, fine.upper).col(1)) /
+                  coarse.area.dot(coarse_upper.col(1)),
+              1.0, 2e-3);
 }
 
 // Within 8 pixels (a third of the blending ramp) of a left pixel that lights the plate: where
