@@ -27,7 +27,7 @@ struct EvaluateArguments {
   std::string loss = "soft_l1";
   std::vector<std::string> methods;
   LightField light = LightField::kSmooth;
-  bool smooth_bounce = false;
+  std::string bounce = "smooth";
 };
 
 std::vector<std::pair<std::string, cv::Mat>> ReadFigures(const std::filesystem::path& directory,
@@ -100,9 +100,12 @@ void AddEvaluationCommands(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--out", args->out, "Output directory")->capture_default_str();
   AddLightOption(cmd, &args->light);
-  cmd->add_flag("--smooth-bounce", args->smooth_bounce,
-                "Simulate bounce light continuous over each surface, not constant per world "
-                "patch");
+  cmd->add_option("--bounce", args->bounce,
+                  "The simulated room's bounce light: smooth (continuous over each surface, as in "
+                  "a real room) | patch (constant over each world-mesh patch, whose borders then "
+                  "show as steps)")
+      ->check(CLI::IsMember({"smooth", "patch"}))
+      ->capture_default_str();
   cmd->callback([args] {
     std::vector<std::string> scenes = args->scenes;
     if (scenes.size() == 1 && scenes.front() == "all") {
@@ -126,7 +129,7 @@ void AddEvaluationCommands(CLI::App& app) {
       }
     }
     options.render.light = args->light;
-    options.smooth_bounce = args->smooth_bounce;
+    options.smooth_bounce = args->bounce == "smooth";
     std::vector<std::unique_ptr<SceneEvaluation>> evaluations;
     nlohmann::json all = nlohmann::json::array();
     std::vector<std::vector<std::pair<std::string, cv::Mat>>> figures;  // per scene

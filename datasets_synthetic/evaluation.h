@@ -63,7 +63,9 @@ struct EvaluationOptions {
   int world_factor = 4;  // world mesh patches per solver patch
   double albedo_variation = 0.05;  // the simulated room's uneven paint (SimulatedRigOptions)
   RenderOptions render;            // projector images (seamless light by default)
-  bool smooth_bounce = false;      // the simulated room's bounce light (SimulatedRigOptions)
+  // The simulated room's bounce light continuous over each surface (SimulatedRigOptions), as in
+  // a real room; false: constant per world patch, which adds steps at the patch borders.
+  bool smooth_bounce = true;
   ProgressCallback progress;       // what is being evaluated, ΔE per method
   bool Check(std::string* why) const;
 };
