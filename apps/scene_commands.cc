@@ -295,9 +295,9 @@ void AddDemoCommand(CLI::App& app) {
     demo.progress = LogProgress();
     demo.steps = PrintProgress();
     const SyntheticDemoSummary summary = RunSyntheticDemo(demo);
-    std::cout << "\n  method        mean ΔE76  max ΔE76  mean ΔE2000  max ΔE2000   seam\n";
+    std::cout << "\n  method            mean ΔE76  max ΔE76  mean ΔE2000  max ΔE2000   seam\n";
     const auto row = [](const std::string& name, const MethodEvaluation& m, const char* note) {
-      std::cout << fmt::format("  {:<12} {:>10.2f} {:>9.1f} {:>12.2f} {:>11.1f} {:>6.2f}{}\n", name, m.mean_delta_e76,
+      std::cout << fmt::format("  {:<16} {:>10.2f} {:>9.1f} {:>12.2f} {:>11.1f} {:>6.2f}{}\n", name, m.mean_delta_e76,
                                m.max_delta_e76, m.mean_delta_e2000, m.max_delta_e2000, m.seams.seam, note);
     };
     for (const MethodEvaluation& m : summary.methods) row(MethodName(m.method), m, "");
