@@ -582,6 +582,12 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
   if (stage.scanned->scene.surfaces.empty())
     throw std::runtime_error("the scan: no surface found in " + std::to_string(thinned.size()) +
                              " points");
+  const std::string left_out = LeftOutSurfaceError(*stage.scanned, scan);
+  if (!left_out.empty()) {
+    throw std::runtime_error("the scan: " + left_out +
+                             " (the captures are kept: run the same command again after "
+                             "mending it)");
+  }
 
   nlohmann::json surfaces = nlohmann::json::array();
   for (size_t s = 0; s < stage.scanned->stats.size(); ++s) {
@@ -611,6 +617,10 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
                                          {"scan",
                                           {{"points", stage.scanned->points},
                                            {"unassigned", stage.scanned->unassigned},
+                                           {"largest_left_out_m2",
+                                            stage.scanned->left_out.empty()
+                                                ? 0.0
+                                                : stage.scanned->left_out.front().area_m2},
                                            {"time_s", stage.scanned->time_s},
                                            {"surfaces", surfaces}}},
                                          {"projectors", ProjectorsJson(stage.calibration)}};

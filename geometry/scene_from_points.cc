@@ -17,6 +17,7 @@
 #include <CGAL/Shape_detection/Region_growing/Region_growing.h>
 #include <CGAL/Shape_detection/Region_growing/Region_growing_on_point_set.h>
 #include <CGAL/compute_average_spacing.h>
+#include <CGAL/convex_hull_2.h>
 #include <CGAL/pca_estimate_normals.h>
 #include <CGAL/property_map.h>
 #include <Eigen/Eigenvalues>
@@ -692,6 +693,23 @@ void AddPlaneSurfaces(const std::vector<Vec3>& points, const std::vector<PlaneSu
 
 }
 
+// A group of points too small for a surface: its centroid and the area of its points' convex
+// hull in their best-fit plane (CGAL convex_hull_2).
+LeftOutGroup DescribeLeftOut(const std::vector<Vec3>& points, const std::vector<int>& indices) {
+  LeftOutGroup group;
+  group.points = static_cast<int>(indices.size());
+  for (int i : indices) group.centroid += points[i] / static_cast<double>(indices.size());
+  Eigen::Matrix3d spread = Eigen::Matrix3d::Zero();
+  for (int i : indices) spread += (points[i] - group.centroid) * (points[i] - group.centroid).transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> axes(spread);
+  const Vec3 u = axes.eigenvectors().col(2), v = axes.eigenvectors().col(1);
+  std::vector<Kernel::Point_2> in_plane, hull;
+  for (int i : indices) in_plane.emplace_back((points[i] - group.centroid).dot(u), (points[i] - group.centroid).dot(v));
+  CGAL::convex_hull_2(in_plane.begin(), in_plane.end(), std::back_inserter(hull));
+  if (hull.size() >= 3) group.area_m2 = std::abs(CGAL::polygon_area_2(hull.begin(), hull.end(), Kernel()));
+  return group;
+}
+
 // Step 6: the points marked `for_mesh`, in connected groups, as mesh surfaces into `result`.
 void AddMeshSurfaces(const std::vector<Vec3>& points, const std::vector<std::vector<int>>& neighbours,
                      const std::vector<bool>& for_mesh, const Vec3& viewpoint, const SceneFromPointsOptions& options,
@@ -708,7 +726,10 @@ void AddMeshSurfaces(const std::vector<Vec3>& points, const std::vector<std::vec
         if (for_mesh[j] && group[j] < 0) group[j] = static_cast<int>(seed), indices.push_back(j);
       }
     }
-    if (static_cast<int>(indices.size()) < options.min_mesh_points) continue;
+    if (static_cast<int>(indices.size()) < options.min_mesh_points) {
+      if (indices.size() >= 3) result->left_out.push_back(DescribeLeftOut(points, indices));
+      continue;
+    }
     std::vector<Vec3> group_points;
     for (int i : indices) group_points.push_back(points[i]);
     std::vector<Vec3> vertices;
@@ -822,6 +843,21 @@ std::string ScannedScene::Report() const {
   return text;
 }
 
+std::string LeftOutSurfaceError(const ScannedScene& scanned, const SceneFromPointsOptions& options,
+                                double max_fraction, double min_area_m2) {
+  double scanned_area = 0.0;
+  for (const ScannedSurfaceStats& stats : scanned.stats) scanned_area += stats.area_m2;
+  const double limit = std::max(min_area_m2, max_fraction * scanned_area);
+  if (scanned.left_out.empty() || !(scanned.left_out.front().area_m2 > limit)) return "";
+  const LeftOutGroup& group = scanned.left_out.front();
+  return fmt::format(
+      "{} points spread over {:.2f} m² around ({:.2f}, {:.2f}, {:.2f}) m are too few for a surface "
+      "(a plane needs {}, a curved surface {}): decoding failed over part of the room there (a "
+      "dark, glossy or out-of-focus surface, or a grazing view)",
+      group.points, group.area_m2, group.centroid.x(), group.centroid.y(), group.centroid.z(),
+      options.min_plane_points, options.min_mesh_points);
+}
+
 ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPointsOptions& options) {
   const Clock::time_point start = Clock::now();
   std::string why;
@@ -861,6 +897,8 @@ ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPoi
   }
   AddMeshSurfaces(points, neighbours, for_mesh, viewpoint, options, &result, &on_surface);
   result.unassigned = static_cast<int>(std::count(on_surface.begin(), on_surface.end(), false));
+  std::sort(result.left_out.begin(), result.left_out.end(),
+            [](const LeftOutGroup& a, const LeftOutGroup& b) { return a.area_m2 > b.area_m2; });
   result.scene.name = "scan";
   result.scene.target_patches = options.target_patches;
   result.time_s = SecondsSince(start);

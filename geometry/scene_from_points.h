@@ -97,6 +97,14 @@ struct ScannedSurfaceStats {
   int snapped_vertices = 0;  // planes: corners moved onto an edge with a neighbouring plane
 };
 
+// Points on no surface, in a connected group too small for one (fewer than min_mesh_points):
+// noise along edges, or, spread over a wide area, a surface where decoding left too few points.
+struct LeftOutGroup {
+  int points = 0;
+  Vec3 centroid = Vec3::Zero();  // room frame, metres
+  double area_m2 = 0.0;          // of the convex hull of its points in their best-fit plane
+};
+
 struct ScannedScene {
   // The room: surfaces named floor, ceiling, wall_N (vertical planes), plane_N (other planes),
   // mesh_N (curved); mesh surfaces carry mesh_path "NAME.obj" for WriteScannedScene.
@@ -104,6 +112,7 @@ struct ScannedScene {
   std::vector<ScannedSurfaceStats> stats;  // one per scene.surfaces, same order
   int points = 0;      // in the cloud
   int unassigned = 0;  // on no surface (noise, too small groups)
+  std::vector<LeftOutGroup> left_out;  // the groups of ≥ 3 of them, largest area first
   double mean_spacing = 0.0;  // of the cloud's points (mean distance to the nearest ones), m
   double time_s = 0.0;
   // One line per surface ("floor: plane, 48210 points, RMS 2.4 mm, 11.68 m², 12 corners, 2
@@ -114,6 +123,13 @@ struct ScannedScene {
 // Builds the scene (method above). Throws std::invalid_argument when the options fail Check(),
 // a point is not finite, or there are fewer than options.min_plane_points points.
 ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPointsOptions& options);
+
+// One line for the largest left-out group that spans more than `max_fraction` of the scanned
+// surfaces' area (and more than min_area_m2): where it is, how many points over how much area,
+// and what a surface needs; "" when there is none. A scan whose decoding failed over part of a
+// surface leaves such a group instead of the surface.
+std::string LeftOutSurfaceError(const ScannedScene& scanned, const SceneFromPointsOptions& options,
+                                double max_fraction = 0.01, double min_area_m2 = 0.1);
 
 // Writes the scene into `dir` (created if missing): room.json (docs/scene_format.md) and one
 // NAME.obj per mesh surface, each through a temporary file and a rename; LoadScene reads it back.

@@ -212,6 +212,11 @@ void CheckScene(const SceneCheck& check) {
   options.viewpoint = camera.centre;
   const ScannedScene scanned = SceneFromPoints(scan.points, options);
   std::cout << scanned.Report();
+  // Every surface decoded: nothing left out that a too-few-points error would report.
+  EXPECT_EQ(LeftOutSurfaceError(scanned, options), "") << check.name;
+  if (!scanned.left_out.empty())
+    std::printf("%s: largest left-out group %d points, %.3f m²\n", check.name.c_str(),
+                scanned.left_out.front().points, scanned.left_out.front().area_m2);
 
   std::vector<Match> matches;
   std::vector<double> rebuilt_area(truth.surfaces.size(), 0.0);
@@ -419,6 +424,40 @@ TEST(SceneFromPoints, ANoisyFlatWallIsAPlane) {
   meshed = false;
   for (const ScannedSurfaceStats& stats : bowed.stats) meshed |= stats.kind == ScannedSurfaceStats::kMesh;
   EXPECT_TRUE(meshed) << bowed.Report();
+}
+
+// A wall where decoding failed but for a few points: no surface, and one line saying where,
+// how many points and over how much area; the room around it scanned whole gives none.
+TEST(SceneFromPoints, ASurfaceWithTooFewPointsIsNamedByWhereItIs) {
+  std::mt19937 random(9);
+  std::normal_distribution<double> noise(0.0, 0.002);
+  std::uniform_real_distribution<double> along(0.0, 3.0), up(0.0, 1.5);
+  std::vector<Vec3> points;
+  for (double x = 0.005; x < 3.0; x += 0.012) {
+    for (double y = 0.005; y < 2.0; y += 0.012) points.push_back(Vec3(x, y, noise(random)));
+  }
+  const std::vector<Vec3> floor_only = points;
+  for (int k = 0; k < 120; ++k) points.push_back(Vec3(along(random), 2.0 + noise(random), up(random)));
+  SceneFromPointsOptions options;
+  options.viewpoint = Vec3(1.5, -1.0, 1.2);
+  const ScannedScene scanned = SceneFromPoints(points, options);
+  std::cout << scanned.Report();
+  ASSERT_EQ(scanned.scene.surfaces.size(), 1u) << scanned.Report();  // the floor
+  ASSERT_FALSE(scanned.left_out.empty());
+  const LeftOutGroup& wall = scanned.left_out.front();
+  // All but those near the floor, which the floor's plane may take.
+  EXPECT_GE(wall.points, 115);
+  EXPECT_LE(wall.points, 120);
+  EXPECT_NEAR(wall.centroid.y(), 2.0, 0.01);
+  EXPECT_NEAR(wall.centroid.x(), 1.5, 0.3);
+  // The convex hull of ~120 random points on 3 × 1.5 m: most of the 4.5 m² (measured 3.83).
+  EXPECT_GT(wall.area_m2, 3.3);
+  EXPECT_LT(wall.area_m2, 4.5);
+  const std::string error = LeftOutSurfaceError(scanned, options);
+  EXPECT_NE(error.find(std::to_string(wall.points) + " points spread over"), std::string::npos)
+      << error;
+  EXPECT_NE(error.find("too few for a surface"), std::string::npos) << error;
+  EXPECT_EQ(LeftOutSurfaceError(SceneFromPoints(floor_only, options), options), "");
 }
 
 TEST(SceneFromPoints, RefusesTooFewPointsAndBadOptions) {
