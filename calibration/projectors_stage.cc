@@ -502,7 +502,16 @@ nlohmann::json SelfCalibrationJson(const ProjectorsStageSummary& stage) {
                           {"principal_point_held", p.principal_point_held},
                           {"outliers", p.outliers},
                           {"rms_px_per_coordinate", p.rms},
-                          {"max_norm_px", p.max_norm}});
+                          {"max_norm_px", p.max_norm},
+                          // NaN (not computed) is written as null.
+                          {"projection_uncertainty",
+                           {{"distance_m", p.uncertainty_distance_m},
+                            {"centre_px", p.uncertainty_centre_px},
+                            {"corners_px",
+                             {{"top_left", p.uncertainty_corners_px[0]},
+                              {"top_right", p.uncertainty_corners_px[1]},
+                              {"bottom_left", p.uncertainty_corners_px[2]},
+                              {"bottom_right", p.uncertainty_corners_px[3]}}}}}});
   }
   return {{"points", summary.points},
           {"ceres_iterations", summary.ceres_iterations},

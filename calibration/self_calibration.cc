@@ -379,7 +379,8 @@ Vec2 Residual(const ProjectorState& p, const Track& track, const Vec2& observed,
 // the final one over the inliers without a loss. The gauge is the depth of the track closest to
 // the median depth among those seen by the most projectors.
 bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track>* tracks,
-           std::vector<ProjectorState>* projectors, ceres::Solver::Summary* ceres_summary) {
+           std::vector<ProjectorState>* projectors, ceres::Solver::Summary* ceres_summary,
+           int* gauge_out = nullptr) {
   ceres::Problem ceres_problem;
   std::vector<int> seen_by(tracks->size(), 0);
   for (ProjectorState& p : *projectors) {
@@ -415,6 +416,7 @@ bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track
                                                 std::abs((*tracks)[gauge].depth - median)))
       gauge = static_cast<int>(t);
   ceres_problem.SetParameterBlockConstant(&(*tracks)[gauge].depth);
+  if (gauge_out) *gauge_out = gauge;
 
   ceres::Solver::Options solver_options;
   solver_options.linear_solver_type = ceres::DENSE_SCHUR;
@@ -427,6 +429,165 @@ bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track
   if (options.square_pixels)
     for (ProjectorState& p : *projectors) p.intrinsics[1] = p.intrinsics[0];
   return ceres_summary->IsSolutionUsable();
+}
+
+// A point fixed in the camera frame in units of the projector's distance from the camera
+// (`point` at the solve's `baseline`), as the projector shows it: the solve's overall scale
+// cancels (header: uncertainty_centre_px).
+struct ProjectScaledPoint {
+  ProjectScaledPoint(const Vec3& point, double baseline, bool square_pixels)
+      : point_(point), baseline_(baseline), square_pixels_(square_pixels) {}
+  template <typename T>
+  bool operator()(const T* intrinsics, const T* rotation, const T* translation, T* pixel) const {
+    using std::sqrt;
+    const T length = sqrt(translation[0] * translation[0] + translation[1] * translation[1] +
+                          translation[2] * translation[2]);
+    const T p[3] = {T(point_.x()) * length / baseline_, T(point_.y()) * length / baseline_,
+                    T(point_.z()) * length / baseline_};
+    T q[3];
+    ceres::AngleAxisRotatePoint(rotation, p, q);
+    for (int i = 0; i < 3; ++i) q[i] += translation[i];
+    const T& fy = square_pixels_ ? intrinsics[0] : intrinsics[1];
+    pixel[0] = intrinsics[0] * q[0] / q[2] + intrinsics[2];
+    pixel[1] = fy * q[1] / q[2] + intrinsics[3];
+    return true;
+  }
+  Vec3 point_;
+  double baseline_;
+  bool square_pixels_;
+};
+
+// The parameters of a projector the final solve refines, as indices into (fx, fy, cx, cy,
+// rotation, translation).
+std::vector<int> FreeParameters(const SelfCalibrationOptions& options, const ProjectorState& p) {
+  std::vector<int> free = {0};
+  if (!options.square_pixels) free.push_back(1);
+  if (!p.principal_point_held) free.insert(free.end(), {2, 3});
+  for (int i = 4; i < 10; ++i) free.push_back(i);
+  return free;
+}
+
+// Step 4b: each projector's projection uncertainty (header: uncertainty_centre_px), in the solve's
+// units (uncertainty_distance_m is scaled to metres by the caller).
+void ProjectorUncertainties(const SelfCalibrationOptions& options,
+                            const RoomCalibrationProblem& problem, const std::vector<Track>& tracks,
+                            const std::vector<ProjectorState>& projectors, int gauge,
+                            std::vector<SelfCalibrationProjectorSummary>* summaries) {
+  const int n = static_cast<int>(projectors.size());
+  std::vector<std::vector<int>> free(n);
+  std::vector<int> offset(n + 1, 0);
+  for (int k = 0; k < n; ++k) {
+    free[k] = FreeParameters(options, projectors[k]);
+    offset[k + 1] = offset[k] + static_cast<int>(free[k].size());
+  }
+  using Row10 = Eigen::Matrix<double, 2, 10>;
+  struct Entry {
+    int k;
+    Eigen::MatrixXd jp;  // 2 × free[k].size()
+    Vec2 jd;
+  };
+  std::vector<std::vector<Entry>> by_track(tracks.size());
+  double squared = 0.0;
+  int residuals = 0;
+  for (int k = 0; k < n; ++k) {
+    const ProjectorState& p = projectors[k];
+    for (size_t i = 0; i < p.observations.size(); ++i) {
+      const Observation& o = p.observations[i];
+      const Track& track = tracks[o.track];
+      if (track.depth <= 0.0 || !p.inlier[i]) continue;
+      const ceres::AutoDiffCostFunction<DepthReprojection, 2, 4, 3, 3, 1> cost(
+          new DepthReprojection(track.ray, o.projector_pixel, options.square_pixels));
+      const double* parameters[] = {p.intrinsics, p.rotation, p.translation, &track.depth};
+      Eigen::Matrix<double, 2, 4, Eigen::RowMajor> j_intrinsics;
+      Eigen::Matrix<double, 2, 3, Eigen::RowMajor> j_rotation, j_translation;
+      Vec2 residual, j_depth;
+      double* jacobians[] = {j_intrinsics.data(), j_rotation.data(), j_translation.data(),
+                             j_depth.data()};
+      if (!cost.Evaluate(parameters, residual.data(), jacobians)) continue;
+      Row10 all;
+      all << j_intrinsics, j_rotation, j_translation;
+      Entry entry{k, Eigen::MatrixXd(2, free[k].size()), j_depth};
+      for (size_t c = 0; c < free[k].size(); ++c) entry.jp.col(c) = all.col(free[k][c]);
+      by_track[o.track].push_back(std::move(entry));
+      squared += residual.squaredNorm();
+      residuals += 2;
+    }
+  }
+  // JᵀJ with the depths eliminated (each depth couples only its own observations).
+  Eigen::MatrixXd schur = Eigen::MatrixXd::Zero(offset[n], offset[n]);
+  int depths = 0;
+  for (size_t t = 0; t < tracks.size(); ++t) {
+    const std::vector<Entry>& entries = by_track[t];
+    if (entries.empty()) continue;
+    double dd = 0.0;
+    for (const Entry& e : entries) {
+      schur.block(offset[e.k], offset[e.k], e.jp.cols(), e.jp.cols()) += e.jp.transpose() * e.jp;
+      dd += e.jd.squaredNorm();
+    }
+    if (static_cast<int>(t) == gauge || !(dd > 0.0)) continue;  // the gauge's depth is held
+    ++depths;
+    for (const Entry& e : entries) {
+      const Eigen::VectorXd b_e = e.jp.transpose() * e.jd;
+      for (const Entry& f : entries) {
+        schur.block(offset[e.k], offset[f.k], e.jp.cols(), f.jp.cols()) -=
+            b_e * (f.jp.transpose() * f.jd).transpose() / dd;
+      }
+    }
+  }
+  const int dof = residuals - offset[n] - depths;
+  if (dof <= 0) return;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(schur);
+  if (eigen.info() != Eigen::Success || !(eigen.eigenvalues().minCoeff() > 0.0)) return;
+  const Eigen::MatrixXd covariance = (squared / dof) * eigen.eigenvectors() *
+                                     eigen.eigenvalues().cwiseInverse().asDiagonal() *
+                                     eigen.eigenvectors().transpose();
+  for (int k = 0; k < n; ++k) {
+    const ProjectorState& p = projectors[k];
+    const Eigen::Matrix3d rotation =
+        Eigen::AngleAxisd(Vec3(p.rotation[0], p.rotation[1], p.rotation[2]).norm(),
+                          Vec3(p.rotation[0], p.rotation[1], p.rotation[2]).normalized())
+            .toRotationMatrix();
+    const Vec3 translation(p.translation[0], p.translation[1], p.translation[2]);
+    std::vector<double> distances;
+    for (size_t i = 0; i < p.observations.size(); ++i) {
+      const Track& track = tracks[p.observations[i].track];
+      if (track.depth > 0.0 && p.inlier[i])
+        distances.push_back((rotation * (track.depth * track.ray) + translation).norm());
+    }
+    const double distance = Median(distances);
+    if (!(distance > 0.0)) continue;
+    const Eigen::MatrixXd block =
+        covariance.block(offset[k], offset[k], free[k].size(), free[k].size());
+    const double fy = options.square_pixels ? p.intrinsics[0] : p.intrinsics[1];
+    const auto worst = [&](const Vec2& pixel) {
+      const Vec3 direction =
+          Vec3((pixel.x() - p.intrinsics[2]) / p.intrinsics[0], (pixel.y() - p.intrinsics[3]) / fy, 1.0)
+              .normalized();
+      const Vec3 in_camera = rotation.transpose() * (distance * direction - translation);
+      const ceres::AutoDiffCostFunction<ProjectScaledPoint, 2, 4, 3, 3> project(
+          new ProjectScaledPoint(in_camera, translation.norm(), options.square_pixels));
+      const double* parameters[] = {p.intrinsics, p.rotation, p.translation};
+      Eigen::Matrix<double, 2, 4, Eigen::RowMajor> j_intrinsics;
+      Eigen::Matrix<double, 2, 3, Eigen::RowMajor> j_rotation, j_translation;
+      Vec2 projected;
+      double* jacobians[] = {j_intrinsics.data(), j_rotation.data(), j_translation.data()};
+      if (!project.Evaluate(parameters, projected.data(), jacobians))
+        return std::numeric_limits<double>::quiet_NaN();
+      Row10 all;
+      all << j_intrinsics, j_rotation, j_translation;
+      Eigen::MatrixXd j(2, free[k].size());
+      for (size_t c = 0; c < free[k].size(); ++c) j.col(c) = all.col(free[k][c]);
+      const Eigen::Matrix2d var = j * block * j.transpose();
+      return std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(var).eigenvalues()[1]);
+    };
+    const double right = problem.projectors[k].width - 1.0;
+    const double bottom = problem.projectors[k].height - 1.0;
+    SelfCalibrationProjectorSummary& summary = (*summaries)[k];
+    summary.uncertainty_distance_m = distance;  // solve units until the scale is known
+    summary.uncertainty_centre_px = worst(Vec2(0.5 * right, 0.5 * bottom));
+    const Vec2 corners[4] = {Vec2(0, 0), Vec2(right, 0), Vec2(0, bottom), Vec2(right, bottom)};
+    for (int c = 0; c < 4; ++c) summary.uncertainty_corners_px[c] = worst(corners[c]);
+  }
 }
 
 // Step 5: the floor among the planes fitted to `points` (camera frame); -1 when none.
@@ -738,7 +899,8 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
                     projector_name(k) + "only " + std::to_string(inliers) +
                         " inliers after the robust bundle adjustment");
   }
-  if (!Solve(options, false, &tracks, &projectors, &final_summary))
+  int gauge = -1;
+  if (!Solve(options, false, &tracks, &projectors, &final_summary, &gauge))
     return finish(SelfCalibrationSummary::kSolverFailed,
                   "the bundle adjustment failed: " + final_summary.message);
   summary->final_cost = final_summary.final_cost;
@@ -748,6 +910,8 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
     if (!InlierResiduals(options, tracks, projectors[k], &summary->projectors[k], &inlier_views))
       return finish(SelfCalibrationSummary::kSolverFailed,
                     projector_name(k) + "the bundle adjustment left a non-finite residual");
+
+  ProjectorUncertainties(options, problem, tracks, projectors, gauge, &summary->projectors);
 
   // 5. The floor, the metric scale and the room frame.
   std::vector<Vec3> cloud;
@@ -773,6 +937,7 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
   const FittedPlane floor_plane = RefinePlane(planes[floor], cloud);
   const double scale = options.camera_height / floor_plane.offset;
   summary->scale = scale;
+  for (SelfCalibrationProjectorSummary& p : summary->projectors) p.uncertainty_distance_m *= scale;
   summary->floor_inliers = floor_plane.inliers;
   summary->floor_rms_mm = floor_plane.rms_mm * scale;
 

@@ -64,6 +64,8 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <array>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -143,6 +145,20 @@ struct SelfCalibrationProjectorSummary {
   int outliers = 0;                   // residual norm > outlier_threshold after the robust pass
   double rms = 0.0;                   // RMS per coordinate over inliers, px
   double max_norm = 0.0;              // largest inlier residual norm, px
+  // What the bundle adjustment is sure of (its projection uncertainty, as mrcal's for a camera):
+  // the worst-direction standard deviation, px, of where the projector shows a point fixed
+  // relative to the camera, `uncertainty_distance_m` along the ray of the image centre and of
+  // the four corner pixels ((0, 0), (w − 1, 0), (0, h − 1), (w − 1, h − 1)). The point is fixed
+  // in units of the projector's distance from the camera, so the overall scale (the floor's,
+  // not the bundle adjustment's) does not count. Covariance of the projector's free parameters:
+  // σ² (Schur complement of JᵀJ on the points' depths)⁻¹, σ² the inliers' residual variance.
+  // NaN when not computed (a singular system).
+  double uncertainty_distance_m = 0.0;  // the median distance of its points from the projector
+  double uncertainty_centre_px = std::numeric_limits<double>::quiet_NaN();
+  std::array<double, 4> uncertainty_corners_px = {std::numeric_limits<double>::quiet_NaN(),
+                                                  std::numeric_limits<double>::quiet_NaN(),
+                                                  std::numeric_limits<double>::quiet_NaN(),
+                                                  std::numeric_limits<double>::quiet_NaN()};
 };
 
 struct SelfCalibrationSummary {
