@@ -29,6 +29,7 @@ struct CalibrateProjectorsArguments {
   double square = 0.03;
   double board_thickness = 0.0;
   int patches = SceneFromPointsOptions().target_patches;
+  int max_correspondences = 0;  // 0: each path's own default
 };
 
 // A scene file, or a synthetic scene by name ("c_shaped" or "synthetic:c_shaped").
@@ -59,12 +60,15 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& args) {
     options.board = ParseChessboard(args.corners, args.square);
     options.board_thickness = args.board_thickness;
     options.scan.target_patches = args.patches;
+    if (args.max_correspondences > 0)
+      options.self_calibration.max_correspondences = args.max_correspondences;
   }
   options.out = args.out;
   if (!args.camera_guess.empty()) options.room_from_camera_guess = RoomFromCameraGuess(args.camera_guess, args.camera_up);
   options.names = args.names;
   options.refine_camera_aspect = args.refine_camera_aspect;
   options.options = args.options;
+  if (args.max_correspondences > 0) options.options.max_correspondences = args.max_correspondences;
   options.progress = PrintProgress();
   RunProjectorsStage(options);
 }
@@ -124,9 +128,13 @@ void AddCalibrateProjectorsCommand(CLI::App& calibrate) {
                     "With --refine-camera: fx and fy free independently (weakly pinned by walls "
                     "and a floor; see the reported 1 sigma)");
   command
-      ->add_option("--max-correspondences", args->options.max_correspondences,
-                   "Per projector, decoded pixels used (thinned evenly)")
-      ->capture_default_str();
+      ->add_option("--max-correspondences", args->max_correspondences,
+                   "Per projector, decoded pixels used (thinned evenly); default " +
+                       std::to_string(RoomCalibrationOptions().max_correspondences) +
+                       " with --scene, " +
+                       std::to_string(SelfCalibrationOptions().max_correspondences) +
+                       " scanning the room")
+      ->check(CLI::PositiveNumber);
   command->callback([args] { RunCalibrateProjectors(*args); });
 }
 

@@ -778,6 +778,15 @@ std::string SelfCalibrationSummary::BriefReport() const {
                   p.seed_inliers, p.homography_inliers, p.shared,
                   p.principal_point_held ? "held" : "refined", p.outliers, p.rms, p.max_norm);
     text += line;
+    if (std::isfinite(p.uncertainty_centre_px)) {
+      const double corner =
+          *std::max_element(p.uncertainty_corners_px.begin(), p.uncertainty_corners_px.end());
+      std::snprintf(line, sizeof(line),
+                    "; projection uncertainty %.3f px at the centre, %.3f px at worst corner "
+                    "(%.2f m away)",
+                    p.uncertainty_centre_px, corner, p.uncertainty_distance_m);
+      text += line;
+    }
   }
   return text;
 }
