@@ -65,13 +65,18 @@ RigPlan Plan(const CalibrateAllOptions& args) {
   plan.names = args.names;
   if (plan.names.empty()) {
     for (size_t k = 0; k < count; ++k) {
-      plan.names.push_back(simulated ? plan.simulated->projector_names[k]
+      plan.names.push_back(simulated ? ProjectorNameFrom(plan.simulated->projector_names[k])
                                      : fmt::format("projector{}", k));
     }
   }
   if (plan.names.size() != count) {
     throw std::invalid_argument("--names: " + std::to_string(plan.names.size()) + " names for " +
                                 std::to_string(count) + " projectors");
+  }
+  for (const std::string& name : plan.names) {
+    if (!ValidProjectorName(name))
+      throw std::invalid_argument("--names: '" + name +
+                                  "': a projector's name takes letters, digits, '_', '-' and '.'");
   }
   plan.scene = args.scene;
   plan.scan = args.scan || (plan.scene.empty() && !simulated);

@@ -42,13 +42,6 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
                             const Scene& scene, const ProjectorsStageSummary& stage,
                             const ScanCheck& check);
 
-bool ValidName(const std::string& name) {
-  if (name.empty()) return false;
-  for (const char c : name)
-    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-' && c != '.')
-      return false;
-  return true;
-}
 
 // Decoded correspondences of one structured-light session.
 ProjectorObservations ReadSession(const std::filesystem::path& directory, int camera_width,
@@ -129,7 +122,10 @@ RoomCalibrationProblem ReadProblem(const ProjectorsStageOptions& args, const Cam
     ProjectorObservations observations =
         ReadSession(args.sessions[k], camera.width, camera.height, camera_path,
                     args.names.empty() ? "" : args.names[k], args.progress);
-    if (!ValidName(observations.name)) observations.name = "projector" + std::to_string(k);
+    if (!args.names.empty() && !ValidProjectorName(args.names[k]))
+      throw std::invalid_argument("--names: '" + args.names[k] +
+                                  "': a projector's name takes letters, digits, '_', '-' and '.'");
+    if (!ValidProjectorName(observations.name)) observations.name = "projector" + std::to_string(k);
     if (!names.insert(observations.name).second)
       throw std::invalid_argument("projector name '" + observations.name + "' of " +
                                   args.sessions[k].string() +
@@ -645,6 +641,21 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
   return stage;
 }
 }  // namespace
+
+bool ValidProjectorName(const std::string& name) {
+  if (name.empty()) return false;
+  for (const char c : name)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-' && c != '.')
+      return false;
+  return true;
+}
+
+std::string ProjectorNameFrom(const std::string& name) {
+  std::string safe = name;
+  for (char& c : safe)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-' && c != '.') c = '_';
+  return safe;
+}
 
 Eigen::Isometry3d RoomFromCameraGuess(const std::string& guess, const std::string& up) {
   const std::vector<double> v = ParseNumberList(

@@ -68,6 +68,11 @@ struct ProjectorsStageSummary {
 // room_from_camera of a camera at x,y,z looking at look_x,look_y,look_z (`guess`, metres, the
 // --camera-guess text) with image up as close to `up` ("x,y,z") as possible. Throws IoError
 // naming --camera-guess or --camera-up.
+// A projector's name as rig.json and file names take it: letters, digits, '_', '-' and '.'.
+bool ValidProjectorName(const std::string& name);
+// `name` with every other character replaced by '_' ("front left" → "front_left").
+std::string ProjectorNameFrom(const std::string& name);
+
 Eigen::Isometry3d RoomFromCameraGuess(const std::string& guess, const std::string& up = "0,0,1");
 
 // Throws IoError naming the session, camera.cameramodel or rig.json and the key;

@@ -12,6 +12,7 @@
 #include "base/image_io.h"
 #include "base/io.h"
 #include "calibration/calibrate_all_stage.h"
+#include "calibration/projectors_stage.h"
 #include "calibration/registration.h"
 #include "calibration/rig_directory.h"
 #include "compensation/colour_image.h"
@@ -114,7 +115,9 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
   nlohmann::json accuracy = nlohmann::json::array();
   for (const Projector& truth : evaluation.world->projectors()) {
     const auto found = std::find_if(rig.projectors.begin(), rig.projectors.end(),
-                                    [&](const Projector& p) { return p.name == truth.name; });
+                                    [&](const Projector& p) {
+                                      return p.name == ProjectorNameFrom(truth.name);
+                                    });
     if (found == rig.projectors.end())
       throw IoError((rig_dir / "rig.json").string() + ": no projector " + truth.name);
     const ProjectorGeometry& a = found->geometry;
