@@ -421,6 +421,12 @@ void WriteDeviceModels(const std::filesystem::path& out, const CameraModel& came
                            room);
   UpdateRigFile(out, [&](RigFile& rig) {
     rig.camera.model = "camera.cameramodel";
+    // Projectors of an earlier calibration that this one does not name are dropped: their
+    // models are in another registration's frame (and a later stage would stop at them).
+    std::erase_if(rig.projectors, [&](const RigProjector& entry) {
+      return std::none_of(calibration.projectors.begin(), calibration.projectors.end(),
+                          [&](const RoomProjector& p) { return p.name == entry.name; });
+    });
     for (const RoomProjector& p : calibration.projectors)
       rig.Projector(p.name).model = p.name + ".cameramodel";
     rig.registration = registration_json;

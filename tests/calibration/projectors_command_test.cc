@@ -78,10 +78,12 @@ std::shared_ptr<SyntheticWorld> CalibrateProjectorsCommand::world_;
 TEST_F(CalibrateProjectorsCommand, RecoversTheSyntheticRig) {
   const std::filesystem::path rig = *dir_ / "rig";
   WriteTrueCamera(rig);
-  // What other commands wrote survives (right's black, from calibrate photometric).
+  // What other commands wrote survives (right's black, from calibrate photometric); a projector
+  // of an earlier calibration that this one does not name is dropped.
   {
     std::ofstream file(rig / "rig.json");
-    file << R"({"format_version": 1, "projectors": [{"name": "right", "black": 0.01}]})";
+    file << R"({"format_version": 1, "projectors": [{"name": "right", "black": 0.01},
+                                                     {"name": "stale", "model": "stale.cameramodel"}]})";
   }
   const CommandRun run = RunProcam("calibrate projectors " + Session(0) + " " + Session(1) +
                                    " --scene synthetic:tiny_box --out " + rig.string() +
