@@ -20,6 +20,7 @@
 #include "base/image_io.h"
 #include "base/io.h"
 #include "calibration/floor_chessboard.h"
+#include "calibration/projectors_stage.h"
 #include "calibration/rig_directory.h"
 #include "datasets_synthetic/chessboard_views.h"
 #include "geometry/scene.h"
@@ -306,6 +307,24 @@ TEST(CalibrateAll, ScanRefusals) {
       (dir / "rig2").string());
   EXPECT_EQ(refine.exit_code, 1);
   EXPECT_NE(refine.output.find("only with --scene"), std::string::npos) << refine.output;
+}
+
+// Projector names become file names and rig.json keys: a name with other characters is refused
+// by name before anything is written, and a synthetic rig's own names ("front left") are made
+// valid ("front_left") rather than replaced.
+TEST(CalibrateAll, ProjectorNamesAreValidFileNames) {
+  testing::TempDir dir;
+  const testing::CommandRun spaced = testing::RunProcam(
+      "calibrate all --camera synthetic:tiny_box?patches=20 --scene synthetic:tiny_box "
+      "--names 'left one,right' --out " + (dir / "rig").string());
+  EXPECT_EQ(spaced.exit_code, 1);
+  EXPECT_NE(spaced.output.find("--names: 'left one'"), std::string::npos) << spaced.output;
+  EXPECT_FALSE(std::filesystem::exists(dir / "rig"));
+  EXPECT_EQ(ProjectorNameFrom("front left"), "front_left");
+  EXPECT_EQ(ProjectorNameFrom("left-2.b"), "left-2.b");
+  EXPECT_TRUE(ValidProjectorName(ProjectorNameFrom("a/b c:d")));
+  EXPECT_FALSE(ValidProjectorName("front left"));
+  EXPECT_FALSE(ValidProjectorName(""));
 }
 
 TEST(CalibrateAll, RefusesWhatItCannotDo) {
