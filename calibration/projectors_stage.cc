@@ -648,18 +648,20 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
 }
 }  // namespace
 
+namespace {
+bool ProjectorNameCharacter(char c) {
+  return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
+}
+}  // namespace
+
 bool ValidProjectorName(const std::string& name) {
-  if (name.empty()) return false;
-  for (const char c : name)
-    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-' && c != '.')
-      return false;
-  return true;
+  return !name.empty() && std::all_of(name.begin(), name.end(), ProjectorNameCharacter);
 }
 
 std::string ProjectorNameFrom(const std::string& name) {
   std::string safe = name;
   for (char& c : safe)
-    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-' && c != '.') c = '_';
+    if (!ProjectorNameCharacter(c)) c = '_';
   return safe;
 }
 

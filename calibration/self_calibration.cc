@@ -467,6 +467,19 @@ std::vector<int> FreeParameters(const SelfCalibrationOptions& options, const Pro
   return free;
 }
 
+// The columns of a 2 × (fx, fy, cx, cy, rotation, translation) Jacobian, given by its blocks,
+// for the parameters `free` (FreeParameters).
+Eigen::MatrixXd FreeColumns(const Eigen::Matrix<double, 2, 4, Eigen::RowMajor>& intrinsics,
+                            const Eigen::Matrix<double, 2, 3, Eigen::RowMajor>& rotation,
+                            const Eigen::Matrix<double, 2, 3, Eigen::RowMajor>& translation,
+                            const std::vector<int>& free) {
+  Eigen::Matrix<double, 2, 10> all;
+  all << intrinsics, rotation, translation;
+  Eigen::MatrixXd columns(2, free.size());
+  for (size_t c = 0; c < free.size(); ++c) columns.col(c) = all.col(free[c]);
+  return columns;
+}
+
 // Step 4b: each projector's projection uncertainty (header: uncertainty_centre_px), in the solve's
 // units (uncertainty_distance_m is scaled to metres by the caller).
 void ProjectorUncertainties(const SelfCalibrationOptions& options,
@@ -480,7 +493,6 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
     free[k] = FreeParameters(options, projectors[k]);
     offset[k + 1] = offset[k] + static_cast<int>(free[k].size());
   }
-  using Row10 = Eigen::Matrix<double, 2, 10>;
   struct Entry {
     int k;
     Eigen::MatrixXd jp;  // 2 × free[k].size()
@@ -504,11 +516,8 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
       double* jacobians[] = {j_intrinsics.data(), j_rotation.data(), j_translation.data(),
                              j_depth.data()};
       if (!cost.Evaluate(parameters, residual.data(), jacobians)) continue;
-      Row10 all;
-      all << j_intrinsics, j_rotation, j_translation;
-      Entry entry{k, Eigen::MatrixXd(2, free[k].size()), j_depth};
-      for (size_t c = 0; c < free[k].size(); ++c) entry.jp.col(c) = all.col(free[k][c]);
-      by_track[o.track].push_back(std::move(entry));
+      by_track[o.track].push_back(
+          {k, FreeColumns(j_intrinsics, j_rotation, j_translation, free[k]), j_depth});
       squared += residual.squaredNorm();
       residuals += 2;
     }
@@ -543,10 +552,8 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
                                      eigen.eigenvectors().transpose();
   for (int k = 0; k < n; ++k) {
     const ProjectorState& p = projectors[k];
-    const Eigen::Matrix3d rotation =
-        Eigen::AngleAxisd(Vec3(p.rotation[0], p.rotation[1], p.rotation[2]).norm(),
-                          Vec3(p.rotation[0], p.rotation[1], p.rotation[2]).normalized())
-            .toRotationMatrix();
+    Eigen::Matrix3d rotation;
+    ceres::AngleAxisToRotationMatrix(p.rotation, rotation.data());  // column-major
     const Vec3 translation(p.translation[0], p.translation[1], p.translation[2]);
     std::vector<double> distances;
     for (size_t i = 0; i < p.observations.size(); ++i) {
@@ -573,10 +580,7 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
       double* jacobians[] = {j_intrinsics.data(), j_rotation.data(), j_translation.data()};
       if (!project.Evaluate(parameters, projected.data(), jacobians))
         return std::numeric_limits<double>::quiet_NaN();
-      Row10 all;
-      all << j_intrinsics, j_rotation, j_translation;
-      Eigen::MatrixXd j(2, free[k].size());
-      for (size_t c = 0; c < free[k].size(); ++c) j.col(c) = all.col(free[k][c]);
+      const Eigen::MatrixXd j = FreeColumns(j_intrinsics, j_rotation, j_translation, free[k]);
       const Eigen::Matrix2d var = j * block * j.transpose();
       return std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(var).eigenvalues()[1]);
     };

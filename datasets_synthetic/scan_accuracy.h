@@ -1,5 +1,5 @@
 #pragma once
-// A scanned room against the true one (issue 19's accuracy): how far each scanned surface lies
+// A scanned room against the true one (the scan's accuracy): how far each scanned surface lies
 // from the true room and which true surface it lies on. Used by the demo's scan stage and the
 // scan tests.
 

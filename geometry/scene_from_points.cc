@@ -694,17 +694,18 @@ void AddPlaneSurfaces(const std::vector<Vec3>& points, const std::vector<PlaneSu
 }
 
 // A group of points too small for a surface: its centroid and the area of its points' convex
-// hull in their best-fit plane (CGAL convex_hull_2).
-LeftOutGroup DescribeLeftOut(const std::vector<Vec3>& points, const std::vector<int>& indices) {
+// hull in their best-fit plane (FitPlane, CGAL convex_hull_2).
+LeftOutGroup DescribeLeftOut(const std::vector<Vec3>& points, const std::vector<int>& indices,
+                             const Vec3& viewpoint) {
+  const Plane plane = FitPlane(points, indices, viewpoint);
   LeftOutGroup group;
   group.points = static_cast<int>(indices.size());
-  for (int i : indices) group.centroid += points[i] / static_cast<double>(indices.size());
-  Eigen::Matrix3d spread = Eigen::Matrix3d::Zero();
-  for (int i : indices) spread += (points[i] - group.centroid) * (points[i] - group.centroid).transpose();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> axes(spread);
-  const Vec3 u = axes.eigenvectors().col(2), v = axes.eigenvectors().col(1);
+  group.centroid = plane.origin;
   std::vector<Kernel::Point_2> in_plane, hull;
-  for (int i : indices) in_plane.emplace_back((points[i] - group.centroid).dot(u), (points[i] - group.centroid).dot(v));
+  for (int i : indices) {
+    const Vec2 uv = plane.ToPlane(points[i]);
+    in_plane.emplace_back(uv.x(), uv.y());
+  }
   CGAL::convex_hull_2(in_plane.begin(), in_plane.end(), std::back_inserter(hull));
   if (hull.size() >= 3) group.area_m2 = std::abs(CGAL::polygon_area_2(hull.begin(), hull.end(), Kernel()));
   return group;
@@ -727,7 +728,7 @@ void AddMeshSurfaces(const std::vector<Vec3>& points, const std::vector<std::vec
       }
     }
     if (static_cast<int>(indices.size()) < options.min_mesh_points) {
-      if (indices.size() >= 3) result->left_out.push_back(DescribeLeftOut(points, indices));
+      if (indices.size() >= 3) result->left_out.push_back(DescribeLeftOut(points, indices, viewpoint));
       continue;
     }
     std::vector<Vec3> group_points;

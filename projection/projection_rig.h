@@ -122,6 +122,8 @@ struct ProjectionRig {
   Eigen::VectorXd lit_fraction;
 
   int size() const { return static_cast<int>(area.size()); }
+  // The area (m²) patch i's bounds and E describe: lit_fraction · A.
+  double LitArea(int i) const { return lit_fraction[i] * area[i]; }
 };
 
 struct ProjectionRigSummary {

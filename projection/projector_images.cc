@@ -330,7 +330,7 @@ FirstLevels ComputeFirstLevels(const ProjectionRig& rig, const Eigen::MatrixX3d&
       first.level(i, c) = 0.0;
       first.flux(i, c) = 0.0;
       if (!(rig.blended_area[i] > 0.0) || !(rho > 0.0)) continue;
-      const double lit_area = rig.lit_fraction[i] * rig.area[i];  // projection_rig.h
+      const double lit_area = rig.LitArea(i);
       first.flux(i, c) = lit_area * (first.target(i, c) - rig.lower(i, c)) / rho;
       const double capacity = lit_area * (rig.upper(i, c) - rig.lower(i, c)) / rho;
       first.level(i, c) = first.flux(i, c) >= capacity * (1.0 - 1e-12)
@@ -524,7 +524,7 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
   }
   s.delivered = rig.lower;
   for (int i = 0; i < n; ++i) {
-    const double lit_area = rig.lit_fraction[i] * rig.area[i];
+    const double lit_area = rig.LitArea(i);
     if (!(lit_area > 0.0)) continue;
     s.delivered.row(i) +=
         (rig.reflectance.row(i).array() * delivered_flux.row(i).array() / lit_area).matrix();

@@ -57,7 +57,7 @@ Eigen::VectorXd QuantisationBound(const ProjectionRig& rig) {
   }
   for (int i = 0; i < rig.size(); ++i) {
     if (rig.lit_fraction[i] > 0.0)
-      bound[i] *= rig.reflectance.row(i).maxCoeff() / (rig.lit_fraction[i] * rig.area[i]);
+      bound[i] *= rig.reflectance.row(i).maxCoeff() / rig.LitArea(i);
   }
   return bound;
 }
