@@ -577,13 +577,9 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
                      points.size(), gap.median_mm, gap.p95_mm, thinned.size()));
   SceneFromPointsOptions scan = args.scan;
   scan.viewpoint = stage.calibration.room_from_camera.translation();
-  // Curved parts are meshed no finer than the patches will be (the room's bounding-box diagonal
-  // over √patches, halved): a finer mesh only makes patches the subdivision cannot merge.
-  Eigen::AlignedBox3d box;
-  for (const Vec3& p : thinned) box.extend(p);
-  scan.mesh_vertex_spacing =
-      std::max(scan.mesh_vertex_spacing,
-               0.5 * box.diagonal().norm() / std::sqrt(std::max(1, scan.target_patches)));
+  // Curved parts are meshed at SceneFromPoints' fine spacing and then coarsened within its
+  // tolerance and to at most target_patches triangles: meshing a coarser grid of points lets
+  // advancing front bridge a concave wall (blue_curves' curved wall: +68% area, 0.6 m RMS).
   try {
     stage.scanned = SceneFromPoints(thinned, scan);
   } catch (const std::invalid_argument& error) {

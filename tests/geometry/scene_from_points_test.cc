@@ -20,6 +20,7 @@
 #include "datasets_synthetic/paper_scenes.h"
 #include "geometry/patches.h"
 #include "geometry/ray_scene.h"
+#include "geometry/scene_from_points_mesh.h"
 #include "tests/testing/testing.h"
 
 namespace procam {
@@ -460,6 +461,69 @@ TEST(SceneFromPoints, ASurfaceWithTooFewPointsIsNamedByWhereItIs) {
   EXPECT_EQ(LeftOutSurfaceError(SceneFromPoints(floor_only, options), options), "");
 }
 
+// SimplifyMesh on a quarter cylinder (radius 2 m, 2.5 m high) meshed on a 2 cm grid: the
+// coarsened mesh keeps within the tolerance of the true cylinder (closed form: distance to the
+// axis minus the radius, measured on a dense sample of every output triangle), keeps its area
+// (the outline moves only within the tolerance) and has a small fraction of the triangles; with
+// a cap it has at most the cap.
+TEST(SceneFromPoints, ACurvedWallIsCoarsenedWithinTheTolerance) {
+  constexpr double kRadius = 2.0, kHeight = 2.5, kArc = M_PI / 2, kTolerance = 0.004;
+  const int around = static_cast<int>(std::ceil(kRadius * kArc / 0.02)), up = static_cast<int>(std::ceil(kHeight / 0.02));
+  std::vector<Vec3> vertices;
+  std::vector<std::array<int, 3>> triangles;
+  for (int a = 0; a <= around; ++a)
+    for (int b = 0; b <= up; ++b) {
+      const double angle = kArc * a / around;
+      vertices.emplace_back(kRadius * std::cos(angle), kRadius * std::sin(angle), kHeight * b / up);
+    }
+  const auto index = [&](int a, int b) { return a * (up + 1) + b; };
+  for (int a = 0; a < around; ++a)
+    for (int b = 0; b < up; ++b) {
+      triangles.push_back({index(a, b), index(a + 1, b), index(a + 1, b + 1)});
+      triangles.push_back({index(a, b), index(a + 1, b + 1), index(a, b + 1)});
+    }
+  const auto area = [](const std::vector<Vec3>& v, const std::vector<std::array<int, 3>>& t) {
+    double sum = 0;
+    for (const auto& f : t) sum += 0.5 * (v[f[1]] - v[f[0]]).cross(v[f[2]] - v[f[0]]).norm();
+    return sum;
+  };
+  const double input_area = area(vertices, triangles);
+  const size_t input_triangles = triangles.size();
+
+  std::vector<Vec3> coarse = vertices;
+  std::vector<std::array<int, 3>> coarse_triangles = triangles;
+  EXPECT_GT(SimplifyMesh(kTolerance, 0, &coarse, &coarse_triangles), 0);
+  double worst = 0;
+  for (const auto& f : coarse_triangles)
+    for (int i = 0; i <= 10; ++i)
+      for (int j = 0; i + j <= 10; ++j) {
+        const Vec3 x = coarse[f[0]] + (coarse[f[1]] - coarse[f[0]]) * (i / 10.0) + (coarse[f[2]] - coarse[f[0]]) * (j / 10.0);
+        worst = std::max(worst, std::abs(std::hypot(x.x(), x.y()) - kRadius));
+      }
+  const double coarse_area = area(coarse, coarse_triangles);
+  std::printf("quarter cylinder: %zu triangles -> %zu, farthest %.2f mm from the cylinder, area %.4f -> %.4f m² (true %.4f)\n",
+              input_triangles, coarse_triangles.size(), 1000 * worst, input_area, coarse_area, kRadius * kArc * kHeight);
+  // Checked at samples of each collapse's triangles, not everywhere: a little over the tolerance
+  // between samples is allowed for.
+  EXPECT_LE(worst, 1.25 * kTolerance);
+  EXPECT_LT(coarse_triangles.size(), input_triangles / 20);
+  // Within the tolerance of the cylinder, the surface's width along the arc changes by at most
+  // about tolerance / radius of itself (chords inside, vertices placed outside); the outline
+  // keeps the height.
+  EXPECT_NEAR(coarse_area, input_area, 2 * kTolerance / kRadius * input_area);
+
+  std::vector<Vec3> capped = vertices;
+  std::vector<std::array<int, 3>> capped_triangles = triangles;
+  SimplifyMesh(kTolerance, 40, &capped, &capped_triangles);
+  EXPECT_LE(capped_triangles.size(), 40u);
+  EXPECT_GT(capped_triangles.size(), 0u);
+  // Nothing to do: unchanged.
+  std::vector<Vec3> same = vertices;
+  std::vector<std::array<int, 3>> same_triangles = triangles;
+  EXPECT_EQ(SimplifyMesh(0.0, 0, &same, &same_triangles), 0);
+  EXPECT_EQ(same_triangles, triangles);
+}
+
 TEST(SceneFromPoints, RefusesTooFewPointsAndBadOptions) {
   SceneFromPointsOptions options;
   std::vector<Vec3> points(50, Vec3::Zero());
@@ -473,6 +537,11 @@ TEST(SceneFromPoints, RefusesTooFewPointsAndBadOptions) {
   std::string why;
   EXPECT_FALSE(options.Check(&why));
   EXPECT_NE(why.find("plane_distance"), std::string::npos);
+  options = SceneFromPointsOptions();
+  options.mesh_tolerance = -0.001;
+  EXPECT_FALSE(options.Check(&why));
+  EXPECT_NE(why.find("mesh_tolerance"), std::string::npos);
+  options.plane_distance = 0;
   EXPECT_THROW(SceneFromPoints(std::vector<Vec3>(1000, Vec3::Zero()), options), std::invalid_argument);
   options = SceneFromPointsOptions();
   std::vector<Vec3> nan_points(1000, Vec3::Zero());
