@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "base/html_report.h"
+#include "base/image_io.h"
 
 namespace procam {
 
@@ -53,6 +54,11 @@ cv::Mat DrawProjectionUncertainty(const ProjectionUncertaintyMap& map, int width
   return picture;
 }
 
+double UncertaintyFullScale(double largest_px) {
+  const double step = std::pow(10.0, std::floor(std::log10(std::max(largest_px, 1e-6))));
+  return std::ceil(largest_px / step) * step;
+}
+
 void WriteCameraReport(const std::filesystem::path& path, const CameraCalibration& calibration,
                        const CameraCalibrationSummary& summary,
                        const std::vector<ChessboardView>& views,
@@ -68,10 +74,7 @@ void WriteCameraReport(const std::filesystem::path& path, const CameraCalibratio
   report.Heading("What the calibration is sure of");
   if (uncertainty_error.empty()) {
     const double largest = *std::max_element(map.grid.begin(), map.grid.end());
-    // The colour scale's top: the largest value rounded up to one significant step, so that two
-    // reports of the same camera compare by eye.
-    const double step = std::pow(10.0, std::floor(std::log10(std::max(largest, 1e-6))));
-    const double full_scale = std::ceil(largest / step) * step;
+    const double full_scale = UncertaintyFullScale(largest);
     std::vector<Vec2> corners;
     for (const ChessboardView& view : views)
       corners.insert(corners.end(), view.corners.begin(), view.corners.end());
@@ -102,6 +105,73 @@ void WriteCameraReport(const std::filesystem::path& path, const CameraCalibratio
   for (const std::string& name : skipped) rows.push_back({name, "board not found"});
   report.Table({"image", "RMS per coordinate, px"}, rows);
   report.Write(path);
+}
+
+std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::path& path,
+                                                         const std::vector<std::string>& names,
+                                                         const RoomCalibrationProblem& problem,
+                                                         const SelfCalibrationSummary& summary) {
+  if (names.size() != problem.projectors.size() || summary.projectors.size() != problem.projectors.size())
+    throw std::invalid_argument("WriteProjectorsReport: one name and one summary per projector");
+  HtmlReport report("procam: projectors from the scan");
+  report.Paragraph(summary.BriefReport());
+  report.Heading("What the calibration is sure of");
+  double largest = 0.0;
+  for (const SelfCalibrationProjectorSummary& p : summary.projectors)
+    for (double v : p.uncertainty.grid) largest = std::max(largest, v);
+  std::vector<std::filesystem::path> pictures(names.size());
+  if (!(largest > 0.0)) {
+    report.Paragraph("Not computed (the self-calibration's system was singular).");
+    report.Write(path);
+    return pictures;
+  }
+  const double full_scale = UncertaintyFullScale(largest);
+  report.Paragraph(fmt::format(
+      "1-σ worst-direction error of where each projector shows a point fixed relative to the "
+      "camera, at the median distance of its points, from decoding noise alone (the "
+      "self-calibration's covariance: σ² (JᵀJ, the depths eliminated)⁻¹). One colour scale for "
+      "all: 0 px (dark blue) to {:g} px (yellow); white dots: the projector pixels decoded. Where "
+      "it is large, few decoded points pin the projector's lens: light more of the room the "
+      "camera sees with that part of the image.",
+      full_scale));
+  std::vector<std::vector<std::string>> rows;
+  std::vector<std::pair<std::string, cv::Mat>> figures;
+  for (size_t k = 0; k < names.size(); ++k) {
+    const ProjectionUncertaintyMap& map = summary.projectors[k].uncertainty;
+    if (map.grid.empty()) {
+      rows.push_back({names[k], "—", "—", "—", "not computed"});
+      continue;
+    }
+    const ProjectorObservations& observations = problem.projectors[k];
+    std::vector<Vec2> decoded;
+    const size_t stride = std::max<size_t>(1, observations.projector_pixels.size() / 3000);
+    for (size_t i = 0; i < observations.projector_pixels.size(); i += stride)
+      decoded.push_back(observations.projector_pixels[i]);
+    cv::Mat picture = DrawProjectionUncertainty(map, observations.width, observations.height, 1,
+                                                full_scale, decoded);
+    if (picture.cols > 640) {
+      cv::Mat small;
+      cv::resize(picture, small, cv::Size(640, std::max(1, picture.rows * 640 / picture.cols)), 0, 0,
+                 cv::INTER_AREA);
+      picture = small;
+    }
+    pictures[k] = path.parent_path() / ("projector_uncertainty_" + names[k] + ".png");
+    WritePng(pictures[k], picture);
+    rows.push_back({names[k], fmt::format("{:.3f}", map.centre),
+                    fmt::format("{:.3f}", *std::max_element(map.corners.begin(), map.corners.end())),
+                    fmt::format("{:.3f}", *std::max_element(map.grid.begin(), map.grid.end())),
+                    fmt::format("{:.2f} m, σ {:.3f} px", summary.projectors[k].uncertainty_distance_m,
+                                map.observed_pixel_sigma)});
+    figures.emplace_back(fmt::format("{}: projection uncertainty ({}×{} pixels)", names[k],
+                                     observations.width, observations.height),
+                         picture);
+  }
+  report.Table({"projector", "centre, px", "worst corner, px", "largest on the grid, px",
+                "at, from"},
+               rows);
+  report.Figures(figures);
+  report.Write(path);
+  return pictures;
 }
 
 }  // namespace procam

@@ -1,7 +1,9 @@
 #pragma once
-// The camera stage's report page (RIG_DIR/camera_report.html): the lens, the residuals, and the
-// projection uncertainty drawn over the image with the board corners that pinned it, so that a
-// person sees at a glance where the calibration is sure and where more photos are needed.
+// The calibration's report pages: the camera stage's (RIG_DIR/camera_report.html: the lens, the
+// residuals, and the projection uncertainty drawn over the image with the board corners that
+// pinned it), so that a person sees at a glance where the calibration is sure and where more
+// photos are needed; and a scan's (RIG_DIR/projectors_report.html: each projector's projection
+// uncertainty from the self-calibration, drawn the same way over the projector's image).
 
 #include <filesystem>
 #include <vector>
@@ -10,6 +12,8 @@
 
 #include "calibration/camera_calibration.h"
 #include "calibration/projection_uncertainty.h"
+#include "calibration/registration.h"
+#include "calibration/self_calibration.h"
 
 namespace procam {
 
@@ -30,5 +34,18 @@ void WriteCameraReport(const std::filesystem::path& path, const CameraCalibratio
                        const std::vector<ChessboardView>& views,
                        const std::vector<std::string>& skipped, const ProjectionUncertaintyMap& map,
                        const std::string& uncertainty_error);
+
+// The top of a map's colour scale: the largest value rounded up to one significant step, so
+// that two reports of the same device compare by eye.
+double UncertaintyFullScale(double largest_px);
+
+// Writes `path` (atomically) and, beside it, projector_uncertainty_NAME.png for each projector
+// with a map: the self-calibration's numbers, each projector's map (one colour scale for all)
+// with the projector pixels of its decoded correspondences (at most 3000 drawn). `names` one per
+// projector of `problem`. Returns the pictures' paths, in projector order ("" where none).
+std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::path& path,
+                                                         const std::vector<std::string>& names,
+                                                         const RoomCalibrationProblem& problem,
+                                                         const SelfCalibrationSummary& summary);
 
 }  // namespace procam

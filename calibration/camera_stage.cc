@@ -111,21 +111,10 @@ CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
                          {"seed_rms_px", summary.seed_rms},       {"corners", summary.corners},
                          {"outliers", summary.outliers}};
   if (stage.uncertainty_error.empty()) {
-    const ProjectionUncertaintyMap& map = stage.uncertainty;
-    nlohmann::json grid = nlohmann::json::array();
-    for (int j = 0; j < map.grid_height; ++j) {
-      grid.push_back(std::vector<double>(map.grid.begin() + j * map.grid_width,
-                                         map.grid.begin() + (j + 1) * map.grid_width));
-    }
-    result["projection_uncertainty"] = {
-        {"what", "1-sigma worst-direction projection error at infinity, px (mrcal 2.2's "
-                 "projection_uncertainty, mean-frames)"},
-        {"observed_pixel_sigma_px", map.observed_pixel_sigma},
-        {"centre_px", map.centre},
-        {"corners_px", {{"top_left", map.corners[0]}, {"top_right", map.corners[1]},
-                        {"bottom_left", map.corners[2]}, {"bottom_right", map.corners[3]}}},
-        {"grid_size", {map.grid_width, map.grid_height}},
-        {"grid_px", grid}};
+    result["projection_uncertainty"] = stage.uncertainty.Json();
+    result["projection_uncertainty"]["what"] =
+        "1-sigma worst-direction projection error at infinity, px (mrcal 2.2's "
+        "projection_uncertainty, mean-frames)";
   } else {
     result["projection_uncertainty"] = {{"error", stage.uncertainty_error}};
   }

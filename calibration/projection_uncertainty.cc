@@ -194,24 +194,43 @@ std::string ProjectionUncertaintyMap::BriefReport() const {
       grid_height, worst);
 }
 
+nlohmann::json ProjectionUncertaintyMap::Json() const {
+  nlohmann::json rows = nlohmann::json::array();
+  for (int j = 0; j < grid_height; ++j)
+    rows.push_back(std::vector<double>(grid.begin() + j * grid_width, grid.begin() + (j + 1) * grid_width));
+  return {{"observed_pixel_sigma_px", observed_pixel_sigma},
+          {"centre_px", centre},
+          {"corners_px", {{"top_left", corners[0]}, {"top_right", corners[1]},
+                          {"bottom_left", corners[2]}, {"bottom_right", corners[3]}}},
+          {"grid_size", {grid_width, grid_height}},
+          {"grid_px", rows}};
+}
+
 ProjectionUncertaintyMap MapProjectionUncertainty(const ProjectionUncertainty& uncertainty,
                                                   int width, int height, int grid_width,
                                                   int grid_height) {
+  return MapProjectionUncertainty(
+      [&](const Vec2& pixel) { return uncertainty.WorstDirectionStdev(pixel); },
+      uncertainty.observed_pixel_sigma(), width, height, grid_width, grid_height);
+}
+
+ProjectionUncertaintyMap MapProjectionUncertainty(const std::function<double(const Vec2&)>& stdev,
+                                                  double observed_pixel_sigma, int width,
+                                                  int height, int grid_width, int grid_height) {
   if (width < 1 || height < 1 || grid_width < 2 || grid_height < 2) {
     throw std::invalid_argument("projection uncertainty map: image at least 1×1, grid 2×2");
   }
   ProjectionUncertaintyMap map;
-  map.observed_pixel_sigma = uncertainty.observed_pixel_sigma();
+  map.observed_pixel_sigma = observed_pixel_sigma;
   const double right = width - 1.0, bottom = height - 1.0;
-  map.centre = uncertainty.WorstDirectionStdev(Vec2(right / 2.0, bottom / 2.0));
+  map.centre = stdev(Vec2(right / 2.0, bottom / 2.0));
   const Vec2 corners[4] = {{0.0, 0.0}, {right, 0.0}, {0.0, bottom}, {right, bottom}};
-  for (int k = 0; k < 4; ++k) map.corners[k] = uncertainty.WorstDirectionStdev(corners[k]);
+  for (int k = 0; k < 4; ++k) map.corners[k] = stdev(corners[k]);
   map.grid_width = grid_width;
   map.grid_height = grid_height;
   for (int j = 0; j < grid_height; ++j) {
     for (int i = 0; i < grid_width; ++i) {
-      map.grid.push_back(uncertainty.WorstDirectionStdev(
-          Vec2(right * i / (grid_width - 1), bottom * j / (grid_height - 1))));
+      map.grid.push_back(stdev(Vec2(right * i / (grid_width - 1), bottom * j / (grid_height - 1))));
     }
   }
   return map;

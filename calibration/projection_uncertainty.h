@@ -21,7 +21,9 @@
 // right, y down, z forward, metres.
 
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 #include <array>
+#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -84,12 +86,22 @@ struct ProjectionUncertaintyMap {
   int grid_width = 0, grid_height = 0;
   std::vector<double> grid;
   std::string BriefReport() const;
+  // result.json's form: observed_pixel_sigma_px, centre_px, corners_px (top_left, ...),
+  // grid_size [w, h] and grid_px (rows).
+  nlohmann::json Json() const;
 };
 
 // Evaluates `uncertainty` at infinity over a `width` × `height` image; grid_width and grid_height
 // at least 2 (std::invalid_argument otherwise).
 ProjectionUncertaintyMap MapProjectionUncertainty(const ProjectionUncertainty& uncertainty,
                                                   int width, int height, int grid_width = 16,
+                                                  int grid_height = 12);
+
+// The same map of any worst-direction standard deviation `stdev(pixel)` (a projector's, from the
+// self-calibration), σ given.
+ProjectionUncertaintyMap MapProjectionUncertainty(const std::function<double(const Vec2&)>& stdev,
+                                                  double observed_pixel_sigma, int width,
+                                                  int height, int grid_width = 16,
                                                   int grid_height = 12);
 
 }  // namespace procam

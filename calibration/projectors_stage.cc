@@ -14,6 +14,7 @@
 #include "base/io.h"
 #include "base/json_fields.h"
 #include "base/parse.h"
+#include "calibration/camera_report.h"
 #include "calibration/floor_chessboard.h"
 #include "calibration/rig_directory.h"
 #include "calibration/structured_light.h"
@@ -490,6 +491,17 @@ double ScanCameraHeight(const ProjectorsStageOptions& args, const CameraModel& c
       "give --camera-height, the camera's height above the floor in metres)");
 }
 
+// A projector's projection uncertainty in result.json: the map's form, where it is, and null
+// where it was not computed.
+nlohmann::json UncertaintyJson(const SelfCalibrationProjectorSummary& p) {
+  if (p.uncertainty.grid.empty()) return nullptr;
+  nlohmann::json json = p.uncertainty.Json();
+  json["what"] = "1-sigma worst-direction error of where the projector shows a point fixed relative to the "
+                 "camera at distance_m, px (the self-calibration's covariance)";
+  json["distance_m"] = p.uncertainty_distance_m;
+  return json;
+}
+
 nlohmann::json SelfCalibrationJson(const ProjectorsStageSummary& stage) {
   const SelfCalibrationSummary& summary = *stage.self_calibration;
   nlohmann::json projectors = nlohmann::json::array();
@@ -505,15 +517,7 @@ nlohmann::json SelfCalibrationJson(const ProjectorsStageSummary& stage) {
                           {"outliers", p.outliers},
                           {"rms_px_per_coordinate", p.rms},
                           {"max_norm_px", p.max_norm},
-                          // NaN (not computed) is written as null.
-                          {"projection_uncertainty",
-                           {{"distance_m", p.uncertainty_distance_m},
-                            {"centre_px", p.uncertainty_centre_px},
-                            {"corners_px",
-                             {{"top_left", p.uncertainty_corners_px[0]},
-                              {"top_right", p.uncertainty_corners_px[1]},
-                              {"bottom_left", p.uncertainty_corners_px[2]},
-                              {"bottom_right", p.uncertainty_corners_px[3]}}}}}});
+                          {"projection_uncertainty", UncertaintyJson(p)}});
   }
   return {{"points", summary.points},
           {"ceres_iterations", summary.ceres_iterations},
@@ -635,9 +639,13 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
   stage.room = WriteScannedScene(out, *stage.scanned);
   WriteDeviceModels(out, camera, stage.calibration, false, "the scanned room's frame (room.json)",
                     registration_json, result_section);
+  std::vector<std::string> names;
+  for (const RoomProjector& projector : stage.calibration.projectors) names.push_back(projector.name);
+  WriteProjectorsReport(out / "projectors_report.html", names, problem, *stage.self_calibration);
   Report(args.progress,
          fmt::format("wrote {} ({} surfaces), {} projector models, camera.cameramodel (pose in "
-                     "the scanned room), rig.json and result.json in {}",
+                     "the scanned room), rig.json, result.json and projectors_report.html (where "
+                     "each projector's calibration is sure) in {}",
                      stage.room.string(), stage.scanned->scene.surfaces.size(),
                      stage.calibration.projectors.size(), out.string()));
   return stage;

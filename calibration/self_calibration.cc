@@ -433,7 +433,7 @@ bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track
 
 // A point fixed in the camera frame in units of the projector's distance from the camera
 // (`point` at the solve's `baseline`), as the projector shows it: the solve's overall scale
-// cancels (header: uncertainty_centre_px).
+// cancels (header: uncertainty).
 struct ProjectScaledPoint {
   ProjectScaledPoint(const Vec3& point, double baseline, bool square_pixels)
       : point_(point), baseline_(baseline), square_pixels_(square_pixels) {}
@@ -480,7 +480,7 @@ Eigen::MatrixXd FreeColumns(const Eigen::Matrix<double, 2, 4, Eigen::RowMajor>& 
   return columns;
 }
 
-// Step 4b: each projector's projection uncertainty (header: uncertainty_centre_px), in the solve's
+// Step 4b: each projector's projection uncertainty (header: uncertainty), in the solve's
 // units (uncertainty_distance_m is scaled to metres by the caller).
 void ProjectorUncertainties(const SelfCalibrationOptions& options,
                             const RoomCalibrationProblem& problem, const std::vector<Track>& tracks,
@@ -584,13 +584,11 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
       const Eigen::Matrix2d var = j * block * j.transpose();
       return std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(var).eigenvalues()[1]);
     };
-    const double right = problem.projectors[k].width - 1.0;
-    const double bottom = problem.projectors[k].height - 1.0;
     SelfCalibrationProjectorSummary& summary = (*summaries)[k];
     summary.uncertainty_distance_m = distance;  // solve units until the scale is known
-    summary.uncertainty_centre_px = worst(Vec2(0.5 * right, 0.5 * bottom));
-    const Vec2 corners[4] = {Vec2(0, 0), Vec2(right, 0), Vec2(0, bottom), Vec2(right, bottom)};
-    for (int c = 0; c < 4; ++c) summary.uncertainty_corners_px[c] = worst(corners[c]);
+    summary.uncertainty = MapProjectionUncertainty(worst, std::sqrt(squared / dof),
+                                                   problem.projectors[k].width,
+                                                   problem.projectors[k].height);
   }
 }
 
@@ -782,13 +780,12 @@ std::string SelfCalibrationSummary::BriefReport() const {
                   p.seed_inliers, p.homography_inliers, p.shared,
                   p.principal_point_held ? "held" : "refined", p.outliers, p.rms, p.max_norm);
     text += line;
-    if (std::isfinite(p.uncertainty_centre_px)) {
-      const double corner =
-          *std::max_element(p.uncertainty_corners_px.begin(), p.uncertainty_corners_px.end());
+    if (!p.uncertainty.grid.empty()) {
+      const double corner = *std::max_element(p.uncertainty.corners.begin(), p.uncertainty.corners.end());
       std::snprintf(line, sizeof(line),
                     "; projection uncertainty %.3f px at the centre, %.3f px at worst corner "
                     "(%.2f m away)",
-                    p.uncertainty_centre_px, corner, p.uncertainty_distance_m);
+                    p.uncertainty.centre, corner, p.uncertainty_distance_m);
       text += line;
     }
   }

@@ -69,6 +69,7 @@
 #include <string>
 #include <vector>
 
+#include "calibration/projection_uncertainty.h"
 #include "calibration/registration.h"
 
 namespace procam {
@@ -147,18 +148,15 @@ struct SelfCalibrationProjectorSummary {
   double max_norm = 0.0;              // largest inlier residual norm, px
   // What the bundle adjustment is sure of (its projection uncertainty, as mrcal's for a camera):
   // the worst-direction standard deviation, px, of where the projector shows a point fixed
-  // relative to the camera, `uncertainty_distance_m` along the ray of the image centre and of
-  // the four corner pixels ((0, 0), (w − 1, 0), (0, h − 1), (w − 1, h − 1)). The point is fixed
-  // in units of the projector's distance from the camera, so the overall scale (the floor's,
-  // not the bundle adjustment's) does not count. Covariance of the projector's free parameters:
-  // σ² (Schur complement of JᵀJ on the points' depths)⁻¹, σ² the inliers' residual variance.
-  // NaN when not computed (a singular system).
+  // relative to the camera, `uncertainty_distance_m` along the ray of each pixel: the image
+  // centre, the four corner pixels ((0, 0), (w − 1, 0), (0, h − 1), (w − 1, h − 1)) and a 16 × 12
+  // grid corner to corner (ProjectionUncertaintyMap). The point is fixed in units of the
+  // projector's distance from the camera, so the overall scale (the floor's, not the bundle
+  // adjustment's) does not count. Covariance of the projector's free parameters: σ² (Schur
+  // complement of JᵀJ on the points' depths)⁻¹, σ² the inliers' residual variance (the map's
+  // observed_pixel_sigma is σ). An empty grid when not computed (a singular system).
   double uncertainty_distance_m = 0.0;  // the median distance of its points from the projector
-  double uncertainty_centre_px = std::numeric_limits<double>::quiet_NaN();
-  std::array<double, 4> uncertainty_corners_px = {std::numeric_limits<double>::quiet_NaN(),
-                                                  std::numeric_limits<double>::quiet_NaN(),
-                                                  std::numeric_limits<double>::quiet_NaN(),
-                                                  std::numeric_limits<double>::quiet_NaN()};
+  ProjectionUncertaintyMap uncertainty;
 };
 
 struct SelfCalibrationSummary {

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <filesystem>
 #include <cmath>
 #include <optional>
 #include <opencv2/imgcodecs.hpp>
@@ -449,6 +450,18 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
           scan->surfaces_picture},
          {"perceptual, computed on the scanned room",
           cv::imread((out / "perceptual_scanned.png").string())}});
+    // Where the self-calibration is sure of each projector (rig_scan/projectors_report.html).
+    std::vector<std::pair<std::string, cv::Mat>> uncertainty;
+    for (const auto& entry : std::filesystem::directory_iterator(out / "rig_scan")) {
+      const std::string file = entry.path().filename().string();
+      if (file.rfind("projector_uncertainty_", 0) == 0 && entry.path().extension() == ".png")
+        uncertainty.emplace_back(file.substr(22, file.size() - 26) + ": projection uncertainty (scale in "
+                                 "rig_scan/projectors_report.html)",
+                                 cv::imread(entry.path().string()));
+    }
+    std::sort(uncertainty.begin(), uncertainty.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+    if (!uncertainty.empty()) report.Figures(uncertainty);
   }
   AddVerificationReport(verified, &report);  // its own heading
   report.Heading("Pictures");

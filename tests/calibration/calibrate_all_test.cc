@@ -248,6 +248,21 @@ TEST(CalibrateAll, ScansTheRoomWithoutAModel) {
   std::printf("board plane to the scanned floor: %.2f deg\n",
               scale["board_to_scanned_floor_deg"].get<double>());
   EXPECT_LT(scale["board_to_scanned_floor_deg"].get<double>(), 1.0);
+  // Each projector's projection uncertainty: its map in result.json (16 × 12, corners equal to
+  // the grid's), and drawn in projectors_report.html, a picture per projector beside it.
+  const std::string report = ReadFile(dir / "rig/projectors_report.html");
+  for (const nlohmann::json& p : result["projectors"]["registration"]["self_calibration"]["projectors"]) {
+    const nlohmann::json& u = p["projection_uncertainty"];
+    ASSERT_TRUE(u.is_object()) << p.dump();
+    ASSERT_EQ(u["grid_px"].size(), 12u);
+    ASSERT_EQ(u["grid_px"][0].size(), 16u);
+    EXPECT_DOUBLE_EQ(u["grid_px"][0][0].get<double>(), u["corners_px"]["top_left"].get<double>());
+    EXPECT_DOUBLE_EQ(u["grid_px"][11][15].get<double>(), u["corners_px"]["bottom_right"].get<double>());
+    EXPECT_GT(u["centre_px"].get<double>(), 0.0);
+    const std::string name = p["name"];
+    EXPECT_TRUE(std::filesystem::exists(dir / "rig" / ("projector_uncertainty_" + name + ".png"))) << name;
+    EXPECT_NE(report.find(name + ": projection uncertainty"), std::string::npos) << name;
+  }
 
   // The same captures with the floor photo turned by 5° about the board (which lies along the
   // photo's bottom edge; moved up 20 px to stay whole in view): the board's plane is then about

@@ -425,11 +425,21 @@ TEST(SelfCalibrateRoom, ProjectionUncertaintyMatchesTheSpreadOverNoise) {
     const double right = truth.width() - 1.0, bottom = truth.height() - 1.0;
     const Vec2 pixels[5] = {Vec2(0.5 * right, 0.5 * bottom), Vec2(0, 0), Vec2(right, 0),
                             Vec2(0, bottom), Vec2(right, bottom)};
-    const double predictions[5] = {predicted.uncertainty_centre_px,
-                                   predicted.uncertainty_corners_px[0],
-                                   predicted.uncertainty_corners_px[1],
-                                   predicted.uncertainty_corners_px[2],
-                                   predicted.uncertainty_corners_px[3]};
+    const double predictions[5] = {predicted.uncertainty.centre,
+                                   predicted.uncertainty.corners[0],
+                                   predicted.uncertainty.corners[1],
+                                   predicted.uncertainty.corners[2],
+                                   predicted.uncertainty.corners[3]};
+    // The map: a 16 × 12 grid from corner to corner, σ the decoding noise put in.
+    const ProjectionUncertaintyMap& map = predicted.uncertainty;
+    ASSERT_EQ(map.grid_width, 16);
+    ASSERT_EQ(map.grid_height, 12);
+    ASSERT_EQ(map.grid.size(), 16u * 12u);
+    EXPECT_DOUBLE_EQ(map.grid.front(), map.corners[0]);
+    EXPECT_DOUBLE_EQ(map.grid[15], map.corners[1]);
+    EXPECT_DOUBLE_EQ(map.grid[11 * 16], map.corners[2]);
+    EXPECT_DOUBLE_EQ(map.grid.back(), map.corners[3]);
+    EXPECT_NEAR(map.observed_pixel_sigma, kDecodingNoisePx, 0.1 * kDecodingNoisePx);
     for (int c = 0; c < 5; ++c) {
       const std::vector<double>& in = truth.intrinsics();
       const Vec3 direction =
