@@ -7,8 +7,8 @@
 // Static data, uploaded once when the renderer is made: per pixel the patch it lights (−1:
 // none), its share (w a / Ω) and the world point its ray hits, and for kSmooth its bumps: the
 // nodes j whose bump reaches the point and their normalised weights K̃_j (SeamlessField::Bumps,
-// in double, stored as floats; up to four, else the shader evaluates them from the centroids);
-// per patch the centroid c_j and
+// in double, stored as floats; up to 12 in three pairs of textures, 96 bytes a pixel, else the
+// shader evaluates them from the centroids); per patch the centroid c_j and
 // r_j² and the node lists of the seamless field (SeamlessField, CSR); per channel the light of
 // each code value (the response, as CodeTable); the mixing inverse, 1/Δ and the 8×8 Bayer
 // matrix of projector_images.cc. Per frame only the plan's per-patch arrays go up (τ, and for

@@ -110,6 +110,10 @@ struct Case {
   LightField light;
   DitherMethod dither;
   double t_low, t_high;  // emittance between the bounds (see Emittance)
+  // The seamless field's bump radius (in √area): at the default most pixels sum 5 to 9 bumps
+  // from the shader's per-pixel slots; at 2 some have more than its 12, at 3 most do (the shader
+  // then evaluates every bump of the patch's list).
+  double radius = SeamlessLightOptions().radius;
 };
 
 class GlRendererTest : public ::testing::TestWithParam<Case> {};
@@ -121,6 +125,7 @@ TEST_P(GlRendererTest, EqualsTheCpuWithinOneCodeStep) {
   RenderOptions options;
   options.light = test.light;
   options.dither = test.dither;
+  options.seamless.radius = test.radius;
   const FramePlanner planner(rig, options);
   const FramePlan plan = planner.Plan(Emittance(rig, test.t_low, test.t_high, 11));
   const std::vector<ProjectorImage> cpu = ShadeProjectorImages(planner, plan, nullptr);
@@ -135,9 +140,9 @@ TEST_P(GlRendererTest, EqualsTheCpuWithinOneCodeStep) {
     ASSERT_EQ(gpu.codes.size(), cpu[k].codes.size());
     const Difference difference = Compare(gpu, cpu[k]);
     std::printf(
-        "%s light, dither %s, t in [%.2f, %.2f], projector %d: %d of %d patches refined, "
-        "%.4f%% of the pixels differ, by at most %d\n",
-        LightFieldName(test.light), DitherName(test.dither), test.t_low, test.t_high, k,
+        "%s light (radius %.1f), dither %s, t in [%.2f, %.2f], projector %d: %d of %d patches "
+        "refined, %.4f%% of the pixels differ, by at most %d\n",
+        LightFieldName(test.light), test.radius, DitherName(test.dither), test.t_low, test.t_high, k,
         plan.refined_patches, rig.size(), 100.0 * difference.fraction, difference.largest);
     EXPECT_LE(difference.largest, 1);
     EXPECT_LT(difference.fraction, 0.01);
@@ -154,7 +159,9 @@ INSTANTIATE_TEST_SUITE_P(
                       // them; τ = +inf where a patch needs every pixel at full drive).
                       Case{LightField::kFlat, DitherMethod::kOrdered, 0.8, 1.1},
                       Case{LightField::kSmooth, DitherMethod::kOrdered, 0.8, 1.1},
-                      Case{LightField::kSmooth, DitherMethod::kNone, 1.0, 1.0}));
+                      Case{LightField::kSmooth, DitherMethod::kNone, 1.0, 1.0},
+                      Case{LightField::kSmooth, DitherMethod::kOrdered, 0.0, 1.0, 2.0},
+                      Case{LightField::kSmooth, DitherMethod::kOrdered, 0.0, 1.0, 3.0}));
 
 // The plan and its CPU shading are RenderProjectorImages, bit for bit, and the planner refines
 // only the patches whose bound reaches full drive.
