@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include <Eigen/Geometry>
+
 namespace procam {
 
 double ScannedSurfaceAccuracy::RmsMetres() const {
@@ -41,6 +43,33 @@ ScannedSurfaceAccuracy MeasureScannedSurface(const RoomModel& truth, const RoomM
                          .surface];
   }
   return accuracy;
+}
+
+Eigen::Isometry3d FitScannedRoom(const RoomModel& truth, const RoomModel& scanned,
+                                 const Eigen::Isometry3d& world_from_room, int iterations) {
+  std::vector<Vec3> samples;
+  for (const ModelFacet& facet : scanned.facets()) {
+    Vec3 centroid = Vec3::Zero();
+    for (const Vec3& corner : facet.corners) {
+      samples.push_back(corner);
+      centroid += corner / facet.corners.size();
+    }
+    samples.push_back(centroid);
+  }
+  Eigen::Isometry3d fit = world_from_room;
+  if (samples.size() < 3) return fit;
+  Eigen::Matrix3Xd from(3, samples.size()), to(3, samples.size());
+  for (int round = 0; round < iterations; ++round) {
+    for (size_t i = 0; i < samples.size(); ++i) {
+      Vec3 nearest;
+      double distance = 0.0;
+      truth.Closest(fit * samples[i], &nearest, &distance);
+      from.col(i) = samples[i];
+      to.col(i) = nearest;
+    }
+    fit.matrix() = Eigen::umeyama(from, to, false);
+  }
+  return fit;
 }
 
 }  // namespace procam

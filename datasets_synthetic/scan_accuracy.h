@@ -27,4 +27,12 @@ ScannedSurfaceAccuracy MeasureScannedSurface(const RoomModel& truth, const RoomM
                                              int surface,
                                              const Eigen::Isometry3d& world_from_room);
 
+// `world_from_room` refined by the rigid motion that best lays the whole scanned room on the true
+// one (iterative closest points: every scanned facet's corners and centroid to their nearest
+// true points, Umeyama's fit without scale, `iterations` rounds). Measuring with it separates
+// the scanned room's shape from where its frame was placed: the camera's pose in the scanned
+// room, carried to every point in proportion to its distance.
+Eigen::Isometry3d FitScannedRoom(const RoomModel& truth, const RoomModel& scanned,
+                                 const Eigen::Isometry3d& world_from_room, int iterations = 100);
+
 }  // namespace procam
