@@ -348,44 +348,78 @@ int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& t
   Eigen::MatrixX3d& level = *level_out;
   const int n = rig.size();
   const int projector_count = static_cast<int>(rig.projectors.size());
-  int most_passes = n > 0 ? 1 : 0;
-  // One patch at a time where only some are refined: they cluster (see FramePlanner::Plan).
-#pragma omp parallel for schedule(dynamic, refine != nullptr ? 1 : 16) reduction(max : most_passes)
+  // Each pass sums a patch's pixels in chunks of at most kChunk per projector, the chunks' sums
+  // then added in order: the same bits whichever thread sums a chunk, and the few large patches
+  // a frame plan refines spread over every thread instead of one each.
+  constexpr int kChunk = 2048;
+  struct Chunk {
+    int patch;  // index into `patches`
+    int k, from, to;
+  };
+  std::vector<int> patches, chunk_begin;
+  std::vector<Chunk> chunks;
   for (int i = 0; i < n; ++i) {
     if (refine != nullptr && !(*refine)[i]) continue;
-    for (int pass = 1; pass <= max_level_passes; ++pass) {
-      most_passes = std::max(most_passes, pass);
-      Vec3 free_area = Vec3::Zero(), clamped = Vec3::Zero();
-      for (int k = 0; k < projector_count; ++k) {
-        const ProjectorMap& map = rig.maps[k];
-        const ProjectorTables& table = tables[k];
-        const double scale = rig.coverage_scale(i, k);
-        const Eigen::Vector3f* pixel_factor = factors.empty() ? nullptr : factors[k].data();
-        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
-          const double plain_share = map.share[map.pixels_by_patch[position]];  // w a / Ω
-          for (int c = 0; c < 3; ++c) {
-            if (level(i, c) == kInfinity) continue;
-            const double share =
-                pixel_factor ? plain_share * pixel_factor[position][c] : plain_share;
-            if (share * level(i, c) * table.inverse_delta[c] >= 1.0) {
-              clamped[c] += scale * map.pixel_solid_angle * table.delta[c];
-            } else {
-              free_area[c] += scale * share * map.pixel_solid_angle;
-            }
+    chunk_begin.push_back(static_cast<int>(chunks.size()));
+    for (int k = 0; k < projector_count; ++k) {
+      const ProjectorMap& map = rig.maps[k];
+      for (int from = map.patch_begin[i]; from < map.patch_begin[i + 1]; from += kChunk)
+        chunks.push_back({static_cast<int>(patches.size()), k, from, std::min(from + kChunk, map.patch_begin[i + 1])});
+    }
+    patches.push_back(i);
+  }
+  chunk_begin.push_back(static_cast<int>(chunks.size()));
+  std::vector<Vec3> free_area(chunks.size()), clamped(chunks.size());
+  std::vector<char> active(patches.size(), 1);
+  int most_passes = n > 0 ? 1 : 0;
+  for (int pass = 1; pass <= max_level_passes; ++pass) {
+    if (std::find(active.begin(), active.end(), 1) == active.end()) break;
+    most_passes = std::max(most_passes, pass);
+#pragma omp parallel for schedule(dynamic, 8)
+    for (size_t c_index = 0; c_index < chunks.size(); ++c_index) {
+      const Chunk& chunk = chunks[c_index];
+      if (!active[chunk.patch]) continue;
+      const int i = patches[chunk.patch];
+      const ProjectorMap& map = rig.maps[chunk.k];
+      const ProjectorTables& table = tables[chunk.k];
+      const double scale = rig.coverage_scale(i, chunk.k);
+      const Eigen::Vector3f* pixel_factor = factors.empty() ? nullptr : factors[chunk.k].data();
+      Vec3 chunk_free = Vec3::Zero(), chunk_clamped = Vec3::Zero();
+      for (int position = chunk.from; position < chunk.to; ++position) {
+        const double plain_share = map.share[map.pixels_by_patch[position]];  // w a / Ω
+        for (int c = 0; c < 3; ++c) {
+          if (level(i, c) == kInfinity) continue;
+          const double share = pixel_factor ? plain_share * pixel_factor[position][c] : plain_share;
+          if (share * level(i, c) * table.inverse_delta[c] >= 1.0) {
+            chunk_clamped[c] += scale * map.pixel_solid_angle * table.delta[c];
+          } else {
+            chunk_free[c] += scale * share * map.pixel_solid_angle;
           }
         }
       }
+      free_area[c_index] = chunk_free;
+      clamped[c_index] = chunk_clamped;
+    }
+#pragma omp parallel for schedule(dynamic, 16)
+    for (size_t p = 0; p < patches.size(); ++p) {
+      if (!active[p]) continue;
+      const int i = patches[p];
+      Vec3 patch_free = Vec3::Zero(), patch_clamped = Vec3::Zero();
+      for (int c_index = chunk_begin[p]; c_index < chunk_begin[p + 1]; ++c_index) {
+        patch_free += free_area[c_index];
+        patch_clamped += clamped[c_index];
+      }
       bool changed = false;
       for (int c = 0; c < 3; ++c) {
-        if (level(i, c) == kInfinity || clamped[c] <= 0.0) continue;
-        const double remaining = std::max(0.0, flux(i, c) - clamped[c]);
-        const double updated = free_area[c] > 0.0 ? remaining / free_area[c] : kInfinity;
+        if (level(i, c) == kInfinity || patch_clamped[c] <= 0.0) continue;
+        const double remaining = std::max(0.0, flux(i, c) - patch_clamped[c]);
+        const double updated = patch_free[c] > 0.0 ? remaining / patch_free[c] : kInfinity;
         if (updated > level(i, c) * (1.0 + 1e-12)) {
           level(i, c) = updated;
           changed = true;
         }
       }
-      if (!changed) break;
+      active[p] = changed;
     }
   }
   return most_passes;

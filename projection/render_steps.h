@@ -107,7 +107,8 @@ FirstLevels ComputeFirstLevels(const ProjectionRig& rig, const Eigen::MatrixX3d&
 // Step 2, per patch: Newton from below on Σ_p min(w a f τ, Ω Δ) = Φ, f the pixel factors
 // (`factors` per projector in pixels_by_patch order; empty: f = 1). Only the patches `refine`
 // marks (null: all), which must have their factors. Raises `level` where pixels saturate;
-// returns the most passes a patch took (1 for every patch not refined).
+// returns the most passes a patch took (1 for every patch not refined). Each pass sums a patch's
+// pixels in fixed chunks spread over the threads: the same bits on any number of threads.
 int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& tables,
                  const std::vector<std::vector<Eigen::Vector3f>>& factors,
                  const Eigen::MatrixX3d& flux, int max_level_passes,
