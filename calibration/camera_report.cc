@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -114,7 +116,8 @@ std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::
   if (names.size() != problem.projectors.size() || summary.projectors.size() != problem.projectors.size())
     throw std::invalid_argument("WriteProjectorsReport: one name and one summary per projector");
   HtmlReport report("procam: projectors from the scan");
-  report.Paragraph(summary.BriefReport());
+  std::istringstream lines(summary.BriefReport());
+  for (std::string line; std::getline(lines, line);) report.Paragraph(line);
   report.Heading("What the calibration is sure of");
   double largest = 0.0;
   for (const SelfCalibrationProjectorSummary& p : summary.projectors)
@@ -143,10 +146,10 @@ std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::
       continue;
     }
     const ProjectorObservations& observations = problem.projectors[k];
-    std::vector<Vec2> decoded;
-    const size_t stride = std::max<size_t>(1, observations.projector_pixels.size() / 3000);
-    for (size_t i = 0; i < observations.projector_pixels.size(); i += stride)
-      decoded.push_back(observations.projector_pixels[i]);
+    // A random sample (fixed seed): every n-th of the camera-ordered list draws moiré curves.
+    std::vector<Vec2> decoded = observations.projector_pixels;
+    std::shuffle(decoded.begin(), decoded.end(), std::mt19937(7));
+    decoded.resize(std::min<size_t>(decoded.size(), 3000));
     cv::Mat picture = DrawProjectionUncertainty(map, observations.width, observations.height, 1,
                                                 full_scale, decoded);
     if (picture.cols > 640) {
