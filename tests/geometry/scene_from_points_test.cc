@@ -461,14 +461,14 @@ TEST(SceneFromPoints, ASurfaceWithTooFewPointsIsNamedByWhereItIs) {
   EXPECT_EQ(LeftOutSurfaceError(SceneFromPoints(floor_only, options), options), "");
 }
 
-// SimplifyMesh on a quarter cylinder (radius 2 m, 2.5 m high) meshed on a 2 cm grid: the
+// SimplifyMesh on a quarter cylinder (radius 2 m, 2.5 m high) meshed on a 4 cm grid: the
 // coarsened mesh keeps within the tolerance of the true cylinder (closed form: distance to the
 // axis minus the radius, measured on a dense sample of every output triangle), keeps its area
 // (the outline moves only within the tolerance) and has a small fraction of the triangles; with
 // a cap it has at most the cap.
 TEST(SceneFromPoints, ACurvedWallIsCoarsenedWithinTheTolerance) {
   constexpr double kRadius = 2.0, kHeight = 2.5, kArc = M_PI / 2, kTolerance = 0.004;
-  const int around = static_cast<int>(std::ceil(kRadius * kArc / 0.02)), up = static_cast<int>(std::ceil(kHeight / 0.02));
+  const int around = static_cast<int>(std::ceil(kRadius * kArc / 0.04)), up = static_cast<int>(std::ceil(kHeight / 0.04));
   std::vector<Vec3> vertices;
   std::vector<std::array<int, 3>> triangles;
   for (int a = 0; a <= around; ++a)
