@@ -737,7 +737,7 @@ void AddMeshSurfaces(const std::vector<Vec3>& points, const std::vector<std::vec
     std::vector<std::array<int, 3>> triangles;
     double smoothing_rms = 0;
     ReconstructMesh(group_points, viewpoint, options.smoothing_neighbors, options.mesh_vertex_spacing, options.mesh_tolerance,
-                    options.max_mesh_triangles > 0 ? options.max_mesh_triangles : options.target_patches, &vertices,
+                    options.max_mesh_edges > 0 ? options.max_mesh_edges : options.target_patches, &vertices,
                     &triangles, &smoothing_rms);
     Surface surface;
     surface.kind = Surface::Kind::kMesh;
@@ -820,7 +820,7 @@ bool SceneFromPointsOptions::Check(std::string* why) const {
   if (smoothing_neighbors != 0 && smoothing_neighbors < 6) return fail("smoothing_neighbors must be 0 or ≥ 6");
   if (!(mesh_vertex_spacing >= 0)) return fail("mesh_vertex_spacing must be ≥ 0");
   if (!(mesh_tolerance >= 0)) return fail("mesh_tolerance must be ≥ 0");
-  if (max_mesh_triangles < 0) return fail("max_mesh_triangles must be ≥ 0");
+  if (max_mesh_edges < 0) return fail("max_mesh_edges must be ≥ 0");
   if (!((reflectance.array() >= 0).all() && (reflectance.array() < 1).all()))
     return fail("reflectance: each value must be in [0, 1)");
   if (!((desired_srgb.array() >= 0).all() && (desired_srgb.array() <= 1).all()))

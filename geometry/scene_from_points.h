@@ -77,12 +77,13 @@ struct SceneFromPointsOptions {
   double mesh_vertex_spacing = 0.02;  // meshes keep one smoothed point per cell this wide, m, ≥ 0
                                       // (0: every point)
   // Meshes are then coarsened for as long as they stay within this of the finer mesh (edge
-  // collapse in a polyhedral envelope; their outlines kept), m, ≥ 0 (0: not coarsened): a
-  // curved wall needs small triangles only where it bends, and every triangle is a patch.
+  // collapse checked at samples of the new triangles; outlines kept), m, ≥ 0 (0: not
+  // coarsened): a curved wall needs small triangles only where it bends, and every triangle is
+  // at least four patches.
   double mesh_tolerance = 0.004;
-  // and, where that leaves more, coarsened to this many triangles whatever the tolerance (0:
-  // target_patches): each triangle is at least four patches.
-  int max_mesh_triangles = 0;
+  // and until it has fewer edges than this (0: target_patches), the tolerance or not: fewer
+  // triangles still, a mesh having fewer triangles than edges.
+  int max_mesh_edges = 0;
   // What the written scene says of each surface: reflectance (each in [0,1)) and a neutral
   // desired colour (sRGB); the patch target.
   Vec3 reflectance = Vec3::Constant(0.9);

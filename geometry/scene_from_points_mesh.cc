@@ -8,7 +8,7 @@
 namespace procam {
 
 void ReconstructMesh(const std::vector<Vec3>& points, const Vec3& viewpoint, int smoothing_neighbors,
-                     double vertex_spacing, double simplify_tolerance, int max_triangles, std::vector<Vec3>* vertices,
+                     double vertex_spacing, double simplify_tolerance, int max_edges, std::vector<Vec3>* vertices,
                      std::vector<std::array<int, 3>>* triangles, double* smoothing_rms) {
   using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
   using Point = Kernel::Point_3;
@@ -38,7 +38,7 @@ void ReconstructMesh(const std::vector<Vec3>& points, const Vec3& viewpoint, int
   triangles->clear();
   for (const std::array<std::size_t, 3>& facet : facets)
     triangles->push_back({int(facet[0]), int(facet[1]), int(facet[2])});
-  SimplifyMesh(simplify_tolerance, max_triangles, vertices, triangles);
+  SimplifyMesh(simplify_tolerance, max_edges, vertices, triangles);
   for (std::array<int, 3>& t : *triangles) {
     const Vec3& a = (*vertices)[t[0]];
     const Vec3 normal = ((*vertices)[t[1]] - a).cross((*vertices)[t[2]] - a);

@@ -121,10 +121,11 @@ class StaysNearInput {
 
 }  // namespace
 
-int SimplifyMesh(double tolerance, int max_triangles, std::vector<Vec3>* vertices,
+int SimplifyMesh(double tolerance, int max_edges, std::vector<Vec3>* vertices,
                  std::vector<std::array<int, 3>>* triangles) {
   namespace PMP = CGAL::Polygon_mesh_processing;
-  const bool over = max_triangles > 0 && static_cast<int>(triangles->size()) > max_triangles;
+  // Triangles are fewer than edges: more triangles than max_edges means more edges too.
+  const bool over = max_edges > 0 && static_cast<int>(triangles->size()) > max_edges;
   if ((!(tolerance > 0) && !over) || triangles->empty()) return 0;
 
   std::vector<Point> points;
@@ -154,6 +155,7 @@ int SimplifyMesh(double tolerance, int max_triangles, std::vector<Vec3>* vertice
   SegmentTree border_tree(border.begin(), border.end());
   if (!border.empty()) border_tree.accelerate_distance_queries();
 
+  // CGAL's Count_stop_predicate counts edges: collapsing ends below max_edges of them.
   const auto collapse = [&](double distance, int stop_at) {
     SMS::Count_stop_predicate<Mesh> stop(std::max(1, stop_at));
     return SMS::edge_collapse(mesh, stop,
@@ -162,10 +164,10 @@ int SimplifyMesh(double tolerance, int max_triangles, std::vector<Vec3>* vertice
                                   .filter(StaysNearInput(surface_tree, border_tree, distance)));
   };
   int collapsed = 0;
-  if (tolerance > 0) collapsed += collapse(tolerance, max_triangles);
+  if (tolerance > 0) collapsed += collapse(tolerance, max_edges);
   // Still more than the cap: the cheapest collapses go on, whatever the tolerance.
-  if (max_triangles > 0 && static_cast<int>(mesh.number_of_faces()) > max_triangles)
-    collapsed += collapse(std::numeric_limits<double>::infinity(), max_triangles);
+  if (max_edges > 0 && static_cast<int>(mesh.number_of_faces()) > max_edges)
+    collapsed += collapse(std::numeric_limits<double>::infinity(), max_edges);
   mesh.collect_garbage();
 
   std::vector<Vec3> kept;
