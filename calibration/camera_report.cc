@@ -56,6 +56,11 @@ cv::Mat DrawProjectionUncertainty(const ProjectionUncertaintyMap& map, int width
   return picture;
 }
 
+std::filesystem::path ProjectorUncertaintyPicture(const std::filesystem::path& dir,
+                                                  const std::string& name) {
+  return dir / ("projector_uncertainty_" + name + ".png");
+}
+
 double UncertaintyFullScale(double largest_px) {
   const double step = std::pow(10.0, std::floor(std::log10(std::max(largest_px, 1e-6))));
   return std::ceil(largest_px / step) * step;
@@ -158,7 +163,7 @@ std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::
                  cv::INTER_AREA);
       picture = small;
     }
-    pictures[k] = path.parent_path() / ("projector_uncertainty_" + names[k] + ".png");
+    pictures[k] = ProjectorUncertaintyPicture(path.parent_path(), names[k]);
     WritePng(pictures[k], picture);
     rows.push_back({names[k], fmt::format("{:.3f}", map.centre),
                     fmt::format("{:.3f}", *std::max_element(map.corners.begin(), map.corners.end())),

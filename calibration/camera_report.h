@@ -35,6 +35,10 @@ void WriteCameraReport(const std::filesystem::path& path, const CameraCalibratio
                        const std::vector<std::string>& skipped, const ProjectionUncertaintyMap& map,
                        const std::string& uncertainty_error);
 
+// Where WriteProjectorsReport draws projector `name`'s map: DIR/projector_uncertainty_NAME.png.
+std::filesystem::path ProjectorUncertaintyPicture(const std::filesystem::path& dir,
+                                                  const std::string& name);
+
 // The top of a map's colour scale: the largest value rounded up to one significant step, so
 // that two reports of the same device compare by eye.
 double UncertaintyFullScale(double largest_px);

@@ -13,6 +13,7 @@
 #include "base/image_io.h"
 #include "base/io.h"
 #include "calibration/calibrate_all_stage.h"
+#include "calibration/camera_report.h"
 #include "calibration/projectors_stage.h"
 #include "calibration/registration.h"
 #include "calibration/rig_directory.h"
@@ -461,15 +462,13 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
           cv::imread((out / "perceptual_scanned.png").string())}});
     // Where the self-calibration is sure of each projector (rig_scan/projectors_report.html).
     std::vector<std::pair<std::string, cv::Mat>> uncertainty;
-    for (const auto& entry : std::filesystem::directory_iterator(out / "rig_scan")) {
-      const std::string file = entry.path().filename().string();
-      if (file.rfind("projector_uncertainty_", 0) == 0 && entry.path().extension() == ".png")
-        uncertainty.emplace_back(file.substr(22, file.size() - 26) + ": projection uncertainty (scale in "
-                                 "rig_scan/projectors_report.html)",
-                                 cv::imread(entry.path().string()));
+    for (const Projector& projector : evaluation.world->projectors()) {
+      const std::string name = ProjectorNameFrom(projector.name);
+      const std::filesystem::path picture = ProjectorUncertaintyPicture(out / "rig_scan", name);
+      if (std::filesystem::exists(picture))
+        uncertainty.emplace_back(name + ": projection uncertainty (scale in rig_scan/projectors_report.html)",
+                                 cv::imread(picture.string()));
     }
-    std::sort(uncertainty.begin(), uncertainty.end(),
-              [](const auto& a, const auto& b) { return a.first < b.first; });
     if (!uncertainty.empty()) report.Figures(uncertainty);
   }
   AddVerificationReport(verified, &report);  // its own heading

@@ -6,6 +6,18 @@
 #include <Eigen/Geometry>
 
 namespace procam {
+namespace {
+
+// Where a scanned facet is measured: its corners, then its centroid.
+std::vector<Vec3> CornersAndCentroid(const ModelFacet& facet) {
+  std::vector<Vec3> samples = facet.corners;
+  Vec3 centroid = Vec3::Zero();
+  for (const Vec3& corner : facet.corners) centroid += corner / facet.corners.size();
+  samples.push_back(centroid);
+  return samples;
+}
+
+}  // namespace
 
 double ScannedSurfaceAccuracy::RmsMetres() const {
   double squares = 0.0;
@@ -29,17 +41,14 @@ ScannedSurfaceAccuracy MeasureScannedSurface(const RoomModel& truth, const RoomM
       accuracy.area_m2 += 0.5 * (facet.corners[k] - facet.corners[0])
                                     .cross(facet.corners[k + 1] - facet.corners[0])
                                     .norm();
-    Vec3 centroid = Vec3::Zero();
-    for (const Vec3& corner : facet.corners) centroid += corner / facet.corners.size();
-    std::vector<Vec3> samples = facet.corners;
-    samples.push_back(centroid);
+    const std::vector<Vec3> samples = CornersAndCentroid(facet);
     Vec3 nearest;
     double distance = 0.0;
     for (const Vec3& p : samples) {
       truth.Closest(world_from_room * p, &nearest, &distance);
       accuracy.distances.push_back(distance);
     }
-    ++accuracy.votes[truth.facets()[truth.Closest(world_from_room * centroid, &nearest, &distance)]
+    ++accuracy.votes[truth.facets()[truth.Closest(world_from_room * samples.back(), &nearest, &distance)]
                          .surface];
   }
   return accuracy;
@@ -49,22 +58,18 @@ Eigen::Isometry3d FitScannedRoom(const RoomModel& truth, const RoomModel& scanne
                                  const Eigen::Isometry3d& world_from_room, int iterations) {
   std::vector<Vec3> samples;
   for (const ModelFacet& facet : scanned.facets()) {
-    Vec3 centroid = Vec3::Zero();
-    for (const Vec3& corner : facet.corners) {
-      samples.push_back(corner);
-      centroid += corner / facet.corners.size();
-    }
-    samples.push_back(centroid);
+    const std::vector<Vec3> facet_samples = CornersAndCentroid(facet);
+    samples.insert(samples.end(), facet_samples.begin(), facet_samples.end());
   }
   Eigen::Isometry3d fit = world_from_room;
   if (samples.size() < 3) return fit;
   Eigen::Matrix3Xd from(3, samples.size()), to(3, samples.size());
+  for (size_t i = 0; i < samples.size(); ++i) from.col(i) = samples[i];
   for (int round = 0; round < iterations; ++round) {
     for (size_t i = 0; i < samples.size(); ++i) {
       Vec3 nearest;
       double distance = 0.0;
       truth.Closest(fit * samples[i], &nearest, &distance);
-      from.col(i) = samples[i];
       to.col(i) = nearest;
     }
     fit.matrix() = Eigen::umeyama(from, to, false);
