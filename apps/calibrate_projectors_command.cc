@@ -123,7 +123,9 @@ void AddCalibrateProjectorsCommand(CLI::App& calibrate) {
                     "Refine projector k1, k2 (LENSMODEL_OPENCV4); default pinhole");
   command->add_flag("--refine-camera", args->options.refine_camera_intrinsics,
                     "Refine the camera's focal length (fy / fx kept), cx, cy jointly (distortion "
-                    "kept) and write them into camera.cameramodel; before/after in result.json");
+                    "kept) and write them into camera.cameramodel; before/after in result.json. "
+                    "Scanning (no --scene): the whole lens, with the chessboard's (result.json "
+                    "camera.intrinsics_covariance) as the prior");
   command->add_flag("--refine-camera-aspect", args->refine_camera_aspect,
                     "With --refine-camera: fx and fy free independently (weakly pinned by walls "
                     "and a floor; see the reported 1 sigma)");

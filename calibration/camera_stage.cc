@@ -85,6 +85,7 @@ CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
   ProjectionUncertainty uncertainty;
   if (uncertainty.Compute(calibration, &stage.uncertainty_error)) {
     stage.uncertainty = MapProjectionUncertainty(uncertainty, width, height);
+    stage.intrinsics_covariance = uncertainty.IntrinsicsCovariance();
     Report(args.progress, stage.uncertainty.BriefReport());
   } else {
     Report(args.progress, "projection uncertainty: not computed: " + stage.uncertainty_error);
@@ -115,6 +116,14 @@ CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
     result["projection_uncertainty"]["what"] =
         "1-sigma worst-direction projection error at infinity, px (mrcal 2.2's "
         "projection_uncertainty, mean-frames)";
+    nlohmann::json rows = nlohmann::json::array();
+    for (int r = 0; r < stage.intrinsics_covariance.rows(); ++r) {
+      std::vector<double> row(stage.intrinsics_covariance.cols());
+      for (int c = 0; c < stage.intrinsics_covariance.cols(); ++c)
+        row[c] = stage.intrinsics_covariance(r, c);
+      rows.push_back(row);
+    }
+    result["intrinsics_covariance"] = rows;
   } else {
     result["projection_uncertainty"] = {{"error", stage.uncertainty_error}};
   }

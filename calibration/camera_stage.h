@@ -29,6 +29,10 @@ struct CameraStageSummary {
   // `uncertainty_error` says why.
   ProjectionUncertaintyMap uncertainty;
   std::string uncertainty_error;
+  // The lens's covariance from the chessboard alone (ProjectionUncertainty::
+  // IntrinsicsCovariance; result.json's camera.intrinsics_covariance): the prior with which a
+  // scan refines the lens (calibration/self_calibration.h). Empty with `uncertainty_error`.
+  Eigen::MatrixXd intrinsics_covariance;
 };
 
 // Detects the board in every photo, calibrates, and writes the model and the result section.

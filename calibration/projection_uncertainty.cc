@@ -127,6 +127,14 @@ bool ProjectionUncertainty::Compute(const CameraCalibration& calibration, std::s
   return true;
 }
 
+Eigen::MatrixXd ProjectionUncertainty::IntrinsicsCovariance() const {
+  const int n = static_cast<int>(intrinsics_.size());
+  const Eigen::VectorXd d = scale_.segment(state_index_intrinsics_, n);
+  return sigma_ * sigma_ * d.asDiagonal() *
+         packed_covariance_.block(state_index_intrinsics_, state_index_intrinsics_, n, n) *
+         d.asDiagonal();
+}
+
 Eigen::Matrix<double, 2, Eigen::Dynamic> ProjectionUncertainty::ProjectionGradient(
     const Vec3& p_in_cam, bool at_infinity) const {
   Eigen::Matrix<double, 2, Eigen::Dynamic> gradient =

@@ -56,6 +56,10 @@ class ProjectionUncertainty {
   // only the direction of `p_in_cam` counts and the translations' columns are zero.
   Eigen::Matrix<double, 2, Eigen::Dynamic> ProjectionGradient(const Vec3& p_in_cam,
                                                               bool at_infinity) const;
+  // Var(intrinsics), the lens's marginal covariance in mrcal's order and units (px², px ·
+  // distortion, ...): σ² times the intrinsics' block of Var(b)/σ². What the chessboard says
+  // of the lens on its own, e.g. as a prior where a later solve refines it.
+  Eigen::MatrixXd IntrinsicsCovariance() const;
   // Var(q), px², of the pixel of `p_in_cam` (mrcal's what = 'covariance').
   Eigen::Matrix2d Covariance(const Vec3& p_in_cam, bool at_infinity) const;
   // The worst-direction standard deviation, px, at `pixel`, for a point `distance` metres along

@@ -140,6 +140,43 @@ RoomCalibrationProblem ReadProblem(const ProjectorsStageOptions& args, const Cam
 ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const CameraModel& camera,
                                  const RoomCalibrationProblem& problem);
 
+// Scanning with --refine-camera: the lens and its covariance as `calibrate camera` recorded them
+// in RIG_DIR/result.json ("camera": intrinsics, intrinsics_covariance), the chessboard's even
+// where camera.cameramodel already holds an earlier scan's refined lens, so that running the scan
+// again starts from the same place. Throws IoError naming result.json without them (a camera
+// model given with --camera-model has no chessboard solve).
+void ChessboardLensPrior(const std::filesystem::path& rig_dir, const CameraModel& camera,
+                         RoomCalibrationProblem* problem, const ProgressCallback& progress) {
+  const std::string file = (rig_dir / "result.json").string();
+  const nlohmann::json camera_result =
+      ReadRigResult(rig_dir).value("camera", nlohmann::json::object());
+  const size_t n = camera.intrinsics.size();
+  if (!camera_result.contains("intrinsics_covariance"))
+    throw IoError(file +
+                  ": camera.intrinsics_covariance: missing: --refine-camera while scanning needs "
+                  "the chessboard's lens covariance (run `procam calibrate camera` into this rig "
+                  "directory)");
+  if (camera_result.value("lens_model", "") != camera.lens_model)
+    throw IoError(file + ": camera.lens_model: not camera.cameramodel's " + camera.lens_model);
+  try {
+    const auto intrinsics = camera_result.at("intrinsics").get<std::vector<double>>();
+    const auto rows =
+        camera_result.at("intrinsics_covariance").get<std::vector<std::vector<double>>>();
+    if (intrinsics.size() != n || rows.size() != n)
+      throw std::invalid_argument("not " + std::to_string(n) + " intrinsics");
+    Eigen::MatrixXd covariance(n, n);
+    for (size_t r = 0; r < n; ++r) {
+      if (rows[r].size() != n) throw std::invalid_argument("a row of the wrong size");
+      for (size_t c = 0; c < n; ++c) covariance(r, c) = rows[r][c];
+    }
+    problem->camera_intrinsics = intrinsics;
+    problem->camera_intrinsics_covariance = covariance;
+  } catch (const std::exception& error) {
+    throw IoError(file + ": camera.intrinsics_covariance: " + error.what());
+  }
+  Report(progress, "camera lens: the chessboard's, refined by the scan with it as the prior");
+}
+
 }  // namespace
 
 ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
@@ -164,12 +201,25 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
                                 std::to_string(args.sessions.size()) + " sessions");
 
   if (args.scene.empty()) {
-    // The scan holds the camera's lens and fits pinhole projectors (self_calibration.h).
-    if (args.options.refine_camera_intrinsics || args.options.refine_distortion)
+    // The scan fits pinhole projectors (self_calibration.h); --refine-camera refines the whole
+    // camera lens with the chessboard's as the prior.
+    if (args.options.refine_distortion)
       throw std::invalid_argument(
-          "--refine-camera, --refine-distortion: only with --scene (a scan holds the camera's "
-          "lens and fits pinhole projectors)");
-    return ScanRoom(args, camera, ReadProblem(args, camera, camera_path));
+          "--refine-distortion: only with --scene (a scan fits pinhole projectors)");
+    if (args.refine_camera_aspect)
+      throw std::invalid_argument(
+          "--refine-camera-aspect: only with --scene (a scan refines the whole lens)");
+    RoomCalibrationProblem prior;  // checked before the sessions are decoded
+    if (args.options.refine_camera_intrinsics) {
+      args.self_calibration.refine_camera_lens = true;
+      ChessboardLensPrior(out, camera, &prior, args.progress);
+    }
+    RoomCalibrationProblem problem = ReadProblem(args, camera, camera_path);
+    if (args.options.refine_camera_intrinsics) {
+      problem.camera_intrinsics = prior.camera_intrinsics;
+      problem.camera_intrinsics_covariance = prior.camera_intrinsics_covariance;
+    }
+    return ScanRoom(args, camera, problem);
   }
 
   // The guess: --camera-guess, else the pose camera.cameramodel already holds.
@@ -414,9 +464,9 @@ void WriteDeviceModels(const std::filesystem::path& out, const CameraModel& came
   }
   WriteCameraModelFile(out / "camera.cameramodel", camera_out,
                        (refined_camera
-                            ? "procam camera model (procam calibrate camera; fx, fy, cx, cy and "
-                              "pose by procam calibrate projectors --refine-camera); extrinsics "
-                              "= rt_cam_room, the room = "
+                            ? "procam camera model (procam calibrate camera; the lens refined "
+                              "and the pose by procam calibrate projectors: --refine-camera, or "
+                              "the scan); extrinsics = rt_cam_room, the room = "
                             : "procam camera model (procam calibrate camera; pose by procam "
                               "calibrate projectors); extrinsics = rt_cam_room, the room = ") +
                            room);
@@ -476,7 +526,8 @@ double ScanCameraHeight(const ProjectorsStageOptions& args, const CameraModel& c
                    {"board_thickness_m", args.board_thickness},
                    {"camera_height_m", floor.camera_height},
                    {"board_distance_m", floor.cam_from_board.translation().norm()},
-                   {"reprojection_rms_px", floor.rms_px}};
+                   {"reprojection_rms_px", floor.rms_px},
+                   {"board_normal_in_camera", JsonTriple(floor.floor_normal_in_cam)}};
     return floor.camera_height;
   }
   if (args.camera_height) {
@@ -519,7 +570,21 @@ nlohmann::json SelfCalibrationJson(const ProjectorsStageSummary& stage) {
                           {"max_norm_px", p.max_norm},
                           {"projection_uncertainty", UncertaintyJson(p)}});
   }
+  nlohmann::json lens;
+  if (summary.camera_lens_refined) {
+    lens = {{"refined", true},
+            {"after", stage.calibration.camera_intrinsics},
+            {"moved", summary.camera_lens_moved},
+            {"moved_chessboard_sigmas", summary.camera_lens_moved_sigmas},
+            {"what",
+             "the camera's lens refined in the bundle adjustment with the chessboard's (result.json "
+             "camera.intrinsics, camera.intrinsics_covariance) as a Gaussian prior; moved = after "
+             "minus the chessboard's, mrcal order"}};
+  } else {
+    lens = {{"refined", false}, {"what", "held as camera.cameramodel has it"}};
+  }
   return {{"points", summary.points},
+          {"camera_lens", lens},
           {"ceres_iterations", summary.ceres_iterations},
           {"metres_per_unit", summary.scale},
           {"floor_inliers", summary.floor_inliers},
@@ -540,6 +605,10 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
                      "the floor, from {})",
                      problem.projectors.size(), options.camera_height,
                      scale_json["source"].get<std::string>()));
+  if (board_normal) {
+    options.floor_normal_in_camera = *board_normal;
+    options.max_floor_normal_deg = args.max_board_floor_angle_deg;
+  }
   ProjectorsStageSummary stage;
   SelfCalibrationSummary summary;
   if (!SelfCalibrateRoom(options, problem, &stage.calibration, nullptr, &summary))
@@ -551,10 +620,10 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
   if (board_normal) {
     // The board must lie on the floor the scan found: its plane parallel to that floor (a board
     // on a tilted surface, or a photo from another camera pose, would set a wrong scale).
-    const Vec3 scan_up = stage.calibration.room_from_camera.linear().transpose() * Vec3::UnitZ();
-    const double angle =
-        std::acos(std::clamp(scan_up.dot(*board_normal), -1.0, 1.0)) * 180.0 / M_PI;
+    // The angle is the scan's own floor's, before the floor was held to the board's normal.
+    const double angle = summary.floor_to_given_normal_deg;
     scale_json["board_to_scanned_floor_deg"] = angle;
+    scale_json["floor_held_to_the_board"] = summary.floor_normal_held;
     if (angle > args.max_board_floor_angle_deg)
       throw IoError(fmt::format(
           "{}: the board's plane is {:.1f} deg off the floor the scan found (at most {:g}): lay "
@@ -637,8 +706,16 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
                                          {"projectors", ProjectorsJson(stage.calibration)}};
   ReadRigFile(out);  // a malformed rig.json stops here, before anything is written
   stage.room = WriteScannedScene(out, *stage.scanned);
-  WriteDeviceModels(out, camera, stage.calibration, false, "the scanned room's frame (room.json)",
-                    registration_json, result_section);
+  if (summary.camera_lens_refined) {
+    // camera.cameramodel gets the refined lens without the chessboard solve's inputs (they no
+    // longer give its intrinsics); a copy of the chessboard's model keeps them for mrcal's tools
+    // (written once: an earlier scan has already dropped them from camera.cameramodel).
+    const std::string chessboard = ReadFile(out / "camera.cameramodel");
+    if (chessboard.find("'optimization_inputs'") != std::string::npos)
+      WriteFileAtomically(out / "camera_chessboard.cameramodel", chessboard);
+  }
+  WriteDeviceModels(out, camera, stage.calibration, summary.camera_lens_refined,
+                    "the scanned room's frame (room.json)", registration_json, result_section);
   std::vector<std::string> names;
   for (const RoomProjector& projector : stage.calibration.projectors) names.push_back(projector.name);
   WriteProjectorsReport(out / "projectors_report.html", names, problem, *stage.self_calibration);

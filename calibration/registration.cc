@@ -306,14 +306,7 @@ struct RoomReprojectionFreeCamera {
     T ray[3] = {dx, dy, T(1.0)};
     if (distorted) {
       T x = T(ray0.x()), y = T(ray0.y());
-      for (int step = 0; step < 2; ++step) {
-        T distorted_x, distorted_y, j[4];
-        DistortOpenCv4(distortion, x, y, &distorted_x, &distorted_y, j);
-        const T ex = distorted_x - dx, ey = distorted_y - dy;
-        const T determinant = j[0] * j[3] - j[1] * j[2];
-        x -= (j[3] * ex - j[1] * ey) / determinant;
-        y -= (j[0] * ey - j[2] * ex) / determinant;
-      }
+      UndistortOpenCv4Steps(distortion, dx, dy, 2, &x, &y);
       ray[0] = x;
       ray[1] = y;
     }

@@ -109,6 +109,10 @@ struct RoomCalibrationProblem {
   // or the start of fx, fy, cx, cy with RoomCalibrationOptions::refine_camera_intrinsics.
   std::string camera_lens_model = "LENSMODEL_PINHOLE";
   std::vector<double> camera_intrinsics;
+  // The lens's covariance from the chessboard (ProjectionUncertainty::IntrinsicsCovariance),
+  // intrinsics × intrinsics, or empty: the prior with which SelfCalibrateRoom refines the lens
+  // (SelfCalibrationOptions::refine_camera_lens). CalibrateRoom does not use it.
+  Eigen::MatrixXd camera_intrinsics_covariance;
   std::vector<ProjectorObservations> projectors;
 };
 

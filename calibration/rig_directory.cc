@@ -239,8 +239,7 @@ void UpdateRigFile(const std::filesystem::path& rig_dir, const std::function<voi
   WriteRigFile(rig_dir, rig);
 }
 
-void UpdateRigResult(const std::filesystem::path& rig_dir, const std::vector<std::string>& path,
-                     const nlohmann::json& section) {
+nlohmann::json ReadRigResult(const std::filesystem::path& rig_dir) {
   nlohmann::json result = nlohmann::json::object();
   const std::filesystem::path file = rig_dir / "result.json";
   if (std::filesystem::exists(file)) {
@@ -250,6 +249,13 @@ void UpdateRigResult(const std::filesystem::path& rig_dir, const std::vector<std
     result = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
     if (!result.is_object()) result = nlohmann::json::object();
   }
+  return result;
+}
+
+void UpdateRigResult(const std::filesystem::path& rig_dir, const std::vector<std::string>& path,
+                     const nlohmann::json& section) {
+  nlohmann::json result = ReadRigResult(rig_dir);
+  const std::filesystem::path file = rig_dir / "result.json";
   nlohmann::json* node = &result;
   for (const std::string& key : path) {
     if (!(*node)[key].is_object()) (*node)[key] = nlohmann::json::object();

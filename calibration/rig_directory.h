@@ -104,6 +104,8 @@ void UpdateRigFile(const std::filesystem::path& rig_dir, const std::function<voi
 // rest; a result.json that is not a JSON object is replaced. Written atomically.
 void UpdateRigResult(const std::filesystem::path& rig_dir, const std::vector<std::string>& path,
                      const nlohmann::json& section);
+// RIG_DIR/result.json as an object: empty when there is none or it is not a JSON object.
+nlohmann::json ReadRigResult(const std::filesystem::path& rig_dir);
 
 // RIG_DIR/rig.json read for compensate and project.
 struct RigDirectory {

@@ -312,7 +312,8 @@ TEST(CalibrateAll, ScanRefusals) {
   EXPECT_NE(both.output.find("--scan"), std::string::npos) << both.output;
   EXPECT_FALSE(std::filesystem::exists(dir / "rig"));  // refused before anything is written
 
-  // calibrate projectors: a scan refines neither the camera's lens nor projector distortion.
+  // calibrate projectors: a scan fits no projector distortion, and refines the camera's lens
+  // only with the chessboard's covariance (result.json, from calibrate camera).
   std::filesystem::create_directories(dir / "rig2");
   WriteCameraModelFile(dir / "rig2/camera.cameramodel",
                        CameraFromPlacement(MakeSyntheticScene("tiny_box", 20).camera).Model(),
@@ -321,7 +322,14 @@ TEST(CalibrateAll, ScanRefusals) {
       "calibrate projectors " + (dir / "no_session").string() + " --refine-camera --out " +
       (dir / "rig2").string());
   EXPECT_EQ(refine.exit_code, 1);
-  EXPECT_NE(refine.output.find("only with --scene"), std::string::npos) << refine.output;
+  EXPECT_NE(refine.output.find("result.json: camera.intrinsics_covariance: missing"),
+            std::string::npos)
+      << refine.output;
+  const testing::CommandRun distortion = testing::RunProcam(
+      "calibrate projectors " + (dir / "no_session").string() + " --refine-distortion --out " +
+      (dir / "rig2").string());
+  EXPECT_EQ(distortion.exit_code, 1);
+  EXPECT_NE(distortion.output.find("only with --scene"), std::string::npos) << distortion.output;
 }
 
 // Projector names become file names and rig.json keys: a name with other characters is refused

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 
 #include <cmath>
 #include <cstdio>
@@ -332,6 +333,134 @@ TEST(SelfCalibrateRoom, FarLensShift) {
         Vec2(projector.geometry.intrinsics()[2], projector.geometry.intrinsics()[3]));
   CalibrateAndCheck("columns, lens shift -300 px, no search, guessed", *rig, problem, Bounds(),
                     nullptr, options);
+}
+
+// The camera's lens as a chessboard leaves it on the green trapezoid's rig (the demo's, at half
+// size): fx, cy and k2 off by about their chessboard uncertainty, which is given as the prior's
+// covariance (independent parameters here).
+struct ChessboardLens {
+  std::vector<double> intrinsics;
+  Eigen::MatrixXd covariance;
+};
+ChessboardLens OffByItsUncertainty(const CameraGeometry& camera) {
+  ChessboardLens lens;
+  const std::vector<double> sigma = {0.15, 0.15, 0.2, 0.15, 7e-4, 1.8e-3, 1e-4, 1e-4};
+  const std::vector<double> off = {0.15, -0.05, -0.1, 0.2, 1e-3, -4e-3, 1.5e-4, -5e-5};
+  lens.intrinsics = camera.intrinsics();
+  lens.covariance = Eigen::MatrixXd::Zero(8, 8);
+  for (int i = 0; i < 8; ++i) {
+    lens.intrinsics[i] += off[i];
+    lens.covariance(i, i) = sigma[i] * sigma[i];
+  }
+  return lens;
+}
+
+// How far `estimate` projects from the camera's true lens, px, once the best rotation between
+// their rays is taken out (a turn of the whole lens is a turn of the camera, which the scan
+// cannot see): the largest over a grid of pixels, the angle times the true focal length.
+double LensErrorAfterRotationPx(const CameraGeometry& camera, const std::vector<double>& estimate) {
+  std::vector<Vec3> truth_rays, estimate_rays;
+  for (int j = 0; j < 12; ++j)
+    for (int i = 0; i < 16; ++i) {
+      const Vec2 pixel(i * (camera.width() - 1) / 15.0, j * (camera.height() - 1) / 11.0);
+      Vec3 t, e;
+      EXPECT_TRUE(UnprojectCameraPixel(camera.lens_model(), camera.intrinsics(), pixel, &t));
+      EXPECT_TRUE(UnprojectCameraPixel(camera.lens_model(), estimate, pixel, &e));
+      truth_rays.push_back(t.normalized());
+      estimate_rays.push_back(e.normalized());
+    }
+  Eigen::Matrix3Xd from(3, truth_rays.size()), to(3, truth_rays.size());
+  for (size_t i = 0; i < truth_rays.size(); ++i) {
+    from.col(i) = truth_rays[i];
+    to.col(i) = estimate_rays[i];
+  }
+  const Eigen::Matrix3d turn = Eigen::umeyama(from, to, false).topLeftCorner<3, 3>();
+  double worst = 0.0;
+  for (size_t i = 0; i < truth_rays.size(); ++i)
+    worst = std::max(worst, std::acos(std::clamp((turn * from.col(i)).dot(to.col(i)), -1.0, 1.0)));
+  return worst * camera.intrinsics()[0];
+}
+
+// With the chessboard's covariance the bundle adjustment refines the whole lens: the structured
+// light covers the image where the chessboard pins it least. The refined lens is closer to the
+// truth than the chessboard's, and moved by about the chessboard's own uncertainty.
+TEST(SelfCalibrateRoom, TheChessboardLensIsRefinedWithItsUncertaintyAsPrior) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("green_trapezoid", 0.5);
+  RoomCalibrationProblem problem = MakeProblem(*rig, 2);
+  const ChessboardLens chessboard = OffByItsUncertainty(rig->camera());
+  problem.camera_intrinsics = chessboard.intrinsics;
+  SelfCalibrationOptions options;
+  options.camera_height = CameraHeight(*rig);
+  RoomCalibration held, refined;
+  SelfCalibrationSummary held_summary, summary;
+  ASSERT_TRUE(SelfCalibrateRoom(options, problem, &held, nullptr, &held_summary));
+  EXPECT_FALSE(held_summary.camera_lens_refined);
+  EXPECT_EQ(held.camera_intrinsics, chessboard.intrinsics);
+  options.refine_camera_lens = true;
+  EXPECT_THROW(SelfCalibrateRoom(options, problem, &refined, nullptr, &summary),
+               std::invalid_argument);  // no covariance
+  problem.camera_intrinsics_covariance = chessboard.covariance;
+  ASSERT_TRUE(SelfCalibrateRoom(options, problem, &refined, nullptr, &summary))
+      << summary.BriefReport();
+  std::printf("%s\n", summary.BriefReport().c_str());
+  const double before = LensErrorAfterRotationPx(rig->camera(), chessboard.intrinsics);
+  const double after = LensErrorAfterRotationPx(rig->camera(), refined.camera_intrinsics);
+  std::printf("camera lens off the truth after the best turn: chessboard %.3f px, refined %.3f px\n",
+              before, after);
+  EXPECT_TRUE(summary.camera_lens_refined);
+  EXPECT_LT(after, 0.5 * before);
+  EXPECT_GT(summary.camera_lens_moved_sigmas, 0.5);
+  EXPECT_LT(summary.camera_lens_moved_sigmas, 10.0);
+  ASSERT_EQ(summary.camera_lens_moved.size(), 8u);
+  for (int i = 0; i < 8; ++i)
+    EXPECT_DOUBLE_EQ(summary.camera_lens_moved[i],
+                     refined.camera_intrinsics[i] - chessboard.intrinsics[i]);
+
+  // A covariance of the wrong size is refused.
+  problem.camera_intrinsics_covariance = Eigen::MatrixXd::Identity(4, 4);
+  EXPECT_THROW(SelfCalibrateRoom(options, problem, &refined, nullptr, &summary),
+               std::invalid_argument);
+}
+
+// The floor held to a normal measured apart from the scan (the floor chessboard's): with the
+// chessboard's lens held, the scan's floor is tilted against the camera; held to the true normal
+// it is not, and the points lie nearer their true places. A normal farther from the scan's floor
+// than max_floor_normal_deg is not used.
+TEST(SelfCalibrateRoom, TheFloorIsHeldToAGivenNormal) {
+  const std::unique_ptr<SimulatedRig> rig = MakeRig("green_trapezoid", 0.5);
+  RoomCalibrationProblem problem = MakeProblem(*rig, 2);
+  problem.camera_intrinsics = OffByItsUncertainty(rig->camera()).intrinsics;
+  SelfCalibrationOptions options;
+  options.camera_height = CameraHeight(*rig);
+  const Vec3 true_up = rig->camera().proj_from_world().linear() * Vec3::UnitZ();
+  RoomCalibration free_floor, held_floor, far_normal;
+  std::vector<SelfCalibrationPoint> free_points, held_points;
+  SelfCalibrationSummary summary;
+  ASSERT_TRUE(SelfCalibrateRoom(options, problem, &free_floor, &free_points, &summary));
+  EXPECT_FALSE(summary.floor_normal_held);
+  EXPECT_TRUE(std::isnan(summary.floor_to_given_normal_deg));
+  options.floor_normal_in_camera = true_up;
+  ASSERT_TRUE(SelfCalibrateRoom(options, problem, &held_floor, &held_points, &summary))
+      << summary.BriefReport();
+  std::printf("%s\n", summary.BriefReport().c_str());
+  const double free_deg = FloorNormalErrorDeg(free_floor, *rig);
+  const double held_deg = FloorNormalErrorDeg(held_floor, *rig);
+  const double free_mm = PointRmsMm(free_points, free_floor, *rig);
+  const double held_mm = PointRmsMm(held_points, held_floor, *rig);
+  std::printf("floor normal off the truth: %.4f deg free, %.4f deg held; points %.2f / %.2f mm\n",
+              free_deg, held_deg, free_mm, held_mm);
+  EXPECT_TRUE(summary.floor_normal_held);
+  EXPECT_NEAR(summary.floor_to_given_normal_deg, free_deg, 1e-6);
+  EXPECT_LT(held_deg, 0.01 * free_deg);
+  EXPECT_LT(held_mm, 0.5 * free_mm);
+
+  // 5° off: refused, the scan's own floor kept.
+  options.floor_normal_in_camera =
+      Eigen::AngleAxisd(5.0 * kPi / 180.0, Vec3::UnitX()) * true_up;
+  ASSERT_TRUE(SelfCalibrateRoom(options, problem, &far_normal, nullptr, &summary));
+  EXPECT_FALSE(summary.floor_normal_held);
+  EXPECT_NEAR(summary.floor_to_given_normal_deg, 5.0, 0.2);  // 5° ± the scan's own 0.11°
+  EXPECT_NEAR(FloorNormalErrorDeg(far_normal, *rig), free_deg, 1e-9);
 }
 
 // One projector: its principal point is not observable (header) and is held at the centre,
