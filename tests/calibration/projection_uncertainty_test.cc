@@ -113,6 +113,45 @@ TEST(ProjectionUncertainty, WithoutSolveIsAStatus) {
   EXPECT_NE(why.find("no chessboard solve"), std::string::npos) << why;
 }
 
+// The lens's covariance (the prior a scan may refine the lens with) against the spread of the
+// intrinsics over 40 noise draws of the same views: each standard deviation within 40% (the
+// spread of 40 draws is itself about 11% uncertain).
+TEST(ProjectionUncertainty, IntrinsicsCovarianceMatchesTheSpreadOverNoise) {
+  constexpr int kDraws = 40;
+  constexpr double kSigma = 0.2;
+  std::vector<std::vector<double>> draws;
+  Eigen::MatrixXd predicted;
+  for (int draw = 0; draw < kDraws; ++draw) {
+    CameraCalibrationOptions options;
+    CameraCalibration calibration;
+    CameraCalibrationSummary summary;
+    ASSERT_TRUE(CalibrateCamera(options, Board(), NoisyViews(kSigma, 100 + draw), kWidth, kHeight,
+                                &calibration, &summary));
+    draws.push_back(calibration.intrinsics);
+    if (draw == 0) {
+      ProjectionUncertainty uncertainty;
+      std::string why;
+      ASSERT_TRUE(uncertainty.Compute(calibration, &why)) << why;
+      predicted = uncertainty.IntrinsicsCovariance();
+    }
+  }
+  const int n = static_cast<int>(draws[0].size());
+  ASSERT_EQ(predicted.rows(), n);
+  ASSERT_EQ(predicted.cols(), n);
+  EXPECT_LT((predicted - predicted.transpose()).norm(), 1e-12 * predicted.norm());
+  for (int i = 0; i < n; ++i) {
+    double mean = 0.0, squares = 0.0;
+    for (const std::vector<double>& d : draws) mean += d[i] / kDraws;
+    for (const std::vector<double>& d : draws) squares += (d[i] - mean) * (d[i] - mean);
+    const double spread = std::sqrt(squares / (kDraws - 1));
+    const double sigma = std::sqrt(predicted(i, i));
+    std::printf("intrinsic %d: predicted 1 sigma %.4g, spread over %d draws %.4g\n", i, sigma,
+                kDraws, spread);
+    EXPECT_GT(sigma, spread / 1.4) << "intrinsic " << i;
+    EXPECT_LT(sigma, spread * 1.4) << "intrinsic " << i;
+  }
+}
+
 // Debian's python3-mrcal installs into Debian's interpreter (not a pyenv or venv python3).
 constexpr char kPython[] = "/usr/bin/python3";
 bool HaveMrcal() {
