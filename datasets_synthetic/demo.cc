@@ -180,6 +180,7 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
 // scanned room and shown by the true projectors in the true world.
 struct ScanStage {
   std::vector<std::vector<std::string>> surfaces;  // table rows, one per scanned surface
+  std::vector<std::vector<std::string>> areas;     // table rows, one per true surface found
   MethodEvaluation perceptual;                     // on the scanned room
   cv::Mat surfaces_picture;  // camera view: true surfaces | scanned surfaces, by colour
   nlohmann::json json;
@@ -259,6 +260,7 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
   const nlohmann::json scan_json =
       nlohmann::json::parse(ReadFile(rig_dir / "result.json"))["projectors"]["scan"];
   nlohmann::json surfaces = nlohmann::json::array();
+  std::vector<double> scanned_on(true_scene.surfaces.size(), 0.0);  // m² per true surface
   for (size_t s = 0; s < geometry.scene.surfaces.size(); ++s) {
     const ScannedSurfaceAccuracy accuracy = MeasureScannedSurface(
         true_model, scanned_model, static_cast<int>(s), world_from_room);
@@ -267,6 +269,7 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
     const double fitted_rms_mm =
         1e3 * MeasureScannedSurface(true_model, scanned_model, static_cast<int>(s), world_from_room_fitted)
                   .RmsMetres();
+    scanned_on[true_surface] += area;
     const std::string& name = geometry.scene.surfaces[s].name;
     std::string kind = "?";
     for (const nlohmann::json& entry : scan_json["surfaces"])
@@ -280,6 +283,25 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
                         {"corners_and_centroids_rms_mm", rms_mm},
                         {"after_best_rigid_fit_rms_mm", fitted_rms_mm},
                         {"area_m2", area}});
+  }
+
+  // Areas, per true surface: the scanned surfaces lying on it against what of it the camera
+  // sees and a projector lights (what a scan can rebuild).
+  const RayScene true_rays(true_scene);
+  std::vector<ProjectorGeometry> true_projectors;
+  for (const Projector& p : evaluation.world->projectors()) true_projectors.push_back(p.geometry);
+  nlohmann::json areas = nlohmann::json::array();
+  for (size_t t = 0; t < true_scene.surfaces.size(); ++t) {
+    if (scanned_on[t] <= 0.0) continue;
+    const double seen = SeenAndLitArea(true_model, true_rays, static_cast<int>(t),
+                                       evaluation.world->camera(), true_projectors);
+    const double error = seen > 0.0 ? 100.0 * (scanned_on[t] / seen - 1.0) : 0.0;
+    stage.areas.push_back({true_scene.surfaces[t].name, fmt::format("{:.3f}", scanned_on[t]),
+                           fmt::format("{:.3f}", seen), fmt::format("{:+.2f}", error)});
+    areas.push_back({{"true_surface", true_scene.surfaces[t].name},
+                     {"scanned_m2", scanned_on[t]},
+                     {"seen_and_lit_m2", seen},
+                     {"error_percent", error}});
   }
 
   // The picture: each camera pixel coloured by the true surface it sees (left) and by the
@@ -308,6 +330,7 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
   stage.surfaces_picture = picture;
   stage.json = {{"rig", rig_dir.string()},
                 {"surfaces", surfaces},
+                {"areas", areas},
                 {"patches", fine.size()},
                 {"patches_unseen_by_the_camera", unseen},
                 {"perceptual_on_scanned_room", DeltaEJson(stage.perceptual)}};
@@ -454,6 +477,10 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
                   "truth, RMS mm (frames by the camera's pose)", "the same after the best rigid fit of the "
                   "whole room (shape alone)", "area m²"},
                  scan->surfaces);
+    report.Paragraph(
+        "Areas per true surface: the scanned surfaces lying on it against what of it the camera "
+        "sees and a projector lights (1 cm cells), which is all a scan can rebuild.");
+    report.Table({"true surface", "scanned m²", "seen and lit m²", "error %"}, scan->areas);
     report.Figures(
         {{"camera view: the true surfaces (left) and the scanned ones (right), a scanned "
           "surface in the colour of the true one it lies on",

@@ -77,4 +77,40 @@ Eigen::Isometry3d FitScannedRoom(const RoomModel& truth, const RoomModel& scanne
   return fit;
 }
 
+double SeenAndLitArea(const RoomModel& truth, const RayScene& rays, int surface,
+                      const ProjectorGeometry& camera,
+                      const std::vector<ProjectorGeometry>& projectors, double cell) {
+  const Vec3 camera_centre = camera.CentreInWorld();
+  const auto visible = [&](const ProjectorGeometry& device, const Vec3& centre, const Vec3& p) {
+    Vec2 pixel;
+    return device.Project(p, &pixel) && device.InImage(pixel) && !rays.Occluded(centre, p, 1e-4);
+  };
+  double area = 0.0;
+  for (const ModelFacet& facet : truth.facets()) {
+    if (facet.surface != surface) continue;
+    // The convex facet as a fan of triangles, each cut into m² congruent sub-triangles whose
+    // sides are at most `cell`, counted at their centroids.
+    for (size_t k = 1; k + 1 < facet.corners.size(); ++k) {
+      const Vec3 &a = facet.corners[0], e1 = facet.corners[k] - a, e2 = facet.corners[k + 1] - a;
+      const double longest = std::max({e1.norm(), e2.norm(), (e2 - e1).norm()});
+      const int m = std::max(1, static_cast<int>(std::ceil(longest / cell)));
+      const double weight = 0.5 * e1.cross(e2).norm() / (static_cast<double>(m) * m);
+      const auto count = [&](const Vec3& p) {
+        if (!visible(camera, camera_centre, p)) return;
+        for (const ProjectorGeometry& projector : projectors)
+          if (visible(projector, projector.CentreInWorld(), p)) {
+            area += weight;
+            return;
+          }
+      };
+      for (int i = 0; i < m; ++i)
+        for (int j = 0; i + j < m; ++j) {
+          count(a + ((3 * i + 1) * e1 + (3 * j + 1) * e2) / (3.0 * m));
+          if (i + j < m - 1) count(a + ((3 * i + 2) * e1 + (3 * j + 2) * e2) / (3.0 * m));
+        }
+    }
+  }
+  return area;
+}
+
 }  // namespace procam

@@ -7,6 +7,8 @@
 #include <vector>
 
 #include "calibration/registration.h"
+#include "geometry/ray_scene.h"
+#include "projection/projector.h"
 
 namespace procam {
 
@@ -34,5 +36,13 @@ ScannedSurfaceAccuracy MeasureScannedSurface(const RoomModel& truth, const RoomM
 // room, carried to every point in proportion to its distance.
 Eigen::Isometry3d FitScannedRoom(const RoomModel& truth, const RoomModel& scanned,
                                  const Eigen::Isometry3d& world_from_room, int iterations = 100);
+
+// What of true surface `surface` a scan can rebuild: the area of its facets whose points the
+// camera sees and at least one projector lights, both unoccluded (`rays` is the true room),
+// sampled at the centres of cells about `cell` metres wide; m². The scanned area of that surface
+// is compared with this, not with the whole surface: a scan rebuilds only what it saw.
+double SeenAndLitArea(const RoomModel& truth, const RayScene& rays, int surface,
+                      const ProjectorGeometry& camera,
+                      const std::vector<ProjectorGeometry>& projectors, double cell = 0.01);
 
 }  // namespace procam

@@ -46,5 +46,41 @@ TEST(ScanAccuracy, TheBestRigidFitUndoesAKnownFrameError) {
   }
 }
 
+// SeenAndLitArea against closed forms: a 4 × 3 m floor seen whole by a camera 10 m above it.
+// Lit whole by a projector beside the camera: all 12 m². Lit by a projector whose principal
+// point is at its image's left edge, pixel 0's outer side (it lights only x ≥ 2 m): half, 6 m², to the 1 cm cells.
+// Under a 1 × 1 m table top 1 m above the floor, which the camera's and projector's rays meet
+// first, the floor loses the table's shadow: 1 m² (the devices are 10 m up, so the shadow is the
+// table's footprint scaled by 10/9).
+TEST(ScanAccuracy, SeenAndLitAreaOfAFloor) {
+  Scene scene;
+  Surface floor;
+  floor.name = "floor";
+  floor.quad = {Vec3(0, 0, 0), Vec3(4, 0, 0), Vec3(4, 3, 0), Vec3(0, 3, 0)};
+  scene.surfaces.push_back(floor);
+  const Vec3 above(2.0, 1.5, 10.0), below(2.0, 1.5, 0.0), up(0.0, 1.0, 0.0);
+  const auto device = [&](double cx) {
+    return ProjectorGeometry::Pinhole(500, 500, cx, 400, 1000, 800,
+                                      ProjFromWorldLookingAt(above, below, up));
+  };
+  const ProjectorGeometry camera = device(499.5), whole = device(499.5), half = device(-0.5);
+  {
+    const RoomModel truth(scene);
+    const RayScene rays(scene);
+    EXPECT_NEAR(SeenAndLitArea(truth, rays, 0, camera, {whole}), 12.0, 1e-9);
+    EXPECT_NEAR(SeenAndLitArea(truth, rays, 0, camera, {half}), 6.0, 0.02);
+    EXPECT_NEAR(SeenAndLitArea(truth, rays, 0, camera, {half, whole}), 12.0, 1e-9);
+  }
+  Surface table;
+  table.name = "table";
+  table.quad = {Vec3(0.5, 0.5, 1), Vec3(1.5, 0.5, 1), Vec3(1.5, 1.5, 1), Vec3(0.5, 1.5, 1)};
+  scene.surfaces.push_back(table);
+  const RoomModel truth(scene);
+  const RayScene rays(scene);
+  const double shadow = 1.0 * (10.0 / 9.0) * (10.0 / 9.0);
+  EXPECT_NEAR(SeenAndLitArea(truth, rays, 0, camera, {whole}), 12.0 - shadow, 0.03);
+  EXPECT_NEAR(SeenAndLitArea(truth, rays, 1, camera, {whole}), 1.0, 1e-9);
+}
+
 }  // namespace
 }  // namespace procam
