@@ -329,6 +329,7 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
   }
   int moved = 0;
   Polygon2 snapped;
+  std::vector<const Line*> snapped_onto;  // per corner: the one line it moved onto, or null
   for (const Point2& corner : ring->vertices()) {
     const Vec3 p = plane.FromPlane(Vec2(corner.x(), corner.y()));
     std::vector<std::pair<double, const Line*>> near;
@@ -347,17 +348,31 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
         q = corner3, done = true;
       }
     }
+    const Line* onto = nullptr;
     if (!done && !near.empty()) {
       const Line& line = *near[0].second;
       q = line.point + (p - line.point).dot(line.direction) * line.direction;
       done = true;
+      onto = &line;
     }
     if (done) ++moved;
     const Vec2 uv = plane.ToPlane(q);
     snapped.push_back(Point2(uv.x(), uv.y()));
+    snapped_onto.push_back(onto);
   }
+  // Of a run of corners snapped onto one edge line, only the run's ends stay: the edge runs
+  // straight between them. (An outline that zig-zags across the line, as where points of two
+  // planes interleave along their edge, would otherwise double back along it and not be simple.)
+  std::vector<Point2> cleaned;
+  const size_t count = snapped_onto.size();
+  for (size_t k = 0; k < count; ++k) {
+    const Line* at = snapped_onto[k];
+    if (at && snapped_onto[(k + count - 1) % count] == at && snapped_onto[(k + 1) % count] == at)
+      continue;
+    cleaned.push_back(snapped[k]);
+  }
+  if (cleaned.size() < 3) cleaned.assign(snapped.vertices_begin(), snapped.vertices_end());
   // Corners that snapped onto one point, or onto a straight line between their neighbours, go.
-  std::vector<Point2> cleaned(snapped.vertices_begin(), snapped.vertices_end());
   for (bool removed = true; removed && cleaned.size() > 3;) {
     removed = false;
     for (size_t k = 0; k < cleaned.size() && cleaned.size() > 3; ++k) {
