@@ -114,38 +114,40 @@ void WriteCameraReport(const std::filesystem::path& path, const CameraCalibratio
   report.Write(path);
 }
 
-std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::path& path,
-                                                         const std::vector<std::string>& names,
-                                                         const RoomCalibrationProblem& problem,
-                                                         const SelfCalibrationSummary& summary) {
-  if (names.size() != problem.projectors.size() || summary.projectors.size() != problem.projectors.size())
+namespace {
+
+// What WriteProjectorsReport shows, whichever calibration gave the maps.
+struct ProjectorMaps {
+  std::string title, brief_report, what;  // `what` has one {} for the colour scale's top
+  std::vector<const ProjectionUncertaintyMap*> maps;
+  std::vector<double> distances_m;
+};
+
+std::vector<std::filesystem::path> WriteProjectorMaps(const std::filesystem::path& path,
+                                                      const std::vector<std::string>& names,
+                                                      const RoomCalibrationProblem& problem,
+                                                      const ProjectorMaps& in) {
+  if (names.size() != problem.projectors.size() || in.maps.size() != problem.projectors.size())
     throw std::invalid_argument("WriteProjectorsReport: one name and one summary per projector");
-  HtmlReport report("procam: projectors from the scan");
-  std::istringstream lines(summary.BriefReport());
+  HtmlReport report(in.title);
+  std::istringstream lines(in.brief_report);
   for (std::string line; std::getline(lines, line);) report.Paragraph(line);
   report.Heading("What the calibration is sure of");
   double largest = 0.0;
-  for (const SelfCalibrationProjectorSummary& p : summary.projectors)
-    for (double v : p.uncertainty.grid) largest = std::max(largest, v);
+  for (const ProjectionUncertaintyMap* map : in.maps)
+    for (double v : map->grid) largest = std::max(largest, v);
   std::vector<std::filesystem::path> pictures(names.size());
   if (!(largest > 0.0)) {
-    report.Paragraph("Not computed (the self-calibration's system was singular).");
+    report.Paragraph("Not computed (the calibration's system was singular).");
     report.Write(path);
     return pictures;
   }
   const double full_scale = UncertaintyFullScale(largest);
-  report.Paragraph(fmt::format(
-      "1-σ worst-direction error of where each projector shows a point fixed relative to the "
-      "camera, at the median distance of its points, from decoding noise alone (the "
-      "self-calibration's covariance: σ² (JᵀJ, the depths eliminated)⁻¹). One colour scale for "
-      "all: 0 px (dark blue) to {:g} px (yellow); white dots: the projector pixels decoded. Where "
-      "it is large, few decoded points pin the projector's lens: light more of the room the "
-      "camera sees with that part of the image.",
-      full_scale));
+  report.Paragraph(fmt::format(fmt::runtime(in.what), full_scale));
   std::vector<std::vector<std::string>> rows;
   std::vector<std::pair<std::string, cv::Mat>> figures;
   for (size_t k = 0; k < names.size(); ++k) {
-    const ProjectionUncertaintyMap& map = summary.projectors[k].uncertainty;
+    const ProjectionUncertaintyMap& map = *in.maps[k];
     if (map.grid.empty()) {
       rows.push_back({names[k], "—", "—", "—", "not computed"});
       continue;
@@ -168,7 +170,7 @@ std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::
     rows.push_back({names[k], fmt::format("{:.3f}", map.centre),
                     fmt::format("{:.3f}", *std::max_element(map.corners.begin(), map.corners.end())),
                     fmt::format("{:.3f}", *std::max_element(map.grid.begin(), map.grid.end())),
-                    fmt::format("{:.2f} m, σ {:.3f} px", summary.projectors[k].uncertainty_distance_m,
+                    fmt::format("{:.2f} m, σ {:.3f} px", in.distances_m[k],
                                 map.observed_pixel_sigma)});
     figures.emplace_back(fmt::format("{}: projection uncertainty ({}×{} pixels)", names[k],
                                      observations.width, observations.height),
@@ -180,6 +182,49 @@ std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::
   report.Figures(figures);
   report.Write(path);
   return pictures;
+}
+
+}  // namespace
+
+std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::path& path,
+                                                         const std::vector<std::string>& names,
+                                                         const RoomCalibrationProblem& problem,
+                                                         const SelfCalibrationSummary& summary) {
+  ProjectorMaps maps;
+  maps.title = "procam: projectors from the scan";
+  maps.brief_report = summary.BriefReport();
+  maps.what =
+      "1-σ worst-direction error of where each projector shows a point fixed relative to the "
+      "camera, at the median distance of its points, from decoding noise alone (the "
+      "self-calibration's covariance: σ² (JᵀJ, the depths eliminated)⁻¹). One colour scale for "
+      "all: 0 px (dark blue) to {:g} px (yellow); white dots: the projector pixels decoded. Where "
+      "it is large, few decoded points pin the projector's lens: light more of the room the "
+      "camera sees with that part of the image.";
+  for (const SelfCalibrationProjectorSummary& p : summary.projectors) {
+    maps.maps.push_back(&p.uncertainty);
+    maps.distances_m.push_back(p.uncertainty_distance_m);
+  }
+  return WriteProjectorMaps(path, names, problem, maps);
+}
+
+std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::path& path,
+                                                         const std::vector<std::string>& names,
+                                                         const RoomCalibrationProblem& problem,
+                                                         const RoomCalibrationSummary& summary) {
+  ProjectorMaps maps;
+  maps.title = "procam: projectors registered to the room model";
+  maps.brief_report = summary.BriefReport();
+  maps.what =
+      "1-σ worst-direction error of where each projector shows a point fixed in the room, at the "
+      "median distance of its points, from decoding noise alone (the joint solve's covariance "
+      "σ² (JᵀJ)⁻¹, the camera's pose included; the model's own errors come on top). One colour "
+      "scale for all: 0 px (dark blue) to {:g} px (yellow); white dots: the projector pixels "
+      "decoded.";
+  for (const RoomProjectorSummary& p : summary.projectors) {
+    maps.maps.push_back(&p.uncertainty);
+    maps.distances_m.push_back(p.uncertainty_distance_m);
+  }
+  return WriteProjectorMaps(path, names, problem, maps);
 }
 
 }  // namespace procam

@@ -44,12 +44,18 @@ std::filesystem::path ProjectorUncertaintyPicture(const std::filesystem::path& d
 double UncertaintyFullScale(double largest_px);
 
 // Writes `path` (atomically) and, beside it, projector_uncertainty_NAME.png for each projector
-// with a map: the self-calibration's numbers, each projector's map (one colour scale for all)
-// with the projector pixels of its decoded correspondences (at most 3000 drawn). `names` one per
-// projector of `problem`. Returns the pictures' paths, in projector order ("" where none).
+// with a map: the calibration's numbers, each projector's map (one colour scale for all) with the
+// projector pixels of its decoded correspondences (at most 3000 drawn). `names` one per
+// projector of `problem`. Returns the pictures' paths, in projector order ("" where none). For
+// a scan (the self-calibration's maps: a point fixed relative to the camera) and for a rig
+// registered to a room model (the joint solve's: a point fixed in the room).
 std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::path& path,
                                                          const std::vector<std::string>& names,
                                                          const RoomCalibrationProblem& problem,
                                                          const SelfCalibrationSummary& summary);
+std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::path& path,
+                                                         const std::vector<std::string>& names,
+                                                         const RoomCalibrationProblem& problem,
+                                                         const RoomCalibrationSummary& summary);
 
 }  // namespace procam

@@ -40,8 +40,8 @@ ScanCheck CheckAgainstScan(const RoomCalibrationProblem& problem,
                            const Eigen::Isometry3d& guess, const ProgressCallback& progress);
 void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraModel& camera,
                             const Eigen::Isometry3d& guess, const std::string& guess_source,
-                            const Scene& scene, const ProjectorsStageSummary& stage,
-                            const ScanCheck& check);
+                            const Scene& scene, const RoomCalibrationProblem& problem,
+                            const ProjectorsStageSummary& stage, const ScanCheck& check);
 
 
 // Decoded correspondences of one structured-light session.
@@ -262,7 +262,7 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
     throw std::runtime_error("projector calibration failed: " + summary.BriefReport());
 
   const ScanCheck check = CheckAgainstScan(problem, calibration, model, guess, args.progress);
-  WriteProjectorsOutputs(args, camera, guess, guess_source, scene, stage, check);
+  WriteProjectorsOutputs(args, camera, guess, guess_source, scene, problem, stage, check);
   return stage;
 }
 
@@ -318,6 +318,29 @@ nlohmann::json StatsJson(const DistanceStats& stats) {
           {"max_mm", stats.max_mm}};
 }
 
+// A projector's projection uncertainty in result.json: the map's form, where it is, and null
+// where it was not computed.
+nlohmann::json UncertaintyJson(const ProjectionUncertaintyMap& map, double distance_m,
+                               const char* what) {
+  if (map.grid.empty()) return nullptr;
+  nlohmann::json json = map.Json();
+  json["what"] = what;
+  json["distance_m"] = distance_m;
+  return json;
+}
+nlohmann::json UncertaintyJson(const SelfCalibrationProjectorSummary& p) {
+  return UncertaintyJson(p.uncertainty, p.uncertainty_distance_m,
+                         "1-sigma worst-direction error of where the projector shows a point fixed "
+                         "relative to the camera at distance_m, px (the self-calibration's "
+                         "covariance)");
+}
+nlohmann::json UncertaintyJson(const RoomProjectorSummary& p) {
+  return UncertaintyJson(p.uncertainty, p.uncertainty_distance_m,
+                         "1-sigma worst-direction error of where the projector shows a point fixed "
+                         "in the room at distance_m, px (the joint solve's covariance, decoding "
+                         "noise only)");
+}
+
 // The "registration" entry of rig.json.
 nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const CameraModel& camera,
                                 const Eigen::Isometry3d& guess, const std::string& guess_source,
@@ -363,7 +386,8 @@ nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const Camera
                              {"outliers", s.outliers},
                              {"seed_rms_px", s.seed_rms},
                              {"rms_px_per_coordinate", s.rms},
-                             {"max_norm_px", s.max_norm}});
+                             {"max_norm_px", s.max_norm},
+                             {"projection_uncertainty", UncertaintyJson(s)}});
   }
   registration_json["projectors"] = per_projector;
   nlohmann::json per_surface = nlohmann::json::array();
@@ -487,8 +511,8 @@ void WriteDeviceModels(const std::filesystem::path& out, const CameraModel& came
 
 void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraModel& camera,
                             const Eigen::Isometry3d& guess, const std::string& guess_source,
-                            const Scene& scene, const ProjectorsStageSummary& stage,
-                            const ScanCheck& check) {
+                            const Scene& scene, const RoomCalibrationProblem& problem,
+                            const ProjectorsStageSummary& stage, const ScanCheck& check) {
   const RoomCalibration& calibration = stage.calibration;
   const std::filesystem::path& out = args.out;
   const std::filesystem::path camera_path = out / "camera.cameramodel";
@@ -500,9 +524,13 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
 
   WriteDeviceModels(out, camera, calibration, args.options.refine_camera_intrinsics,
                     "the scene's frame", registration_json, result_section);
+  std::vector<std::string> names;
+  for (const RoomProjector& projector : calibration.projectors) names.push_back(projector.name);
+  WriteProjectorsReport(out / "projectors_report.html", names, problem, stage.summary);
   Report(args.progress,
-         fmt::format("wrote {} projector models, camera.cameramodel (pose in the room{}), rig.json "
-                     "and result.json in {}",
+         fmt::format("wrote {} projector models, camera.cameramodel (pose in the room{}), rig.json, "
+                     "result.json and projectors_report.html (where each projector's calibration "
+                     "is sure) in {}",
                      calibration.projectors.size(),
                      args.options.refine_camera_intrinsics ? ", refined intrinsics" : "",
                      out.string()));
@@ -540,17 +568,6 @@ double ScanCameraHeight(const ProjectorsStageOptions& args, const CameraModel& c
       "--floor-chessboard: required without --scene: the scan's metric scale comes from a photo "
       "of the chessboard lying flat on the floor, taken by the camera from where it stands (or "
       "give --camera-height, the camera's height above the floor in metres)");
-}
-
-// A projector's projection uncertainty in result.json: the map's form, where it is, and null
-// where it was not computed.
-nlohmann::json UncertaintyJson(const SelfCalibrationProjectorSummary& p) {
-  if (p.uncertainty.grid.empty()) return nullptr;
-  nlohmann::json json = p.uncertainty.Json();
-  json["what"] = "1-sigma worst-direction error of where the projector shows a point fixed relative to the "
-                 "camera at distance_m, px (the self-calibration's covariance)";
-  json["distance_m"] = p.uncertainty_distance_m;
-  return json;
 }
 
 nlohmann::json SelfCalibrationJson(const ProjectorsStageSummary& stage) {

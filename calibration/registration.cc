@@ -420,14 +420,15 @@ std::vector<std::vector<Correspondence>> SampleCorrespondences(const RoomCalibra
 // 1σ of the camera's fx, fy, cx, cy from (JᵀJ)⁻¹ s² at the solution of `ceres_problem`, whose
 // parameter blocks are listed in `blocks` with the camera's intrinsics third (`camera_aspect` >
 // 0: fy tied to fx). NaN where the normal matrix is singular.
-void EstimateCameraSigma(ceres::Problem& ceres_problem, const std::vector<double*>& blocks, double cost,
-                         double camera_aspect, double* camera_sigma) {
+// σ² (JᵀJ)⁻¹ of the solve over `blocks` (in the tangent coordinates of each, in order),
+// σ² = 2·cost / (residuals − parameters); false when JᵀJ is singular.
+bool ParameterCovariance(ceres::Problem& ceres_problem, const std::vector<double*>& blocks,
+                         double cost, Eigen::MatrixXd* covariance) {
   ceres::Problem::EvaluateOptions evaluate;
   evaluate.parameter_blocks = blocks;
   evaluate.apply_loss_function = false;
   ceres::CRSMatrix jacobian;
-  std::fill(camera_sigma, camera_sigma + 4, std::numeric_limits<double>::quiet_NaN());
-  if (!ceres_problem.Evaluate(evaluate, nullptr, nullptr, nullptr, &jacobian)) return;
+  if (!ceres_problem.Evaluate(evaluate, nullptr, nullptr, nullptr, &jacobian)) return false;
   const int n = jacobian.num_cols;
   Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(n, n);
   for (int row = 0; row < jacobian.num_rows; ++row)
@@ -442,23 +443,48 @@ void EstimateCameraSigma(ceres::Problem& ceres_problem, const std::vector<double
   const Eigen::VectorXd scale = normal.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
   const Eigen::MatrixXd scaled = scale.asDiagonal() * normal * scale.asDiagonal();
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(scaled);
-  if (eigen.info() != Eigen::Success ||
-      !(eigen.eigenvalues()(0) > 1e-12 * eigen.eigenvalues()(n - 1)))
-    return;
-  const Eigen::MatrixXd inverse = scale.asDiagonal() * eigen.eigenvectors() *
-                                  eigen.eigenvalues().cwiseInverse().asDiagonal() *
-                                  eigen.eigenvectors().transpose() * scale.asDiagonal();
+  if (eigen.info() != Eigen::Success || !(eigen.eigenvalues()(n - 1) > 0.0)) return false;
+  // Directions the solve does not see at all (eigenvalues at rounding level) are a gauge: left
+  // out (the pseudo-inverse). Measured on l_shaped: one, a common shift of the camera and the
+  // projectors.
+  Eigen::VectorXd inverse_eigenvalues(n);
+  int gauge = 0;
+  for (int i = 0; i < n; ++i) {
+    const bool seen = eigen.eigenvalues()(i) > 1e-10 * eigen.eigenvalues()(n - 1);
+    inverse_eigenvalues(i) = seen ? 1.0 / eigen.eigenvalues()(i) : 0.0;
+    gauge += !seen;
+  }
+  if (gauge > 1) return false;  // more than a gauge: a degenerate solve
   const int degrees_of_freedom = jacobian.num_rows - n;
-  if (degrees_of_freedom < 1) return;
+  if (degrees_of_freedom < 1) return false;
   const double variance = 2.0 * cost / degrees_of_freedom;
-  // Columns 6… are the camera's fx, fy, cx, cy, or fx, cx, cy with fy held (tied to fx).
-  const int fx = 6, fy = camera_aspect > 0.0 ? -1 : 7, cx = fy < 0 ? 7 : 8, cy = cx + 1;
-  camera_sigma[0] = std::sqrt(variance * inverse(fx, fx));
-  camera_sigma[1] =
-      fy < 0 ? camera_aspect * camera_sigma[0] : std::sqrt(variance * inverse(fy, fy));
-  camera_sigma[2] = std::sqrt(variance * inverse(cx, cx));
-  camera_sigma[3] = std::sqrt(variance * inverse(cy, cy));
+  *covariance = variance * scale.asDiagonal() * eigen.eigenvectors() *
+                inverse_eigenvalues.asDiagonal() * eigen.eigenvectors().transpose() *
+                scale.asDiagonal();
+  return true;
 }
+
+// The camera's fx, fy, cx, cy 1σ from the covariance over (camera rotation, translation,
+// camera_k, ...): columns 6… are fx, fy, cx, cy, or fx, cx, cy with fy held (tied to fx).
+void CameraSigma(const Eigen::MatrixXd& covariance, double camera_aspect, double* camera_sigma) {
+  const int fx = 6, fy = camera_aspect > 0.0 ? -1 : 7, cx = fy < 0 ? 7 : 8, cy = cx + 1;
+  camera_sigma[0] = std::sqrt(covariance(fx, fx));
+  camera_sigma[1] = fy < 0 ? camera_aspect * camera_sigma[0] : std::sqrt(covariance(fy, fy));
+  camera_sigma[2] = std::sqrt(covariance(cx, cx));
+  camera_sigma[3] = std::sqrt(covariance(cy, cy));
+}
+
+// A point fixed in the room as projector (intrinsics, proj_from_room) shows it.
+struct ProjectRoomPoint {
+  explicit ProjectRoomPoint(const Vec3& p_in_room) : p_in_room(p_in_room) {}
+  template <typename T>
+  bool operator()(const T* intrinsics, const T* rotation, const T* translation, T* pixel) const {
+    const T p[3] = {T(p_in_room.x()), T(p_in_room.y()), T(p_in_room.z())};
+    ProjectorPixelResidual(intrinsics, rotation, translation, p, Vec2::Zero().eval(), pixel);
+    return true;
+  }
+  Vec3 p_in_room;
+};
 
 // Projector k alone against the model's planes as the guess puts them in the camera: the seed of
 // its intrinsics and pose. False (with `failure`) when its own calibration fails.
@@ -513,6 +539,64 @@ int CountPoints(const std::vector<Correspondence>& correspondences, bool inliers
 
 // The solve's results: the calibration (camera pose and lens, every projector's model) and the
 // per-projector residuals. False (with `failure`) where a value is not finite.
+// Each projector's projection uncertainty (RoomProjectorSummary::uncertainty) from the last
+// solve's covariance over (camera rotation, translation, [camera fx, fy, cx, cy], per projector
+// intrinsics, rotation, translation), tangent coordinates.
+void ProjectorUncertainties(const RoomCalibrationOptions& options, const RoomModel& model,
+                            const RoomCalibrationProblem& problem, const PoseBlock& camera,
+                            const std::vector<ProjectorState>& projectors,
+                            const std::vector<std::vector<Correspondence>>& correspondences,
+                            const Eigen::MatrixXd& covariance, RoomCalibrationSummary* summary) {
+  const int intrinsics_free = options.refine_distortion ? 6 : 4;
+  const int camera_free = !options.refine_camera_intrinsics ? 0
+                          : options.keep_camera_aspect_ratio ? 3
+                                                             : 4;
+  int offset = 6 + camera_free;
+  const Eigen::Isometry3d room_from_camera = camera.Pose();
+  for (size_t k = 0; k < projectors.size(); ++k, offset += intrinsics_free + 6) {
+    const ProjectorState& p = projectors[k];
+    if (offset + intrinsics_free + 6 > covariance.rows()) return;
+    const Eigen::MatrixXd block =
+        covariance.block(offset, offset, intrinsics_free + 6, intrinsics_free + 6);
+    const Eigen::Isometry3d proj_from_room = p.proj_from_room.Pose();
+    const Vec3 centre = proj_from_room.inverse().translation();
+    std::vector<double> distances;
+    for (const Correspondence& c : correspondences[k]) {
+      if (c.facet < 0 || !c.inlier) continue;
+      double t = 0.0;
+      const Vec3 direction = room_from_camera.linear() * c.ray_in_cam;
+      if (model.Intersect(room_from_camera.translation(), direction, &t) >= 0 && t > 0.0)
+        distances.push_back((room_from_camera.translation() + t * direction - centre).norm());
+    }
+    if (distances.empty()) continue;
+    std::nth_element(distances.begin(), distances.begin() + distances.size() / 2, distances.end());
+    const double distance = distances[distances.size() / 2];
+    const auto worst = [&](const Vec2& pixel) {
+      const Vec3 direction = Vec3((pixel.x() - p.intrinsics[2]) / p.intrinsics[0],
+                                  (pixel.y() - p.intrinsics[3]) / p.intrinsics[1], 1.0)
+                                 .normalized();
+      const ceres::AutoDiffCostFunction<ProjectRoomPoint, 2, 6, 3, 3> project(
+          new ProjectRoomPoint(proj_from_room.inverse() * (distance * direction)));
+      const double* parameters[] = {p.intrinsics, p.proj_from_room.rotation,
+                                    p.proj_from_room.translation};
+      Eigen::Matrix<double, 2, 6, Eigen::RowMajor> j_intrinsics;
+      Eigen::Matrix<double, 2, 3, Eigen::RowMajor> j_rotation, j_translation;
+      Vec2 projected;
+      double* jacobians[] = {j_intrinsics.data(), j_rotation.data(), j_translation.data()};
+      if (!project.Evaluate(parameters, projected.data(), jacobians))
+        return std::numeric_limits<double>::quiet_NaN();
+      Eigen::MatrixXd j(2, intrinsics_free + 6);
+      j << j_intrinsics.leftCols(intrinsics_free), j_rotation, j_translation;
+      const Eigen::Matrix2d var = j * block * j.transpose();
+      return std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(var).eigenvalues()[1]));
+    };
+    RoomProjectorSummary& out = summary->projectors[k];
+    out.uncertainty_distance_m = distance;
+    out.uncertainty = MapProjectionUncertainty(worst, out.rms, problem.projectors[k].width,
+                                               problem.projectors[k].height);
+  }
+}
+
 bool CollectRoomResults(const RoomCalibrationOptions& options, const RoomModel& model,
                         const RoomCalibrationProblem& problem, const PoseBlock& camera,
                         const std::vector<double>& camera_intrinsics, const std::vector<ProjectorState>& projectors,
@@ -630,6 +714,8 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
       }
   };
   // Joint solves: robust until the facets settle, then least squares on the inliers.
+  Eigen::MatrixXd covariance;  // of the last least-squares solve (ParameterCovariance)
+  bool covariance_ok = false;
   auto solve = [&](bool robust, ceres::Solver::Summary* ceres_summary) {
     ceres::Problem ceres_problem;
     std::vector<double*> blocks = {camera.rotation, camera.translation, camera_k};
@@ -668,12 +754,21 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
     ++summary->rounds;
     bool usable = ceres_summary->IsSolutionUsable() && camera.Finite();
     for (const double value : camera_k) usable = usable && std::isfinite(value) && value != 0.0;
-    if (usable && options.refine_camera_intrinsics) {
-      if (!robust) {
-        EstimateCameraSigma(ceres_problem, blocks, ceres_summary->final_cost, camera_aspect, summary->camera_sigma);
+    if (usable && !robust) {
+      // What the solve is sure of: the covariance over the blocks it has (the camera's lens
+      // only when refined), kept for the projectors' uncertainty after the last solve.
+      std::vector<double*> present;
+      for (double* block : blocks)
+        if (ceres_problem.HasParameterBlock(block)) present.push_back(block);
+      covariance_ok =
+          ParameterCovariance(ceres_problem, present, ceres_summary->final_cost, &covariance);
+      if (options.refine_camera_intrinsics) {
+        std::fill(summary->camera_sigma, summary->camera_sigma + 4,
+                  std::numeric_limits<double>::quiet_NaN());
+        if (covariance_ok) CameraSigma(covariance, camera_aspect, summary->camera_sigma);
       }
-      update_rays();
     }
+    if (usable && options.refine_camera_intrinsics) update_rays();
     return usable;
   };
   auto check_counts = [&](bool inliers_only) {
@@ -717,6 +812,9 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
                           calibration, summary, &failure)) {
     return finish(RoomCalibrationSummary::kSolverFailed, failure);
   }
+  if (covariance_ok)
+    ProjectorUncertainties(options, model, problem, camera, projectors, correspondences, covariance,
+                           summary);
   summary->camera_moved_mm =
       1e3 * (calibration->room_from_camera.translation() - room_from_camera_guess.translation())
                 .norm();

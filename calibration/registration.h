@@ -52,6 +52,7 @@
 #include <string>
 #include <vector>
 
+#include "calibration/projection_uncertainty.h"
 #include "calibration/projector_calibration.h"
 #include "calibration/structured_light.h"
 #include "geometry/scene.h"
@@ -165,6 +166,14 @@ struct RoomProjectorSummary {
   double seed_rms = 0.0;    // CalibrateProjector's RMS per coordinate on the guessed planes, px
   double rms = 0.0;         // RMS per coordinate over inliers, px
   double max_norm = 0.0;    // largest inlier residual norm, px
+  // What the joint solve is sure of: the worst-direction standard deviation, px, of where the
+  // projector shows a point fixed in the room `uncertainty_distance_m` along each pixel's ray
+  // (the median distance of its points), over a 16 × 12 grid, centre and corners. Covariance of
+  // the projector's free parameters: the marginal of σ² (JᵀJ)⁻¹ over the whole final solve (the
+  // camera's pose, and lens when refined, included), σ² the inliers' residual variance: decoding
+  // noise only, the model's own errors come on top. Empty grid when JᵀJ is singular.
+  ProjectionUncertaintyMap uncertainty;
+  double uncertainty_distance_m = 0.0;
 };
 
 struct RoomCalibrationSummary {

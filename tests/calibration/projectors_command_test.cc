@@ -141,6 +141,15 @@ TEST_F(CalibrateProjectorsCommand, RecoversTheSyntheticRig) {
   const nlohmann::json& registration = rig_json["registration"];
   EXPECT_EQ(registration["projectors"].size(), 2u);
   EXPECT_LT(registration["projectors"][0]["rms_px_per_coordinate"].get<double>(), 0.5);
+  // What the joint solve is sure of, per projector, and the report that draws it.
+  for (const nlohmann::json& projector : registration["projectors"]) {
+    const nlohmann::json& uncertainty = projector["projection_uncertainty"];
+    ASSERT_TRUE(uncertainty.is_object()) << projector.dump();
+    EXPECT_GT(uncertainty["centre_px"].get<double>(), 0.0);
+    EXPECT_EQ(uncertainty["grid_px"].size(), 12u);
+    EXPECT_GT(uncertainty["distance_m"].get<double>(), 0.3);
+  }
+  EXPECT_TRUE(std::filesystem::exists(rig / "projectors_report.html"));
   const nlohmann::json& residual = registration["residual"];
   // Triangulation noise sets these: 320-pixel projectors (f = 343 px) 0.45 m from the camera
   // put 0.34 px of decoding error at about 9 mm in depth 2 m away; the guess was 41 mm RMS off.
