@@ -106,20 +106,4 @@ void DistortOpenCv4(const K* k1_k2_p1_p2, const T& x, const T& y, T* distorted_x
   }
 }
 
-// `steps` Newton steps towards the normalised point (x, y) that DistortOpenCv4 takes to
-// (distorted_x, distorted_y), from the start in *x, *y (a nearby solution: the step converges
-// quadratically). Differentiable in every argument when `T` and `K` are Ceres Jets.
-template <typename T, typename K>
-void UndistortOpenCv4Steps(const K* k1_k2_p1_p2, const T& distorted_x, const T& distorted_y,
-                           int steps, T* x, T* y) {
-  for (int step = 0; step < steps; ++step) {
-    T value_x, value_y, j[4];
-    DistortOpenCv4(k1_k2_p1_p2, *x, *y, &value_x, &value_y, j);
-    const T ex = value_x - distorted_x, ey = value_y - distorted_y;
-    const T determinant = j[0] * j[3] - j[1] * j[2];
-    *x -= (j[3] * ex - j[1] * ey) / determinant;
-    *y -= (j[0] * ey - j[2] * ex) / determinant;
-  }
-}
-
 }  // namespace procam

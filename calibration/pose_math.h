@@ -1,7 +1,8 @@
 #pragma once
 // Small pieces the calibration's Ceres problems share (internal to calibration/): the projector
 // lens model (fx, fy, cx, cy, radial k1, k2: OpenCV4 with
-// p1 = p2 = 0) applied to a point given in another frame.
+// p1 = p2 = 0) applied to a point given in another frame, and the camera's OpenCV4 distortion
+// undone by Newton steps (differentiable, for a camera lens the solve refines).
 
 #include <Eigen/Geometry>
 #include <ceres/rotation.h>
@@ -27,6 +28,22 @@ void ProjectorPixelResidual(const T* intrinsics, const T* rotation, const T* tra
   DistortOpenCv4(distortion, x, y, &distorted_x, &distorted_y);
   residual[0] = intrinsics[0] * distorted_x + intrinsics[2] - T(observed.x());
   residual[1] = intrinsics[1] * distorted_y + intrinsics[3] - T(observed.y());
+}
+
+// `steps` Newton steps towards the normalised point (x, y) that DistortOpenCv4 takes to
+// (distorted_x, distorted_y), from the start in *x, *y (a nearby solution: the step converges
+// quadratically). Differentiable in every argument when `T` and `K` are Ceres Jets.
+template <typename T, typename K>
+void UndistortOpenCv4Steps(const K* k1_k2_p1_p2, const T& distorted_x, const T& distorted_y,
+                           int steps, T* x, T* y) {
+  for (int step = 0; step < steps; ++step) {
+    T value_x, value_y, j[4];
+    DistortOpenCv4(k1_k2_p1_p2, *x, *y, &value_x, &value_y, j);
+    const T ex = value_x - distorted_x, ey = value_y - distorted_y;
+    const T determinant = j[0] * j[3] - j[1] * j[2];
+    *x -= (j[3] * ex - j[1] * ey) / determinant;
+    *y -= (j[0] * ey - j[2] * ex) / determinant;
+  }
 }
 
 }  // namespace procam

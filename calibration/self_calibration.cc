@@ -15,6 +15,8 @@
 #include <stdexcept>
 #include <unordered_map>
 
+#include "calibration/pose_math.h"
+
 namespace procam {
 namespace {
 
