@@ -184,6 +184,16 @@ std::vector<std::filesystem::path> WriteProjectorMaps(const std::filesystem::pat
   return pictures;
 }
 
+// Each projector's map and the distance it is taken at, from a calibration summary's
+// per-projector entries (`uncertainty`, `uncertainty_distance_m`).
+template <typename ProjectorSummaries>
+void AddMaps(const ProjectorSummaries& projectors, ProjectorMaps* maps) {
+  for (const auto& p : projectors) {
+    maps->maps.push_back(&p.uncertainty);
+    maps->distances_m.push_back(p.uncertainty_distance_m);
+  }
+}
+
 }  // namespace
 
 std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::path& path,
@@ -200,10 +210,7 @@ std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::
       "all: 0 px (dark blue) to {:g} px (yellow); white dots: the projector pixels decoded. Where "
       "it is large, few decoded points pin the projector's lens: light more of the room the "
       "camera sees with that part of the image.";
-  for (const SelfCalibrationProjectorSummary& p : summary.projectors) {
-    maps.maps.push_back(&p.uncertainty);
-    maps.distances_m.push_back(p.uncertainty_distance_m);
-  }
+  AddMaps(summary.projectors, &maps);
   return WriteProjectorMaps(path, names, problem, maps);
 }
 
@@ -220,10 +227,7 @@ std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::
       "σ² (JᵀJ)⁻¹, the camera's pose included; the model's own errors come on top). One colour "
       "scale for all: 0 px (dark blue) to {:g} px (yellow); white dots: the projector pixels "
       "decoded.";
-  for (const RoomProjectorSummary& p : summary.projectors) {
-    maps.maps.push_back(&p.uncertainty);
-    maps.distances_m.push_back(p.uncertainty_distance_m);
-  }
+  AddMaps(summary.projectors, &maps);
   return WriteProjectorMaps(path, names, problem, maps);
 }
 

@@ -417,11 +417,8 @@ std::vector<std::vector<Correspondence>> SampleCorrespondences(const RoomCalibra
   return correspondences;
 }
 
-// 1σ of the camera's fx, fy, cx, cy from (JᵀJ)⁻¹ s² at the solution of `ceres_problem`, whose
-// parameter blocks are listed in `blocks` with the camera's intrinsics third (`camera_aspect` >
-// 0: fy tied to fx). NaN where the normal matrix is singular.
 // σ² (JᵀJ)⁻¹ of the solve over `blocks` (in the tangent coordinates of each, in order),
-// σ² = 2·cost / (residuals − parameters); false when JᵀJ is singular.
+// σ² = 2·cost / (residuals − parameters); false when JᵀJ is singular beyond one gauge direction.
 bool ParameterCovariance(ceres::Problem& ceres_problem, const std::vector<double*>& blocks,
                          double cost, Eigen::MatrixXd* covariance) {
   ceres::Problem::EvaluateOptions evaluate;
@@ -537,8 +534,6 @@ int CountPoints(const std::vector<Correspondence>& correspondences, bool inliers
   return n;
 }
 
-// The solve's results: the calibration (camera pose and lens, every projector's model) and the
-// per-projector residuals. False (with `failure`) where a value is not finite.
 // Each projector's projection uncertainty (RoomProjectorSummary::uncertainty) from the last
 // solve's covariance over (camera rotation, translation, [camera fx, fy, cx, cy], per projector
 // intrinsics, rotation, translation), tangent coordinates.
@@ -563,9 +558,12 @@ void ProjectorUncertainties(const RoomCalibrationOptions& options, const RoomMod
     std::vector<double> distances;
     for (const Correspondence& c : correspondences[k]) {
       if (c.facet < 0 || !c.inlier) continue;
-      double t = 0.0;
+      // The point where the camera ray meets its facet's plane, as the residual places it.
+      const ModelFacet& facet = model.facets()[c.facet];
       const Vec3 direction = room_from_camera.linear() * c.ray_in_cam;
-      if (model.Intersect(room_from_camera.translation(), direction, &t) >= 0 && t > 0.0)
+      const double t = -(facet.normal.dot(room_from_camera.translation()) + facet.offset) /
+                       facet.normal.dot(direction);
+      if (t > 0.0)
         distances.push_back((room_from_camera.translation() + t * direction - centre).norm());
     }
     if (distances.empty()) continue;
@@ -597,6 +595,8 @@ void ProjectorUncertainties(const RoomCalibrationOptions& options, const RoomMod
   }
 }
 
+// The solve's results: the calibration (camera pose and lens, every projector's model) and the
+// per-projector residuals. False (with `failure`) where a value is not finite.
 bool CollectRoomResults(const RoomCalibrationOptions& options, const RoomModel& model,
                         const RoomCalibrationProblem& problem, const PoseBlock& camera,
                         const std::vector<double>& camera_intrinsics, const std::vector<ProjectorState>& projectors,

@@ -194,7 +194,8 @@ struct RoomCalibrationSummary {
   // With refine_camera_intrinsics: how far fx, fy, cx, cy moved from the problem's (px), and
   // their 1σ (px) from the last solve's Gauss–Newton covariance (JᵀJ)⁻¹ · s², s² = 2·cost /
   // (residuals − parameters): decoding noise only, model errors (walls not flat) come on top.
-  // Zero when the intrinsics are held fixed; camera_sigma is NaN when JᵀJ is singular.
+  // Zero when the intrinsics are held fixed; camera_sigma is NaN when JᵀJ is singular beyond
+  // one direction (a gauge, which the pseudo-inverse leaves out).
   double camera_intrinsics_moved[4] = {0, 0, 0, 0};
   double camera_sigma[4] = {0, 0, 0, 0};
   double time_s = 0.0;

@@ -383,6 +383,18 @@ struct DepthReprojection {
 // of LENSMODEL_OPENCV4, zero and held for a pinhole): the ray is the camera pixel unprojected
 // through the lens, by Newton steps from the ray at the lens the solve started from.
 constexpr int kCameraBlock = 8;
+
+// The free lens's ray (x, y, 1) of `camera_pixel`: Newton steps from `ray0`, the ray at the lens
+// the solve started from.
+template <typename T>
+void RayThroughFreeLens(const T* camera, const Vec2& camera_pixel, const Vec2& ray0, T* x, T* y) {
+  const T distorted_x = (T(camera_pixel.x()) - camera[2]) / camera[0];
+  const T distorted_y = (T(camera_pixel.y()) - camera[3]) / camera[1];
+  *x = T(ray0.x());
+  *y = T(ray0.y());
+  UndistortOpenCv4Steps(camera + 4, distorted_x, distorted_y, 3, x, y);
+}
+
 struct DepthReprojectionFreeLens {
   DepthReprojectionFreeLens(const Vec2& camera_pixel, const Vec3& ray0, const Vec2& observed,
                             bool square_pixels)
@@ -391,10 +403,8 @@ struct DepthReprojectionFreeLens {
   template <typename T>
   bool operator()(const T* camera, const T* intrinsics, const T* rotation, const T* translation,
                   const T* depth, T* residual) const {
-    const T distorted_x = (T(camera_pixel_.x()) - camera[2]) / camera[0];
-    const T distorted_y = (T(camera_pixel_.y()) - camera[3]) / camera[1];
-    T x = T(ray0_.x()), y = T(ray0_.y());
-    UndistortOpenCv4Steps(camera + 4, distorted_x, distorted_y, 3, &x, &y);
+    T x, y;
+    RayThroughFreeLens(camera, camera_pixel_, ray0_, &x, &y);
     ProjectDepthPoint(x, y, intrinsics, rotation, translation, depth, observed_, square_pixels_,
                       residual);
     return true;
@@ -433,10 +443,8 @@ struct FloorPlaneResidualFreeLens {
       : camera_pixel_(camera_pixel), ray0_(ray0.x(), ray0.y()), normal_(normal), weight_(weight) {}
   template <typename T>
   bool operator()(const T* camera, const T* depth, const T* offset, T* residual) const {
-    const T distorted_x = (T(camera_pixel_.x()) - camera[2]) / camera[0];
-    const T distorted_y = (T(camera_pixel_.y()) - camera[3]) / camera[1];
-    T x = T(ray0_.x()), y = T(ray0_.y());
-    UndistortOpenCv4Steps(camera + 4, distorted_x, distorted_y, 3, &x, &y);
+    T x, y;
+    RayThroughFreeLens(camera, camera_pixel_, ray0_, &x, &y);
     residual[0] = T(weight_) * FloorDistance(x, y, depth[0], normal_, offset[0]);
     return true;
   }
@@ -451,7 +459,7 @@ struct FloorConstraint {
   std::vector<int> tracks;
   Vec3 normal = Vec3::UnitZ();
   double offset = 0.0;  // solve units, free in the solve
-  double weight = 1.0;  // σ_decoding / σ_floor (px per solve unit)
+  double weight = 1.0;  // px per solve unit (10 σ_decoding / σ_floor, SelfCalibrateRoom)
 };
 
 // The camera's lens in the bundle adjustment (SelfCalibrationOptions::refine_camera_lens): its
