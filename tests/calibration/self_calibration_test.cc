@@ -770,6 +770,17 @@ TEST(SelfCalibrateRoom, OptionsAndInputsAreChecked) {
   EXPECT_THROW(
       SelfCalibrateRoom(SelfCalibrationOptions(), unequal, &calibration, nullptr, &summary),
       std::invalid_argument);
+  // The floor's given normal must be finite, its angle bound in (0, 90).
+  SelfCalibrationOptions floor_options;
+  std::string why;
+  floor_options.floor_normal_in_camera = Vec3(std::nan(""), -1.0, 0.0);
+  EXPECT_FALSE(floor_options.Check(&why));
+  EXPECT_NE(why.find("floor_normal_in_camera"), std::string::npos) << why;
+  floor_options = SelfCalibrationOptions();
+  floor_options.max_floor_normal_deg = 0.0;
+  EXPECT_FALSE(floor_options.Check(&why));
+  EXPECT_THROW(SelfCalibrateRoom(floor_options, problem, &calibration, nullptr, &summary),
+               std::invalid_argument);
 }
 
 }  // namespace
