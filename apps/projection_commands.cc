@@ -195,6 +195,11 @@ void AddProjectionCommands(CLI::App& app) {
                          "context (EGL: a GPU, or Mesa's llvmpipe)")
       ->check(CLI::IsMember({"cpu", "gpu"}))
       ->capture_default_str();
+  bench_play->add_option("--shader", play_args->shader,
+                         "auto | fragment | compute: with --render gpu, the shader path (auto: "
+                         "compute where the context has OpenGL 4.3)")
+      ->check(CLI::IsMember({"auto", "fragment", "compute"}))
+      ->capture_default_str();
   AddLightOption(bench_play, &play_args->light);
   bench_play->add_option("--json", play_args->json, "Also write the timings as JSON");
   bench_play->callback([play_args, play_strings] {

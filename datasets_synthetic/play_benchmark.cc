@@ -31,14 +31,24 @@ namespace {
 // into the offscreen framebuffer in turn, then glFinish: every image ready).
 class PlayRenderer {
  public:
-  PlayRenderer(const FramePlanner& planner, PlayRender render) : planner_(planner), render_(render) {
+  PlayRenderer(const FramePlanner& planner, PlayRender render, const std::string& shader)
+      : planner_(planner), render_(render) {
     if (render != PlayRender::kGpu) return;
 #if PROCAM_WITH_GLFW
     const ProjectorMap& map = planner.rig().maps.front();
     gl_ = std::make_unique<OffscreenGl>(map.width, map.height);
-    for (size_t k = 0; k < planner.rig().projectors.size(); ++k)
-      gpu_.push_back(std::make_unique<GlProjectorRenderer>(planner, static_cast<int>(k)));
-    description_ = gl_->description();
+    const GlShading shading = shader == "fragment"  ? GlShading::kFragment
+                              : shader == "compute" ? GlShading::kCompute
+                              : shader == "auto"
+                                  ? GlShading::kAuto
+                                  : throw std::invalid_argument(
+                                        "procam bench play: no shader path '" + shader +
+                                        "' (auto, fragment, compute)");
+    for (size_t k = 0; k < planner.rig().projectors.size(); ++k) {
+      gpu_.push_back(
+          std::make_unique<GlProjectorRenderer>(planner, static_cast<int>(k), shading));
+    }
+    description_ = gl_->description() + ", " + GlShadingName(gpu_.front()->shading()) + " shader";
 #else
     throw IoError("procam bench play --render gpu: procam was built without OpenGL (PROCAM_WITH_GLFW)");
 #endif
@@ -118,7 +128,7 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
   start = Clock::now();
   const FramePlanner planner(rig, render);
   const double planner_seconds = SecondsSince(start);
-  PlayRenderer renderer(planner, args.render);
+  PlayRenderer renderer(planner, args.render, args.shader);
   const double nodes_per_patch =
       planner.field() ? double(planner.field()->node_list().size()) / problem.size() : 1.0;
   WarmStart warm;

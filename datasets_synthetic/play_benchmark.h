@@ -34,6 +34,8 @@ struct PlayBenchmarkOptions {
   LightField light = LightField::kSmooth;
   DitherMethod dither = DitherMethod::kOrdered;
   PlayRender render = PlayRender::kCpu;
+  // kGpu: the shader path, "auto", "fragment" or "compute" (GlShading of gl_renderer.h).
+  std::string shader = "auto";
   std::string json;
   ProgressCallback progress;
 };

@@ -23,8 +23,9 @@ void main() {
 }
 )";
 
-// Step 3 of projector_images.h per pixel (gl_renderer.h); the names follow the CPU's.
-constexpr const char* kFragmentShader = R"(#version 330 core
+// Step 3 of projector_images.h per pixel (gl_renderer.h); the names follow the CPU's. Shared by
+// the fragment and the compute shader, each of which puts its #version and main() around it.
+constexpr const char* kShading = R"(
 uniform isampler2D pixel_patch;       // patch the pixel lights, −1: none (texel row = image row)
 uniform sampler2D pixel_point;        // xyz: world point its ray hits; w: its share (w a / Ω)
 uniform isampler2D pixel_nodes;       // kSmooth: the nodes j of the pixel's first four bumps (−1:
@@ -51,7 +52,6 @@ uniform int ordered_dither;
 uniform int smooth_light;
 uniform int image_height;
 uniform int bayer[64];
-layout(location = 0) out vec4 colour;
 
 // v(x): the bumps' weighted mean of the node values, the bumps evaluated here (pixels reached by
 // more than 12).
@@ -123,13 +123,10 @@ int Quantise(int c, float r, float threshold) {
   return r - below > threshold * (above - below) ? q + 1 : q;
 }
 
-void main() {
-  ivec2 pixel = ivec2(int(gl_FragCoord.x), image_height - 1 - int(gl_FragCoord.y));
+// The colour of image pixel (column, row), row 0 at the top.
+vec4 PixelColour(ivec2 pixel) {
   int i = texelFetch(pixel_patch, pixel, 0).r;
-  if (i < 0) {
-    colour = vec4(0.0, 0.0, 0.0, 1.0);
-    return;
-  }
+  if (i < 0) return vec4(0.0, 0.0, 0.0, 1.0);
   vec4 point = texelFetch(pixel_point, pixel, 0);
   vec3 tau = texelFetch(level, i).rgb;
   vec3 m = smooth_light != 0 ? SeamlessFactor(i, point.xyz, pixel) : vec3(1.0);
@@ -142,7 +139,27 @@ void main() {
                         : 0.5;
   vec3 code = vec3(Quantise(0, r.r, threshold), Quantise(1, r.g, threshold),
                    Quantise(2, r.b, threshold));
-  colour = vec4(code / float(max_code), 1.0);
+  return vec4(code / float(max_code), 1.0);
+}
+)";
+
+constexpr const char* kFragmentMain = R"(
+layout(location = 0) out vec4 colour;
+void main() {
+  colour = PixelColour(ivec2(int(gl_FragCoord.x), image_height - 1 - int(gl_FragCoord.y)));
+}
+)";
+
+// Stores at (x, y) counted from the bottom, as the framebuffer holds it, so that the blit into
+// the framebuffer is a plain copy. IMAGE_FORMAT is the image's format qualifier.
+constexpr const char* kComputeMain = R"(
+layout(local_size_x = 16, local_size_y = 16) in;
+layout(IMAGE_FORMAT, binding = 0) writeonly uniform image2D shaded;
+uniform int image_width;
+void main() {
+  ivec2 at = ivec2(gl_GlobalInvocationID.xy);
+  if (at.x >= image_width || at.y >= image_height) return;
+  imageStore(shaded, at, PixelColour(ivec2(at.x, image_height - 1 - at.y)));
 }
 )";
 
@@ -153,9 +170,14 @@ std::string OneLine(std::string log) {
   return log;
 }
 
-GLuint CompileShader(GLenum type, const char* source) {
+const char* ShaderName(GLenum type) {
+  return type == GL_VERTEX_SHADER ? "vertex" : type == GL_FRAGMENT_SHADER ? "fragment" : "compute";
+}
+
+GLuint CompileShader(GLenum type, const std::string& source) {
   const GLuint shader = glCreateShader(type);
-  glShaderSource(shader, 1, &source, nullptr);
+  const char* text = source.c_str();
+  glShaderSource(shader, 1, &text, nullptr);
   glCompileShader(shader);
   GLint ok = GL_FALSE;
   glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
@@ -165,28 +187,35 @@ GLuint CompileShader(GLenum type, const char* source) {
     std::string log(std::max(length, 1), '\0');
     glGetShaderInfoLog(shader, length, nullptr, log.data());
     glDeleteShader(shader);
-    throw IoError(std::string("GlProjectorRenderer: the ") +
-                  (type == GL_VERTEX_SHADER ? "vertex" : "fragment") +
+    throw IoError(std::string("GlProjectorRenderer: the ") + ShaderName(type) +
                   " shader does not compile: " + OneLine(log));
   }
   return shader;
 }
 
-GLuint LinkProgram() {
-  const GLuint vertex = CompileShader(GL_VERTEX_SHADER, kVertexShader);
-  GLuint fragment = 0;
+// The fragment path's program (vertex + fragment shader), or the compute path's, whose image
+// has the format qualifier `image_format`.
+GLuint LinkProgram(GlShading shading, const std::string& image_format) {
+  std::vector<GLuint> shaders;
   try {
-    fragment = CompileShader(GL_FRAGMENT_SHADER, kFragmentShader);
+    if (shading == GlShading::kCompute) {
+      std::string main = kComputeMain;
+      main.replace(main.find("IMAGE_FORMAT"), std::string("IMAGE_FORMAT").size(), image_format);
+      shaders.push_back(
+          CompileShader(GL_COMPUTE_SHADER, std::string("#version 430 core\n") + kShading + main));
+    } else {
+      shaders.push_back(CompileShader(GL_VERTEX_SHADER, kVertexShader));
+      shaders.push_back(CompileShader(GL_FRAGMENT_SHADER,
+                                      std::string("#version 330 core\n") + kShading + kFragmentMain));
+    }
   } catch (...) {
-    glDeleteShader(vertex);
+    for (const GLuint shader : shaders) glDeleteShader(shader);
     throw;
   }
   const GLuint program = glCreateProgram();
-  glAttachShader(program, vertex);
-  glAttachShader(program, fragment);
+  for (const GLuint shader : shaders) glAttachShader(program, shader);
   glLinkProgram(program);
-  glDeleteShader(vertex);
-  glDeleteShader(fragment);
+  for (const GLuint shader : shaders) glDeleteShader(shader);
   GLint ok = GL_FALSE;
   glGetProgramiv(program, GL_LINK_STATUS, &ok);
   if (ok != GL_TRUE) {
@@ -243,7 +272,11 @@ std::string OpenGlDescription() {
 struct GlProjectorRenderer::State {
   int width = 0, height = 0, bits = 8, patches = 0;
   LightField light = LightField::kSmooth;
+  GlShading shading = GlShading::kFragment;  // kFragment or kCompute, as chosen
   GLuint program = 0, vertex_array = 0;
+  // kCompute: the image the compute shader stores into, and a framebuffer holding it (the blit's
+  // source).
+  GLuint image = 0, image_framebuffer = 0;
   GLuint timer_query = 0;  // while TimedDraw runs: a GL_TIME_ELAPSED query around the draw call
   std::array<GLuint, kUnits> textures = {};
   std::array<GLuint, kUnits> buffers = {};  // behind the texture buffers (0 for 2D textures)
@@ -304,11 +337,27 @@ struct GlProjectorRenderer::State {
     glDeleteTextures(kUnits, textures.data());
     glDeleteBuffers(kUnits, buffers.data());
     if (vertex_array != 0) glDeleteVertexArrays(1, &vertex_array);
+    if (image_framebuffer != 0) glDeleteFramebuffers(1, &image_framebuffer);
+    if (image != 0) glDeleteTextures(1, &image);
     if (program != 0) glDeleteProgram(program);
   }
 };
 
-GlProjectorRenderer::GlProjectorRenderer(const FramePlanner& planner, int projector) {
+bool GlComputeShading() {
+  return epoxy_is_desktop_gl() && epoxy_gl_version() >= 43;
+}
+
+const char* GlShadingName(GlShading shading) {
+  switch (shading) {
+    case GlShading::kAuto: return "auto";
+    case GlShading::kFragment: return "fragment";
+    case GlShading::kCompute: return "compute";
+  }
+  return "?";
+}
+
+GlProjectorRenderer::GlProjectorRenderer(const FramePlanner& planner, int projector,
+                                         GlShading shading) {
   const ProjectionRig& rig = planner.rig();
   const RenderOptions& options = planner.options();
   if (projector < 0 || projector >= static_cast<int>(rig.projectors.size())) {
@@ -336,8 +385,40 @@ GlProjectorRenderer::GlProjectorRenderer(const FramePlanner& planner, int projec
   state.patches = rig.size();
   state.light = options.light;
   glGetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &state.max_texels);
-  state.program = LinkProgram();
+  if (shading == GlShading::kCompute && !GlComputeShading()) {
+    throw IoError("GlProjectorRenderer: compute shading needs OpenGL 4.3, the context has " +
+                  std::to_string(epoxy_gl_version() / 10) + "." +
+                  std::to_string(epoxy_gl_version() % 10));
+  }
+  state.shading = shading == GlShading::kAuto
+                      ? (GlComputeShading() ? GlShading::kCompute : GlShading::kFragment)
+                      : shading;
+  // The compute path's image holds the codes exactly: 8 bits, 10 (rgb10_a2), or 16.
+  const GLenum image_format =
+      state.bits <= 8 ? GL_RGBA8 : state.bits == 10 ? GL_RGB10_A2 : GL_RGBA16;
+  state.program = LinkProgram(state.shading, state.bits <= 8    ? "rgba8"
+                                             : state.bits == 10 ? "rgb10_a2"
+                                                                : "rgba16");
   glGenVertexArrays(1, &state.vertex_array);
+  if (state.shading == GlShading::kCompute) {
+    glGenTextures(1, &state.image);
+    glBindTexture(GL_TEXTURE_2D, state.image);
+    glTexStorage2D(GL_TEXTURE_2D, 1, image_format, map.width, map.height);
+    glBindTexture(GL_TEXTURE_2D, 0);
+    GLint read_framebuffer = 0;
+    glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &read_framebuffer);
+    glGenFramebuffers(1, &state.image_framebuffer);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, state.image_framebuffer);
+    glFramebufferTexture2D(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, state.image,
+                           0);
+    glReadBuffer(GL_COLOR_ATTACHMENT0);
+    const GLenum status = glCheckFramebufferStatus(GL_READ_FRAMEBUFFER);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, read_framebuffer);
+    if (status != GL_FRAMEBUFFER_COMPLETE) {
+      throw IoError("GlProjectorRenderer: the compute shader's " + std::to_string(map.width) +
+                    "x" + std::to_string(map.height) + " image is not a complete framebuffer");
+    }
+  }
 
   // Per pixel: the patch, and the hit point with the share.
   const size_t pixels = static_cast<size_t>(map.width) * map.height;
@@ -469,6 +550,8 @@ GlProjectorRenderer::GlProjectorRenderer(const FramePlanner& planner, int projec
   glUniform1i(glGetUniformLocation(state.program, "smooth_light"),
               options.light == LightField::kSmooth);
   glUniform1i(glGetUniformLocation(state.program, "image_height"), map.height);
+  if (state.shading == GlShading::kCompute)
+    glUniform1i(glGetUniformLocation(state.program, "image_width"), map.width);
   std::array<GLint, 64> bayer;
   std::copy(internal::kBayer.begin(), internal::kBayer.end(), bayer.begin());
   glUniform1iv(glGetUniformLocation(state.program, "bayer"), 64, bayer.data());
@@ -484,6 +567,7 @@ GlProjectorRenderer::~GlProjectorRenderer() = default;
 int GlProjectorRenderer::width() const { return state_->width; }
 int GlProjectorRenderer::height() const { return state_->height; }
 int GlProjectorRenderer::bits() const { return state_->bits; }
+GlShading GlProjectorRenderer::shading() const { return state_->shading; }
 
 void GlProjectorRenderer::Draw(const FramePlan& plan) {
   State& state = *state_;
@@ -513,7 +597,23 @@ void GlProjectorRenderer::Draw(const FramePlan& plan) {
   }
   glBindVertexArray(state.vertex_array);
   if (state.timer_query != 0) glBeginQuery(GL_TIME_ELAPSED, state.timer_query);
-  glDrawArrays(GL_TRIANGLES, 0, 3);
+  if (state.shading == GlShading::kCompute) {
+    glBindImageTexture(0, state.image, 0, GL_FALSE, 0, GL_WRITE_ONLY,
+                       state.bits <= 8 ? GL_RGBA8 : state.bits == 10 ? GL_RGB10_A2 : GL_RGBA16);
+    constexpr int kGroup = 16;  // the compute shader's local size
+    glDispatchCompute((state.width + kGroup - 1) / kGroup, (state.height + kGroup - 1) / kGroup, 1);
+    glMemoryBarrier(GL_FRAMEBUFFER_BARRIER_BIT);
+    // Into the current draw framebuffer as the fragment path draws: a copy of the same pixels.
+    GLint read_framebuffer = 0;
+    glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &read_framebuffer);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, state.image_framebuffer);
+    glBlitFramebuffer(0, 0, state.width, state.height, 0, 0, state.width, state.height,
+                      GL_COLOR_BUFFER_BIT, GL_NEAREST);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, read_framebuffer);
+    glBindImageTexture(0, 0, 0, GL_FALSE, 0, GL_WRITE_ONLY, GL_RGBA8);
+  } else {
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+  }
   if (state.timer_query != 0) glEndQuery(GL_TIME_ELAPSED);
   glBindVertexArray(0);
   glUseProgram(0);

@@ -1,7 +1,12 @@
 #pragma once
 // One projector's image rendered on the GPU from a frame plan (frame_plan.h), by an OpenGL
-// fragment shader, straight into the current framebuffer (a display node's fullscreen window:
-// GlfwDisplay::Draw). Part of the optional backend target procam_projection_glfw; OpenGL
+// shader, into the current framebuffer (a display node's fullscreen window: GlfwDisplay::Draw).
+// Two paths do the same per-pixel work (GlShading): a compute shader that stores into an image of
+// the projector's size, then blits it into the framebuffer (OpenGL 4.3; the default where the
+// context has it), or a fragment shader drawing one fullscreen triangle (OpenGL 3.3). Compute is
+// the default because data-centre GPUs such as the H100 run graphics work on a small part of the
+// chip (NVIDIA's Hopper architecture paper) and compute work on all of it: docs/nodes.md has the
+// timings. Part of the optional backend target procam_projection_glfw; OpenGL
 // functions are loaded through libepoxy.
 //
 // Static data, uploaded once when the renderer is made: per pixel the patch it lights (−1:
@@ -12,8 +17,8 @@
 // r_j² and the node lists of the seamless field (SeamlessField, CSR); per channel the light of
 // each code value (the response, as CodeTable); the mixing inverse, 1/Δ and the 8×8 Bayer
 // matrix of projector_images.cc. Per frame only the plan's per-patch arrays go up (τ, and for
-// kSmooth v̂ and the patch means: 48 bytes a patch), then one fullscreen triangle is drawn whose
-// fragment shader does step 3 of projector_images.h for its pixel p of patch i:
+// kSmooth v̂ and the patch means: 48 bytes a patch), then the shader does step 3 of
+// projector_images.h for each pixel p of patch i:
 //   m      = v(x_p) / mean_i, v(x_p) = Σ_j K̃_j(x_p) v̂_j (kSmooth; 1 on flat patches and
 //            channels whose mean is 0),
 //   s      = min(1, share_p · τ_i · m / Δ) per channel, 1 where τ_i is +inf,
@@ -30,7 +35,9 @@
 // framebuffer a 10-bit code shows as its nearest 8-bit level, as GlfwDisplay::Show does).
 //
 // Needs OpenGL 3.3 (core or compatibility profile: Mesa's llvmpipe and NVIDIA's drivers give
-// it): texture buffers, integer textures, GLSL 3.30. All calls must come with the renderer's
+// it): texture buffers, integer textures, GLSL 3.30; the compute path 4.3 (both give 4.5 or
+// more). On the compute path the image holds the codes exactly (RGBA8 for 8-bit projectors,
+// RGB10_A2 for 10-bit, RGBA16 otherwise) and the blit converts them to the framebuffer's depth. All calls must come with the renderer's
 // context current, on that context's thread. Detail and error diffusion stay on the CPU
 // (ShadeProjectorImages / RenderProjectorImages).
 
@@ -46,6 +53,16 @@ namespace procam {
 // Profile) Mesa 22.3.6, llvmpipe (LLVM 15.0.6, 256 bits)"), for a display node's log.
 std::string OpenGlDescription();
 
+// How GlProjectorRenderer shades its pixels (gl_renderer.h's header comment).
+enum class GlShading {
+  kAuto,      // kCompute where the current context has OpenGL 4.3
+  kFragment,  // a fragment shader over one fullscreen triangle
+  kCompute,   // a compute shader into an image, then blitted into the framebuffer
+};
+const char* GlShadingName(GlShading shading);  // "auto", "fragment", "compute"
+// Whether the current context runs compute shaders (what kAuto picks kCompute on).
+bool GlComputeShading();
+
 class GlProjectorRenderer {
  public:
   // Uploads projector `projector`'s static data of the planner's rig (the planner must outlive
@@ -53,7 +70,9 @@ class GlProjectorRenderer {
   // std::invalid_argument for a bad projector index or options the GPU does not render
   // (detail, error diffusion), and IoError when the context is older than 3.3 or the shader
   // does not build (one line with the driver's log).
-  GlProjectorRenderer(const FramePlanner& planner, int projector);
+  // kCompute on a context without compute shaders throws IoError.
+  GlProjectorRenderer(const FramePlanner& planner, int projector,
+                      GlShading shading = GlShading::kAuto);
   // Deletes the GL objects: the renderer's context must still exist and be current.
   ~GlProjectorRenderer();
   GlProjectorRenderer(const GlProjectorRenderer&) = delete;
@@ -62,6 +81,7 @@ class GlProjectorRenderer {
   int width() const;
   int height() const;
   int bits() const;
+  GlShading shading() const;  // kFragment or kCompute: the path chosen
 
   // Uploads the plan's per-patch arrays and draws the projector's image into the current draw
   // framebuffer, pixel (c, r) of the image at window pixel (c, height − 1 − r) (row 0 at the

@@ -69,14 +69,19 @@ OffscreenGl::OffscreenGl(int width, int height) : state_(std::make_unique<State>
   }
   if (!eglBindAPI(EGL_OPENGL_API))
     throw IoError("offscreen OpenGL (" + kind + "): cannot bind the OpenGL API");
-  const EGLint context_attributes[] = {EGL_CONTEXT_MAJOR_VERSION,
-                                       3,
-                                       EGL_CONTEXT_MINOR_VERSION,
-                                       3,
-                                       EGL_CONTEXT_OPENGL_PROFILE_MASK,
-                                       EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
-                                       EGL_NONE};
-  state_->context = eglCreateContext(state_->display, config, EGL_NO_CONTEXT, context_attributes);
+  // 4.3 core where the driver has it (compute shaders: gl_renderer.h), else 3.3 core.
+  for (const EGLint version : {43, 33}) {
+    const EGLint context_attributes[] = {EGL_CONTEXT_MAJOR_VERSION,
+                                         version / 10,
+                                         EGL_CONTEXT_MINOR_VERSION,
+                                         version % 10,
+                                         EGL_CONTEXT_OPENGL_PROFILE_MASK,
+                                         EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
+                                         EGL_NONE};
+    state_->context =
+        eglCreateContext(state_->display, config, EGL_NO_CONTEXT, context_attributes);
+    if (state_->context != EGL_NO_CONTEXT) break;
+  }
   if (state_->context == EGL_NO_CONTEXT)
     throw IoError("offscreen OpenGL (" + kind + "): no OpenGL 3.3 core context");
   if (!eglMakeCurrent(state_->display, EGL_NO_SURFACE, EGL_NO_SURFACE, state_->context)) {

@@ -12,8 +12,8 @@ namespace procam {
 
 class OffscreenGl {
  public:
-  // Makes a current OpenGL ≥ 3.3 context (core profile) with a width × height RGBA8 framebuffer
-  // object bound for drawing and reading. Throws IoError with one line saying which step failed
+  // Makes a current OpenGL context (4.3 core profile where the driver has it, else 3.3) with a
+  // width × height RGBA8 framebuffer object bound for drawing and reading. Throws IoError with one line saying which step failed
   // (no EGL, no device, no config, no context) when none can be made.
   OffscreenGl(int width, int height);
   ~OffscreenGl();

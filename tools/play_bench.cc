@@ -1,7 +1,8 @@
 // procam-play-bench: `procam bench play` (datasets_synthetic/play_benchmark.h) as a binary of its
 // own, linked with only the libraries it calls recorded, so that it can be carried to a GPU
 // machine without procam's other libraries (docs/nodes.md: the H100 numbers).
-//   procam-play-bench [--render cpu|gpu] [--device cpu|cuda] [--light smooth|flat]
+//   procam-play-bench [--render cpu|gpu] [--shader auto|fragment|compute] [--device cpu|cuda]
+//                     [--light smooth|flat]
 //                     [--method perceptual] [--dither ordered] [--patches 1000] [--frames 20]
 //                     [--width 1920] [--height 1080] [--json FILE]
 #include <CLI/CLI.hpp>
@@ -26,6 +27,7 @@ int main(int argc, char** argv) {
   app.add_option("--light", light)->check(CLI::IsMember({"smooth", "flat"}));
   app.add_option("--dither", dither)->check(CLI::IsMember({"none", "ordered"}));
   app.add_option("--render", render)->check(CLI::IsMember({"cpu", "gpu"}));
+  app.add_option("--shader", options.shader)->check(CLI::IsMember({"auto", "fragment", "compute"}));
   app.add_option("--json", options.json, "Also write the timings as JSON");
   CLI11_PARSE(app, argc, argv);
   ParseMethod(method, &options.method);

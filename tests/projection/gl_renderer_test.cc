@@ -8,6 +8,7 @@
 // a display draws and presents frames separately. DISABLED_Timings is the benchmark of docs/projection.md.
 #include "projection/gl_renderer.h"
 
+#include <epoxy/gl.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -133,19 +134,27 @@ TEST_P(GlRendererTest, EqualsTheCpuWithinOneCodeStep) {
   // Offscreen (EGL): no display server needed, so it runs on a compute GPU's machine too.
   OffscreenGl gl(kScreenWidth, kScreenHeight);
   std::printf("OpenGL %s (%s)\n", OpenGlDescription().c_str(), gl.description().c_str());
-  for (int k = 0; k < static_cast<int>(rig.projectors.size()); ++k) {
-    GlProjectorRenderer renderer(planner, k);
-    renderer.Draw(plan);
-    const ProjectorImage gpu = renderer.ReadBack();
-    ASSERT_EQ(gpu.codes.size(), cpu[k].codes.size());
-    const Difference difference = Compare(gpu, cpu[k]);
-    std::printf(
-        "%s light (radius %.1f), dither %s, t in [%.2f, %.2f], projector %d: %d of %d patches "
-        "refined, %.4f%% of the pixels differ, by at most %d\n",
-        LightFieldName(test.light), test.radius, DitherName(test.dither), test.t_low, test.t_high, k,
-        plan.refined_patches, rig.size(), 100.0 * difference.fraction, difference.largest);
-    EXPECT_LE(difference.largest, 1);
-    EXPECT_LT(difference.fraction, 0.01);
+  // Both shader paths; Mesa's llvmpipe (the test machines' OpenGL) has compute shaders.
+  ASSERT_TRUE(GlComputeShading()) << "the context has no OpenGL 4.3: the compute path is untested";
+  for (const GlShading shading : {GlShading::kFragment, GlShading::kCompute}) {
+    for (int k = 0; k < static_cast<int>(rig.projectors.size()); ++k) {
+      GlProjectorRenderer renderer(planner, k, shading);
+      ASSERT_EQ(renderer.shading(), shading);
+      glClearColor(0.5f, 0.25f, 0.75f, 1.0f);  // what a pixel the shader missed would keep
+      glClear(GL_COLOR_BUFFER_BIT);
+      renderer.Draw(plan);
+      const ProjectorImage gpu = renderer.ReadBack();
+      ASSERT_EQ(gpu.codes.size(), cpu[k].codes.size());
+      const Difference difference = Compare(gpu, cpu[k]);
+      std::printf(
+          "%s shader, %s light (radius %.1f), dither %s, t in [%.2f, %.2f], projector %d: %d of "
+          "%d patches refined, %.4f%% of the pixels differ, by at most %d\n",
+          GlShadingName(shading), LightFieldName(test.light), test.radius,
+          DitherName(test.dither), test.t_low, test.t_high, k, plan.refined_patches, rig.size(),
+          100.0 * difference.fraction, difference.largest);
+      EXPECT_LE(difference.largest, 1);
+      EXPECT_LT(difference.fraction, 0.01);
+    }
   }
 }
 
