@@ -61,7 +61,7 @@ class PlayRenderer {
 
   void Render(const FramePlan& plan) {
     if (render_ == PlayRender::kCpu) {
-      ShadeProjectorImages(planner_, plan, nullptr);
+      ShadeProjectorImages(planner_, plan, nullptr, {}, &images_);  // as a node: buffers kept
       return;
     }
 #if PROCAM_WITH_GLFW
@@ -88,6 +88,7 @@ class PlayRenderer {
 
  private:
   const FramePlanner& planner_;
+  std::vector<ProjectorImage> images_;  // kCpu: the last frame's, their buffers reused
   PlayRender render_;
   std::string description_ = "CPU";
 #if PROCAM_WITH_GLFW
@@ -126,7 +127,8 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
   // As a display node: the planner's static part (seamless field, share bounds, code tables) is
   // made once per rig; each frame is a plan (per patch) and its shading (per pixel).
   start = Clock::now();
-  const FramePlanner planner(rig, render);
+  FramePlanner planner(rig, render);
+  if (args.render == PlayRender::kCpu) planner.CacheBumps();  // as a node shading on its CPU
   const double planner_seconds = SecondsSince(start);
   PlayRenderer renderer(planner, args.render, args.shader);
   const double nodes_per_patch =

@@ -27,6 +27,9 @@ struct NodeSetup {
   ProjectionRig rig;
   std::unique_ptr<FramePlanner> planner;  // refers to rig; null for detail (no frame plans)
   std::vector<bool> gpu;                  // per output: renders plans itself
+  // The CPU's images of the last frame: their buffers are shaded into again (outputs copy what
+  // they keep).
+  std::vector<ProjectorImage> images;
 };
 
 // Reads a kSetup's body into *setup (not the rig). Throws std::invalid_argument naming the key.
@@ -218,9 +221,8 @@ class Node {
                       e.what()));
       return;
     }
-    if (!options_.gpu) return;
     int on_gpu = 0;
-    for (size_t k = 0; k < outputs_.size(); ++k) {
+    for (size_t k = 0; k < outputs_.size() && options_.gpu; ++k) {
       try {
         setup->gpu[k] = outputs_[k]->PrepareGpu(*setup->planner, own_[k]);
       } catch (const std::invalid_argument& e) {  // error diffusion: the CPU renders
@@ -229,8 +231,15 @@ class Node {
       }
       on_gpu += setup->gpu[k];
     }
-    Log(fmt::format("node {}: {} of {} projector(s) rendered on the GPU", options_.name, on_gpu,
-                    outputs_.size()));
+    if (options_.gpu) {
+      Log(fmt::format("node {}: {} of {} projector(s) rendered on the GPU", options_.name, on_gpu,
+                      outputs_.size()));
+    }
+    // The CPU shades the others frame after frame: their seamless bumps are kept.
+    std::vector<char> on_cpu(setup->rig.projectors.size(), 0);
+    for (size_t k = 0; k < outputs_.size(); ++k) on_cpu[own_[k]] = !setup->gpu[k];
+    if (std::find(on_cpu.begin(), on_cpu.end(), 1) != on_cpu.end())
+      setup->planner->CacheBumps(&on_cpu);
   }
 
   void Render(const Message& message) {
@@ -247,7 +256,7 @@ class Node {
     const bool cpu_outputs =
         std::find(setup_->gpu.begin(), setup_->gpu.end(), false) != setup_->gpu.end();
     const long on_gpu = std::count(setup_->gpu.begin(), setup_->gpu.end(), true);
-    std::vector<ProjectorImage> images;
+    std::vector<ProjectorImage>& images = setup_->images;
     double plan_ms = 0.0;
     if (setup_->planner) {
       const FramePlan plan = setup_->planner->Plan(emittance);
@@ -261,7 +270,7 @@ class Node {
         for (size_t k = 0; k < outputs_.size(); ++k) {
           if (!setup_->gpu[k]) shade.push_back(own_[k]);
         }
-        images = ShadeProjectorImages(*setup_->planner, plan, nullptr, shade);
+        ShadeProjectorImages(*setup_->planner, plan, nullptr, shade, &images);
       }
     } else {
       RenderSummary summary;

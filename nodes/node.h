@@ -34,7 +34,8 @@ class NodeOutput {
  public:
   virtual ~NodeOutput() = default;
   virtual std::string Describe() const = 0;  // e.g. "glfw:HDMI-1" or "record:DIR/left.png"
-  // Puts the image into the back buffer (nothing visible changes).
+  // Puts the image into the back buffer (nothing visible changes). The image's buffer is the
+  // node's and is shaded into again next frame: an output that keeps the image copies it.
   virtual void Draw(const ProjectorImage& image) = 0;
   // Shows what Draw (or DrawPlan) put there.
   virtual void Present(uint64_t frame) = 0;
@@ -53,7 +54,10 @@ class RecordOutput : public NodeOutput {
  public:
   explicit RecordOutput(std::filesystem::path path = {}) : path_(std::move(path)) {}
   std::string Describe() const override;
-  void Draw(const ProjectorImage& image) override { drawn_ = image; }
+  void Draw(const ProjectorImage& image) override {  // a copy: the node shades into its buffer
+    drawn_.bits = image.bits;
+    drawn_.codes = image.codes.clone();
+  }
   void Present(uint64_t frame) override;
   const ProjectorImage& presented() const { return presented_; }
   uint64_t frames() const { return frames_; }

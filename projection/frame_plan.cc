@@ -145,11 +145,8 @@ FramePlan FramePlanner::Plan(const Eigen::MatrixX3d& emittance) const {
     for (int i = 0; i < n; ++i) {
       if (!refine[i]) continue;
       for (size_t k = 0; k < rig_.maps.size(); ++k) {
-        const ProjectorMap& map = rig_.maps[k];
-        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
-          factors[k][position] =
-              field_->Factor(i, map.point_by_patch[position], plan.node_value, plan.mean);
-        }
+        field_->PatchFactors(i, k, plan.node_value, plan.mean,
+                             &factors[k][rig_.maps[k].patch_begin[i]]);
       }
     }
   }
@@ -168,6 +165,14 @@ FramePlan PlanFrame(const ProjectionRig& rig, const Eigen::MatrixX3d& emittance,
 std::vector<ProjectorImage> ShadeProjectorImages(const FramePlanner& planner, const FramePlan& plan,
                                                  RenderSummary* summary,
                                                  const std::vector<int>& projectors) {
+  std::vector<ProjectorImage> images;
+  ShadeProjectorImages(planner, plan, summary, projectors, &images);
+  return images;
+}
+
+void ShadeProjectorImages(const FramePlanner& planner, const FramePlan& plan,
+                          RenderSummary* summary, const std::vector<int>& projectors,
+                          std::vector<ProjectorImage>* images) {
   const ProjectionRig& rig = planner.rig();
   const int n = rig.size();
   const bool smooth = planner.field() != nullptr;
@@ -199,13 +204,20 @@ std::vector<ProjectorImage> ShadeProjectorImages(const FramePlanner& planner, co
   s.patches_below_lower = plan.patches_below_lower;
   s.patches_above_upper = plan.patches_above_upper;
   s.patches_unreached = plan.patches_unreached;
-  std::vector<std::vector<Eigen::Vector3f>> factors;
-  if (smooth) factors = planner.field()->Factors(plan.node_value, plan.mean, subset);
-  std::vector<ProjectorImage> images =
-      internal::ShadeImages(rig, planner.tables(), plan.level, factors, planner.options().dither,
-                            plan.target, summary ? &s : nullptr, subset);
+  // The seamless factors patch by patch as the shading reaches them: no per-pixel array.
+  internal::PatchFactorFunction patch_factors;
+  if (smooth) {
+    const SeamlessField& field = *planner.field();
+    patch_factors = [&field, &plan](int i, int k, Eigen::Vector3f* out) {
+      if (field.Flat(i)) return false;
+      field.PatchFactors(i, k, plan.node_value, plan.mean, out);
+      return true;
+    };
+  }
+  *images = internal::ShadeImages(rig, planner.tables(), plan.level, {}, planner.options().dither,
+                                  plan.target, summary ? &s : nullptr, subset, patch_factors,
+                                  std::move(*images));
   s.seconds = SecondsSince(start);
-  return images;
 }
 
 }  // namespace procam

@@ -85,6 +85,13 @@ class FramePlanner {
   const RenderOptions& options() const { return options_; }
   // The seamless field for kSmooth; null for kFlat.
   const SeamlessField* field() const { return field_.get(); }
+  // For shading on the CPU frame after frame (ShadeProjectorImages): keeps the seamless field's
+  // bumps at every lit pixel of the projectors flagged (null: all; SeamlessField::CacheBumps), so
+  // that each frame sums them instead of evaluating them. The same images, faster; no effect
+  // with kFlat.
+  void CacheBumps(const std::vector<char>* projectors = nullptr) {
+    if (field_) field_->CacheBumps(projectors);
+  }
   const std::vector<internal::ProjectorTables>& tables() const { return *tables_; }
 
  private:
@@ -111,5 +118,13 @@ FramePlan PlanFrame(const ProjectionRig& rig, const Eigen::MatrixX3d& emittance,
 std::vector<ProjectorImage> ShadeProjectorImages(const FramePlanner& planner, const FramePlan& plan,
                                                  RenderSummary* summary,
                                                  const std::vector<int>& projectors = {});
+// The same into `images`, whose buffers are reused where they are of the right size: images an
+// earlier call of this function made for the same planner (their unlit pixels, never written,
+// are black). A display node's frame after frame then allocates and clears no image: in this
+// 2-core VM a fresh 1080p image cost its page faults on every frame. Whoever keeps an image
+// across frames must copy it.
+void ShadeProjectorImages(const FramePlanner& planner, const FramePlan& plan,
+                          RenderSummary* summary, const std::vector<int>& projectors,
+                          std::vector<ProjectorImage>* images);
 
 }  // namespace procam

@@ -431,7 +431,9 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
                                         const std::vector<std::vector<Eigen::Vector3f>>& factors,
                                         DitherMethod dither, const Eigen::MatrixX3d& target,
                                         RenderSummary* summary,
-                                        const std::vector<char>* projectors) {
+                                        const std::vector<char>* projectors,
+                                        const PatchFactorFunction& patch_factors,
+                                        std::vector<ProjectorImage> reuse) {
   // Without a summary nobody reads the delivered flux: the pixels' light is not summed.
   const bool account = summary != nullptr;
   RenderSummary local;
@@ -441,13 +443,22 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
   std::vector<char> wanted(projector_count, 1);
   if (projectors != nullptr) wanted = *projectors;
   const bool all = std::find(wanted.begin(), wanted.end(), 0) == wanted.end();
-  std::vector<ProjectorImage> images(projector_count);
+  std::vector<ProjectorImage> images = std::move(reuse);
+  images.resize(projector_count);
   const bool diffuse = dither == DitherMethod::kErrorDiffusion;
   std::vector<std::vector<Vec3>> light(projector_count);
   for (int k = 0; k < projector_count; ++k) {
-    if (!wanted[k]) continue;
+    if (!wanted[k]) {
+      images[k] = ProjectorImage();
+      continue;
+    }
     images[k].bits = rig.projectors[k].photometry.bits;
-    images[k].codes = cv::Mat(rig.maps[k].height, rig.maps[k].width, CV_16UC3, cv::Scalar::all(0));
+    const cv::Mat& codes = images[k].codes;
+    if (codes.rows != rig.maps[k].height || codes.cols != rig.maps[k].width ||
+        codes.type() != CV_16UC3 || !codes.isContinuous()) {
+      images[k].codes =
+          cv::Mat(rig.maps[k].height, rig.maps[k].width, CV_16UC3, cv::Scalar::all(0));
+    }
     if (diffuse) light[k].assign(rig.maps[k].patch.size(), Vec3::Zero());
   }
   Eigen::MatrixX3d delivered_flux = Eigen::MatrixX3d::Zero(n, 3);
@@ -457,6 +468,7 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
   {
     std::vector<long long> my_saturated(projector_count, 0), my_clipped(projector_count, 0),
         my_detail_saturated(projector_count, 0);
+    std::vector<Eigen::Vector3f> patch_buffer;  // patch_factors' output
 #pragma omp for schedule(dynamic, 16)
     for (int i = 0; i < n; ++i) {
       const Vec3 tau = level.row(i).transpose();
@@ -466,11 +478,19 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
         const ProjectorMap& map = rig.maps[k];
         const ProjectorTables& table = tables[k];
         auto* codes = reinterpret_cast<cv::Vec3w*>(images[k].codes.data);
-        const Eigen::Vector3f* pixel_factor = factors.empty() ? nullptr : factors[k].data();
+        const int first = map.patch_begin[i];
+        // The factors of this patch's pixels, by position − first (null: all 1).
+        const Eigen::Vector3f* pixel_factor = nullptr;
+        if (patch_factors) {
+          patch_buffer.resize(map.patch_begin[i + 1] - first);
+          if (patch_factors(i, k, patch_buffer.data())) pixel_factor = patch_buffer.data();
+        } else if (!factors.empty()) {
+          pixel_factor = factors[k].data() + first;
+        }
         double light_0 = 0.0, light_1 = 0.0, light_2 = 0.0;
         int row = -1, row_begin = 0,
             row_end = 0;  // the row of the current pixel, found incrementally
-        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+        for (int position = first; position < map.patch_begin[i + 1]; ++position) {
           const int32_t index = map.pixels_by_patch[position];
           if (index >= row_end) {
             row = index / map.width;
@@ -488,8 +508,9 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
             if (tau[c] != kInfinity) {
               value = share * tau[c] * table.inverse_delta[c];
               if (pixel_factor) {
-                value *= pixel_factor[position][c];
-                saturated_by_factor |= value >= 1.0 && pixel_factor[position][c] > 1.0f;
+                const float factor = pixel_factor[position - first][c];
+                value *= factor;
+                saturated_by_factor |= value >= 1.0 && factor > 1.0f;
               }
               value = std::min(1.0, value);
             }

@@ -6,6 +6,7 @@
 #include <Eigen/LU>
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <vector>
 
@@ -119,12 +120,21 @@ int RefineLevels(const ProjectionRig& rig, const std::vector<ProjectorTables>& t
 // light is then not summed). With `projectors` (one flag per projector) only
 // those images are made (the others left empty, their counts 0) and the summary's delivered
 // exitance and error are left empty and 0: the flux of the others is not known.
+// The pixel factors come from `factors` (as RefineLevels), or, with `patch_factors`, per patch
+// and projector as they are needed: patch_factors(i, k, out) writes patch i's factors of projector
+// k in pixels_by_patch order (out[position − patch_begin[i]]), or returns false where they are
+// all 1. That keeps no factor of every pixel: a frame's shading allocates no per-pixel array.
+// The images of `reuse` keep their buffers where they have the projector's size and 16-bit
+// codes (their unlit pixels must be black: images an earlier call made).
+using PatchFactorFunction = std::function<bool(int i, int k, Eigen::Vector3f* out)>;
 std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
                                         const std::vector<ProjectorTables>& tables,
                                         const Eigen::MatrixX3d& level,
                                         const std::vector<std::vector<Eigen::Vector3f>>& factors,
                                         DitherMethod dither, const Eigen::MatrixX3d& target,
                                         RenderSummary* summary,
-                                        const std::vector<char>* projectors = nullptr);
+                                        const std::vector<char>* projectors = nullptr,
+                                        const PatchFactorFunction& patch_factors = {},
+                                        std::vector<ProjectorImage> reuse = {});
 
 }  // namespace procam::internal

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <stdexcept>
 #include <utility>
 
@@ -142,8 +144,15 @@ SeamlessField::SeamlessField(const ProjectionRig& rig, const SeamlessLightOption
   std::vector<std::vector<int>> nodes = FieldNodes(rig, options);
   DropNodesOutOfReach(rig, radius2_, &nodes);
   node_begin_.assign(n + 1, 0);
-  for (int i = 0; i < n; ++i)
+  for (int i = 0; i < n; ++i) {
+    // Bumps name their node by its position in the list in 16 bits (FactorBumps).
+    if (nodes[i].size() > std::numeric_limits<uint16_t>::max()) {
+      throw std::invalid_argument("SeamlessField: patch " + std::to_string(i) + " has " +
+                                  std::to_string(nodes[i].size()) +
+                                  " nodes, more than 65535 (a smaller radius or fewer rings)");
+    }
     node_begin_[i + 1] = node_begin_[i] + static_cast<int>(nodes[i].size());
+  }
   node_list_.reserve(node_begin_[n]);
   for (const std::vector<int>& list : nodes)
     node_list_.insert(node_list_.end(), list.begin(), list.end());
@@ -253,37 +262,106 @@ Eigen::MatrixX3d SeamlessField::NodeValues(const Eigen::MatrixX3d& exitance) con
   return node_value;
 }
 
-Eigen::Vector3f SeamlessField::Factor(int i, const Eigen::Vector3f& point,
-                                      const Eigen::MatrixX3d& node_value,
-                                      const Eigen::MatrixX3d& means) const {
-  if (Flat(i)) return Eigen::Vector3f::Ones();
-  // Bumps() without its list: the same operations in the same order, so the same bits.
+namespace {
+
+// m = v / mean_i(v) per channel from a pixel's bumps: v = Σ K̃ v̂ in double, K̃ as single-precision
+// weights, v̂ of node position b at list_value[3 b .. 3 b + 2]. The flux is kept: the weighted
+// mean of m over the patch is 1. One function for the cached and the evaluated bumps: the same
+// bits.
+inline Eigen::Vector3f SumFactor(int count, const uint16_t* node, const float* weight,
+                                 const double* list_value, const Eigen::MatrixX3d& means, int i) {
+  double value[3] = {0.0, 0.0, 0.0};
+  for (int b = 0; b < count; ++b) {
+    const double w = weight[b];
+    const double* v = list_value + 3 * node[b];
+    value[0] += w * v[0];
+    value[1] += w * v[1];
+    value[2] += w * v[2];
+  }
+  Eigen::Vector3f m;
+  for (int c = 0; c < 3; ++c)
+    m[c] = means(i, c) > 0.0 ? static_cast<float>(value[c] / means(i, c)) : 1.0f;
+  return m;
+}
+
+}  // namespace
+
+void SeamlessField::FactorBumps(int i, const Eigen::Vector3f& point, std::vector<uint16_t>* node,
+                                std::vector<float>* weight) const {
+  node->clear();
+  weight->clear();
   const int begin = node_begin_[i], end = node_begin_[i + 1];
   const Eigen::Vector3d x = point.cast<double>();
   // The bumps' t² kept for the second pass (lists are short: a handful to a few dozen nodes).
   constexpr int kKept = 64;
   double kept[kKept];
   double weight_sum = 0.0;
-  for (int node = begin; node < end; ++node) {
-    const double t2 = BumpSquared(node, x);
-    if (node - begin < kKept) kept[node - begin] = t2;
+  for (int j = begin; j < end; ++j) {
+    const double t2 = BumpSquared(j, x);
+    if (j - begin < kKept) kept[j - begin] = t2;
     if (t2 >= 0.0) weight_sum += t2;
   }
-  Eigen::Vector3d value = Eigen::Vector3d::Zero();
-  if (!(weight_sum > 0.0)) {
-    value += 1.0 * node_value.row(i).transpose();
-  } else {
-    for (int node = begin; node < end; ++node) {
-      const double t2 = node - begin < kKept ? kept[node - begin] : BumpSquared(node, x);
-      if (t2 < 0.0) continue;
-      value += (t2 / weight_sum) * node_value.row(node_list_[node]).transpose();
-    }
+  if (!(weight_sum > 0.0)) {  // no bump reaches: the patch's own value (Bumps)
+    node->push_back(0);
+    weight->push_back(1.0f);
+    return;
   }
-  // m = v / mean(v) per patch and channel: the weighted mean of m is 1, so the flux is kept.
-  Eigen::Vector3f m = value.cast<float>();
-  for (int c = 0; c < 3; ++c)
-    m[c] = means(i, c) > 0.0 ? static_cast<float>(m[c] / means(i, c)) : 1.0f;
-  return m;
+  for (int j = begin; j < end; ++j) {
+    const double t2 = j - begin < kKept ? kept[j - begin] : BumpSquared(j, x);
+    if (t2 < 0.0) continue;
+    node->push_back(static_cast<uint16_t>(j - begin));
+    weight->push_back(static_cast<float>(t2 / weight_sum));
+  }
+}
+
+Eigen::Vector3f SeamlessField::Factor(int i, const Eigen::Vector3f& point,
+                                      const Eigen::MatrixX3d& node_value,
+                                      const Eigen::MatrixX3d& means) const {
+  if (Flat(i)) return Eigen::Vector3f::Ones();
+  std::vector<uint16_t> node;
+  std::vector<float> weight;
+  FactorBumps(i, point, &node, &weight);
+  const int begin = node_begin_[i], end = node_begin_[i + 1];
+  std::vector<double> values(3 * static_cast<size_t>(end - begin));
+  for (int b = 0; b < end - begin; ++b) {
+    for (int c = 0; c < 3; ++c) values[3 * b + c] = node_value(node_list_[begin + b], c);
+  }
+  return SumFactor(static_cast<int>(node.size()), node.data(), weight.data(), values.data(), means,
+                   i);
+}
+
+void SeamlessField::PatchFactors(int i, size_t k, const Eigen::MatrixX3d& node_value,
+                                 const Eigen::MatrixX3d& means, Eigen::Vector3f* factors) const {
+  const ProjectorMap& map = rig_.maps[k];
+  const int first = map.patch_begin[i], last = map.patch_begin[i + 1];
+  if (Flat(i)) {
+    std::fill(factors, factors + (last - first), Eigen::Vector3f::Ones());
+    return;
+  }
+  const int begin = node_begin_[i], end = node_begin_[i + 1];
+  thread_local std::vector<double> list_value;
+  list_value.resize(3 * static_cast<size_t>(end - begin));
+  for (int b = 0; b < end - begin; ++b) {
+    for (int c = 0; c < 3; ++c) list_value[3 * b + c] = node_value(node_list_[begin + b], c);
+  }
+  if (BumpsCached(k)) {
+    const PixelBumps& cache = cached_[k];
+    int64_t bump = cache.patch_first[i];
+    for (int position = first; position < last; ++position) {
+      const int count = cache.count[position];
+      factors[position - first] = SumFactor(count, &cache.node[bump], &cache.weight[bump],
+                                            list_value.data(), means, i);
+      bump += count;
+    }
+    return;
+  }
+  thread_local std::vector<uint16_t> node;
+  thread_local std::vector<float> weight;
+  for (int position = first; position < last; ++position) {
+    FactorBumps(i, map.point_by_patch[position], &node, &weight);
+    factors[position - first] = SumFactor(static_cast<int>(node.size()), node.data(),
+                                          weight.data(), list_value.data(), means, i);
+  }
 }
 
 std::vector<std::vector<Eigen::Vector3f>> SeamlessField::Factors(
@@ -299,13 +377,59 @@ std::vector<std::vector<Eigen::Vector3f>> SeamlessField::Factors(
   for (int i = 0; i < n; ++i) {
     if (Flat(i)) continue;
     for (size_t k = 0; k < rig_.maps.size(); ++k) {
-      if (!wanted(k)) continue;
-      const ProjectorMap& map = rig_.maps[k];
-      for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position)
-        factors[k][position] = Factor(i, map.point_by_patch[position], node_value, means);
+      if (wanted(k))
+        PatchFactors(i, k, node_value, means, &factors[k][rig_.maps[k].patch_begin[i]]);
     }
   }
   return factors;
+}
+
+void SeamlessField::CacheBumps(const std::vector<char>* projectors) {
+  const int n = rig_.size();
+  cached_.resize(rig_.maps.size());
+  for (size_t k = 0; k < rig_.maps.size(); ++k) {
+    if ((projectors != nullptr && !(*projectors)[k]) || BumpsCached(k)) continue;
+    const ProjectorMap& map = rig_.maps[k];
+    PixelBumps cache;
+    cache.count.assign(map.lit_pixels, 0);
+    // Two passes: the counts, then the bumps where the counts place them.
+    std::vector<int64_t> patch_bumps(n, 0);
+#pragma omp parallel
+    {
+      std::vector<uint16_t> node;
+      std::vector<float> weight;
+#pragma omp for schedule(dynamic, 16)
+      for (int i = 0; i < n; ++i) {
+        if (Flat(i)) continue;
+        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+          FactorBumps(i, map.point_by_patch[position], &node, &weight);
+          cache.count[position] = static_cast<uint16_t>(node.size());
+          patch_bumps[i] += static_cast<int64_t>(node.size());
+        }
+      }
+    }
+    cache.patch_first.assign(n + 1, 0);
+    for (int i = 0; i < n; ++i) cache.patch_first[i + 1] = cache.patch_first[i] + patch_bumps[i];
+    cache.node.resize(cache.patch_first[n]);
+    cache.weight.resize(cache.patch_first[n]);
+#pragma omp parallel
+    {
+      std::vector<uint16_t> node;
+      std::vector<float> weight;
+#pragma omp for schedule(dynamic, 16)
+      for (int i = 0; i < n; ++i) {
+        if (Flat(i)) continue;
+        int64_t bump = cache.patch_first[i];
+        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+          FactorBumps(i, map.point_by_patch[position], &node, &weight);
+          std::copy(node.begin(), node.end(), cache.node.begin() + bump);
+          std::copy(weight.begin(), weight.end(), cache.weight.begin() + bump);
+          bump += static_cast<int64_t>(node.size());
+        }
+      }
+    }
+    cached_[k] = std::move(cache);
+  }
 }
 
 std::vector<std::vector<Eigen::Vector3f>> SeamlessLightFactors(

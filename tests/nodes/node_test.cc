@@ -205,7 +205,10 @@ class MeanOutput : public NodeOutput {
  public:
   explicit MeanOutput(std::vector<cv::Scalar>* means) : means_(means) {}
   std::string Describe() const override { return "test:means"; }
-  void Draw(const ProjectorImage& image) override { drawn_ = image; }
+  void Draw(const ProjectorImage& image) override {  // a copy, as NodeOutput::Draw asks
+    drawn_.bits = image.bits;
+    drawn_.codes = image.codes.clone();
+  }
   void Present(uint64_t) override { means_->push_back(cv::mean(drawn_.codes)); }
 
  private:

@@ -206,6 +206,57 @@ TEST(FramePlan, ShadedOnTheCpuIsRenderProjectorImages) {
   }
 }
 
+// A display node's frames: the seamless bumps cached at every pixel and the images' buffers
+// reused from frame to frame give the images a fresh planner gives, bit for bit, frame after
+// frame (the second frame's plan differs from the first's, so a buffer left holding the first
+// would show), and the buffers are indeed kept.
+TEST(FramePlan, CachedBumpsAndReusedImagesShadeTheSame) {
+  const ProjectionRig& rig = SmallRig().rig;
+  for (const LightField light : {LightField::kFlat, LightField::kSmooth}) {
+    RenderOptions options;
+    options.light = light;
+    const FramePlanner fresh(rig, options);
+    FramePlanner cached(rig, options);
+    cached.CacheBumps();
+    if (light == LightField::kSmooth) {
+      for (size_t k = 0; k < rig.maps.size(); ++k) EXPECT_TRUE(cached.field()->BumpsCached(k));
+    }
+    std::vector<ProjectorImage> reused;
+    std::vector<const uint8_t*> buffers;
+    for (const int seed : {3, 4, 5}) {
+      const Eigen::MatrixX3d emittance = Emittance(rig, 0.1, 1.05, seed);
+      const FramePlan plan = cached.Plan(emittance);
+      const FramePlan reference_plan = fresh.Plan(emittance);
+      EXPECT_EQ(plan.level, reference_plan.level);
+      EXPECT_EQ(plan.refined_patches, reference_plan.refined_patches);
+      const std::vector<ProjectorImage> reference =
+          ShadeProjectorImages(fresh, reference_plan, nullptr);
+      ShadeProjectorImages(cached, plan, nullptr, {}, &reused);
+      ASSERT_EQ(reused.size(), reference.size());
+      for (size_t k = 0; k < reference.size(); ++k) {
+        EXPECT_EQ(cv::norm(reused[k].codes, reference[k].codes, cv::NORM_INF), 0.0)
+            << LightFieldName(light) << " seed " << seed << " projector " << k;
+        if (seed == 3) buffers.push_back(reused[k].codes.data);
+        EXPECT_EQ(reused[k].codes.data, buffers[k]) << "projector " << k << ": a new buffer";
+      }
+    }
+  }
+  // The cache is per projector: caching one leaves the other evaluated, with the same images.
+  RenderOptions options;
+  FramePlanner one(rig, options);
+  const std::vector<char> first_only = {1, 0};
+  one.CacheBumps(&first_only);
+  EXPECT_TRUE(one.field()->BumpsCached(0));
+  EXPECT_FALSE(one.field()->BumpsCached(1));
+  const Eigen::MatrixX3d emittance = Emittance(rig, 0.0, 1.0, 7);
+  const std::vector<ProjectorImage> mixed = ShadeProjectorImages(one, one.Plan(emittance), nullptr);
+  const FramePlanner fresh(rig, options);
+  const std::vector<ProjectorImage> reference =
+      ShadeProjectorImages(fresh, fresh.Plan(emittance), nullptr);
+  for (size_t k = 0; k < reference.size(); ++k)
+    EXPECT_EQ(cv::norm(mixed[k].codes, reference[k].codes, cv::NORM_INF), 0.0) << k;
+}
+
 // A display node shades only its own projectors: their images are those of the whole rig's
 // shading, bit for bit, the others are left empty, and so is the delivered exitance (the rest of
 // the rig's light is not known); an index outside the rig is refused.
