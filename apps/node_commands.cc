@@ -33,6 +33,7 @@ struct PlayArguments {
   std::vector<std::string> nodes, display = {"memory"};
   LightField light = LightField::kSmooth;
   double fps = 30.0, alpha = 0.5, frame_timeout_ms = 500.0, setup_timeout = 120.0;
+  double tolerance = kPlayFunctionTolerance;
   int frames = 0, patches = 0;
 };
 
@@ -49,6 +50,7 @@ void RunPlayCommand(const PlayArguments& args) {
   options.patches = args.patches;
   options.alpha = args.alpha;
   ParseMethod(args.method, &options.solver.method);
+  options.solver.function_tolerance = args.tolerance;
   ParseDevice(args.device, &options.solver.device);
   if (!ParseDither(args.dither, &options.dither))
     throw std::invalid_argument("--dither: unknown method " + args.dither);
@@ -161,6 +163,11 @@ void AddNodeCommands(CLI::App& app) {
       ->capture_default_str();
   play->add_option("--device", play_args->device, "cpu | cuda")
       ->check(CLI::IsMember({"cpu", "cuda"}))
+      ->capture_default_str();
+  play->add_option("--tolerance", play_args->tolerance,
+                   "Each frame's solve stops when an iteration lowers the cost by less than this "
+                   "fraction of it")
+      ->check(CLI::Range(0.0, 0.1))
       ->capture_default_str();
   play->add_option("--alpha", play_args->alpha, "Weight of the absolute term, (0,1]")
       ->check(CLI::Range(1e-9, 1.0));

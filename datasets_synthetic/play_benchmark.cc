@@ -121,6 +121,7 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
   SolverOptions solver;
   solver.method = args.method;
   solver.device = args.device;
+  solver.function_tolerance = args.tolerance;
   RenderOptions render;
   render.light = args.light;
   render.dither = args.dither;
@@ -185,10 +186,10 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
   Report(args.progress, fmt::format("  render on {}; {:.1f} seamless-field nodes per patch on average",
                                     renderer.description(), nodes_per_patch));
   Report(args.progress,
-         fmt::format("  per frame, median of {}: solve (warm) {:.1f} ms ({:.0f} iterations), render 3 images "
+         fmt::format("  per frame, median of {}: solve (warm, tolerance {:g}) {:.1f} ms ({:.0f} iterations), render 3 images "
                      "({}) {:.1f} ms (plan {:.1f} with {:.0f} patches refined per pixel, {} {:.1f}); new desired "
                      "appearance -> every image ready {:.1f} ms",
-                     args.frames, Median(solve_ms), Median(iteration_values), gpu ? "GPU" : "CPU",
+                     args.frames, args.tolerance, Median(solve_ms), Median(iteration_values), gpu ? "GPU" : "CPU",
                      Median(render_ms), Median(plan_ms), Median(refined), gpu ? "draw + glFinish" : "shade",
                      Median(shade_ms), Median(total_ms)));
   if (gpu) {
@@ -203,6 +204,7 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
                                    {"height", args.height},
                                    {"projectors", 3},
                                    {"method", MethodName(args.method)},
+                                   {"function_tolerance", args.tolerance},
                                    {"device", DeviceName(args.device)},
                                    {"frames", args.frames},
                                    {"first_frame_ms", first_ms},

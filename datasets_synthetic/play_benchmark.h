@@ -34,6 +34,9 @@ struct PlayBenchmarkOptions {
   LightField light = LightField::kSmooth;
   DitherMethod dither = DitherMethod::kOrdered;
   PlayRender render = PlayRender::kCpu;
+  // Each frame's solve stops when an iteration lowers the cost by less than this fraction of it
+  // (procam play's default, kPlayFunctionTolerance of nodes/play.h).
+  double tolerance = 1e-6;
   // kGpu: the shader path, "auto", "fragment" or "compute" (GlShading of gl_renderer.h).
   std::string shader = "auto";
   std::string json;

@@ -29,6 +29,18 @@
 
 namespace procam {
 
+// Each frame's solve stops when an iteration lowers the cost by less than this fraction of it
+// (SolverOptions::function_tolerance; compensate and evaluate run to 1e-12). On the play
+// benchmark's drifting frames every patch's emittance then lies within 0.0006–0.0027 of the
+// converged solve's (emittances up to 1.6), the cost within 3e-8 of it, in 4–6 iterations
+// instead of 8–10.
+inline constexpr double kPlayFunctionTolerance = 1e-6;
+inline SolverOptions PlaySolverOptions() {
+  SolverOptions options;
+  options.function_tolerance = kPlayFunctionTolerance;
+  return options;
+}
+
 struct PlayOptions {
   std::string scene;              // the room (LoadSceneArgument)
   std::filesystem::path rig_dir;  // projectors, reflectance, camera, keys
@@ -42,7 +54,9 @@ struct PlayOptions {
   int frames = 0;             // frames to play (0: the whole source)
   int patches = 0;            // target patch count (0: the room's)
   double alpha = 0.5;
-  SolverOptions solver;  // method (default perceptual), device
+  // Method (default perceptual), device, and each frame's stopping rule (function_tolerance,
+  // kPlayFunctionTolerance by default).
+  SolverOptions solver = PlaySolverOptions();
   DitherMethod dither = DitherMethod::kOrdered;
   LightField light = LightField::kSmooth;
   double feather = 0.1;

@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   app.add_option("--dither", dither)->check(CLI::IsMember({"none", "ordered"}));
   app.add_option("--render", render)->check(CLI::IsMember({"cpu", "gpu"}));
   app.add_option("--shader", options.shader)->check(CLI::IsMember({"auto", "fragment", "compute"}));
+  app.add_option("--tolerance", options.tolerance)->check(CLI::Range(0.0, 0.1));
   app.add_option("--json", options.json, "Also write the timings as JSON");
   CLI11_PARSE(app, argc, argv);
   ParseMethod(method, &options.method);

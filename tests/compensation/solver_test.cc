@@ -366,6 +366,33 @@ TEST_F(SolveBounded, MultiresReachesTheSameObjective) {
       << single.BriefReport() << "\n" << multi.BriefReport();
 }
 
+// procam play's stopping rule (kPlayFunctionTolerance of nodes/play.h, 1e-6): the next frame's
+// warm solve stops in fewer iterations than one run to compensate's 1e-12, and lands near it:
+// every patch's emittance within half a percent of the largest, the cost within 1e-6 of it.
+TEST_F(SolveBounded, PlaysStoppingRuleLandsNearTheConvergedSolve) {
+  const CompensationProblem& problem = test_->fine;
+  SolverSummary first;
+  const CompensationSolution previous = Solve(SolverOptions(), problem, &first);
+  CompensationProblem next = problem;
+  next.desired = (problem.desired * 1.05).cwiseMin(1.0);
+  SolverOptions play;
+  play.function_tolerance = 1e-6;
+  SolverSummary converged_summary, play_summary;
+  const WarmStart warm{previous.radiosity_system, previous.emittance};
+  const CompensationSolution converged = Solve(SolverOptions(), next, &converged_summary, {}, warm);
+  const CompensationSolution played = Solve(play, next, &play_summary, {}, warm);
+  const double largest = converged.emittance.cwiseAbs().maxCoeff();
+  const double difference = (played.emittance - converged.emittance).cwiseAbs().maxCoeff();
+  std::printf("play's rule: %d iterations against %d, emittance within %.2g of %.3g, cost %.3g "
+              "relative\n",
+              play_summary.iterations, converged_summary.iterations, difference, largest,
+              play_summary.final_cost / converged_summary.final_cost - 1.0);
+  EXPECT_LT(play_summary.iterations, converged_summary.iterations);
+  EXPECT_LT(difference, 0.005 * largest);
+  EXPECT_NEAR(play_summary.final_cost, converged_summary.final_cost,
+              1e-6 * converged_summary.final_cost);
+}
+
 // procam play: one problem per frame, the desired colours changing. A solve started from the
 // previous frame's emittance, with the previous solve's factorised K, reaches the cold solve's
 // objective in fewer iterations; started at the optimum it stops at once.
