@@ -190,7 +190,11 @@ bool LatencyOptions::Check(std::string* why) const {
 
 double LatencyMeasurement::SettleMs() const {
   const double upper = std::max(upper_ms, 0.0);
-  return std::ceil(upper + std::max(5.0, 0.1 * upper));
+  // The margin covers a change slower than the slowest of the few measured: as much again as
+  // their spread (a display chain's jitter; a frame period for a steady projector), 10 % or
+  // 5 ms, whichever is largest.
+  const double spread = std::max(upper_ms - lower_ms, 0.0);
+  return std::ceil(upper + std::max({5.0, 0.1 * upper, spread}));
 }
 
 std::string LatencyMeasurement::Summary() const {

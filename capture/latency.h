@@ -45,8 +45,10 @@ struct LatencyMeasurement {
   int frames = 0;                // frames classed
   double lit_fraction = 0.0;     // of the camera's pixels, those the display lights
   double EstimateMs() const { return estimate_ms; }
-  // The settle time the sequencer needs: the slowest change's upper bound plus a margin (10 %,
-  // at least 5 ms), rounded up to a millisecond.
+  // The settle time the sequencer needs: the slowest change's upper bound plus a margin (the
+  // changes' spread upper − lower, 10 % or 5 ms, whichever is largest), rounded up to a
+  // millisecond. The spread: a chain that jitters (a compositor and a screen grabber, as the
+  // emulated room's) can be slower on a later change than on any of the few measured.
   double SettleMs() const;
   std::string Summary() const;  // one line, for logs
 };

@@ -1,11 +1,15 @@
 #include "geometry/scene_from_points.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <numeric>
 #include <stdexcept>
 
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/Alpha_shape_2.h>
 #include <CGAL/Alpha_shape_face_base_2.h>
 #include <CGAL/Alpha_shape_vertex_base_2.h>
@@ -47,6 +51,9 @@ using PlaneSorting =
     CGAL::Shape_detection::Point_set::Least_squares_plane_fit_sorting<Kernel, Cloud, NeighborQuery, PointMap>;
 using RegionGrowing =
     CGAL::Shape_detection::Region_growing<Cloud, NeighborQuery, PlaneRegion, PlaneSorting::Seed_map>;
+using Triangle3 = Kernel::Triangle_3;
+using TriangleTree = CGAL::AABB_tree<
+    CGAL::AABB_traits<Kernel, CGAL::AABB_triangle_primitive<Kernel, std::vector<Triangle3>::const_iterator>>>;
 using Polygon2 = CGAL::Polygon_2<Kernel>;
 using PolygonWithHoles2 = CGAL::Polygon_with_holes_2<Kernel>;
 using AlphaShape = CGAL::Alpha_shape_2<CGAL::Delaunay_triangulation_2<
@@ -398,6 +405,33 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
   return moved;
 }
 
+// Step 6b for one ring: moves corners within snap_distance of a mesh surface to the mesh's nearest
+// point, seen along the plane's normal. Where a plane meets a curved surface (a floor under a
+// curved wall, around a column) nothing else places its outline: its free edge lies wherever
+// the plane's points stopped, up to a few centimetres beyond the surface it meets. Returns how
+// many moved; the ring stays as it was if moving them would make it not simple.
+int SnapRingToMeshes(const Plane& plane, const TriangleTree& meshes, double snap_distance, Polygon2* ring) {
+  std::vector<Point2> moved_ring;
+  int moved = 0;
+  for (const Point2& corner : ring->vertices()) {
+    const Vec3 p = plane.FromPlane(Vec2(corner.x(), corner.y()));
+    const Point3 query(p.x(), p.y(), p.z());
+    const Point3 nearest = meshes.closest_point(query);
+    const Vec3 q(nearest.x(), nearest.y(), nearest.z());
+    if ((q - p).norm() <= snap_distance) {
+      const Vec2 uv = plane.ToPlane(q);
+      moved_ring.push_back(Point2(uv.x(), uv.y()));
+      ++moved;
+    } else {
+      moved_ring.push_back(corner);
+    }
+  }
+  static const Kernel traits;  // (as in SnapRing)
+  if (moved == 0 || !CGAL::is_simple_2(moved_ring.begin(), moved_ring.end(), traits)) return 0;
+  *ring = Polygon2(moved_ring.begin(), moved_ring.end());
+  return moved;
+}
+
 // Quad when the outline is one convex 4-corner polygon; otherwise a mesh of its constrained
 // Delaunay triangles.
 Surface ToSurface(const PlaneSurface& plane_surface, const SceneFromPointsOptions& options, double weld) {
@@ -640,23 +674,47 @@ std::vector<PlaneSurface> PlaneSurfaces(const std::vector<Vec3>& points, const s
     (*surface_of_region)[r] = static_cast<int>(plane_surfaces.size());
     plane_surfaces.push_back(std::move(surface));
   }
-  std::vector<std::vector<const Plane*>> plane_neighbours(plane_surfaces.size());
-  for (const auto& [pair, count] : Adjacency(label, neighbours)) {
-    const int a = (*surface_of_region)[pair.first], b = (*surface_of_region)[pair.second];
-    if (count < kMinAdjacentEdges || a < 0 || b < 0) continue;
-    plane_neighbours[a].push_back(&plane_surfaces[b].plane);
-    plane_neighbours[b].push_back(&plane_surfaces[a].plane);
-  }
-  for (size_t s = 0; s < plane_surfaces.size(); ++s) {
-    PlaneSurface& surface = plane_surfaces[s];
-    for (PolygonWithHoles2& polygon : surface.polygons) {
-      surface.snapped += SnapRing(surface.plane, plane_neighbours[s], options.snap_distance, &polygon.outer_boundary());
-      for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) {
-        surface.snapped += SnapRing(surface.plane, plane_neighbours[s], options.snap_distance, &*hole);
+  return plane_surfaces;
+}
+
+// Steps 5 and 6b: each plane's outline corners near a mesh surface (`meshes`: the scan's mesh
+// surfaces) onto it, then those near the edge lines with neighbouring planes onto those lines (so
+// that where a plane, a neighbouring plane and a mesh meet, the planes' shared edge wins).
+void SnapOutlines(const std::vector<int>& label, const std::vector<std::vector<int>>& neighbours,
+                  const std::vector<int>& surface_of_region, const std::vector<Surface>& meshes,
+                  const SceneFromPointsOptions& options, std::vector<PlaneSurface>* plane_surfaces) {
+  std::vector<Triangle3> mesh_triangles;
+  for (const Surface& mesh : meshes) {
+    for (const MeshTriangle& triangle : mesh.mesh_triangles) {
+      std::array<Point3, 3> corner;
+      for (int k = 0; k < 3; ++k) {
+        const Vec3& v = mesh.mesh_vertices[triangle.vertex[k]];
+        corner[k] = Point3(v.x(), v.y(), v.z());
       }
+      mesh_triangles.emplace_back(corner[0], corner[1], corner[2]);
     }
   }
-  return plane_surfaces;
+  TriangleTree mesh_tree(mesh_triangles.begin(), mesh_triangles.end());
+  if (!mesh_triangles.empty()) mesh_tree.accelerate_distance_queries();
+  std::vector<std::vector<const Plane*>> plane_neighbours(plane_surfaces->size());
+  for (const auto& [pair, count] : Adjacency(label, neighbours)) {
+    const int a = surface_of_region[pair.first], b = surface_of_region[pair.second];
+    if (count < kMinAdjacentEdges || a < 0 || b < 0) continue;
+    plane_neighbours[a].push_back(&(*plane_surfaces)[b].plane);
+    plane_neighbours[b].push_back(&(*plane_surfaces)[a].plane);
+  }
+  for (size_t s = 0; s < plane_surfaces->size(); ++s) {
+    PlaneSurface& surface = (*plane_surfaces)[s];
+    const auto snap = [&](Polygon2* ring) {
+      if (!mesh_triangles.empty())
+        surface.snapped += SnapRingToMeshes(surface.plane, mesh_tree, options.snap_distance, ring);
+      surface.snapped += SnapRing(surface.plane, plane_neighbours[s], options.snap_distance, ring);
+    };
+    for (PolygonWithHoles2& polygon : surface.polygons) {
+      snap(&polygon.outer_boundary());
+      for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) snap(&*hole);
+    }
+  }
 }
 
 // The planar surfaces into `result`, named by their orientation; marks their points.
@@ -905,16 +963,21 @@ ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPoi
   std::vector<bool> curved = MergeAndClassify(points, neighbours, viewpoint, options, &label, &planes);
   PromoteNoisyPlanes(points, neighbours, viewpoint, options, &label, &planes, &curved);
   std::vector<int> surface_of_region;
-  const std::vector<PlaneSurface> plane_surfaces =
+  std::vector<PlaneSurface> plane_surfaces =
       PlaneSurfaces(points, neighbours, label, planes, curved, options, &surface_of_region);
-  std::vector<bool> on_surface(points.size(), false);
-  AddPlaneSurfaces(points, plane_surfaces, options, &result, &on_surface);
-  // Step 6: what no plane took, in connected groups, as meshes.
+  // Step 6: what no plane took, in connected groups, as meshes (listed after the planes).
   std::vector<bool> for_mesh(points.size(), false);
   for (size_t i = 0; i < points.size(); ++i) {
     for_mesh[i] = label[i] < 0 ? true : curved[label[i]] || surface_of_region[label[i]] < 0;
   }
-  AddMeshSurfaces(points, neighbours, for_mesh, viewpoint, options, &result, &on_surface);
+  std::vector<bool> on_surface(points.size(), false);
+  ScannedScene meshes;
+  AddMeshSurfaces(points, neighbours, for_mesh, viewpoint, options, &meshes, &on_surface);
+  SnapOutlines(label, neighbours, surface_of_region, meshes.scene.surfaces, options, &plane_surfaces);
+  AddPlaneSurfaces(points, plane_surfaces, options, &result, &on_surface);
+  for (Surface& mesh : meshes.scene.surfaces) result.scene.surfaces.push_back(std::move(mesh));
+  result.stats.insert(result.stats.end(), meshes.stats.begin(), meshes.stats.end());
+  result.left_out.insert(result.left_out.end(), meshes.left_out.begin(), meshes.left_out.end());
   result.unassigned = static_cast<int>(std::count(on_surface.begin(), on_surface.end(), false));
   std::sort(result.left_out.begin(), result.left_out.end(),
             [](const LeftOutGroup& a, const LeftOutGroup& b) { return a.area_m2 > b.area_m2; });

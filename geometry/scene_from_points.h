@@ -33,7 +33,10 @@
 //  6. Meshes: curved regions and points no plane took, in connected groups, smoothed (CGAL
 //     jet_smooth_point_set), thinned to one point per mesh_vertex_spacing cell (CGAL
 //     grid_simplify_point_set) and meshed by advancing-front surface reconstruction (CGAL
-//     Advancing_front_surface_reconstruction); each triangle faces the viewpoint.
+//     Advancing_front_surface_reconstruction); each triangle faces the viewpoint. Then, before
+//     step 5's snapping, outline vertices within snap_distance of a mesh move onto the mesh's
+//     nearest point (seen along the plane's normal; CGAL AABB_tree): where a floor meets a
+//     curved wall or a column, its outline follows the surface it meets.
 //
 // Planar polygons become scene surfaces: a convex 4-corner polygon without holes a quad, any other
 // polygon (holes, more corners) a mesh triangulated by a constrained Delaunay triangulation (CGAL
