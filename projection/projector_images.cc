@@ -488,6 +488,7 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
           pixel_factor = factors[k].data() + first;
         }
         double light_0 = 0.0, light_1 = 0.0, light_2 = 0.0;
+        long long patch_saturated = 0, patch_detail_saturated = 0;  // in registers, not the vectors
         int row = -1, row_begin = 0,
             row_end = 0;  // the row of the current pixel, found incrementally
         for (int position = first; position < map.patch_begin[i + 1]; ++position) {
@@ -517,8 +518,8 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
             saturated_pixel |= value >= 1.0;
             r[c] = value;
           }
-          my_saturated[k] += saturated_pixel;
-          my_detail_saturated[k] += saturated_by_factor;
+          patch_saturated += saturated_pixel;
+          patch_detail_saturated += saturated_by_factor;
           if (!table.identity_mixing) {
             Vec3 mixed;
             if (LightFor(table, Vec3(r[0], r[1], r[2]), &mixed)) ++my_clipped[k];
@@ -542,6 +543,8 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
             light_2 += table.codes[2].Light(q2);
           }
         }
+        my_saturated[k] += patch_saturated;
+        my_detail_saturated[k] += patch_detail_saturated;
         const Vec3 projector_light(light_0, light_1, light_2);
         if (!diffuse) {
           const Vec3 mixed = table.identity_mixing
