@@ -115,6 +115,15 @@ void AddLightOption(CLI::App* command, LightField* light) {
       ->option_text(std::string("smooth|flat (default ") + LightFieldName(*light) + ")");
 }
 
+void AddPlayToleranceOption(CLI::App* command, double* tolerance) {
+  command
+      ->add_option("--tolerance", *tolerance,
+                   "Each frame's solve stops when an iteration lowers the cost by less than this "
+                   "fraction of it")
+      ->check(CLI::Range(0.0, 0.1))
+      ->capture_default_str();
+}
+
 std::string SettleSetting::Text() const { return measure ? "auto" : fmt::format("{}", ms); }
 
 void AddSettleOption(CLI::App* command, SettleSetting* settle) {

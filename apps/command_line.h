@@ -41,6 +41,10 @@ std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text);
 // into a smooth field (seamless light) or light each patch uniformly (projector_images.h).
 void AddLightOption(CLI::App* command, LightField* light);
 
+// --tolerance F (procam play and bench play): each frame's solve stops when an iteration lowers
+// the cost by less than F of it, in [0, 0.1].
+void AddPlayToleranceOption(CLI::App* command, double* tolerance);
+
 // --settle-ms auto|MS: the wait after each pattern before frames count. "auto" measures the
 // display-to-camera latency first (a flash sequence, capture/latency.h) and settles for it;
 // a number is milliseconds in [0, 60000].

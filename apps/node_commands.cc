@@ -164,11 +164,7 @@ void AddNodeCommands(CLI::App& app) {
   play->add_option("--device", play_args->device, "cpu | cuda")
       ->check(CLI::IsMember({"cpu", "cuda"}))
       ->capture_default_str();
-  play->add_option("--tolerance", play_args->tolerance,
-                   "Each frame's solve stops when an iteration lowers the cost by less than this "
-                   "fraction of it")
-      ->check(CLI::Range(0.0, 0.1))
-      ->capture_default_str();
+  AddPlayToleranceOption(play, &play_args->tolerance);
   play->add_option("--alpha", play_args->alpha, "Weight of the absolute term, (0,1]")
       ->check(CLI::Range(1e-9, 1.0));
   play->add_option("--dither", play_args->dither, "none | ordered | error-diffusion")

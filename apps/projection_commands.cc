@@ -200,11 +200,7 @@ void AddProjectionCommands(CLI::App& app) {
                          "compute where the context has OpenGL 4.3)")
       ->check(CLI::IsMember({"auto", "fragment", "compute"}))
       ->capture_default_str();
-  bench_play->add_option("--tolerance", play_args->tolerance,
-                         "Each frame's solve stops when an iteration lowers the cost by less than "
-                         "this fraction of it (procam play's default)")
-      ->check(CLI::Range(0.0, 0.1))
-      ->capture_default_str();
+  AddPlayToleranceOption(bench_play, &play_args->tolerance);
   AddLightOption(bench_play, &play_args->light);
   bench_play->add_option("--json", play_args->json, "Also write the timings as JSON");
   bench_play->callback([play_args, play_strings] {

@@ -35,8 +35,8 @@ struct PlayBenchmarkOptions {
   DitherMethod dither = DitherMethod::kOrdered;
   PlayRender render = PlayRender::kCpu;
   // Each frame's solve stops when an iteration lowers the cost by less than this fraction of it
-  // (procam play's default, kPlayFunctionTolerance of nodes/play.h).
-  double tolerance = 1e-6;
+  // (procam play's default).
+  double tolerance = kPlayFunctionTolerance;
   // kGpu: the shader path, "auto", "fragment" or "compute" (GlShading of gl_renderer.h).
   std::string shader = "auto";
   std::string json;

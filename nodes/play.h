@@ -29,12 +29,7 @@
 
 namespace procam {
 
-// Each frame's solve stops when an iteration lowers the cost by less than this fraction of it
-// (SolverOptions::function_tolerance; compensate and evaluate run to 1e-12). On the play
-// benchmark's drifting frames every patch's emittance then lies within 0.0006–0.0027 of the
-// converged solve's (emittances up to 1.6), the cost within 3e-8 of it, in 4–6 iterations
-// instead of 8–10.
-inline constexpr double kPlayFunctionTolerance = 1e-6;
+// The solver's options for play: each frame's solve stops at kPlayFunctionTolerance (solver.h).
 inline SolverOptions PlaySolverOptions() {
   SolverOptions options;
   options.function_tolerance = kPlayFunctionTolerance;

@@ -229,6 +229,18 @@ GLuint LinkProgram(GlShading shading, const std::string& image_format) {
   return program;
 }
 
+// The compute path's image for codes of `bits` bits, exactly: its format and the compute shader's
+// format qualifier for it.
+struct ImageFormat {
+  GLenum format;
+  const char* qualifier;
+};
+ImageFormat ImageFormatFor(int bits) {
+  if (bits <= 8) return {GL_RGBA8, "rgba8"};
+  if (bits == 10) return {GL_RGB10_A2, "rgb10_a2"};
+  return {GL_RGBA16, "rgba16"};
+}
+
 // Texture units of the shader's samplers.
 enum Unit : int {
   kPixelPatch,  // the 2D textures first (kLastTexture2D)
@@ -274,9 +286,10 @@ struct GlProjectorRenderer::State {
   LightField light = LightField::kSmooth;
   GlShading shading = GlShading::kFragment;  // kFragment or kCompute, as chosen
   GLuint program = 0, vertex_array = 0;
-  // kCompute: the image the compute shader stores into, and a framebuffer holding it (the blit's
-  // source).
+  // kCompute: the image the compute shader stores into (of image_format), and a framebuffer
+  // holding it (the blit's source).
   GLuint image = 0, image_framebuffer = 0;
+  GLenum image_format = GL_RGBA8;
   GLuint timer_query = 0;  // while TimedDraw runs: a GL_TIME_ELAPSED query around the draw call
   std::array<GLuint, kUnits> textures = {};
   std::array<GLuint, kUnits> buffers = {};  // behind the texture buffers (0 for 2D textures)
@@ -393,17 +406,14 @@ GlProjectorRenderer::GlProjectorRenderer(const FramePlanner& planner, int projec
   state.shading = shading == GlShading::kAuto
                       ? (GlComputeShading() ? GlShading::kCompute : GlShading::kFragment)
                       : shading;
-  // The compute path's image holds the codes exactly: 8 bits, 10 (rgb10_a2), or 16.
-  const GLenum image_format =
-      state.bits <= 8 ? GL_RGBA8 : state.bits == 10 ? GL_RGB10_A2 : GL_RGBA16;
-  state.program = LinkProgram(state.shading, state.bits <= 8    ? "rgba8"
-                                             : state.bits == 10 ? "rgb10_a2"
-                                                                : "rgba16");
+  const ImageFormat image_format = ImageFormatFor(state.bits);
+  state.image_format = image_format.format;
+  state.program = LinkProgram(state.shading, image_format.qualifier);
   glGenVertexArrays(1, &state.vertex_array);
   if (state.shading == GlShading::kCompute) {
     glGenTextures(1, &state.image);
     glBindTexture(GL_TEXTURE_2D, state.image);
-    glTexStorage2D(GL_TEXTURE_2D, 1, image_format, map.width, map.height);
+    glTexStorage2D(GL_TEXTURE_2D, 1, state.image_format, map.width, map.height);
     glBindTexture(GL_TEXTURE_2D, 0);
     GLint read_framebuffer = 0;
     glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &read_framebuffer);
@@ -598,8 +608,7 @@ void GlProjectorRenderer::Draw(const FramePlan& plan) {
   glBindVertexArray(state.vertex_array);
   if (state.timer_query != 0) glBeginQuery(GL_TIME_ELAPSED, state.timer_query);
   if (state.shading == GlShading::kCompute) {
-    glBindImageTexture(0, state.image, 0, GL_FALSE, 0, GL_WRITE_ONLY,
-                       state.bits <= 8 ? GL_RGBA8 : state.bits == 10 ? GL_RGB10_A2 : GL_RGBA16);
+    glBindImageTexture(0, state.image, 0, GL_FALSE, 0, GL_WRITE_ONLY, state.image_format);
     constexpr int kGroup = 16;  // the compute shader's local size
     glDispatchCompute((state.width + kGroup - 1) / kGroup, (state.height + kGroup - 1) / kGroup, 1);
     glMemoryBarrier(GL_FRAMEBUFFER_BARRIER_BIT);

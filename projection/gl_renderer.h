@@ -6,8 +6,8 @@
 // context has it), or a fragment shader drawing one fullscreen triangle (OpenGL 3.3). Compute is
 // the default because data-centre GPUs such as the H100 run graphics work on a small part of the
 // chip (NVIDIA's Hopper architecture paper) and compute work on all of it: docs/nodes.md has the
-// timings. Part of the optional backend target procam_projection_glfw; OpenGL
-// functions are loaded through libepoxy.
+// timings. Part of the optional backend target procam_projection_glfw; OpenGL functions are
+// loaded through libepoxy.
 //
 // Static data, uploaded once when the renderer is made: per pixel the patch it lights (−1:
 // none), its share (w a / Ω) and the world point its ray hits, and for kSmooth its bumps: the
@@ -37,9 +37,9 @@
 // Needs OpenGL 3.3 (core or compatibility profile: Mesa's llvmpipe and NVIDIA's drivers give
 // it): texture buffers, integer textures, GLSL 3.30; the compute path 4.3 (both give 4.5 or
 // more). On the compute path the image holds the codes exactly (RGBA8 for 8-bit projectors,
-// RGB10_A2 for 10-bit, RGBA16 otherwise) and the blit converts them to the framebuffer's depth. All calls must come with the renderer's
-// context current, on that context's thread. Detail and error diffusion stay on the CPU
-// (ShadeProjectorImages / RenderProjectorImages).
+// RGB10_A2 for 10-bit, RGBA16 otherwise) and the blit converts them to the framebuffer's depth.
+// All calls must come with the renderer's context current, on that context's thread. Detail and
+// error diffusion stay on the CPU (ShadeProjectorImages / RenderProjectorImages).
 
 #include <memory>
 #include <string>

@@ -288,29 +288,22 @@ inline Eigen::Vector3f SumFactor(int count, const uint16_t* node, const float* w
 
 void SeamlessField::FactorBumps(int i, const Eigen::Vector3f& point, std::vector<uint16_t>* node,
                                 std::vector<float>* weight) const {
-  node->clear();
-  weight->clear();
+  thread_local std::vector<std::pair<int, double>> bumps;
+  Bumps(i, point, &bumps);
+  node->resize(bumps.size());
+  weight->resize(bumps.size());
+  for (size_t b = 0; b < bumps.size(); ++b) {
+    (*node)[b] = static_cast<uint16_t>(bumps[b].first);
+    (*weight)[b] = static_cast<float>(bumps[b].second);
+  }
+}
+
+void SeamlessField::ListValues(int i, const Eigen::MatrixX3d& node_value,
+                               std::vector<double>* values) const {
   const int begin = node_begin_[i], end = node_begin_[i + 1];
-  const Eigen::Vector3d x = point.cast<double>();
-  // The bumps' t² kept for the second pass (lists are short: a handful to a few dozen nodes).
-  constexpr int kKept = 64;
-  double kept[kKept];
-  double weight_sum = 0.0;
-  for (int j = begin; j < end; ++j) {
-    const double t2 = BumpSquared(j, x);
-    if (j - begin < kKept) kept[j - begin] = t2;
-    if (t2 >= 0.0) weight_sum += t2;
-  }
-  if (!(weight_sum > 0.0)) {  // no bump reaches: the patch's own value (Bumps)
-    node->push_back(0);
-    weight->push_back(1.0f);
-    return;
-  }
-  for (int j = begin; j < end; ++j) {
-    const double t2 = j - begin < kKept ? kept[j - begin] : BumpSquared(j, x);
-    if (t2 < 0.0) continue;
-    node->push_back(static_cast<uint16_t>(j - begin));
-    weight->push_back(static_cast<float>(t2 / weight_sum));
+  values->resize(3 * static_cast<size_t>(end - begin));
+  for (int b = 0; b < end - begin; ++b) {
+    for (int c = 0; c < 3; ++c) (*values)[3 * b + c] = node_value(node_list_[begin + b], c);
   }
 }
 
@@ -321,11 +314,8 @@ Eigen::Vector3f SeamlessField::Factor(int i, const Eigen::Vector3f& point,
   std::vector<uint16_t> node;
   std::vector<float> weight;
   FactorBumps(i, point, &node, &weight);
-  const int begin = node_begin_[i], end = node_begin_[i + 1];
-  std::vector<double> values(3 * static_cast<size_t>(end - begin));
-  for (int b = 0; b < end - begin; ++b) {
-    for (int c = 0; c < 3; ++c) values[3 * b + c] = node_value(node_list_[begin + b], c);
-  }
+  std::vector<double> values;
+  ListValues(i, node_value, &values);
   return SumFactor(static_cast<int>(node.size()), node.data(), weight.data(), values.data(), means,
                    i);
 }
@@ -338,12 +328,8 @@ void SeamlessField::PatchFactors(int i, size_t k, const Eigen::MatrixX3d& node_v
     std::fill(factors, factors + (last - first), Eigen::Vector3f::Ones());
     return;
   }
-  const int begin = node_begin_[i], end = node_begin_[i + 1];
   thread_local std::vector<double> list_value;
-  list_value.resize(3 * static_cast<size_t>(end - begin));
-  for (int b = 0; b < end - begin; ++b) {
-    for (int c = 0; c < 3; ++c) list_value[3 * b + c] = node_value(node_list_[begin + b], c);
-  }
+  ListValues(i, node_value, &list_value);
   if (BumpsCached(k)) {
     const PixelBumps& cache = cached_[k];
     int64_t bump = cache.patch_first[i];
@@ -392,8 +378,9 @@ void SeamlessField::CacheBumps(const std::vector<char>* projectors) {
     const ProjectorMap& map = rig_.maps[k];
     PixelBumps cache;
     cache.count.assign(map.lit_pixels, 0);
-    // Two passes: the counts, then the bumps where the counts place them.
-    std::vector<int64_t> patch_bumps(n, 0);
+    // Each patch's bumps in a list of their own (every bump evaluated once), then end to end.
+    std::vector<std::vector<uint16_t>> patch_node(n);
+    std::vector<std::vector<float>> patch_weight(n);
 #pragma omp parallel
     {
       std::vector<uint16_t> node;
@@ -404,29 +391,21 @@ void SeamlessField::CacheBumps(const std::vector<char>* projectors) {
         for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
           FactorBumps(i, map.point_by_patch[position], &node, &weight);
           cache.count[position] = static_cast<uint16_t>(node.size());
-          patch_bumps[i] += static_cast<int64_t>(node.size());
+          patch_node[i].insert(patch_node[i].end(), node.begin(), node.end());
+          patch_weight[i].insert(patch_weight[i].end(), weight.begin(), weight.end());
         }
       }
     }
     cache.patch_first.assign(n + 1, 0);
-    for (int i = 0; i < n; ++i) cache.patch_first[i + 1] = cache.patch_first[i] + patch_bumps[i];
-    cache.node.resize(cache.patch_first[n]);
-    cache.weight.resize(cache.patch_first[n]);
-#pragma omp parallel
-    {
-      std::vector<uint16_t> node;
-      std::vector<float> weight;
-#pragma omp for schedule(dynamic, 16)
-      for (int i = 0; i < n; ++i) {
-        if (Flat(i)) continue;
-        int64_t bump = cache.patch_first[i];
-        for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
-          FactorBumps(i, map.point_by_patch[position], &node, &weight);
-          std::copy(node.begin(), node.end(), cache.node.begin() + bump);
-          std::copy(weight.begin(), weight.end(), cache.weight.begin() + bump);
-          bump += static_cast<int64_t>(node.size());
-        }
-      }
+    for (int i = 0; i < n; ++i)
+      cache.patch_first[i + 1] = cache.patch_first[i] + static_cast<int64_t>(patch_node[i].size());
+    cache.node.reserve(cache.patch_first[n]);
+    cache.weight.reserve(cache.patch_first[n]);
+    for (int i = 0; i < n; ++i) {
+      cache.node.insert(cache.node.end(), patch_node[i].begin(), patch_node[i].end());
+      cache.weight.insert(cache.weight.end(), patch_weight[i].begin(), patch_weight[i].end());
+      patch_node[i] = {};
+      patch_weight[i] = {};
     }
     cached_[k] = std::move(cache);
   }

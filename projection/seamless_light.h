@@ -116,10 +116,12 @@ class SeamlessField {
   template <typename Visit>
   void ForEachPixel(Visit visit) const;
   void FormPatchMeans();
-  // The normalised bumps at `point` on patch i as Factor sums them: nodes by their position in
-  // i's list, weights K̃_j rounded to single precision (what the cache keeps).
+  // The normalised bumps at `point` on patch i as Factor sums them: Bumps, nodes by their
+  // position in i's list, weights K̃_j rounded to single precision (what the cache keeps).
   void FactorBumps(int i, const Eigen::Vector3f& point, std::vector<uint16_t>* node,
                    std::vector<float>* weight) const;
+  // The node values of patch i's list in list order, three to a node (what SumFactor reads).
+  void ListValues(int i, const Eigen::MatrixX3d& node_value, std::vector<double>* values) const;
 
   const ProjectionRig& rig_;
   SeamlessLightOptions options_;

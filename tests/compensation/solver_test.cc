@@ -366,7 +366,7 @@ TEST_F(SolveBounded, MultiresReachesTheSameObjective) {
       << single.BriefReport() << "\n" << multi.BriefReport();
 }
 
-// procam play's stopping rule (kPlayFunctionTolerance of nodes/play.h, 1e-6): the next frame's
+// procam play's stopping rule (kPlayFunctionTolerance, 1e-6): the next frame's
 // warm solve stops in fewer iterations than one run to compensate's 1e-12, and lands near it:
 // every patch's emittance within half a percent of the largest, the cost within 1e-6 of it.
 TEST_F(SolveBounded, PlaysStoppingRuleLandsNearTheConvergedSolve) {
@@ -376,7 +376,7 @@ TEST_F(SolveBounded, PlaysStoppingRuleLandsNearTheConvergedSolve) {
   CompensationProblem next = problem;
   next.desired = (problem.desired * 1.05).cwiseMin(1.0);
   SolverOptions play;
-  play.function_tolerance = 1e-6;
+  play.function_tolerance = kPlayFunctionTolerance;
   SolverSummary converged_summary, play_summary;
   const WarmStart warm{previous.radiosity_system, previous.emittance};
   const CompensationSolution converged = Solve(SolverOptions(), next, &converged_summary, {}, warm);
