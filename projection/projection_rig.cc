@@ -185,6 +185,35 @@ void Blend(int k, const std::vector<Caster>& casters, const PatchLevel& level, c
   }
 }
 
+// ProjectorMap::pixels_by_share and its companions, from pixels_by_patch and share.
+void SortByShare(ProjectorMap* map) {
+  map->pixels_by_share.resize(map->lit_pixels);
+  const int n = static_cast<int>(map->patch_begin.size()) - 1;
+#pragma omp parallel
+  {
+    std::vector<std::pair<float, int32_t>> pixels;  // (share, pixel): ties by pixel, one order
+#pragma omp for schedule(dynamic, 16)
+    for (int i = 0; i < n; ++i) {
+      pixels.clear();
+      for (int position = map->patch_begin[i]; position < map->patch_begin[i + 1]; ++position) {
+        const int32_t index = map->pixels_by_patch[position];
+        pixels.emplace_back(map->share[index], index);
+      }
+      std::sort(pixels.begin(), pixels.end());
+      for (size_t j = 0; j < pixels.size(); ++j)
+        map->pixels_by_share[map->patch_begin[i] + j] = pixels[j].second;
+    }
+  }
+  map->share_by_share.resize(map->lit_pixels);
+  map->bayer_by_share.resize(map->lit_pixels);
+  for (int position = 0; position < map->lit_pixels; ++position) {
+    const int32_t index = map->pixels_by_share[position];
+    const int x = index % map->width, y = index / map->width;
+    map->share_by_share[position] = map->share[index];
+    map->bayer_by_share[position] = static_cast<uint8_t>((y & 7) * 8 + (x & 7));
+  }
+}
+
 }  // namespace
 
 bool ProjectionRigOptions::Check(std::string* why) const {
@@ -323,6 +352,7 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
     map.point_by_patch.resize(map.lit_pixels);
     for (int position = 0; position < map.lit_pixels; ++position)
       map.point_by_patch[position] = casters[k].point[map.pixels_by_patch[position]];
+    SortByShare(&map);
     // Footprints of the pixels counted per patch; a patch this projector lights wholly gets its
     // pixels' footprints rescaled to its exact area (coverage scale, header comment).
     Eigen::VectorXd solid_angle_sum = Eigen::VectorXd::Zero(n),

@@ -94,6 +94,14 @@ struct ProjectorMap {
   // (lit_pixels) The world point (metres) each lit pixel's ray hits, in pixels_by_patch's order:
   // where the seamless light of projector_images.h evaluates its smooth field.
   std::vector<Eigen::Vector3f> point_by_patch;
+  // The lit pixels of each patch once more (the same ranges patch_begin[i] .. patch_begin[i+1]),
+  // by ascending share within the patch, with each one's share and 8×8 Bayer cell
+  // ((y mod 8)·8 + x mod 8): the order in which a flat light's codes only grow, so that the CPU
+  // shading walks each channel's code up from the last pixel's instead of looking it up. Empty
+  // in a map built by hand (the shading then goes by pixels_by_patch).
+  std::vector<int32_t> pixels_by_share;
+  std::vector<float> share_by_share;
+  std::vector<uint8_t> bayer_by_share;
   int lit_pixels = 0;       // pixels with a patch
   int patches_reached = 0;  // distinct patches lit
 };

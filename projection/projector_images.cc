@@ -309,6 +309,155 @@ Eigen::MatrixX3d FluxOfCodes(const ProjectionRig& rig, const std::vector<Project
   return delivered_flux;
 }
 
+
+// One patch's pixels in one projector (step 3 of projector_images.h), specialised for the
+// per-pixel branches that are fixed per call: whether the pixels have seamless factors and the
+// dither. The hottest loop of a frame shaded on the CPU.
+struct PatchShadeCounts {
+  long long saturated = 0, detail_saturated = 0, clipped = 0;
+  double light[3] = {0.0, 0.0, 0.0};  // Σ light of the codes, when accounted
+};
+using PatchShadeFunction = void (*)(const ProjectorMap& map, const ProjectorTables& table,
+                                    int first, int end, const Vec3& tau,
+                                    const Eigen::Vector3f* pixel_factor, bool account,
+                                    cv::Vec3w* codes, Vec3* light, PatchShadeCounts* counts);
+
+// One pixel's relative light r per channel (step 3 of projector_images.h), mixed; counts its
+// saturations.
+template <bool kFactor>
+inline void PixelLight(const ProjectorTables& table, const bool full[3], const Vec3& scale,
+                       double share, const Eigen::Vector3f* factor, PatchShadeCounts* counts,
+                       double r[3]) {
+  bool saturated_by_factor = false, saturated_pixel = false;
+  for (int c = 0; c < 3; ++c) {
+    double value = 1.0;
+    if (!full[c]) {
+      value = share * scale[c];
+      if constexpr (kFactor) {
+        value *= (*factor)[c];
+        saturated_by_factor |= value >= 1.0 && (*factor)[c] > 1.0f;
+      }
+      value = std::min(1.0, value);
+    }
+    saturated_pixel |= value >= 1.0;
+    r[c] = value;
+  }
+  counts->saturated += saturated_pixel;
+  counts->detail_saturated += saturated_by_factor;
+  if (!table.identity_mixing) {
+    Vec3 mixed;
+    if (LightFor(table, Vec3(r[0], r[1], r[2]), &mixed)) ++counts->clipped;
+    for (int c = 0; c < 3; ++c) r[c] = mixed[c];
+  }
+}
+
+// One pixel's codes into the image, and their light into the sums when accounted.
+inline void StoreCodes(const ProjectorTables& table, int32_t index, const int q[3], bool account,
+                       cv::Vec3w* codes, double sums[3]) {
+  codes[index] = cv::Vec3w(static_cast<uint16_t>(q[0]), static_cast<uint16_t>(q[1]),
+                           static_cast<uint16_t>(q[2]));
+  if (account) {
+    for (int c = 0; c < 3; ++c) sums[c] += table.codes[c].Light(q[c]);
+  }
+}
+
+// A flat light's patch in the map's order by share (ProjectorMap::pixels_by_share): r grows from
+// pixel to pixel (it is share times a constant per channel, clipped at 1, and rounding keeps
+// the order), so each channel's Below(r) is walked up from the last pixel's instead of looked
+// up. The same codes as the loop by pixels_by_patch, in a third of the time.
+template <DitherMethod kDither, bool kAccount>
+void ShadeFlatPatchByShare(const ProjectorMap& map, const ProjectorTables& table, int first,
+                           int end, const Vec3& scale, PatchShadeCounts* counts,
+                           cv::Vec3w* codes, double sums[3]) {
+  if (first == end) return;
+  const CodeTable &table_0 = table.codes[0], &table_1 = table.codes[1], &table_2 = table.codes[2];
+  const double scale_0 = scale[0], scale_1 = scale[1], scale_2 = scale[2];
+  // PixelLight's r without factors or mixing; +inf scale (full drive) gives 1.
+  const auto light = [](double share, double channel_scale) {
+    return std::min(1.0, share * channel_scale);
+  };
+  double share = map.share_by_share[first];
+  double r_0 = light(share, scale_0), r_1 = light(share, scale_1), r_2 = light(share, scale_2);
+  // Each channel's Below(r), written out per channel so that everything stays in registers.
+  int below_0 = table_0.Below(r_0), below_1 = table_1.Below(r_1), below_2 = table_2.Below(r_2);
+  long long saturated = 0;
+  for (int position = first;;) {
+    saturated += (r_0 >= 1.0) | (r_1 >= 1.0) | (r_2 >= 1.0);
+    const double threshold = kDither == DitherMethod::kOrdered
+                                 ? internal::kBayerThresholds[map.bayer_by_share[position]]
+                                 : 0.5;
+    const int q[3] = {table_0.Round(below_0, r_0, threshold),
+                      table_1.Round(below_1, r_1, threshold),
+                      table_2.Round(below_2, r_2, threshold)};
+    StoreCodes(table, map.pixels_by_share[position], q, kAccount, codes, sums);
+    if (++position == end) break;
+    share = map.share_by_share[position];
+    r_0 = light(share, scale_0);
+    r_1 = light(share, scale_1);
+    r_2 = light(share, scale_2);
+    below_0 = table_0.BelowFrom(below_0, r_0);
+    below_1 = table_1.BelowFrom(below_1, r_1);
+    below_2 = table_2.BelowFrom(below_2, r_2);
+  }
+  counts->saturated += saturated;
+}
+
+template <bool kFactor, DitherMethod kDither>
+void ShadePatch(const ProjectorMap& map, const ProjectorTables& table, int first, int end,
+                const Vec3& tau, const Eigen::Vector3f* pixel_factor, bool account,
+                cv::Vec3w* codes, Vec3* light, PatchShadeCounts* counts) {
+  // Light is linear in the codes' light and mixing: the patch's delivered flux is summed in
+  // relative light and mixed once per patch and projector. The sums stay in registers.
+  const bool full[3] = {tau[0] == kInfinity, tau[1] == kInfinity, tau[2] == kInfinity};
+  const Vec3 scale = tau.cwiseProduct(table.inverse_delta);  // r = share · scale (full: 1)
+  double sums[3] = {0.0, 0.0, 0.0};
+  if constexpr (!kFactor && kDither != DitherMethod::kErrorDiffusion) {
+    if (table.identity_mixing && !map.pixels_by_share.empty()) {
+      (account ? ShadeFlatPatchByShare<kDither, true> : ShadeFlatPatchByShare<kDither, false>)(
+          map, table, first, end, scale, counts, codes, sums);
+      for (int c = 0; c < 3; ++c) counts->light[c] = sums[c];
+      return;
+    }
+  }
+  int row = -1, row_begin = 0, row_end = 0;  // the row of the current pixel, found incrementally
+  for (int position = first; position < end; ++position) {
+    const int32_t index = map.pixels_by_patch[position];
+    if (kDither == DitherMethod::kOrdered && index >= row_end) {
+      row = index / map.width;
+      row_begin = row * map.width;
+      row_end = row_begin + map.width;
+    }
+    double r[3];
+    PixelLight<kFactor>(table, full, scale, map.share[index],
+                        kFactor ? &pixel_factor[position - first] : nullptr, counts, r);
+    if constexpr (kDither == DitherMethod::kErrorDiffusion) {
+      light[index] = Vec3(r[0], r[1], r[2]);
+    } else {
+      const double threshold =
+          kDither == DitherMethod::kOrdered ? BayerThreshold(index - row_begin, row) : 0.5;
+      const int q[3] = {table.codes[0].Quantise(r[0], threshold),
+                        table.codes[1].Quantise(r[1], threshold),
+                        table.codes[2].Quantise(r[2], threshold)};
+      StoreCodes(table, index, q, account, codes, sums);
+    }
+  }
+  for (int c = 0; c < 3; ++c) counts->light[c] = sums[c];
+}
+
+PatchShadeFunction PatchShadeFor(bool factor, DitherMethod dither) {
+  switch (dither) {
+    case DitherMethod::kNone:
+      return factor ? ShadePatch<true, DitherMethod::kNone> : ShadePatch<false, DitherMethod::kNone>;
+    case DitherMethod::kOrdered:
+      return factor ? ShadePatch<true, DitherMethod::kOrdered>
+                    : ShadePatch<false, DitherMethod::kOrdered>;
+    case DitherMethod::kErrorDiffusion:
+      break;
+  }
+  return factor ? ShadePatch<true, DitherMethod::kErrorDiffusion>
+                : ShadePatch<false, DitherMethod::kErrorDiffusion>;
+}
+
 }  // namespace
 
 namespace internal {
@@ -487,65 +636,15 @@ std::vector<ProjectorImage> ShadeImages(const ProjectionRig& rig,
         } else if (!factors.empty()) {
           pixel_factor = factors[k].data() + first;
         }
-        double light_0 = 0.0, light_1 = 0.0, light_2 = 0.0;
-        long long patch_saturated = 0, patch_detail_saturated = 0;  // in registers, not the vectors
-        int row = -1, row_begin = 0,
-            row_end = 0;  // the row of the current pixel, found incrementally
-        for (int position = first; position < map.patch_begin[i + 1]; ++position) {
-          const int32_t index = map.pixels_by_patch[position];
-          if (index >= row_end) {
-            row = index / map.width;
-            row_begin = row * map.width;
-            row_end = row_begin + map.width;
-          }
-          const double share = map.share[index];
-          // Light is linear in the codes' light and mixing: the patch's delivered flux is summed
-          // in relative light and mixed once per patch and projector. Scalars throughout: a
-          // vector's max over three lanes stalls on store forwarding in this, the hottest loop.
-          double r[3];
-          bool saturated_by_factor = false, saturated_pixel = false;
-          for (int c = 0; c < 3; ++c) {
-            double value = 1.0;
-            if (tau[c] != kInfinity) {
-              value = share * tau[c] * table.inverse_delta[c];
-              if (pixel_factor) {
-                const float factor = pixel_factor[position - first][c];
-                value *= factor;
-                saturated_by_factor |= value >= 1.0 && factor > 1.0f;
-              }
-              value = std::min(1.0, value);
-            }
-            saturated_pixel |= value >= 1.0;
-            r[c] = value;
-          }
-          patch_saturated += saturated_pixel;
-          patch_detail_saturated += saturated_by_factor;
-          if (!table.identity_mixing) {
-            Vec3 mixed;
-            if (LightFor(table, Vec3(r[0], r[1], r[2]), &mixed)) ++my_clipped[k];
-            for (int c = 0; c < 3; ++c) r[c] = mixed[c];
-          }
-          if (diffuse) {
-            light[k][index] = Vec3(r[0], r[1], r[2]);
-            continue;
-          }
-          const double threshold =
-              dither == DitherMethod::kOrdered ? BayerThreshold(index - row_begin, row) : 0.5;
-          // Written out per channel so that the three sums stay in registers.
-          const int q0 = table.codes[0].Quantise(r[0], threshold);
-          const int q1 = table.codes[1].Quantise(r[1], threshold);
-          const int q2 = table.codes[2].Quantise(r[2], threshold);
-          codes[index] = cv::Vec3w(static_cast<uint16_t>(q0), static_cast<uint16_t>(q1),
-                                   static_cast<uint16_t>(q2));
-          if (account) {
-            light_0 += table.codes[0].Light(q0);
-            light_1 += table.codes[1].Light(q1);
-            light_2 += table.codes[2].Light(q2);
-          }
-        }
-        my_saturated[k] += patch_saturated;
-        my_detail_saturated[k] += patch_detail_saturated;
-        const Vec3 projector_light(light_0, light_1, light_2);
+        PatchShadeCounts counts;
+        const PatchShadeFunction shade =
+            PatchShadeFor(pixel_factor != nullptr, dither);
+        shade(map, table, first, map.patch_begin[i + 1], tau, pixel_factor, account, codes,
+              diffuse ? light[k].data() : nullptr, &counts);
+        my_clipped[k] += counts.clipped;
+        my_saturated[k] += counts.saturated;
+        my_detail_saturated[k] += counts.detail_saturated;
+        const Vec3 projector_light(counts.light[0], counts.light[1], counts.light[2]);
         if (!diffuse) {
           const Vec3 mixed = table.identity_mixing
                                  ? projector_light

@@ -23,7 +23,12 @@ inline constexpr std::array<uint8_t, 64> kBayer = {
     6,  38, 60, 28, 52, 20, 62, 30, 54, 22, 3,  35, 11, 43, 1,  33, 9,  41, 51, 19, 59, 27,
     49, 17, 57, 25, 15, 47, 7,  39, 13, 45, 5,  37, 63, 31, 55, 23, 61, 29, 53, 21};
 
-inline double BayerThreshold(int x, int y) { return (kBayer[(y & 7) * 8 + (x & 7)] + 0.5) / 64.0; }
+inline constexpr std::array<double, 64> kBayerThresholds = [] {
+  std::array<double, 64> thresholds{};
+  for (int i = 0; i < 64; ++i) thresholds[i] = (kBayer[i] + 0.5) / 64.0;
+  return thresholds;
+}();
+inline double BayerThreshold(int x, int y) { return kBayerThresholds[(y & 7) * 8 + (x & 7)]; }
 
 // Code values ↔ relative light for one channel of one projector.
 class CodeTable {
@@ -49,8 +54,15 @@ class CodeTable {
   }
   // The code for light r: the upper of the bracketing pair when r's position between them
   // exceeds `threshold` (½: nearest in linear light).
-  int Quantise(double r, double threshold) const {
-    const int q = Below(r);
+  int Quantise(double r, double threshold) const { return Round(Below(r), r, threshold); }
+  // Below(r) for an r at or above the light of `code` (≤ Below(r)): the walk up from it.
+  int BelowFrom(int code, double r) const {
+    code += light_[code + 1] <= r;  // most walks take no step or one: no branch for the first
+    while (light_[code + 1] <= r) ++code;
+    return code;
+  }
+  // Quantise's last step, from q = Below(r).
+  int Round(int q, double r, double threshold) const {
     // (r − light_q) / (light_q+1 − light_q) > threshold, without the division. At the top code
     // the sentinel's infinite gap keeps q. No branch: under dithering the test is a coin toss.
     return q + static_cast<int>(r - light_[q] > threshold * (light_[q + 1] - light_[q]));

@@ -268,7 +268,9 @@ TEST(Play, AVideosFramesAreSolvedAndShownAndTheLightFollowsThem) {
         EXPECT_GT(mean[2], 1.5 * mean[0]) << "frame " << k;
       }
     }
-    if (k > 0) EXPECT_GT(summary.frames[k].iterations, 0);
+    if (k > 0) {
+      EXPECT_GT(summary.frames[k].iterations, 0);
+    }
   }
 }
 

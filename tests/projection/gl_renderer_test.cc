@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <opencv2/core.hpp>
 #include <random>
 #include <stdexcept>
@@ -255,6 +256,57 @@ TEST(FramePlan, CachedBumpsAndReusedImagesShadeTheSame) {
       ShadeProjectorImages(fresh, fresh.Plan(emittance), nullptr);
   for (size_t k = 0; k < reference.size(); ++k)
     EXPECT_EQ(cv::norm(mixed[k].codes, reference[k].codes, cv::NORM_INF), 0.0) << k;
+}
+
+// A flat light's pixels are shaded in the map's order by share (each channel's code walked up
+// from the last pixel's): the images are those of the plain loop by pixel, which a map without
+// that order gets, bit for bit, and so are the counts; the delivered light differs only by the
+// order of its sums. 8- and 10-bit projectors, both dithers that shade by patch, patches at full
+// drive and saturated pixels included (the first projector has no colour mixing: the order is
+// its; the second's mixing keeps it on the loop by pixel).
+TEST(FramePlan, ShadingByShareIsShadingByPixel) {
+  for (const int bits : {8, 10}) {
+    Stage stage = MakeStage({});
+    stage.projectors[1].photometry.mixing << 0.9, 0.1, 0.0, 0.05, 0.9, 0.05, 0.0, 0.2, 0.8;
+    stage.projectors[0].photometry.response[1] = ResponseCurve::Gamma(1.8);
+    for (Projector& projector : stage.projectors) projector.photometry.bits = bits;
+    const ProjectionRig rig = BuildProjectionRig(stage.patches.fine, stage.projectors, {});
+    ASSERT_EQ(rig.maps[0].pixels_by_share.size(), size_t(rig.maps[0].lit_pixels));
+    ProjectionRig by_pixel = rig;
+    for (ProjectorMap& map : by_pixel.maps) {
+      map.pixels_by_share.clear();
+      map.share_by_share.clear();
+      map.bayer_by_share.clear();
+    }
+    for (const DitherMethod dither : {DitherMethod::kNone, DitherMethod::kOrdered}) {
+      RenderOptions options;
+      options.light = LightField::kFlat;
+      options.dither = dither;
+      const FramePlanner planner(rig, options), reference_planner(by_pixel, options);
+      for (const unsigned seed : {1u, 2u}) {
+        const Eigen::MatrixX3d emittance = Emittance(rig, 0.0, seed == 1 ? 1.0 : 1.3, seed);
+        const FramePlan plan = planner.Plan(emittance);
+        if (seed == 2) {
+          EXPECT_TRUE((plan.level.array() == std::numeric_limits<double>::infinity()).any());
+        }
+        RenderSummary summary, reference_summary;
+        const std::vector<ProjectorImage> images = ShadeProjectorImages(planner, plan, &summary);
+        const std::vector<ProjectorImage> reference = ShadeProjectorImages(
+            reference_planner, reference_planner.Plan(emittance), &reference_summary);
+        const std::string what = std::to_string(bits) + " bits, " + DitherName(dither) +
+                                 ", seed " + std::to_string(seed);
+        for (size_t k = 0; k < images.size(); ++k) {
+          EXPECT_EQ(cv::norm(images[k].codes, reference[k].codes, cv::NORM_INF), 0.0)
+              << what << ", projector " << k;
+        }
+        EXPECT_EQ(summary.saturated_pixels, reference_summary.saturated_pixels) << what;
+        EXPECT_GT(summary.saturated_pixels[0], 0) << what;
+        EXPECT_LE((summary.delivered - reference_summary.delivered).cwiseAbs().maxCoeff(),
+                  1e-12 * reference_summary.delivered.cwiseAbs().maxCoeff())
+            << what;
+      }
+    }
+  }
 }
 
 // A display node shades only its own projectors: their images are those of the whole rig's
