@@ -361,45 +361,82 @@ inline void StoreCodes(const ProjectorTables& table, int32_t index, const int q[
   }
 }
 
-// A flat light's patch in the map's order by share (ProjectorMap::pixels_by_share): r grows from
-// pixel to pixel (it is share times a constant per channel, clipped at 1, and rounding keeps
-// the order), so each channel's Below(r) is walked up from the last pixel's instead of looked
-// up. The same codes as the loop by pixels_by_patch, in a third of the time.
-template <DitherMethod kDither, bool kAccount>
-void ShadeFlatPatchByShare(const ProjectorMap& map, const ProjectorTables& table, int first,
-                           int end, const Vec3& scale, PatchShadeCounts* counts,
-                           cv::Vec3w* codes, double sums[3]) {
-  if (first == end) return;
+// A patch's pixels without colour mixing (the hot loop of a frame shaded on the CPU): each
+// channel's code below r is walked from the last pixel's instead of looked up, since r changes
+// little from pixel to pixel. In the order by pixel (pixels_by_patch, rows of neighbours) the
+// walk goes either way; in the order by share (ProjectorMap::pixels_by_share), a flat light's
+// r only grows (share times a constant per channel, clipped at 1: rounding keeps the order), so
+// it only goes up, its first step without a branch. Either way the same codes as Quantise's
+// lookup (tested), with everything in registers.
+template <DitherMethod kDither, bool kAccount, bool kFactor, bool kByShare>
+void ShadeWalking(const ProjectorMap& map, const ProjectorTables& table, int first, int end,
+                  const Vec3& scale, const Eigen::Vector3f* pixel_factor, cv::Vec3w* codes,
+                  PatchShadeCounts* counts, double sums[3]) {
   const CodeTable &table_0 = table.codes[0], &table_1 = table.codes[1], &table_2 = table.codes[2];
   const double scale_0 = scale[0], scale_1 = scale[1], scale_2 = scale[2];
-  // PixelLight's r without factors or mixing; +inf scale (full drive) gives 1.
-  const auto light = [](double share, double channel_scale) {
-    return std::min(1.0, share * channel_scale);
-  };
-  double share = map.share_by_share[first];
-  double r_0 = light(share, scale_0), r_1 = light(share, scale_1), r_2 = light(share, scale_2);
-  // Each channel's Below(r), written out per channel so that everything stays in registers.
-  int below_0 = table_0.Below(r_0), below_1 = table_1.Below(r_1), below_2 = table_2.Below(r_2);
-  long long saturated = 0;
-  for (int position = first;;) {
+  long long saturated = 0, detail_saturated = 0;
+  int row = -1, row_begin = 0, row_end = 0;  // by pixel: the current pixel's row, incrementally
+  int32_t index = 0;
+  double threshold = 0.5, r_0 = 0.0, r_1 = 0.0, r_2 = 0.0;
+  // The pixel at `position`: its index, threshold and r (PixelLight's without mixing; a +inf
+  // scale, full drive, gives 1), its saturations counted.
+  const auto pixel = [&](int position) {
+    double share;
+    if constexpr (kByShare) {
+      index = map.pixels_by_share[position];
+      share = map.share_by_share[position];
+      if (kDither == DitherMethod::kOrdered)
+        threshold = internal::kBayerThresholds[map.bayer_by_share[position]];
+    } else {
+      index = map.pixels_by_patch[position];
+      share = map.share[index];
+      if (kDither == DitherMethod::kOrdered) {
+        if (index >= row_end) {
+          row = index / map.width;
+          row_begin = row * map.width;
+          row_end = row_begin + map.width;
+        }
+        threshold = BayerThreshold(index - row_begin, row);
+      }
+    }
+    r_0 = share * scale_0;
+    r_1 = share * scale_1;
+    r_2 = share * scale_2;
+    if constexpr (kFactor) {
+      const Eigen::Vector3f& factor = pixel_factor[position - first];
+      r_0 = scale_0 == kInfinity ? 1.0 : r_0 * factor[0];
+      r_1 = scale_1 == kInfinity ? 1.0 : r_1 * factor[1];
+      r_2 = scale_2 == kInfinity ? 1.0 : r_2 * factor[2];
+      detail_saturated += (r_0 >= 1.0 && factor[0] > 1.0f) | (r_1 >= 1.0 && factor[1] > 1.0f) |
+                          (r_2 >= 1.0 && factor[2] > 1.0f);
+    }
+    r_0 = std::min(1.0, r_0);
+    r_1 = std::min(1.0, r_1);
+    r_2 = std::min(1.0, r_2);
     saturated += (r_0 >= 1.0) | (r_1 >= 1.0) | (r_2 >= 1.0);
-    const double threshold = kDither == DitherMethod::kOrdered
-                                 ? internal::kBayerThresholds[map.bayer_by_share[position]]
-                                 : 0.5;
+  };
+  if (first == end) return;
+  pixel(first);
+  int below_0 = table_0.Below(r_0), below_1 = table_1.Below(r_1), below_2 = table_2.Below(r_2);
+  for (int position = first;;) {
     const int q[3] = {table_0.Round(below_0, r_0, threshold),
                       table_1.Round(below_1, r_1, threshold),
                       table_2.Round(below_2, r_2, threshold)};
-    StoreCodes(table, map.pixels_by_share[position], q, kAccount, codes, sums);
+    StoreCodes(table, index, q, kAccount, codes, sums);
     if (++position == end) break;
-    share = map.share_by_share[position];
-    r_0 = light(share, scale_0);
-    r_1 = light(share, scale_1);
-    r_2 = light(share, scale_2);
-    below_0 = table_0.BelowFrom(below_0, r_0);
-    below_1 = table_1.BelowFrom(below_1, r_1);
-    below_2 = table_2.BelowFrom(below_2, r_2);
+    pixel(position);
+    if constexpr (kByShare) {
+      below_0 = table_0.BelowFrom(below_0, r_0);
+      below_1 = table_1.BelowFrom(below_1, r_1);
+      below_2 = table_2.BelowFrom(below_2, r_2);
+    } else {
+      below_0 = table_0.BelowNear(below_0, r_0);
+      below_1 = table_1.BelowNear(below_1, r_1);
+      below_2 = table_2.BelowNear(below_2, r_2);
+    }
   }
   counts->saturated += saturated;
+  counts->detail_saturated += detail_saturated;
 }
 
 template <bool kFactor, DitherMethod kDither>
@@ -411,10 +448,16 @@ void ShadePatch(const ProjectorMap& map, const ProjectorTables& table, int first
   const bool full[3] = {tau[0] == kInfinity, tau[1] == kInfinity, tau[2] == kInfinity};
   const Vec3 scale = tau.cwiseProduct(table.inverse_delta);  // r = share · scale (full: 1)
   double sums[3] = {0.0, 0.0, 0.0};
-  if constexpr (!kFactor && kDither != DitherMethod::kErrorDiffusion) {
-    if (table.identity_mixing && !map.pixels_by_share.empty()) {
-      (account ? ShadeFlatPatchByShare<kDither, true> : ShadeFlatPatchByShare<kDither, false>)(
-          map, table, first, end, scale, counts, codes, sums);
+  if constexpr (kDither != DitherMethod::kErrorDiffusion) {
+    if (table.identity_mixing) {
+      const bool by_share = !kFactor && !map.pixels_by_share.empty();
+      using Loop = decltype(&ShadeWalking<kDither, false, kFactor, false>);
+      const Loop loop =
+          by_share ? (account ? ShadeWalking<kDither, true, kFactor, true>
+                              : ShadeWalking<kDither, false, kFactor, true>)
+                   : (account ? ShadeWalking<kDither, true, kFactor, false>
+                              : ShadeWalking<kDither, false, kFactor, false>);
+      loop(map, table, first, end, scale, pixel_factor, codes, counts, sums);
       for (int c = 0; c < 3; ++c) counts->light[c] = sums[c];
       return;
     }

@@ -61,6 +61,13 @@ class CodeTable {
     while (light_[code + 1] <= r) ++code;
     return code;
   }
+  // Below(r) for an r near the light of `code`: the walk up or down from it (r ≥ 0; black's
+  // light is 0).
+  int BelowNear(int code, double r) const {
+    while (light_[code + 1] <= r) ++code;
+    while (light_[code] > r) --code;
+    return code;
+  }
   // Quantise's last step, from q = Below(r).
   int Round(int q, double r, double threshold) const {
     // (r − light_q) / (light_q+1 − light_q) > threshold, without the division. At the top code

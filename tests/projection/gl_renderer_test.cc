@@ -28,6 +28,7 @@
 #include "projection/frame_plan.h"
 #include "projection/glfw_display.h"
 #include "projection/offscreen_gl.h"
+#include "projection/render_steps.h"
 #include "tests/projection/stage.h"
 #include "tests/projection/xvfb.h"
 #include "tests/testing/testing.h"
@@ -258,13 +259,15 @@ TEST(FramePlan, CachedBumpsAndReusedImagesShadeTheSame) {
     EXPECT_EQ(cv::norm(mixed[k].codes, reference[k].codes, cv::NORM_INF), 0.0) << k;
 }
 
-// A flat light's pixels are shaded in the map's order by share (each channel's code walked up
-// from the last pixel's): the images are those of the plain loop by pixel, which a map without
-// that order gets, bit for bit, and so are the counts; the delivered light differs only by the
-// order of its sums. 8- and 10-bit projectors, both dithers that shade by patch, patches at full
-// drive and saturated pixels included (the first projector has no colour mixing: the order is
-// its; the second's mixing keeps it on the loop by pixel).
-TEST(FramePlan, ShadingByShareIsShadingByPixel) {
+// The CPU shading walks each channel's code from the last pixel's (down the map's order by
+// share for a flat light, along the pixels of each row otherwise) instead of looking it up. Its
+// codes are those of CodeTable::Quantise's lookup at every pixel, computed here pixel by pixel
+// from the plan (and the seamless factors): 8- and 10-bit projectors, both dithers that shade by
+// patch, both lights, patches at full drive and saturated pixels included. A map without the
+// order by share gives the same images and counts; the delivered light differs only by the
+// order of its sums. (The first projector has no colour mixing: the walk is its; the second's
+// mixing keeps it on the lookup.)
+TEST(FramePlan, WalkedCodesAreTheLookedUpOnes) {
   for (const int bits : {8, 10}) {
     Stage stage = MakeStage({});
     stage.projectors[1].photometry.mixing << 0.9, 0.1, 0.0, 0.05, 0.9, 0.05, 0.0, 0.2, 0.8;
@@ -278,32 +281,67 @@ TEST(FramePlan, ShadingByShareIsShadingByPixel) {
       map.share_by_share.clear();
       map.bayer_by_share.clear();
     }
-    for (const DitherMethod dither : {DitherMethod::kNone, DitherMethod::kOrdered}) {
-      RenderOptions options;
-      options.light = LightField::kFlat;
-      options.dither = dither;
-      const FramePlanner planner(rig, options), reference_planner(by_pixel, options);
-      for (const unsigned seed : {1u, 2u}) {
-        const Eigen::MatrixX3d emittance = Emittance(rig, 0.0, seed == 1 ? 1.0 : 1.3, seed);
-        const FramePlan plan = planner.Plan(emittance);
-        if (seed == 2) {
-          EXPECT_TRUE((plan.level.array() == std::numeric_limits<double>::infinity()).any());
+    const ProjectorMap& map = rig.maps[0];
+    const internal::ProjectorTables tables(rig.projectors[0]);
+    for (const LightField light : {LightField::kFlat, LightField::kSmooth}) {
+      for (const DitherMethod dither : {DitherMethod::kNone, DitherMethod::kOrdered}) {
+        RenderOptions options;
+        options.light = light;
+        options.dither = dither;
+        const FramePlanner planner(rig, options), reference_planner(by_pixel, options);
+        for (const unsigned seed : {1u, 2u}) {
+          const std::string what = std::to_string(bits) + " bits, " + LightFieldName(light) +
+                                   ", " + DitherName(dither) + ", seed " + std::to_string(seed);
+          const FramePlan plan =
+              planner.Plan(Emittance(rig, 0.0, seed == 1 ? 1.0 : 1.3, seed));
+          if (seed == 2) {
+            EXPECT_TRUE((plan.level.array() == std::numeric_limits<double>::infinity()).any())
+                << what;
+          }
+          RenderSummary summary, reference_summary;
+          const std::vector<ProjectorImage> images = ShadeProjectorImages(planner, plan, &summary);
+          const std::vector<ProjectorImage> reference =
+              ShadeProjectorImages(reference_planner, plan, &reference_summary);
+          for (size_t k = 0; k < images.size(); ++k) {
+            EXPECT_EQ(cv::norm(images[k].codes, reference[k].codes, cv::NORM_INF), 0.0)
+                << what << ", projector " << k;
+          }
+          EXPECT_EQ(summary.saturated_pixels, reference_summary.saturated_pixels) << what;
+          EXPECT_EQ(summary.detail_saturated_pixels, reference_summary.detail_saturated_pixels)
+              << what;
+          EXPECT_GT(summary.saturated_pixels[0], 0) << what;
+          EXPECT_LE((summary.delivered - reference_summary.delivered).cwiseAbs().maxCoeff(),
+                    1e-12 * reference_summary.delivered.cwiseAbs().maxCoeff())
+              << what;
+          // The first projector's codes looked up pixel by pixel.
+          const auto* codes = reinterpret_cast<const cv::Vec3w*>(images[0].codes.data);
+          std::vector<Eigen::Vector3f> factors;
+          long long differing = 0;
+          for (int i = 0; i < rig.size(); ++i) {
+            const int first = map.patch_begin[i], count = map.patch_begin[i + 1] - first;
+            factors.assign(count, Eigen::Vector3f::Ones());
+            if (light == LightField::kSmooth && !planner.field()->Flat(i)) {
+              planner.field()->PatchFactors(i, 0, plan.node_value, plan.mean, factors.data());
+            }
+            for (int j = 0; j < count; ++j) {
+              const int32_t index = map.pixels_by_patch[first + j];
+              const double threshold =
+                  dither == DitherMethod::kOrdered
+                      ? internal::BayerThreshold(index % map.width, index / map.width)
+                      : 0.5;
+              for (int c = 0; c < 3; ++c) {
+                const double tau = plan.level(i, c);
+                const double r =
+                    tau == std::numeric_limits<double>::infinity()
+                        ? 1.0
+                        : std::min(1.0, map.share[index] * (tau * tables.inverse_delta[c]) *
+                                            double(factors[j][c]));
+                differing += codes[index][c] != tables.codes[c].Quantise(r, threshold);
+              }
+            }
+          }
+          EXPECT_EQ(differing, 0) << what;
         }
-        RenderSummary summary, reference_summary;
-        const std::vector<ProjectorImage> images = ShadeProjectorImages(planner, plan, &summary);
-        const std::vector<ProjectorImage> reference = ShadeProjectorImages(
-            reference_planner, reference_planner.Plan(emittance), &reference_summary);
-        const std::string what = std::to_string(bits) + " bits, " + DitherName(dither) +
-                                 ", seed " + std::to_string(seed);
-        for (size_t k = 0; k < images.size(); ++k) {
-          EXPECT_EQ(cv::norm(images[k].codes, reference[k].codes, cv::NORM_INF), 0.0)
-              << what << ", projector " << k;
-        }
-        EXPECT_EQ(summary.saturated_pixels, reference_summary.saturated_pixels) << what;
-        EXPECT_GT(summary.saturated_pixels[0], 0) << what;
-        EXPECT_LE((summary.delivered - reference_summary.delivered).cwiseAbs().maxCoeff(),
-                  1e-12 * reference_summary.delivered.cwiseAbs().maxCoeff())
-            << what;
       }
     }
   }
