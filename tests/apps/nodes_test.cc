@@ -1,19 +1,31 @@
 // A controller and three display nodes, each its own `procam node` process on 127.0.0.1, as a
 // user runs them: the images the nodes show equal `procam project`'s, the frame barrier holds,
-// a killed node is reported within a second and rejoins when restarted, and a node set up with
-// another rig's keys refuses the controller. Every process is bounded by `timeout`.
+// a killed node is reported within a second and rejoins when restarted, so is one whose link is
+// cut or whose process is frozen, and a node set up with another rig's keys refuses the
+// controller. Every process is bounded by `timeout`; the cut link forwards on 127.0.0.1 only.
 #include <gtest/gtest.h>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <iterator>
 #include <string>
+#include <thread>
+#include <utility>
+#include <vector>
 
 #include "base/io.h"
 #include "tests/testing/testing.h"
@@ -225,6 +237,164 @@ TEST(Nodes, ANodeThatGoesSilentIsReportedWithinASecondAndComesBack) {
       << log;
   std::cout << "node n2 frozen: the first frame without it was shown "
             << 1e-9 * double(first_missed - stopped) << " s later\n";
+}
+
+// A TCP link between the controller and one node, forwarded through this test process so that
+// the test can cut it: while cut, nothing crosses either way and no new connection is taken,
+// but every socket stays open (no FIN, no RST), as when a cable is pulled or a switch port goes
+// down; restored, what waited in the sockets' buffers goes on, as TCP's retransmissions would
+// deliver it. Loopback only; the forwarding loop polls every 50 ms until Stop().
+class CuttableLink {
+ public:
+  // Listens on 127.0.0.1:port, forwarding each connection to 127.0.0.1:target.
+  CuttableLink(int port, int target) : target_(target) {
+    listener_ = ::socket(AF_INET, SOCK_STREAM, 0);
+    const int yes = 1;
+    ::setsockopt(listener_, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
+    const sockaddr_in address = Loopback(port);
+    if (::bind(listener_, reinterpret_cast<const sockaddr*>(&address), sizeof(address)) != 0 ||
+        ::listen(listener_, 16) != 0) {
+      ADD_FAILURE() << "link: cannot listen on 127.0.0.1:" << port << ": " << std::strerror(errno);
+    }
+    thread_ = std::thread([this] { Forward(); });
+  }
+  ~CuttableLink() { Stop(); }
+  void Cut() { cut_ = true; }
+  void Restore() { cut_ = false; }
+  void Stop() {
+    if (stop_.exchange(true)) return;
+    thread_.join();
+    for (const auto& [from, to] : pairs_) ::close(from), ::close(to);
+    ::close(listener_);
+  }
+  int connections() const { return connections_; }
+
+ private:
+  static sockaddr_in Loopback(int port) {
+    sockaddr_in address{};
+    address.sin_family = AF_INET;
+    address.sin_port = htons(static_cast<uint16_t>(port));
+    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    return address;
+  }
+  void Forward() {
+    while (!stop_) {
+      if (cut_) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        continue;
+      }
+      std::vector<pollfd> fds = {{listener_, POLLIN, 0}};
+      for (const auto& [from, to] : pairs_) fds.push_back({from, POLLIN, 0}), fds.push_back({to, POLLIN, 0});
+      if (::poll(fds.data(), fds.size(), 50) <= 0 || cut_) continue;
+      if (fds[0].revents & POLLIN) Accept();
+      std::vector<std::pair<int, int>> open;
+      for (size_t p = 0; p < pairs_.size(); ++p) {
+        const auto [a, b] = pairs_[p];
+        const bool alive = (!(fds[1 + 2 * p].revents & (POLLIN | POLLHUP)) || Pass(a, b)) &&
+                           (!(fds[2 + 2 * p].revents & (POLLIN | POLLHUP)) || Pass(b, a));
+        if (alive) {
+          open.emplace_back(a, b);
+        } else {
+          ::close(a), ::close(b);
+        }
+      }
+      pairs_ = open;
+    }
+  }
+  void Accept() {
+    const int client = ::accept(listener_, nullptr, nullptr);
+    if (client < 0) return;
+    const int upstream = ::socket(AF_INET, SOCK_STREAM, 0);
+    const sockaddr_in address = Loopback(target_);
+    if (::connect(upstream, reinterpret_cast<const sockaddr*>(&address), sizeof(address)) != 0) {
+      ::close(client), ::close(upstream);
+      return;
+    }
+    pairs_.emplace_back(client, upstream);
+    ++connections_;
+  }
+  // Moves what `from` has to `to`; false once either end is closed.
+  static bool Pass(int from, int to) {
+    char buffer[65536];
+    const ssize_t got = ::read(from, buffer, sizeof(buffer));
+    if (got <= 0) return false;
+    for (ssize_t sent = 0; sent < got;) {
+      const ssize_t wrote = ::write(to, buffer + sent, got - sent);
+      if (wrote <= 0) return false;
+      sent += wrote;
+    }
+    return true;
+  }
+  int target_, listener_ = -1;
+  std::vector<std::pair<int, int>> pairs_;  // (from the controller, to the node)
+  std::atomic<bool> cut_{false}, stop_{false};
+  std::atomic<int> connections_{0};
+  std::thread thread_;
+};
+
+// A node whose network goes while the show runs: its link is cut for 2 s (CuttableLink, the node
+// process running on). It is reported lost within a second, the others go on, and once the link
+// is back it takes part again.
+TEST(Nodes, ANodeWhoseLinkIsCutIsReportedWithinASecondAndComesBack) {
+  testing::TempDir dir;
+  const Rig rig(dir);
+  const std::string room = (rig.root / "room").string();
+  ASSERT_TRUE(rig.Solve(100));
+  const int link_port = rig.ports[2] + 5;
+  CuttableLink link(link_port, rig.ports[1]);
+  const std::string nodes = "n1=tcp://127.0.0.1:" + std::to_string(rig.ports[0]) +
+                            ",n2=tcp://127.0.0.1:" + std::to_string(link_port) +
+                            ",n3=tcp://127.0.0.1:" + std::to_string(rig.ports[2]);
+  // Cuts the link 0.5 s after the first frame (waiting at most 30 s for it), for 2 s.
+  const std::filesystem::path play_log = dir / "play.log";
+  std::atomic<int64_t> cut_ns{0};
+  const auto started = [&play_log] {
+    std::ifstream file(play_log);
+    const std::string text((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+    return text.find("play: frame") != std::string::npos;
+  };
+  std::thread director([&] {
+    for (int i = 0; i < 300 && !started(); ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    link.Cut();
+    cut_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                 std::chrono::system_clock::now().time_since_epoch())
+                 .count();  // the clock of the nodes' presented_ns
+    std::this_thread::sleep_for(std::chrono::seconds(2));
+    link.Restore();
+  });
+  const std::string script =
+      rig.StartNode(0) + rig.StartNode(1) + rig.StartNode(2) + "timeout 120 " + Binary() +
+      " play " + rig.scene + " --rig " + room + " --solution " + (dir / "solution").string() +
+      " --frames 80 --fps 10 --nodes " + nodes + " --out " + (dir / "play").string() + " > " +
+      play_log.string() + " 2>&1\nstatus=$?\nkill %1 %2 %3 2>/dev/null\nwait\nexit $status\n";
+  const testing::CommandRun run = testing::RunShell("bash -c '" + script + "'");
+  director.join();
+  link.Stop();
+  const std::string log = ReadFile(play_log);
+  ASSERT_EQ(run.exit_code, 0) << run.output << log;
+  ASSERT_NE(cut_ns.load(), 0);
+  EXPECT_GE(link.connections(), 1);
+  const nlohmann::json result = ReadResult(dir / "play" / "result.json");
+  int64_t first_missed = 0;
+  bool back = false;
+  for (const nlohmann::json& frame : result.at("frames")) {
+    const nlohmann::json& frame_nodes = frame.at("nodes");
+    EXPECT_EQ(frame_nodes.at("n1").at("state"), "shown");
+    EXPECT_EQ(frame_nodes.at("n3").at("state"), "shown");
+    if (frame_nodes.at("n2").at("state") != "shown" && first_missed == 0)
+      first_missed = frame_nodes.at("n1").at("presented_ns");
+    if (first_missed != 0 && frame_nodes.at("n2").at("state") == "shown") back = true;
+  }
+  ASSERT_NE(first_missed, 0) << log;
+  EXPECT_LT(double(first_missed - cut_ns.load()) * 1e-9, 1.0) << log;
+  EXPECT_TRUE(back) << log;
+  EXPECT_NE(log.find("node n2 (tcp://127.0.0.1:" + std::to_string(link_port) + ") lost at frame"),
+            std::string::npos)
+      << log;
+  std::cout << "node n2's link cut: the first frame without it was shown "
+            << 1e-9 * double(first_missed - cut_ns.load()) << " s later\n";
 }
 
 TEST(Nodes, ANodeWithAnotherRigsKeysRefusesTheController) {
