@@ -1,6 +1,7 @@
 #include "projection/seamless_light.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -265,11 +266,12 @@ Eigen::MatrixX3d SeamlessField::NodeValues(const Eigen::MatrixX3d& exitance) con
 namespace {
 
 // m = v / mean_i(v) per channel from a pixel's bumps: v = Σ K̃ v̂ in double, K̃ as single-precision
-// weights, v̂ of node position b at list_value[3 b .. 3 b + 2]. The flux is kept: the weighted
-// mean of m over the patch is 1. One function for the cached and the evaluated bumps: the same
-// bits.
+// weights, v̂ / mean_i(v) of node position b at list_value[3 b .. 3 b + 2] (ListValues: the
+// division once per patch, not per pixel); 1 in the channels where the mean is not positive. The
+// flux is kept: the weighted mean of m over the patch is 1. One function for the cached and the
+// evaluated bumps: the same bits.
 inline Eigen::Vector3f SumFactor(int count, const uint16_t* node, const float* weight,
-                                 const double* list_value, const Eigen::MatrixX3d& means, int i) {
+                                 const double* list_value, const std::array<bool, 3>& unit) {
   double value[3] = {0.0, 0.0, 0.0};
   for (int b = 0; b < count; ++b) {
     const double w = weight[b];
@@ -279,8 +281,7 @@ inline Eigen::Vector3f SumFactor(int count, const uint16_t* node, const float* w
     value[2] += w * v[2];
   }
   Eigen::Vector3f m;
-  for (int c = 0; c < 3; ++c)
-    m[c] = means(i, c) > 0.0 ? static_cast<float>(value[c] / means(i, c)) : 1.0f;
+  for (int c = 0; c < 3; ++c) m[c] = unit[c] ? 1.0f : static_cast<float>(value[c]);
   return m;
 }
 
@@ -298,13 +299,22 @@ void SeamlessField::FactorBumps(int i, const Eigen::Vector3f& point, std::vector
   }
 }
 
-void SeamlessField::ListValues(int i, const Eigen::MatrixX3d& node_value,
-                               std::vector<double>* values) const {
+std::array<bool, 3> SeamlessField::ListValues(int i, const Eigen::MatrixX3d& node_value,
+                                               const Eigen::MatrixX3d& means,
+                                               std::vector<double>* values) const {
   const int begin = node_begin_[i], end = node_begin_[i + 1];
+  std::array<bool, 3> unit;
+  double inverse_mean[3];
+  for (int c = 0; c < 3; ++c) {
+    unit[c] = !(means(i, c) > 0.0);
+    inverse_mean[c] = unit[c] ? 0.0 : 1.0 / means(i, c);
+  }
   values->resize(3 * static_cast<size_t>(end - begin));
   for (int b = 0; b < end - begin; ++b) {
-    for (int c = 0; c < 3; ++c) (*values)[3 * b + c] = node_value(node_list_[begin + b], c);
+    for (int c = 0; c < 3; ++c)
+      (*values)[3 * b + c] = node_value(node_list_[begin + b], c) * inverse_mean[c];
   }
+  return unit;
 }
 
 Eigen::Vector3f SeamlessField::Factor(int i, const Eigen::Vector3f& point,
@@ -315,9 +325,8 @@ Eigen::Vector3f SeamlessField::Factor(int i, const Eigen::Vector3f& point,
   std::vector<float> weight;
   FactorBumps(i, point, &node, &weight);
   std::vector<double> values;
-  ListValues(i, node_value, &values);
-  return SumFactor(static_cast<int>(node.size()), node.data(), weight.data(), values.data(), means,
-                   i);
+  const std::array<bool, 3> unit = ListValues(i, node_value, means, &values);
+  return SumFactor(static_cast<int>(node.size()), node.data(), weight.data(), values.data(), unit);
 }
 
 void SeamlessField::PatchFactors(int i, size_t k, const Eigen::MatrixX3d& node_value,
@@ -329,14 +338,14 @@ void SeamlessField::PatchFactors(int i, size_t k, const Eigen::MatrixX3d& node_v
     return;
   }
   thread_local std::vector<double> list_value;
-  ListValues(i, node_value, &list_value);
+  const std::array<bool, 3> unit = ListValues(i, node_value, means, &list_value);
   if (BumpsCached(k)) {
     const PixelBumps& cache = cached_[k];
     int64_t bump = cache.patch_first[i];
     for (int position = first; position < last; ++position) {
       const int count = cache.count[position];
-      factors[position - first] = SumFactor(count, &cache.node[bump], &cache.weight[bump],
-                                            list_value.data(), means, i);
+      factors[position - first] =
+          SumFactor(count, &cache.node[bump], &cache.weight[bump], list_value.data(), unit);
       bump += count;
     }
     return;
@@ -346,7 +355,7 @@ void SeamlessField::PatchFactors(int i, size_t k, const Eigen::MatrixX3d& node_v
   for (int position = first; position < last; ++position) {
     FactorBumps(i, map.point_by_patch[position], &node, &weight);
     factors[position - first] = SumFactor(static_cast<int>(node.size()), node.data(),
-                                          weight.data(), list_value.data(), means, i);
+                                          weight.data(), list_value.data(), unit);
   }
 }
 

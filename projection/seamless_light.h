@@ -21,6 +21,7 @@
 // and leaves no visible step. m_p = v(x_p) / mean_i(v).
 
 #include <Eigen/Core>
+#include <array>
 #include <memory>
 #include <string>
 #include <utility>
@@ -120,8 +121,10 @@ class SeamlessField {
   // position in i's list, weights K̃_j rounded to single precision (what the cache keeps).
   void FactorBumps(int i, const Eigen::Vector3f& point, std::vector<uint16_t>* node,
                    std::vector<float>* weight) const;
-  // The node values of patch i's list in list order, three to a node (what SumFactor reads).
-  void ListValues(int i, const Eigen::MatrixX3d& node_value, std::vector<double>* values) const;
+  // The node values of patch i's list in list order over the patch's means, three to a node
+  // (what SumFactor reads); true for the channels whose mean is not positive (factor 1).
+  std::array<bool, 3> ListValues(int i, const Eigen::MatrixX3d& node_value,
+                                 const Eigen::MatrixX3d& means, std::vector<double>* values) const;
 
   const ProjectionRig& rig_;
   SeamlessLightOptions options_;
