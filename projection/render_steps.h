@@ -61,11 +61,11 @@ class CodeTable {
     while (light_[code + 1] <= r) ++code;
     return code;
   }
-  // Below(r) for an r near the light of `code`: the walk up or down from it (r ≥ 0; black's
-  // light is 0).
+  // Below(r) for an r near the light of `code`: the walk up or down from it (black, code 0,
+  // for an r below black's light, 0).
   int BelowNear(int code, double r) const {
     while (light_[code + 1] <= r) ++code;
-    while (light_[code] > r) --code;
+    while (code > 0 && light_[code] > r) --code;
     return code;
   }
   // Quantise's last step, from q = Below(r).
