@@ -9,6 +9,7 @@
 
 #include "base/io.h"
 #include "base/timing.h"
+#include "projection/render_steps.h"
 
 namespace procam {
 namespace {
@@ -188,6 +189,8 @@ void Blend(int k, const std::vector<Caster>& casters, const PatchLevel& level, c
 // ProjectorMap::pixels_by_share and its companions, from pixels_by_patch and share.
 void SortByShare(ProjectorMap* map) {
   map->pixels_by_share.resize(map->lit_pixels);
+  map->share_by_share.resize(map->lit_pixels);
+  map->bayer_by_share.resize(map->lit_pixels);
   const int n = static_cast<int>(map->patch_begin.size()) - 1;
 #pragma omp parallel
   {
@@ -200,17 +203,15 @@ void SortByShare(ProjectorMap* map) {
         pixels.emplace_back(map->share[index], index);
       }
       std::sort(pixels.begin(), pixels.end());
-      for (size_t j = 0; j < pixels.size(); ++j)
-        map->pixels_by_share[map->patch_begin[i] + j] = pixels[j].second;
+      for (size_t j = 0; j < pixels.size(); ++j) {
+        const size_t position = map->patch_begin[i] + j;
+        const auto [share, index] = pixels[j];
+        map->pixels_by_share[position] = index;
+        map->share_by_share[position] = share;
+        map->bayer_by_share[position] =
+            static_cast<uint8_t>(internal::BayerCell(index % map->width, index / map->width));
+      }
     }
-  }
-  map->share_by_share.resize(map->lit_pixels);
-  map->bayer_by_share.resize(map->lit_pixels);
-  for (int position = 0; position < map->lit_pixels; ++position) {
-    const int32_t index = map->pixels_by_share[position];
-    const int x = index % map->width, y = index / map->width;
-    map->share_by_share[position] = map->share[index];
-    map->bayer_by_share[position] = static_cast<uint8_t>((y & 7) * 8 + (x & 7));
   }
 }
 

@@ -20,7 +20,6 @@
 namespace procam {
 namespace {
 
-using internal::BayerThreshold;
 using internal::CodeTable;
 using internal::kInfinity;
 using internal::LightFor;
@@ -309,10 +308,7 @@ Eigen::MatrixX3d FluxOfCodes(const ProjectionRig& rig, const std::vector<Project
   return delivered_flux;
 }
 
-
-// One patch's pixels in one projector (step 3 of projector_images.h), specialised for the
-// per-pixel branches that are fixed per call: whether the pixels have seamless factors and the
-// dither. The hottest loop of a frame shaded on the CPU.
+// One patch's counts in one projector, from ShadePatch.
 struct PatchShadeCounts {
   long long saturated = 0, detail_saturated = 0, clipped = 0;
   double light[3] = {0.0, 0.0, 0.0};  // Σ light of the codes, when accounted
@@ -375,7 +371,7 @@ void ShadeWalking(const ProjectorMap& map, const ProjectorTables& table, int fir
   const CodeTable &table_0 = table.codes[0], &table_1 = table.codes[1], &table_2 = table.codes[2];
   const double scale_0 = scale[0], scale_1 = scale[1], scale_2 = scale[2];
   long long saturated = 0, detail_saturated = 0;
-  int row = -1, row_begin = 0, row_end = 0;  // by pixel: the current pixel's row, incrementally
+  internal::RowThresholds row_thresholds(map.width);  // by pixel
   int32_t index = 0;
   double threshold = 0.5, r_0 = 0.0, r_1 = 0.0, r_2 = 0.0;
   // The pixel at `position`: its index, threshold and r (PixelLight's without mixing; a +inf
@@ -390,14 +386,7 @@ void ShadeWalking(const ProjectorMap& map, const ProjectorTables& table, int fir
     } else {
       index = map.pixels_by_patch[position];
       share = map.share[index];
-      if (kDither == DitherMethod::kOrdered) {
-        if (index >= row_end) {
-          row = index / map.width;
-          row_begin = row * map.width;
-          row_end = row_begin + map.width;
-        }
-        threshold = BayerThreshold(index - row_begin, row);
-      }
+      if (kDither == DitherMethod::kOrdered) threshold = row_thresholds.At(index);
     }
     r_0 = share * scale_0;
     r_1 = share * scale_1;
@@ -439,6 +428,9 @@ void ShadeWalking(const ProjectorMap& map, const ProjectorTables& table, int fir
   counts->detail_saturated += detail_saturated;
 }
 
+// One patch's pixels in one projector (step 3 of projector_images.h), specialised for the
+// per-pixel branches that are fixed per call: whether the pixels have seamless factors and the
+// dither. The hottest loop of a frame shaded on the CPU.
 template <bool kFactor, DitherMethod kDither>
 void ShadePatch(const ProjectorMap& map, const ProjectorTables& table, int first, int end,
                 const Vec3& tau, const Eigen::Vector3f* pixel_factor, bool account,
@@ -462,14 +454,9 @@ void ShadePatch(const ProjectorMap& map, const ProjectorTables& table, int first
       return;
     }
   }
-  int row = -1, row_begin = 0, row_end = 0;  // the row of the current pixel, found incrementally
+  internal::RowThresholds row_thresholds(map.width);
   for (int position = first; position < end; ++position) {
     const int32_t index = map.pixels_by_patch[position];
-    if (kDither == DitherMethod::kOrdered && index >= row_end) {
-      row = index / map.width;
-      row_begin = row * map.width;
-      row_end = row_begin + map.width;
-    }
     double r[3];
     PixelLight<kFactor>(table, full, scale, map.share[index],
                         kFactor ? &pixel_factor[position - first] : nullptr, counts, r);
@@ -477,7 +464,7 @@ void ShadePatch(const ProjectorMap& map, const ProjectorTables& table, int first
       light[index] = Vec3(r[0], r[1], r[2]);
     } else {
       const double threshold =
-          kDither == DitherMethod::kOrdered ? BayerThreshold(index - row_begin, row) : 0.5;
+          kDither == DitherMethod::kOrdered ? row_thresholds.At(index) : 0.5;
       const int q[3] = {table.codes[0].Quantise(r[0], threshold),
                         table.codes[1].Quantise(r[1], threshold),
                         table.codes[2].Quantise(r[2], threshold)};

@@ -28,7 +28,27 @@ inline constexpr std::array<double, 64> kBayerThresholds = [] {
   for (int i = 0; i < 64; ++i) thresholds[i] = (kBayer[i] + 0.5) / 64.0;
   return thresholds;
 }();
-inline double BayerThreshold(int x, int y) { return kBayerThresholds[(y & 7) * 8 + (x & 7)]; }
+// The Bayer matrix's cell at column x and row y (ProjectorMap::bayer_by_share holds it).
+inline int BayerCell(int x, int y) { return (y & 7) * 8 + (x & 7); }
+inline double BayerThreshold(int x, int y) { return kBayerThresholds[BayerCell(x, y)]; }
+
+// The ordered dither's thresholds of pixels visited by ascending index within rows (a patch's
+// pixels_by_patch): each pixel's row found incrementally, without a division per pixel.
+class RowThresholds {
+ public:
+  explicit RowThresholds(int width) : width_(width) {}
+  double At(int32_t index) {
+    if (index >= row_end_) {
+      row_ = index / width_;
+      row_begin_ = row_ * width_;
+      row_end_ = row_begin_ + width_;
+    }
+    return BayerThreshold(index - row_begin_, row_);
+  }
+
+ private:
+  int width_, row_ = -1, row_begin_ = 0, row_end_ = 0;
+};
 
 // Code values ↔ relative light for one channel of one projector.
 class CodeTable {
