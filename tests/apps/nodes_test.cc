@@ -105,6 +105,30 @@ nlohmann::json ReadResult(const std::filesystem::path& path) {
   return nlohmann::json::parse(ReadFile(path));
 }
 
+// One node's absence from a play's frames (result.json): the presented time of the first frame
+// shown without it (0: it never missed one) and of its own first frame shown after that (0: it
+// never came back). Every other node must have shown every frame.
+struct Absence {
+  int64_t first_missed = 0, back = 0;
+};
+Absence FindAbsence(const nlohmann::json& result, const std::string& absent) {
+  Absence absence;
+  for (const nlohmann::json& frame : result.at("frames")) {
+    int64_t other_presented = 0;
+    for (const auto& [name, node] : frame.at("nodes").items()) {
+      if (name == absent) continue;
+      EXPECT_EQ(node.at("state"), "shown") << name;  // the others go on
+      other_presented = node.at("presented_ns");
+    }
+    const nlohmann::json& node = frame.at("nodes").at(absent);
+    if (node.at("state") != "shown" && absence.first_missed == 0)
+      absence.first_missed = other_presented;
+    if (absence.first_missed != 0 && node.at("state") == "shown" && absence.back == 0)
+      absence.back = node.at("presented_ns");
+  }
+  return absence;
+}
+
 // With the CPU renderer (--render cpu) the nodes' images are project's byte for byte.
 TEST(Nodes, ThreeNodesShowWhatProjectMakesAndHoldTheBarrier) {
   testing::TempDir dir;
@@ -168,22 +192,10 @@ TEST(Nodes, AKilledNodeIsReportedWithinASecondAndRejoins) {
   const int64_t killed = std::stoll(ReadFile(dir / "killed"));
   const nlohmann::json result = ReadResult(dir / "play" / "result.json");
   const int64_t restarted = std::stoll(ReadFile(dir / "restarted"));
-  int64_t first_missed = 0, back = 0;
-  bool rejoined = false;
-  for (const nlohmann::json& frame : result.at("frames")) {
-    const nlohmann::json& nodes = frame.at("nodes");
-    EXPECT_EQ(nodes.at("n1").at("state"), "shown");  // the others go on
-    EXPECT_EQ(nodes.at("n2").at("state"), "shown");
-    if (nodes.at("n3").at("state") != "shown" && first_missed == 0)
-      first_missed = nodes.at("n1").at("presented_ns");
-    if (first_missed != 0 && nodes.at("n3").at("state") == "shown" && !rejoined) {
-      rejoined = true;
-      back = nodes.at("n3").at("presented_ns");
-    }
-  }
+  const auto [first_missed, back] = FindAbsence(result, "n3");
   ASSERT_NE(first_missed, 0) << log;
   EXPECT_LT(double(first_missed - killed) * 1e-9, 1.0) << log;  // reported within a second
-  EXPECT_TRUE(rejoined) << log;
+  EXPECT_NE(back, 0) << log;  // rejoined
   std::cout << "node n3 killed: reported with the frame shown "
             << 1e-9 * double(first_missed - killed)
             << " s later; restarted, it showed a frame again " << 1e-9 * double(back - restarted)
@@ -218,19 +230,10 @@ TEST(Nodes, ANodeThatGoesSilentIsReportedWithinASecondAndComesBack) {
   ASSERT_EQ(run.exit_code, 0) << run.output << log;
   const int64_t stopped = std::stoll(ReadFile(dir / "stopped"));
   const nlohmann::json result = ReadResult(dir / "play" / "result.json");
-  int64_t first_missed = 0;
-  bool back = false;
-  for (const nlohmann::json& frame : result.at("frames")) {
-    const nlohmann::json& nodes = frame.at("nodes");
-    EXPECT_EQ(nodes.at("n1").at("state"), "shown");
-    EXPECT_EQ(nodes.at("n3").at("state"), "shown");
-    if (nodes.at("n2").at("state") != "shown" && first_missed == 0)
-      first_missed = nodes.at("n1").at("presented_ns");
-    if (first_missed != 0 && nodes.at("n2").at("state") == "shown") back = true;
-  }
+  const auto [first_missed, back] = FindAbsence(result, "n2");
   ASSERT_NE(first_missed, 0) << log;
   EXPECT_LT(double(first_missed - stopped) * 1e-9, 1.0) << log;
-  EXPECT_TRUE(back) << log;
+  EXPECT_NE(back, 0) << log;
   EXPECT_NE(
       log.find("node n2 (tcp://127.0.0.1:" + std::to_string(rig.ports[1]) + ") lost at frame"),
       std::string::npos)
@@ -377,19 +380,10 @@ TEST(Nodes, ANodeWhoseLinkIsCutIsReportedWithinASecondAndComesBack) {
   ASSERT_NE(cut_ns.load(), 0);
   EXPECT_GE(link.connections(), 1);
   const nlohmann::json result = ReadResult(dir / "play" / "result.json");
-  int64_t first_missed = 0;
-  bool back = false;
-  for (const nlohmann::json& frame : result.at("frames")) {
-    const nlohmann::json& frame_nodes = frame.at("nodes");
-    EXPECT_EQ(frame_nodes.at("n1").at("state"), "shown");
-    EXPECT_EQ(frame_nodes.at("n3").at("state"), "shown");
-    if (frame_nodes.at("n2").at("state") != "shown" && first_missed == 0)
-      first_missed = frame_nodes.at("n1").at("presented_ns");
-    if (first_missed != 0 && frame_nodes.at("n2").at("state") == "shown") back = true;
-  }
+  const auto [first_missed, back] = FindAbsence(result, "n2");
   ASSERT_NE(first_missed, 0) << log;
   EXPECT_LT(double(first_missed - cut_ns.load()) * 1e-9, 1.0) << log;
-  EXPECT_TRUE(back) << log;
+  EXPECT_NE(back, 0) << log;
   EXPECT_NE(log.find("node n2 (tcp://127.0.0.1:" + std::to_string(link_port) + ") lost at frame"),
             std::string::npos)
       << log;
