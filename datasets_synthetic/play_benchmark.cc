@@ -16,6 +16,7 @@
 #include "datasets_synthetic/rooms.h"
 #include "geometry/form_factors.h"
 #include "geometry/patches.h"
+#include "nodes/messages.h"
 #include "procam/config.h"
 #include "projection/frame_plan.h"
 #include "projection/projection_rig.h"
@@ -139,6 +140,8 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
       one_image_gpu_ms;
   std::vector<int> iterations;
   std::vector<double> refined;  // patches whose light may saturate: refined per pixel
+  std::vector<double> frame_ms;  // encode and parse the frame message
+  size_t frame_bytes = 0;
   // Frame 0 factorises K (or forms K⁻¹ on the device) and starts cold: reported apart.
   double first_ms = 0.0;
   for (int frame = 0; frame <= args.frames; ++frame) {
@@ -152,9 +155,24 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
     const CompensationSolution solution = Solve(solver, problem, &summary, {}, warm);
     const double solved = MsSince(start);
     warm = WarmStart{solution.radiosity_system, solution.emittance};
+    // What a display node gets: the emittance through the protocol's frame (half precision).
     const auto render_start = Clock::now();
-    const FramePlan plan = planner.Plan(solution.emittance);
-    const double planned = MsSince(render_start);
+    Message message;
+    message.type = MessageType::kFrame;
+    message.emittance.resize(solution.emittance.size());
+    Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
+        message.emittance.data(), problem.size(), 3) = solution.emittance;
+    const std::string bytes = EncodeMessage(message);
+    std::string why;
+    if (!ParseMessage(bytes.data(), bytes.size(), &message, &why))
+      throw std::logic_error("bench play: a frame the encoder made was refused: " + why);
+    frame_bytes = bytes.size();
+    const Eigen::MatrixX3d carried =
+        Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
+            message.emittance.data(), problem.size(), 3);
+    const double framed = MsSince(render_start);
+    const FramePlan plan = planner.Plan(carried);
+    const double planned = MsSince(render_start) - framed;
     refined.push_back(plan.refined_patches);
     const auto shade_start = Clock::now();
     renderer.Render(plan);
@@ -169,6 +187,7 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
     }
     solve_ms.push_back(solved);
     plan_ms.push_back(planned);
+    frame_ms.push_back(framed);
     shade_ms.push_back(shaded);
     render_ms.push_back(rendered);
     total_ms.push_back(solved + rendered);
@@ -192,6 +211,9 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
                      args.frames, args.tolerance, Median(solve_ms), Median(iteration_values), gpu ? "GPU" : "CPU",
                      Median(render_ms), Median(plan_ms), Median(refined), gpu ? "draw + glFinish" : "shade",
                      Median(shade_ms), Median(total_ms)));
+  Report(args.progress, fmt::format("  a frame to the nodes: {} bytes ({:.1f} KiB, half precision), encoded and "
+                                    "parsed in {:.3f} ms (in the render time)",
+                                    frame_bytes, frame_bytes / 1024.0, Median(frame_ms)));
   if (gpu) {
     Report(args.progress, fmt::format("  one {}x{} image on the GPU, median: {:.2f} ms upload + draw + glFinish "
                                       "(wall clock), {:.2f} ms drawing (the GPU's timer)",
@@ -211,6 +233,8 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
                                    {"median_solve_ms", Median(solve_ms)},
                                    {"median_render_ms", Median(render_ms)},
                                    {"median_plan_ms", Median(plan_ms)},
+                                   {"frame_bytes", frame_bytes},
+                                   {"median_frame_ms", Median(frame_ms)},
                                    {"median_refined_patches", Median(refined)},
                                    {"median_shade_ms", Median(shade_ms)},  // or draw + glFinish
                                    {"median_total_ms", Median(total_ms)},

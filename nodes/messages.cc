@@ -1,6 +1,9 @@
 #include "nodes/messages.h"
 
+#include <Eigen/Core>
+#include <algorithm>
 #include <bit>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
@@ -11,7 +14,7 @@ namespace {
 static_assert(std::endian::native == std::endian::little,
               "the node protocol is little endian; this build writes host order");
 
-constexpr char kMagic[4] = {'P', 'C', 'N', '1'};
+constexpr char kMagic[4] = {'P', 'C', 'N', '2'};
 
 bool CarriesJson(MessageType type) {
   return type == MessageType::kSetup || type == MessageType::kSetupDone ||
@@ -35,6 +38,45 @@ T Read(const unsigned char* at) {
   T value;
   std::memcpy(&value, at, sizeof(T));
   return value;
+}
+
+uint16_t HalfBits(double value) {
+  return Eigen::numext::bit_cast<uint16_t>(Eigen::half(static_cast<float>(value)));
+}
+double HalfValue(uint16_t bits) {
+  return static_cast<double>(static_cast<float>(Eigen::numext::bit_cast<Eigen::half>(bits)));
+}
+
+// A kFrame's payload after the header (messages.h): count, scales, binary16 values.
+void AppendFrame(const std::vector<double>& emittance, std::string* bytes) {
+  const size_t n = emittance.size() / 3;
+  double scale[3] = {0.0, 0.0, 0.0};
+  for (size_t i = 0; i < emittance.size(); ++i) {
+    if (!std::isfinite(emittance[i])) {
+      throw std::invalid_argument("frame message: emittance of patch " + std::to_string(i / 3) +
+                                  " channel " + std::to_string(i % 3) + " is not finite");
+    }
+    scale[i % 3] = std::max(scale[i % 3], std::abs(emittance[i]));
+  }
+  for (int c = 0; c < 3; ++c) {
+    if (scale[c] > kMaxFrameScale) {
+      throw std::invalid_argument("frame message: channel " + std::to_string(c) +
+                                  " reaches an emittance of " + std::to_string(scale[c]) +
+                                  " (at most 1e30)");
+    }
+    if (scale[c] < kMinFrameScale) scale[c] = 0.0;  // sent as zero
+  }
+  Append(bytes, static_cast<uint32_t>(n));
+  Append(bytes, uint32_t{0});
+  for (double s : scale) Append(bytes, s);
+  const size_t values = bytes->size();
+  bytes->resize(values + n * kFramePatchBytes);
+  for (size_t i = 0; i < emittance.size(); ++i) {
+    const double s = scale[i % 3];
+    // The channel's largest value is s itself: its ratio is exactly 1.
+    const uint16_t bits = HalfBits(s == 0.0 ? 0.0 : emittance[i] / s);
+    std::memcpy(bytes->data() + values + 2 * i, &bits, 2);
+  }
 }
 
 bool Fail(std::string* why, const std::string& text) {
@@ -98,10 +140,7 @@ std::string EncodeMessage(const Message& message) {
           "frame message: emittance of " + std::to_string(message.emittance.size()) +
           " values is not n x 3 with 1 <= n <= " + std::to_string(kMaxFramePatches));
     }
-    Append(&bytes, static_cast<uint32_t>(message.emittance.size() / 3));
-    Append(&bytes, uint32_t{0});
-    bytes.append(reinterpret_cast<const char*>(message.emittance.data()),
-                 message.emittance.size() * sizeof(double));
+    AppendFrame(message.emittance, &bytes);
     return bytes;
   }
   if (message.type == MessageType::kPresented) Append(&bytes, message.presented_ns);
@@ -127,6 +166,11 @@ bool ParseMessage(const void* data, size_t size, Message* message, std::string* 
   if (size < kMessageHeaderBytes) {
     return Fail(why, "message of " + std::to_string(size) + " bytes, shorter than the " +
                          std::to_string(kMessageHeaderBytes) + "-byte header");
+  }
+  if (std::memcmp(bytes, kMagic, 3) == 0 && bytes[3] != kMagic[3]) {
+    return Fail(why, "a procam node message of another protocol version (magic PCN" +
+                         (std::isprint(bytes[3]) ? std::string(1, char(bytes[3])) : "?") +
+                         ", this procam speaks PCN2): run the same procam on every PC");
   }
   if (std::memcmp(bytes, kMagic, sizeof(kMagic)) != 0)
     return Fail(why, "not a procam node message (magic)");
@@ -159,18 +203,36 @@ bool ParseMessage(const void* data, size_t size, Message* message, std::string* 
         return Fail(why, "frame message of " + std::to_string(patches) + " patches (at most " +
                              std::to_string(kMaxFramePatches) + ")");
       }
-      const size_t expected = offset + size_t{patches} * 24;
+      const size_t expected = kFrameHeadBytes + size_t{patches} * kFramePatchBytes;
       if (size != expected) {
         return Fail(why, "frame message of " + std::to_string(size) + " bytes; " +
                              std::to_string(patches) + " patches need " + std::to_string(expected));
       }
+      double scale[3];
+      for (int c = 0; c < 3; ++c) {
+        scale[c] = Read<double>(bytes + offset + 8 * c);
+        if (!(scale[c] == 0.0 || (scale[c] >= kMinFrameScale && scale[c] <= kMaxFrameScale))) {
+          return Fail(why, "frame message: channel " + std::to_string(c) + "'s scale " +
+                               std::to_string(scale[c]) + " is neither 0 nor in [1e-30, 1e30]");
+        }
+      }
+      offset += 24;
       message->emittance.resize(size_t{patches} * 3);
-      std::memcpy(message->emittance.data(), bytes + offset,
-                  message->emittance.size() * sizeof(double));
+      double largest[3] = {0.0, 0.0, 0.0};
       for (size_t i = 0; i < message->emittance.size(); ++i) {
-        if (!std::isfinite(message->emittance[i])) {
-          return Fail(why, "frame message: emittance of patch " + std::to_string(i / 3) +
-                               " channel " + std::to_string(i % 3) + " is not finite");
+        const double h = HalfValue(Read<uint16_t>(bytes + offset + 2 * i));
+        if (!std::isfinite(h)) {
+          return Fail(why, "frame message: value of patch " + std::to_string(i / 3) + " channel " +
+                               std::to_string(i % 3) + " is not finite");
+        }
+        largest[i % 3] = std::max(largest[i % 3], std::abs(h));
+        message->emittance[i] = h * scale[i % 3];
+      }
+      for (int c = 0; c < 3; ++c) {
+        if (largest[c] != (scale[c] == 0.0 ? 0.0 : 1.0)) {
+          return Fail(why, "frame message: channel " + std::to_string(c) + "'s largest value is " +
+                               std::to_string(largest[c]) + ", not " +
+                               (scale[c] == 0.0 ? "0 (its scale is 0)" : "1"));
         }
       }
       return true;

@@ -5,14 +5,21 @@
 // Every message is one ZeroMQ frame:
 //
 //   offset  size  field
-//   0       4     magic "PCN1" (procam nodes, protocol version 1)
+//   0       4     magic "PCN2" (procam nodes, protocol version 2; version 1 sent float64)
 //   4       1     type (MessageType)
 //   5       3     zero
 //   8       8     sequence: the frame number (kFrame, kReady, kPresent, kPresented, kFailed), or
 //                 the request's number (kPing/kPong, kSetup/kSetupDone), little endian
 //   16      ...   payload, by type:
-//     kFrame      u32 patches n ≥ 1, u32 zero, then n × 3 float64 per-patch emittance (R, G,
-//                 B), little endian: exactly what the solver computed (24 bytes a patch)
+//     kFrame      u32 patches n ≥ 1, u32 zero, 3 float64 scales s_c (R, G, B), then n × 3
+//                 IEEE binary16 values h_ic (patch by patch, R G B), little endian: the per-patch
+//                 emittance E_ic = h_ic · s_c, 6 bytes a patch (6.2 KiB at 1 000 patches).
+//                 s_c is the channel's largest |E_ic| and h_ic = E_ic / s_c rounded to the
+//                 nearest binary16, so each value is within 2^-11 of itself (relative; 2^-25 · s_c
+//                 absolute near zero): under a fifth of a 10-bit code step for a projector of
+//                 gamma 2.2 anywhere in its range (docs/nodes.md). Canonical: a channel's largest
+//                 |h_ic| is exactly 1 with s_c in [kMinFrameScale, kMaxFrameScale], or every h_ic is
+//                 zero with s_c = 0, so that a parsed frame encodes again to the same bytes.
 //     kPresented  i64 the presentation time (ns since the Unix epoch, the node's system clock,
 //                 which linuxptp keeps in step between PCs), then kPong's JSON
 //     kSetup, kSetupDone, kPong, kReady, kFailed, kStop
@@ -55,29 +62,40 @@ const char* MessageTypeName(MessageType type);
 
 constexpr size_t kMessageHeaderBytes = 16;
 constexpr size_t kMaxTextBytes = 64 * 1024;
-// Patches a kFrame may carry: 4 million (a message of 96 MiB), past any room procam solves.
+// Patches a kFrame may carry: 4 million (a message of 24 MiB), past any room procam solves.
 constexpr uint32_t kMaxFramePatches = 1u << 22;
+// A kFrame's bytes before its values (header, count, scales) and per patch.
+constexpr size_t kFrameHeadBytes = kMessageHeaderBytes + 8 + 3 * 8;
+constexpr size_t kFramePatchBytes = 3 * 2;
+// The range of a channel's non-zero scale: a channel whose largest |E| is below kMinFrameScale is
+// sent as zero (no projector's light is that small in any unit procam uses); one above
+// kMaxFrameScale is refused.
+constexpr double kMinFrameScale = 1e-30, kMaxFrameScale = 1e30;
 // What the transport lets through at most (ZMQ_MAXMSGSIZE): a kFrame of kMaxFramePatches.
 constexpr int64_t kMaxMessageBytes =
-    int64_t{kMessageHeaderBytes} + 8 + int64_t{24} * kMaxFramePatches;
+    int64_t{kFrameHeadBytes} + int64_t{kFramePatchBytes} * kMaxFramePatches;
 
 struct Message {
   MessageType type = MessageType::kPing;
   uint64_t sequence = 0;
-  std::vector<double> emittance;  // kFrame: n × 3, row-major (patch, channel)
+  // kFrame: n × 3, row-major (patch, channel). Parsed: the values the frame carries (h_ic · s_c);
+  // to encode: any, rounded by the encoder.
+  std::vector<double> emittance;
   int64_t presented_ns = 0;       // kPresented
   nlohmann::json body;            // the JSON payload of the types that carry one; else null
 };
 
-// The bytes of `message` (its type decides which fields are written). Throws
-// std::invalid_argument if a kFrame's emittance is not n × 3 with n ≤ kMaxFramePatches, or a JSON
+// The bytes of `message` (its type decides which fields are written; a kFrame's emittance rounded
+// as above). Throws std::invalid_argument if a kFrame's emittance is not n × 3 with
+// n ≤ kMaxFramePatches, is not finite or has a channel larger than kMaxFrameScale, or a JSON
 // payload is not an object or longer than kMaxTextBytes.
 std::string EncodeMessage(const Message& message);
 
 // Parses one received message. False with `why` set (one line: what is wrong, at which offset)
-// for anything malformed: short, wrong magic or type, non-zero reserved bytes, a payload of the
-// wrong size for its type or its patch count, non-finite emittance, text that is not a JSON
-// object. `message` is unspecified when false.
+// for anything malformed: short, wrong magic or type (another protocol version named as such),
+// non-zero reserved bytes, a payload of the wrong size for its type or its patch count, a frame
+// that is not canonical (a scale out of range, a value not finite, a channel whose largest value
+// is not 1), text that is not a JSON object. `message` is unspecified when false.
 bool ParseMessage(const void* data, size_t size, Message* message, std::string* why);
 
 }  // namespace procam

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <algorithm>
 #include <cstring>
 #include <limits>
 #include <random>
@@ -33,14 +34,16 @@ TEST(NodeMessages, EveryTypeRoundTrips) {
   Message frame;
   frame.type = MessageType::kFrame;
   frame.sequence = 0x0123456789abcdefULL;
-  frame.emittance = {0.0, 1.5, -2.25, 1e-300, 3e300, 0.1};
+  // Binary16 values times the channel's largest |E| (3, 1.125, 2.25) come back exactly.
+  frame.emittance = {0.0, 1.125, -2.25, 3.0, 0.5625, 0.5625};
   const std::string bytes = EncodeMessage(frame);
-  EXPECT_EQ(bytes.size(), kMessageHeaderBytes + 8 + 6 * 8);  // the layout of messages.h
-  EXPECT_EQ(bytes.substr(0, 4), "PCN1");
+  EXPECT_EQ(bytes.size(), kMessageHeaderBytes + 8 + 3 * 8 + 2 * 3 * 2);  // messages.h's layout
+  EXPECT_EQ(bytes.substr(0, 4), "PCN2");
   const Message back = Parsed(bytes);
   EXPECT_EQ(back.type, MessageType::kFrame);
   EXPECT_EQ(back.sequence, frame.sequence);
-  EXPECT_EQ(back.emittance, frame.emittance);  // float64 on the wire: exact
+  EXPECT_EQ(back.emittance, frame.emittance);
+  EXPECT_EQ(EncodeMessage(back), bytes);  // canonical: a parsed frame encodes to the same bytes
 
   for (MessageType type : {MessageType::kPong, MessageType::kSetup, MessageType::kSetupDone,
                            MessageType::kReady, MessageType::kFailed, MessageType::kStop}) {
@@ -69,6 +72,47 @@ TEST(NodeMessages, EveryTypeRoundTrips) {
   }
 }
 
+// A frame's values are the emittance rounded to binary16 relative to the channel's largest: IEEE
+// binary16 has 11 significant bits, so each value is within 2^-11 of itself (relative), or of
+// 2^-25 times the channel's largest below binary16's normal range (its subnormals step by 2^-24).
+TEST(NodeMessages, AFrameCarriesTheEmittanceWithinHalfPrecision) {
+  std::mt19937 random(11);
+  std::uniform_real_distribution<double> exponent(-9.0, 0.0), sign(-1.0, 1.0);
+  Message frame;
+  frame.type = MessageType::kFrame;
+  const int n = 5000;
+  for (int i = 0; i < 3 * n; ++i) {
+    // Channels of different units: up to 1.6, 2e-4 and 3e6.
+    const double unit = i % 3 == 0 ? 1.6 : i % 3 == 1 ? 2e-4 : 3e6;
+    frame.emittance.push_back(unit * std::pow(10.0, exponent(random)) * (sign(random) < 0 ? -1 : 1));
+  }
+  frame.emittance[4] = 0.0;
+  const std::string bytes = EncodeMessage(frame);
+  EXPECT_EQ(bytes.size(), kFrameHeadBytes + size_t{6} * n);
+  const Message back = Parsed(bytes);
+  ASSERT_EQ(back.emittance.size(), frame.emittance.size());
+  double largest[3] = {0, 0, 0};
+  for (size_t i = 0; i < frame.emittance.size(); ++i)
+    largest[i % 3] = std::max(largest[i % 3], std::abs(frame.emittance[i]));
+  double worst = 0.0;  // the largest relative error over the normal range
+  for (size_t i = 0; i < frame.emittance.size(); ++i) {
+    const double e = frame.emittance[i], error = std::abs(back.emittance[i] - e);
+    ASSERT_LE(error, std::ldexp(std::abs(e), -11) + std::ldexp(largest[i % 3], -25)) << i;
+    if (std::abs(e) >= std::ldexp(largest[i % 3], -14)) worst = std::max(worst, error / std::abs(e));
+  }
+  EXPECT_EQ(back.emittance[4], 0.0);
+  // Rounded, not truncated or kept: the worst error is close to the bound.
+  EXPECT_GT(worst, std::ldexp(1.0, -12));
+  EXPECT_EQ(EncodeMessage(back), bytes);
+  // A channel whose largest |E| is under 1e-30 is sent as zero; one over 1e30 is refused.
+  frame.emittance = {1.0, 5e-31, 2.0};
+  EXPECT_EQ(Parsed(EncodeMessage(frame)).emittance, (std::vector<double>{1.0, 0.0, 2.0}));
+  frame.emittance = {1.0, 2e30, 2.0};
+  EXPECT_THROW(EncodeMessage(frame), std::invalid_argument);
+  frame.emittance = {1.0, std::numeric_limits<double>::infinity(), 2.0};
+  EXPECT_THROW(EncodeMessage(frame), std::invalid_argument);
+}
+
 TEST(NodeMessages, MalformedMessagesAreRefusedWithOneLine) {
   Message frame;
   frame.type = MessageType::kFrame;
@@ -87,6 +131,9 @@ TEST(NodeMessages, MalformedMessagesAreRefusedWithOneLine) {
   bad[4] = 11;
   EXPECT_NE(Refusal(bad).find("unknown message type 11"), std::string::npos);
   bad = good;
+  bad[3] = '1';  // the protocol's first version sent float64
+  EXPECT_NE(Refusal(bad).find("another protocol version (magic PCN1"), std::string::npos);
+  bad = good;
   bad[6] = 1;
   EXPECT_NE(Refusal(bad).find("reserved"), std::string::npos);
   // A frame one byte short or long, a patch count larger than the bytes, a huge count.
@@ -102,11 +149,26 @@ TEST(NodeMessages, MalformedMessagesAreRefusedWithOneLine) {
   const uint32_t huge = kMaxFramePatches + 1;
   std::memcpy(&bad[16], &huge, 4);
   EXPECT_NE(Refusal(bad).find("at most"), std::string::npos);
-  // Non-finite emittance.
+  // A value that is not finite (binary16 NaN and infinity), a scale out of range, a frame that
+  // is not canonical (a channel's largest value not 1, or not 0 under a scale of 0).
+  for (const uint16_t bits : {uint16_t{0x7e00}, uint16_t{0x7c00}}) {
+    bad = good;
+    std::memcpy(&bad[kFrameHeadBytes + 2 * 4], &bits, 2);
+    EXPECT_NE(Refusal(bad).find("patch 1 channel 1 is not finite"), std::string::npos);
+  }
+  for (const double scale : {-1.0, 1e-31, 1e31, std::numeric_limits<double>::quiet_NaN()}) {
+    bad = good;
+    std::memcpy(&bad[24 + 8], &scale, 8);
+    EXPECT_NE(Refusal(bad).find("channel 1's scale"), std::string::npos) << scale;
+  }
   bad = good;
-  const double nan = std::numeric_limits<double>::quiet_NaN();
-  std::memcpy(&bad[24 + 4 * 8], &nan, 8);
-  EXPECT_NE(Refusal(bad).find("patch 1 channel 1 is not finite"), std::string::npos);
+  const uint16_t half_quarter = 0x3400;
+  std::memcpy(&bad[kFrameHeadBytes + 2 * 4], &half_quarter, 2);  // patch 1 held channel 1's 1
+  EXPECT_NE(Refusal(bad).find("channel 1's largest value is"), std::string::npos);
+  bad = good;
+  const double zero = 0.0;
+  std::memcpy(&bad[24 + 8], &zero, 8);
+  EXPECT_NE(Refusal(bad).find("its scale is 0"), std::string::npos);
   // Payloads where none belongs, text that is not a JSON object, text too long.
   Message ping;
   ping.type = MessageType::kPing;
