@@ -96,6 +96,7 @@ class Node {
     outputs_ = make_outputs(own_projectors_);
     if (outputs_.size() != own_.size())
       throw IoError("node " + options.name + ": one output per projector needed");
+    faulty_.assign(outputs_.size(), false);
     const bool local = options.listen.starts_with("inproc://");
     std::optional<RigKeys> keys;
     if (!local) keys = ReadRigKeys(options.rig_dir, KeyRole::kNode);
@@ -262,7 +263,7 @@ class Node {
       const FramePlan plan = setup_->planner->Plan(emittance);
       plan_ms = 1e3 * SecondsSince(start);
       for (size_t k = 0; k < outputs_.size(); ++k) {
-        if (!faulty_[k] && setup_->gpu[k]) outputs_[k]->DrawPlan(plan);
+        if (setup_->gpu[k]) Use(k, message.sequence, [&] { outputs_[k]->DrawPlan(plan); });
       }
       if (cpu_outputs) {
         // Only this node's projectors (those not on the GPU).
@@ -277,7 +278,7 @@ class Node {
       images = RenderProjectorImages(setup_->rig, emittance, setup_->render, &summary);
     }
     for (size_t k = 0; k < outputs_.size(); ++k) {
-      if (!faulty_[k] && !setup_->gpu[k]) outputs_[k]->Draw(images[own_[k]]);
+      if (!setup_->gpu[k]) Use(k, message.sequence, [&] { outputs_[k]->Draw(images[own_[k]]); });
     }
     rendered_ = message.sequence;
     Reply(MessageType::kReady, message.sequence,
@@ -292,9 +293,8 @@ class Node {
       return Fail(frame, fmt::format("present of frame {} that was not rendered", frame));
     }
     const auto start = Clock::now();
-    for (size_t k = 0; k < outputs_.size(); ++k) {
-      if (!faulty_[k]) outputs_[k]->Present(frame);
-    }
+    for (size_t k = 0; k < outputs_.size(); ++k)
+      Use(k, frame, [&] { outputs_[k]->Present(frame); });
     Message presented;
     presented.type = MessageType::kPresented;
     presented.sequence = frame;
@@ -303,16 +303,28 @@ class Node {
     socket_->Send(peer_, presented);
   }
 
-  // An output that stops working is reported once and skipped from then on.
+  // An output that stops working is reported once and skipped from then on: found between
+  // frames (Fault), or by a draw or a present that throws (a monitor unplugged in between), which
+  // then leaves the node's other outputs and its answer to the controller as they are.
   void CheckOutputs() {
-    faulty_.resize(outputs_.size(), false);
     for (size_t k = 0; k < outputs_.size(); ++k) {
       if (faulty_[k]) continue;
       const std::string fault = outputs_[k]->Fault();
-      if (fault.empty()) continue;
-      faulty_[k] = true;
-      Fail(rendered_.value_or(0), fmt::format("projector {}: {}", own_projectors_[k].name, fault));
+      if (!fault.empty()) MarkFaulty(k, rendered_.value_or(0), fault);
     }
+  }
+  template <typename Action>
+  void Use(size_t k, uint64_t sequence, Action action) {
+    if (faulty_[k]) return;
+    try {
+      action();
+    } catch (const std::exception& e) {
+      MarkFaulty(k, sequence, e.what());
+    }
+  }
+  void MarkFaulty(size_t k, uint64_t sequence, const std::string& fault) {
+    faulty_[k] = true;
+    Fail(sequence, fmt::format("projector {}: {}", own_projectors_[k].name, fault));
   }
 
   void Fail(uint64_t sequence, const std::string& why) {

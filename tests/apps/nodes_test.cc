@@ -592,5 +592,60 @@ TEST(Nodes, PlayShowsProjectsImagesOnThreeMonitors) {
       << ReadFile(dir / "play.log");
 }
 
+// A monitor unplugged mid-show (scripts/dummy_monitors.sh: Xorg with the dummy driver, whose
+// outputs xrandr can switch off as a pulled cable does; GLFW learns it from the X server's RandR
+// change): the node says so to the controller, which logs it, and goes on showing every frame on
+// its other projectors.
+TEST(Nodes, AMonitorUnpluggedMidShowIsReportedAndTheNodeGoesOn) {
+  for (const char* program : {"Xorg", "xrandr", "cvt"}) {
+    if (testing::RunShell(std::string("command -v ") + program + " >/dev/null").exit_code != 0)
+      GTEST_SKIP() << program
+                   << " is not installed (apt-get install xserver-xorg-core "
+                      "xserver-xorg-video-dummy x11-xserver-utils)";
+  }
+  if (!std::filesystem::exists("/usr/lib/xorg/modules/drivers/dummy_drv.so"))
+    GTEST_SKIP() << "no dummy video driver (apt-get install xserver-xorg-video-dummy)";
+  if (::geteuid() != 0 && testing::RunShell("sudo -n true 2>/dev/null").exit_code != 0)
+    GTEST_SKIP() << "Xorg with a configuration file needs root";
+  testing::TempDir dir;
+  const Rig rig(dir);
+  ASSERT_TRUE(rig.Solve(150));
+  // 25 frames at 5 fps; DUMMY2 (centre's monitor) is switched off half a second after the first
+  // progress line, and the time the controller's log names it is taken (polled every 50 ms).
+  dir.Write("show.sh",
+            "cd \"$(dirname \"$0\")\"\n" + Binary() +
+                " play room/tiny_box.json --rig room --solution solution --display "
+                "glfw:DUMMY0,glfw:DUMMY1,glfw:DUMMY2 --frames 25 --fps 5 --out play >play.log "
+                "2>&1 &\n"
+                "pid=$!\n"
+                "i=0; until grep -q \"play: frame\" play.log 2>/dev/null; do i=$((i+1)); "
+                "[ $i -ge 300 ] && break; sleep 0.1; done\nsleep 0.5\n"
+                "date +%s%N > unplugged\nxrandr --output DUMMY2 --off\n"
+                "i=0; until grep -q \"controller: node local says: projector centre\" play.log; "
+                "do i=$((i+1)); [ $i -ge 100 ] && break; sleep 0.05; done\n"
+                "date +%s%N > reported\n"
+                "wait $pid\nstatus=$?\ncat play.log\nexit $status\n");
+  const testing::CommandRun run =
+      testing::RunShell((testing::SourceDir() / "scripts" / "dummy_monitors.sh").string() +
+                        " --mode 320x200 --timeout 90 3 -- sh " + (dir / "show.sh").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  const std::string log = ReadFile(dir / "play.log");
+  EXPECT_NE(log.find("controller: node local says: projector centre: glfw:DUMMY2: the monitor was "
+                     "disconnected"),
+            std::string::npos)
+      << log;
+  EXPECT_EQ(log.find("projector left:"), std::string::npos) << log;
+  EXPECT_EQ(log.find("projector right:"), std::string::npos) << log;
+  const double seconds =
+      1e-9 * double(std::stoll(ReadFile(dir / "reported")) - std::stoll(ReadFile(dir / "unplugged")));
+  EXPECT_LT(seconds, 1.0) << log;  // noticed at the next frame (0.2 s apart)
+  std::cout << "monitor DUMMY2 switched off: the controller logged it " << seconds << " s later\n";
+  // The node went on: every frame shown, none dropped for it.
+  const nlohmann::json result = ReadResult(dir / "play" / "result.json");
+  ASSERT_EQ(result.at("frames").size() + result.at("frames_dropped").get<size_t>(), 25u);
+  for (const nlohmann::json& frame : result.at("frames"))
+    EXPECT_EQ(frame.at("nodes_shown"), 1) << frame.dump();
+}
+
 }  // namespace
 }  // namespace procam

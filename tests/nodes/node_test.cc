@@ -8,6 +8,7 @@
 #include <cmath>
 #include <mutex>
 #include <opencv2/videoio.hpp>
+#include <stdexcept>
 #include <thread>
 
 #include "base/io.h"
@@ -19,23 +20,26 @@
 namespace procam {
 namespace {
 
-// Keeps what it presents; after `fail_after` presents it says its monitor is gone.
+// Keeps what it presents; after `fail_after` presents its monitor is gone: Fault says so between
+// frames, or, `in_draw`, the next Draw throws (a monitor unplugged while a frame is under way).
 class VanishingOutput : public NodeOutput {
  public:
-  VanishingOutput(std::string name, int fail_after, int* presented)
-      : name_(std::move(name)), fail_after_(fail_after), presented_(presented) {}
+  VanishingOutput(std::string name, int fail_after, int* presented, bool in_draw = false)
+      : name_(std::move(name)), fail_after_(fail_after), presented_(presented), in_draw_(in_draw) {}
   std::string Describe() const override { return "test:" + name_; }
-  void Draw(const ProjectorImage&) override {}
-  void Present(uint64_t) override { ++*presented_; }
-  std::string Fault() override {
-    return fail_after_ >= 0 && *presented_ >= fail_after_ ? "monitor TEST-" + name_ + " disappeared"
-                                                          : "";
+  void Draw(const ProjectorImage&) override {
+    if (in_draw_ && Gone()) throw std::runtime_error(Why());
   }
+  void Present(uint64_t) override { ++*presented_; }
+  std::string Fault() override { return !in_draw_ && Gone() ? Why() : ""; }
 
  private:
+  bool Gone() const { return fail_after_ >= 0 && *presented_ >= fail_after_; }
+  std::string Why() const { return "monitor TEST-" + name_ + " disappeared"; }
   std::string name_;
   int fail_after_;
   int* presented_;
+  bool in_draw_;
 };
 
 // tiny_box as a scene file and a rig directory holding its projectors.
@@ -48,7 +52,9 @@ std::string WriteRig(const testing::TempDir& dir) {
   return scene.string();
 }
 
-TEST(Node, AMonitorThatDisappearsIsReportedAndTheOtherProjectorGoesOn) {
+// Shows 5 frames on a node whose left monitor goes after 2 (found between frames, or by a draw
+// that throws) and checks that it is reported once and the node goes on with the right one.
+void ShowWithAVanishingMonitor(bool in_draw) {
   testing::TempDir dir;
   const std::string scene = WriteRig(dir);
   int presented_left = 0, presented_right = 0;
@@ -65,7 +71,8 @@ TEST(Node, AMonitorThatDisappearsIsReportedAndTheOtherProjectorGoesOn) {
         context, options,
         [&](const std::vector<Projector>&) {
           std::vector<std::unique_ptr<NodeOutput>> outputs;
-          outputs.push_back(std::make_unique<VanishingOutput>("left", 2, &presented_left));
+          outputs.push_back(
+              std::make_unique<VanishingOutput>("left", 2, &presented_left, in_draw));
           outputs.push_back(std::make_unique<VanishingOutput>("right", -1, &presented_right));
           return outputs;
         },
@@ -101,6 +108,22 @@ TEST(Node, AMonitorThatDisappearsIsReportedAndTheOtherProjectorGoesOn) {
             std::string::npos)
       << log;
   EXPECT_EQ(log.find("right:"), std::string::npos) << log;
+  EXPECT_EQ(log.find("lost"), std::string::npos) << log;
+  size_t reports = 0;
+  for (size_t at = log.find("says: projector left"); at != std::string::npos;
+       at = log.find("says: projector left", at + 1))
+    ++reports;
+  EXPECT_EQ(reports, 1u) << log;  // once
+}
+
+TEST(Node, AMonitorThatDisappearsIsReportedAndTheOtherProjectorGoesOn) {
+  ShowWithAVanishingMonitor(/*in_draw=*/false);
+}
+
+// The monitor goes while a frame is drawn: the node still answers that frame (the controller
+// does not lose it) and shows it on its other projector.
+TEST(Node, AMonitorThatGoesDuringADrawIsReportedAndTheFrameStillShown) {
+  ShowWithAVanishingMonitor(/*in_draw=*/true);
 }
 
 TEST(Node, ASetupTheRoomDoesNotGiveIsRefusedNamingTheScene) {
