@@ -440,6 +440,52 @@ TEST(Nodes, ANodeWhoseLinkIsCutIsReportedWithinASecondAndComesBack) {
             << 1e-9 * double(first_missed - cut_ns.load()) << " s later\n";
 }
 
+// The same cut made by the kernel: the nodes and the controller run in a private network namespace
+// (scripts/in_private_netns.sh, loopback only) where nftables drops every TCP packet to and from
+// n2's port for 2 s, as a pulled cable would, and then lets them through again.
+TEST(Nodes, ANodeWhoseNetworkTheKernelCutsIsReportedWithinASecondAndComesBack) {
+  if (testing::RunShell("command -v nft >/dev/null || test -x /usr/sbin/nft").exit_code != 0)
+    GTEST_SKIP() << "nft is not installed (apt-get install nftables)";
+  testing::TempDir dir;
+  const Rig rig(dir);
+  const std::string room = (rig.root / "room").string();
+  ASSERT_TRUE(rig.Solve(100));
+  const std::string port = std::to_string(rig.ports[1]), log = (dir / "play.log").string();
+  dir.Write("show.sh",
+            "PATH=$PATH:/usr/sbin\n" + rig.StartNode(0) + rig.StartNode(1) + rig.StartNode(2) +
+                "timeout 120 " + Binary() + " play " + rig.scene + " --rig " + room +
+                " --solution " + (dir / "solution").string() + " --frames 80 --fps 10 --nodes " +
+                rig.Nodes() + " --out " + (dir / "play").string() + " > " + log + " 2>&1 &\n" +
+                "play=$!\n"
+                "for i in $(seq 300); do grep -q \"play: frame\" " + log +
+                " && break; sleep 0.1; done\nsleep 0.5\n"
+                "nft add table inet procam_cut\n"
+                "nft add chain inet procam_cut out \"{ type filter hook output priority 0; }\"\n"
+                "nft add rule inet procam_cut out tcp dport " + port + " drop\n"
+                "nft add rule inet procam_cut out tcp sport " + port + " drop\n"
+                "date +%s%N > " + (dir / "cut").string() + "\n"
+                "sleep 2\nnft delete table inet procam_cut\n"
+                "wait $play\nstatus=$?\nkill %1 %2 %3 2>/dev/null\nwait\nexit $status\n");
+  const testing::CommandRun run = testing::RunShell(
+      (testing::SourceDir() / "scripts" / "in_private_netns.sh").string() + " bash " +
+      (dir / "show.sh").string());
+  if (run.exit_code == 77) GTEST_SKIP() << run.output;
+  const std::string text = ReadFile(log);
+  ASSERT_EQ(run.exit_code, 0) << run.output << text;
+  ASSERT_TRUE(std::filesystem::exists(dir / "cut")) << run.output << text;
+  const int64_t cut_ns = std::stoll(ReadFile(dir / "cut"));
+  const nlohmann::json result = ReadResult(dir / "play" / "result.json");
+  const auto [first_missed, back] = FindAbsence(result, "n2");
+  ASSERT_NE(first_missed, 0) << text;
+  EXPECT_LT(double(first_missed - cut_ns) * 1e-9, 1.0) << text;
+  EXPECT_NE(back, 0) << text;
+  EXPECT_NE(text.find("node n2 (tcp://127.0.0.1:" + port + ") lost at frame"), std::string::npos)
+      << text;
+  std::cout << "node n2's network cut by nftables: the first frame without it was shown "
+            << 1e-9 * double(first_missed - cut_ns) << " s later; it showed a frame again "
+            << 1e-9 * double(back - cut_ns) - 2.0 << " s after the cut ended\n";
+}
+
 TEST(Nodes, ANodeWithAnotherRigsKeysRefusesTheController) {
   testing::TempDir dir;
   const Rig rig(dir);
