@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <functional>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -47,7 +48,8 @@ double FieldBound(const SeamlessField& field, int i, const Eigen::MatrixX3d& nod
 }  // namespace
 
 FramePlanner::FramePlanner(const ProjectionRig& rig, const RenderOptions& options)
-    : rig_(rig), options_(options), tables_(std::make_unique<std::vector<ProjectorTables>>()) {
+    : rig_(rig), options_(options), tables_(std::make_unique<std::vector<ProjectorTables>>()),
+      factor_buffer_(std::make_unique<FactorBuffer>()) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("RenderOptions: " + why);
   if (options.detail) {
@@ -76,6 +78,11 @@ FramePlanner::FramePlanner(const ProjectionRig& rig, const RenderOptions& option
     }
   }
 }
+
+struct FramePlanner::FactorBuffer {
+  std::mutex mutex;
+  std::shared_ptr<std::vector<std::vector<Eigen::Vector3f>>> factors;
+};
 
 FramePlanner::~FramePlanner() = default;
 
@@ -134,9 +141,20 @@ FramePlan FramePlanner::Plan(const Eigen::MatrixX3d& emittance) const {
     plan.refined_patches += refine[i];
   }
 
-  // The refined patches' pixel factors, computed as RenderProjectorImages computes them.
-  std::vector<std::vector<Eigen::Vector3f>> factors;
+  // The refined patches' pixel factors, computed as RenderProjectorImages computes them, into
+  // the last plan's arrays where no plan holds them any more.
+  std::shared_ptr<std::vector<std::vector<Eigen::Vector3f>>> buffer;
   if (field_ && plan.refined_patches > 0) {
+    {
+      std::lock_guard<std::mutex> lock(factor_buffer_->mutex);
+      if (factor_buffer_->factors && factor_buffer_->factors.use_count() == 1) {
+        buffer = factor_buffer_->factors;
+      } else {
+        buffer = std::make_shared<std::vector<std::vector<Eigen::Vector3f>>>();
+        factor_buffer_->factors = buffer;
+      }
+    }
+    std::vector<std::vector<Eigen::Vector3f>>& factors = *buffer;
     factors.resize(rig_.maps.size());
     for (size_t k = 0; k < rig_.maps.size(); ++k) factors[k].resize(rig_.maps[k].lit_pixels);
     // One patch at a time: the refined patches are few and clustered (a bright region), so
@@ -150,8 +168,11 @@ FramePlan FramePlanner::Plan(const Eigen::MatrixX3d& emittance) const {
       }
     }
   }
-  plan.level_passes = internal::RefineLevels(rig_, *tables_, factors, first.flux,
-                                             options_.max_level_passes, &refine, &plan.level);
+  static const std::vector<std::vector<Eigen::Vector3f>> kNoFactors;
+  plan.level_passes = internal::RefineLevels(rig_, *tables_, buffer ? *buffer : kNoFactors,
+                                             first.flux, options_.max_level_passes, &refine,
+                                             &plan.level);
+  plan.refined_factors = std::move(buffer);
   plan.refined = std::move(refine);
   plan.seconds = SecondsSince(start);
   return plan;
@@ -208,8 +229,15 @@ void ShadeProjectorImages(const FramePlanner& planner, const FramePlan& plan,
   internal::PatchFactorFunction patch_factors;
   if (smooth) {
     const SeamlessField& field = *planner.field();
-    patch_factors = [&field, &plan](int i, int k, Eigen::Vector3f* out) {
+    // A refined patch's factors are the plan's (the same bits): copied, not computed again.
+    patch_factors = [&field, &plan, &rig](int i, int k, Eigen::Vector3f* out) {
       if (field.Flat(i)) return false;
+      if (plan.refined_factors && plan.refined[i]) {
+        const std::vector<Eigen::Vector3f>& factors = (*plan.refined_factors)[k];
+        const int begin = rig.maps[k].patch_begin[i], end = rig.maps[k].patch_begin[i + 1];
+        std::copy(factors.begin() + begin, factors.begin() + end, out);
+        return true;
+      }
       field.PatchFactors(i, k, plan.node_value, plan.mean, out);
       return true;
     };

@@ -267,6 +267,37 @@ TEST(FramePlan, CachedBumpsAndReusedImagesShadeTheSame) {
 // order by share gives the same images and counts; the delivered light differs only by the
 // order of its sums. (The first projector has no colour mixing: the walk is its; the second's
 // mixing keeps it on the lookup.)
+// A plan keeps its refined patches' factors while the planner makes newer plans; the planner reuses
+// the arrays only once no plan holds them.
+TEST(FramePlan, APlanKeepsItsFactorsWhileNewerPlansAreMade) {
+  const ProjectionRig& rig = SmallRig().rig;
+  const RenderOptions options;  // seamless light
+  FramePlanner planner(rig, options);
+  const FramePlanner fresh(rig, options);
+  const Eigen::MatrixX3d first = Emittance(rig, 0.1, 1.05, 3), second = Emittance(rig, 0.1, 1.05, 4);
+  const std::vector<ProjectorImage> expected =
+      ShadeProjectorImages(fresh, fresh.Plan(first), nullptr);
+  const void* arrays = nullptr;
+  {
+    const FramePlan a = planner.Plan(first);
+    ASSERT_GT(a.refined_patches, 0);
+    ASSERT_TRUE(a.refined_factors);
+    const FramePlan b = planner.Plan(second);
+    ASSERT_GT(b.refined_patches, 0);
+    EXPECT_NE(a.refined_factors.get(), b.refined_factors.get());  // a's are still a's
+    const std::vector<ProjectorImage> shaded = ShadeProjectorImages(planner, a, nullptr);
+    for (size_t k = 0; k < expected.size(); ++k)
+      EXPECT_EQ(cv::norm(shaded[k].codes, expected[k].codes, cv::NORM_INF), 0.0) << k;
+    arrays = b.refined_factors.get();
+  }
+  // Both plans gone: the next plan takes the last arrays made, and shades as a fresh planner.
+  const FramePlan again = planner.Plan(first);
+  EXPECT_EQ(again.refined_factors.get(), arrays);
+  const std::vector<ProjectorImage> shaded = ShadeProjectorImages(planner, again, nullptr);
+  for (size_t k = 0; k < expected.size(); ++k)
+    EXPECT_EQ(cv::norm(shaded[k].codes, expected[k].codes, cv::NORM_INF), 0.0) << k;
+}
+
 TEST(FramePlan, WalkedCodesAreTheLookedUpOnes) {
   for (const int bits : {8, 10}) {
     Stage stage = MakeStage({});
