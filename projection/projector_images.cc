@@ -118,6 +118,8 @@ std::vector<std::vector<Eigen::Vector3f>> DetailFactors(const ProjectionRig& rig
 
 // The detail's and the seamless light's factors multiplied into *combined (the detail), then
 // renormalised to a weighted mean of 1 per patch and channel (weights w a), so the flux is kept.
+// A patch whose detail is 1 everywhere (untextured) keeps the seamless factors as they are: they
+// are normalised already, and renormalising them again would move them by a rounding.
 void CombineFactors(const ProjectionRig& rig,
                     const std::vector<std::vector<Eigen::Vector3f>>& smooth,
                     std::vector<std::vector<Eigen::Vector3f>>* combined) {
@@ -127,17 +129,20 @@ void CombineFactors(const ProjectionRig& rig,
   for (int i = 0; i < n; ++i) {
     Vec3 weighted = Vec3::Zero();
     double weight_sum = 0.0;
+    bool textured = false;
     for (int k = 0; k < projector_count; ++k) {
       const ProjectorMap& map = rig.maps[k];
       const double scale = rig.coverage_scale(i, k) * map.pixel_solid_angle;
       for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
         Eigen::Vector3f& factor = (*combined)[k][position];
+        textured |= factor != Eigen::Vector3f::Ones();
         factor = factor.cwiseProduct(smooth[k][position]);
         const double weight = scale * map.share[map.pixels_by_patch[position]];
         weighted += weight * factor.cast<double>();
         weight_sum += weight;
       }
     }
+    if (!textured) continue;
     for (int c = 0; c < 3; ++c) {
       const float normaliser =
           weighted[c] > 0.0 ? static_cast<float>(weight_sum / weighted[c]) : 1.0f;

@@ -265,23 +265,19 @@ Eigen::MatrixX3d SeamlessField::NodeValues(const Eigen::MatrixX3d& exitance) con
 
 namespace {
 
-// m = v / mean_i(v) per channel from a pixel's bumps: v = Σ K̃ v̂ in double, K̃ as single-precision
-// weights, v̂ / mean_i(v) of node position b at list_value[3 b .. 3 b + 2] (ListValues: the
-// division once per patch, not per pixel); 1 in the channels where the mean is not positive. The
-// flux is kept: the weighted mean of m over the patch is 1. One function for the cached and the
-// evaluated bumps: the same bits.
+// m = v / mean_i(v) per channel from a pixel's bumps: v = Σ K̃ v̂ in single precision, four lanes
+// at a time (R, G, B and a zero), K̃ as single-precision weights, v̂ / mean_i(v) of node position
+// b at list_value[4 b .. 4 b + 2] (ListValues: the division once per patch, not per pixel); 1 in
+// the channels where the mean is not positive. The flux is kept: the weighted mean of m over the
+// patch is 1 (within single precision). One function for the cached and the evaluated bumps: the
+// same bits.
 inline Eigen::Vector3f SumFactor(int count, const uint16_t* node, const float* weight,
-                                 const double* list_value, const std::array<bool, 3>& unit) {
-  double value[3] = {0.0, 0.0, 0.0};
-  for (int b = 0; b < count; ++b) {
-    const double w = weight[b];
-    const double* v = list_value + 3 * node[b];
-    value[0] += w * v[0];
-    value[1] += w * v[1];
-    value[2] += w * v[2];
-  }
+                                 const float* list_value, const std::array<bool, 3>& unit) {
+  Eigen::Array4f value = Eigen::Array4f::Zero();
+  for (int b = 0; b < count; ++b)
+    value += weight[b] * Eigen::Map<const Eigen::Array4f, Eigen::Aligned16>(list_value + 4 * node[b]);
   Eigen::Vector3f m;
-  for (int c = 0; c < 3; ++c) m[c] = unit[c] ? 1.0f : static_cast<float>(value[c]);
+  for (int c = 0; c < 3; ++c) m[c] = unit[c] ? 1.0f : value[c];
   return m;
 }
 
@@ -301,7 +297,7 @@ void SeamlessField::FactorBumps(int i, const Eigen::Vector3f& point, std::vector
 
 std::array<bool, 3> SeamlessField::ListValues(int i, const Eigen::MatrixX3d& node_value,
                                                const Eigen::MatrixX3d& means,
-                                               std::vector<double>* values) const {
+                                               FactorValues* values) const {
   const int begin = node_begin_[i], end = node_begin_[i + 1];
   std::array<bool, 3> unit;
   double inverse_mean[3];
@@ -309,10 +305,11 @@ std::array<bool, 3> SeamlessField::ListValues(int i, const Eigen::MatrixX3d& nod
     unit[c] = !(means(i, c) > 0.0);
     inverse_mean[c] = unit[c] ? 0.0 : 1.0 / means(i, c);
   }
-  values->resize(3 * static_cast<size_t>(end - begin));
+  values->assign(4 * static_cast<size_t>(end - begin), 0.0f);
   for (int b = 0; b < end - begin; ++b) {
     for (int c = 0; c < 3; ++c)
-      (*values)[3 * b + c] = node_value(node_list_[begin + b], c) * inverse_mean[c];
+      (*values)[4 * b + c] =
+          static_cast<float>(node_value(node_list_[begin + b], c) * inverse_mean[c]);
   }
   return unit;
 }
@@ -324,7 +321,7 @@ Eigen::Vector3f SeamlessField::Factor(int i, const Eigen::Vector3f& point,
   std::vector<uint16_t> node;
   std::vector<float> weight;
   FactorBumps(i, point, &node, &weight);
-  std::vector<double> values;
+  FactorValues values;
   const std::array<bool, 3> unit = ListValues(i, node_value, means, &values);
   return SumFactor(static_cast<int>(node.size()), node.data(), weight.data(), values.data(), unit);
 }
@@ -337,7 +334,7 @@ void SeamlessField::PatchFactors(int i, size_t k, const Eigen::MatrixX3d& node_v
     std::fill(factors, factors + (last - first), Eigen::Vector3f::Ones());
     return;
   }
-  thread_local std::vector<double> list_value;
+  thread_local FactorValues list_value;
   const std::array<bool, 3> unit = ListValues(i, node_value, means, &list_value);
   if (BumpsCached(k)) {
     const PixelBumps& cache = cached_[k];

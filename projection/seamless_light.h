@@ -121,10 +121,12 @@ class SeamlessField {
   // position in i's list, weights K̃_j rounded to single precision (what the cache keeps).
   void FactorBumps(int i, const Eigen::Vector3f& point, std::vector<uint16_t>* node,
                    std::vector<float>* weight) const;
-  // The node values of patch i's list in list order over the patch's means, three to a node
-  // (what SumFactor reads); true for the channels whose mean is not positive (factor 1).
+  // The node values of patch i's list in list order over the patch's means, in single
+  // precision, four to a node (R, G, B, 0: what SumFactor reads, 16-byte aligned); true for the
+  // channels whose mean is not positive (factor 1).
+  using FactorValues = std::vector<float, Eigen::aligned_allocator<float>>;
   std::array<bool, 3> ListValues(int i, const Eigen::MatrixX3d& node_value,
-                                 const Eigen::MatrixX3d& means, std::vector<double>* values) const;
+                                 const Eigen::MatrixX3d& means, FactorValues* values) const;
 
   const ProjectionRig& rig_;
   SeamlessLightOptions options_;
