@@ -517,7 +517,9 @@ FirstLevels ComputeFirstLevels(const ProjectionRig& rig, const Eigen::MatrixX3d&
       const double lit_area = rig.LitArea(i);
       first.flux(i, c) = lit_area * (first.target(i, c) - rig.lower(i, c)) / rho;
       const double capacity = lit_area * (rig.upper(i, c) - rig.lower(i, c)) / rho;
-      first.level(i, c) = first.flux(i, c) >= capacity * (1.0 - 1e-12)
+      const bool at_upper =
+          first.target(i, c) >= rig.upper(i, c) - kFullDriveTolerance * std::abs(rig.upper(i, c));
+      first.level(i, c) = at_upper || first.flux(i, c) >= capacity * (1.0 - 1e-12)
                               ? kInfinity
                               : first.flux(i, c) / rig.blended_area[i];
     }

@@ -5,7 +5,12 @@
 // 1. The light above black the patch must receive is Φ = f_i A_i (E_i − lower_i) / ρ_i, with E
 //    clipped to [lower, upper] (the summary counts the patches that were outside) and f_i the
 //    part of the patch the bounds and E describe (ProjectionRig::lit_fraction: 1 for a patch
-//    some projector lights wholly; a partly lit patch's E is that of its lit part).
+//    some projector lights wholly; a partly lit patch's E is that of its lit part). An E within
+//    kFullDriveTolerance of its upper bound (relative) is at the bound: every pixel of the patch
+//    at full drive. That is a binary16 step, so the emittance a display node receives in half
+//    precision (nodes/messages.h) renders as the solver's float64 does at the bounds, where a
+//    solution often sits; without it a rounding down made the patch a per-pixel refinement whose
+//    least-share pixels fell a code or two below full drive.
 // 2. It is spread as a uniform irradiance τ above black over the patch's lit area, shared among
 //    the projectors by the blending weights: pixel p (projector k, weight w, gain g) shows the
 //    relative level s = w τ / (g (max_k − black_k)), which sends flux w a τ (a = Ω_k / g its

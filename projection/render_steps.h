@@ -16,6 +16,9 @@
 namespace procam::internal {
 
 inline constexpr double kInfinity = std::numeric_limits<double>::infinity();
+// Step 1 (projector_images.h): an E within this of its upper bound, relative, is at the bound
+// (2^-10: one binary16 step, twice its rounding).
+inline constexpr double kFullDriveTolerance = 0x1p-10;
 
 // 8×8 Bayer matrix: thresholds (b + ½)/64 spread evenly over (0, 1).
 inline constexpr std::array<uint8_t, 64> kBayer = {

@@ -298,6 +298,36 @@ TEST(FramePlan, APlanKeepsItsFactorsWhileNewerPlansAreMade) {
     EXPECT_EQ(cv::norm(shaded[k].codes, expected[k].codes, cv::NORM_INF), 0.0) << k;
 }
 
+// An E within one binary16 step of its upper bound is at the bound: the emittance a display node
+// receives in half precision (rounded down by at most 2^-11 of itself) renders as the bound does.
+TEST(FramePlan, EmittanceWithinABinary16StepOfTheUpperBoundIsFullDrive) {
+  const ProjectionRig& rig = SmallRig().rig;
+  const RenderOptions options;
+  const FramePlanner planner(rig, options);
+  const Eigen::MatrixX3d at = rig.upper;
+  const Eigen::MatrixX3d rounded = rig.upper - std::ldexp(1.0, -11) * rig.upper.cwiseAbs();
+  const Eigen::MatrixX3d below = rig.upper - std::ldexp(1.0, -8) * rig.upper.cwiseAbs();
+  const FramePlan at_plan = planner.Plan(at), rounded_plan = planner.Plan(rounded),
+                  below_plan = planner.Plan(below);
+  int checked = 0;
+  for (int i = 0; i < rig.size(); ++i) {
+    if (!(rig.blended_area[i] > 0.0)) continue;
+    for (int c = 0; c < 3; ++c) {
+      if (!(rig.reflectance(i, c) > 0.0) || !(below(i, c) > rig.lower(i, c))) continue;
+      EXPECT_EQ(at_plan.level(i, c), internal::kInfinity) << i;
+      EXPECT_EQ(rounded_plan.level(i, c), internal::kInfinity) << i;
+      EXPECT_LT(below_plan.level(i, c), internal::kInfinity) << i;  // 2^-8 below: not at the bound
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 100);
+  const std::vector<ProjectorImage> at_images = ShadeProjectorImages(planner, at_plan, nullptr);
+  const std::vector<ProjectorImage> rounded_images =
+      ShadeProjectorImages(planner, rounded_plan, nullptr);
+  for (size_t k = 0; k < at_images.size(); ++k)
+    EXPECT_EQ(cv::norm(at_images[k].codes, rounded_images[k].codes, cv::NORM_INF), 0.0) << k;
+}
+
 TEST(FramePlan, WalkedCodesAreTheLookedUpOnes) {
   for (const int bits : {8, 10}) {
     Stage stage = MakeStage({});
