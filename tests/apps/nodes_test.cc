@@ -461,9 +461,9 @@ TEST(Nodes, ANodeWhoseNetworkTheKernelCutsIsReportedWithinASecondAndComesBack) {
                 " && break; sleep 0.1; done\nsleep 0.5\n"
                 "nft add table inet procam_cut\n"
                 "nft add chain inet procam_cut out \"{ type filter hook output priority 0; }\"\n"
+                "date +%s%N > " + (dir / "cut").string() + "\n"  // the cut starts with the rules
                 "nft add rule inet procam_cut out tcp dport " + port + " drop\n"
                 "nft add rule inet procam_cut out tcp sport " + port + " drop\n"
-                "date +%s%N > " + (dir / "cut").string() + "\n"
                 "sleep 2\nnft delete table inet procam_cut\n"
                 "wait $play\nstatus=$?\nkill %1 %2 %3 2>/dev/null\nwait\nexit $status\n");
   const testing::CommandRun run = testing::RunShell(
