@@ -157,19 +157,13 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
     warm = WarmStart{solution.radiosity_system, solution.emittance};
     // What a display node gets: the emittance through the protocol's frame (half precision).
     const auto render_start = Clock::now();
+    const std::string bytes = EncodeMessage(FrameMessage(frame, solution.emittance));
     Message message;
-    message.type = MessageType::kFrame;
-    message.emittance.resize(solution.emittance.size());
-    Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
-        message.emittance.data(), problem.size(), 3) = solution.emittance;
-    const std::string bytes = EncodeMessage(message);
     std::string why;
     if (!ParseMessage(bytes.data(), bytes.size(), &message, &why))
       throw std::logic_error("bench play: a frame the encoder made was refused: " + why);
     frame_bytes = bytes.size();
-    const Eigen::MatrixX3d carried =
-        Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
-            message.emittance.data(), problem.size(), 3);
+    const Eigen::MatrixX3d carried = FrameEmittance(message);
     const double framed = MsSince(render_start);
     const FramePlan plan = planner.Plan(carried);
     const double planned = MsSince(render_start) - framed;

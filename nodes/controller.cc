@@ -222,13 +222,7 @@ FrameReport Controller::Show(uint64_t frame, const Eigen::MatrixX3d& emittance) 
   report.frame = frame;
   Service();
   Pump(0);
-  Message message;
-  message.type = MessageType::kFrame;
-  message.sequence = frame;
-  message.emittance.resize(emittance.size());
-  Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
-      message.emittance.data(), emittance.rows(), 3) = emittance;
-  const std::string bytes = EncodeMessage(message);  // once, for every node
+  const std::string bytes = EncodeMessage(FrameMessage(frame, emittance));  // once, for every node
   const auto sent = Clock::now();
   // Only the nodes live now take part: one that rejoins while the frame is under way waits for
   // the next.

@@ -161,6 +161,23 @@ std::string EncodeMessage(const Message& message) {
   return bytes;
 }
 
+using RowMajorEmittance = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+
+Message FrameMessage(uint64_t frame, const Eigen::MatrixX3d& emittance) {
+  Message message;
+  message.type = MessageType::kFrame;
+  message.sequence = frame;
+  message.emittance.resize(emittance.size());
+  Eigen::Map<RowMajorEmittance>(message.emittance.data(), emittance.rows(), 3) = emittance;
+  return message;
+}
+
+Eigen::MatrixX3d FrameEmittance(const Message& frame) {
+  return Eigen::Map<const RowMajorEmittance>(frame.emittance.data(),
+                                             static_cast<Eigen::Index>(frame.emittance.size() / 3),
+                                             3);
+}
+
 bool ParseMessage(const void* data, size_t size, Message* message, std::string* why) {
   const auto* bytes = static_cast<const unsigned char*>(data);
   if (size < kMessageHeaderBytes) {

@@ -39,6 +39,7 @@
 // field against the message's length before reading it and refuses, with one line, anything
 // that is not exactly a message of this protocol. It never throws and never reads past `size`.
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -90,6 +91,11 @@ struct Message {
 // n ≤ kMaxFramePatches, is not finite or has a channel larger than kMaxFrameScale, or a JSON
 // payload is not an object or longer than kMaxTextBytes.
 std::string EncodeMessage(const Message& message);
+
+// A kFrame numbered `frame` carrying `emittance` (n,3), and a parsed kFrame's emittance as an
+// (n,3) matrix (n = emittance.size() / 3).
+Message FrameMessage(uint64_t frame, const Eigen::MatrixX3d& emittance);
+Eigen::MatrixX3d FrameEmittance(const Message& frame);
 
 // Parses one received message. False with `why` set (one line: what is wrong, at which offset)
 // for anything malformed: short, wrong magic or type (another protocol version named as such),

@@ -251,9 +251,7 @@ class Node {
                                                 message.emittance.size() / 3, n));
     }
     const auto start = Clock::now();
-    const Eigen::MatrixX3d emittance =
-        Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
-            message.emittance.data(), n, 3);
+    const Eigen::MatrixX3d emittance = FrameEmittance(message);
     const bool cpu_outputs =
         std::find(setup_->gpu.begin(), setup_->gpu.end(), false) != setup_->gpu.end();
     const long on_gpu = std::count(setup_->gpu.begin(), setup_->gpu.end(), true);

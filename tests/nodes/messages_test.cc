@@ -44,6 +44,11 @@ TEST(NodeMessages, EveryTypeRoundTrips) {
   EXPECT_EQ(back.sequence, frame.sequence);
   EXPECT_EQ(back.emittance, frame.emittance);
   EXPECT_EQ(EncodeMessage(back), bytes);  // canonical: a parsed frame encodes to the same bytes
+  // The same frame from and back to an (n,3) matrix, patch by patch.
+  Eigen::MatrixX3d matrix(2, 3);
+  matrix << 0.0, 1.125, -2.25, 3.0, 0.5625, 0.5625;
+  EXPECT_EQ(FrameMessage(frame.sequence, matrix).emittance, frame.emittance);
+  EXPECT_EQ(FrameEmittance(back), matrix);
 
   for (MessageType type : {MessageType::kPong, MessageType::kSetup, MessageType::kSetupDone,
                            MessageType::kReady, MessageType::kFailed, MessageType::kStop}) {
