@@ -214,10 +214,14 @@ struct PlaneSurface {
 };
 
 // Places each edge of a simplified ring where the sampled surface most likely ends. The outermost
-// points lie inside the true edge: a band of points along the edge, cut into bins of width w, has
-// about ρ·w points per unit depth in each bin (ρ: points per m²), so the first point of a bin lies
-// on average 1/(2ρw) inside the edge (half the depth spacing; exact for a lattice of samples, the
-// camera's pixels, at any orientation). The edge moves to the bins' mean first depth minus that.
+// points lie inside the true edge, by a gap that depends on how the samples are laid out along it:
+// half the depth spacing of a camera's lattice of pixels turned against the edge (1/(2ρw) for bins
+// of width w at density ρ), but half the spacing of its rows where they run along the edge (a
+// wall's vertical end seen at a grazing angle, its pixel columns far apart in depth), which can be
+// several times more. The gap is measured on the edge's own points: cut each bin at a depth t
+// beyond its first point, for t spread over several spacings, and take the mean distance from the
+// cut to the bin's next point, as from a true edge at an unknown place among the samples. The edge
+// moves to the bins' mean first depth minus that gap.
 // `uv`: the plane's points; counter-clockwise outer rings and clockwise holes alike have the
 // surface on their left.
 void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, Polygon2* ring) {
@@ -226,28 +230,43 @@ void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, P
   std::vector<double> shift(n, 0.0);
   for (int k = 0; k < n; ++k) corner[k] = Vec2((*ring)[k].x(), (*ring)[k].y());
   const double band = 6 * spacing, bin_width = 2 * spacing;
+  // The cuts: kCuts depths spread evenly over `reach` beyond each bin's first point.
+  constexpr int kCuts = 24;
+  const double reach = 4 * spacing, deep = 12 * spacing;
   for (int k = 0; k < n; ++k) {
     const Vec2 a = corner[k], b = corner[(k + 1) % n];
     const double length = (b - a).norm();
     outward[k] = Vec2((b - a).y(), -(b - a).x()) / std::max(length, 1e-12);
     if (length < 2 * bin_width) continue;
     const int bins = static_cast<int>(length / bin_width);
-    std::vector<double> first(bins, 1e300);
+    std::vector<std::vector<double>> depths(bins);
     for (const Point2& point : uv) {
       const Vec2 p(point.x(), point.y());
       const double along = (p - a).dot(b - a) / length;
       const double depth = -(p - a).dot(outward[k]);
-      if (along < 0 || along >= length || depth < -band || depth > band) continue;
-      const int bin = std::min(bins - 1, static_cast<int>(along / length * bins));
-      first[bin] = std::min(first[bin], depth);
+      if (along < 0 || along >= length || depth < -band || depth > deep) continue;
+      depths[std::min(bins - 1, static_cast<int>(along / length * bins))].push_back(depth);
     }
     double sum = 0;
     int filled = 0;
-    for (double depth : first)
-      if (depth < 1e300) sum += depth, ++filled;
+    for (std::vector<double>& bin : depths) {
+      std::sort(bin.begin(), bin.end());
+      if (!bin.empty() && bin.front() <= band) sum += bin.front(), ++filled;
+    }
     if (filled < std::max(2, bins / 2)) continue;  // not an edge of this point set
-    const double true_width = length / bins;
-    const double edge_depth = sum / filled - 1.0 / (2 * density * true_width);
+    double gap_sum = 0;
+    int gaps = 0;
+    for (const std::vector<double>& bin : depths) {
+      if (bin.empty() || bin.front() > band) continue;
+      for (int c = 0; c < kCuts; ++c) {
+        const double cut = bin.front() + (c + 0.5) / kCuts * reach;
+        const auto next = std::upper_bound(bin.begin(), bin.end(), cut);
+        if (next != bin.end()) gap_sum += *next - cut, ++gaps;
+      }
+    }
+    // Without a next point anywhere (a strip narrower than the cuts reach), the turned lattice's.
+    const double gap = gaps > 0 ? gap_sum / gaps : 1.0 / (2 * density * (length / bins));
+    const double edge_depth = sum / filled - gap;
     // Never inwards: the simplified edge runs through boundary points already, and where it
     // bridges a notch its bins' first points lie deep inside.
     shift[k] = std::clamp(-edge_depth, 0.0, band / 2);
