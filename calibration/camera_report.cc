@@ -203,10 +203,18 @@ std::vector<std::filesystem::path> WriteProjectorsReport(const std::filesystem::
   ProjectorMaps maps;
   maps.title = "procam: projectors from the scan";
   maps.brief_report = summary.BriefReport();
-  maps.what =
+  const bool with_lens = !summary.projectors.empty() &&
+                         summary.projectors.front().uncertainty_includes_camera_lens;
+  maps.what = std::string(
       "1-σ worst-direction error of where each projector shows a point fixed relative to the "
-      "camera, at the median distance of its points, from decoding noise alone (the "
-      "self-calibration's covariance: σ² (JᵀJ, the depths eliminated)⁻¹). One colour scale for "
+      "camera, at the median distance of its points, ") +
+      (with_lens ? "from decoding noise and the camera lens's own uncertainty (the "
+                   "self-calibration's covariance, σ² (JᵀJ, the depths eliminated)⁻¹, plus how the "
+                   "projectors move with the lens within the chessboard's covariance). "
+                 : "from decoding noise alone (the self-calibration's covariance: σ² (JᵀJ, the "
+                   "depths eliminated)⁻¹; no chessboard covariance of the camera's lens was "
+                   "given). ") +
+      "One colour scale for "
       "all: 0 px (dark blue) to {:g} px (yellow); white dots: the projector pixels decoded. Where "
       "it is large, few decoded points pin the projector's lens: light more of the room the "
       "camera sees with that part of the image.";

@@ -140,24 +140,39 @@ RoomCalibrationProblem ReadProblem(const ProjectorsStageOptions& args, const Cam
 ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const CameraModel& camera,
                                  const RoomCalibrationProblem& problem);
 
-// Scanning with --refine-camera: the lens and its covariance as `calibrate camera` recorded them
-// in RIG_DIR/result.json ("camera": intrinsics, intrinsics_covariance), the chessboard's even
-// where camera.cameramodel already holds an earlier scan's refined lens, so that running the scan
-// again starts from the same place. Throws IoError naming result.json without them (a camera
-// model given with --camera-model has no chessboard solve).
-void ChessboardLensPrior(const std::filesystem::path& rig_dir, const CameraModel& camera,
-                         RoomCalibrationProblem* problem, const ProgressCallback& progress) {
+// Scanning: the lens and its covariance as `calibrate camera` recorded them in RIG_DIR/result.json
+// ("camera": intrinsics, intrinsics_covariance), the chessboard's even where camera.cameramodel
+// already holds an earlier scan's refined lens, so that running the scan again starts from the
+// same place. With --refine-camera (`required`) they are the lens's start and prior, and IoError
+// names result.json without them (a camera model given with --camera-model has no chessboard
+// solve); without it only the covariance is used, folded into the projectors' uncertainty, and
+// its absence is reported, not an error. Returns whether they were read.
+bool ChessboardLensPrior(const std::filesystem::path& rig_dir, const CameraModel& camera,
+                         bool required, RoomCalibrationProblem* problem,
+                         const ProgressCallback& progress) {
   const std::string file = (rig_dir / "result.json").string();
   const nlohmann::json camera_result =
       ReadRigResult(rig_dir).value("camera", nlohmann::json::object());
   const size_t n = camera.intrinsics.size();
-  if (!camera_result.contains("intrinsics_covariance"))
+  if (!camera_result.contains("intrinsics_covariance")) {
+    if (!required) {
+      Report(progress, "camera lens: no chessboard covariance in " + file +
+                           "; the projectors' uncertainty leaves the lens's out");
+      return false;
+    }
     throw IoError(file +
                   ": camera.intrinsics_covariance: missing: --refine-camera while scanning needs "
                   "the chessboard's lens covariance (run `procam calibrate camera` into this rig "
                   "directory)");
-  if (camera_result.value("lens_model", "") != camera.lens_model)
+  }
+  if (camera_result.value("lens_model", "") != camera.lens_model) {
+    if (!required) {
+      Report(progress, "camera lens: " + file + " holds another lens model's covariance; the "
+                           "projectors' uncertainty leaves the lens's out");
+      return false;
+    }
     throw IoError(file + ": camera.lens_model: not camera.cameramodel's " + camera.lens_model);
+  }
   try {
     const auto intrinsics = camera_result.at("intrinsics").get<std::vector<double>>();
     const auto rows =
@@ -174,7 +189,10 @@ void ChessboardLensPrior(const std::filesystem::path& rig_dir, const CameraModel
   } catch (const std::exception& error) {
     throw IoError(file + ": camera.intrinsics_covariance: " + error.what());
   }
-  Report(progress, "camera lens: the chessboard's, refined by the scan with it as the prior");
+  Report(progress, required ? "camera lens: the chessboard's, refined by the scan with it as the prior"
+                            : "camera lens: held; its chessboard covariance goes into the "
+                              "projectors' uncertainty");
+  return true;
 }
 
 }  // namespace
@@ -210,15 +228,12 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
       throw std::invalid_argument(
           "--refine-camera-aspect: only with --scene (a scan refines the whole lens)");
     RoomCalibrationProblem prior;  // checked before the sessions are decoded
-    if (args.options.refine_camera_intrinsics) {
-      args.self_calibration.refine_camera_lens = true;
-      ChessboardLensPrior(out, camera, &prior, args.progress);
-    }
+    const bool refine = args.options.refine_camera_intrinsics;
+    args.self_calibration.refine_camera_lens = refine;
+    const bool have_prior = ChessboardLensPrior(out, camera, refine, &prior, args.progress);
     RoomCalibrationProblem problem = ReadProblem(args, camera, camera_path);
-    if (args.options.refine_camera_intrinsics) {
-      problem.camera_intrinsics = prior.camera_intrinsics;
-      problem.camera_intrinsics_covariance = prior.camera_intrinsics_covariance;
-    }
+    if (refine) problem.camera_intrinsics = prior.camera_intrinsics;
+    if (have_prior) problem.camera_intrinsics_covariance = prior.camera_intrinsics_covariance;
     return ScanRoom(args, camera, problem);
   }
 
@@ -329,10 +344,17 @@ nlohmann::json UncertaintyJson(const ProjectionUncertaintyMap& map, double dista
   return json;
 }
 nlohmann::json UncertaintyJson(const SelfCalibrationProjectorSummary& p) {
-  return UncertaintyJson(p.uncertainty, p.uncertainty_distance_m,
-                         "1-sigma worst-direction error of where the projector shows a point fixed "
-                         "relative to the camera at distance_m, px (the self-calibration's "
-                         "covariance)");
+  nlohmann::json json = UncertaintyJson(
+      p.uncertainty, p.uncertainty_distance_m,
+      p.uncertainty_includes_camera_lens
+          ? "1-sigma worst-direction error of where the projector shows a point fixed relative to "
+            "the camera at distance_m, px (the self-calibration's covariance with the camera "
+            "lens's chessboard covariance folded in)"
+          : "1-sigma worst-direction error of where the projector shows a point fixed relative to "
+            "the camera at distance_m, px (the self-calibration's covariance, decoding noise "
+            "only)");
+  if (!json.is_null()) json["includes_camera_lens"] = p.uncertainty_includes_camera_lens;
+  return json;
 }
 nlohmann::json UncertaintyJson(const RoomProjectorSummary& p) {
   return UncertaintyJson(p.uncertainty, p.uncertainty_distance_m,

@@ -112,7 +112,8 @@ struct RoomCalibrationProblem {
   std::vector<double> camera_intrinsics;
   // The lens's covariance from the chessboard (ProjectionUncertainty::IntrinsicsCovariance),
   // intrinsics × intrinsics, or empty: the prior with which SelfCalibrateRoom refines the lens
-  // (SelfCalibrationOptions::refine_camera_lens). CalibrateRoom does not use it.
+  // (SelfCalibrationOptions::refine_camera_lens), and the lens's uncertainty it folds into the
+  // projectors' (SelfCalibrationProjectorSummary::uncertainty). CalibrateRoom does not use it.
   Eigen::MatrixXd camera_intrinsics_covariance;
   std::vector<ProjectorObservations> projectors;
 };

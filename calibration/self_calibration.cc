@@ -630,8 +630,16 @@ Eigen::MatrixXd FreeColumns(const Eigen::Matrix<double, 2, 4, Eigen::RowMajor>& 
 
 // Step 4b: each projector's projection uncertainty (header: uncertainty), in the solve's
 // units (uncertainty_distance_m is scaled to metres by the caller).
+// With the chessboard's covariance Σc of the camera's lens (the problem's
+// camera_intrinsics_covariance), the lens's own uncertainty is folded in. Held fixed, the lens
+// moves the projectors by −S⁻¹B Δc (S the reduced JᵀJ of the projectors' parameters, B their
+// reduced cross term with the lens), adding S⁻¹BΣcBᵀS⁻¹; refined with Σc as its prior (`refined`),
+// the projectors' covariance is the marginal of the joint one, σ²(S − B(C + σ²Σc⁻¹)⁻¹Bᵀ)⁻¹,
+// C the lens's reduced JᵀJ.
 void ProjectorUncertainties(const SelfCalibrationOptions& options,
-                            const RoomCalibrationProblem& problem, const std::vector<Track>& tracks,
+                            const RoomCalibrationProblem& problem,
+                            const std::vector<double>& camera_intrinsics, bool refined,
+                            const std::vector<Track>& tracks,
                             const std::vector<ProjectorState>& projectors, int gauge,
                             std::vector<SelfCalibrationProjectorSummary>* summaries) {
   const int n = static_cast<int>(projectors.size());
@@ -641,10 +649,20 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
     free[k] = FreeParameters(options, projectors[k]);
     offset[k + 1] = offset[k] + static_cast<int>(free[k].size());
   }
+  // The camera's lens as the free-lens residual takes it (kCameraBlock, zero distortion for a
+  // pinhole), and its covariance where the problem has one of the right size.
+  const int lens_parameters = static_cast<int>(camera_intrinsics.size());
+  const Eigen::MatrixXd& lens_covariance = problem.camera_intrinsics_covariance;
+  const bool with_lens = lens_covariance.rows() == lens_parameters &&
+                         lens_covariance.cols() == lens_parameters && lens_parameters <= kCameraBlock &&
+                         lens_covariance.allFinite();
+  double lens[kCameraBlock] = {0, 0, 0, 0, 0, 0, 0, 0};
+  std::copy(camera_intrinsics.begin(), camera_intrinsics.end(), lens);
   struct Entry {
     int k;
     Eigen::MatrixXd jp;  // 2 × free[k].size()
     Vec2 jd;
+    Eigen::Matrix<double, 2, kCameraBlock> jc;  // the first lens_parameters columns are the lens's
   };
   std::vector<std::vector<Entry>> by_track(tracks.size());
   double squared = 0.0;
@@ -655,36 +673,48 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
       const Observation& o = p.observations[i];
       const Track& track = tracks[o.track];
       if (track.depth <= 0.0 || !p.inlier[i]) continue;
-      const ceres::AutoDiffCostFunction<DepthReprojection, 2, 4, 3, 3, 1> cost(
-          new DepthReprojection(track.ray, o.projector_pixel, options.square_pixels));
-      const double* parameters[] = {p.intrinsics, p.rotation, p.translation, &track.depth};
+      const ceres::AutoDiffCostFunction<DepthReprojectionFreeLens, 2, kCameraBlock, 4, 3, 3, 1> cost(
+          new DepthReprojectionFreeLens(track.camera_pixel, track.ray, o.projector_pixel,
+                                        options.square_pixels));
+      const double* parameters[] = {lens, p.intrinsics, p.rotation, p.translation, &track.depth};
+      Eigen::Matrix<double, 2, kCameraBlock, Eigen::RowMajor> j_lens;
       Eigen::Matrix<double, 2, 4, Eigen::RowMajor> j_intrinsics;
       Eigen::Matrix<double, 2, 3, Eigen::RowMajor> j_rotation, j_translation;
       Vec2 residual, j_depth;
-      double* jacobians[] = {j_intrinsics.data(), j_rotation.data(), j_translation.data(),
-                             j_depth.data()};
+      double* jacobians[] = {j_lens.data(), j_intrinsics.data(), j_rotation.data(),
+                             j_translation.data(), j_depth.data()};
       if (!cost.Evaluate(parameters, residual.data(), jacobians)) continue;
       by_track[o.track].push_back(
-          {k, FreeColumns(j_intrinsics, j_rotation, j_translation, free[k]), j_depth});
+          {k, FreeColumns(j_intrinsics, j_rotation, j_translation, free[k]), j_depth, j_lens});
       squared += residual.squaredNorm();
       residuals += 2;
     }
   }
-  // JᵀJ with the depths eliminated (each depth couples only its own observations).
+  // JᵀJ with the depths eliminated (each depth couples only its own observations): the
+  // projectors' block S, their cross term with the lens B and the lens's own C.
   Eigen::MatrixXd schur = Eigen::MatrixXd::Zero(offset[n], offset[n]);
+  Eigen::MatrixXd cross = Eigen::MatrixXd::Zero(offset[n], lens_parameters);
+  Eigen::MatrixXd lens_block = Eigen::MatrixXd::Zero(lens_parameters, lens_parameters);
   int depths = 0;
   for (size_t t = 0; t < tracks.size(); ++t) {
     const std::vector<Entry>& entries = by_track[t];
     if (entries.empty()) continue;
     double dd = 0.0;
+    Eigen::RowVectorXd dc = Eigen::RowVectorXd::Zero(lens_parameters);  // Σ jdᵀ jc
     for (const Entry& e : entries) {
+      const auto jc = e.jc.leftCols(lens_parameters);
       schur.block(offset[e.k], offset[e.k], e.jp.cols(), e.jp.cols()) += e.jp.transpose() * e.jp;
+      cross.middleRows(offset[e.k], e.jp.cols()) += e.jp.transpose() * jc;
+      lens_block += jc.transpose() * jc;
       dd += e.jd.squaredNorm();
+      dc += e.jd.transpose() * jc;
     }
     if (static_cast<int>(t) == gauge || !(dd > 0.0)) continue;  // the gauge's depth is held
     ++depths;
+    lens_block -= dc.transpose() * dc / dd;
     for (const Entry& e : entries) {
       const Eigen::VectorXd b_e = e.jp.transpose() * e.jd;
+      cross.middleRows(offset[e.k], e.jp.cols()) -= b_e * dc / dd;
       for (const Entry& f : entries) {
         schur.block(offset[e.k], offset[f.k], e.jp.cols(), f.jp.cols()) -=
             b_e * (f.jp.transpose() * f.jd).transpose() / dd;
@@ -693,11 +723,23 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
   }
   const int dof = residuals - offset[n] - depths;
   if (dof <= 0) return;
+  const double variance = squared / dof;
+  if (with_lens && refined) {
+    // The lens's information: the data's C/σ² and the prior's Σc⁻¹; marginalised out of S.
+    const Eigen::MatrixXd lens_information =
+        lens_block + variance * lens_covariance.inverse();
+    schur -= cross * lens_information.ldlt().solve(cross.transpose());
+  }
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(schur);
   if (eigen.info() != Eigen::Success || !(eigen.eigenvalues().minCoeff() > 0.0)) return;
-  const Eigen::MatrixXd covariance = (squared / dof) * eigen.eigenvectors() *
-                                     eigen.eigenvalues().cwiseInverse().asDiagonal() *
-                                     eigen.eigenvectors().transpose();
+  const Eigen::MatrixXd schur_inverse = eigen.eigenvectors() *
+                                        eigen.eigenvalues().cwiseInverse().asDiagonal() *
+                                        eigen.eigenvectors().transpose();
+  Eigen::MatrixXd covariance = variance * schur_inverse;
+  if (with_lens && !refined) {
+    const Eigen::MatrixXd moved = schur_inverse * cross;  // −∂(projectors)/∂(lens)
+    covariance += moved * lens_covariance * moved.transpose();
+  }
   for (int k = 0; k < n; ++k) {
     const ProjectorState& p = projectors[k];
     Eigen::Matrix3d rotation;
@@ -733,6 +775,7 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
       return std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(var).eigenvalues()[1]);
     };
     SelfCalibrationProjectorSummary& summary = (*summaries)[k];
+    summary.uncertainty_includes_camera_lens = with_lens;
     summary.uncertainty_distance_m = distance;  // solve units until the scale is known
     summary.uncertainty = MapProjectionUncertainty(worst, std::sqrt(squared / dof),
                                                    problem.projectors[k].width,
@@ -1098,17 +1141,19 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
   // σ_decoding: the robust pass's inlier residuals, all projectors pooled.
   const double noise_px = PooledInlierRms(options, tracks, projectors);
   CameraLensBlock lens;
-  if (refine_lens) {
-    const Eigen::MatrixXd& covariance = problem.camera_intrinsics_covariance;
+  const Eigen::MatrixXd& covariance = problem.camera_intrinsics_covariance;
+  if (covariance.size() != 0) {
     if (covariance.rows() != lens_parameters || covariance.cols() != lens_parameters)
       throw std::invalid_argument("self-calibration: camera_intrinsics_covariance is " +
                                   std::to_string(covariance.rows()) + "x" +
                                   std::to_string(covariance.cols()) + " for " +
                                   std::to_string(lens_parameters) + " intrinsics");
-    const Eigen::LLT<Eigen::MatrixXd> factor(covariance);
-    if (factor.info() != Eigen::Success || !covariance.allFinite())
+    if (!covariance.allFinite() || Eigen::LLT<Eigen::MatrixXd>(covariance).info() != Eigen::Success)
       throw std::invalid_argument(
           "self-calibration: camera_intrinsics_covariance is not positive definite");
+  }
+  if (refine_lens) {
+    const Eigen::LLT<Eigen::MatrixXd> factor(covariance);
     // Σ = L Lᵀ, so Σ⁻¹ = AᵀA with A = L⁻¹.
     lens.sqrt_information = factor.matrixL().solve(
         Eigen::MatrixXd::Identity(lens_parameters, lens_parameters));
@@ -1163,7 +1208,8 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
   if (const int k = gather(); k >= 0)
     return finish(SelfCalibrationSummary::kSolverFailed,
                   projector_name(k) + "the bundle adjustment left a non-finite residual");
-  ProjectorUncertainties(options, problem, tracks, projectors, gauge, &summary->projectors);
+  ProjectorUncertainties(options, problem, camera_intrinsics, refine_lens, tracks, projectors,
+                         gauge, &summary->projectors);
 
   std::vector<double> depths;
   for (const Vec3& p : cloud) depths.push_back(p.z());

@@ -176,8 +176,14 @@ struct SelfCalibrationProjectorSummary {
   // adjustment's) does not count. Covariance of the projector's free parameters: σ² (Schur
   // complement of JᵀJ on the points' depths)⁻¹, σ² the inliers' residual variance (the map's
   // observed_pixel_sigma is σ). An empty grid when not computed (a singular system).
+  // With the problem's camera_intrinsics_covariance (the chessboard's), the camera lens's own
+  // uncertainty is folded in (uncertainty_includes_camera_lens): held fixed, the projectors move
+  // with the lens by −S⁻¹B (B the reduced cross term of their parameters with the lens's),
+  // adding S⁻¹BΣcBᵀS⁻¹; refined (refine_camera_lens), the marginal of the joint covariance with
+  // Σc as the lens's prior.
   double uncertainty_distance_m = 0.0;  // the median distance of its points from the projector
   ProjectionUncertaintyMap uncertainty;
+  bool uncertainty_includes_camera_lens = false;
 };
 
 struct SelfCalibrationSummary {
