@@ -671,22 +671,23 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
           args.floor_chessboard.string(), angle, args.max_board_floor_angle_deg));
   }
 
-  // The room: every correspondence triangulated (rays more than 2 cm apart left out), in the
-  // room frame, at most 400 000 points.
-  std::vector<Vec3> points;
+  // The room: every correspondence triangulated (rays more than 2 cm apart left out), one point
+  // per camera pixel (FusePerCameraPixel), in the room frame, at most 400 000 points.
+  const std::vector<TriangulatedPoint> triangulated = Triangulate(problem, stage.calibration, 0.02);
   std::vector<double> gaps;
-  for (const TriangulatedPoint& p : Triangulate(problem, stage.calibration, 0.02)) {
+  for (const TriangulatedPoint& p : triangulated) gaps.push_back(p.gap);
+  std::vector<Vec3> points;
+  for (const TriangulatedPoint& p : FusePerCameraPixel(triangulated))
     points.push_back(stage.calibration.room_from_camera * p.p_in_cam);
-    gaps.push_back(p.gap);
-  }
   const DistanceStats gap = ComputeDistanceStats(gaps);
   const size_t stride = std::max<size_t>(1, (points.size() + 399999) / 400000);
   std::vector<Vec3> thinned;
   for (size_t i = 0; i < points.size(); i += stride) thinned.push_back(points[i]);
   Report(args.progress,
-         fmt::format("triangulated {} points (ray gap median {:.2f} mm, 95% {:.2f} mm); the room "
-                     "from {} of them",
-                     points.size(), gap.median_mm, gap.p95_mm, thinned.size()));
+         fmt::format("triangulated {} correspondences (ray gap median {:.2f} mm, 95% {:.2f} mm) "
+                     "into {} camera pixels; the room from {} of them",
+                     triangulated.size(), gap.median_mm, gap.p95_mm, points.size(),
+                     thinned.size()));
   SceneFromPointsOptions scan = args.scan;
   scan.viewpoint = stage.calibration.room_from_camera.translation();
   // Curved parts are meshed at SceneFromPoints' fine spacing and then coarsened within its

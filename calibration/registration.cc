@@ -864,10 +864,53 @@ std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem
       point.p_in_cam = 0.5 * (on_camera_ray + on_projector_ray);
       point.gap = (on_camera_ray - on_projector_ray).norm();
       point.projector = static_cast<int>(k);
+      point.camera_pixel = p.camera_pixels[i];
+      point.on_camera_ray = on_camera_ray;
       if (point.gap <= max_gap && point.p_in_cam.allFinite()) points.push_back(point);
     }
   }
   return points;
+}
+
+std::vector<TriangulatedPoint> FusePerCameraPixel(const std::vector<TriangulatedPoint>& points,
+                                                  double max_spread) {
+  // Grouped by pixel: indices sorted by pixel, row-major.
+  std::vector<int> order(points.size());
+  std::iota(order.begin(), order.end(), 0);
+  const auto before = [&](int a, int b) {
+    const Vec2& p = points[a].camera_pixel;
+    const Vec2& q = points[b].camera_pixel;
+    return p.y() < q.y() || (p.y() == q.y() && p.x() < q.x());
+  };
+  std::stable_sort(order.begin(), order.end(), before);
+  std::vector<TriangulatedPoint> fused;
+  std::vector<double> depths, sorted;
+  for (size_t begin = 0; begin < order.size();) {
+    size_t end = begin + 1;
+    while (end < order.size() && points[order[end]].camera_pixel == points[order[begin]].camera_pixel)
+      ++end;
+    depths.clear();
+    for (size_t i = begin; i < end; ++i) depths.push_back(points[order[i]].on_camera_ray.norm());
+    sorted = depths;
+    std::sort(sorted.begin(), sorted.end());
+    const size_t n = sorted.size();
+    const double median = n % 2 == 1 ? sorted[n / 2] : 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]);
+    TriangulatedPoint out;
+    out.camera_pixel = points[order[begin]].camera_pixel;
+    for (size_t i = begin; i < end; ++i) {
+      if (std::abs(depths[i - begin] - median) > max_spread) continue;
+      out.on_camera_ray += points[order[i]].on_camera_ray;
+      out.gap = std::max(out.gap, points[order[i]].gap);
+      ++out.projector;
+    }
+    if (out.projector > 0) {
+      out.on_camera_ray /= out.projector;
+      out.p_in_cam = out.on_camera_ray;
+      fused.push_back(out);
+    }
+    begin = end;
+  }
+  return fused;
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -218,6 +218,8 @@ struct TriangulatedPoint {
   Vec3 p_in_cam = Vec3::Zero();
   double gap = 0.0;  // distance between the camera ray and the projector ray, metres
   int projector = 0;
+  Vec2 camera_pixel = Vec2::Zero();
+  Vec3 on_camera_ray = Vec3::Zero();  // the camera ray's point closest to the projector's ray
 };
 
 // Triangulates every correspondence of `problem` by the midpoint of the camera ray and the ray
@@ -228,6 +230,17 @@ struct TriangulatedPoint {
 std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem,
                                            const RoomCalibration& calibration,
                                            double max_gap = 0.05);
+
+// One point per camera pixel, as a scan of the room wants it (SceneFromPoints takes its points'
+// spacing for the camera's pixel lattice): where several projectors light a pixel, their
+// triangulations' points on the camera ray (on_camera_ray) within `max_spread` metres of their
+// median depth are averaged into p_in_cam, on the ray; a pixel none of whose points lies that
+// close is left out. `projector` is the number of points averaged, `gap` their largest.
+// Triangulate's points of one projector are one per pixel already; two projectors' points of one
+// pixel, side by side in the cloud, double its density where both light the room and make its
+// spacing look smaller than the pixels' is.
+std::vector<TriangulatedPoint> FusePerCameraPixel(const std::vector<TriangulatedPoint>& points,
+                                                  double max_spread = 0.01);
 
 // Distances of points to the model, in millimetres.
 struct DistanceStats {

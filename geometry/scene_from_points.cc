@@ -247,11 +247,22 @@ void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, P
       if (along < 0 || along >= length || depth < -band || depth > deep) continue;
       depths[std::min(bins - 1, static_cast<int>(along / length * bins))].push_back(depth);
     }
+    // Each bin's reference: its second point from the edge (its only one if it has one). The
+    // outermost of several noisy points lies beyond their mean by about their noise (a
+    // triangulated point's noise runs along the camera's ray, nearly in the plane at a grazing
+    // view), which put edges of triangulated scans centimetres beyond the truth; the second is
+    // much less so. The cuts below are measured from it too, and their gap to the first point
+    // after them: on a noise-free lattice the edge then lies a fraction of the spacing along the
+    // edge inside (areas 0.3-1.2% small on the point-cloud tests, 2.7% on tiny_box's walls at
+    // 74°), a bias kept on purpose, as beyond the truth is where a scan is wrong in the room.
+    const auto reference = [](const std::vector<double>& bin) {
+      return bin.size() > 1 ? bin[1] : bin.front();
+    };
     double sum = 0;
     int filled = 0;
     for (std::vector<double>& bin : depths) {
       std::sort(bin.begin(), bin.end());
-      if (!bin.empty() && bin.front() <= band) sum += bin.front(), ++filled;
+      if (!bin.empty() && bin.front() <= band) sum += reference(bin), ++filled;
     }
     if (filled < std::max(2, bins / 2)) continue;  // not an edge of this point set
     double gap_sum = 0;
@@ -259,7 +270,7 @@ void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, P
     for (const std::vector<double>& bin : depths) {
       if (bin.empty() || bin.front() > band) continue;
       for (int c = 0; c < kCuts; ++c) {
-        const double cut = bin.front() + (c + 0.5) / kCuts * reach;
+        const double cut = reference(bin) + (c + 0.5) / kCuts * reach;
         const auto next = std::upper_bound(bin.begin(), bin.end(), cut);
         if (next != bin.end()) gap_sum += *next - cut, ++gaps;
       }

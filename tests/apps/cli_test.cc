@@ -173,6 +173,14 @@ TEST(Cli, DemoOnTheSyntheticRigWritesAReportThatRendersInChromium) {
   for (const nlohmann::json& surface : result["scan"]["surfaces"])
     lies_on.insert(surface["true_surface"].get<std::string>());
   EXPECT_EQ(lies_on.size(), 4u);  // the tiny box's floor and three walls
+  // The scan's camera lens came from its chessboard photos: each projector's uncertainty folds in
+  // the lens's covariance.
+  const nlohmann::json scan_result = nlohmann::json::parse(ReadFile(dir / "demo" / "rig_scan" / "result.json"));
+  const nlohmann::json& scanned_projectors =
+      scan_result["projectors"]["registration"]["self_calibration"]["projectors"];
+  EXPECT_EQ(scanned_projectors.size(), 2u);
+  for (const nlohmann::json& p : scanned_projectors)
+    EXPECT_TRUE(p["projection_uncertainty"]["includes_camera_lens"].get<bool>()) << p.dump();
   // Headless Chromium (Debian's, installed by scripts/packages.txt), no network: the page's
   // own script marks data-ready="yes" once every embedded picture has decoded.
   const std::string chromium = std::filesystem::exists("/usr/bin/chromium") ? "/usr/bin/chromium" : "chromium";

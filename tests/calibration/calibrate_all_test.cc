@@ -167,6 +167,8 @@ TEST(CalibrateAll, ScansTheRoomWithoutAModel) {
   ASSERT_EQ(run.exit_code, 0) << run.output;
   EXPECT_NE(run.output.find("$ procam calibrate projectors"), std::string::npos);
   EXPECT_NE(run.output.find("--floor-chessboard"), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("the projectors' uncertainty leaves the lens's out"), std::string::npos)
+      << run.output;
   ASSERT_TRUE(std::filesystem::exists(dir / "rig/room.json"));
   const Scene room = LoadScene(dir / "rig/room.json");
 
@@ -254,6 +256,8 @@ TEST(CalibrateAll, ScansTheRoomWithoutAModel) {
   for (const nlohmann::json& p : result["projectors"]["registration"]["self_calibration"]["projectors"]) {
     const nlohmann::json& u = p["projection_uncertainty"];
     ASSERT_TRUE(u.is_object()) << p.dump();
+    // The lens came with --camera-model: no chessboard covariance to fold in, and the run says so.
+    EXPECT_FALSE(u["includes_camera_lens"].get<bool>());
     ASSERT_EQ(u["grid_px"].size(), 12u);
     ASSERT_EQ(u["grid_px"][0].size(), 16u);
     EXPECT_DOUBLE_EQ(u["grid_px"][0][0].get<double>(), u["corners_px"]["top_left"].get<double>());

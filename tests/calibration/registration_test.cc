@@ -232,6 +232,34 @@ TEST(RoomModel, RaysAndClosestPoints) {
   EXPECT_LT((nearest - Vec3(0.5, 1.0, 1.0)).norm(), 1e-12);
 }
 
+// One point per camera pixel: a pixel's points within max_spread of their median depth averaged
+// on the camera ray, one far off left out; two far apart leave the pixel out; one alone stays.
+TEST(FusePerCameraPixel, AveragesAgreeingProjectorsOnTheCameraRay) {
+  const Vec3 ray = Vec3(0.1, -0.2, 1.0).normalized();
+  const auto point = [&](double x, double y, double depth, double gap) {
+    TriangulatedPoint p;
+    p.camera_pixel = Vec2(x, y);
+    p.on_camera_ray = depth * ray;
+    p.p_in_cam = p.on_camera_ray + Vec3(0.5 * gap, 0, 0);  // the midpoint, off the ray
+    p.gap = gap;
+    return p;
+  };
+  const std::vector<TriangulatedPoint> points = {
+      point(3, 1, 2.000, 0.001), point(7, 0, 4.0, 0.002), point(3, 1, 2.004, 0.003),
+      point(5, 5, 1.0, 0.001),   point(3, 1, 2.5, 0.001),  point(5, 5, 1.5, 0.001)};
+  const std::vector<TriangulatedPoint> fused = FusePerCameraPixel(points, 0.01);
+  ASSERT_EQ(fused.size(), 2u);  // (5, 5): 1.0 and 1.5 m, neither within 1 cm of their median
+  // Row-major: (7, 0) first, then (3, 1).
+  EXPECT_EQ(fused[0].camera_pixel, Vec2(7, 0));
+  EXPECT_EQ(fused[0].projector, 1);
+  EXPECT_NEAR((fused[0].p_in_cam - 4.0 * ray).norm(), 0.0, 1e-12);
+  EXPECT_EQ(fused[1].camera_pixel, Vec2(3, 1));
+  EXPECT_EQ(fused[1].projector, 2);  // 2.5 m is 0.496 m from the median 2.004
+  EXPECT_NEAR((fused[1].p_in_cam - 2.002 * ray).norm(), 0.0, 1e-12);
+  EXPECT_DOUBLE_EQ(fused[1].gap, 0.003);
+  EXPECT_TRUE(FusePerCameraPixel({}).empty());
+}
+
 TEST(CameraModel, WriteReadRoundTrip) {
   testing::TempDir dir;
   CameraModel model;

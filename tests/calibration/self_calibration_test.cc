@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <memory>
 #include <random>
 
@@ -474,12 +475,22 @@ TEST(SelfCalibrateRoom, TheFloorIsHeldToAGivenNormal) {
 // camera's pose (the frame the rig uses, not a fit): every true surface the scan can see found,
 // each planar surface within the 5 mm RMS, its area against the area the camera sees and a
 // projector lights (SeenAndLitArea), nothing spurious above 1% of the room's area.
-// Measured (2026-11-27): green_trapezoid 3.4–4.8 mm, areas −0.27 to +0.26%; l_shaped 2.5–2.6 mm,
-// −0.42 to −0.27% (floors seen at 65–67° included).
-void ExpectScanMeetsAims(const std::string& name) {
+// The points: one per camera pixel (FusePerCameraPixel), as the scan makes them.
+// Measured (2026-11-27): green_trapezoid 3.3–4.6 mm, areas −0.16 to +0.21%; l_shaped 2.1–3.7 mm,
+// −0.45 to −0.10%; interior_partitions 1.5–3.0 mm, −0.75 to +0.12% (floors seen at 65–70°
+// included; before the points were one per pixel, its floor came out in two pieces, −3.3%).
+// `decoded`: the correspondences decoded from simulated captures (DecodedObservations: the rig
+// photographs the structured light, bounces, camera noise and distortion included) instead.
+// `area_bounds`: true surfaces held to another area bound than the aim's 1%, percent (a known
+// limit, named where it is used).
+void ExpectScanMeetsAims(const std::string& name, bool decoded = false,
+                         const std::map<std::string, double>& area_bounds = {}) {
   constexpr double kRmsMm = 5.0, kAreaPercent = 1.0;  // the aims for planar surfaces
   const std::unique_ptr<SimulatedRig> rig = MakeRig(name, 0.5);
   RoomCalibrationProblem problem = MakeProblem(*rig, 1);
+  if (decoded)
+    for (int k = 0; k < static_cast<int>(problem.projectors.size()); ++k)
+      problem.projectors[k] = DecodedObservations(*rig, k);
   problem.camera_intrinsics = OffByItsUncertainty(rig->camera()).intrinsics;
   SelfCalibrationOptions options;
   options.camera_height = CameraHeight(*rig);
@@ -491,7 +502,7 @@ void ExpectScanMeetsAims(const std::string& name) {
       << summary.BriefReport();
   ASSERT_TRUE(summary.floor_normal_held);
   std::vector<Vec3> points_in_room;
-  for (const TriangulatedPoint& point : Triangulate(problem, calibration, 0.02))
+  for (const TriangulatedPoint& point : FusePerCameraPixel(Triangulate(problem, calibration, 0.02)))
     points_in_room.push_back(calibration.room_from_camera * point.p_in_cam);
   SceneFromPointsOptions scene_options;
   scene_options.viewpoint = calibration.room_from_camera.translation();
@@ -535,7 +546,9 @@ void ExpectScanMeetsAims(const std::string& name) {
     std::printf("  true %s: scanned %.3f m² of %.3f m² seen and lit (%+.2f%%), incidence %.0f deg\n",
                 truth_scene.surfaces[t].name.c_str(), scanned_on[t], seen, error, incidence_deg);
     EXPECT_GT(scanned_on[t], 0.0) << truth_scene.surfaces[t].name << " not found";
-    EXPECT_LT(std::abs(error), kAreaPercent) << truth_scene.surfaces[t].name;
+    const auto bound = area_bounds.find(truth_scene.surfaces[t].name);
+    EXPECT_LT(std::abs(error), bound == area_bounds.end() ? kAreaPercent : bound->second)
+        << truth_scene.surfaces[t].name;
   }
 }
 
@@ -545,6 +558,18 @@ TEST(SelfCalibrateRoom, ScannedGreenTrapezoidMeetsTheAccuracyAims) {
 
 TEST(SelfCalibrateRoom, ScannedLShapedMeetsTheAccuracyAims) {
   ExpectScanMeetsAims("l_shaped");
+}
+
+TEST(SelfCalibrateRoom, ScannedInteriorPartitionsMeetsTheAccuracyAims) {
+  ExpectScanMeetsAims("interior_partitions");
+}
+
+// From decoded captures every surface is within 5 mm and the floor and back wall within 1%, but
+// the left wall comes out 3.9% small (measured): seen at 67°, it is lit at a grazing angle by
+// the right projector, which crowds many of its pixels into each camera pixel there and decodes
+// only part of the wall's back half. A known limit (docs/scan.md), bounded at 5%.
+TEST(SelfCalibrateRoom, ScannedLShapedFromDecodedCaptures) {
+  ExpectScanMeetsAims("l_shaped", /*decoded=*/true, {{"left wall", 5.0}});
 }
 
 // One projector: its principal point is not observable (header) and is held at the centre,
