@@ -672,22 +672,25 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
   }
 
   // The room: every correspondence triangulated (rays more than 2 cm apart left out), one point
-  // per camera pixel (FusePerCameraPixel), in the room frame, at most 400 000 points.
+  // per camera pixel (FusePerCameraPixel), in the room frame. Above kMaxScanPoints, only the
+  // pixels of a coarser lattice (every s-th row and column) are kept: SceneFromPoints takes the
+  // points' spacing for a lattice of pixels, which every s-th point of the list would not be.
+  constexpr size_t kMaxScanPoints = 1000000;
   const std::vector<TriangulatedPoint> triangulated = Triangulate(problem, stage.calibration, 0.02);
   std::vector<double> gaps;
   for (const TriangulatedPoint& p : triangulated) gaps.push_back(p.gap);
-  std::vector<Vec3> points;
-  for (const TriangulatedPoint& p : FusePerCameraPixel(triangulated))
-    points.push_back(stage.calibration.room_from_camera * p.p_in_cam);
-  const DistanceStats gap = ComputeDistanceStats(gaps);
-  const size_t stride = std::max<size_t>(1, (points.size() + 399999) / 400000);
+  const std::vector<TriangulatedPoint> per_pixel = FusePerCameraPixel(triangulated);
+  int lattice = 1;
   std::vector<Vec3> thinned;
-  for (size_t i = 0; i < points.size(); i += stride) thinned.push_back(points[i]);
+  for (const TriangulatedPoint& p : KeepPixelLattice(per_pixel, kMaxScanPoints, &lattice))
+    thinned.push_back(stage.calibration.room_from_camera * p.p_in_cam);
+  const DistanceStats gap = ComputeDistanceStats(gaps);
   Report(args.progress,
          fmt::format("triangulated {} correspondences (ray gap median {:.2f} mm, 95% {:.2f} mm) "
-                     "into {} camera pixels; the room from {} of them",
-                     triangulated.size(), gap.median_mm, gap.p95_mm, points.size(),
-                     thinned.size()));
+                     "into {} camera pixels; the room from {} of them{}",
+                     triangulated.size(), gap.median_mm, gap.p95_mm, per_pixel.size(),
+                     thinned.size(),
+                     lattice > 1 ? fmt::format(" (every {}th row and column)", lattice) : ""));
   SceneFromPointsOptions scan = args.scan;
   scan.viewpoint = stage.calibration.room_from_camera.translation();
   // Curved parts are meshed at SceneFromPoints' fine spacing and then coarsened within its

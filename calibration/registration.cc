@@ -872,6 +872,21 @@ std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem
   return points;
 }
 
+std::vector<TriangulatedPoint> KeepPixelLattice(const std::vector<TriangulatedPoint>& points,
+                                                size_t max_points, int* lattice) {
+  const int s = points.size() <= max_points
+                    ? 1
+                    : static_cast<int>(std::ceil(
+                          std::sqrt(static_cast<double>(points.size()) / std::max<size_t>(max_points, 1)) - 1e-9));
+  if (lattice) *lattice = s;
+  if (s == 1) return points;
+  std::vector<TriangulatedPoint> kept;
+  for (const TriangulatedPoint& p : points)
+    if (std::lround(p.camera_pixel.x()) % s == 0 && std::lround(p.camera_pixel.y()) % s == 0)
+      kept.push_back(p);
+  return kept;
+}
+
 std::vector<TriangulatedPoint> FusePerCameraPixel(const std::vector<TriangulatedPoint>& points,
                                                   double max_spread) {
   // Grouped by pixel: indices sorted by pixel, row-major.

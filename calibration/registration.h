@@ -242,6 +242,13 @@ std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem
 std::vector<TriangulatedPoint> FusePerCameraPixel(const std::vector<TriangulatedPoint>& points,
                                                   double max_spread = 0.01);
 
+// At most `max_points` of one-per-pixel `points` (FusePerCameraPixel's), still a lattice of
+// pixels: those whose camera pixel's column and row are multiples of the smallest s that leaves
+// at most max_points in the worst case (every pixel present: s = ⌈√(size / max_points)⌉); all of
+// them when they are that few already. `*lattice` (optional) gets s.
+std::vector<TriangulatedPoint> KeepPixelLattice(const std::vector<TriangulatedPoint>& points,
+                                                size_t max_points, int* lattice = nullptr);
+
 // Distances of points to the model, in millimetres.
 struct DistanceStats {
   int points = 0;

@@ -260,6 +260,30 @@ TEST(FusePerCameraPixel, AveragesAgreeingProjectorsOnTheCameraRay) {
   EXPECT_TRUE(FusePerCameraPixel({}).empty());
 }
 
+// Thinning keeps a lattice of pixels: 10 × 10 pixels to at most 30 keeps every 2nd row and
+// column (25 points); at most 100 keeps all; at most 5 every 5th (4 points).
+TEST(KeepPixelLattice, KeepsEverySthRowAndColumn) {
+  std::vector<TriangulatedPoint> points;
+  for (int y = 0; y < 10; ++y)
+    for (int x = 0; x < 10; ++x) {
+      TriangulatedPoint p;
+      p.camera_pixel = Vec2(x, y);
+      points.push_back(p);
+    }
+  int lattice = 0;
+  const std::vector<TriangulatedPoint> kept = KeepPixelLattice(points, 30, &lattice);
+  EXPECT_EQ(lattice, 2);
+  ASSERT_EQ(kept.size(), 25u);
+  for (const TriangulatedPoint& p : kept) {
+    EXPECT_EQ(static_cast<int>(p.camera_pixel.x()) % 2, 0);
+    EXPECT_EQ(static_cast<int>(p.camera_pixel.y()) % 2, 0);
+  }
+  EXPECT_EQ(KeepPixelLattice(points, 100, &lattice).size(), 100u);
+  EXPECT_EQ(lattice, 1);
+  EXPECT_EQ(KeepPixelLattice(points, 5, &lattice).size(), 4u);
+  EXPECT_EQ(lattice, 5);
+}
+
 TEST(CameraModel, WriteReadRoundTrip) {
   testing::TempDir dir;
   CameraModel model;
