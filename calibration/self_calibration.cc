@@ -725,7 +725,8 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
   if (dof <= 0) return;
   const double variance = squared / dof;
   if (with_lens && refined) {
-    // The lens's information: the data's C/σ² and the prior's Σc⁻¹; marginalised out of S.
+    // The lens's information in JᵀJ's units: the data's C and the prior's σ²Σc⁻¹; the lens is
+    // then marginalised out of S.
     const Eigen::MatrixXd lens_information =
         lens_block + variance * lens_covariance.inverse();
     schur -= cross * lens_information.ldlt().solve(cross.transpose());
