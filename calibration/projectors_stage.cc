@@ -154,25 +154,20 @@ bool ChessboardLensPrior(const std::filesystem::path& rig_dir, const CameraModel
   const nlohmann::json camera_result =
       ReadRigResult(rig_dir).value("camera", nlohmann::json::object());
   const size_t n = camera.intrinsics.size();
-  if (!camera_result.contains("intrinsics_covariance")) {
-    if (!required) {
-      Report(progress, "camera lens: no chessboard covariance in " + file +
-                           "; the projectors' uncertainty leaves the lens's out");
-      return false;
-    }
-    throw IoError(file +
-                  ": camera.intrinsics_covariance: missing: --refine-camera while scanning needs "
-                  "the chessboard's lens covariance (run `procam calibrate camera` into this rig "
-                  "directory)");
-  }
-  if (camera_result.value("lens_model", "") != camera.lens_model) {
-    if (!required) {
-      Report(progress, "camera lens: " + file + " holds another lens model's covariance; the "
-                           "projectors' uncertainty leaves the lens's out");
-      return false;
-    }
-    throw IoError(file + ": camera.lens_model: not camera.cameramodel's " + camera.lens_model);
-  }
+  // Without the covariance: an error when it is required, else said and left out.
+  const auto without = [&](const std::string& why, const std::string& error) {
+    if (required) throw IoError(file + ": " + error);
+    Report(progress, "camera lens: " + why + "; the projectors' uncertainty leaves the lens's out");
+    return false;
+  };
+  if (!camera_result.contains("intrinsics_covariance"))
+    return without("no chessboard covariance in " + file,
+                   "camera.intrinsics_covariance: missing: --refine-camera while scanning needs "
+                   "the chessboard's lens covariance (run `procam calibrate camera` into this rig "
+                   "directory)");
+  if (camera_result.value("lens_model", "") != camera.lens_model)
+    return without(file + " holds another lens model's covariance",
+                   "camera.lens_model: not camera.cameramodel's " + camera.lens_model);
   try {
     const auto intrinsics = camera_result.at("intrinsics").get<std::vector<double>>();
     const auto rows =

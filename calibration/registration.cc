@@ -874,10 +874,8 @@ std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem
 
 std::vector<TriangulatedPoint> KeepPixelLattice(const std::vector<TriangulatedPoint>& points,
                                                 size_t max_points, int* lattice) {
-  const int s = points.size() <= max_points
-                    ? 1
-                    : static_cast<int>(std::ceil(
-                          std::sqrt(static_cast<double>(points.size()) / std::max<size_t>(max_points, 1)) - 1e-9));
+  const double ratio = static_cast<double>(points.size()) / std::max<size_t>(max_points, 1);
+  const int s = points.size() <= max_points ? 1 : static_cast<int>(std::ceil(std::sqrt(ratio) - 1e-9));
   if (lattice) *lattice = s;
   if (s == 1) return points;
   std::vector<TriangulatedPoint> kept;

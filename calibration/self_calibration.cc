@@ -778,7 +778,7 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
     SelfCalibrationProjectorSummary& summary = (*summaries)[k];
     summary.uncertainty_includes_camera_lens = with_lens;
     summary.uncertainty_distance_m = distance;  // solve units until the scale is known
-    summary.uncertainty = MapProjectionUncertainty(worst, std::sqrt(squared / dof),
+    summary.uncertainty = MapProjectionUncertainty(worst, std::sqrt(variance),
                                                    problem.projectors[k].width,
                                                    problem.projectors[k].height);
   }

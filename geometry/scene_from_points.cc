@@ -219,9 +219,9 @@ struct PlaneSurface {
 // of width w at density ρ), but half the spacing of its rows where they run along the edge (a
 // wall's vertical end seen at a grazing angle, its pixel columns far apart in depth), which can be
 // several times more. The gap is measured on the edge's own points: cut each bin at a depth t
-// beyond its first point, for t spread over several spacings, and take the mean distance from the
-// cut to the bin's next point, as from a true edge at an unknown place among the samples. The edge
-// moves to the bins' mean first depth minus that gap.
+// beyond its reference point (below), for t spread over several spacings, and take the mean
+// distance from the cut to the bin's next point, as from a true edge at an unknown place among the
+// samples. The edge moves to the bins' mean reference depth minus that gap.
 // `uv`: the plane's points; counter-clockwise outer rings and clockwise holes alike have the
 // surface on their left.
 void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, Polygon2* ring) {
@@ -230,7 +230,7 @@ void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, P
   std::vector<double> shift(n, 0.0);
   for (int k = 0; k < n; ++k) corner[k] = Vec2((*ring)[k].x(), (*ring)[k].y());
   const double band = 6 * spacing, bin_width = 2 * spacing;
-  // The cuts: kCuts depths spread evenly over `reach` beyond each bin's first point.
+  // The cuts: kCuts depths spread evenly over `reach` beyond each bin's reference point.
   constexpr int kCuts = 24;
   const double reach = 4 * spacing, deep = 12 * spacing;
   for (int k = 0; k < n; ++k) {
@@ -258,28 +258,24 @@ void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, P
     const auto reference = [](const std::vector<double>& bin) {
       return bin.size() > 1 ? bin[1] : bin.front();
     };
-    double sum = 0;
-    int filled = 0;
+    double sum = 0, gap_sum = 0;
+    int filled = 0, gaps = 0;
     for (std::vector<double>& bin : depths) {
       std::sort(bin.begin(), bin.end());
-      if (!bin.empty() && bin.front() <= band) sum += reference(bin), ++filled;
-    }
-    if (filled < std::max(2, bins / 2)) continue;  // not an edge of this point set
-    double gap_sum = 0;
-    int gaps = 0;
-    for (const std::vector<double>& bin : depths) {
       if (bin.empty() || bin.front() > band) continue;
+      sum += reference(bin), ++filled;
       for (int c = 0; c < kCuts; ++c) {
         const double cut = reference(bin) + (c + 0.5) / kCuts * reach;
         const auto next = std::upper_bound(bin.begin(), bin.end(), cut);
         if (next != bin.end()) gap_sum += *next - cut, ++gaps;
       }
     }
+    if (filled < std::max(2, bins / 2)) continue;  // not an edge of this point set
     // Without a next point anywhere (a strip narrower than the cuts reach), the turned lattice's.
     const double gap = gaps > 0 ? gap_sum / gaps : 1.0 / (2 * density * (length / bins));
     const double edge_depth = sum / filled - gap;
     // Never inwards: the simplified edge runs through boundary points already, and where it
-    // bridges a notch its bins' first points lie deep inside.
+    // bridges a notch its bins' reference points lie deep inside.
     shift[k] = std::clamp(-edge_depth, 0.0, band / 2);
   }
   Polygon2 placed;

@@ -117,6 +117,16 @@ ProjectorObservations DecodedObservations(const SimulatedRig& rig, int k) {
   return ObservationsFromMap(map, rig.projectors()[k].name, geometry.width(), geometry.height());
 }
 
+// MakeProblem's problem with every projector's correspondences decoded (DecodedObservations).
+RoomCalibrationProblem MakeDecodedProblem(const SimulatedRig& rig) {
+  RoomCalibrationProblem problem;
+  problem.camera_lens_model = rig.camera().lens_model();
+  problem.camera_intrinsics = rig.camera().intrinsics();
+  for (int k = 0; k < static_cast<int>(rig.projectors().size()); ++k)
+    problem.projectors.push_back(DecodedObservations(rig, k));
+  return problem;
+}
+
 double TurnDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
   return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / kPi;
 }
@@ -263,10 +273,7 @@ TEST(SelfCalibrateRoom, TinyBox) {
 // edges, bounces): the outliers the robust pass removes, the RMS is the decoder's.
 TEST(SelfCalibrateRoom, TinyBoxDecoded) {
   const std::unique_ptr<SimulatedRig> rig = MakeRig("tiny_box");
-  RoomCalibrationProblem problem;
-  problem.camera_lens_model = rig->camera().lens_model();
-  problem.camera_intrinsics = rig->camera().intrinsics();
-  for (int k = 0; k < 2; ++k) problem.projectors.push_back(DecodedObservations(*rig, k));
+  const RoomCalibrationProblem problem = MakeDecodedProblem(*rig);
   Bounds bounds;
   bounds.point_rms_mm = 25.0;  // measured 17.5 mm: exact-data noise plus decoding errors at edges
   bounds.decoding_noise_px = 0.0;  // unknown: not checked
@@ -283,10 +290,7 @@ TEST(SelfCalibrateRoom, LShaped) {
 // The same from simulated captures decoded by DecodeStructuredLight.
 TEST(SelfCalibrateRoom, LShapedDecoded) {
   const std::unique_ptr<SimulatedRig> rig = MakeRig("l_shaped", 0.5);
-  RoomCalibrationProblem problem;
-  problem.camera_lens_model = rig->camera().lens_model();
-  problem.camera_intrinsics = rig->camera().intrinsics();
-  for (int k = 0; k < 2; ++k) problem.projectors.push_back(DecodedObservations(*rig, k));
+  const RoomCalibrationProblem problem = MakeDecodedProblem(*rig);
   Bounds bounds;
   bounds.decoding_noise_px = 0.0;  // unknown: not checked
   CalibrateAndCheck("l_shaped decoded", *rig, problem, bounds);
@@ -487,10 +491,7 @@ void ExpectScanMeetsAims(const std::string& name, bool decoded = false,
                          const std::map<std::string, double>& area_bounds = {}) {
   constexpr double kRmsMm = 5.0, kAreaPercent = 1.0;  // the aims for planar surfaces
   const std::unique_ptr<SimulatedRig> rig = MakeRig(name, 0.5);
-  RoomCalibrationProblem problem = MakeProblem(*rig, 1);
-  if (decoded)
-    for (int k = 0; k < static_cast<int>(problem.projectors.size()); ++k)
-      problem.projectors[k] = DecodedObservations(*rig, k);
+  RoomCalibrationProblem problem = decoded ? MakeDecodedProblem(*rig) : MakeProblem(*rig, 1);
   problem.camera_intrinsics = OffByItsUncertainty(rig->camera()).intrinsics;
   SelfCalibrationOptions options;
   options.camera_height = CameraHeight(*rig);
