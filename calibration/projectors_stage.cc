@@ -105,10 +105,12 @@ ProjectorObservations ReadSession(const std::filesystem::path& directory, int ca
   }
   const ProjectorObservations out = ObservationsFromMap(map, name, options.width, options.height);
   Report(progress,
-         fmt::format("{}: {}x{} projector, {} camera pixels decoded ({} shadowed, {} ambiguous, "
-                     "{} weak phase, {} out of range)",
+         fmt::format("{}: {}x{} projector, {} camera pixels decoded, {} more on one axis alone "
+                     "(refused on some axis: {} shadowed, {} ambiguous, {} weak phase, {} out of "
+                     "range)",
                      directory.string(), options.width, options.height, out.camera_pixels.size(),
-                     map.shadowed, map.ambiguous, map.weak_phase, map.out_of_range));
+                     out.one_axis_camera_pixels.size(), map.shadowed, map.ambiguous,
+                     map.weak_phase, map.out_of_range));
   return out;
 }
 
@@ -666,15 +668,21 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
           args.floor_chessboard.string(), angle, args.max_board_floor_angle_deg));
   }
 
-  // The room: every correspondence triangulated (rays more than 2 cm apart left out), one point
-  // per camera pixel (FusePerCameraPixel), in the room frame. Above kMaxScanPoints, only the
-  // pixels of a coarser lattice (every s-th row and column) are kept: SceneFromPoints takes the
-  // points' spacing for a lattice of pixels, which every s-th point of the list would not be.
+  // The room: every correspondence triangulated (rays more than 2 cm apart left out), and where
+  // no projector decoded both axes of a pixel, its one-axis correspondences against their
+  // projector's column or row; one point per camera pixel (FusePerCameraPixel), in the room
+  // frame. Above kMaxScanPoints, only the pixels of a coarser lattice (every s-th row and
+  // column) are kept: SceneFromPoints takes the points' spacing for a lattice of pixels, which
+  // every s-th point of the list would not be.
   constexpr size_t kMaxScanPoints = 1000000;
-  const std::vector<TriangulatedPoint> triangulated = Triangulate(problem, stage.calibration, 0.02);
+  std::vector<TriangulatedPoint> triangulated = Triangulate(problem, stage.calibration, 0.02);
   std::vector<double> gaps;
   for (const TriangulatedPoint& p : triangulated) gaps.push_back(p.gap);
+  const std::vector<TriangulatedPoint> one_axis = TriangulateOneAxis(problem, stage.calibration);
+  triangulated.insert(triangulated.end(), one_axis.begin(), one_axis.end());
   const std::vector<TriangulatedPoint> per_pixel = FusePerCameraPixel(triangulated);
+  const long one_axis_pixels = std::count_if(per_pixel.begin(), per_pixel.end(),
+                                             [](const TriangulatedPoint& p) { return p.one_axis; });
   int lattice = 1;
   std::vector<Vec3> thinned;
   for (const TriangulatedPoint& p : KeepPixelLattice(per_pixel, kMaxScanPoints, &lattice))
@@ -682,8 +690,9 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
   const DistanceStats gap = ComputeDistanceStats(gaps);
   Report(args.progress,
          fmt::format("triangulated {} correspondences (ray gap median {:.2f} mm, 95% {:.2f} mm) "
-                     "into {} camera pixels; the room from {} of them{}",
-                     triangulated.size(), gap.median_mm, gap.p95_mm, per_pixel.size(),
+                     "into {} camera pixels, {} of them from one axis alone (a projector's "
+                     "column or row); the room from {} of them{}",
+                     gaps.size(), gap.median_mm, gap.p95_mm, per_pixel.size(), one_axis_pixels,
                      thinned.size(),
                      lattice > 1 ? fmt::format(" (every {}th row and column)", lattice) : ""));
   SceneFromPointsOptions scan = args.scan;

@@ -11,6 +11,7 @@
 #include <numeric>
 #include <random>
 #include <stdexcept>
+#include <unordered_map>
 
 #include <Eigen/Eigenvalues>
 #include <ceres/ceres.h>
@@ -872,6 +873,94 @@ std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem
   return points;
 }
 
+std::vector<TriangulatedPoint> TriangulateOneAxis(const RoomCalibrationProblem& problem,
+                                                  const RoomCalibration& calibration,
+                                                  double max_depth_per_pixel) {
+  const bool own_lens = !calibration.camera_intrinsics.empty();
+  const std::string& camera_lens_model =
+      own_lens ? calibration.camera_lens_model : problem.camera_lens_model;
+  const std::vector<double>& camera_intrinsics =
+      own_lens ? calibration.camera_intrinsics : problem.camera_intrinsics;
+  // Depths along the unit camera ray at which the search brackets the coordinate, metres: a
+  // geometric ladder fine enough that a coordinate reached twice shows as two brackets.
+  constexpr double kNear = 0.1, kFar = 100.0;
+  constexpr int kLadder = 200;
+  std::vector<double> ladder(kLadder);
+  for (int i = 0; i < kLadder; ++i) ladder[i] = kNear * std::pow(kFar / kNear, i / (kLadder - 1.0));
+  std::vector<TriangulatedPoint> points;
+  for (size_t k = 0; k < problem.projectors.size() && k < calibration.projectors.size(); ++k) {
+    const RoomProjector& projector = calibration.projectors[k];
+    const LensModel lens(projector.lens_model, projector.intrinsics);
+    const Eigen::Isometry3d proj_from_cam = projector.proj_from_room * calibration.room_from_camera;
+    const ProjectorObservations& p = problem.projectors[k];
+    for (size_t i = 0; i < p.one_axis_camera_pixels.size(); ++i) {
+      const Vec2& decoded = p.one_axis_projector_pixels[i];
+      const int axis = std::isfinite(decoded.x()) ? 0 : 1;
+      Vec3 ray_cam;
+      if (!std::isfinite(decoded[axis]) || !p.one_axis_camera_pixels[i].allFinite() ||
+          !UnprojectCameraPixel(camera_lens_model, camera_intrinsics, p.one_axis_camera_pixels[i],
+                                &ray_cam))
+        continue;
+      const Vec3 d = ray_cam.normalized();
+      const Vec3 direction = proj_from_cam.linear() * d;
+      // The decoded coordinate minus the projected one at depth t (NaN behind the projector),
+      // and its derivative.
+      const auto residual = [&](double t, double* derivative, Vec2* pixel) {
+        const Vec3 q = proj_from_cam * Vec3(t * d);
+        if (!(q.z() > 0.0)) return std::numeric_limits<double>::quiet_NaN();
+        ProjectionJacobian dq_dp;
+        *pixel = lens.Project(q, &dq_dp);
+        if (derivative) *derivative = dq_dp.row(axis).dot(direction);
+        return (*pixel)[axis] - decoded[axis];
+      };
+      // Bracket the root on the ladder; more than one bracket: ambiguous, left out.
+      int brackets = 0;
+      double low = 0.0, high = 0.0;
+      double previous = std::numeric_limits<double>::quiet_NaN();
+      Vec2 pixel;
+      for (int j = 0; j < kLadder; ++j) {
+        const double value = residual(ladder[j], nullptr, &pixel);
+        if (std::isfinite(previous) && std::isfinite(value) && (previous < 0.0) != (value < 0.0)) {
+          ++brackets;
+          low = ladder[j - 1];
+          high = ladder[j];
+        }
+        previous = value;
+      }
+      if (brackets != 1) continue;
+      // Newton steps kept inside the bracket (bisection where a step leaves it).
+      const double sign_low = residual(low, nullptr, &pixel) < 0.0 ? -1.0 : 1.0;
+      double t = 0.5 * (low + high), slope = 0.0;
+      for (int iteration = 0; iteration < 60; ++iteration) {
+        const double value = residual(t, &slope, &pixel);
+        if (!std::isfinite(value)) break;
+        if ((value < 0.0 ? -1.0 : 1.0) == sign_low) low = t; else high = t;
+        double next = slope != 0.0 ? t - value / slope : 0.5 * (low + high);
+        if (!(next > low && next < high)) next = 0.5 * (low + high);
+        const bool settled = std::abs(next - t) < 1e-9;
+        t = next;
+        if (settled) break;
+      }
+      const double value = residual(t, &slope, &pixel);
+      const double depth_per_pixel = 1.0 / std::abs(slope);
+      const int other = 1 - axis;
+      const double other_size = other == 0 ? p.width : p.height;
+      if (!(std::abs(value) < 1e-3) || !(depth_per_pixel <= max_depth_per_pixel) ||
+          !(pixel[other] >= -0.5 && pixel[other] <= other_size - 0.5))
+        continue;
+      TriangulatedPoint point;
+      point.p_in_cam = t * d;
+      point.on_camera_ray = point.p_in_cam;
+      point.gap = depth_per_pixel;
+      point.projector = static_cast<int>(k);
+      point.camera_pixel = p.one_axis_camera_pixels[i];
+      point.one_axis = true;
+      points.push_back(point);
+    }
+  }
+  return points;
+}
+
 std::vector<TriangulatedPoint> KeepPixelLattice(const std::vector<TriangulatedPoint>& points,
                                                 size_t max_points, int* lattice) {
   const double ratio = static_cast<double>(points.size()) / std::max<size_t>(max_points, 1);
@@ -885,6 +974,11 @@ std::vector<TriangulatedPoint> KeepPixelLattice(const std::vector<TriangulatedPo
   return kept;
 }
 
+// A one-axis point (FusePerCameraPixel) is kept only when its depth lies within this fraction
+// beyond the range of the two-axis points at most kOneAxisWindow pixels from it.
+constexpr int kOneAxisWindow = 8;
+constexpr double kOneAxisDepthMargin = 0.1;
+
 std::vector<TriangulatedPoint> FusePerCameraPixel(const std::vector<TriangulatedPoint>& points,
                                                   double max_spread) {
   // Grouped by pixel: indices sorted by pixel, row-major.
@@ -897,23 +991,32 @@ std::vector<TriangulatedPoint> FusePerCameraPixel(const std::vector<Triangulated
   };
   std::stable_sort(order.begin(), order.end(), before);
   std::vector<TriangulatedPoint> fused;
-  std::vector<double> depths, sorted;
+  std::vector<int> group;
+  std::vector<double> depths;
   for (size_t begin = 0; begin < order.size();) {
     size_t end = begin + 1;
     while (end < order.size() && points[order[end]].camera_pixel == points[order[begin]].camera_pixel)
       ++end;
+    // The pixel's two-axis points, or its one-axis points where it has none.
+    bool two_axis = false;
+    for (size_t i = begin; i < end; ++i) two_axis |= !points[order[i]].one_axis;
+    group.clear();
     depths.clear();
-    for (size_t i = begin; i < end; ++i) depths.push_back(points[order[i]].on_camera_ray.norm());
-    sorted = depths;
-    std::sort(sorted.begin(), sorted.end());
-    const size_t n = sorted.size();
-    const double median = n % 2 == 1 ? sorted[n / 2] : 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]);
+    for (size_t i = begin; i < end; ++i) {
+      if (two_axis && points[order[i]].one_axis) continue;
+      group.push_back(order[i]);
+      depths.push_back(points[order[i]].on_camera_ray.norm());
+    }
+    std::sort(depths.begin(), depths.end());
+    const size_t n = depths.size();
+    const double median = n % 2 == 1 ? depths[n / 2] : 0.5 * (depths[n / 2 - 1] + depths[n / 2]);
     TriangulatedPoint out;
     out.camera_pixel = points[order[begin]].camera_pixel;
-    for (size_t i = begin; i < end; ++i) {
-      if (std::abs(depths[i - begin] - median) > max_spread) continue;
-      out.on_camera_ray += points[order[i]].on_camera_ray;
-      out.gap = std::max(out.gap, points[order[i]].gap);
+    out.one_axis = !two_axis;
+    for (const int i : group) {
+      if (std::abs(points[i].on_camera_ray.norm() - median) > max_spread) continue;
+      out.on_camera_ray += points[i].on_camera_ray;
+      out.gap = std::max(out.gap, points[i].gap);
       ++out.projector;
     }
     if (out.projector > 0) {
@@ -923,7 +1026,32 @@ std::vector<TriangulatedPoint> FusePerCameraPixel(const std::vector<Triangulated
     }
     begin = end;
   }
-  return fused;
+  // A one-axis point's depth within the range of the two-axis points around it.
+  std::unordered_map<long long, double> two_axis_depth;
+  const auto key = [](const Vec2& pixel) {
+    return (static_cast<long long>(std::lround(pixel.y())) << 32) + std::lround(pixel.x());
+  };
+  for (const TriangulatedPoint& p : fused)
+    if (!p.one_axis) two_axis_depth[key(p.camera_pixel)] = p.on_camera_ray.norm();
+  std::vector<TriangulatedPoint> kept;
+  kept.reserve(fused.size());
+  for (const TriangulatedPoint& p : fused) {
+    if (p.one_axis) {
+      double low = std::numeric_limits<double>::infinity(), high = 0.0;
+      for (int dy = -kOneAxisWindow; dy <= kOneAxisWindow; ++dy)
+        for (int dx = -kOneAxisWindow; dx <= kOneAxisWindow; ++dx) {
+          const auto found = two_axis_depth.find(key(p.camera_pixel + Vec2(dx, dy)));
+          if (found == two_axis_depth.end()) continue;
+          low = std::min(low, found->second);
+          high = std::max(high, found->second);
+        }
+      const double depth = p.on_camera_ray.norm();
+      if (!(depth >= (1.0 - kOneAxisDepthMargin) * low && depth <= (1.0 + kOneAxisDepthMargin) * high))
+        continue;
+    }
+    kept.push_back(p);
+  }
+  return kept;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1186,9 +1314,29 @@ ProjectorObservations ObservationsFromMap(const StructuredLightMap& map, std::st
   out.height = height;
   for (int row = 0; row < map.mask.rows; ++row) {
     for (int col = 0; col < map.mask.cols; ++col) {
-      if (!map.mask.at<uint8_t>(row, col)) continue;
-      out.camera_pixels.push_back(Vec2(col, row));
-      out.projector_pixels.push_back(Vec2(map.column.at<float>(row, col), map.row.at<float>(row, col)));
+      const Vec2 decoded(map.column.at<float>(row, col), map.row.at<float>(row, col));
+      if (map.mask.at<uint8_t>(row, col)) {
+        out.camera_pixels.push_back(Vec2(col, row));
+        out.projector_pixels.push_back(decoded);
+      } else if (std::isfinite(decoded.x()) != std::isfinite(decoded.y())) {
+        // One axis passes its tests by chance where the projector lights a pixel only through
+        // bounces (bits of random sign but enough contrast), both axes rarely: a one-axis
+        // coordinate is kept only where enough of its 8 neighbours decoded that axis close by.
+        constexpr int kMinAgreeing = 3;
+        constexpr float kAgreePixels = 3.0f;
+        const cv::Mat& axis = std::isfinite(decoded.x()) ? map.column : map.row;
+        const float value = axis.at<float>(row, col);
+        int agreeing = 0;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int y = row + dy, x = col + dx;
+            if ((dx || dy) && y >= 0 && y < axis.rows && x >= 0 && x < axis.cols)
+              agreeing += std::abs(axis.at<float>(y, x) - value) <= kAgreePixels;  // NaN: false
+          }
+        if (agreeing < kMinAgreeing) continue;
+        out.one_axis_camera_pixels.push_back(Vec2(col, row));
+        out.one_axis_projector_pixels.push_back(decoded);
+      }
     }
   }
   return out;

@@ -99,10 +99,20 @@ struct ProjectorObservations {
   int width = 0, height = 0;        // projector pixels, ≥ 1
   std::vector<Vec2> camera_pixels;  // camera pixel of each correspondence
   std::vector<Vec2> projector_pixels;  // decoded projector pixel (same order)
+  // Camera pixels where only one axis decoded: a surface lit at a grazing angle crowds many
+  // projector columns (or rows) into one camera pixel, and the other axis may still resolve.
+  // The decoded coordinate, NaN for the other one: (column, NaN) or (NaN, row). Calibration
+  // does not use them; the scan triangulates them against the projector's column or row
+  // (TriangulateOneAxis) where no projector decoded both axes.
+  std::vector<Vec2> one_axis_camera_pixels;
+  std::vector<Vec2> one_axis_projector_pixels;  // same order
 };
 
 // The correspondences of a decoded structured-light capture: every camera pixel of `map.mask`
-// with the projector pixel it decoded to, for a `width` × `height` projector named `name`.
+// with the projector pixel it decoded to, and every pixel where one axis decoded (one_axis_*)
+// and at least 3 of its 8 neighbours decoded that axis within 3 projector pixels of it (one axis
+// passes its tests by chance where only bounce light reaches a pixel; a chance code disagrees
+// with its neighbours), for a `width` × `height` projector named `name`.
 ProjectorObservations ObservationsFromMap(const StructuredLightMap& map, std::string name, int width, int height);
 
 struct RoomCalibrationProblem {
@@ -220,6 +230,7 @@ struct TriangulatedPoint {
   int projector = 0;
   Vec2 camera_pixel = Vec2::Zero();
   Vec3 on_camera_ray = Vec3::Zero();  // the camera ray's point closest to the projector's ray
+  bool one_axis = false;  // from a one-axis correspondence (TriangulateOneAxis)
 };
 
 // Triangulates every correspondence of `problem` by the midpoint of the camera ray and the ray
@@ -231,11 +242,28 @@ std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem
                                            const RoomCalibration& calibration,
                                            double max_gap = 0.05);
 
+// The one-axis correspondences (ProjectorObservations::one_axis_*) of `problem`, each
+// triangulated against its projector's column (or row): the point of the camera ray at which
+// projector k, posed as in Triangulate, shows the decoded coordinate, found by a safeguarded
+// Newton search along the ray between 0.1 and 100 metres. A point is left out where the ray
+// runs so nearly along the column's surface that one projector pixel spans more than
+// `max_depth_per_pixel` metres of depth (decoding noise would move it that far), where the
+// coordinate is reached more than once along the ray, or where the other coordinate of the
+// projected point falls outside the projector's image. `gap` is the depth one projector pixel
+// spans there, metres; on_camera_ray = p_in_cam; one_axis is true.
+std::vector<TriangulatedPoint> TriangulateOneAxis(const RoomCalibrationProblem& problem,
+                                                  const RoomCalibration& calibration,
+                                                  double max_depth_per_pixel = 0.06);
+
 // One point per camera pixel, as a scan of the room wants it (SceneFromPoints takes its points'
 // spacing for the camera's pixel lattice): where several projectors light a pixel, their
 // triangulations' points on the camera ray (on_camera_ray) within `max_spread` metres of their
 // median depth are averaged into p_in_cam, on the ray; a pixel none of whose points lies that
 // close is left out. `projector` is the number of points averaged, `gap` their largest.
+// One-axis points (TriangulateOneAxis) count only at pixels where no two-axis point is given, and
+// are kept only where their depth lies within 10% beyond the range of the fused two-axis points
+// at most 8 pixels away (a wrong one-axis code lands anywhere along the ray; a surface seen at a
+// grazing angle continues its neighbours' depths).
 // Triangulate's points of one projector are one per pixel already; two projectors' points of one
 // pixel, side by side in the cloud, double its density where both light the room and make its
 // spacing look smaller than the pixels' is.

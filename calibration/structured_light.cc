@@ -261,11 +261,18 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightOptions& options,
           decode_options.binarization == Binarization::kPixelThreshold
               ? 0.5f * (white.at<float>(y, x) + black.at<float>(y, x))
               : static_cast<float>(global_threshold);
-      bool ok = true;
-      double coordinate[2] = {nan, nan};
+      // Each axis decodes on its own (a grazed surface may crowd many projector columns into a
+      // pixel and still resolve the rows); a pixel's first failing test is counted once.
+      bool counted = false, all = true;
+      const auto refuse = [&](long long* counter) {
+        all = false;
+        if (!counted) ++*counter;
+        counted = true;
+      };
       for (const AxisLayout& axis : axes) {
         // Shown bits, most significant first.
         int shown[32] = {0};
+        bool ok = true;
         for (int bit = axis.bits - 1; bit >= axis.finest && ok; --bit) {
           const int index = axis.first_index + 2 * (axis.bits - 1 - bit);
           const float value = grey[index].at<float>(y, x);
@@ -275,13 +282,13 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightOptions& options,
           } else {
             difference = 2.0f * (value - threshold);
           }
-          if (std::abs(difference) < bit_fraction * pixel_range) {
-            ok = false;
-            ++map.ambiguous;
-          }
+          ok = std::abs(difference) >= bit_fraction * pixel_range;
           shown[bit] = difference > 0.0f;
         }
-        if (!ok) break;
+        if (!ok) {
+          refuse(&map.ambiguous);
+          continue;
+        }
         // Undo the XOR, then Gray → binary on the code truncated to the shown bits.
         int binary = 0, previous = 0;
         for (int bit = axis.bits - 1; bit >= axis.finest; --bit) {
@@ -302,9 +309,8 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightOptions& options,
           }
           const double amplitude = 2.0 / steps * std::hypot(c, s);
           if (amplitude < decode_options.min_modulation * 0.5 * pixel_range) {
-            ok = false;
-            ++map.weak_phase;
-            break;
+            refuse(&map.weak_phase);
+            continue;
           }
           const double period = options.phase_period;
           double within = std::atan2(s, c) / (2.0 * kPi) * period;  // position within a period
@@ -314,15 +320,12 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightOptions& options,
           u = within + period * std::round((coarse - within) / period);
         }
         if (u < -0.5 || u >= axis.size - 0.5) {
-          ok = false;
-          ++map.out_of_range;
-          break;
+          refuse(&map.out_of_range);
+          continue;
         }
-        coordinate[axis.is_column ? 0 : 1] = u;
+        (axis.is_column ? map.column : map.row).at<float>(y, x) = static_cast<float>(u);
       }
-      if (!ok) continue;
-      map.column.at<float>(y, x) = static_cast<float>(coordinate[0]);
-      map.row.at<float>(y, x) = static_cast<float>(coordinate[1]);
+      if (!all) continue;
       map.mask.at<uint8_t>(y, x) = 255;
     }
   }

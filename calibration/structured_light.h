@@ -96,7 +96,10 @@ struct StructuredLightMap {
   cv::Mat column;  // CV_32FC1 projector column (pixel centres at integers); NaN where not decoded
   cv::Mat row;     // CV_32FC1 projector row; NaN where not decoded (or rows not encoded)
   cv::Mat mask;    // CV_8UC1, 255 where every encoded axis decoded
-  // Why pixels were refused (a pixel counts once, for the first test it fails).
+  // Each axis decodes on its own: where one fails its tests, the other may still hold a
+  // coordinate (a surface lit at a grazing angle crowds many projector columns into one camera
+  // pixel while its rows stay resolved).
+  // Why pixels were refused on some axis (a pixel counts once, for the first test it fails).
   long long shadowed = 0;      // white − black under the contrast threshold
   long long ambiguous = 0;     // some bit under the bit-contrast threshold
   long long weak_phase = 0;    // sinusoid amplitude under the modulation threshold

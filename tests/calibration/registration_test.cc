@@ -15,6 +15,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
+#include <tuple>
 #include <random>
 
 #include "calibration/structured_light.h"
@@ -258,6 +260,117 @@ TEST(FusePerCameraPixel, AveragesAgreeingProjectorsOnTheCameraRay) {
   EXPECT_NEAR((fused[1].p_in_cam - 2.002 * ray).norm(), 0.0, 1e-12);
   EXPECT_DOUBLE_EQ(fused[1].gap, 0.003);
   EXPECT_TRUE(FusePerCameraPixel({}).empty());
+
+  // One-axis points count only where a pixel has no two-axis point: at (3, 1) they are ignored;
+  // at (9, 6), with no other, the two that agree are averaged, their depth (3.003 m) within the
+  // range of the two-axis points at most 8 pixels away ((3, 1) at 2.002 m, (7, 0) at 4 m). At
+  // (10, 7) one 5 m away is beyond that range by more than 10% (4.4 m), at (30, 30) one has no
+  // two-axis point near it: both left out.
+  std::vector<TriangulatedPoint> with_one_axis = points;
+  for (const auto& [x, y, depth] : {std::tuple{3, 1, 2.2}, std::tuple{9, 6, 3.0},
+                                    std::tuple{9, 6, 3.006}, std::tuple{10, 7, 5.0},
+                                    std::tuple{30, 30, 3.0}}) {
+    with_one_axis.push_back(point(x, y, depth, 0.04));
+    with_one_axis.back().one_axis = true;
+  }
+  const std::vector<TriangulatedPoint> fused_one_axis = FusePerCameraPixel(with_one_axis, 0.01);
+  ASSERT_EQ(fused_one_axis.size(), 3u);
+  EXPECT_EQ(fused_one_axis[1].camera_pixel, Vec2(3, 1));
+  EXPECT_FALSE(fused_one_axis[1].one_axis);
+  EXPECT_NEAR((fused_one_axis[1].p_in_cam - 2.002 * ray).norm(), 0.0, 1e-12);
+  EXPECT_EQ(fused_one_axis[2].camera_pixel, Vec2(9, 6));
+  EXPECT_TRUE(fused_one_axis[2].one_axis);
+  EXPECT_EQ(fused_one_axis[2].projector, 2);
+  EXPECT_NEAR((fused_one_axis[2].p_in_cam - 3.003 * ray).norm(), 0.0, 1e-12);
+}
+
+// One-axis correspondences against closed-form truth. A pinhole camera at the room's origin looks
+// at a plane about 3 m away, turned 0.3 rad about the vertical. Projector A stands 0.4 m right of
+// and 0.3 m above the camera, turned 0.1 rad, with OpenCV4 distortion; projector B 0.5 m right,
+// level and parallel to the camera, so that its rows run along the baseline: a row is the same
+// along every camera ray and says nothing of depth. Each camera pixel's true point is its ray's
+// hit on the plane, its decoded coordinate that point projected. Camera pixels near the top see
+// points above A's image: their columns decode (the column is inside it) but the point is not
+// lit, and they must be left out.
+TEST(TriangulateOneAxis, FindsThePointOfTheCameraRayOnTheDecodedColumnOrRow) {
+  RoomCalibrationProblem problem;
+  problem.camera_lens_model = "LENSMODEL_PINHOLE";
+  problem.camera_intrinsics = {500.0, 500.0, 320.0, 240.0};
+  RoomCalibration calibration;  // room_from_camera: identity; the problem's lens
+  const auto posed = [](const Vec3& centre, double turn) {
+    Eigen::Isometry3d proj_from_room = Eigen::Isometry3d::Identity();
+    proj_from_room.linear() = Eigen::AngleAxisd(turn, Vec3::UnitY()).toRotationMatrix();
+    proj_from_room.translation() = -(proj_from_room.linear() * centre);
+    return proj_from_room;
+  };
+  calibration.projectors = {
+      {"a", "LENSMODEL_OPENCV4", {900, 900, 400, 300, -0.05, 0.01, 0, 0}, 800, 600,
+       posed(Vec3(0.4, -0.3, 0.0), -0.1)},
+      {"b", "LENSMODEL_PINHOLE", {900, 900, 400, 300}, 800, 600, posed(Vec3(0.5, 0.0, 0.0), 0.0)}};
+  const Vec3 normal = Eigen::AngleAxisd(0.3, Vec3::UnitY()) * Vec3::UnitZ();  // n·x = 3
+  const auto in_image = [](double coordinate, int size) {
+    return coordinate >= -0.5 && coordinate <= size - 0.5;
+  };
+  struct Truth {
+    Vec3 point;
+    bool expected;
+  };
+  std::map<std::tuple<int, int, int>, Truth> truth;  // by projector, camera pixel (x, y)
+  int unlit = 0;
+  for (const RoomProjector& projector : calibration.projectors) {
+    const int k = static_cast<int>(problem.projectors.size());
+    ProjectorObservations observations;
+    observations.name = projector.name;
+    observations.width = projector.width;
+    observations.height = projector.height;
+    const LensModel lens(projector.lens_model, projector.intrinsics);
+    for (int y = 0; y <= 400; y += 40) {
+      for (int x = 100; x <= 540; x += 40) {
+        const Vec3 d((x - 320.0) / 500.0, (y - 240.0) / 500.0, 1.0);
+        const Vec3 point = 3.0 / normal.dot(d) * d;
+        const Vec2 pixel = lens.Project(projector.proj_from_room * point);
+        const int axis = (x / 40 + y / 40) % 2;  // alternately the column and the row
+        const int size = axis == 0 ? projector.width : projector.height;
+        const int other_size = axis == 0 ? projector.height : projector.width;
+        if (!in_image(pixel[axis], size)) continue;
+        Vec2 decoded = Vec2::Constant(std::numeric_limits<double>::quiet_NaN());
+        decoded[axis] = pixel[axis];
+        observations.one_axis_camera_pixels.push_back(Vec2(x, y));
+        observations.one_axis_projector_pixels.push_back(decoded);
+        const bool lit = in_image(pixel[1 - axis], other_size);
+        unlit += !lit;
+        truth[{k, x, y}] = {point, lit && !(k == 1 && axis == 1)};
+      }
+    }
+    problem.projectors.push_back(observations);
+  }
+  EXPECT_GT(unlit, 0);
+
+  const auto check = [&](double max_depth_per_pixel) {
+    const std::vector<TriangulatedPoint> points =
+        TriangulateOneAxis(problem, calibration, max_depth_per_pixel);
+    int expected = 0;
+    for (const auto& [key, t] : truth) expected += t.expected;
+    int found = 0;
+    for (const TriangulatedPoint& p : points) {
+      const Truth& t = truth.at({p.projector, static_cast<int>(p.camera_pixel.x()),
+                                 static_cast<int>(p.camera_pixel.y())});
+      EXPECT_TRUE(t.expected) << p.projector << " " << p.camera_pixel.transpose();
+      EXPECT_LT((p.p_in_cam - t.point).norm(), 1e-6) << p.camera_pixel.transpose();
+      EXPECT_TRUE(p.one_axis);
+      EXPECT_LE(p.gap, max_depth_per_pixel);
+      found += t.expected;
+    }
+    return std::pair{found, expected};
+  };
+  const auto [found, expected] = check(0.06);
+  std::printf("%d of %d points found, %d unlit left out; %d with 0.02 m per pixel\n", found,
+              expected, unlit, check(0.02).first);
+  EXPECT_EQ(found, expected);
+  EXPECT_GT(expected, 100);
+  // A's points lie 3–4 m away, 0.3–0.4 m of baseline: about 0.03 m of depth per projector
+  // pixel. A tighter bound leaves some out.
+  EXPECT_LT(check(0.02).first, expected);
 }
 
 // Thinning keeps a lattice of pixels: 10 × 10 pixels to at most 30 keeps every 2nd row and

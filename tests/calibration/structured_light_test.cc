@@ -6,9 +6,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
+#include "calibration/registration.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "geometry/ray_scene.h"
@@ -45,6 +47,63 @@ TEST(StructuredLight, IdealCapturesDecodeToTheProjectorPixel) {
       EXPECT_LT(worst, period ? 0.05 : 1e-9) << "period " << period << " xor " << xor_codes;
     }
   }
+}
+
+// A surface lit at a grazing angle crowds several projector columns into each camera pixel: here
+// every capture averaged over 8 camera pixels along x, which turns the 4-pixel stripes of the
+// finest shown column plane (and, XORed with it, every column plane) into flat grey, while the
+// rows, constant along x, stay as shown. The rows decode on their own; the columns are refused.
+TEST(StructuredLight, EachAxisDecodesOnItsOwn) {
+  StructuredLightOptions options;
+  options.width = 128;
+  options.height = 64;
+  const CaptureSequence sequence = MakeStructuredLightSequence(options);
+  std::vector<cv::Mat> captured;
+  for (const cv::Mat& ideal : IdealCaptures(sequence)) {
+    cv::Mat grey;
+    ideal.convertTo(grey, CV_32F);
+    cv::Mat crowded(grey.size(), grey.type(), cv::Scalar::all(0));
+    for (int v = 0; v < grey.rows; ++v)
+      for (int u = 0; u < grey.cols; ++u)
+        for (int j = 0; j < 8; ++j)  // wrapping around: every pixel sees one whole period
+          crowded.at<cv::Vec3f>(v, u) += grey.at<cv::Vec3f>(v, (u + j) % grey.cols) / 8.0f;
+    captured.push_back(crowded);
+  }
+  const StructuredLightMap map = DecodeStructuredLight(options, captured);
+  const int pixels = options.width * options.height;
+  EXPECT_EQ(cv::countNonZero(map.mask), 0);
+  EXPECT_EQ(map.ambiguous, pixels);  // each pixel counted once
+  int rows = 0, columns = 0;
+  double worst = 0.0;
+  for (int v = 0; v < options.height; ++v) {
+    for (int u = 0; u < options.width; ++u) {
+      columns += std::isfinite(map.column.at<float>(v, u));
+      if (!std::isfinite(map.row.at<float>(v, u))) continue;
+      ++rows;
+      worst = std::max<double>(worst, std::abs(map.row.at<float>(v, u) - v));
+    }
+  }
+  EXPECT_EQ(columns, 0);
+  EXPECT_EQ(rows, pixels);
+  EXPECT_LT(worst, 0.05);  // as IdealCapturesDecodeToTheProjectorPixel: 8-bit sinusoids
+
+  // The correspondences: none on both axes, every pixel on its row alone but one, whose row is
+  // made to disagree with its neighbours' (as a code that passed its tests by chance does).
+  StructuredLightMap chance = map;
+  chance.row = map.row.clone();
+  chance.row.at<float>(20, 30) += 40.0f;
+  const ProjectorObservations observations =
+      ObservationsFromMap(chance, "p", options.width, options.height);
+  EXPECT_TRUE(observations.camera_pixels.empty());
+  ASSERT_EQ(observations.one_axis_camera_pixels.size(), static_cast<size_t>(pixels - 1));
+  EXPECT_EQ(std::count(observations.one_axis_camera_pixels.begin(),
+                       observations.one_axis_camera_pixels.end(), Vec2(30, 20)),
+            0);
+  const Vec2& camera_pixel = observations.one_axis_camera_pixels.back();
+  const Vec2& decoded = observations.one_axis_projector_pixels.back();
+  EXPECT_EQ(camera_pixel, Vec2(options.width - 1, options.height - 1));
+  EXPECT_TRUE(std::isnan(decoded.x()));
+  EXPECT_NEAR(decoded.y(), options.height - 1, 0.05);
 }
 
 TEST(StructuredLight, OptionsAreChecked) {
