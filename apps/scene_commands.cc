@@ -185,7 +185,7 @@ void RunJsonDemo(const std::string& scene_path, int patches, const std::filesyst
   nlohmann::json result = {{"scene", scene_path}, {"patches", stage.patches.fine.size()}, {"methods", methods}};
   WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
   std::cout << "\nwrote " << out.string() << "/: problem/, form_factors.png, result.json, per method E.npy, B.npy\n"
-            << "(a scene file has no camera: ΔE here is per patch, in the solver's model)\n";
+            << "(this scene file has no camera or no projectors: ΔE here is per patch, in the solver's model)\n";
 }
 
 }  // namespace
@@ -247,7 +247,8 @@ void AddDemoCommand(CLI::App& app) {
               "simulated photos, ΔE, report.html");
   demo->add_option("--scene", args->scene,
                    "A synthetic scene (c_shaped, l_shaped, columns, green_trapezoid, interior_partitions, blue_curves, "
-                   "tiny_box) or a scene JSON file (geometry and compensation only)")
+                   "tiny_box) or a scene JSON file: with projectors and a camera a synthetic rig (every stage, "
+                   "as synthetic:ROOM.json), else geometry and compensation only")
       ->capture_default_str();
   demo->add_option("--patches", args->patches, "Solver patches")->capture_default_str();
   demo->add_option("--out", args->out, "Output directory")->capture_default_str();
@@ -282,9 +283,14 @@ void AddDemoCommand(CLI::App& app) {
       RunRigDemo(named ? "synthetic:" + args->scene : args->scene, args->patches, *rig, out);
       return;
     }
+    // A scene file without projectors and a camera: geometry and compensation only. With them it
+    // is a synthetic rig (synthetic:ROOM.json), and the demo runs every stage on it.
     if (args->scene.size() > 5 && args->scene.substr(args->scene.size() - 5) == ".json") {
-      RunJsonDemo(args->scene, args->patches, out);
-      return;
+      const Scene scene = LoadScene(args->scene);
+      if (scene.cameras_json.empty() || scene.projectors_json.empty()) {
+        RunJsonDemo(args->scene, args->patches, out);
+        return;
+      }
     }
     SyntheticDemoOptions demo;
     demo.scene = args->scene;

@@ -19,7 +19,7 @@
 namespace procam {
 
 struct SyntheticDemoOptions {
-  std::string scene = "c_shaped";  // SyntheticSceneNames()
+  std::string scene = "c_shaped";  // SyntheticSceneNames(), or a scene file with projectors and a camera
   int patches = 600;               // solver patches
   LightField light = LightField::kSmooth;  // projector images: seamless, or flat per patch
   // Also calibrate without the room model (calibrate all --scan into out/rig_scan), compensate

@@ -13,6 +13,7 @@
 #include "compensation/colour_image.h"
 #include "compensation/objective.h"
 #include "compensation/solver.h"
+#include "datasets_synthetic/synthetic_camera.h"
 #include "projection/camera_rays.h"
 
 namespace procam {
@@ -46,27 +47,37 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
   const auto start = Clock::now();
   SceneEvaluation evaluation;
   evaluation.name = name;
-  const SyntheticScene synthetic = MakeSyntheticScene(name, options.patches);
+  // A built-in scene, or a scene file with projectors and a camera (as synthetic:ROOM.json).
+  SyntheticRigSource source;
+  if (name.size() > 5 && name.compare(name.size() - 5, 5, ".json") == 0) {
+    source = LoadSceneFileRig(name, "", options.patches);
+  } else {
+    const SyntheticScene synthetic = MakeSyntheticScene(name, options.patches);
+    source.scene = synthetic.scene;
+    for (const DevicePlacement& placement : synthetic.projectors)
+      source.projectors.push_back(ProjectorFromPlacement(placement));
+    source.camera = CameraFromPlacement(synthetic.camera);
+  }
   Report(options.progress, fmt::format("evaluate {}: geometry ({} patches)", name, options.patches));
   GeometryOptions geometry;
   geometry.patches = options.patches;
   geometry.progress = options.progress;
-  Scene scene = synthetic.scene;
-  scene.path = "synthetic:" + name;  // what solutions record, so that later stages can rebuild it
+  Scene scene = source.scene;
+  // What solutions record, so that later stages can rebuild it.
+  if (scene.path.empty()) scene.path = "synthetic:" + name;
   evaluation.geometry = RunGeometryStage(std::move(scene), geometry);
-  std::vector<Projector> projectors;
-  for (const DevicePlacement& placement : synthetic.projectors) projectors.push_back(ProjectorFromPlacement(placement));
+  const std::vector<Projector>& projectors = source.projectors;
   evaluation.rig = std::make_unique<ProjectionRig>(
       BuildProjectionRig(evaluation.geometry.patches.fine, projectors, ProjectionRigOptions()));
   Report(options.progress, fmt::format("evaluate {}: simulated world ({}× finer mesh, camera {}×{})", name, options.world_factor,
-               synthetic.camera.width, synthetic.camera.height));
+               source.camera.width(), source.camera.height()));
   SimulatedRigOptions world_options;
   world_options.solver_patches = options.patches;
   world_options.world_factor = options.world_factor;
   world_options.albedo_variation = options.albedo_variation;
   world_options.smooth_bounce = options.smooth_bounce;
-  evaluation.world = std::make_unique<SimulatedRig>(synthetic.scene, projectors,
-                                                    CameraFromPlacement(synthetic.camera), world_options);
+  evaluation.world = std::make_unique<SimulatedRig>(source.scene, projectors, source.camera,
+                                                    world_options);
   evaluation.desired = evaluation.world->RenderDesired();
   const CameraPixelRays camera_rays = CastCameraPixels(evaluation.geometry.scene, evaluation.geometry.patches.fine,
                                                        {}, evaluation.world->camera());

@@ -70,8 +70,10 @@ struct EvaluationOptions {
   bool Check(std::string* why) const;
 };
 
-// Evaluates one synthetic scene (SyntheticSceneNames()). Logs progress. Throws
-// std::invalid_argument for an unknown scene or bad options.
+// Evaluates one synthetic scene (SyntheticSceneNames()), or a scene file (NAME.json) with
+// projectors and a camera, its first camera (LoadSceneFileRig, as synthetic:NAME.json opens it).
+// Logs progress. Throws std::invalid_argument for an unknown scene or bad options, IoError for a
+// scene file that cannot be read or has no projectors or camera.
 SceneEvaluation EvaluateSyntheticScene(const std::string& name, const EvaluationOptions& options);
 
 // The lowest area-weighted mean ΔE76 per patch that emittances within `problem`'s bounds reach,

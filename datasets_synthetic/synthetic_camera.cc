@@ -206,18 +206,18 @@ std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int
                     CameraFromPlacement(synthetic.camera), albedo_variation);
 }
 
-std::shared_ptr<SyntheticWorld> MakeSceneFileWorld(const std::filesystem::path& scene_file,
-                                                   const std::string& camera, int patches,
-                                                   double albedo_variation, const std::string& uri_path) {
+SyntheticRigSource LoadSceneFileRig(const std::filesystem::path& scene_file,
+                                    const std::string& camera, int patches) {
   const std::string file = scene_file.string();
   CheckPatches(file, patches);
-  Scene scene = LoadScene(scene_file);
-  scene.target_patches = patches;
-  std::vector<Projector> projectors = ReadProjectors(scene);
-  if (projectors.empty())
+  SyntheticRigSource source;
+  source.scene = LoadScene(scene_file);
+  source.scene.target_patches = patches;
+  source.projectors = ReadProjectors(source.scene);
+  if (source.projectors.empty())
     throw IoError(file + ": projectors: a synthetic rig needs at least one projector");
   const std::vector<SceneCamera> cameras =
-      ParseSceneCameras(scene.cameras_json, file, scene_file.parent_path());
+      ParseSceneCameras(source.scene.cameras_json, file, scene_file.parent_path());
   if (cameras.empty()) throw IoError(file + ": cameras: a synthetic rig needs a camera");
   size_t index = 0;
   if (!camera.empty()) {
@@ -229,23 +229,31 @@ std::shared_ptr<SyntheticWorld> MakeSceneFileWorld(const std::filesystem::path& 
     if (index == cameras.size())
       throw IoError(file + ": cameras: no camera named '" + camera + "' (cameras: " + names + ")");
   }
-  const SceneCamera& entry = cameras[index];
-  CameraGeometry geometry;
+  source.camera_entry = cameras[index];
   try {
-    geometry = CameraGeometry::FromModel(entry.model);
+    source.camera = CameraGeometry::FromModel(source.camera_entry.model);
   } catch (const std::invalid_argument& error) {
     throw IoError(file + ": cameras[" + std::to_string(index) + "].model: " + error.what());
   }
+  return source;
+}
+
+std::shared_ptr<SyntheticWorld> MakeSceneFileWorld(const std::filesystem::path& scene_file,
+                                                   const std::string& camera, int patches,
+                                                   double albedo_variation, const std::string& uri_path) {
+  SyntheticRigSource source = LoadSceneFileRig(scene_file, camera, patches);
+  const std::string file = scene_file.string();
   auto world = std::make_shared<SyntheticWorld>();
   world->scene = uri_path.empty() ? file : uri_path;
   world->scene_source = file;
   world->patches = patches;
-  world->camera_settings = entry.settings;
+  world->camera_settings = source.camera_entry.settings;
   world->camera_settings.name = world->scene;
-  const Eigen::Isometry3d world_from_camera = entry.model.cam_from_ref.inverse();
+  const Eigen::Isometry3d world_from_camera = source.camera_entry.model.cam_from_ref.inverse();
   const Vec3 centre = world_from_camera.translation();
   world->camera_guess = CameraGuess(centre, centre + 3.0 * world_from_camera.linear().col(2));
-  return BuildWorld(world, scene, std::move(projectors), std::move(geometry), albedo_variation);
+  return BuildWorld(world, source.scene, std::move(source.projectors), std::move(source.camera),
+                    albedo_variation);
 }
 
 SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world) {

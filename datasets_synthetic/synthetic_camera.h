@@ -32,6 +32,7 @@
 
 #include "capture/camera.h"
 #include "capture/display.h"
+#include "capture/scene_cameras.h"
 #include "capture/test_camera.h"
 #include "datasets_synthetic/simulated_rig.h"
 
@@ -76,6 +77,21 @@ struct SyntheticWorld {
 // unknown or patches is outside [20, 5000].
 std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int patches = 300,
                                                    double albedo_variation = 0.0);
+// What a synthetic rig is built from: the scene, its projectors and its camera.
+struct SyntheticRigSource {
+  Scene scene;
+  std::vector<Projector> projectors;
+  CameraGeometry camera;
+  SceneCamera camera_entry;  // a scene file's camera entry (name, settings); empty otherwise
+};
+
+// A scene file's rig (docs/scene_format.md): its surfaces with patch target `patches`, its
+// projectors as written and its camera `camera` (a name of its cameras; "" = the first). Throws
+// IoError naming the file and key (a scene without projectors or cameras, an unknown camera
+// name), std::invalid_argument for patches outside [20, 5000].
+SyntheticRigSource LoadSceneFileRig(const std::filesystem::path& scene_file,
+                                    const std::string& camera, int patches);
+
 // The world of a scene file with `projectors` and `cameras` (docs/scene_format.md): the scene's
 // surfaces, its projectors as written (models and photometry), and its camera `camera` (a name
 // of its cameras; "" = the first) with the entry's settings; the rest as MakeSyntheticWorld.

@@ -2,12 +2,16 @@
 #include "datasets_synthetic/evaluation.h"
 
 #include <cstdio>
+#include <filesystem>
 
 #include <gtest/gtest.h>
 
 #include "compensation/objective.h"
 #include "compensation/solver.h"
 #include "datasets_synthetic/rooms.h"
+#include "datasets_synthetic/scene_files.h"
+#include "datasets_synthetic/simulated_rig.h"
+#include "tests/testing/testing.h"
 #include "geometry/form_factors.h"
 
 namespace procam {
@@ -78,6 +82,40 @@ TEST(LowestMeanDeltaE2000, IsZeroWhenReachableAndBelowEveryMethodWhenBoundsBite)
                 mean2000, lowest);
     EXPECT_LT(lowest, mean2000) << MethodName(method);
   }
+}
+
+// A scene file with projectors and a camera is the rig it describes: tiny_box written as a file
+// (WriteSyntheticSceneFile) and evaluated from it has the built-in scene's camera and projectors
+// and photographs the same compensation (the linear method's per-pixel ΔE76, within the rounding
+// of the written numbers), and its geometry records the file it came from.
+TEST(EvaluateSyntheticScene, ASceneFileWithProjectorsAndACameraIsTheRigItDescribes) {
+  const testing::TempDir dir;
+  const std::filesystem::path file = WriteSyntheticSceneFile("tiny_box", 100, dir.path());
+  EvaluationOptions options;
+  options.patches = 100;
+  options.methods = {CompensationMethod::kLinear};
+  const SceneEvaluation built_in = EvaluateSyntheticScene("tiny_box", options);
+  const SceneEvaluation from_file = EvaluateSyntheticScene(file.string(), options);
+  EXPECT_EQ(from_file.geometry.scene.path, file);
+  EXPECT_EQ(built_in.geometry.scene.path, "synthetic:tiny_box");
+  const auto same_device = [](const ProjectorGeometry& a, const ProjectorGeometry& b) {
+    EXPECT_EQ(a.width(), b.width());
+    EXPECT_EQ(a.height(), b.height());
+    ASSERT_EQ(a.intrinsics().size(), b.intrinsics().size());
+    for (size_t i = 0; i < a.intrinsics().size(); ++i)
+      EXPECT_NEAR(a.intrinsics()[i], b.intrinsics()[i], 1e-6 * (1.0 + std::abs(a.intrinsics()[i])));
+    EXPECT_LT((a.proj_from_world().matrix() - b.proj_from_world().matrix()).norm(), 1e-9);
+  };
+  same_device(from_file.world->camera(), built_in.world->camera());
+  ASSERT_EQ(from_file.world->projectors().size(), built_in.world->projectors().size());
+  for (size_t k = 0; k < built_in.world->projectors().size(); ++k)
+    same_device(from_file.world->projectors()[k].geometry, built_in.world->projectors()[k].geometry);
+  ASSERT_EQ(from_file.methods.size(), 1u);
+  ASSERT_EQ(built_in.methods.size(), 1u);
+  std::printf("linear: mean ΔE76 %.4f built in, %.4f from the file\n",
+              built_in.methods[0].mean_delta_e76, from_file.methods[0].mean_delta_e76);
+  EXPECT_NEAR(from_file.methods[0].mean_delta_e76, built_in.methods[0].mean_delta_e76,
+              1e-3 * built_in.methods[0].mean_delta_e76);
 }
 
 // The scene with the most shadows and partly lit patches (partitions in front of the walls), as
