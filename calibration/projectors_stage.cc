@@ -743,6 +743,7 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
                                          {"registration", registration_json},
                                          {"scan",
                                           {{"points", stage.scanned->points},
+                                           {"one_axis_pixels", one_axis_pixels},
                                            {"unassigned", stage.scanned->unassigned},
                                            {"largest_left_out_m2",
                                             stage.scanned->left_out.empty()

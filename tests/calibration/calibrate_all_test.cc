@@ -250,6 +250,12 @@ TEST(CalibrateAll, ScansTheRoomWithoutAModel) {
   std::printf("board plane to the scanned floor: %.2f deg\n",
               scale["board_to_scanned_floor_deg"].get<double>());
   EXPECT_LT(scale["board_to_scanned_floor_deg"].get<double>(), 1.0);
+  // How many of the scan's points came from one axis alone: a count among its points.
+  const nlohmann::json& scan = result["projectors"]["scan"];
+  std::printf("scan: %d points, %d from one axis alone\n", scan["points"].get<int>(),
+              scan["one_axis_pixels"].get<int>());
+  EXPECT_GE(scan["one_axis_pixels"].get<int>(), 0);
+  EXPECT_LE(scan["one_axis_pixels"].get<int>(), scan["points"].get<int>());
   // Each projector's projection uncertainty: its map in result.json (16 × 12, corners equal to
   // the grid's), and drawn in projectors_report.html, a picture per projector beside it.
   const std::string report = ReadFile(dir / "rig/projectors_report.html");
