@@ -675,12 +675,9 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
   // column) are kept: SceneFromPoints takes the points' spacing for a lattice of pixels, which
   // every s-th point of the list would not be.
   constexpr size_t kMaxScanPoints = 1000000;
-  std::vector<TriangulatedPoint> triangulated = Triangulate(problem, stage.calibration, 0.02);
   std::vector<double> gaps;
-  for (const TriangulatedPoint& p : triangulated) gaps.push_back(p.gap);
-  const std::vector<TriangulatedPoint> one_axis = TriangulateOneAxis(problem, stage.calibration);
-  triangulated.insert(triangulated.end(), one_axis.begin(), one_axis.end());
-  const std::vector<TriangulatedPoint> per_pixel = FusePerCameraPixel(triangulated);
+  const std::vector<TriangulatedPoint> per_pixel =
+      TriangulateScan(problem, stage.calibration, 0.02, &gaps);
   const long one_axis_pixels = std::count_if(per_pixel.begin(), per_pixel.end(),
                                              [](const TriangulatedPoint& p) { return p.one_axis; });
   int lattice = 1;

@@ -828,13 +828,25 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
 // ---------------------------------------------------------------------------------------------
 // Triangulation
 
+namespace {
+
+// The camera's lens a triangulation uses: `calibration`'s when it holds one (CalibrateRoom and
+// SelfCalibrateRoom fill it), else the problem's.
+struct CameraLens {
+  const std::string& model;
+  const std::vector<double>& intrinsics;
+};
+CameraLens CameraLensOf(const RoomCalibrationProblem& problem, const RoomCalibration& calibration) {
+  if (calibration.camera_intrinsics.empty())
+    return {problem.camera_lens_model, problem.camera_intrinsics};
+  return {calibration.camera_lens_model, calibration.camera_intrinsics};
+}
+
+}  // namespace
+
 std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem,
                                            const RoomCalibration& calibration, double max_gap) {
-  const bool own_lens = !calibration.camera_intrinsics.empty();
-  const std::string& camera_lens_model =
-      own_lens ? calibration.camera_lens_model : problem.camera_lens_model;
-  const std::vector<double>& camera_intrinsics =
-      own_lens ? calibration.camera_intrinsics : problem.camera_intrinsics;
+  const CameraLens camera = CameraLensOf(problem, calibration);
   std::vector<TriangulatedPoint> points;
   for (size_t k = 0; k < problem.projectors.size() && k < calibration.projectors.size(); ++k) {
     const RoomProjector& projector = calibration.projectors[k];
@@ -845,7 +857,7 @@ std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem
     for (size_t i = 0; i < p.camera_pixels.size(); ++i) {
       Vec3 ray_cam, ray_proj;
       if (!p.camera_pixels[i].allFinite() || !p.projector_pixels[i].allFinite() ||
-          !UnprojectCameraPixel(camera_lens_model, camera_intrinsics, p.camera_pixels[i],
+          !UnprojectCameraPixel(camera.model, camera.intrinsics, p.camera_pixels[i],
                                 &ray_cam) ||
           !UnprojectCameraPixel(projector.lens_model, projector.intrinsics,
                                 p.projector_pixels[i], &ray_proj))
@@ -876,11 +888,7 @@ std::vector<TriangulatedPoint> Triangulate(const RoomCalibrationProblem& problem
 std::vector<TriangulatedPoint> TriangulateOneAxis(const RoomCalibrationProblem& problem,
                                                   const RoomCalibration& calibration,
                                                   double max_depth_per_pixel) {
-  const bool own_lens = !calibration.camera_intrinsics.empty();
-  const std::string& camera_lens_model =
-      own_lens ? calibration.camera_lens_model : problem.camera_lens_model;
-  const std::vector<double>& camera_intrinsics =
-      own_lens ? calibration.camera_intrinsics : problem.camera_intrinsics;
+  const CameraLens camera = CameraLensOf(problem, calibration);
   // Depths along the unit camera ray at which the search brackets the coordinate, metres: a
   // geometric ladder fine enough that a coordinate reached twice shows as two brackets.
   constexpr double kNear = 0.1, kFar = 100.0;
@@ -898,7 +906,7 @@ std::vector<TriangulatedPoint> TriangulateOneAxis(const RoomCalibrationProblem& 
       const int axis = std::isfinite(decoded.x()) ? 0 : 1;
       Vec3 ray_cam;
       if (!std::isfinite(decoded[axis]) || !p.one_axis_camera_pixels[i].allFinite() ||
-          !UnprojectCameraPixel(camera_lens_model, camera_intrinsics, p.one_axis_camera_pixels[i],
+          !UnprojectCameraPixel(camera.model, camera.intrinsics, p.one_axis_camera_pixels[i],
                                 &ray_cam))
         continue;
       const Vec3 d = ray_cam.normalized();
@@ -1052,6 +1060,19 @@ std::vector<TriangulatedPoint> FusePerCameraPixel(const std::vector<Triangulated
     kept.push_back(p);
   }
   return kept;
+}
+
+std::vector<TriangulatedPoint> TriangulateScan(const RoomCalibrationProblem& problem,
+                                               const RoomCalibration& calibration, double max_gap,
+                                               std::vector<double>* gaps) {
+  std::vector<TriangulatedPoint> points = Triangulate(problem, calibration, max_gap);
+  if (gaps) {
+    gaps->clear();
+    for (const TriangulatedPoint& p : points) gaps->push_back(p.gap);
+  }
+  const std::vector<TriangulatedPoint> one_axis = TriangulateOneAxis(problem, calibration);
+  points.insert(points.end(), one_axis.begin(), one_axis.end());
+  return FusePerCameraPixel(points);
 }
 
 // ---------------------------------------------------------------------------------------------

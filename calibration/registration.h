@@ -270,6 +270,15 @@ std::vector<TriangulatedPoint> TriangulateOneAxis(const RoomCalibrationProblem& 
 std::vector<TriangulatedPoint> FusePerCameraPixel(const std::vector<TriangulatedPoint>& points,
                                                   double max_spread = 0.01);
 
+// The points of a scan of the room, one per camera pixel: every correspondence triangulated
+// (Triangulate; rays more than `max_gap` metres apart left out) and every one-axis
+// correspondence (TriangulateOneAxis), fused (FusePerCameraPixel). `gaps` (optional) gets the
+// ray gaps of the two-axis triangulations, metres.
+std::vector<TriangulatedPoint> TriangulateScan(const RoomCalibrationProblem& problem,
+                                               const RoomCalibration& calibration,
+                                               double max_gap = 0.02,
+                                               std::vector<double>* gaps = nullptr);
+
 // At most `max_points` of one-per-pixel `points` (FusePerCameraPixel's), still a lattice of
 // pixels: those whose camera pixel's column and row are multiples of the smallest s that leaves
 // at most max_points in the worst case (every pixel present: s = ⌈√(size / max_points)⌉); all of

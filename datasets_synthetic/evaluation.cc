@@ -48,16 +48,7 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
   SceneEvaluation evaluation;
   evaluation.name = name;
   // A built-in scene, or a scene file with projectors and a camera (as synthetic:ROOM.json).
-  SyntheticRigSource source;
-  if (name.size() > 5 && name.compare(name.size() - 5, 5, ".json") == 0) {
-    source = LoadSceneFileRig(name, "", options.patches);
-  } else {
-    const SyntheticScene synthetic = MakeSyntheticScene(name, options.patches);
-    source.scene = synthetic.scene;
-    for (const DevicePlacement& placement : synthetic.projectors)
-      source.projectors.push_back(ProjectorFromPlacement(placement));
-    source.camera = CameraFromPlacement(synthetic.camera);
-  }
+  const SyntheticRigSource source = LoadSyntheticRig(name, options.patches);
   Report(options.progress, fmt::format("evaluate {}: geometry ({} patches)", name, options.patches));
   GeometryOptions geometry;
   geometry.patches = options.patches;

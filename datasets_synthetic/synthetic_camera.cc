@@ -147,6 +147,16 @@ std::shared_ptr<SyntheticWorld> BuildWorld(std::shared_ptr<SyntheticWorld> world
   return world;
 }
 
+// A built-in scene's rig: its projectors and camera (with distortion) from their placements.
+SyntheticRigSource RigFromPlacements(const SyntheticScene& synthetic) {
+  SyntheticRigSource source;
+  source.scene = synthetic.scene;
+  for (const DevicePlacement& placement : synthetic.projectors)
+    source.projectors.push_back(ProjectorFromPlacement(placement));
+  source.camera = CameraFromPlacement(synthetic.camera);
+  return source;
+}
+
 }  // namespace
 
 ProjectorImage CodesFromPattern(const cv::Mat& pattern, const Projector& projector) {
@@ -190,9 +200,7 @@ std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int
   }
   CheckPatches(scene, patches);
   const SyntheticScene synthetic = MakeSyntheticScene(scene, patches);
-  std::vector<Projector> projectors;
-  for (const DevicePlacement& placement : synthetic.projectors)
-    projectors.push_back(ProjectorFromPlacement(placement));
+  SyntheticRigSource source = RigFromPlacements(synthetic);
   auto world = std::make_shared<SyntheticWorld>();
   world->scene = scene;
   world->scene_source = "synthetic:" + scene;
@@ -202,8 +210,8 @@ std::shared_ptr<SyntheticWorld> MakeSyntheticWorld(const std::string& scene, int
   world->camera_settings.height = synthetic.camera.height;
   world->camera_settings.pixel_format = PixelFormat::kBGR8;
   world->camera_guess = CameraGuess(synthetic.camera.centre, synthetic.camera.target);
-  return BuildWorld(world, synthetic.scene, std::move(projectors),
-                    CameraFromPlacement(synthetic.camera), albedo_variation);
+  return BuildWorld(world, source.scene, std::move(source.projectors), std::move(source.camera),
+                    albedo_variation);
 }
 
 SyntheticRigSource LoadSceneFileRig(const std::filesystem::path& scene_file,
@@ -236,6 +244,11 @@ SyntheticRigSource LoadSceneFileRig(const std::filesystem::path& scene_file,
     throw IoError(file + ": cameras[" + std::to_string(index) + "].model: " + error.what());
   }
   return source;
+}
+
+SyntheticRigSource LoadSyntheticRig(const std::string& scene, int patches) {
+  if (IsSceneFile(scene)) return LoadSceneFileRig(scene, "", patches);
+  return RigFromPlacements(MakeSyntheticScene(scene, patches));
 }
 
 std::shared_ptr<SyntheticWorld> MakeSceneFileWorld(const std::filesystem::path& scene_file,

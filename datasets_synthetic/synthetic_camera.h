@@ -92,6 +92,11 @@ struct SyntheticRigSource {
 SyntheticRigSource LoadSceneFileRig(const std::filesystem::path& scene_file,
                                     const std::string& camera, int patches);
 
+// A built-in scene's rig (MakeSyntheticScene, its placements as MakeSyntheticWorld takes them) or,
+// for a path ending in .json, a scene file's with its first camera (LoadSceneFileRig). Throws
+// std::invalid_argument for an unknown scene, as LoadSceneFileRig for a scene file.
+SyntheticRigSource LoadSyntheticRig(const std::string& scene, int patches);
+
 // The world of a scene file with `projectors` and `cameras` (docs/scene_format.md): the scene's
 // surfaces, its projectors as written (models and photometry), and its camera `camera` (a name
 // of its cameras; "" = the first) with the entry's settings; the rest as MakeSyntheticWorld.

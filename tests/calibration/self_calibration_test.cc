@@ -502,13 +502,9 @@ void ExpectScanMeetsAims(const std::string& name, bool decoded = false,
   ASSERT_TRUE(SelfCalibrateRoom(options, problem, &calibration, nullptr, &summary))
       << summary.BriefReport();
   ASSERT_TRUE(summary.floor_normal_held);
-  // As the scan does it (calibration/projectors_stage.cc): one-axis correspondences where no
-  // projector decoded both axes.
-  std::vector<TriangulatedPoint> triangulated = Triangulate(problem, calibration, 0.02);
-  const std::vector<TriangulatedPoint> one_axis = TriangulateOneAxis(problem, calibration);
-  triangulated.insert(triangulated.end(), one_axis.begin(), one_axis.end());
+  // The scan's points, as calibrate projectors takes them.
   std::vector<Vec3> points_in_room;
-  for (const TriangulatedPoint& point : FusePerCameraPixel(triangulated))
+  for (const TriangulatedPoint& point : TriangulateScan(problem, calibration))
     points_in_room.push_back(calibration.room_from_camera * point.p_in_cam);
   SceneFromPointsOptions scene_options;
   scene_options.viewpoint = calibration.room_from_camera.translation();
@@ -882,4 +878,3 @@ TEST(SelfCalibrateRoom, OptionsAndInputsAreChecked) {
 
 }  // namespace
 }  // namespace procam
-
