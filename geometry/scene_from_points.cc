@@ -347,10 +347,145 @@ std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const P
   return polygons;
 }
 
+// Notch filling (step 5): where the points of a plane stop short of the edge it shares with a
+// neighbour (camera pixels that decoded nothing beside the corner of two walls, seen at a grazing
+// angle so that each spans centimetres to decimetres of wall), its outline retreats from the edge
+// line in a notch a few pixels wide in the camera's image. Both planes run on to their shared
+// edge; what the camera cannot resolve is filled, unless points seen through it show a hole.
+struct NotchFilling {
+  Vec3 viewpoint = Vec3::Zero();
+  double max_angle = 0.0;  // a notch is at most this wide seen from the viewpoint, rad (0: none)
+  // Points beyond the plane by more than this, seen through a notch, make it a hole, m (triangulated
+  // points where a surface is seen and lit at grazing angles lie centimetres off it).
+  double beyond = 0.05;
+  const std::vector<Vec3>* points = nullptr;
+};
+
+constexpr int kSeenThrough = 3;  // points seen through a notch that make it a hole
+
+struct NotchLine {
+  Vec3 point, direction;  // unit direction
+  const Plane* other;     // the neighbour the line is shared with
+};
+
+// The angle, seen from `viewpoint`, between p and the line (in the image: p's distance from the
+// line's image).
+double AngleToLine(const Vec3& viewpoint, const NotchLine& line, const Vec3& p) {
+  const Vec3 normal = line.direction.cross(line.point - viewpoint);
+  const Vec3 ray = p - viewpoint;
+  if (normal.norm() < 1e-12 || ray.norm() < 1e-12) return 0.0;
+  return std::asin(std::min(1.0, std::abs(normal.normalized().dot(ray.normalized()))));
+}
+
+// How many cloud points lie beyond `plane` by more than notches.beyond, on a ray from the
+// viewpoint that crosses the plane inside `larger` but not inside `smaller` (rings in the plane's
+// (u, v)).
+int PointsSeenThrough(const Plane& plane, const std::vector<Point2>& larger, const std::vector<Point2>& smaller,
+                      const NotchFilling& notches) {
+  static const Kernel traits;  // (as in SnapRing)
+  const CGAL::Bbox_2 box = CGAL::bbox_2(larger.begin(), larger.end());
+  const Vec3& v = notches.viewpoint;
+  const double from = plane.Distance(v);
+  int seen = 0;
+  for (const Vec3& q : *notches.points) {
+    const double to = plane.Distance(q);
+    if (to > -notches.beyond || from <= 0) continue;
+    const Vec2 uv = plane.ToPlane(v + from / (from - to) * (q - v));
+    if (uv.x() < box.xmin() || uv.x() > box.xmax() || uv.y() < box.ymin() || uv.y() > box.ymax()) continue;
+    const Point2 at(uv.x(), uv.y());
+    if (CGAL::bounded_side_2(larger.begin(), larger.end(), at, traits) == CGAL::ON_BOUNDED_SIDE &&
+        CGAL::bounded_side_2(smaller.begin(), smaller.end(), at, traits) == CGAL::ON_UNBOUNDED_SIDE)
+      ++seen;
+  }
+  return seen;
+}
+
+// Finds the notches of one snapped ring: a corner j on edge line L2 and, walking back from it
+// through corners each within notches.max_angle of L1 or L2 (seen from the viewpoint), the
+// farthest corner i on L1 (L1 = L2 or another edge line): the corners between i and j go, and
+// where L1 ≠ L2 the point where the three planes meet comes between them. A notch is taken when
+// the ring stays simple and gains area, and no points are seen through the area it gains.
+// `on_line[k]`: the lines (indices into `lines`) corner k lies on. Marks the corners that go in
+// `dropped` and the corners added after corner k in `added[k]`.
+void FillNotches(const Plane& plane, const std::vector<NotchLine>& lines, const std::vector<Point2>& corners,
+                 const std::vector<std::vector<int>>& on_line, const NotchFilling& notches,
+                 std::vector<bool>* dropped, std::vector<std::vector<Point2>>* added) {
+  const int n = static_cast<int>(corners.size());
+  if (notches.max_angle <= 0 || n < 4) return;
+  const auto at = [&](int k) { return plane.FromPlane(Vec2(corners[k].x(), corners[k].y())); };
+  const auto on = [&](int k, int line) {
+    return std::find(on_line[k].begin(), on_line[k].end(), line) != on_line[k].end();
+  };
+  const auto near = [&](int k, int line) {
+    return on(k, line) || AngleToLine(notches.viewpoint, lines[line], at(k)) <= notches.max_angle;
+  };
+  struct Notch {
+    int i, j, run;
+    bool meet;
+    Point2 corner;
+  };
+  std::vector<Notch> found;
+  for (int j = 0; j < n; ++j) {
+    for (int second : on_line[j]) {
+      for (int first = 0; first < static_cast<int>(lines.size()); ++first) {
+        Notch notch{-1, j, 0, first != second, Point2(0, 0)};
+        if (notch.meet) {
+          Vec3 meet;
+          if (!ThreePlanePoint(plane, *lines[first].other, *lines[second].other, &meet)) continue;
+          const Vec2 uv = plane.ToPlane(meet);
+          notch.corner = Point2(uv.x(), uv.y());
+        }
+        for (int steps = 1, k = (j + n - 1) % n; steps < n / 2; ++steps, k = (k + n - 1) % n) {
+          if (on(k, first)) notch.i = k, notch.run = steps - 1;
+          else if (!near(k, first) && !near(k, second)) break;
+        }
+        if (notch.i < 0) continue;
+        // Something to gain: a corner between off both lines, or the meeting point not yet there.
+        bool gain = false;
+        for (int k = (notch.i + 1) % n; k != j && !gain; k = (k + 1) % n) gain = !on(k, first) && !on(k, second);
+        if (notch.meet && !gain) {
+          gain = true;
+          for (int k = notch.i; k != (j + 1) % n && gain; k = (k + 1) % n) gain = !(on(k, first) && on(k, second));
+        }
+        if (gain) found.push_back(notch);
+      }
+    }
+  }
+  // Widest first; each checked on the ring with the notches taken so far.
+  std::sort(found.begin(), found.end(), [](const Notch& a, const Notch& b) { return a.run > b.run; });
+  static const Kernel traits;  // (as in SnapRing)
+  const auto ring_of = [&](const std::vector<bool>& drop, const std::vector<std::vector<Point2>>& add) {
+    std::vector<Point2> ring;
+    for (int k = 0; k < n; ++k) {
+      if (!drop[k]) ring.push_back(corners[k]);
+      ring.insert(ring.end(), add[k].begin(), add[k].end());
+    }
+    return ring;
+  };
+  const std::vector<Point2> original = ring_of(*dropped, *added);
+  double area = CGAL::to_double(CGAL::polygon_area_2(original.begin(), original.end(), traits));
+  for (const Notch& notch : found) {
+    if ((*dropped)[notch.i] || (*dropped)[notch.j] || !(*added)[notch.i].empty()) continue;
+    std::vector<bool> drop = *dropped;
+    std::vector<std::vector<Point2>> add = *added;
+    bool free = true;
+    for (int k = (notch.i + 1) % n; k != notch.j; k = (k + 1) % n) free = free && !drop[k] && add[k].empty(), drop[k] = true;
+    if (!free) continue;
+    if (notch.meet) add[notch.i].push_back(notch.corner);
+    const std::vector<Point2> ring = ring_of(drop, add);
+    if (ring.size() < 3 || !CGAL::is_simple_2(ring.begin(), ring.end(), traits)) continue;
+    const double larger = CGAL::to_double(CGAL::polygon_area_2(ring.begin(), ring.end(), traits));
+    if (std::abs(larger) <= std::abs(area) || (larger > 0) != (area > 0)) continue;
+    if (notches.points && PointsSeenThrough(plane, ring, ring_of(*dropped, *added), notches) >= kSeenThrough)
+      continue;
+    *dropped = drop, *added = add, area = larger;
+  }
+}
+
 // Step 5 for one ring: moves corners near the edge lines with neighbouring planes onto them.
 // Returns how many moved.
 int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, double snap_distance,
-             Polygon2* ring) {
+             const NotchFilling& notches, Polygon2* ring) {
   struct Line {
     Vec3 point, direction;
     const Plane* other;
@@ -363,6 +498,7 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
   int moved = 0;
   Polygon2 snapped;
   std::vector<const Line*> snapped_onto;  // per corner: the one line it moved onto, or null
+  std::vector<std::vector<const Line*>> on_lines;  // per corner: the lines it now lies on
   for (const Point2& corner : ring->vertices()) {
     const Vec3 p = plane.FromPlane(Vec2(corner.x(), corner.y()));
     std::vector<std::pair<double, const Line*>> near;
@@ -379,6 +515,7 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
       if (ThreePlanePoint(plane, *near[0].second->other, *near[1].second->other, &corner3) &&
           (corner3 - p).norm() <= 2 * snap_distance) {
         q = corner3, done = true;
+        on_lines.push_back({near[0].second, near[1].second});
       }
     }
     const Line* onto = nullptr;
@@ -387,22 +524,37 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
       q = line.point + (p - line.point).dot(line.direction) * line.direction;
       done = true;
       onto = &line;
+      on_lines.push_back({onto});
     }
     if (done) ++moved;
+    else on_lines.emplace_back();
     const Vec2 uv = plane.ToPlane(q);
     snapped.push_back(Point2(uv.x(), uv.y()));
     snapped_onto.push_back(onto);
   }
+  // Notches along edge lines (NotchFilling): corners are dropped, and the point where three
+  // planes meet added, by FillNotches.
+  std::vector<int> line_of(lines.size());
+  std::vector<std::vector<int>> on_index(on_lines.size());
+  for (size_t k = 0; k < on_lines.size(); ++k)
+    for (const Line* line : on_lines[k]) on_index[k].push_back(static_cast<int>(line - lines.data()));
+  std::vector<Point2> corners(snapped.vertices_begin(), snapped.vertices_end());
+  std::vector<NotchLine> notch_lines;
+  for (const Line& line : lines) notch_lines.push_back({line.point, line.direction, line.other});
+  std::vector<bool> notch(corners.size(), false);
+  std::vector<std::vector<Point2>> inserted(corners.size());
+  FillNotches(plane, notch_lines, corners, on_index, notches, &notch, &inserted);
   // Of a run of corners snapped onto one edge line, only the run's ends stay: the edge runs
   // straight between them. (An outline that zig-zags across the line, as where points of two
   // planes interleave along their edge, would otherwise double back along it and not be simple.)
   std::vector<Point2> cleaned;
   const size_t count = snapped_onto.size();
   for (size_t k = 0; k < count; ++k) {
+    if (notch[k]) continue;
     const Line* at = snapped_onto[k];
-    if (at && snapped_onto[(k + count - 1) % count] == at && snapped_onto[(k + 1) % count] == at)
-      continue;
-    cleaned.push_back(snapped[k]);
+    if (!(at && snapped_onto[(k + count - 1) % count] == at && snapped_onto[(k + 1) % count] == at))
+      cleaned.push_back(snapped[k]);
+    if (!inserted[k].empty()) cleaned.push_back(inserted[k].front());
   }
   if (cleaned.size() < 3) cleaned.assign(snapped.vertices_begin(), snapped.vertices_end());
   // Corners that snapped onto one point, or onto a straight line between their neighbours, go.
@@ -559,6 +711,27 @@ double RegionSpacing(const std::vector<Vec3>& points, const std::vector<int>& in
   return 1.0 / std::sqrt(density);
 }
 
+// The angle between neighbouring points seen from `viewpoint`: the median over the points of the
+// smallest angle to one of their k nearest neighbours; one camera pixel for a cloud of one point
+// per camera pixel seen from the camera's centre.
+double PixelAngle(const std::vector<Vec3>& points, const std::vector<std::vector<int>>& neighbours,
+                  const Vec3& viewpoint) {
+  std::vector<double> angles;
+  angles.reserve(points.size());
+  for (size_t i = 0; i < points.size(); ++i) {
+    const Vec3 ray = (points[i] - viewpoint).normalized();
+    double smallest = kPi;
+    for (int j : neighbours[i]) {
+      const Vec3 other = (points[j] - viewpoint).normalized();
+      smallest = std::min(smallest, std::atan2(ray.cross(other).norm(), ray.dot(other)));
+    }
+    if (smallest > 0 && smallest < kPi) angles.push_back(smallest);
+  }
+  if (angles.empty()) return 0.0;
+  std::nth_element(angles.begin(), angles.begin() + angles.size() / 2, angles.end());
+  return angles[angles.size() / 2];
+}
+
 std::vector<std::vector<int>> Members(const std::vector<int>& label, int regions) {
   std::vector<std::vector<int>> members(regions);
   for (size_t i = 0; i < label.size(); ++i)
@@ -706,9 +879,11 @@ std::vector<PlaneSurface> PlaneSurfaces(const std::vector<Vec3>& points, const s
 // Steps 5 and 6b: each plane's outline corners near a mesh surface (`meshes`: the scan's mesh
 // surfaces) onto it, then those near the edge lines with neighbouring planes onto those lines (so
 // that where a plane, a neighbouring plane and a mesh meet, the planes' shared edge wins).
+// `notches`: what fills notches along the edge lines (SnapRing).
 void SnapOutlines(const std::vector<int>& label, const std::vector<std::vector<int>>& neighbours,
                   const std::vector<int>& surface_of_region, const std::vector<Surface>& meshes,
-                  const SceneFromPointsOptions& options, std::vector<PlaneSurface>* plane_surfaces) {
+                  const NotchFilling& notches, const SceneFromPointsOptions& options,
+                  std::vector<PlaneSurface>* plane_surfaces) {
   std::vector<Triangle3> mesh_triangles;
   for (const Surface& mesh : meshes) {
     for (const MeshTriangle& triangle : mesh.mesh_triangles) {
@@ -734,7 +909,7 @@ void SnapOutlines(const std::vector<int>& label, const std::vector<std::vector<i
     const auto snap = [&](Polygon2* ring) {
       if (!mesh_triangles.empty())
         surface.snapped += SnapRingToMeshes(surface.plane, mesh_tree, options.snap_distance, ring);
-      surface.snapped += SnapRing(surface.plane, plane_neighbours[s], options.snap_distance, ring);
+      surface.snapped += SnapRing(surface.plane, plane_neighbours[s], options.snap_distance, notches, ring);
     };
     for (PolygonWithHoles2& polygon : surface.polygons) {
       snap(&polygon.outer_boundary());
@@ -914,6 +1089,7 @@ bool SceneFromPointsOptions::Check(std::string* why) const {
   if (!(outline_alpha_spacings > 0.5)) return fail("outline_alpha_spacings must be > 0.5");
   if (!(outline_tolerance > 0)) return fail("outline_tolerance must be > 0");
   if (!(snap_distance >= 0)) return fail("snap_distance must be ≥ 0");
+  if (!(max_notch_pixels >= 0)) return fail("max_notch_pixels must be ≥ 0");
   if (!(min_hole_area >= 0) || !(min_surface_area >= 0)) return fail("min_hole_area and min_surface_area must be ≥ 0");
   if (min_mesh_points < 3) return fail("min_mesh_points must be ≥ 3");
   if (smoothing_neighbors != 0 && smoothing_neighbors < 6) return fail("smoothing_neighbors must be 0 or ≥ 6");
@@ -999,7 +1175,11 @@ ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPoi
   std::vector<bool> on_surface(points.size(), false);
   ScannedScene meshes;
   AddMeshSurfaces(points, neighbours, for_mesh, viewpoint, options, &meshes, &on_surface);
-  SnapOutlines(label, neighbours, surface_of_region, meshes.scene.surfaces, options, &plane_surfaces);
+  NotchFilling notches;
+  notches.viewpoint = viewpoint;
+  notches.max_angle = options.max_notch_pixels * PixelAngle(points, neighbours, viewpoint);
+  notches.points = &points;
+  SnapOutlines(label, neighbours, surface_of_region, meshes.scene.surfaces, notches, options, &plane_surfaces);
   AddPlaneSurfaces(points, plane_surfaces, options, &result, &on_surface);
   for (Surface& mesh : meshes.scene.surfaces) result.scene.surfaces.push_back(std::move(mesh));
   result.stats.insert(result.stats.end(), meshes.stats.begin(), meshes.stats.end());

@@ -575,15 +575,16 @@ TEST(SelfCalibrateRoom, ScannedLShapedFromDecodedCaptures) {
 }
 
 // Four projectors from decoded captures: every surface within 5 mm (1.6–3.4 mm, measured), the
-// back wall and the partitions within 1%. The side walls come out 2.9% (left) and 2.1% (right)
-// small and the floor 1.2%: near the back corners the side walls are lit only at a grazing angle,
-// where neither of that projector's axes decodes in a strip of camera pixels, and seen at a
-// grazing angle, so that each of those pixels spans several centimetres of wall; the one-axis
-// points fill part of it (without them: 4.9% and 2.3%). A known limit (docs/scan.md), bounded as
-// measured.
+// walls and the partitions within 1%. Near the back corners the side walls are lit only at a
+// grazing angle, where neither of that projector's axes decodes in a pocket of camera pixels
+// about ten wide, and seen at a grazing angle, so that each of those pixels spans several
+// centimetres of wall. The one-axis points fill part of it; the outline, run on to the corner
+// where the side wall, the back wall and the floor meet (notch filling, SceneFromPoints), the rest:
+// −0.26% and −0.26% (−2.9% and −2.1% without notch filling, −4.9% and −2.3% without the one-axis
+// points either). The floor comes out 1.1% small (its free edge near the camera, where the
+// projectors' light ends, sits a little inside): held to 1.5%, a known limit (docs/scan.md).
 TEST(SelfCalibrateRoom, ScannedInteriorPartitionsFromDecodedCaptures) {
-  ExpectScanMeetsAims("interior_partitions", /*decoded=*/true,
-                      {{"left wall", 3.5}, {"right wall", 3.0}, {"floor", 1.5}});
+  ExpectScanMeetsAims("interior_partitions", /*decoded=*/true, {{"floor", 1.5}});
 }
 
 // One projector: its principal point is not observable (header) and is held at the centre,
