@@ -350,7 +350,7 @@ std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const P
 // Notch filling (step 5): where the points of a plane stop short of the edge it shares with a
 // neighbour (camera pixels that decoded nothing beside the corner of two walls, seen at a grazing
 // angle so that each spans centimetres to decimetres of wall), its outline retreats from the edge
-// line in a notch a few pixels wide in the camera's image. Both planes run on to their shared
+// line in a notch a few pixels wide in the camera's image (a degree or two). Both planes run on to their shared
 // edge; what the camera cannot resolve is filled, unless points seen through it show a hole.
 struct NotchFilling {
   Vec3 viewpoint = Vec3::Zero();
@@ -400,54 +400,62 @@ int PointsSeenThrough(const Plane& plane, const std::vector<Point2>& larger, con
   return seen;
 }
 
-// Finds the notches of one snapped ring: a corner j on edge line L2 and, walking back from it
-// through corners each within notches.max_angle of L1 or L2 (seen from the viewpoint), the
-// farthest corner i on L1 (L1 = L2 or another edge line): the corners between i and j go, and
-// where L1 ≠ L2 the point where the three planes meet comes between them. A notch is taken when
-// the ring stays simple and gains area, and no points are seen through the area it gains.
-// `on_line[k]`: the lines (indices into `lines`) corner k lies on. Marks the corners that go in
-// `dropped` and the corners added after corner k in `added[k]`.
+// Finds the notches of one snapped ring beside the points where three planes meet. For a corner
+// j on edge line L2, another edge line L1 and their meeting point T, walking back from j through
+// corners each within notches.max_angle of L1 or L2 (seen from the viewpoint):
+//  - to the farthest corner i on L1: the corners between i and j go, and T comes between them;
+//  - to the farthest corner i on L2, where T is within notches.max_angle of i or j: the corners
+//    between them go, the edge runs straight along L2 (a pocket opening onto one edge beside the
+//    corner).
+// Only beside such points: along a single edge line far from any, a retreat is as likely a part
+// of the surface no projector lights (the floor between two partitions' shadows, which the camera
+// may see within a few degrees of the edge) as one that did not decode.
+// A notch is taken when the ring stays simple and gains area, and no points are seen through the
+// area it gains. `on_line[k]`: the lines (indices into `lines`) corner k lies on. Marks the
+// corners that go in `dropped` and the corner added after corner k in `added[k]`.
 void FillNotches(const Plane& plane, const std::vector<NotchLine>& lines, const std::vector<Point2>& corners,
                  const std::vector<std::vector<int>>& on_line, const NotchFilling& notches,
                  std::vector<bool>* dropped, std::vector<std::vector<Point2>>* added) {
   const int n = static_cast<int>(corners.size());
   if (notches.max_angle <= 0 || n < 4) return;
+  const Vec3& v = notches.viewpoint;
   const auto at = [&](int k) { return plane.FromPlane(Vec2(corners[k].x(), corners[k].y())); };
   const auto on = [&](int k, int line) {
     return std::find(on_line[k].begin(), on_line[k].end(), line) != on_line[k].end();
   };
   const auto near = [&](int k, int line) {
-    return on(k, line) || AngleToLine(notches.viewpoint, lines[line], at(k)) <= notches.max_angle;
+    return on(k, line) || AngleToLine(v, lines[line], at(k)) <= notches.max_angle;
+  };
+  const auto apart = [&](const Vec3& a, const Vec3& b) {  // the angle between a and b seen from v
+    const Vec3 ra = a - v, rb = b - v;
+    return std::atan2(ra.cross(rb).norm(), ra.dot(rb));
   };
   struct Notch {
     int i, j, run;
-    bool meet;
+    bool meet;  // T comes in after i
     Point2 corner;
   };
   std::vector<Notch> found;
   for (int j = 0; j < n; ++j) {
     for (int second : on_line[j]) {
       for (int first = 0; first < static_cast<int>(lines.size()); ++first) {
-        Notch notch{-1, j, 0, first != second, Point2(0, 0)};
-        if (notch.meet) {
-          Vec3 meet;
-          if (!ThreePlanePoint(plane, *lines[first].other, *lines[second].other, &meet)) continue;
-          const Vec2 uv = plane.ToPlane(meet);
-          notch.corner = Point2(uv.x(), uv.y());
-        }
+        Vec3 meet;
+        if (first == second || !ThreePlanePoint(plane, *lines[first].other, *lines[second].other, &meet)) continue;
+        const Vec2 uv = plane.ToPlane(meet);
+        Notch to_first{-1, j, 0, true, Point2(uv.x(), uv.y())}, along{-1, j, 0, false, Point2(0, 0)};
+        bool off_second = false;  // a corner between j and along.i off L2
         for (int steps = 1, k = (j + n - 1) % n; steps < n / 2; ++steps, k = (k + n - 1) % n) {
-          if (on(k, first)) notch.i = k, notch.run = steps - 1;
-          else if (!near(k, first) && !near(k, second)) break;
+          if (on(k, first)) to_first.i = k, to_first.run = steps - 1;
+          if (on(k, second) && off_second) along.i = k, along.run = steps - 1;
+          if (!near(k, first) && !near(k, second)) break;
+          off_second = off_second || !on(k, second);
         }
-        if (notch.i < 0) continue;
-        // Something to gain: a corner between off both lines, or the meeting point not yet there.
-        bool gain = false;
-        for (int k = (notch.i + 1) % n; k != j && !gain; k = (k + 1) % n) gain = !on(k, first) && !on(k, second);
-        if (notch.meet && !gain) {
-          gain = true;
-          for (int k = notch.i; k != (j + 1) % n && gain; k = (k + 1) % n) gain = !(on(k, first) && on(k, second));
-        }
-        if (gain) found.push_back(notch);
+        // to_first: something to gain where T is not yet a corner between i and j.
+        bool there = to_first.i < 0;
+        for (int k = to_first.i; !there && k != (j + 1) % n; k = (k + 1) % n) there = on(k, first) && on(k, second);
+        if (!there) found.push_back(to_first);
+        if (along.i >= 0 && std::min(apart(meet, at(along.i)), apart(meet, at(j))) <= notches.max_angle)
+          found.push_back(along);
       }
     }
   }
@@ -462,8 +470,8 @@ void FillNotches(const Plane& plane, const std::vector<NotchLine>& lines, const 
     }
     return ring;
   };
-  const std::vector<Point2> original = ring_of(*dropped, *added);
-  double area = CGAL::to_double(CGAL::polygon_area_2(original.begin(), original.end(), traits));
+  std::vector<Point2> before = ring_of(*dropped, *added);
+  double area = CGAL::to_double(CGAL::polygon_area_2(before.begin(), before.end(), traits));
   for (const Notch& notch : found) {
     if ((*dropped)[notch.i] || (*dropped)[notch.j] || !(*added)[notch.i].empty()) continue;
     std::vector<bool> drop = *dropped;
@@ -472,13 +480,12 @@ void FillNotches(const Plane& plane, const std::vector<NotchLine>& lines, const 
     for (int k = (notch.i + 1) % n; k != notch.j; k = (k + 1) % n) free = free && !drop[k] && add[k].empty(), drop[k] = true;
     if (!free) continue;
     if (notch.meet) add[notch.i].push_back(notch.corner);
-    const std::vector<Point2> ring = ring_of(drop, add);
+    std::vector<Point2> ring = ring_of(drop, add);
     if (ring.size() < 3 || !CGAL::is_simple_2(ring.begin(), ring.end(), traits)) continue;
     const double larger = CGAL::to_double(CGAL::polygon_area_2(ring.begin(), ring.end(), traits));
     if (std::abs(larger) <= std::abs(area) || (larger > 0) != (area > 0)) continue;
-    if (notches.points && PointsSeenThrough(plane, ring, ring_of(*dropped, *added), notches) >= kSeenThrough)
-      continue;
-    *dropped = drop, *added = add, area = larger;
+    if (notches.points && PointsSeenThrough(plane, ring, before, notches) >= kSeenThrough) continue;
+    *dropped = drop, *added = add, area = larger, before = std::move(ring);
   }
 }
 
@@ -486,10 +493,7 @@ void FillNotches(const Plane& plane, const std::vector<NotchLine>& lines, const 
 // Returns how many moved.
 int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, double snap_distance,
              const NotchFilling& notches, Polygon2* ring) {
-  struct Line {
-    Vec3 point, direction;
-    const Plane* other;
-  };
+  using Line = NotchLine;
   std::vector<Line> lines;
   for (const Plane* other : neighbours) {
     Line line{Vec3::Zero(), Vec3::Zero(), other};
@@ -534,16 +538,13 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
   }
   // Notches along edge lines (NotchFilling): corners are dropped, and the point where three
   // planes meet added, by FillNotches.
-  std::vector<int> line_of(lines.size());
   std::vector<std::vector<int>> on_index(on_lines.size());
   for (size_t k = 0; k < on_lines.size(); ++k)
     for (const Line* line : on_lines[k]) on_index[k].push_back(static_cast<int>(line - lines.data()));
   std::vector<Point2> corners(snapped.vertices_begin(), snapped.vertices_end());
-  std::vector<NotchLine> notch_lines;
-  for (const Line& line : lines) notch_lines.push_back({line.point, line.direction, line.other});
   std::vector<bool> notch(corners.size(), false);
   std::vector<std::vector<Point2>> inserted(corners.size());
-  FillNotches(plane, notch_lines, corners, on_index, notches, &notch, &inserted);
+  FillNotches(plane, lines, corners, on_index, notches, &notch, &inserted);
   // Of a run of corners snapped onto one edge line, only the run's ends stay: the edge runs
   // straight between them. (An outline that zig-zags across the line, as where points of two
   // planes interleave along their edge, would otherwise double back along it and not be simple.)
@@ -709,27 +710,6 @@ double RegionSpacing(const std::vector<Vec3>& points, const std::vector<int>& in
   *radius = std::sqrt(r2s[r2s.size() / 2]);
   const double density = neighbours[indices[0]].size() / (kPi * r2s[r2s.size() / 2]);
   return 1.0 / std::sqrt(density);
-}
-
-// The angle between neighbouring points seen from `viewpoint`: the median over the points of the
-// smallest angle to one of their k nearest neighbours; one camera pixel for a cloud of one point
-// per camera pixel seen from the camera's centre.
-double PixelAngle(const std::vector<Vec3>& points, const std::vector<std::vector<int>>& neighbours,
-                  const Vec3& viewpoint) {
-  std::vector<double> angles;
-  angles.reserve(points.size());
-  for (size_t i = 0; i < points.size(); ++i) {
-    const Vec3 ray = (points[i] - viewpoint).normalized();
-    double smallest = kPi;
-    for (int j : neighbours[i]) {
-      const Vec3 other = (points[j] - viewpoint).normalized();
-      smallest = std::min(smallest, std::atan2(ray.cross(other).norm(), ray.dot(other)));
-    }
-    if (smallest > 0 && smallest < kPi) angles.push_back(smallest);
-  }
-  if (angles.empty()) return 0.0;
-  std::nth_element(angles.begin(), angles.begin() + angles.size() / 2, angles.end());
-  return angles[angles.size() / 2];
 }
 
 std::vector<std::vector<int>> Members(const std::vector<int>& label, int regions) {
@@ -1089,7 +1069,7 @@ bool SceneFromPointsOptions::Check(std::string* why) const {
   if (!(outline_alpha_spacings > 0.5)) return fail("outline_alpha_spacings must be > 0.5");
   if (!(outline_tolerance > 0)) return fail("outline_tolerance must be > 0");
   if (!(snap_distance >= 0)) return fail("snap_distance must be ≥ 0");
-  if (!(max_notch_pixels >= 0)) return fail("max_notch_pixels must be ≥ 0");
+  if (!(max_notch_deg >= 0 && max_notch_deg < 90)) return fail("max_notch_deg must be in [0, 90)");
   if (!(min_hole_area >= 0) || !(min_surface_area >= 0)) return fail("min_hole_area and min_surface_area must be ≥ 0");
   if (min_mesh_points < 3) return fail("min_mesh_points must be ≥ 3");
   if (smoothing_neighbors != 0 && smoothing_neighbors < 6) return fail("smoothing_neighbors must be 0 or ≥ 6");
@@ -1177,7 +1157,7 @@ ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPoi
   AddMeshSurfaces(points, neighbours, for_mesh, viewpoint, options, &meshes, &on_surface);
   NotchFilling notches;
   notches.viewpoint = viewpoint;
-  notches.max_angle = options.max_notch_pixels * PixelAngle(points, neighbours, viewpoint);
+  notches.max_angle = options.max_notch_deg * kPi / 180.0;
   notches.points = &points;
   SnapOutlines(label, neighbours, surface_of_region, meshes.scene.surfaces, notches, options, &plane_surfaces);
   AddPlaneSurfaces(points, plane_surfaces, options, &result, &on_surface);

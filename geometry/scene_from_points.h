@@ -73,11 +73,11 @@ struct SceneFromPointsOptions {
   double outline_alpha_spacings = 2.5;  // alpha-shape radius in mean point spacings, > 0.5
   double outline_tolerance = 0.01;  // outline simplification: largest deviation, metres, > 0
   double snap_distance = 0.04;      // vertices this close to a neighbour's edge line snap, m, ≥ 0
-  // Notches: where a plane's outline retreats from the edge it shares with a neighbour by at most
-  // this many pixels seen from the viewpoint (the angle between neighbouring points there), the
-  // edge runs straight along the line, or through the point where three planes meet, unless
-  // points are seen through the notch, ≥ 0 (0: none filled).
-  double max_notch_pixels = 16.0;
+  // Notches: where a plane's outline retreats from the edge it shares with a neighbour by no more
+  // than this angle seen from the viewpoint, the edge runs straight along the line, or through the
+  // point where three planes meet, unless points are seen through the notch, degrees, [0, 90)
+  // (0: none filled).
+  double max_notch_deg = 3.0;
   double min_hole_area = 0.01;      // smaller holes in an outline are filled, m², ≥ 0
   double min_surface_area = 0.02;   // smaller polygons and meshes are left out, m², ≥ 0
   int min_mesh_points = 300;        // smaller groups of non-planar points are left out, ≥ 3

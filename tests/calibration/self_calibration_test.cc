@@ -580,7 +580,7 @@ TEST(SelfCalibrateRoom, ScannedLShapedFromDecodedCaptures) {
 // about ten wide, and seen at a grazing angle, so that each of those pixels spans several
 // centimetres of wall. The one-axis points fill part of it; the outline, run on to the corner
 // where the side wall, the back wall and the floor meet (notch filling, SceneFromPoints), the rest:
-// −0.26% and −0.26% (−2.9% and −2.1% without notch filling, −4.9% and −2.3% without the one-axis
+// −0.72% and −0.26% (−2.9% and −2.1% without notch filling, −4.9% and −2.3% without the one-axis
 // points either). The floor comes out 1.1% small (its free edge near the camera, where the
 // projectors' light ends, sits a little inside): held to 1.5%, a known limit (docs/scan.md).
 TEST(SelfCalibrateRoom, ScannedInteriorPartitionsFromDecodedCaptures) {

@@ -427,10 +427,10 @@ TEST(SceneFromPoints, HoleAndSharedEdge) {
 
 // A corner of a room (floor, back wall, side wall), one point per pixel of a 480 × 320 camera that
 // sees the side wall at 60-70°. Near the corner where the three meet, a pocket of the side wall
-// (0.2 m along it, 0.6 m up, about ten pixels wide in the image) has no points, as where neither
-// structured-light axis decodes. Both walls run on to their shared edge, so the side wall's outline
-// goes through the point where the three planes meet, its area as with every point there; with
-// notch filling off (max_notch_pixels 0) it comes out short by about the pocket. Where the pocket
+// (0.2 m along it, 0.6 m up, about ten pixels or 1.4° wide in the image) has no points, as where
+// neither structured-light axis decodes. Both walls run on to their shared edge, so the side wall's
+// outline goes through the point where the three planes meet, its area as with every point there;
+// with notch filling off (max_notch_deg 0) it comes out short by about the pocket. Where the pocket
 // is an opening instead, and the camera sees a wall 0.6 m behind through it, it stays open.
 TEST(SceneFromPoints, APocketWithoutPointsBesideACornerIsFilledAnOpeningIsNot) {
   DevicePlacement placement;
@@ -439,7 +439,7 @@ TEST(SceneFromPoints, APocketWithoutPointsBesideACornerIsFilledAnOpeningIsNot) {
   placement.horizontal_fov_deg = 70.0;
   const Pinhole camera(placement, 480, 320);
   enum Pocket { kNone, kUndecoded, kOpening };
-  const auto side_wall_area = [&](Pocket pocket, double max_notch_pixels) {
+  const auto side_wall_area = [&](Pocket pocket, double max_notch_deg) {
     std::mt19937 random(17);
     std::normal_distribution<double> gauss(0.0, 0.0025);
     std::vector<Vec3> points;
@@ -469,7 +469,7 @@ TEST(SceneFromPoints, APocketWithoutPointsBesideACornerIsFilledAnOpeningIsNot) {
     }
     SceneFromPointsOptions options;
     options.viewpoint = camera.centre;
-    options.max_notch_pixels = max_notch_pixels;
+    options.max_notch_deg = max_notch_deg;
     const ScannedScene scanned = SceneFromPoints(points, options);
     std::cout << scanned.Report();
     for (const Surface& surface : scanned.scene.surfaces) {
@@ -482,10 +482,10 @@ TEST(SceneFromPoints, APocketWithoutPointsBesideACornerIsFilledAnOpeningIsNot) {
     ADD_FAILURE() << "no side wall";
     return 0.0;
   };
-  const double complete = side_wall_area(kNone, 16.0);
-  const double filled = side_wall_area(kUndecoded, 16.0);
+  const double complete = side_wall_area(kNone, 3.0);
+  const double filled = side_wall_area(kUndecoded, 3.0);
   const double unfilled = side_wall_area(kUndecoded, 0.0);
-  const double opening = side_wall_area(kOpening, 16.0);
+  const double opening = side_wall_area(kOpening, 3.0);
   std::printf("side wall: %.3f m² with every point, pocket %.3f m² filled, %.3f m² not, opening %.3f m²\n",
               complete, filled, unfilled, opening);
   constexpr double kPocket = 0.2 * 0.6;
