@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <numeric>
 #include <stdexcept>
@@ -377,12 +378,23 @@ double AngleToLine(const Vec3& viewpoint, const NotchLine& line, const Vec3& p) 
   return std::asin(std::min(1.0, std::abs(normal.normalized().dot(ray.normalized()))));
 }
 
+// Whether `at` lies inside `ring` by the even-odd rule (the ring need not be simple).
+bool InsideEvenOdd(const std::vector<Point2>& ring, const Point2& at) {
+  bool inside = false;
+  for (size_t k = 0, prev = ring.size() - 1; k < ring.size(); prev = k++) {
+    const Point2 &a = ring[k], &b = ring[prev];
+    if ((a.y() > at.y()) != (b.y() > at.y()) &&
+        at.x() < a.x() + (b.x() - a.x()) * (at.y() - a.y()) / (b.y() - a.y()))
+      inside = !inside;
+  }
+  return inside;
+}
+
 // How many cloud points lie beyond `plane` by more than notches.beyond, on a ray from the
 // viewpoint that crosses the plane inside `larger` but not inside `smaller` (rings in the plane's
 // (u, v)).
 int PointsSeenThrough(const Plane& plane, const std::vector<Point2>& larger, const std::vector<Point2>& smaller,
                       const NotchFilling& notches) {
-  static const Kernel traits;  // (as in SnapRing)
   const CGAL::Bbox_2 box = CGAL::bbox_2(larger.begin(), larger.end());
   const Vec3& v = notches.viewpoint;
   const double from = plane.Distance(v);
@@ -393,9 +405,7 @@ int PointsSeenThrough(const Plane& plane, const std::vector<Point2>& larger, con
     const Vec2 uv = plane.ToPlane(v + from / (from - to) * (q - v));
     if (uv.x() < box.xmin() || uv.x() > box.xmax() || uv.y() < box.ymin() || uv.y() > box.ymax()) continue;
     const Point2 at(uv.x(), uv.y());
-    if (CGAL::bounded_side_2(larger.begin(), larger.end(), at, traits) == CGAL::ON_BOUNDED_SIDE &&
-        CGAL::bounded_side_2(smaller.begin(), smaller.end(), at, traits) == CGAL::ON_UNBOUNDED_SIDE)
-      ++seen;
+    if (InsideEvenOdd(larger, at) && !InsideEvenOdd(smaller, at)) ++seen;
   }
   return seen;
 }
@@ -411,10 +421,13 @@ int PointsSeenThrough(const Plane& plane, const std::vector<Point2>& larger, con
 // of the surface no projector lights (the floor between two partitions' shadows, which the camera
 // may see within a few degrees of the edge) as one that did not decode.
 // A notch is taken when the ring stays simple and gains area, and no points are seen through the
-// area it gains. `on_line[k]`: the lines (indices into `lines`) corner k lies on. Marks the
-// corners that go in `dropped` and the corner added after corner k in `added[k]`.
+// area it gains. `on_line[k]`: the lines (indices into `lines`) corner k lies on. `ring_of`: the
+// ring SnapRing makes of the corners with some dropped and some added. Marks the corners that go
+// in `dropped` and the corner added after corner k in `added[k]`.
+using RingOf = std::function<std::vector<Point2>(const std::vector<bool>& dropped,
+                                                  const std::vector<std::vector<Point2>>& added)>;
 void FillNotches(const Plane& plane, const std::vector<NotchLine>& lines, const std::vector<Point2>& corners,
-                 const std::vector<std::vector<int>>& on_line, const NotchFilling& notches,
+                 const std::vector<std::vector<int>>& on_line, const NotchFilling& notches, const RingOf& ring_of,
                  std::vector<bool>* dropped, std::vector<std::vector<Point2>>* added) {
   const int n = static_cast<int>(corners.size());
   if (notches.max_angle <= 0 || n < 4) return;
@@ -462,14 +475,6 @@ void FillNotches(const Plane& plane, const std::vector<NotchLine>& lines, const 
   // Widest first; each checked on the ring with the notches taken so far.
   std::sort(found.begin(), found.end(), [](const Notch& a, const Notch& b) { return a.run > b.run; });
   static const Kernel traits;  // (as in SnapRing)
-  const auto ring_of = [&](const std::vector<bool>& drop, const std::vector<std::vector<Point2>>& add) {
-    std::vector<Point2> ring;
-    for (int k = 0; k < n; ++k) {
-      if (!drop[k]) ring.push_back(corners[k]);
-      ring.insert(ring.end(), add[k].begin(), add[k].end());
-    }
-    return ring;
-  };
   std::vector<Point2> before = ring_of(*dropped, *added);
   double area = CGAL::to_double(CGAL::polygon_area_2(before.begin(), before.end(), traits));
   for (const Notch& notch : found) {
@@ -542,39 +547,44 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
   for (size_t k = 0; k < on_lines.size(); ++k)
     for (const Line* line : on_lines[k]) on_index[k].push_back(static_cast<int>(line - lines.data()));
   std::vector<Point2> corners(snapped.vertices_begin(), snapped.vertices_end());
-  std::vector<bool> notch(corners.size(), false);
-  std::vector<std::vector<Point2>> inserted(corners.size());
-  FillNotches(plane, lines, corners, on_index, notches, &notch, &inserted);
   // Of a run of corners snapped onto one edge line, only the run's ends stay: the edge runs
   // straight between them. (An outline that zig-zags across the line, as where points of two
   // planes interleave along their edge, would otherwise double back along it and not be simple.)
-  std::vector<Point2> cleaned;
-  const size_t count = snapped_onto.size();
-  for (size_t k = 0; k < count; ++k) {
-    if (notch[k]) continue;
-    const Line* at = snapped_onto[k];
-    if (!(at && snapped_onto[(k + count - 1) % count] == at && snapped_onto[(k + 1) % count] == at))
-      cleaned.push_back(snapped[k]);
-    if (!inserted[k].empty()) cleaned.push_back(inserted[k].front());
-  }
-  if (cleaned.size() < 3) cleaned.assign(snapped.vertices_begin(), snapped.vertices_end());
-  // Corners that snapped onto one point, or onto a straight line between their neighbours, go.
-  for (bool removed = true; removed && cleaned.size() > 3;) {
-    removed = false;
-    for (size_t k = 0; k < cleaned.size() && cleaned.size() > 3; ++k) {
-      const size_t count = cleaned.size();
-      const Vec2 prev(cleaned[(k + count - 1) % count].x(), cleaned[(k + count - 1) % count].y());
-      const Vec2 at(cleaned[k].x(), cleaned[k].y());
-      const Vec2 next(cleaned[(k + 1) % count].x(), cleaned[(k + 1) % count].y());
-      const Vec2 base = next - prev;
-      const double along = base.squaredNorm() > 0 ? (at - prev).dot(base) / base.squaredNorm() : -1;
-      const double off_line = base.norm() > 0 ? std::abs(base.x() * (at - prev).y() - base.y() * (at - prev).x()) / base.norm() : 0;
-      if ((at - prev).norm() < 2e-3 || (along > 0 && along < 1 && off_line < 5e-4)) {
-        cleaned.erase(cleaned.begin() + k);
-        removed = true;
+  // Corners in notches go (`dropped`), meeting points come in (`added`).
+  const RingOf clean = [&](const std::vector<bool>& dropped, const std::vector<std::vector<Point2>>& added) {
+    std::vector<Point2> cleaned;
+    const size_t count = snapped_onto.size();
+    for (size_t k = 0; k < count; ++k) {
+      if (dropped[k]) continue;
+      const Line* at = snapped_onto[k];
+      if (!(at && snapped_onto[(k + count - 1) % count] == at && snapped_onto[(k + 1) % count] == at))
+        cleaned.push_back(snapped[k]);
+      cleaned.insert(cleaned.end(), added[k].begin(), added[k].end());
+    }
+    if (cleaned.size() < 3) cleaned.assign(snapped.vertices_begin(), snapped.vertices_end());
+    // Corners that snapped onto one point, or onto a straight line between their neighbours, go.
+    for (bool removed = true; removed && cleaned.size() > 3;) {
+      removed = false;
+      for (size_t k = 0; k < cleaned.size() && cleaned.size() > 3; ++k) {
+        const size_t count = cleaned.size();
+        const Vec2 prev(cleaned[(k + count - 1) % count].x(), cleaned[(k + count - 1) % count].y());
+        const Vec2 at(cleaned[k].x(), cleaned[k].y());
+        const Vec2 next(cleaned[(k + 1) % count].x(), cleaned[(k + 1) % count].y());
+        const Vec2 base = next - prev;
+        const double along = base.squaredNorm() > 0 ? (at - prev).dot(base) / base.squaredNorm() : -1;
+        const double off_line = base.norm() > 0 ? std::abs(base.x() * (at - prev).y() - base.y() * (at - prev).x()) / base.norm() : 0;
+        if ((at - prev).norm() < 2e-3 || (along > 0 && along < 1 && off_line < 5e-4)) {
+          cleaned.erase(cleaned.begin() + k);
+          removed = true;
+        }
       }
     }
-  }
+    return cleaned;
+  };
+  std::vector<bool> dropped(corners.size(), false);
+  std::vector<std::vector<Point2>> added(corners.size());
+  FillNotches(plane, lines, corners, on_index, notches, clean, &dropped, &added);
+  const std::vector<Point2> cleaned = clean(dropped, added);
   // (A named traits object: GCC 12 takes the empty temporary Polygon_2::is_simple passes for
   // uninitialised.)
   static const Kernel traits;

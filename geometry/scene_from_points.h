@@ -29,7 +29,10 @@
 //     each edge moves out by the expected gap, half the depth spacing of the points along it.
 //  5. Edges: outline vertices within snap_distance of the line where the plane meets a
 //     neighbouring plane are moved onto that line; vertices near two such lines onto the point
-//     where the three planes meet, so neighbouring polygons share their edges exactly.
+//     where the three planes meet, so neighbouring polygons share their edges exactly. Beside
+//     such a point, an outline that stops short of it within max_notch_deg seen from the
+//     viewpoint (pixels that decoded nothing by the corner of two walls) is run on to it, unless
+//     points seen through the area gained show an opening.
 //  6. Meshes: curved regions and points no plane took, in connected groups, smoothed (CGAL
 //     jet_smooth_point_set), thinned to one point per mesh_vertex_spacing cell (CGAL
 //     grid_simplify_point_set) and meshed by advancing-front surface reconstruction (CGAL
