@@ -351,7 +351,7 @@ std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const P
 // Notch filling (step 5): where the points of a plane stop short of the edge it shares with a
 // neighbour (camera pixels that decoded nothing beside the corner of two walls, seen at a grazing
 // angle so that each spans centimetres to decimetres of wall), its outline retreats from the edge
-// line in a notch a few pixels wide in the camera's image (a degree or two). Both planes run on to their shared
+// line in a notch a degree or two wide in the camera's image. Both planes run on to their shared
 // edge; what the camera cannot resolve is filled, unless points seen through it show a hole.
 struct NotchFilling {
   Vec3 viewpoint = Vec3::Zero();
