@@ -506,8 +506,10 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
   }
   int moved = 0;
   Polygon2 snapped;
-  std::vector<const Line*> snapped_onto;  // per corner: the one line it moved onto, or null
-  std::vector<std::vector<const Line*>> on_lines;  // per corner: the lines it now lies on
+  // Per corner: the lines (indices into `lines`) it now lies on, two where it moved onto the
+  // point where three planes meet.
+  std::vector<std::vector<int>> on_line;
+  const auto index = [&](const Line* line) { return static_cast<int>(line - lines.data()); };
   for (const Point2& corner : ring->vertices()) {
     const Vec3 p = plane.FromPlane(Vec2(corner.x(), corner.y()));
     std::vector<std::pair<double, const Line*>> near;
@@ -524,40 +526,34 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
       if (ThreePlanePoint(plane, *near[0].second->other, *near[1].second->other, &corner3) &&
           (corner3 - p).norm() <= 2 * snap_distance) {
         q = corner3, done = true;
-        on_lines.push_back({near[0].second, near[1].second});
+        on_line.push_back({index(near[0].second), index(near[1].second)});
       }
     }
-    const Line* onto = nullptr;
     if (!done && !near.empty()) {
       const Line& line = *near[0].second;
       q = line.point + (p - line.point).dot(line.direction) * line.direction;
       done = true;
-      onto = &line;
-      on_lines.push_back({onto});
+      on_line.push_back({index(&line)});
     }
     if (done) ++moved;
-    else on_lines.emplace_back();
+    else on_line.emplace_back();
     const Vec2 uv = plane.ToPlane(q);
     snapped.push_back(Point2(uv.x(), uv.y()));
-    snapped_onto.push_back(onto);
   }
-  // Notches along edge lines (NotchFilling): corners are dropped, and the point where three
-  // planes meet added, by FillNotches.
-  std::vector<std::vector<int>> on_index(on_lines.size());
-  for (size_t k = 0; k < on_lines.size(); ++k)
-    for (const Line* line : on_lines[k]) on_index[k].push_back(static_cast<int>(line - lines.data()));
   std::vector<Point2> corners(snapped.vertices_begin(), snapped.vertices_end());
   // Of a run of corners snapped onto one edge line, only the run's ends stay: the edge runs
   // straight between them. (An outline that zig-zags across the line, as where points of two
   // planes interleave along their edge, would otherwise double back along it and not be simple.)
-  // Corners in notches go (`dropped`), meeting points come in (`added`).
+  // Corners in notches go (`dropped`), meeting points come in (`added`; FillNotches).
+  // The one line corner k moved onto, −1 for none or for the point where three planes meet.
+  const auto onto = [&](size_t k) { return on_line[k].size() == 1 ? on_line[k][0] : -1; };
   const RingOf clean = [&](const std::vector<bool>& dropped, const std::vector<std::vector<Point2>>& added) {
     std::vector<Point2> cleaned;
-    const size_t count = snapped_onto.size();
+    const size_t count = on_line.size();
     for (size_t k = 0; k < count; ++k) {
       if (dropped[k]) continue;
-      const Line* at = snapped_onto[k];
-      if (!(at && snapped_onto[(k + count - 1) % count] == at && snapped_onto[(k + 1) % count] == at))
+      const int at = onto(k);
+      if (!(at >= 0 && onto((k + count - 1) % count) == at && onto((k + 1) % count) == at))
         cleaned.push_back(snapped[k]);
       cleaned.insert(cleaned.end(), added[k].begin(), added[k].end());
     }
@@ -583,7 +579,7 @@ int SnapRing(const Plane& plane, const std::vector<const Plane*>& neighbours, do
   };
   std::vector<bool> dropped(corners.size(), false);
   std::vector<std::vector<Point2>> added(corners.size());
-  FillNotches(plane, lines, corners, on_index, notches, clean, &dropped, &added);
+  FillNotches(plane, lines, corners, on_line, notches, clean, &dropped, &added);
   const std::vector<Point2> cleaned = clean(dropped, added);
   // (A named traits object: GCC 12 takes the empty temporary Polygon_2::is_simple passes for
   // uninitialised.)
