@@ -904,9 +904,12 @@ void SnapOutlines(const std::vector<int>& label, const std::vector<std::vector<i
   }
 }
 
-// The planar surfaces into `result`, named by their orientation; marks their points.
+// The planar surfaces into `result`, named by their orientation; marks their points. `names` gets
+// each plane surface's name, "" for one too small to keep.
 void AddPlaneSurfaces(const std::vector<Vec3>& points, const std::vector<PlaneSurface>& plane_surfaces,
-                      const SceneFromPointsOptions& options, ScannedScene* result, std::vector<bool>* on_surface) {
+                      const SceneFromPointsOptions& options, ScannedScene* result, std::vector<bool>* on_surface,
+                      std::vector<std::string>* names) {
+  names->assign(plane_surfaces.size(), "");
   const double weld = result->scene.weld_tolerance;
   double floor_z = 1e300, ceiling_z = -1e300;
   int floor = -1, ceiling = -1;
@@ -947,6 +950,7 @@ void AddPlaneSurfaces(const std::vector<Vec3>& points, const std::vector<PlaneSu
       }
     }
     stats.snapped_vertices = plane_surface.snapped;
+    (*names)[s] = surface.name;
     result->scene.surfaces.push_back(std::move(surface));
     result->stats.push_back(stats);
   }
@@ -971,10 +975,48 @@ LeftOutGroup DescribeLeftOut(const std::vector<Vec3>& points, const std::vector<
   return group;
 }
 
+// The plane surface under each left-out group: the one that more than half of its points lie on,
+// within snap_distance of the plane and inside its outer outline; -1 for none. A hole of that
+// surface holding more than half of the group's points is closed: the group's own points, measured
+// off the plane, cut it, not a gap in the surface.
+std::vector<int> FindSurfacesUnderLeftOut(const std::vector<Vec3>& points,
+                                          const std::vector<std::vector<int>>& members, double snap_distance,
+                                          std::vector<PlaneSurface>* plane_surfaces) {
+  std::vector<int> under(members.size(), -1);
+  for (size_t g = 0; g < members.size(); ++g) {
+    for (size_t s = 0; s < plane_surfaces->size() && under[g] < 0; ++s) {
+      PlaneSurface& surface = (*plane_surfaces)[s];
+      std::vector<Point2> near;
+      for (int i : members[g]) {
+        if (std::abs(surface.plane.Distance(points[i])) > snap_distance) continue;
+        const Vec2 uv = surface.plane.ToPlane(points[i]);
+        near.emplace_back(uv.x(), uv.y());
+      }
+      const auto count_inside = [&](const Polygon2& ring) {
+        return std::count_if(near.begin(), near.end(),
+                             [&](const Point2& at) { return InsideEvenOdd(ring.container(), at); });
+      };
+      for (PolygonWithHoles2& polygon : surface.polygons) {
+        if (2 * count_inside(polygon.outer_boundary()) <= static_cast<long>(members[g].size())) continue;
+        under[g] = static_cast<int>(s);
+        PolygonWithHoles2 kept(polygon.outer_boundary());
+        for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) {
+          if (2 * count_inside(*hole) <= static_cast<long>(members[g].size())) kept.add_hole(*hole);
+        }
+        polygon = std::move(kept);
+        break;
+      }
+    }
+  }
+  return under;
+}
+
 // Step 6: the points marked `for_mesh`, in connected groups, as mesh surfaces into `result`.
+// `left_out_members` gets each left-out group's points, in result->left_out's order.
 void AddMeshSurfaces(const std::vector<Vec3>& points, const std::vector<std::vector<int>>& neighbours,
                      const std::vector<bool>& for_mesh, const Vec3& viewpoint, const SceneFromPointsOptions& options,
-                     ScannedScene* result, std::vector<bool>* on_surface) {
+                     ScannedScene* result, std::vector<bool>* on_surface,
+                     std::vector<std::vector<int>>* left_out_members) {
   const double weld = result->scene.weld_tolerance;
   std::vector<int> group(points.size(), -1);
   int meshes = 0;
@@ -988,7 +1030,10 @@ void AddMeshSurfaces(const std::vector<Vec3>& points, const std::vector<std::vec
       }
     }
     if (static_cast<int>(indices.size()) < options.min_mesh_points) {
-      if (indices.size() >= 3) result->left_out.push_back(DescribeLeftOut(points, indices, viewpoint));
+      if (indices.size() >= 3) {
+        result->left_out.push_back(DescribeLeftOut(points, indices, viewpoint));
+        left_out_members->push_back(std::move(indices));
+      }
       continue;
     }
     std::vector<Vec3> group_points;
@@ -1105,6 +1150,12 @@ std::string ScannedScene::Report() const {
   }
   text += fmt::format("{} surfaces from {} points ({} on none), spacing {:.1f} mm, {:.2f} s\n",
                       scene.surfaces.size(), points, unassigned, 1000 * mean_spacing, time_s);
+  if (!left_out.empty()) {
+    const LeftOutGroup& group = left_out.front();
+    text += fmt::format("largest group on none: {} points over {:.3f} m² around ({:.2f}, {:.2f}, {:.2f}) m{}\n",
+                        group.points, group.area_m2, group.centroid.x(), group.centroid.y(), group.centroid.z(),
+                        group.on_surface.empty() ? "" : ", within " + group.on_surface + "'s outline");
+  }
   return text;
 }
 
@@ -1113,8 +1164,10 @@ std::string LeftOutSurfaceError(const ScannedScene& scanned, const SceneFromPoin
   double scanned_area = 0.0;
   for (const ScannedSurfaceStats& stats : scanned.stats) scanned_area += stats.area_m2;
   const double limit = std::max(min_area_m2, max_fraction * scanned_area);
-  if (scanned.left_out.empty() || !(scanned.left_out.front().area_m2 > limit)) return "";
-  const LeftOutGroup& group = scanned.left_out.front();
+  const auto missed = std::find_if(scanned.left_out.begin(), scanned.left_out.end(),
+                                   [](const LeftOutGroup& group) { return group.on_surface.empty(); });
+  if (missed == scanned.left_out.end() || !(missed->area_m2 > limit)) return "";
+  const LeftOutGroup& group = *missed;
   return fmt::format(
       "{} points spread over {:.2f} m² around ({:.2f}, {:.2f}, {:.2f}) m are too few for a surface "
       "(a plane needs {}, a curved surface {}): decoding failed over part of the room there (a "
@@ -1160,13 +1213,20 @@ ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPoi
   }
   std::vector<bool> on_surface(points.size(), false);
   ScannedScene meshes;
-  AddMeshSurfaces(points, neighbours, for_mesh, viewpoint, options, &meshes, &on_surface);
+  std::vector<std::vector<int>> left_out_members;
+  AddMeshSurfaces(points, neighbours, for_mesh, viewpoint, options, &meshes, &on_surface, &left_out_members);
   NotchFilling notches;
   notches.viewpoint = viewpoint;
   notches.max_angle = options.max_notch_deg * kPi / 180.0;
   notches.points = &points;
   SnapOutlines(label, neighbours, surface_of_region, meshes.scene.surfaces, notches, options, &plane_surfaces);
-  AddPlaneSurfaces(points, plane_surfaces, options, &result, &on_surface);
+  const std::vector<int> under_left_out =
+      FindSurfacesUnderLeftOut(points, left_out_members, options.snap_distance, &plane_surfaces);
+  std::vector<std::string> plane_names;
+  AddPlaneSurfaces(points, plane_surfaces, options, &result, &on_surface, &plane_names);
+  for (size_t g = 0; g < meshes.left_out.size(); ++g) {
+    if (under_left_out[g] >= 0) meshes.left_out[g].on_surface = plane_names[under_left_out[g]];
+  }
   for (Surface& mesh : meshes.scene.surfaces) result.scene.surfaces.push_back(std::move(mesh));
   result.stats.insert(result.stats.end(), meshes.stats.begin(), meshes.stats.end());
   result.left_out.insert(result.left_out.end(), meshes.left_out.begin(), meshes.left_out.end());

@@ -122,6 +122,10 @@ struct LeftOutGroup {
   int points = 0;
   Vec3 centroid = Vec3::Zero();  // room frame, metres
   double area_m2 = 0.0;          // of the convex hull of its points in their best-fit plane
+  // The plane surface most of the group's points lie on (within snap_distance of its plane,
+  // inside its outer outline), or "": a badly measured part of a surface that was found (a far
+  // wall's noisy points by a corner, a thin thing hung on a wall), not a surface missed.
+  std::string on_surface;
 };
 
 struct ScannedScene {
@@ -143,10 +147,11 @@ struct ScannedScene {
 // a point is not finite, or there are fewer than options.min_plane_points points.
 ScannedScene SceneFromPoints(const std::vector<Vec3>& points, const SceneFromPointsOptions& options);
 
-// One line for the largest left-out group that spans more than `max_fraction` of the scanned
-// surfaces' area (and more than min_area_m2): where it is, how many points over how much area,
-// and what a surface needs; "" when there is none. A scan whose decoding failed over part of a
-// surface leaves such a group instead of the surface.
+// One line for the largest left-out group on no found surface (LeftOutGroup::on_surface "")
+// that spans more than `max_fraction` of the scanned surfaces' area (and more than
+// min_area_m2): where it is, how many points over how much area, and what a surface needs; ""
+// when there is none. A scan whose decoding failed over part of a surface leaves such a group
+// instead of the surface.
 std::string LeftOutSurfaceError(const ScannedScene& scanned, const SceneFromPointsOptions& options,
                                 double max_fraction = 0.01, double min_area_m2 = 0.1);
 

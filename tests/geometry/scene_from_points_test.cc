@@ -649,6 +649,35 @@ TEST(SceneFromPoints, ASurfaceWithTooFewPointsIsNamedByWhereItIs) {
       << error;
   EXPECT_NE(error.find("too few for a surface"), std::string::npos) << error;
   EXPECT_EQ(LeftOutSurfaceError(SceneFromPoints(floor_only, options), options), "");
+  EXPECT_EQ(wall.on_surface, "");
+
+  // A patch of the floor measured 2.5 cm too low (beyond plane_distance, too few points for a
+  // plane of its own): left out, but on the floor, so no error even at a limit below its area,
+  // and the hole its points would cut in the floor is closed (the floor's area whole).
+  std::vector<Vec3> sunk;
+  for (const Vec3& p : floor_only) {
+    const bool in_patch = std::abs(p.x() - 1.5) < 0.085 && std::abs(p.y() - 1.0) < 0.085;
+    sunk.push_back(in_patch ? Vec3(p.x(), p.y(), p.z() - 0.025) : p);
+  }
+  const ScannedScene patched = SceneFromPoints(sunk, options);
+  std::cout << patched.Report();
+  ASSERT_EQ(patched.scene.surfaces.size(), 1u) << patched.Report();
+  ASSERT_FALSE(patched.left_out.empty());
+  const LeftOutGroup& patch = patched.left_out.front();
+  EXPECT_GE(patch.points, 150);  // 14 × 14 in the patch, less those the floor's edge takes
+  EXPECT_NEAR(patch.centroid.x(), 1.5, 0.02);
+  EXPECT_EQ(patch.on_surface, "floor");
+  EXPECT_GT(patch.area_m2, 0.02);
+  EXPECT_EQ(LeftOutSurfaceError(patched, options, 0.001, 0.01), "");
+  const ScannedScene whole = SceneFromPoints(floor_only, options);
+  EXPECT_EQ(patched.stats[0].holes, 0);
+  EXPECT_NEAR(patched.stats[0].area_m2, whole.stats[0].area_m2, 0.002);
+  // Farther off the floor than snap_distance: no longer on it, and an error at that limit.
+  options.snap_distance = 0.02;
+  const ScannedScene apart = SceneFromPoints(sunk, options);
+  ASSERT_FALSE(apart.left_out.empty());
+  EXPECT_EQ(apart.left_out.front().on_surface, "");
+  EXPECT_NE(LeftOutSurfaceError(apart, options, 0.001, 0.01), "");
 }
 
 // SimplifyMesh on a quarter cylinder (radius 2 m, 2.5 m high) meshed on a 4 cm grid: the
