@@ -694,6 +694,7 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
                      lattice > 1 ? fmt::format(" (every {}th row and column)", lattice) : ""));
   SceneFromPointsOptions scan = args.scan;
   scan.viewpoint = stage.calibration.room_from_camera.translation();
+  scan.points_on_viewpoint_rays = true;  // each point on its camera pixel's ray (FusePerCameraPixel)
   // Curved parts are meshed at SceneFromPoints' fine spacing and then coarsened within its
   // tolerance and to at most target_patches triangles: meshing a coarser grid of points lets
   // advancing front bridge a concave wall (blue_curves' curved wall: +68% area, 0.6 m RMS).

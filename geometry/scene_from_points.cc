@@ -303,16 +303,90 @@ void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, P
   }
 }
 
+// Seen at a grazing angle, a camera's pixel columns lie on a plane 1/cos θ farther apart than its
+// rows (θ: the incidence), and a free edge slanted across them is a sawtooth as deep as that gap,
+// one tooth per column, wider than any tolerance on the plane can take for one edge without
+// rounding the corners of surfaces seen face on. In the image it is a staircase one pixel deep.
+constexpr double kSeenTolerance = 1.5;  // pixels
+
+// Simplifies `polygon` as seen from `viewpoint`: its vertices mapped to an image plane facing its
+// centre (a central projection, which keeps lines straight and a simple polygon simple), simplified
+// there within `tolerance` (rad at the image's centre), and the kept vertices mapped back.
+void SimplifyAsSeen(const Plane& plane, const Vec3& viewpoint, double tolerance, PolygonWithHoles2* polygon) {
+  Vec3 towards = Vec3::Zero();
+  for (const Point2& q : polygon->outer_boundary().container())
+    towards += (plane.FromPlane(Vec2(q.x(), q.y())) - viewpoint).normalized();
+  if (!(towards.norm() > 1e-9)) return;
+  towards.normalize();
+  const Vec3 across = towards.unitOrthogonal(), up = towards.cross(across);
+  std::map<std::pair<double, double>, Point2> on_plane;
+  bool in_front = true;
+  const auto to_image = [&](const Polygon2& ring) {
+    Polygon2 image;
+    for (const Point2& q : ring.container()) {
+      const Vec3 ray = plane.FromPlane(Vec2(q.x(), q.y())) - viewpoint;
+      const double depth = ray.dot(towards);
+      in_front = in_front && depth > 1e-3 * ray.norm();
+      const Point2 seen(ray.dot(across) / depth, ray.dot(up) / depth);
+      on_plane[{seen.x(), seen.y()}] = q;
+      image.push_back(seen);
+    }
+    return image;
+  };
+  PolygonWithHoles2 image(to_image(polygon->outer_boundary()));
+  for (auto hole = polygon->holes_begin(); hole != polygon->holes_end(); ++hole) image.add_hole(to_image(*hole));
+  if (!in_front) return;  // a surface around the viewpoint has no one image plane
+  namespace simplification = CGAL::Polyline_simplification_2;
+  image = simplification::simplify(image, simplification::Squared_distance_cost(),
+                                   simplification::Stop_above_cost_threshold(tolerance * tolerance));
+  const auto back = [&](const Polygon2& ring) {
+    Polygon2 kept;
+    for (const Point2& q : ring.container()) kept.push_back(on_plane.at({q.x(), q.y()}));
+    return kept;
+  };
+  PolygonWithHoles2 simplified(back(image.outer_boundary()));
+  for (auto hole = image.holes_begin(); hole != image.holes_end(); ++hole) simplified.add_hole(back(*hole));
+  *polygon = std::move(simplified);
+}
+
 // Step 4: outlines of the plane's points, simplified, each edge where the surface ends.
 // `spacing`: the points' typical spacing on this plane (1/√density); the alpha shape's radius is
 // the larger of outline_alpha_spacings spacings and 1.5 × `neighbour_radius` (RegionSpacing).
 std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const PlaneSurface& surface,
                                         double spacing, double neighbour_radius,
                                         const SceneFromPointsOptions& options) {
+  // Sparse rows (a grazing view) make the alpha shape's boundary zig-zag by about the rows' gap.
+  const double tolerance = std::max(options.outline_tolerance, 0.5 * neighbour_radius);
+  // Points on a camera's rays, on a plane where the camera's pixel columns lie farther apart than
+  // twice `tolerance` (a grazing view): each point is taken where its ray meets the plane, and the
+  // outline is also simplified as the camera sees it (below), within kSeenTolerance of its pixels,
+  // α rad each. α from `spacing`, the mean spacing, α r / √cos θ at distance r and incidence θ; the
+  // columns' gap is α r / cos θ. Elsewhere both are left as they were: on a plane seen nearly face
+  // on they change little, and which corners the simplification keeps changes with any change.
+  const Vec3& viewpoint = options.viewpoint;
+  const double viewpoint_distance = surface.plane.Distance(viewpoint);
+  double pixel_rad = 0.0;
+  if (options.points_on_viewpoint_rays && std::abs(viewpoint_distance) > 1e-3) {
+    double sum_spacing = 0.0, sum_gap = 0.0;
+    for (int i : surface.indices) {
+      const Vec3 ray = points[i] - viewpoint;
+      const double r = ray.norm();
+      const double cos_incidence = std::max(std::abs(surface.plane.normal.dot(ray)) / r, 0.02);
+      sum_spacing += r / std::sqrt(cos_incidence);
+      sum_gap += r / cos_incidence;
+    }
+    pixel_rad = spacing * surface.indices.size() / sum_spacing;
+    if (pixel_rad * sum_gap / surface.indices.size() <= 2 * tolerance) pixel_rad = 0.0;
+  }
   std::vector<Point2> uv;
   uv.reserve(surface.indices.size());
   for (int i : surface.indices) {
-    const Vec2 p = surface.plane.ToPlane(points[i]);
+    Vec3 on_plane = points[i];
+    if (pixel_rad > 0) {  // where the ray from the viewpoint through the point meets the plane
+      const double t = viewpoint_distance / (viewpoint_distance - surface.plane.Distance(points[i]));
+      if (t > 0) on_plane = viewpoint + t * (points[i] - viewpoint);
+    }
+    const Vec2 p = surface.plane.ToPlane(on_plane);
     uv.emplace_back(p.x(), p.y());
   }
   std::vector<Polygon2> outers, holes;
@@ -333,13 +407,12 @@ std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const P
     }
   }
   namespace simplification = CGAL::Polyline_simplification_2;
-  // Sparse rows (a grazing view) make the alpha shape's boundary zig-zag by about the rows' gap.
-  const double tolerance = std::max(options.outline_tolerance, 0.5 * neighbour_radius);
   const double tolerance2 = tolerance * tolerance;
   const double density = 1.0 / (spacing * spacing);
   for (PolygonWithHoles2& polygon : polygons) {
     polygon = simplification::simplify(polygon, simplification::Squared_distance_cost(),
                                        simplification::Stop_above_cost_threshold(tolerance2));
+    if (pixel_rad > 0) SimplifyAsSeen(surface.plane, viewpoint, kSeenTolerance * pixel_rad, &polygon);
     PlaceEdges(uv, density, spacing, &polygon.outer_boundary());
     for (auto hole = polygon.holes_begin(); hole != polygon.holes_end(); ++hole) {
       PlaceEdges(uv, density, spacing, &*hole);
@@ -352,17 +425,19 @@ std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const P
 // neighbour (camera pixels that decoded nothing beside the corner of two walls, seen at a grazing
 // angle so that each spans centimetres to decimetres of wall), its outline retreats from the edge
 // line in a notch a degree or two wide in the camera's image. Both planes run on to their shared
-// edge; what the camera cannot resolve is filled, unless points seen through it show a hole.
+// edge; what the camera cannot resolve is filled, unless it saw something else there: points
+// through it (a hole) or in front of it (the notch hidden behind another surface).
 struct NotchFilling {
   Vec3 viewpoint = Vec3::Zero();
   double max_angle = 0.0;  // a notch is at most this wide seen from the viewpoint, rad (0: none)
-  // Points beyond the plane by more than this, seen through a notch, make it a hole, m (triangulated
-  // points where a surface is seen and lit at grazing angles lie centimetres off it).
+  // Points beyond the plane or in front of it by more than this, seen where a notch is, keep it
+  // open, m (triangulated points where a surface is seen and lit at grazing angles lie
+  // centimetres off it).
   double beyond = 0.05;
   const std::vector<Vec3>* points = nullptr;
 };
 
-constexpr int kSeenThrough = 3;  // points seen through a notch that make it a hole
+constexpr int kSeenInstead = 3;  // points seen where a notch is that keep it open
 
 struct NotchLine {
   Vec3 point, direction;  // unit direction
@@ -390,10 +465,10 @@ bool InsideEvenOdd(const std::vector<Point2>& ring, const Point2& at) {
   return inside;
 }
 
-// How many cloud points lie beyond `plane` by more than notches.beyond, on a ray from the
-// viewpoint that crosses the plane inside `larger` but not inside `smaller` (rings in the plane's
-// (u, v)).
-int PointsSeenThrough(const Plane& plane, const std::vector<Point2>& larger, const std::vector<Point2>& smaller,
+// How many cloud points lie off `plane` by more than notches.beyond, beyond it (seen through it)
+// or in front of it (hiding it), on a ray from the viewpoint that crosses the plane inside
+// `larger` but not inside `smaller` (rings in the plane's (u, v)).
+int PointsSeenInstead(const Plane& plane, const std::vector<Point2>& larger, const std::vector<Point2>& smaller,
                       const NotchFilling& notches) {
   const CGAL::Bbox_2 box = CGAL::bbox_2(larger.begin(), larger.end());
   const Vec3& v = notches.viewpoint;
@@ -401,7 +476,8 @@ int PointsSeenThrough(const Plane& plane, const std::vector<Point2>& larger, con
   int seen = 0;
   for (const Vec3& q : *notches.points) {
     const double to = plane.Distance(q);
-    if (to > -notches.beyond || from <= 0) continue;
+    const bool through = to < -notches.beyond, hiding = to > notches.beyond && to < from;
+    if (!(through || hiding) || from <= 0) continue;
     const Vec2 uv = plane.ToPlane(v + from / (from - to) * (q - v));
     if (uv.x() < box.xmin() || uv.x() > box.xmax() || uv.y() < box.ymin() || uv.y() > box.ymax()) continue;
     const Point2 at(uv.x(), uv.y());
@@ -421,7 +497,7 @@ int PointsSeenThrough(const Plane& plane, const std::vector<Point2>& larger, con
 // of the surface no projector lights (the floor between two partitions' shadows, which the camera
 // may see within a few degrees of the edge) as one that did not decode.
 // A notch is taken when the ring stays simple and gains area, and no points are seen through the
-// area it gains. `on_line[k]`: the lines (indices into `lines`) corner k lies on. `ring_of`: the
+// area it gains or in front of it. `on_line[k]`: the lines (indices into `lines`) corner k lies on. `ring_of`: the
 // ring SnapRing makes of the corners with some dropped and some added. Marks the corners that go
 // in `dropped` and the corner added after corner k in `added[k]`.
 using RingOf = std::function<std::vector<Point2>(const std::vector<bool>& dropped,
@@ -489,7 +565,7 @@ void FillNotches(const Plane& plane, const std::vector<NotchLine>& lines, const 
     if (ring.size() < 3 || !CGAL::is_simple_2(ring.begin(), ring.end(), traits)) continue;
     const double larger = CGAL::to_double(CGAL::polygon_area_2(ring.begin(), ring.end(), traits));
     if (std::abs(larger) <= std::abs(area) || (larger > 0) != (area > 0)) continue;
-    if (notches.points && PointsSeenThrough(plane, ring, before, notches) >= kSeenThrough) continue;
+    if (notches.points && PointsSeenInstead(plane, ring, before, notches) >= kSeenInstead) continue;
     *dropped = drop, *added = add, area = larger, before = std::move(ring);
   }
 }
@@ -1123,6 +1199,8 @@ bool SceneFromPointsOptions::Check(std::string* why) const {
   if (!(max_notch_deg >= 0 && max_notch_deg < 90)) return fail("max_notch_deg must be in [0, 90)");
   if (!(min_hole_area >= 0) || !(min_surface_area >= 0)) return fail("min_hole_area and min_surface_area must be ≥ 0");
   if (min_mesh_points < 3) return fail("min_mesh_points must be ≥ 3");
+  if (points_on_viewpoint_rays && !viewpoint.allFinite())
+    return fail("points_on_viewpoint_rays needs a viewpoint");
   if (smoothing_neighbors != 0 && smoothing_neighbors < 6) return fail("smoothing_neighbors must be 0 or ≥ 6");
   if (!(mesh_vertex_spacing >= 0)) return fail("mesh_vertex_spacing must be ≥ 0");
   if (!(mesh_tolerance >= 0)) return fail("mesh_tolerance must be ≥ 0");

@@ -25,14 +25,17 @@
 //     Alpha_shape_2; radius outline_alpha_spacings × the points' spacing 1/√density, or 1.5 × the
 //     reach of their 12 nearest neighbours where a grazing view leaves rows far apart), its
 //     boundary cycles as the outer polygons and holes, simplified to outline_tolerance (CGAL
-//     Polyline_simplification_2, topology kept). The outermost points lie inside the true edge:
-//     each edge moves out by the expected gap, half the depth spacing of the points along it.
+//     Polyline_simplification_2, topology kept); with points_on_viewpoint_rays, each point taken
+//     where its ray meets the plane, and simplified again as seen from the viewpoint, within 1.5
+//     pixels (a free edge seen at a grazing angle is a sawtooth on the plane, a staircase one
+//     pixel deep in the image). The outermost points lie inside the true edge: each edge moves
+//     out by the expected gap, half the depth spacing of the points along it.
 //  5. Edges: outline vertices within snap_distance of the line where the plane meets a
 //     neighbouring plane are moved onto that line; vertices near two such lines onto the point
 //     where the three planes meet, so neighbouring polygons share their edges exactly. Beside
 //     such a point, an outline that stops short of it within max_notch_deg seen from the
 //     viewpoint (pixels that decoded nothing by the corner of two walls) is run on to it, unless
-//     points seen through the area gained show an opening.
+//     points seen through the area gained show an opening, or points in front of it hide it.
 //  6. Meshes: curved regions and points no plane took, in connected groups, smoothed (CGAL
 //     jet_smooth_point_set), thinned to one point per mesh_vertex_spacing cell (CGAL
 //     grid_simplify_point_set) and meshed by advancing-front surface reconstruction (CGAL
@@ -60,6 +63,11 @@ struct SceneFromPointsOptions {
   // lit side faces it. NaN (default): the centre of the cloud's bounding box, right for a room
   // scanned from inside but not for the outward faces of a column.
   Vec3 viewpoint = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
+  // Each point lies on the ray from `viewpoint` through its camera pixel, its error along that
+  // ray (a camera's triangulated pixels): the outlines then take each point where its ray meets
+  // its plane, not its foot on the plane. Seen at a grazing angle, a few millimetres of error
+  // along the ray put a point centimetres along the plane. Needs `viewpoint`.
+  bool points_on_viewpoint_rays = false;
   int normal_neighbors = 24;      // k of the PCA normals, ≥ 6
   int growing_neighbors = 12;     // k of the region-growing graph, ≥ 4
   double plane_distance = 0.01;   // a plane's points are within this of it, metres, > 0 (≈ 4σ)
@@ -78,8 +86,8 @@ struct SceneFromPointsOptions {
   double snap_distance = 0.04;      // vertices this close to a neighbour's edge line snap, m, ≥ 0
   // Notches: where a plane's outline retreats from the edge it shares with a neighbour by no more
   // than this angle seen from the viewpoint, the edge runs straight along the line, or through the
-  // point where three planes meet, unless points are seen through the notch, degrees, [0, 90)
-  // (0: none filled).
+  // point where three planes meet, unless points are seen through the notch or in front of it,
+  // degrees, [0, 90) (0: none filled).
   double max_notch_deg = 3.0;
   double min_hole_area = 0.01;      // smaller holes in an outline are filled, m², ≥ 0
   double min_surface_area = 0.02;   // smaller polygons and meshes are left out, m², ≥ 0

@@ -508,6 +508,7 @@ void ExpectScanMeetsAims(const std::string& name, bool decoded = false,
     points_in_room.push_back(calibration.room_from_camera * point.p_in_cam);
   SceneFromPointsOptions scene_options;
   scene_options.viewpoint = calibration.room_from_camera.translation();
+  scene_options.points_on_viewpoint_rays = true;  // each point on its camera pixel's ray
   const ScannedScene scanned = SceneFromPoints(points_in_room, scene_options);
   std::printf("%s: %zu points\n%s\n", name.c_str(), points_in_room.size(),
               scanned.Report().c_str());
