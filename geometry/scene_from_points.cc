@@ -222,13 +222,15 @@ struct PlaneSurface {
 // several times more. The gap is measured on the edge's own points: cut each bin at a depth t
 // beyond its reference point (below), for t spread over several spacings, and take the mean
 // distance from the cut to the bin's next point, as from a true edge at an unknown place among the
-// samples. The edge moves to the bins' mean reference depth minus that gap.
+// samples. The edge moves to the bins' reference depths (their mean, or with four bins or more
+// the line through them) minus that gap.
 // `uv`: the plane's points; counter-clockwise outer rings and clockwise holes alike have the
 // surface on their left.
 void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, Polygon2* ring) {
   const int n = static_cast<int>(ring->size());
   std::vector<Vec2> corner(n), outward(n);
-  std::vector<double> shift(n, 0.0);
+  // How far each edge moves out at its start (corner k) and at its end (corner k + 1).
+  std::vector<double> shift_start(n, 0.0), shift_end(n, 0.0);
   for (int k = 0; k < n; ++k) corner[k] = Vec2((*ring)[k].x(), (*ring)[k].y());
   const double band = 6 * spacing, bin_width = 2 * spacing;
   // The cuts: kCuts depths spread evenly over `reach` beyond each bin's reference point.
@@ -261,10 +263,13 @@ void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, P
     };
     double sum = 0, gap_sum = 0;
     int filled = 0, gaps = 0;
-    for (std::vector<double>& bin : depths) {
+    std::vector<Vec2> along_and_reference;  // per filled bin: its centre along the edge, its reference
+    for (int b = 0; b < bins; ++b) {
+      std::vector<double>& bin = depths[b];
       std::sort(bin.begin(), bin.end());
       if (bin.empty() || bin.front() > band) continue;
       sum += reference(bin), ++filled;
+      along_and_reference.emplace_back((b + 0.5) * length / bins, reference(bin));
       for (int c = 0; c < kCuts; ++c) {
         const double cut = reference(bin) + (c + 0.5) / kCuts * reach;
         const auto next = std::upper_bound(bin.begin(), bin.end(), cut);
@@ -274,25 +279,50 @@ void PlaceEdges(const std::vector<Point2>& uv, double density, double spacing, P
     if (filled < std::max(2, bins / 2)) continue;  // not an edge of this point set
     // Without a next point anywhere (a strip narrower than the cuts reach), the turned lattice's.
     const double gap = gaps > 0 ? gap_sum / gaps : 1.0 / (2 * density * (length / bins));
-    const double edge_depth = sum / filled - gap;
+    double edge_depth = sum / filled - gap, slope = 0.0;
+    // The simplified edge runs from one kept outline corner to another, and where a corner's place
+    // is off by the noise its edge leans against the points. With several bins the edge leans as
+    // their references do (least squares), on the bins within a few spacings of the shallowest
+    // half of them (a notch the edge bridges would lean it).
+    if (filled >= 4) {
+      std::vector<double> references;
+      for (const Vec2& bin : along_and_reference) references.push_back(bin.y());
+      std::nth_element(references.begin(), references.begin() + filled / 2, references.end());
+      const double within = references[filled / 2] + 2 * spacing;
+      double count = 0, mean_along = 0, mean_reference = 0;
+      for (const Vec2& bin : along_and_reference)
+        if (bin.y() <= within) ++count, mean_along += bin.x(), mean_reference += bin.y();
+      mean_along /= count, mean_reference /= count;
+      double sxx = 0, sxy = 0;
+      for (const Vec2& bin : along_and_reference)
+        if (bin.y() <= within)
+          sxx += std::pow(bin.x() - mean_along, 2), sxy += (bin.x() - mean_along) * (bin.y() - mean_reference);
+      if (count >= 4 && sxx > 0) {
+        slope = sxy / sxx;
+        edge_depth = mean_reference - slope * mean_along - gap;  // at the edge's start
+      }
+    }
     // Never inwards: the simplified edge runs through boundary points already, and where it
     // bridges a notch its bins' reference points lie deep inside.
-    shift[k] = std::clamp(-edge_depth, 0.0, band / 2);
+    shift_start[k] = std::clamp(-edge_depth, 0.0, band / 2);
+    shift_end[k] = std::clamp(-(edge_depth + slope * length), 0.0, band / 2);
   }
   Polygon2 placed;
   for (int k = 0; k < n; ++k) {
     const int prev = (k + n - 1) % n;
-    // The corner where the moved edges prev and k meet: (p − c)·outward = shift for both.
+    // The corner where the moved edges prev and k meet: (p − c)·outward = each one's shift there
+    // (an edge that leans turns by at most band / length: its normal is kept).
     Eigen::Matrix2d m;
     m.row(0) = outward[prev].transpose();
     m.row(1) = outward[k].transpose();
     Vec2 p = corner[k];
-    const double largest = std::max(std::abs(shift[prev]), std::abs(shift[k]));
-    const Vec2 move = std::abs(m.determinant()) > 0.1 ? Vec2(m.inverse() * Vec2(shift[prev], shift[k])) : Vec2(1e300, 0);
+    const double largest = std::max(std::abs(shift_end[prev]), std::abs(shift_start[k]));
+    const Vec2 move = std::abs(m.determinant()) > 0.1 ? Vec2(m.inverse() * Vec2(shift_end[prev], shift_start[k]))
+                                                      : Vec2(1e300, 0);
     if (move.norm() <= 2 * largest) {
       p += move;
     } else {  // nearly parallel edges: along their mean normal
-      p += 0.5 * (shift[prev] + shift[k]) * (outward[prev] + outward[k]).normalized();
+      p += 0.5 * (shift_end[prev] + shift_start[k]) * (outward[prev] + outward[k]).normalized();
     }
     placed.push_back(Point2(p.x(), p.y()));
   }
