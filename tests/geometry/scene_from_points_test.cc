@@ -305,9 +305,9 @@ void CheckScene(const SceneCheck& check) {
 // The scenes' own cameras (tiny_box: 240 × 160) or half their resolution (960 × 640), to keep the
 // tests short. Bounded as measured: PlaceEdges keeps free edges a little inside on noise-free
 // clouds like these (its reference is each bin's second point, for triangulated scans' sake),
-// areas 0.2-1.25% small (tiny_box's side walls at 74°); the columns' sides, 0.4 m faces
+// areas 0.1-1.3% small (tiny_box's side walls at 74°); the columns' sides, 0.4 m faces
 // seen at 82° incidence, three pixel columns across at this resolution, whose far edge (a free
-// one) cannot be placed closer than about one pixel column's depth, 2.0 and 5.5% small. Before
+// one) cannot be placed closer than about one pixel column's depth, 1.8 and 5.5% small. Before
 // notch filling (outlines run on to the edges they share where they stop a few pixels short)
 // these were 2.7% and 8.4-10.6%; before each free edge's gap was measured on its own points, 3.2%
 // (tiny_box's side walls), 21% (the column sides), 1.7% (l_shaped's floor at 63°) and 1.3%
@@ -322,8 +322,8 @@ TEST(SceneFromPoints, BlueCurves) { CheckScene({"blue_curves", 480, 320, 1.0, 1.
 // exact, its depth not (4 mm of noise along the ray), and SceneFromPoints told so
 // (points_on_viewpoint_rays: each point taken where its ray meets its plane, outlines simplified
 // as the camera sees them). The columns at the scene's own camera resolution, 960 × 640 (six
-// pixel columns across each side). Measured: tiny_box's side walls −0.57 / −0.53%, the column
-// sides −0.08 / +0.73%; the same clouds with the option off −1.19 / −1.36% and −1.33 / −1.57%.
+// pixel columns across each side). Measured: tiny_box's side walls −0.17 / −0.10%, the column
+// sides −0.08 / +0.96%; the same clouds with the option off −0.75 / −1.03% and −1.32 / −1.33%.
 TEST(SceneFromPoints, TinyBoxTriangulated) { CheckScene({"tiny_box", 240, 160, 1.0, 1.0, true}); }
 TEST(SceneFromPoints, ColumnsTriangulated) { CheckScene({"columns", 960, 640, 1.0, 1.0, true}); }
 
