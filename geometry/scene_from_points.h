@@ -29,7 +29,8 @@
 //     where its ray meets the plane, and simplified again as seen from the viewpoint, within 1.5
 //     pixels (a free edge seen at a grazing angle is a sawtooth on the plane, a staircase one
 //     pixel deep in the image). The outermost points lie inside the true edge: each edge moves
-//     out by the expected gap, half the depth spacing of the points along it.
+//     out by the expected gap, half the depth spacing of the points along it, leaning as the
+//     points along it do.
 //  5. Edges: outline vertices within snap_distance of the line where the plane meets a
 //     neighbouring plane are moved onto that line; vertices near two such lines onto the point
 //     where the three planes meet, so neighbouring polygons share their edges exactly. Beside
