@@ -76,6 +76,11 @@ struct Plane {
   double Distance(const Vec3& p) const { return normal.dot(p) + offset; }
   Vec2 ToPlane(const Vec3& p) const { return Vec2((p - origin).dot(axis_u), (p - origin).dot(axis_v)); }
   Vec3 FromPlane(const Vec2& uv) const { return origin + uv.x() * axis_u + uv.y() * axis_v; }
+  // Where the ray from `eye` through p meets the plane; p itself where that ray never does.
+  Vec3 SeenAt(const Vec3& eye, const Vec3& p) const {
+    const double from = Distance(eye), t = from / (from - Distance(p));
+    return t > 0 && std::isfinite(t) ? Vec3(eye + t * (p - eye)) : p;
+  }
 };
 
 // The least-squares plane of the points (PCA), its normal turned towards `viewpoint`; horizontal
@@ -349,6 +354,7 @@ void SimplifyAsSeen(const Plane& plane, const Vec3& viewpoint, double tolerance,
   if (!(towards.norm() > 1e-9)) return;
   towards.normalize();
   const Vec3 across = towards.unitOrthogonal(), up = towards.cross(across);
+  // Image point → plane point: simplify keeps the vertices it does not remove unchanged.
   std::map<std::pair<double, double>, Point2> on_plane;
   bool in_front = true;
   const auto to_image = [&](const Polygon2& ring) {
@@ -411,12 +417,7 @@ std::vector<PolygonWithHoles2> Outlines(const std::vector<Vec3>& points, const P
   std::vector<Point2> uv;
   uv.reserve(surface.indices.size());
   for (int i : surface.indices) {
-    Vec3 on_plane = points[i];
-    if (pixel_rad > 0) {  // where the ray from the viewpoint through the point meets the plane
-      const double t = viewpoint_distance / (viewpoint_distance - surface.plane.Distance(points[i]));
-      if (t > 0) on_plane = viewpoint + t * (points[i] - viewpoint);
-    }
-    const Vec2 p = surface.plane.ToPlane(on_plane);
+    const Vec2 p = surface.plane.ToPlane(pixel_rad > 0 ? surface.plane.SeenAt(viewpoint, points[i]) : points[i]);
     uv.emplace_back(p.x(), p.y());
   }
   std::vector<Polygon2> outers, holes;
@@ -508,7 +509,7 @@ int PointsSeenInstead(const Plane& plane, const std::vector<Point2>& larger, con
     const double to = plane.Distance(q);
     const bool through = to < -notches.beyond, hiding = to > notches.beyond && to < from;
     if (!(through || hiding) || from <= 0) continue;
-    const Vec2 uv = plane.ToPlane(v + from / (from - to) * (q - v));
+    const Vec2 uv = plane.ToPlane(plane.SeenAt(v, q));
     if (uv.x() < box.xmin() || uv.x() > box.xmax() || uv.y() < box.ymin() || uv.y() > box.ymax()) continue;
     const Point2 at(uv.x(), uv.y());
     if (InsideEvenOdd(larger, at) && !InsideEvenOdd(smaller, at)) ++seen;
