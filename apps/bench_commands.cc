@@ -1,4 +1,4 @@
-// procam bench formfactors / bench solver / bench scale (datasets_synthetic/benchmarks.h).
+// procam bench formfactors / bench solver / bench scale / bench decode (datasets_synthetic/benchmarks.h).
 #include <memory>
 
 #include "apps/command_line.h"
@@ -54,6 +54,17 @@ void AddBenchCommands(CLI::App& app) {
   scale->add_option("--cpu-max-variables", args->cpu_max_variables, "Skip the CPU solves above this many variables");
   scale->add_option("--json", args->json, "Also write the results as JSON here");
   scale->callback([args] { RunScaleBenchmark(*args); });
+
+  auto decode_args = std::make_shared<DecodeBenchmarkOptions>();
+  decode_args->progress = PrintProgress();
+  CLI::App* decode = bench->add_subcommand(
+      "decode", "Import and decode a structured-light capture (procam's 42 patterns, 1280x1024 photos)");
+  decode->add_option("--camera-width", decode_args->camera_width, "Photo width")->capture_default_str();
+  decode->add_option("--camera-height", decode_args->camera_height, "Photo height")->capture_default_str();
+  decode->add_option("--repeat", decode_args->repeat, "Timed runs")->check(CLI::Range(1, 100))
+      ->capture_default_str();
+  decode->add_option("--out", decode_args->out, "Keep the photos and the session here");
+  decode->callback([decode_args] { RunDecodeBenchmark(*decode_args); });
 }
 
 }  // namespace procam

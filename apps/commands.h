@@ -17,6 +17,7 @@ void AddBenchCommands(CLI::App& app);         // bench formfactors, bench solver
 void AddDemoCommand(CLI::App& app);           // demo
 void AddEvaluationCommands(CLI::App& app);    // evaluate
 void AddCaptureCommands(CLI::App& app);       // cameras, capture
+void AddStructuredLightCommands(CLI::App& app);  // import, decode, patterns
 void AddVerifyCommand(CLI::App& app);         // verify
 void AddEmulateCommand(CLI::App& app);        // emulate (the room as a GigE camera)
 void AddNodeCommands(CLI::App& app);          // keys, node, play (display nodes)

@@ -39,6 +39,7 @@ int main(int argc, char** argv) {
   procam::AddEvaluationCommands(app);
   procam::AddBenchCommands(app);
   procam::AddCaptureCommands(app);
+  procam::AddStructuredLightCommands(app);
   procam::AddVerifyCommand(app);
   procam::AddEmulateCommand(app);
   procam::AddCalibrateCommands(app);

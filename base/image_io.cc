@@ -115,8 +115,7 @@ void WritePng(const std::filesystem::path& path, const cv::Mat& image) {
   WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
 }
 
-cv::Mat ReadImage(const std::filesystem::path& path, int flags, uintmax_t max_bytes) {
-  const std::string bytes = ReadFile(path, max_bytes);
+cv::Mat DecodeImage(const std::filesystem::path& path, const std::string& bytes, int flags) {
   CheckImageHeader(path, bytes);
   const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data()));
   cv::Mat image;
@@ -130,6 +129,21 @@ cv::Mat ReadImage(const std::filesystem::path& path, int flags, uintmax_t max_by
   }
   if (image.empty()) throw IoError(path.string() + ": not a readable image");
   return image;
+}
+
+cv::Mat ReadImage(const std::filesystem::path& path, int flags, uintmax_t max_bytes) {
+  return DecodeImage(path, ReadFile(path, max_bytes), flags);
+}
+
+cv::Mat ReadImageChecked(const std::filesystem::path& path, int flags,
+                         const std::string& checksum) {
+  const std::string bytes = ReadFile(path, kMaxImageBytes);
+  const std::string actual = ContentChecksum(bytes);
+  if (actual != checksum) {
+    throw IoError(path.string() + ": changed since it was recorded (checksum " + actual +
+                  ", recorded " + checksum + ")");
+  }
+  return DecodeImage(path, bytes, flags);
 }
 
 }  // namespace procam

@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <string>
 #include <opencv2/core/mat.hpp>
 
 namespace procam {
@@ -24,5 +25,15 @@ constexpr int64_t kMaxImagePixels = int64_t{1} << 27;
 // IoError naming the file: not found, not a regular file, too large, "not a readable image".
 cv::Mat ReadImage(const std::filesystem::path& path, int flags,
                   uintmax_t max_bytes = kMaxImageBytes);
+
+// Decodes `bytes`, the contents of `path` already read (ReadFile), with ReadImage's checks and
+// messages: lets a caller checksum the same bytes it decodes.
+cv::Mat DecodeImage(const std::filesystem::path& path, const std::string& bytes, int flags);
+
+// ReadImage, after checking that the file's bytes still have the ContentChecksum recorded when
+// it was written. Throws IoError naming the file when they do not ("changed since it was
+// recorded"), or as ReadImage.
+cv::Mat ReadImageChecked(const std::filesystem::path& path, int flags,
+                         const std::string& checksum);
 
 }  // namespace procam

@@ -140,6 +140,17 @@ std::string ReadFile(const std::filesystem::path& path, uintmax_t max_bytes) {
   return contents.str();
 }
 
+std::string ContentChecksum(std::string_view bytes) {
+  uint64_t hash = 1469598103934665603ull;
+  for (const char byte : bytes) {
+    hash ^= static_cast<uint8_t>(byte);
+    hash *= 1099511628211ull;
+  }
+  char text[17];
+  std::snprintf(text, sizeof(text), "%016llx", static_cast<unsigned long long>(hash));
+  return text;
+}
+
 namespace {
 std::mutex stderr_mutex;  // SilencedStderr: one at a time
 }  // namespace

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -45,6 +46,10 @@ void CheckRegularFile(const std::filesystem::path& path, uintmax_t max_bytes = k
 // Reads a whole regular file of at most `max_bytes` (CheckRegularFile). Throws IoError naming
 // the file.
 std::string ReadFile(const std::filesystem::path& path, uintmax_t max_bytes = kMaxFileBytes);
+
+// FNV-1a (64 bits) of `bytes` as 16 hex digits: identifies a file's contents in manifests, so a
+// file changed or truncated after it was written is noticed (a fault check, not a security one).
+std::string ContentChecksum(std::string_view bytes);
 
 // While one exists, what libraries print on the process's stderr (file descriptor 2: libmrcal's
 // parser, libpng's and OpenCV's decoders) goes nowhere, so that procam reports a failure in its

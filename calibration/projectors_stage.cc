@@ -15,6 +15,7 @@
 #include "base/json_fields.h"
 #include "base/parse.h"
 #include "calibration/camera_report.h"
+#include "calibration/capture_layout.h"
 #include "calibration/floor_chessboard.h"
 #include "calibration/rig_directory.h"
 #include "calibration/structured_light.h"
@@ -48,67 +49,48 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
 ProjectorObservations ReadSession(const std::filesystem::path& directory, int camera_width,
                                   int camera_height, const std::filesystem::path& camera_model,
                                   std::string name, const ProgressCallback& progress) {
-  if (!std::filesystem::is_directory(directory))
-    throw IoError(directory.string() + ": not a directory");
-  const CaptureSessionData data = CaptureSessionData::Load(directory);
+  const StructuredLightSession session = ReadStructuredLightSession(directory);
   const std::string manifest = (directory / "session.json").string();
-  const nlohmann::json& sequence = data.manifest().value("sequence", nlohmann::json::object());
-  const std::string kind = sequence.value("kind", "");
-  if (kind != "structured_light")
-    throw IoError(manifest + ": a '" + kind +
-                  "' session; projector calibration needs one captured with --sequence "
-                  "structured_light");
-  const nlohmann::json& parameters = sequence.value("parameters", nlohmann::json::object());
-  StructuredLightOptions options;
-  try {
-    options.width = parameters.at("width").get<int>();
-    options.height = parameters.at("height").get<int>();
-    options.columns = parameters.at("columns").get<bool>();
-    options.rows = parameters.at("rows").get<bool>();
-    options.phase_period = parameters.at("phase_period").get<int>();
-    options.phase_steps = parameters.at("phase_steps").get<int>();
-    options.xor_codes = parameters.at("xor_codes").get<bool>();
-    options.pattern_gamma = parameters.at("pattern_gamma").get<double>();
-  } catch (const nlohmann::json::exception& error) {
-    throw IoError(manifest + ": sequence.parameters: " + error.what());
-  }
-  std::string why;
-  if (!options.Check(&why)) throw IoError(manifest + ": sequence.parameters: " + why);
-  if (!options.columns || !options.rows)
+  const StructuredLightLayout& layout = session.layout;
+  const auto encodes = [&](bool column) {
+    return std::any_of(layout.gray.begin(), layout.gray.end(),
+                       [&](const auto& gray) { return gray.column == column; }) ||
+           std::any_of(layout.phases.begin(), layout.phases.end(),
+                       [&](const auto& phase) { return phase.column == column; });
+  };
+  if (!encodes(true) || !encodes(false))
     throw IoError(manifest + ": sequence.parameters: both columns and rows must be encoded");
-  std::vector<cv::Mat> captured;
-  for (int p = 0; p < data.pattern_count(); ++p) {
-    if (!data.captured(p))
-      throw IoError(manifest + ": pattern " + data.pattern_name(p) +
-                    " is not captured (run the same capture command again to resume)");
-    cv::Mat image = data.Hdr(p);
-    if (image.empty()) image = data.Mean(p, 0);
-    if (image.cols != camera_width || image.rows != camera_height)
-      throw IoError(manifest + ": pattern " + data.pattern_name(p) + " is " +
-                    std::to_string(image.cols) + "x" + std::to_string(image.rows) + ", " +
-                    camera_model.string() + " is " + std::to_string(camera_width) + "x" +
-                    std::to_string(camera_height));
-    captured.push_back(image);
-  }
-  StructuredLightMap map;
+  const cv::Mat& first = session.images.front();
+  if (first.cols != camera_width || first.rows != camera_height)
+    throw IoError(manifest + ": its photos are " + std::to_string(first.cols) + "x" +
+                  std::to_string(first.rows) + ", " + camera_model.string() + " is " +
+                  std::to_string(camera_width) + "x" + std::to_string(camera_height));
+  DecodeSummary decoded;
   try {
-    map = DecodeStructuredLight(options, captured);
-  } catch (const std::invalid_argument& error) {
+    decoded = DecodeSession(session);
+  } catch (const IoError& error) {
     throw IoError(manifest + ": " + error.what());
+  }
+  const StructuredLightMap& map = decoded.map;
+  // The decode's picture and numbers beside the session, for people to look at; a session on a
+  // read-only disk is still calibrated.
+  try {
+    WriteDecodeReport(decoded, directory / "decode");
+  } catch (const IoError& error) {
+    Report(progress, std::string("decode picture not written: ") + error.what());
   }
   if (name.empty()) {
     // The display's name, after its last '/' ("synthetic:tiny_box/left" → "left").
-    const std::string display =
-        data.manifest().value("display", nlohmann::json::object()).value("name", "");
+    const std::string& display = session.display_name;
     name = display.substr(
         display.find_last_of("/:") == std::string::npos ? 0 : display.find_last_of("/:") + 1);
   }
-  const ProjectorObservations out = ObservationsFromMap(map, name, options.width, options.height);
+  const ProjectorObservations out = ObservationsFromMap(map, name, layout.width, layout.height);
   Report(progress,
          fmt::format("{}: {}x{} projector, {} camera pixels decoded, {} more on one axis alone "
                      "(refused on some axis: {} shadowed, {} ambiguous, {} weak phase, {} out of "
                      "range)",
-                     directory.string(), options.width, options.height, out.camera_pixels.size(),
+                     directory.string(), layout.width, layout.height, out.camera_pixels.size(),
                      out.one_axis_camera_pixels.size(), map.shadowed, map.ambiguous,
                      map.weak_phase, map.out_of_range));
   return out;

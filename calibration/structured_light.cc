@@ -1,15 +1,17 @@
 #include "calibration/structured_light.h"
 
 #include <algorithm>
+#include <Eigen/Dense>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <numbers>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
 namespace procam {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 bool IsPowerOfTwo(int value) { return value > 0 && (value & (value - 1)) == 0; }
 
@@ -35,7 +37,7 @@ int ShownBit(const StructuredLightOptions& options, int u, int bit) {
 }
 
 uint8_t SinusoidValue(const StructuredLightOptions& options, int u, int step) {
-  const double phase = 2.0 * kPi * u / options.phase_period - 2.0 * kPi * step / options.phase_steps;
+  const double phase = 2.0 * std::numbers::pi * u / options.phase_period - 2.0 * std::numbers::pi * step / options.phase_steps;
   const double light = 0.5 + 0.5 * std::cos(phase);
   return static_cast<uint8_t>(std::lround(255.0 * std::pow(light, 1.0 / options.pattern_gamma)));
 }
@@ -129,6 +131,10 @@ bool StructuredLightDecodeOptions::Check(std::string* why) const {
     if (why) *why = "min_contrast, min_bit_contrast and min_modulation must be in [0, 1)";
     return false;
   }
+  if (!(noise_sigmas >= 0.0 && noise_sigmas <= 100.0)) {
+    if (why) *why = "noise_sigmas must be in [0, 100]";
+    return false;
+  }
   return true;
 }
 
@@ -196,19 +202,210 @@ CaptureSequence MakeStructuredLightSequence(const StructuredLightOptions& option
   return sequence;
 }
 
+StructuredLightLayout LayoutOf(const StructuredLightOptions& options) {
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument("structured light: " + why);
+  StructuredLightLayout layout;
+  layout.width = options.width;
+  layout.height = options.height;
+  layout.white = 0;
+  layout.black = 1;
+  for (const AxisLayout& axis : Layout(options)) {
+    StructuredLightLayout::Gray gray;
+    gray.column = axis.is_column;
+    gray.bits = axis.bits;
+    gray.finest_bit = axis.finest;
+    gray.xor_codes = options.xor_codes;
+    for (int bit = axis.bits - 1; bit >= axis.finest; --bit) {
+      const int index = axis.first_index + 2 * (axis.bits - 1 - bit);
+      gray.images.push_back(index);
+      gray.inverse.push_back(index + 1);
+    }
+    layout.gray.push_back(gray);
+    if (options.phase_period == 0) continue;
+    StructuredLightLayout::Phase phase;
+    phase.column = axis.is_column;
+    phase.period = options.phase_period;
+    for (int step = 0; step < options.phase_steps; ++step) {
+      phase.shifts.push_back(-2.0 * std::numbers::pi * step / options.phase_steps);
+      phase.images.push_back(axis.phase_index + step);
+    }
+    layout.phases.push_back(phase);
+  }
+  const AxisLayout& last = Layout(options).back();
+  layout.image_count = last.phase_index + (options.phase_period > 0 ? options.phase_steps : 0);
+  return layout;
+}
+
+bool StructuredLightLayout::Check(std::string* why) const {
+  auto fail = [&](const std::string& message) {
+    if (why) *why = message;
+    return false;
+  };
+  if (width < 2 || width > 16384 || height < 2 || height > 16384)
+    return fail("projector size must be in [2, 16384], got " + std::to_string(width) + "x" +
+                std::to_string(height));
+  if (image_count < 3) return fail("fewer than three images");
+  std::vector<int> uses(image_count, 0);
+  auto use = [&](int index) {
+    if (index < 0 || index >= image_count) return false;
+    ++uses[index];
+    return true;
+  };
+  if (!use(white)) return fail("no white image");
+  if (!use(black)) return fail("no black image");
+  if (gray.empty() && phases.empty()) return fail("neither a Gray code nor phases");
+  for (const Gray& code : gray) {
+    const int size = code.column ? width : height;
+    if (code.cell < 1 || code.cell > size) return fail("Gray cell outside [1, projector size]");
+    if (code.bits != GrayCodeBits((size + code.cell - 1) / code.cell))
+      return fail("Gray code of " + std::to_string(code.bits) + " bits does not fit " +
+                  std::to_string(size) + " pixels in cells of " + std::to_string(code.cell));
+    if (code.finest_bit < 0 || code.finest_bit >= code.bits) return fail("finest Gray bit outside the code");
+    const size_t shown = static_cast<size_t>(code.bits - code.finest_bit);
+    if (code.images.size() != shown || code.inverse.size() != shown)
+      return fail("Gray code images do not match its bits");
+    for (size_t b = 0; b < shown; ++b) {
+      if (!use(code.images[b])) return fail("a Gray bit image index outside the images");
+      if (code.inverse[b] != -1 && !use(code.inverse[b]))
+        return fail("a Gray inverse image index outside the images");
+    }
+  }
+  for (bool column : {true, false}) {
+    if (std::count_if(phases.begin(), phases.end(),
+                      [&](const Phase& phase) { return phase.column == column; }) >
+        kMaxPhasesPerAxis)
+      return fail("more than " + std::to_string(kMaxPhasesPerAxis) + " phase sets on one axis");
+  }
+  for (const Phase& phase : phases) {
+    if (!(phase.period > 1.0 && phase.period <= 65536.0))
+      return fail("phase period must be in (1, 65536] projector pixels");
+    if (!std::isfinite(phase.origin)) return fail("phase origin must be finite");
+    if (phase.direction != 1 && phase.direction != -1) return fail("phase direction must be 1 or -1");
+    if (phase.shifts.size() < 3 || phase.images.size() != phase.shifts.size())
+      return fail("a phase set needs at least three images, one shift each");
+    // The least-squares fit of offset, cosine and sine needs three independent shifts.
+    Eigen::MatrixXd design(phase.shifts.size(), 3);
+    for (size_t k = 0; k < phase.shifts.size(); ++k) {
+      if (!std::isfinite(phase.shifts[k])) return fail("phase shifts must be finite");
+      design.row(k) << 1.0, std::cos(phase.shifts[k]), -std::sin(phase.shifts[k]);
+    }
+    if (Eigen::FullPivLU<Eigen::MatrixXd>(design).rank() < 3)
+      return fail("a phase set's shifts must hold three distinct phases");
+    for (int index : phase.images)
+      if (!use(index)) return fail("a phase image index outside the images");
+  }
+  for (int i = 0; i < image_count; ++i) {
+    if (uses[i] != 1)
+      return fail("image " + std::to_string(i) + (uses[i] ? " is used twice" : " is not used"));
+  }
+  return true;
+}
+
+const char* DecodeRefusalName(DecodeRefusal refusal) {
+  switch (refusal) {
+    case DecodeRefusal::kDecoded:
+      return "decoded";
+    case DecodeRefusal::kShadowed:
+      return "shadowed";
+    case DecodeRefusal::kAmbiguous:
+      return "ambiguous bit";
+    case DecodeRefusal::kWeakPhase:
+      return "weak phase";
+    case DecodeRefusal::kOutOfRange:
+      return "out of range";
+    case DecodeRefusal::kUnwrap:
+      return "not unwrapped";
+  }
+  return "?";
+}
+
 StructuredLightMap DecodeStructuredLight(const StructuredLightOptions& options,
                                          const std::vector<cv::Mat>& captured,
                                          const StructuredLightDecodeOptions& decode_options) {
+  return DecodeStructuredLight(LayoutOf(options), captured, decode_options);
+}
+
+namespace {
+
+// The median of |x − median x|, scaled to a normal distribution's standard deviation.
+double RobustSigma(std::vector<float> values) {
+  if (values.empty()) return 0.0;
+  const size_t middle = values.size() / 2;
+  std::nth_element(values.begin(), values.begin() + middle, values.end());
+  const float median = values[middle];
+  for (float& v : values) v = std::abs(v - median);
+  std::nth_element(values.begin(), values.begin() + middle, values.end());
+  return 1.4826 * values[middle];
+}
+
+// One standard deviation of one image's noise (see StructuredLightMap::noise_sigma), from every
+// fourth pixel of every fourth row that passes the shadow floor.
+double EstimateNoise(const StructuredLightLayout& layout, const std::vector<cv::Mat>& grey,
+                     const cv::Mat& lit) {
+  constexpr int kStride = 4;
+  std::vector<float> residuals;
+  const cv::Mat& white = grey[layout.white];
+  const cv::Mat& black = grey[layout.black];
+  for (const StructuredLightLayout::Gray& code : layout.gray) {
+    for (size_t b = 0; b < code.images.size(); ++b) {
+      if (code.inverse[b] < 0) continue;
+      const cv::Mat& pattern = grey[code.images[b]];
+      const cv::Mat& inverse = grey[code.inverse[b]];
+      for (int y = 0; y < lit.rows; y += kStride) {
+        for (int x = 0; x < lit.cols; x += kStride) {
+          if (!lit.at<uint8_t>(y, x)) continue;
+          residuals.push_back(pattern.at<float>(y, x) + inverse.at<float>(y, x) -
+                              white.at<float>(y, x) - black.at<float>(y, x));
+        }
+      }
+    }
+  }
+  // Four images' noise in each residual.
+  if (residuals.size() >= 100) return RobustSigma(std::move(residuals)) / 2.0;
+  residuals.clear();
+  for (int y = 0; y < black.rows; y += kStride)
+    for (int x = 0; x + 1 < black.cols; x += kStride)
+      residuals.push_back(black.at<float>(y, x + 1) - black.at<float>(y, x));
+  return RobustSigma(std::move(residuals)) / std::sqrt(2.0);
+}
+
+// A phase set's least-squares fit: for each image k, value = a + C cos(shift_k) − S sin(shift_k),
+// so C = amplitude · cos θ and S = amplitude · sin θ for θ = direction · 2π (u − origin) / P.
+struct PhaseFit {
+  const StructuredLightLayout::Phase* phase = nullptr;
+  Eigen::MatrixXd solve;  // 3 × N: (a, C, S) = solve · values
+  double amplitude_noise = 0.0;  // standard deviation of C and S per unit image noise
+};
+
+PhaseFit FitPhase(const StructuredLightLayout::Phase& phase) {
+  const int n = static_cast<int>(phase.shifts.size());
+  Eigen::MatrixXd design(n, 3);
+  for (int k = 0; k < n; ++k) design.row(k) << 1.0, std::cos(phase.shifts[k]), -std::sin(phase.shifts[k]);
+  const Eigen::Matrix3d normal = design.transpose() * design;
+  PhaseFit fit;
+  fit.phase = &phase;
+  fit.solve = normal.inverse() * design.transpose();
+  fit.amplitude_noise = std::sqrt(0.5 * (normal.inverse()(1, 1) + normal.inverse()(2, 2)));
+  return fit;
+}
+
+// x + P · round((estimate − x) / P): the one of x's P-periodic images nearest the estimate.
+double Unwrap(double within, double period, double estimate) {
+  return within + period * std::round((estimate - within) / period);
+}
+
+}  // namespace
+
+StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
+                                         const std::vector<cv::Mat>& captured,
+                                         const StructuredLightDecodeOptions& decode_options) {
   std::string why;
-  if (!options.Check(&why)) throw std::invalid_argument("structured light: " + why);
+  if (!layout.Check(&why)) throw std::invalid_argument("structured light layout: " + why);
   if (!decode_options.Check(&why)) throw std::invalid_argument("structured light decode: " + why);
-  const std::vector<AxisLayout> axes = Layout(options);
-  const AxisLayout& last = axes.back();
-  const size_t expected =
-      last.phase_index + (options.phase_period > 0 ? options.phase_steps : 0);
-  if (captured.size() != expected) {
+  if (captured.size() != static_cast<size_t>(layout.image_count)) {
     throw std::invalid_argument("structured light: " + std::to_string(captured.size()) +
-                                " images for a sequence of " + std::to_string(expected));
+                                " images for a sequence of " + std::to_string(layout.image_count));
   }
   const cv::Size size = captured[0].size();
   std::vector<cv::Mat> grey(captured.size());
@@ -216,19 +413,26 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightOptions& options,
     if (captured[i].size() != size)
       throw std::invalid_argument("structured light: image " + std::to_string(i) +
                                   " differs in size from image 0");
-    grey[i] = ToGrey(captured[i]);
   }
-  const cv::Mat& white = grey[0];
-  const cv::Mat& black = grey[1];
+  cv::parallel_for_(cv::Range(0, static_cast<int>(captured.size())), [&](const cv::Range& range) {
+    for (int i = range.start; i < range.end; ++i) grey[i] = ToGrey(captured[i]);
+  });
+  const cv::Mat& white = grey[layout.white];
+  const cv::Mat& black = grey[layout.black];
   const cv::Mat range = white - black;
 
-  // Shadow test against a robust maximum of the contrast.
+  // Shadow test against a robust maximum of the contrast, then against the noise.
   std::vector<float> ranges(range.begin<float>(), range.end<float>());
   const size_t percentile = std::min(ranges.size() - 1, ranges.size() * 99 / 100);
   std::nth_element(ranges.begin(), ranges.begin() + percentile, ranges.end());
-  const float contrast_floor =
+  const float relative_floor =
       static_cast<float>(decode_options.min_contrast) * std::max(ranges[percentile], 0.0f);
-  cv::Mat lit = (range > contrast_floor) & (range > 0.0f);
+  StructuredLightMap map;
+  map.noise_sigma = EstimateNoise(layout, grey, (range > relative_floor) & (range > 0.0f));
+  const double sigmas = decode_options.noise_sigmas;
+  const float difference_floor = static_cast<float>(sigmas * std::sqrt(2.0) * map.noise_sigma);
+  const float contrast_floor = std::max(relative_floor, difference_floor);
+  const cv::Mat lit = (range > contrast_floor) & (range > 0.0f);
 
   double global_threshold = 0.0;
   if (decode_options.binarization == Binarization::kGlobalThreshold) {
@@ -236,100 +440,237 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightOptions& options,
     global_threshold = cv::mean(midpoint, lit)[0];
   }
 
-  StructuredLightMap map;
   const float nan = std::numeric_limits<float>::quiet_NaN();
   map.column = cv::Mat(size, CV_32FC1, cv::Scalar(nan));
   map.row = cv::Mat(size, CV_32FC1, cv::Scalar(nan));
   map.mask = cv::Mat(size, CV_8UC1, cv::Scalar(0));
-  const bool phase = options.phase_period > 0;
-  const int steps = options.phase_steps;
-  std::vector<double> cosines(steps), sines(steps);
-  for (int k = 0; k < steps; ++k) {
-    cosines[k] = std::cos(2.0 * kPi * k / steps);
-    sines[k] = std::sin(2.0 * kPi * k / steps);
-  }
-  const float bit_fraction = static_cast<float>(decode_options.min_bit_contrast);
+  map.refused = cv::Mat(size, CV_8UC1, cv::Scalar(static_cast<int>(DecodeRefusal::kShadowed)));
 
-  for (int y = 0; y < size.height; ++y) {
-    for (int x = 0; x < size.width; ++x) {
-      if (!lit.at<uint8_t>(y, x)) {
-        ++map.shadowed;
-        continue;
-      }
-      const float pixel_range = range.at<float>(y, x);
-      const float threshold =
-          decode_options.binarization == Binarization::kPixelThreshold
-              ? 0.5f * (white.at<float>(y, x) + black.at<float>(y, x))
-              : static_cast<float>(global_threshold);
-      // Each axis decodes on its own (a grazed surface may crowd many projector columns into a
-      // pixel and still resolve the rows); a pixel's first failing test is counted once.
-      bool counted = false, all = true;
-      const auto refuse = [&](long long* counter) {
-        all = false;
-        if (!counted) ++*counter;
-        counted = true;
-      };
-      for (const AxisLayout& axis : axes) {
-        // Shown bits, most significant first.
-        int shown[32] = {0};
-        bool ok = true;
-        for (int bit = axis.bits - 1; bit >= axis.finest && ok; --bit) {
-          const int index = axis.first_index + 2 * (axis.bits - 1 - bit);
-          const float value = grey[index].at<float>(y, x);
-          float difference;
-          if (decode_options.binarization == Binarization::kComplementary) {
-            difference = value - grey[index + 1].at<float>(y, x);
-          } else {
-            difference = 2.0f * (value - threshold);
+  // Per axis: its Gray code (at most one) and its phase sets, coarsest period first.
+  struct Axis {
+    bool column = true;
+    int size = 0;
+    const StructuredLightLayout::Gray* gray = nullptr;
+    std::vector<PhaseFit> phases;
+  };
+  std::vector<Axis> axes;
+  for (bool column : {true, false}) {
+    Axis axis;
+    axis.column = column;
+    axis.size = column ? layout.width : layout.height;
+    for (const auto& code : layout.gray)
+      if (code.column == column && axis.gray == nullptr) axis.gray = &code;
+    for (const auto& phase : layout.phases)
+      if (phase.column == column) axis.phases.push_back(FitPhase(phase));
+    std::sort(axis.phases.begin(), axis.phases.end(),
+              [](const PhaseFit& a, const PhaseFit& b) { return a.phase->period > b.phase->period; });
+    if (axis.gray || !axis.phases.empty()) axes.push_back(std::move(axis));
+  }
+
+  const float bit_fraction = static_cast<float>(decode_options.min_bit_contrast);
+  std::vector<long long> agree(size.height, 0), disagree(size.height, 0);
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y) {
+      for (int x = 0; x < size.width; ++x) {
+        if (!lit.at<uint8_t>(y, x)) continue;
+        const float pixel_range = range.at<float>(y, x);
+        const float threshold =
+            decode_options.binarization == Binarization::kPixelThreshold
+                ? 0.5f * (white.at<float>(y, x) + black.at<float>(y, x))
+                : static_cast<float>(global_threshold);
+        const float bit_floor = std::max(bit_fraction * pixel_range, difference_floor);
+        // Each axis decodes on its own; a pixel's first failing test is what it is refused for.
+        DecodeRefusal refusal = DecodeRefusal::kDecoded;
+        const auto refuse = [&](DecodeRefusal why_refused) {
+          if (refusal == DecodeRefusal::kDecoded) refusal = why_refused;
+        };
+        for (const Axis& axis : axes) {
+          double estimate = std::numeric_limits<double>::quiet_NaN();
+          double bound = std::numeric_limits<double>::infinity();  // |estimate − truth| below this
+          double gray_low = 0.0, gray_high = 0.0;                    // the Gray cell's pixels
+          if (axis.gray) {
+            const StructuredLightLayout::Gray& code = *axis.gray;
+            int shown[32] = {0};
+            bool ok = true;
+            for (size_t b = 0; b < code.images.size() && ok; ++b) {
+              const int bit = code.bits - 1 - static_cast<int>(b);
+              const float value = grey[code.images[b]].at<float>(y, x);
+              const bool complementary =
+                  decode_options.binarization == Binarization::kComplementary && code.inverse[b] >= 0;
+              const float threshold_here =
+                  complementary ? 0.0f
+                  : decode_options.binarization == Binarization::kComplementary
+                      ? 0.5f * (white.at<float>(y, x) + black.at<float>(y, x))
+                      : threshold;
+              const float difference = complementary
+                                           ? value - grey[code.inverse[b]].at<float>(y, x)
+                                           : 2.0f * (value - threshold_here);
+              ok = std::abs(difference) >= bit_floor;
+              shown[bit] = difference > 0.0f;
+            }
+            if (!ok) {
+              refuse(DecodeRefusal::kAmbiguous);
+              continue;
+            }
+            // Undo the XOR, then Gray → binary on the code truncated to the shown bits.
+            int binary = 0, previous = 0;
+            for (int bit = code.bits - 1; bit >= code.finest_bit; --bit) {
+              int gray = shown[bit];
+              if (code.xor_codes && bit > code.finest_bit) gray ^= shown[code.finest_bit];
+              previous ^= gray;
+              binary |= previous << (bit - code.finest_bit);
+            }
+            const int cell = code.cell << code.finest_bit;
+            gray_low = static_cast<double>(binary) * cell;
+            if (gray_low >= axis.size) {
+              refuse(DecodeRefusal::kOutOfRange);
+              continue;
+            }
+            gray_high = std::min<double>(gray_low + cell, axis.size) - 1.0;
+            estimate = 0.5 * (gray_low + gray_high);
+            bound = 0.5 * cell;
           }
-          ok = std::abs(difference) >= bit_fraction * pixel_range;
-          shown[bit] = difference > 0.0f;
-        }
-        if (!ok) {
-          refuse(&map.ambiguous);
-          continue;
-        }
-        // Undo the XOR, then Gray → binary on the code truncated to the shown bits.
-        int binary = 0, previous = 0;
-        for (int bit = axis.bits - 1; bit >= axis.finest; --bit) {
-          int gray = shown[bit];
-          if (options.xor_codes && bit > axis.finest) gray ^= shown[axis.finest];
-          previous ^= gray;
-          binary |= previous << (bit - axis.finest);
-        }
-        double u;
-        if (!phase) {
-          u = binary;
-        } else {
-          double c = 0.0, s = 0.0;
-          for (int k = 0; k < steps; ++k) {
-            const float value = grey[axis.phase_index + k].at<float>(y, x);
-            c += value * cosines[k];
-            s += value * sines[k];
+          // The phases, coarsest first; a set whose period the estimate cannot unwrap is first
+          // combined with the next finer set into their beat.
+          bool phase_ok = true;
+          double phase_estimate = estimate;
+          double within[StructuredLightLayout::kMaxPhasesPerAxis];
+          for (size_t k = 0; k < axis.phases.size() && phase_ok; ++k) {
+            const PhaseFit& fit = axis.phases[k];
+            const StructuredLightLayout::Phase& phase = *fit.phase;
+            double abc[3] = {0.0, 0.0, 0.0};  // fit.solve · values, without allocating
+            for (size_t i = 0; i < phase.images.size(); ++i) {
+              const double value = grey[phase.images[i]].at<float>(y, x);
+              for (int r = 0; r < 3; ++r) abc[r] += fit.solve(r, i) * value;
+            }
+            const double amplitude = std::hypot(abc[1], abc[2]);
+            if (amplitude < decode_options.min_modulation * 0.5 * pixel_range ||
+                amplitude < sigmas * fit.amplitude_noise * map.noise_sigma) {
+              phase_ok = false;
+              refuse(DecodeRefusal::kWeakPhase);
+              break;
+            }
+            const double turns = std::atan2(abc[2], abc[1]) / (2.0 * std::numbers::pi);
+            double w = phase.origin + phase.direction * turns * phase.period;
+            w -= phase.period * std::floor(w / phase.period);
+            within[k] = w;
           }
-          const double amplitude = 2.0 / steps * std::hypot(c, s);
-          if (amplitude < decode_options.min_modulation * 0.5 * pixel_range) {
-            refuse(&map.weak_phase);
+          if (!phase_ok) continue;
+          bool unwrapped = true;
+          for (size_t k = 0; k < axis.phases.size() && unwrapped; ++k) {
+            const double period = axis.phases[k].phase->period;
+            if (bound < 0.5 * period) {
+              phase_estimate = Unwrap(within[k], period, phase_estimate);
+            } else if (std::isinf(bound) && period >= axis.size - 0.5) {
+              phase_estimate = within[k];  // one period spans the axis
+            } else if (k + 1 < axis.phases.size() &&
+                       period > axis.phases[k + 1].phase->period * (1.0 + 1e-9)) {
+              // The beat of this set and the next finer one.
+              const double finer = axis.phases[k + 1].phase->period;
+              const double beat = period * finer / (period - finer);
+              double w = within[k + 1] / finer - within[k] / period;
+              w = (w - std::floor(w)) * beat;
+              if (bound < 0.5 * beat) {
+                phase_estimate = Unwrap(w, beat, phase_estimate);
+              } else if (std::isinf(bound) && beat >= axis.size - 0.5) {
+                phase_estimate = w;
+              } else {
+                unwrapped = false;
+              }
+              unwrapped = unwrapped && beat / 8.0 < 0.5 * period;
+              if (unwrapped) phase_estimate = Unwrap(within[k], period, phase_estimate);
+            } else {
+              unwrapped = false;
+            }
+            bound = period / 8.0;
+          }
+          if (!unwrapped) {
+            refuse(DecodeRefusal::kUnwrap);
             continue;
           }
-          const double period = options.phase_period;
-          double within = std::atan2(s, c) / (2.0 * kPi) * period;  // position within a period
-          if (within < 0.0) within += period;
-          const int step = 1 << axis.finest;
-          const double coarse = binary * step + 0.5 * (step - 1);  // centre of the Gray cell
-          u = within + period * std::round((coarse - within) / period);
+          if (!axis.phases.empty()) estimate = phase_estimate;
+          if (axis.gray && !axis.phases.empty()) {
+            ++((estimate >= gray_low - 1.5 && estimate <= gray_high + 1.5) ? agree : disagree)[y];
+          }
+          if (estimate < -0.5 || estimate >= axis.size - 0.5) {
+            refuse(DecodeRefusal::kOutOfRange);
+            continue;
+          }
+          (axis.column ? map.column : map.row).at<float>(y, x) = static_cast<float>(estimate);
         }
-        if (u < -0.5 || u >= axis.size - 0.5) {
-          refuse(&map.out_of_range);
-          continue;
-        }
-        (axis.is_column ? map.column : map.row).at<float>(y, x) = static_cast<float>(u);
+        map.refused.at<uint8_t>(y, x) = static_cast<uint8_t>(refusal);
+        if (refusal == DecodeRefusal::kDecoded) map.mask.at<uint8_t>(y, x) = 255;
       }
-      if (!all) continue;
-      map.mask.at<uint8_t>(y, x) = 255;
+    }
+  });
+  for (int y = 0; y < size.height; ++y) {
+    map.gray_phase_agree += agree[y];
+    map.gray_phase_disagree += disagree[y];
+    const uint8_t* reasons = map.refused.ptr<uint8_t>(y);
+    for (int x = 0; x < size.width; ++x) {
+      switch (static_cast<DecodeRefusal>(reasons[x])) {
+        case DecodeRefusal::kShadowed: ++map.shadowed; break;
+        case DecodeRefusal::kAmbiguous: ++map.ambiguous; break;
+        case DecodeRefusal::kWeakPhase: ++map.weak_phase; break;
+        case DecodeRefusal::kOutOfRange: ++map.out_of_range; break;
+        case DecodeRefusal::kUnwrap: ++map.unwrap; break;
+        case DecodeRefusal::kDecoded: break;
+      }
     }
   }
   return map;
+}
+
+cv::Mat DecodePicture(const StructuredLightMap& map, int projector_width, int projector_height) {
+  const cv::Size size = map.column.size();
+  const double scale = std::min(1.0, 640.0 / std::max(1, size.width));
+  const cv::Size panel(std::max(1, static_cast<int>(std::lround(size.width * scale))),
+                       std::max(1, static_cast<int>(std::lround(size.height * scale))));
+  constexpr int kTitle = 28, kLegend = 22;
+  const int legend_rows = 6;
+  cv::Mat picture(panel.height + kTitle + kLegend * legend_rows, 3 * panel.width,
+                  CV_8UC3, cv::Scalar::all(255));
+  const auto coordinate_panel = [&](const cv::Mat& coordinate, int extent) {
+    cv::Mat level(size, CV_8UC1, cv::Scalar(0)), valid = coordinate == coordinate;  // not NaN
+    coordinate.convertTo(level, CV_8U, 255.0 / std::max(1, extent - 1));
+    cv::Mat colour;
+    cv::applyColorMap(level, colour, cv::COLORMAP_TURBO);
+    colour.setTo(cv::Scalar::all(0), ~valid);
+    cv::Mat resized;
+    cv::resize(colour, resized, panel, 0, 0, cv::INTER_NEAREST);
+    return resized;
+  };
+  static const cv::Vec3b kColours[] = {{60, 170, 60},   {80, 80, 80},  {0, 140, 255},
+                                       {230, 60, 160},  {40, 40, 220}, {200, 180, 0}};
+  cv::Mat reasons(size, CV_8UC3);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x)
+      reasons.at<cv::Vec3b>(y, x) = kColours[std::min<int>(map.refused.at<uint8_t>(y, x), 5)];
+  cv::Mat reasons_panel;
+  cv::resize(reasons, reasons_panel, panel, 0, 0, cv::INTER_NEAREST);
+  const cv::Mat panels[] = {coordinate_panel(map.column, projector_width),
+                            coordinate_panel(map.row, projector_height), reasons_panel};
+  const char* titles[] = {"projector column", "projector row", "why refused"};
+  for (int k = 0; k < 3; ++k) {
+    panels[k].copyTo(picture(cv::Rect(k * panel.width, kTitle, panel.width, panel.height)));
+    cv::putText(picture, titles[k], cv::Point(k * panel.width + 6, 20), cv::FONT_HERSHEY_SIMPLEX,
+                0.55, cv::Scalar::all(0), 1, cv::LINE_AA);
+  }
+  const long long counts[] = {cv::countNonZero(map.mask), map.shadowed, map.ambiguous,
+                              map.weak_phase, map.out_of_range, map.unwrap};
+  const double total = std::max(1, size.area());
+  for (int k = 0; k < legend_rows; ++k) {
+    const int top = kTitle + panel.height + k * kLegend + 4;
+    const cv::Rect swatch(2 * panel.width + 6, top, 14, 14);
+    picture(swatch).setTo(cv::Scalar(kColours[k][0], kColours[k][1], kColours[k][2]));
+    char text[96];
+    std::snprintf(text, sizeof(text), "%s: %lld (%.1f%%)",
+                  DecodeRefusalName(static_cast<DecodeRefusal>(k)), counts[k],
+                  100.0 * counts[k] / total);
+    cv::putText(picture, text, cv::Point(swatch.x + 20, top + 12), cv::FONT_HERSHEY_SIMPLEX, 0.45,
+                cv::Scalar::all(0), 1, cv::LINE_AA);
+  }
+  return picture;
 }
 
 }  // namespace procam

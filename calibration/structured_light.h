@@ -29,6 +29,7 @@
 //     frequency, so their bounce light is nearly constant and drops out of the phase), and the
 //     Gray code only has to be right to within P/2 to unwrap it.
 
+#include <cstdint>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -79,6 +80,10 @@ const char* BinarizationName(Binarization binarization);
 
 struct StructuredLightDecodeOptions {
   Binarization binarization = Binarization::kComplementary;
+  // Every threshold below is the larger of a fraction of the pixel's own white − black contrast
+  // and `noise_sigmas` standard deviations of the photos' noise, which the decoder estimates from
+  // the photos themselves (StructuredLightMap::noise_sigma): a real camera's read noise, JPEG
+  // and quantisation set the floor, the scene's contrast the rest.
   // Shadow test: a pixel is decoded only where white − black ≥ min_contrast × the 99th
   // percentile of white − black over the image, [0, 1).
   double min_contrast = 0.05;
@@ -88,14 +93,28 @@ struct StructuredLightDecodeOptions {
   // The phase is accepted only where the sinusoids' amplitude is at least this fraction of
   // (white − black)/2, [0, 1).
   double min_modulation = 0.2;
+  // How many noise standard deviations each difference must exceed, [0, 100]; 0 = no noise floor.
+  double noise_sigmas = 4.0;
   bool Check(std::string* why) const;
 };
+
+// Why a camera pixel was not decoded (StructuredLightMap::refused): the first test it failed.
+enum class DecodeRefusal : uint8_t {
+  kDecoded = 0,     // every encoded axis decoded
+  kShadowed = 1,    // white − black under the contrast threshold
+  kAmbiguous = 2,   // some Gray bit under the bit-contrast threshold
+  kWeakPhase = 3,   // sinusoid amplitude under the modulation threshold
+  kOutOfRange = 4,  // decoded coordinate outside the projector image
+  kUnwrap = 5,      // the phases could not be unwrapped (no coarser code resolves their period)
+};
+const char* DecodeRefusalName(DecodeRefusal refusal);
 
 // Per camera pixel, what it sees of the projector.
 struct StructuredLightMap {
   cv::Mat column;  // CV_32FC1 projector column (pixel centres at integers); NaN where not decoded
   cv::Mat row;     // CV_32FC1 projector row; NaN where not decoded (or rows not encoded)
   cv::Mat mask;    // CV_8UC1, 255 where every encoded axis decoded
+  cv::Mat refused;  // CV_8UC1, DecodeRefusal per pixel (kDecoded where mask is 255)
   // Each axis decodes on its own: where one fails its tests, the other may still hold a
   // coordinate (a surface lit at a grazing angle crowds many projector columns into one camera
   // pixel while its rows stay resolved).
@@ -104,7 +123,55 @@ struct StructuredLightMap {
   long long ambiguous = 0;     // some bit under the bit-contrast threshold
   long long weak_phase = 0;    // sinusoid amplitude under the modulation threshold
   long long out_of_range = 0;  // decoded coordinate outside the projector image
+  long long unwrap = 0;        // phases no coarser code could unwrap
+  // Where an axis has both a Gray code and phases: pixels whose unwrapped phase lies within its
+  // Gray cell (widened by one projector pixel each side), and those where it does not.
+  long long gray_phase_agree = 0;
+  long long gray_phase_disagree = 0;
+  // The photos' noise, one standard deviation in the images' units, estimated from pattern and
+  // inverse pairs (pattern + inverse = white + black, up to noise, wherever the bit is clear) or,
+  // without inverses, from neighbouring pixels of the black image.
+  double noise_sigma = 0.0;
 };
+
+// A structured-light capture as another tool (or procam) ordered it: the images, by index in
+// capture order, and what each shows. MakeStructuredLightSequence's order is one such layout
+// (LayoutOf); the layout file (calibration/capture_layout.h) describes others.
+struct StructuredLightLayout {
+  // A Gray code along one axis: the bit images from the most significant bit down to
+  // `finest_bit`, each optionally followed by its inverse.
+  struct Gray {
+    bool column = true;  // the code encodes projector columns (else rows)
+    int cell = 1;        // projector pixels per code value, ≥ 1 (OpenCV's cells when scaled up)
+    int bits = 0;        // bits of the full code: ⌈log2 ⌈size / cell⌉⌉
+    int finest_bit = 0;  // lowest bit shown, [0, bits)
+    // Every plane above the finest shown is XORed with the finest (Gupta et al. 2011).
+    bool xor_codes = false;
+    std::vector<int> images;   // per shown bit, most significant first: its image's index
+    std::vector<int> inverse;  // per shown bit: its inverse's index, or −1 (none)
+  };
+  // N phase-shifted sinusoids along one axis: image k shows, at projector coordinate u,
+  // 0.5 + 0.5 cos(direction · 2π (u − origin) / period + shifts[k]).
+  struct Phase {
+    bool column = true;
+    double period = 16.0;       // projector pixels, > 1
+    double origin = 0.0;        // coordinate of phase 0, projector pixels
+    int direction = 1;          // +1 or −1
+    std::vector<double> shifts;  // radians, one per image, ≥ 3 distinct
+    std::vector<int> images;
+  };
+  static constexpr int kMaxPhasesPerAxis = 16;
+  int width = 0, height = 0;  // projector pixels
+  int white = -1, black = -1;  // image indices (required)
+  std::vector<Gray> gray;
+  std::vector<Phase> phases;
+  int image_count = 0;
+  bool Check(std::string* why) const;
+};
+
+// MakeStructuredLightSequence(options)'s order as a layout. Throws std::invalid_argument when
+// options.Check() fails.
+StructuredLightLayout LayoutOf(const StructuredLightOptions& options);
 
 // Decodes `captured`: one camera image per pattern of MakeStructuredLightSequence(options), in
 // order, same size, any depth, one or three channels (three are averaged), linear in light
@@ -113,5 +180,22 @@ struct StructuredLightMap {
 StructuredLightMap DecodeStructuredLight(const StructuredLightOptions& options,
                                          const std::vector<cv::Mat>& captured,
                                          const StructuredLightDecodeOptions& decode_options = {});
+
+// Decodes images ordered as `layout` says. Per axis, the Gray code gives a coordinate to within
+// half a cell; the phases, coarsest period first, refine it, each unwrapped by the estimate
+// before it (x = w + P round((estimate − w) / P), which needs the estimate within P/2); where
+// the estimate is too coarse for a period (OpenCV's cells as wide as the period), two phase sets
+// of periods P1 > P2 are first combined into their beat, of period P1 P2 / (P1 − P2) (temporal
+// heterodyne unwrapping). Without phases a coordinate is its Gray cell's centre. Throws
+// std::invalid_argument when the layout fails Check() or the count or sizes do not match.
+StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
+                                         const std::vector<cv::Mat>& captured,
+                                         const StructuredLightDecodeOptions& decode_options = {});
+
+// A picture of a decode for people to look at: three panels side by side, each the camera's
+// image size scaled to at most 640 pixels wide — the decoded columns and rows (colour maps over
+// the projector's width and height, black where not decoded) and why pixels were refused (one
+// colour per DecodeRefusal, named in a legend). CV_8UC3.
+cv::Mat DecodePicture(const StructuredLightMap& map, int projector_width, int projector_height);
 
 }  // namespace procam

@@ -1,6 +1,8 @@
 #include "capture/session.h"
 
+#include <algorithm>
 #include <chrono>
+#include <initializer_list>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -68,7 +70,9 @@ nlohmann::json CaptureJson(const SequencerOptions& options) {
           {"settle_ms", options.settle_ms}};
 }
 
-void WriteImage(const fs::path& path, const cv::Mat& image, const std::vector<int>& params = {}) {
+// Writes the image and returns its file's ContentChecksum.
+std::string WriteImage(const fs::path& path, const cv::Mat& image,
+                       const std::vector<int>& params = {}) {
   std::vector<uint8_t> bytes;
   bool encoded = false;
   try {
@@ -77,7 +81,9 @@ void WriteImage(const fs::path& path, const cv::Mat& image, const std::vector<in
     throw IoError(path.string() + ": cannot encode image: " + error.what());
   }
   if (!encoded) throw IoError(path.string() + ": cannot encode image");
-  WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
+  const std::string contents(bytes.begin(), bytes.end());
+  WriteFileAtomically(path, contents);
+  return ContentChecksum(contents);
 }
 
 void WriteManifest(const fs::path& directory, nlohmann::json& manifest) {
@@ -85,11 +91,21 @@ void WriteManifest(const fs::path& directory, nlohmann::json& manifest) {
   WriteFileAtomically(directory / kManifestName, manifest.dump(2) + "\n");
 }
 
-// Whether `file` decodes to an image of `depth` (a frame left by a crash or overwritten by
-// something else does not, and is captured again).
-bool FrameReadable(const fs::path& file, int depth) {
+// A recorded frame read back: checked against the checksum recorded with it (sessions written
+// before checksums were recorded have none, and are only decoded), then decoded.
+cv::Mat ReadFrame(const fs::path& file, const nlohmann::json& checksum) {
+  if (checksum.is_string())
+    return ReadImageChecked(file, cv::IMREAD_UNCHANGED, checksum.get<std::string>());
+  return ReadImage(file, cv::IMREAD_UNCHANGED);
+}
+
+// Whether `file` still holds the frame recorded (its checksum) and decodes to an image of one of
+// `depths` (a frame left by a crash, altered or truncated since does not, and is captured again).
+bool FrameReadable(const fs::path& file, const nlohmann::json& checksum,
+                   std::initializer_list<int> depths) {
   try {
-    return ReadImage(file, cv::IMREAD_UNCHANGED).depth() == depth;
+    const int depth = ReadFrame(file, checksum).depth();
+    return std::find(depths.begin(), depths.end(), depth) != depths.end();
   } catch (const IoError&) {
     return false;
   }
@@ -99,10 +115,13 @@ bool PatternComplete(const fs::path& directory, const nlohmann::json& entry) {
   if (!entry.contains("captured") || entry["captured"].is_null()) return false;
   const nlohmann::json& captured = entry["captured"];
   for (const nlohmann::json& exposure : captured.at("exposures")) {
-    if (!FrameReadable(directory / exposure.at("file").get<std::string>(), CV_16U)) return false;
+    if (!FrameReadable(directory / exposure.at("file").get<std::string>(),
+                       exposure.value("file_checksum", nlohmann::json()), {CV_16U}))
+      return false;
   }
   if (captured.contains("hdr") && !captured["hdr"].is_null() &&
-      !FrameReadable(directory / captured["hdr"].get<std::string>(), CV_32F)) {
+      !FrameReadable(directory / captured["hdr"].get<std::string>(),
+                     captured.value("hdr_checksum", nlohmann::json()), {CV_32F})) {
     return false;
   }
   return true;
@@ -204,8 +223,9 @@ nlohmann::json WriteCapture(const fs::path& directory, int index, const std::str
     const std::string file = stem + "_e" + ExposureTag(exposure.exposure_us) + "us.png";
     cv::Mat png;
     exposure.mean.convertTo(png, CV_16U, png_scale);  // rounds and saturates
-    WriteImage(directory / file, png);
+    const std::string checksum = WriteImage(directory / file, png);
     exposures.push_back({{"exposure_us", exposure.exposure_us},
+                         {"file_checksum", checksum},
                          {"gain", exposure.gain},
                          {"file", file},
                          {"png_scale", png_scale},
@@ -217,10 +237,11 @@ nlohmann::json WriteCapture(const fs::path& directory, int index, const std::str
                          {"first_exposure_start_ns", exposure.first_exposure_start_ns},
                          {"last_arrival_ns", exposure.last_arrival_ns}});
   }
-  nlohmann::json hdr = nullptr;
+  nlohmann::json hdr = nullptr, hdr_checksum = nullptr;
   if (!capture.hdr.empty()) {
     const std::string file = stem + "_hdr.tiff";
-    WriteImage(directory / file, capture.hdr, {cv::IMWRITE_TIFF_COMPRESSION, 1});  // lossless float
+    hdr_checksum = WriteImage(directory / file, capture.hdr,
+                              {cv::IMWRITE_TIFF_COMPRESSION, 1});  // lossless float
     hdr = file;
   }
   return {{"time", UtcNow()},
@@ -230,7 +251,8 @@ nlohmann::json WriteCapture(const fs::path& directory, int index, const std::str
           {"retry_reasons", capture.retry_reasons},
           {"full_scale", capture.full_scale},
           {"exposures", exposures},
-          {"hdr", hdr}};
+          {"hdr", hdr},
+          {"hdr_checksum", hdr_checksum}};
 }
 
 // The manifest of the session in options.directory if it can be resumed with these settings,
@@ -254,6 +276,61 @@ nlohmann::json ResumableManifest(const CaptureSessionOptions& options,
 }
 
 }  // namespace
+
+void WriteImportedSession(const fs::path& directory, const std::string& kind,
+                          const nlohmann::json& parameters, const std::string& display_name,
+                          cv::Size display_size, const std::vector<ImportedPhoto>& photos) {
+  const fs::path manifest_path = directory / kManifestName;
+  if (fs::exists(manifest_path)) {
+    nlohmann::json old;
+    try {
+      old = nlohmann::json::parse(ReadFile(manifest_path));
+    } catch (const nlohmann::json::exception&) {
+    }
+    if (!old.is_object() || old.value("format", "") != kFormat ||
+        old.value("camera", nlohmann::json::object()).value("device", "") != "import") {
+      throw IoError(manifest_path.string() +
+                    ": holds a capture session that was not imported; import into another "
+                    "directory");
+    }
+  }
+  std::error_code error;
+  fs::create_directories(directory, error);
+  if (error) throw IoError(directory.string() + ": cannot create directory: " + error.message());
+  nlohmann::json manifest;
+  manifest["format"] = kFormat;
+  manifest["version"] = kVersion;
+  manifest["sequence"] = {{"kind", kind}, {"parameters", parameters}};
+  manifest["capture"] = {{"imported", true}};
+  manifest["camera"] = {{"device", "import"}, {"uri", "import"}, {"backend", "import"}};
+  manifest["display"] = {
+      {"name", display_name}, {"width", display_size.width}, {"height", display_size.height}};
+  manifest["complete"] = true;
+  manifest["created"] = UtcNow();
+  manifest["runs"] = nlohmann::json::array();
+  manifest["interruptions"] = nlohmann::json::array();
+  nlohmann::json patterns = nlohmann::json::array();
+  for (size_t i = 0; i < photos.size(); ++i) {
+    const ImportedPhoto& photo = photos[i];
+    nlohmann::json exposure = {{"exposure_us", nullptr},
+                               {"file", photo.file.string()},
+                               {"file_checksum", photo.checksum},
+                               {"png_scale", 1.0}};
+    patterns.push_back({{"index", i},
+                        {"name", photo.name},
+                        {"file", nullptr},
+                        {"checksum", nullptr},
+                        {"info", photo.info},
+                        {"captured",
+                         {{"time", UtcNow()},
+                          {"imported", true},
+                          {"full_scale", photo.full_scale},
+                          {"exposures", nlohmann::json::array({exposure})},
+                          {"hdr", nullptr}}}});
+  }
+  manifest["patterns"] = patterns;
+  WriteManifest(directory, manifest);
+}
 
 void CheckSessionResumable(const CaptureSessionOptions& options, const CaptureSequence& sequence,
                            const Camera& camera) {
@@ -396,8 +473,10 @@ cv::Mat CaptureSessionData::Mean(int pattern, int exposure) const {
   const nlohmann::json& entry =
       manifest_["patterns"][pattern]["captured"]["exposures"].at(exposure);
   const fs::path file = directory_ / entry.at("file").get<std::string>();
-  const cv::Mat png = ReadImage(file, cv::IMREAD_UNCHANGED);
-  if (png.depth() != CV_16U) throw IoError(file.string() + ": missing or not a 16-bit PNG");
+  const cv::Mat png = ReadFrame(file, entry.value("file_checksum", nlohmann::json()));
+  // procam's own frames are 16-bit PNGs; an imported session's photos 8- or 16-bit.
+  if (png.depth() != CV_16U && png.depth() != CV_8U)
+    throw IoError(file.string() + ": not an 8- or 16-bit image");
   cv::Mat mean;
   png.convertTo(mean, CV_32F, 1.0 / entry.at("png_scale").get<double>());
   return mean;
@@ -411,7 +490,8 @@ cv::Mat CaptureSessionData::Hdr(int pattern) const {
   const nlohmann::json& hdr = manifest_["patterns"][pattern]["captured"]["hdr"];
   if (hdr.is_null()) return cv::Mat();
   const fs::path file = directory_ / hdr.get<std::string>();
-  const cv::Mat image = ReadImage(file, cv::IMREAD_UNCHANGED);
+  const cv::Mat image = ReadFrame(
+      file, manifest_["patterns"][pattern]["captured"].value("hdr_checksum", nlohmann::json()));
   if (image.depth() != CV_32F) throw IoError(file.string() + ": missing or not a float TIFF");
   return image;
 }

@@ -10,13 +10,20 @@
 //   DIR/frames/NNN_<name>_hdr.tiff         with several exposures: the linear HDR merge
 //                                          (32-bit float TIFF, full scale per second)
 //
+// An imported session (WriteImportedSession) holds no patterns/ or frames/: its frames' files are
+// the other tool's photos, by absolute path.
+//
 // Manifest: {"format": "procam capture session", "version": 1, "sequence": {kind, parameters},
 // "capture": {frames_per_pattern, discard_frames, exposures_us, settle_ms}, "camera": {device,
 // uri, vendor, model, serial, settings}, "display": {name, width, height}, "complete",
 // "created", "updated", "runs": [...], "interruptions": [...], "patterns": [{index, name, file,
 // checksum, info, "captured": null | {time, shown_ns, settled_ns, retries, full_scale,
-// exposures: [{exposure_us, gain, file, png_scale, frames, sequences, buffered_dropped,
-// stale_dropped, discarded, first_exposure_start_ns, last_arrival_ns}], hdr}}]}.
+// exposures: [{exposure_us, gain, file, file_checksum, png_scale, frames, sequences,
+// buffered_dropped, stale_dropped, discarded, first_exposure_start_ns, last_arrival_ns}], hdr,
+// hdr_checksum}}]}. file_checksum and hdr_checksum are the ContentChecksum (base/io.h) of the
+// frame's file as written: a frame altered or truncated since is captured again on resume and
+// refused, with one line naming it, by every reader (sessions written before checksums were
+// recorded have none and are read as they are).
 //
 // Every file is written through a temporary file and a rename (WriteFileAtomically), frames
 // before the manifest entry that names them, so a crash at any point leaves a consistent
@@ -69,6 +76,26 @@ CaptureSummary RunCaptureSession(const CaptureSessionOptions& options,
 // of its own beside the session.
 void CheckSessionResumable(const CaptureSessionOptions& options, const CaptureSequence& sequence,
                            const Camera& camera);
+
+// One photo made by another tool, recorded in a session as it lies (capture/session.h, imported
+// sessions): nothing is copied.
+struct ImportedPhoto {
+  std::string name;                // the pattern's name ("pat00"), unique in the session
+  nlohmann::json info;             // what the pattern encodes, as Pattern::info
+  std::filesystem::path file;      // the photo, absolute
+  std::string checksum;            // ContentChecksum of its bytes as imported
+  double full_scale = 255.0;       // its largest digital number: 255 (8-bit) or 65535 (16-bit)
+};
+
+// Writes DIR/session.json for photos captured by another tool: sequence `kind` with
+// `parameters`, the display `display_name` of `display_size`, every pattern captured, each
+// frame's file the photo itself (absolute path, with its checksum: a photo changed later is
+// refused by every reader), camera device "import", complete. The directory is created; a
+// directory that holds another session is refused (IoError naming its manifest) unless it holds
+// an imported one, which is replaced. Throws IoError naming the file on write errors.
+void WriteImportedSession(const std::filesystem::path& directory, const std::string& kind,
+                          const nlohmann::json& parameters, const std::string& display_name,
+                          cv::Size display_size, const std::vector<ImportedPhoto>& photos);
 
 // A session read back, for calibration and tests.
 class CaptureSessionData {

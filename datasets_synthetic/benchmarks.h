@@ -54,5 +54,18 @@ struct ProjectionBenchmarkOptions {
 // maps once, then rendering and PNG encoding, median over the runs.
 void RunProjectionBenchmark(const ProjectionBenchmarkOptions& options);
 
+struct DecodeBenchmarkOptions {
+  int camera_width = 1280, camera_height = 1024;    // the photos' size
+  int projector_width = 1024, projector_height = 768;  // procam's default sequence: 42 photos
+  int repeat = 3;                                    // timed runs (median reported)
+  std::string out;  // where the photos and the session go (default: a temporary folder, removed)
+  ProgressCallback progress;
+};
+
+// Photos of procam's structured light on a plane (8-bit PNG, ambient light, read noise), then
+// timed: `procam import` of the folder (reading and checksumming every photo, the session, the
+// decode and its picture), reading the session back, and decoding alone.
+void RunDecodeBenchmark(const DecodeBenchmarkOptions& options);
+
 
 }  // namespace procam

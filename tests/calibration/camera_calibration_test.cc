@@ -3,6 +3,7 @@
 // detected by OpenCV and refined by mrcal. Truth: an OpenCV4 lens of 640×480 pixels.
 #include "calibration/camera_calibration.h"
 #include "calibration/camera_report.h"
+#include "calibration/camera_stage.h"
 
 #include <gtest/gtest.h>
 
@@ -255,6 +256,50 @@ TEST(CameraReport, DrawsTheUncertaintyMapWhereItsGridLies) {
   EXPECT_THROW(DrawProjectionUncertainty(ProjectionUncertaintyMap(), width, height, 1, 1.0, {}),
                std::invalid_argument);
   EXPECT_THROW(DrawProjectionUncertainty(map, width, height, 0, 1.0, {}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace procam
+
+namespace procam {
+namespace {
+
+// Real photographs: OpenCV's own chessboard set (Debian's opencv-doc, copied to
+// ../shared/data/real/opencv_left) against the reference OpenCV's test asserts for it
+// (modules/python/test/test_calibration.py: calibrateCamera with k1, k2, p1, p2, k3, square 1):
+// camera-matrix L1 < 10, distortion L1 < 0.05, RMS reprojection error 0.196 ± 0.01 px per point.
+TEST(CameraCalibration, OpenCvsRealChessboardPhotosMatchOpenCvsReference) {
+  const std::filesystem::path photos = testing::SharedDir() / "data" / "real" / "opencv_left";
+  if (!std::filesystem::exists(photos / "left01.jpg"))
+    GTEST_SKIP() << photos << " is missing (the team's shared data)";
+  CameraStageOptions options;
+  options.images = photos;
+  testing::TempDir rig;
+  options.out = rig.path();
+  options.board.corners_x = 9;
+  options.board.corners_y = 6;
+  options.board.square_size = 1.0;
+  options.options.lens_model = "LENSMODEL_OPENCV5";
+  options.options.reject_outliers = false;
+  const CameraStageSummary stage = RunCameraStage(options);
+  const std::vector<double>& k = stage.calibration.intrinsics;
+  ASSERT_EQ(k.size(), 9u);
+  const double matrix_l1 = std::abs(k[0] - 532.80992189) + std::abs(k[1] - 532.93346422) +
+                           std::abs(k[2] - 342.4952186) + std::abs(k[3] - 233.8879292);
+  const double reference[] = {-0.281325576, 0.0291130406, 0.00121234330, -0.000140825372,
+                              0.154865844};
+  double distortion_l1 = 0.0;
+  for (int i = 0; i < 5; ++i) distortion_l1 += std::abs(k[4 + i] - reference[i]);
+  std::printf("fx %.2f fy %.2f cx %.2f cy %.2f: camera-matrix L1 %.3f, distortion L1 %.4f, RMS %.4f "
+              "px per point over %d views\n",
+              k[0], k[1], k[2], k[3], matrix_l1, distortion_l1, stage.summary.rms_norm,
+              stage.summary.views);
+  EXPECT_EQ(stage.summary.views, 13);
+  EXPECT_LT(matrix_l1, 10.0);
+  EXPECT_LT(distortion_l1, 0.05);
+  // mrcal's optimum may fit the corners better than OpenCV's; never worse than its tolerance.
+  EXPECT_LT(stage.summary.rms_norm, 0.196334638 + 0.01);
+  EXPECT_GT(stage.summary.rms_norm, 0.1);
 }
 
 }  // namespace

@@ -199,6 +199,46 @@ TEST(CaptureSession, APatternWhoseFilesAreMissingIsCapturedAgain) {
   EXPECT_NEAR(low, ExpectedLuma(sequence.patterns[3].image), 0.501);
 }
 
+// A frame altered or truncated after it was captured (a disk fault, a copy gone wrong) still
+// decodes as an image, or does not: either way its checksum no longer matches. Every reader
+// refuses it with one line naming the file, and resuming captures it again.
+TEST(CaptureSession, AFrameChangedAfterCaptureIsRefusedAndCapturedAgain) {
+  for (const bool truncate : {false, true}) {
+    testing::TempDir dir;
+    const CaptureSequence sequence = Photometric();
+    auto display = std::make_shared<MemoryDisplay>(cv::Size(12, 8));
+    TestCamera camera(SessionCamera(), MakeLoopbackView(display));
+    RunCaptureSession(Options(dir.path()), sequence, camera, *display);
+    const CaptureSessionData data = CaptureSessionData::Load(dir.path());
+    const fs::path frame =
+        dir.path() /
+        data.manifest()["patterns"][4]["captured"]["exposures"][0]["file"].get<std::string>();
+    if (truncate) {
+      const std::string bytes = Bytes(frame);
+      WriteFileAtomically(frame, bytes.substr(0, bytes.size() - 5));
+    } else {
+      // The same size and depth, one pixel changed: a valid 16-bit PNG.
+      cv::Mat image = cv::imread(frame.string(), cv::IMREAD_UNCHANGED);
+      ASSERT_EQ(image.depth(), CV_16U);
+      image.at<uint16_t>(2, 2) ^= 0x100;
+      ASSERT_TRUE(cv::imwrite(frame.string(), image));
+    }
+    try {
+      CaptureSessionData::Load(dir.path()).Mean(4);
+      ADD_FAILURE() << "a changed frame was read (truncated: " << truncate << ")";
+    } catch (const IoError& error) {
+      EXPECT_NE(std::string(error.what()).find(frame.filename().string()), std::string::npos)
+          << error.what();
+    }
+    const CaptureSummary summary = RunCaptureSession(Options(dir.path()), sequence, camera, *display);
+    EXPECT_EQ(summary.patterns_before, 6);
+    EXPECT_EQ(summary.patterns_captured, 1);
+    double low = 0;
+    cv::minMaxLoc(CaptureSessionData::Load(dir.path()).Mean(4), &low);
+    EXPECT_NEAR(low, ExpectedLuma(sequence.patterns[4].image), 0.501);
+  }
+}
+
 TEST(CaptureSession, ResumingWithOtherSettingsIsRefused) {
   testing::TempDir dir;
   auto display = std::make_shared<MemoryDisplay>(cv::Size(12, 8));
