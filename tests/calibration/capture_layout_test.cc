@@ -27,9 +27,15 @@ fs::path SourceDirLayout() {
   return testing::SourceDir() / "data" / "layouts" / "kamino410_phase_shifting.json";
 }
 
+// The patterns themselves as grey photos (as ExportPatterns writes them): camera pixel (x, y)
+// sees projector pixel (x, y).
 std::vector<cv::Mat> IdealCaptures(const CaptureSequence& sequence) {
   std::vector<cv::Mat> captured;
-  for (const Pattern& pattern : sequence.patterns) captured.push_back(pattern.image);
+  for (const Pattern& pattern : sequence.patterns) {
+    cv::Mat grey;
+    cv::extractChannel(pattern.image, grey, 0);
+    captured.push_back(grey);
+  }
   return captured;
 }
 
@@ -41,7 +47,7 @@ void ExpectSameMap(const StructuredLightMap& a, const StructuredLightMap& b) {
       for (const auto* m : {&a.column, &a.row}) {
         const cv::Mat& other = m == &a.column ? b.column : b.row;
         const float u = m->at<float>(y, x), w = other.at<float>(y, x);
-        ASSERT_TRUE((std::isnan(u) && std::isnan(w)) || u == w) << x << "," << y;
+        ASSERT_TRUE((std::isnan(u) && std::isnan(w)) || u == w) << x << "," << y << ": " << u << " " << w;
       }
     }
   }
