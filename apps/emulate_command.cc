@@ -100,6 +100,8 @@ void RunEmulate(const EmulateArguments& args) {
   auto last_status = start;
   while (!g_stop) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    // A signal to the process group stops grim too: the watcher's error is then the stop's.
+    if (g_stop) break;
     const std::string error = watcher.error();
     if (!error.empty()) throw IoError("emulate: " + error);
     const auto now = std::chrono::steady_clock::now();

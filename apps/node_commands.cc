@@ -125,6 +125,7 @@ void AddNodeCommands(CLI::App& app) {
     std::signal(SIGTERM, OnSignal);
     zmq::context_t context;
     RunNode(context, options, MakeNodeOutputs(node_args->display), g_stop);
+    if (g_stop) std::cout << "node " << options.name << ": stopped by a signal" << std::endl;
   });
 
   auto play_args = std::make_shared<PlayArguments>();

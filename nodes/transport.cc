@@ -1,5 +1,7 @@
 #include "nodes/transport.h"
 
+#include <cerrno>
+
 #include <sys/stat.h>
 
 #include <atomic>
@@ -12,6 +14,20 @@
 
 namespace procam {
 namespace {
+
+// zmq::poll, with an interruption by a signal (EINTR) read as "nothing arrived", so that the
+// caller's loop sees its stop flag (a node stopped with SIGTERM stops cleanly) instead of an
+// "Interrupted system call" error.
+int PollOrInterrupted(zmq::pollitem_t* items, size_t count, std::chrono::milliseconds timeout) {
+  try {
+    return zmq::poll(items, count, timeout);
+  } catch (const zmq::error_t& error) {
+    if (error.num() != EINTR) throw;
+    for (size_t i = 0; i < count; ++i) items[i].revents = 0;
+    return 0;
+  }
+}
+
 
 constexpr int kHeartbeatMs = 200;
 constexpr int kHeartbeatTimeoutMs = 1000;
@@ -144,7 +160,7 @@ class NodeSocket::ZapHandler {
                                {monitor_.handle(), 0, ZMQ_POLLIN, 0}};
     while (!stop_) {
       try {
-        zmq::poll(items, 2, std::chrono::milliseconds(50));
+        PollOrInterrupted(items, 2, std::chrono::milliseconds(50));
         if (items[0].revents & ZMQ_POLLIN) Answer();
         if (items[1].revents & ZMQ_POLLIN) Watch();
       } catch (const zmq::error_t& e) {
@@ -266,7 +282,7 @@ std::optional<Envelope> NodeSocket::Receive(int timeout_ms) {
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
         deadline - std::chrono::steady_clock::now());
     zmq::pollitem_t item = {socket_.handle(), 0, ZMQ_POLLIN, 0};
-    zmq::poll(&item, 1, std::max(left, std::chrono::milliseconds(0)));
+    PollOrInterrupted(&item, 1, std::max(left, std::chrono::milliseconds(0)));
     if (!(item.revents & ZMQ_POLLIN)) return std::nullopt;
     std::vector<zmq::message_t> parts;
     for (;;) {
@@ -330,7 +346,7 @@ bool ControllerSocket::Send(const Message& message) {
 
 std::optional<Message> ControllerSocket::Receive(int timeout_ms, std::string* why) {
   zmq::pollitem_t item = {socket_.handle(), 0, ZMQ_POLLIN, 0};
-  zmq::poll(&item, 1, std::chrono::milliseconds(std::max(0, timeout_ms)));
+  PollOrInterrupted(&item, 1, std::chrono::milliseconds(std::max(0, timeout_ms)));
   if (!(item.revents & ZMQ_POLLIN)) return std::nullopt;
   zmq::message_t part;
   if (!socket_.recv(part, zmq::recv_flags::dontwait)) return std::nullopt;

@@ -699,3 +699,28 @@ TEST(Nodes, AMonitorUnpluggedMidShowIsReportedAndTheNodeGoesOn) {
 
 }  // namespace
 }  // namespace procam
+
+namespace procam {
+namespace {
+
+// A node stopped by SIGTERM or SIGINT (a service manager, Ctrl+C) stops cleanly: exit 0, its last
+// line says so, nothing about an interrupted system call (zmq's poll returns EINTR).
+TEST(Nodes, ASignalStopsANodeCleanly) {
+  testing::TempDir dir;
+  const Rig rig(dir);
+  const std::string log = (rig.root / "node1.log").string();
+  for (const char* signal : {"TERM", "INT"}) {
+    const testing::CommandRun run = testing::RunShell(
+        rig.StartNode(0) + "pid=$!\nfor i in $(seq 200); do grep -q listening " + log +
+        " && break; sleep 0.05; done\nkill -" + signal + " $pid\nwait $pid\necho exit=$?\n");
+    const std::string output = ReadFile(log);
+    EXPECT_NE(run.output.find("exit=0"), std::string::npos)
+        << "SIG" << signal << ": " << run.output << output;
+    EXPECT_NE(output.find("stopped by a signal"), std::string::npos) << output;
+    EXPECT_EQ(output.find("Interrupted"), std::string::npos) << output;
+    EXPECT_EQ(output.find("error"), std::string::npos) << output;
+  }
+}
+
+}  // namespace
+}  // namespace procam
