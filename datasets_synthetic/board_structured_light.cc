@@ -55,10 +55,10 @@ std::vector<Eigen::Isometry3d> BoardRigPoses(const BoardRig& rig, const Chessboa
     double x, y, z, tilt_x_deg, tilt_y_deg, roll_deg;  // offsets in metres
   };
   const Placement placements[] = {
-      {0.00, 0.00, 0.00, 20, 0, 0},       {-0.12, -0.06, -0.03, -20, 30, 5},
-      {0.12, -0.06, 0.05, 25, -25, -10},  {-0.12, 0.06, 0.10, -30, -20, 15},
-      {0.12, 0.06, -0.03, 30, 25, -20},   {0.00, 0.00, 0.15, 0, -35, 90},
-      {0.00, 0.00, -0.10, 35, 10, 30},    {0.00, 0.00, 0.05, -15, -35, -30},
+      {0.00, 0.00, 0.00, 30, 0, 0},       {-0.12, -0.06, -0.03, -30, 40, 5},
+      {0.12, -0.06, 0.05, 35, -35, -10},  {-0.12, 0.06, 0.10, -40, -25, 15},
+      {0.12, 0.06, -0.03, 40, 30, -20},   {0.00, 0.00, 0.15, 0, -45, 90},
+      {0.00, 0.00, -0.10, 45, 10, 30},    {0.00, 0.00, 0.05, -25, -40, -30},
   };
   // Centre the poses where the projector's axis crosses the plane `distance` ahead of the camera.
   const Eigen::Isometry3d cam_from_projector = rig.projector_from_camera.inverse();

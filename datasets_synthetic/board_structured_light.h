@@ -47,7 +47,7 @@ struct BoardRenderOptions {
 };
 
 // `count` board poses (cam_from_board, up to 8) around `distance` metres in front of the camera,
-// tilted by 20°–35° about different axes, centred where the projector's image centre meets the
+// tilted by 30°–45° about different axes, centred where the projector's image centre meets the
 // plane at `distance` and moved up to 0.12 m sideways and 0.06 m up or down towards the corners
 // of both images (so that the board's corners reach towards the images' corners).
 std::vector<Eigen::Isometry3d> BoardRigPoses(const BoardRig& rig, const ChessboardSpec& board,

@@ -1,6 +1,6 @@
 // A projector calibrated with a chessboard and structured light (calibration/board_projector.h)
 // against the synthetic rig's truth (datasets_synthetic/board_structured_light.h: DefaultBoardRig,
-// a 1280×800 OpenCV4 camera and a 1024×768 OpenCV4 projector 0.2 m apart, a 9×6 board of 3 cm
+// a 1280×800 OpenCV4 camera and a 1024×768 OpenCV4 projector 0.2 m apart, an 11×8 board of 2.5 cm
 // squares at eight poses about 1 m away, rendered with blur and read noise, then decoded by DecodeStructuredLight).
 #include "calibration/board_projector.h"
 
@@ -19,9 +19,9 @@ namespace {
 
 ChessboardSpec Board() {
   ChessboardSpec board;
-  board.corners_x = 9;
-  board.corners_y = 6;
-  board.square_size = 0.03;
+  board.corners_x = 11;
+  board.corners_y = 8;
+  board.square_size = 0.025;
   return board;
 }
 
