@@ -76,7 +76,7 @@ TEST(BoardProjector, RenderedPosesMatchTheRigsTruth) {
     for (int k = 0; k < board.CornerCount(); ++k) {
       if (!pose.projector_found[k]) continue;
       double nearest = 1e9;
-      Vec2 truth;
+      Vec2 truth = Vec2::Zero();
       for (int j = 0; j < board.CornerCount(); ++j) {
         const Vec3 corner_in_cam = poses[v] * board.Corner(j);
         Vec2 camera_pixel, projector_pixel;
