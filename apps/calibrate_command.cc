@@ -1,17 +1,22 @@
-// procam calibrate camera SESSION_DIR --out RIG_DIR (calibration/camera_stage.h) and procam
-// calibrate photometric SESSION_DIR --out RIG_DIR (calibration/photometric_stage.h).
+// procam calibrate camera SESSION_DIR --out RIG_DIR (calibration/camera_stage.h), procam
+// calibrate board SESSION... --out RIG_DIR (calibration/board_stage.h) and procam calibrate
+// photometric SESSION_DIR --out RIG_DIR (calibration/photometric_stage.h).
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "calibration/board_stage.h"
 #include "calibration/camera_stage.h"
 #include "calibration/photometric_stage.h"
 
@@ -34,6 +39,64 @@ void RunCalibrateCamera(const CalibrateCameraArguments& args) {
   options.options = args.options;
   options.progress = PrintProgress();
   RunCameraStage(options);
+}
+
+struct CalibrateBoardArguments {
+  std::vector<std::string> sessions;
+  std::string corners = "9x6";
+  double square = 0.03;
+  BoardStageOptions options;
+};
+
+void RunCalibrateBoard(const CalibrateBoardArguments& args) {
+  BoardStageOptions options = args.options;
+  options.sessions.assign(args.sessions.begin(), args.sessions.end());
+  options.board = ParseChessboard(args.corners, args.square);
+  options.progress = PrintProgress();
+  RunBoardStage(options);
+}
+
+void AddCalibrateBoardCommand(CLI::App* calibrate) {
+  auto args = std::make_shared<CalibrateBoardArguments>();
+  CLI::App* board = calibrate->add_subcommand(
+      "board",
+      "Camera and projector together from a chessboard held at several poses, one "
+      "structured-light session per pose (docs/chessboard.md)");
+  board
+      ->add_option("sessions", args->sessions,
+                   "Capture sessions of `procam capture --sequence structured_light`, one per "
+                   "board pose")
+      ->required();
+  board->add_option("--out", args->options.out,
+                    "Rig directory: camera.cameramodel, NAME.cameramodel, result.json")
+      ->required();
+  board->add_option("--name", args->options.projector, "The projector's name")
+      ->capture_default_str();
+  board->add_option("--corners", args->corners, "Inner corners, COLUMNSxROWS")
+      ->capture_default_str();
+  board->add_option("--square", args->square, "Square size, metres")->capture_default_str();
+  BoardProjectorOptions& options = args->options.options;
+  board->add_option("--lens-model", options.lens_model,
+                    "Both lenses: LENSMODEL_OPENCV4, LENSMODEL_OPENCV5 or LENSMODEL_OPENCV8")
+      ->capture_default_str();
+  board->add_option("--window", options.homography_half_window,
+                    "Half side of the window around a corner for its local homography, camera "
+                    "pixels [3, 200]")
+      ->capture_default_str();
+  board->add_option("--min-window-pixels", options.min_window_pixels,
+                    "Fewest decoded pixels in a corner's window, >= 8")
+      ->capture_default_str();
+  board->add_option("--homography-reject", options.homography_reject_px,
+                    "Decoded pixels farther than this from a corner's homography are dropped, "
+                    "projector pixels")
+      ->capture_default_str();
+  board->add_option("--min-poses", options.min_poses, "Fewest board poses, >= 2")
+      ->capture_default_str();
+  board->add_option("--min-tilt-spread", options.min_tilt_spread_deg,
+                    "Least angle between two poses' board normals, degrees [0, 90)")
+      ->capture_default_str();
+  board->add_flag("!--no-outlier-rejection", options.reject_outliers, "Keep every corner");
+  board->callback([args] { RunCalibrateBoard(*args); });
 }
 
 }  // namespace
@@ -102,6 +165,7 @@ void AddCalibrateCommands(CLI::App& app) {
   AddPhotometricStageOptions(photometric, photometric_args.get());
   photometric->callback([photometric_args] { RunPhotometricStage(*photometric_args); });
 
+  AddCalibrateBoardCommand(calibrate);
   AddCalibrateResponseCommand(*calibrate);
   AddCalibrateAllCommand(*calibrate);
   AddCalibrateProjectorsCommand(*calibrate);

@@ -9,6 +9,8 @@
 
 #include "base/camera_model.h"
 
+#include <suitesparse/cholmod.h>  // the cholmod_sparse that carries Jᵀ (the struct only)
+
 extern "C" {
 // _mrcal_num_j_nonzero: the Jacobian's size, which mrcal's Python wrapper asks for the same way.
 #include <mrcal/mrcal-internal.h>
@@ -57,8 +59,7 @@ MrcalChessboardProblem ToMrcal(const CameraCalibration& calibration) {
         mrcal_point3_t{{solve.corners[k].x(), solve.corners[k].y(), solve.corners[k].z()}};
   }
   problem.selections = ChessboardSelections(solve.regularization, solve.reject_outliers);
-  problem.imager_size[0] = calibration.width;
-  problem.imager_size[1] = calibration.height;
+  problem.imager_sizes = {calibration.width, calibration.height};
   problem.spacing = solve.board.square_size;
   problem.corners_x = solve.board.corners_x;
   problem.corners_y = solve.board.corners_y;
@@ -66,29 +67,72 @@ MrcalChessboardProblem ToMrcal(const CameraCalibration& calibration) {
 }
 
 int MrcalChessboardProblem::StateCount() const {
-  return mrcal_num_states(1, 0, Frames(), 0, 0, Frames(), selections, &lens);
+  return mrcal_num_states(cameras, Extrinsics(), Frames(), 0, 0, Observations(), selections, &lens);
 }
 
 int MrcalChessboardProblem::MeasurementCount() const {
-  return mrcal_num_measurements(Frames(), 0, corners_x, corners_y, 1, 0, Frames(), 0, 0, selections,
-                                &lens);
+  return mrcal_num_measurements(Observations(), 0, corners_x, corners_y, cameras, Extrinsics(),
+                                Frames(), 0, 0, selections, &lens);
 }
 
 int MrcalChessboardProblem::BoardMeasurementCount() const {
-  return mrcal_num_measurements_boards(Frames(), corners_x, corners_y);
+  return mrcal_num_measurements_boards(Observations(), corners_x, corners_y);
 }
 
-int MrcalChessboardProblem::StateIndexIntrinsics() const {
-  return mrcal_state_index_intrinsics(0, 1, 0, Frames(), 0, 0, Frames(), selections, &lens);
+int MrcalChessboardProblem::StateIndexIntrinsics() const { return StateIndexIntrinsics(0); }
+
+int MrcalChessboardProblem::StateIndexIntrinsics(int camera) const {
+  return mrcal_state_index_intrinsics(camera, cameras, Extrinsics(), Frames(), 0, 0,
+                                      Observations(), selections, &lens);
+}
+
+int MrcalChessboardProblem::StateIndexExtrinsics(int camera) const {
+  return mrcal_state_index_extrinsics(camera - 1, cameras, Extrinsics(), Frames(), 0, 0,
+                                      Observations(), selections, &lens);
 }
 
 int MrcalChessboardProblem::StateIndexFrames() const {
-  return mrcal_state_index_frames(0, 1, 0, Frames(), 0, 0, Frames(), selections, &lens);
+  return mrcal_state_index_frames(0, cameras, Extrinsics(), Frames(), 0, 0, Observations(),
+                                  selections, &lens);
 }
 
 int MrcalChessboardProblem::JacobianNonZeros() const {
-  return _mrcal_num_j_nonzero(Frames(), 0, corners_x, corners_y, 1, 0, Frames(), 0, 0,
-                              observations.data(), nullptr, selections, &lens);
+  return _mrcal_num_j_nonzero(Observations(), 0, corners_x, corners_y, cameras, Extrinsics(),
+                              Frames(), 0, 0, observations.data(), nullptr, selections, &lens);
+}
+
+bool MrcalChessboardProblem::Evaluate(std::vector<double>* x, std::vector<int>* column_starts,
+                                      std::vector<int>* rows, std::vector<double>* values) const {
+  const int state_count = StateCount();
+  const int measurement_count = MeasurementCount();
+  const int nonzeros = JacobianNonZeros();
+  std::vector<double> b_packed(state_count);
+  x->assign(measurement_count, 0.0);
+  values->assign(nonzeros, 0.0);
+  column_starts->assign(measurement_count + 1, 0);
+  rows->assign(nonzeros, 0);
+  cholmod_sparse jt{};
+  jt.nrow = state_count;
+  jt.ncol = measurement_count;
+  jt.nzmax = nonzeros;
+  jt.p = column_starts->data();
+  jt.i = rows->data();
+  jt.x = values->data();
+  jt.stype = 0;
+  jt.itype = CHOLMOD_INT;
+  jt.xtype = CHOLMOD_REAL;
+  jt.dtype = CHOLMOD_DOUBLE;
+  jt.sorted = 1;
+  jt.packed = 1;
+  // libmrcal takes non-const arrays but only reads them here.
+  MrcalChessboardProblem& self = const_cast<MrcalChessboardProblem&>(*this);
+  return mrcal_optimizer_callback(
+      b_packed.data(), state_count * sizeof(double), x->data(), measurement_count * sizeof(double),
+      &jt, self.intrinsics.data(), self.extrinsics.empty() ? nullptr : self.extrinsics.data(),
+      self.frames.data(), nullptr, nullptr, cameras, Extrinsics(), Frames(), 0, 0,
+      observations.data(), nullptr, Observations(), 0, self.pool.data(), &lens,
+      imager_sizes.data(), selections, &kChessboardConstants, spacing, corners_x, corners_y,
+      false);
 }
 
 namespace {
@@ -221,10 +265,19 @@ std::string Base85(const std::string& bytes) {
 }  // namespace
 
 std::string MrcalOptimizationInputs(const CameraCalibration& calibration) {
-  const MrcalChessboardProblem problem = ToMrcal(calibration);
+  return MrcalOptimizationInputs(ToMrcal(calibration), calibration.lens_model);
+}
+
+std::string MrcalOptimizationInputs(const MrcalChessboardProblem& problem,
+                                    const std::string& lens_model) {
   const int views = problem.Frames();
+  const int observation_count = problem.Observations();
+  const int per_camera = static_cast<int>(problem.intrinsics.size()) / problem.cameras;
   std::vector<double> frames(6 * views), pool(3 * problem.pool.size());
+  std::vector<double> extrinsics(6 * problem.Extrinsics());
   std::memcpy(frames.data(), problem.frames.data(), sizeof(double) * frames.size());
+  if (!extrinsics.empty())
+    std::memcpy(extrinsics.data(), problem.extrinsics.data(), sizeof(double) * extrinsics.size());
   std::memcpy(pool.data(), problem.pool.data(), sizeof(double) * pool.size());
   std::vector<int32_t> indices;  // iframe, icam_intrinsics, icam_extrinsics per observation
   for (const mrcal_observation_board_t& observation : problem.observations) {
@@ -234,18 +287,24 @@ std::string MrcalOptimizationInputs(const CameraCalibration& calibration) {
   const mrcal_problem_selections_t& selections = problem.selections;
   const std::vector<std::pair<std::string, std::string>> members = {
       {"intrinsics",
-       NpyDoubles(problem.intrinsics, fmt::format("(1, {})", problem.intrinsics.size()))},
-      {"extrinsics_rt_fromref", NpyString("")},
+       NpyDoubles(problem.intrinsics, fmt::format("({}, {})", problem.cameras, per_camera))},
+      {"extrinsics_rt_fromref",
+       extrinsics.empty()
+           ? NpyString("")
+           : NpyDoubles(extrinsics, fmt::format("({}, 6)", problem.Extrinsics()))},
       {"frames_rt_toref", NpyDoubles(frames, fmt::format("({}, 6)", views))},
       {"points", NpyString("")},
-      {"observations_board", NpyDoubles(pool, fmt::format("({}, {}, {}, 3)", views,
-                                                          problem.corners_y, problem.corners_x))},
+      {"observations_board",
+       NpyDoubles(pool, fmt::format("({}, {}, {}, 3)", observation_count, problem.corners_y,
+                                    problem.corners_x))},
       {"indices_frame_camintrinsics_camextrinsics",
-       NpyInts(indices, fmt::format("({}, 3)", views))},
+       NpyInts(indices, fmt::format("({}, 3)", observation_count))},
       {"observations_point", NpyString("")},
       {"indices_point_camintrinsics_camextrinsics", NpyString("")},
-      {"lensmodel", NpyString(calibration.lens_model)},
-      {"imagersizes", NpyInts({problem.imager_size[0], problem.imager_size[1]}, "(1, 2)")},
+      {"lensmodel", NpyString(lens_model)},
+      {"imagersizes", NpyInts(std::vector<int32_t>(problem.imager_sizes.begin(),
+                                                   problem.imager_sizes.end()),
+                              fmt::format("({}, 2)", problem.cameras))},
       {"calobject_warp", NpyString("")},
       {"Npoints_fixed", NpyInt64(0)},
       {"do_optimize_intrinsics_core", NpyBool(selections.do_optimize_intrinsics_core)},

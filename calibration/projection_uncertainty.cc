@@ -62,7 +62,7 @@ bool ProjectionUncertainty::Compute(const CameraCalibration& calibration, std::s
                                 /*Ncameras_intrinsics=*/1, /*Ncameras_extrinsics=*/0,
                                 problem.Frames(), 0, 0, problem.observations.data(), nullptr,
                                 problem.Frames(), 0, problem.pool.data(), &problem.lens,
-                                problem.imager_size, problem.selections, &kChessboardConstants,
+                                problem.imager_sizes.data(), problem.selections, &kChessboardConstants,
                                 problem.spacing, problem.corners_x, problem.corners_y, false)) {
     *why = "mrcal_optimizer_callback failed on the chessboard solve";
     return false;

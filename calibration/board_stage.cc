@@ -1,0 +1,299 @@
+#include "calibration/board_stage.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <array>
+#include <numbers>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include <opencv2/imgproc.hpp>
+
+#include "base/html_report.h"
+#include "base/io.h"
+#include "calibration/camera_report.h"
+#include "calibration/projectors_stage.h"
+#include "calibration/rig_directory.h"
+#include "capture/session.h"
+
+namespace procam {
+
+bool BoardStageOptions::Check(std::string* why) const {
+  if (sessions.empty()) {
+    *why = "board: no capture sessions (one per board pose)";
+    return false;
+  }
+  if (out.empty()) {
+    *why = "board: no rig directory (--out)";
+    return false;
+  }
+  if (!ValidProjectorName(projector)) {
+    *why = "board: projector name '" + projector + "' takes letters, digits, '_', '-' and '.'";
+    return false;
+  }
+  return board.Check(why) && options.Check(why) && decode.Check(why);
+}
+
+namespace {
+
+// One session: the white photo and the decoded structured light; the projector's size.
+BoardPoseCapture ReadBoardSession(const std::filesystem::path& directory,
+                                  const StructuredLightDecodeOptions& decode, int* projector_width,
+                                  int* projector_height) {
+  if (!std::filesystem::is_directory(directory))
+    throw IoError(directory.string() + ": not a directory");
+  const CaptureSessionData data = CaptureSessionData::Load(directory);
+  const std::string manifest = (directory / "session.json").string();
+  const nlohmann::json& sequence = data.manifest().value("sequence", nlohmann::json::object());
+  const std::string kind = sequence.value("kind", "");
+  if (kind != "structured_light")
+    throw IoError(manifest + ": a '" + kind +
+                  "' session; a board pose needs one captured with --sequence structured_light");
+  const nlohmann::json& parameters = sequence.value("parameters", nlohmann::json::object());
+  StructuredLightOptions light;
+  try {
+    light.width = parameters.at("width").get<int>();
+    light.height = parameters.at("height").get<int>();
+    light.columns = parameters.at("columns").get<bool>();
+    light.rows = parameters.at("rows").get<bool>();
+    light.phase_period = parameters.at("phase_period").get<int>();
+    light.phase_steps = parameters.at("phase_steps").get<int>();
+    light.xor_codes = parameters.at("xor_codes").get<bool>();
+    light.pattern_gamma = parameters.at("pattern_gamma").get<double>();
+  } catch (const nlohmann::json::exception& error) {
+    throw IoError(manifest + ": sequence.parameters: " + error.what());
+  }
+  std::string why;
+  if (!light.Check(&why)) throw IoError(manifest + ": sequence.parameters: " + why);
+  if (!light.columns || !light.rows)
+    throw IoError(manifest + ": sequence.parameters: both columns and rows must be encoded");
+  *projector_width = light.width;
+  *projector_height = light.height;
+  std::vector<cv::Mat> captured;
+  for (int p = 0; p < data.pattern_count(); ++p) {
+    if (!data.captured(p))
+      throw IoError(manifest + ": pattern " + data.pattern_name(p) +
+                    " is not captured (run the same capture command again to resume)");
+    cv::Mat image = data.Hdr(p);
+    if (image.empty()) image = data.Mean(p, 0);
+    if (!captured.empty() && image.size() != captured.front().size())
+      throw IoError(manifest + ": pattern " + data.pattern_name(p) + " differs in size");
+    captured.push_back(image);
+  }
+  if (captured.empty() || data.pattern_name(0) != "white")
+    throw IoError(manifest + ": the sequence does not start with its white pattern");
+  BoardPoseCapture capture;
+  capture.name = directory.filename().empty() ? directory.parent_path().filename().string()
+                                              : directory.filename().string();
+  try {
+    capture.map = DecodeStructuredLight(light, captured, decode);
+  } catch (const std::invalid_argument& error) {
+    throw IoError(manifest + ": " + error.what());
+  }
+  capture.white = captured.front();
+  return capture;
+}
+
+nlohmann::json Residuals(const std::vector<Vec2>& residuals) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const Vec2& r : residuals) {
+    if (r.allFinite()) {
+      out.push_back({r.x(), r.y()});
+    } else {
+      out.push_back(nullptr);
+    }
+  }
+  return out;
+}
+
+void WriteBoardReport(const std::filesystem::path& path, const std::string& name,
+                      const BoardStageSummary& stage) {
+  const BoardProjectorCalibration& calibration = stage.calibration;
+  const BoardProjectorSummary& summary = stage.summary;
+  HtmlReport report("procam: camera and projector " + name + " from a chessboard");
+  report.Paragraph(summary.BriefReport());
+  report.Heading("Lenses");
+  const auto lens_row = [](const std::string& device, const std::vector<double>& intrinsics) {
+    std::vector<std::string> row = {device};
+    for (int k = 0; k < 4; ++k) row.push_back(fmt::format("{:.3f}", intrinsics[k]));
+    std::string distortion;
+    for (size_t k = 4; k < intrinsics.size(); ++k)
+      distortion += fmt::format("{}{:.5f}", k > 4 ? " " : "", intrinsics[k]);
+    row.push_back(distortion);
+    return row;
+  };
+  report.Table({"device", "fx", "fy", "cx", "cy", "distortion"},
+               {lens_row("camera", calibration.camera_intrinsics),
+                lens_row(name, calibration.projector_intrinsics)});
+  const Eigen::Isometry3d camera_from_projector = calibration.projector_from_camera.inverse();
+  report.Paragraph(fmt::format(
+      "The projector's centre in the camera frame: ({:.4f}, {:.4f}, {:.4f}) m; its axis turned "
+      "{:.3f}° from the camera's.",
+      camera_from_projector.translation().x(), camera_from_projector.translation().y(),
+      camera_from_projector.translation().z(),
+      Eigen::AngleAxisd(camera_from_projector.linear()).angle() * 180.0 / std::numbers::pi));
+  report.Heading("What the calibration is sure of");
+  if (stage.uncertainty_error.empty()) {
+    double largest = 0.0;
+    for (double v : stage.camera_uncertainty.grid) largest = std::max(largest, v);
+    for (double v : stage.projector_uncertainty.grid) largest = std::max(largest, v);
+    const double full_scale = UncertaintyFullScale(largest);
+    report.Paragraph(fmt::format(
+        "1-σ worst-direction projection error at infinity, mrcal's definition (the point rides "
+        "with the boards' mean), from corner noise σ {:.3f} px. One colour scale for both: 0 px "
+        "(dark blue) to {:g} px (yellow); white dots: the corners observed. Where it is large, "
+        "hold the board so that it covers that part of the image.",
+        stage.camera_uncertainty.observed_pixel_sigma, full_scale));
+    std::vector<Vec2> camera_corners, projector_corners;
+    for (const BoardPoseCorners& pose : stage.corners) {
+      camera_corners.insert(camera_corners.end(), pose.camera.begin(), pose.camera.end());
+      for (size_t k = 0; k < pose.projector.size(); ++k)
+        if (pose.projector_found[k]) projector_corners.push_back(pose.projector[k]);
+    }
+    auto shrink = [](cv::Mat picture) {
+      if (picture.cols <= 640) return picture;
+      cv::Mat small;
+      cv::resize(picture, small, cv::Size(640, std::max(1, picture.rows * 640 / picture.cols)), 0,
+                 0, cv::INTER_AREA);
+      return small;
+    };
+    report.Figures(
+        {{fmt::format("camera ({}×{}): centre {:.3f} px", calibration.camera_width,
+                      calibration.camera_height, stage.camera_uncertainty.centre),
+          shrink(DrawProjectionUncertainty(stage.camera_uncertainty, calibration.camera_width,
+                                           calibration.camera_height, 1, full_scale,
+                                           camera_corners))},
+         {fmt::format("{} ({}×{}): centre {:.3f} px", name, calibration.projector_width,
+                      calibration.projector_height, stage.projector_uncertainty.centre),
+          shrink(DrawProjectionUncertainty(stage.projector_uncertainty,
+                                           calibration.projector_width,
+                                           calibration.projector_height, 1, full_scale,
+                                           projector_corners))}});
+  } else {
+    report.Paragraph("Not computed: " + stage.uncertainty_error);
+  }
+  report.Heading("Poses");
+  std::vector<std::vector<std::string>> rows;
+  for (size_t v = 0; v < stage.corners.size(); ++v) {
+    int seen = 0;
+    for (bool found : stage.corners[v].projector_found) seen += found;
+    rows.push_back({stage.corners[v].name, fmt::format("{:.4f}", summary.pose_camera_rms[v]),
+                    fmt::format("{:.4f}", summary.pose_projector_rms[v]),
+                    fmt::format("{} of {}", seen, stage.corners[v].projector_found.size())});
+  }
+  for (const std::string& skipped : stage.skipped)
+    rows.push_back({skipped, "board not found", "-", "-"});
+  report.Table({"pose", "camera RMS per coordinate, px", "projector RMS per coordinate, px",
+                "corners the projector saw"},
+               rows);
+  report.Write(path);
+}
+
+}  // namespace
+
+BoardStageSummary RunBoardStage(const BoardStageOptions& args) {
+  std::string why;
+  if (!args.Check(&why)) throw std::invalid_argument(why);
+  BoardStageSummary stage;
+  int camera_width = 0, camera_height = 0, projector_width = 0, projector_height = 0;
+  for (const std::filesystem::path& session : args.sessions) {
+    int width = 0, height = 0;
+    const BoardPoseCapture capture = ReadBoardSession(session, args.decode, &width, &height);
+    if (projector_width == 0) {
+      projector_width = width;
+      projector_height = height;
+      camera_width = capture.white.cols;
+      camera_height = capture.white.rows;
+    } else if (width != projector_width || height != projector_height ||
+               capture.white.cols != camera_width || capture.white.rows != camera_height) {
+      throw IoError(session.string() + ": projector " + std::to_string(width) + "x" +
+                    std::to_string(height) + ", camera " + std::to_string(capture.white.cols) +
+                    "x" + std::to_string(capture.white.rows) + "; the first session's are " +
+                    std::to_string(projector_width) + "x" + std::to_string(projector_height) +
+                    " and " + std::to_string(camera_width) + "x" + std::to_string(camera_height));
+    }
+    BoardPoseCorners corners;
+    if (!LocateBoardCorners(args.options, args.board, capture, &corners)) {
+      stage.skipped.push_back(capture.name);
+      Report(args.progress, session.string() + ": chessboard not found in the white photo");
+      continue;
+    }
+    const int seen = static_cast<int>(
+        std::count(corners.projector_found.begin(), corners.projector_found.end(), true));
+    Report(args.progress, fmt::format("{}: {} corners, {} located in the projector",
+                                      session.string(), corners.camera.size(), seen));
+    stage.corners.push_back(std::move(corners));
+  }
+  const bool converged = CalibrateBoardProjector(
+      args.options, args.board, stage.corners, camera_width, camera_height, projector_width,
+      projector_height, &stage.calibration, &stage.summary);
+  Report(args.progress, stage.summary.BriefReport());
+  if (!converged) throw std::runtime_error("board calibration: " + stage.summary.message);
+  if (BoardProjectorUncertainty(stage.calibration, &stage.camera_uncertainty,
+                                &stage.projector_uncertainty, &stage.uncertainty_error)) {
+    Report(args.progress, "camera " + stage.camera_uncertainty.BriefReport());
+    Report(args.progress, args.projector + " " + stage.projector_uncertainty.BriefReport());
+  } else {
+    Report(args.progress, "projection uncertainty: not computed: " + stage.uncertainty_error);
+  }
+
+  const std::filesystem::path out(args.out);
+  std::filesystem::create_directories(out);
+  const BoardProjectorCalibration& calibration = stage.calibration;
+  WriteCameraModelFile(out / "camera.cameramodel", calibration.CameraModelOut(),
+                       "procam camera model (procam calibrate board; mrcal_optimize with the "
+                       "projector " + args.projector + "); the camera is the reference frame");
+  const std::filesystem::path projector_path = out / (args.projector + ".cameramodel");
+  WriteCameraModelFile(projector_path, calibration.ProjectorModelOut(),
+                       "procam projector model (procam calibrate board; mrcal_optimize, camera 1 "
+                       "of 2); extrinsics: the projector from the camera");
+  const BoardProjectorSummary& summary = stage.summary;
+  nlohmann::json result;
+  result["lens_model"] = calibration.lens_model;
+  result["camera"] = {{"intrinsics", calibration.camera_intrinsics},
+                      {"imagersize", {calibration.camera_width, calibration.camera_height}}};
+  result["projector"] = {{"intrinsics", calibration.projector_intrinsics},
+                         {"imagersize", {calibration.projector_width, calibration.projector_height}},
+                         {"model", projector_path.filename().string()}};
+  const std::array<double, 6> rt = RtFromPose(calibration.projector_from_camera);
+  result["rt_projector_camera"] = rt;
+  result["board"] = {{"corners_x", args.board.corners_x},
+                     {"corners_y", args.board.corners_y},
+                     {"square_size_m", args.board.square_size}};
+  result["residuals"] = {{"camera_rms_px_per_coordinate", summary.camera_rms},
+                         {"projector_rms_px_per_coordinate", summary.projector_rms},
+                         {"camera_max_norm_px", summary.camera_max_norm},
+                         {"projector_max_norm_px", summary.projector_max_norm},
+                         {"camera_corners", summary.camera_corners},
+                         {"projector_corners", summary.projector_corners},
+                         {"camera_outliers", summary.camera_outliers},
+                         {"projector_outliers", summary.projector_outliers},
+                         {"tilt_spread_deg", summary.tilt_spread_deg}};
+  nlohmann::json poses = nlohmann::json::array();
+  for (size_t v = 0; v < stage.corners.size(); ++v) {
+    poses.push_back({{"session", stage.corners[v].name},
+                     {"camera_rms_px", summary.pose_camera_rms[v]},
+                     {"projector_rms_px", summary.pose_projector_rms[v]},
+                     {"rt_camera_board", RtFromPose(calibration.cam_from_board[v])},
+                     {"camera_residuals_px", Residuals(summary.camera_residuals[v])},
+                     {"projector_residuals_px", Residuals(summary.projector_residuals[v])}});
+  }
+  result["poses"] = poses;
+  result["skipped_sessions"] = stage.skipped;
+  if (stage.uncertainty_error.empty()) {
+    result["camera_uncertainty"] = stage.camera_uncertainty.Json();
+    result["projector_uncertainty"] = stage.projector_uncertainty.Json();
+  } else {
+    result["uncertainty_error"] = stage.uncertainty_error;
+  }
+  UpdateRigResult(out, {"board", args.projector}, result);
+  const std::filesystem::path report = out / ("board_report_" + args.projector + ".html");
+  WriteBoardReport(report, args.projector, stage);
+  Report(args.progress, "wrote " + (out / "camera.cameramodel").string() + ", " +
+                            projector_path.string() + ", " + (out / "result.json").string() +
+                            " (section board." + args.projector + ") and " + report.string());
+  return stage;
+}
+
+}  // namespace procam
