@@ -13,6 +13,7 @@
 #include "base/html_report.h"
 #include "base/io.h"
 #include "calibration/camera_report.h"
+#include "calibration/capture_layout.h"
 #include "calibration/projectors_stage.h"
 #include "calibration/rig_directory.h"
 #include "capture/session.h"
@@ -41,57 +42,23 @@ namespace {
 BoardPoseCapture ReadBoardSession(const std::filesystem::path& directory,
                                   const StructuredLightDecodeOptions& decode, int* projector_width,
                                   int* projector_height) {
-  if (!std::filesystem::is_directory(directory))
-    throw IoError(directory.string() + ": not a directory");
-  const CaptureSessionData data = CaptureSessionData::Load(directory);
+  // Procam's own sessions and imported ones (calibration/capture_layout.h) alike.
+  const StructuredLightSession session = ReadStructuredLightSession(directory);
   const std::string manifest = (directory / "session.json").string();
-  const nlohmann::json& sequence = data.manifest().value("sequence", nlohmann::json::object());
-  const std::string kind = sequence.value("kind", "");
-  if (kind != "structured_light")
-    throw IoError(manifest + ": a '" + kind +
-                  "' session; a board pose needs one captured with --sequence structured_light");
-  const nlohmann::json& parameters = sequence.value("parameters", nlohmann::json::object());
-  StructuredLightOptions light;
-  try {
-    light.width = parameters.at("width").get<int>();
-    light.height = parameters.at("height").get<int>();
-    light.columns = parameters.at("columns").get<bool>();
-    light.rows = parameters.at("rows").get<bool>();
-    light.phase_period = parameters.at("phase_period").get<int>();
-    light.phase_steps = parameters.at("phase_steps").get<int>();
-    light.xor_codes = parameters.at("xor_codes").get<bool>();
-    light.pattern_gamma = parameters.at("pattern_gamma").get<double>();
-  } catch (const nlohmann::json::exception& error) {
-    throw IoError(manifest + ": sequence.parameters: " + error.what());
-  }
-  std::string why;
-  if (!light.Check(&why)) throw IoError(manifest + ": sequence.parameters: " + why);
-  if (!light.columns || !light.rows)
+  const StructuredLightLayout& layout = session.layout;
+  if (!layout.Encodes(true) || !layout.Encodes(false))
     throw IoError(manifest + ": sequence.parameters: both columns and rows must be encoded");
-  *projector_width = light.width;
-  *projector_height = light.height;
-  std::vector<cv::Mat> captured;
-  for (int p = 0; p < data.pattern_count(); ++p) {
-    if (!data.captured(p))
-      throw IoError(manifest + ": pattern " + data.pattern_name(p) +
-                    " is not captured (run the same capture command again to resume)");
-    cv::Mat image = data.Hdr(p);
-    if (image.empty()) image = data.Mean(p, 0);
-    if (!captured.empty() && image.size() != captured.front().size())
-      throw IoError(manifest + ": pattern " + data.pattern_name(p) + " differs in size");
-    captured.push_back(image);
-  }
-  if (captured.empty() || data.pattern_name(0) != "white")
-    throw IoError(manifest + ": the sequence does not start with its white pattern");
+  *projector_width = layout.width;
+  *projector_height = layout.height;
   BoardPoseCapture capture;
   capture.name = directory.filename().empty() ? directory.parent_path().filename().string()
                                               : directory.filename().string();
   try {
-    capture.map = DecodeStructuredLight(light, captured, decode);
+    capture.map = DecodeStructuredLight(layout, session.images, decode);
   } catch (const std::invalid_argument& error) {
     throw IoError(manifest + ": " + error.what());
   }
-  capture.white = captured.front();
+  capture.white = session.images[layout.white];
   return capture;
 }
 

@@ -52,13 +52,7 @@ ProjectorObservations ReadSession(const std::filesystem::path& directory, int ca
   const StructuredLightSession session = ReadStructuredLightSession(directory);
   const std::string manifest = (directory / "session.json").string();
   const StructuredLightLayout& layout = session.layout;
-  const auto encodes = [&](bool column) {
-    return std::any_of(layout.gray.begin(), layout.gray.end(),
-                       [&](const auto& gray) { return gray.column == column; }) ||
-           std::any_of(layout.phases.begin(), layout.phases.end(),
-                       [&](const auto& phase) { return phase.column == column; });
-  };
-  if (!encodes(true) || !encodes(false))
+  if (!layout.Encodes(true) || !layout.Encodes(false))
     throw IoError(manifest + ": sequence.parameters: both columns and rows must be encoded");
   const cv::Mat& first = session.images.front();
   if (first.cols != camera_width || first.rows != camera_height)

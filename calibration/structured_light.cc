@@ -302,6 +302,12 @@ bool StructuredLightLayout::Check(std::string* why) const {
   return true;
 }
 
+bool StructuredLightLayout::Encodes(bool column) const {
+  return std::any_of(gray.begin(), gray.end(), [&](const Gray& g) { return g.column == column; }) ||
+         std::any_of(phases.begin(), phases.end(),
+                     [&](const Phase& p) { return p.column == column; });
+}
+
 const char* DecodeRefusalName(DecodeRefusal refusal) {
   switch (refusal) {
     case DecodeRefusal::kDecoded:

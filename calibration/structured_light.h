@@ -167,6 +167,8 @@ struct StructuredLightLayout {
   std::vector<Phase> phases;
   int image_count = 0;
   bool Check(std::string* why) const;
+  // Whether a Gray code or a phase set encodes projector columns (`column`) or rows.
+  bool Encodes(bool column) const;
 };
 
 // MakeStructuredLightSequence(options)'s order as a layout. Throws std::invalid_argument when
