@@ -371,7 +371,11 @@ cv::Mat PhotographRadiance(cv::Mat radiance, const TestCameraOptions& model,
     }
     radiance = resized;
   }
-  if (model.ambient > 0.0) radiance = radiance + cv::Scalar::all(model.ambient);
+  if (model.ambient > 0.0) {  // into a new matrix: `radiance` may share the caller's pixels
+    cv::Mat lit;
+    cv::add(radiance, cv::Scalar::all(model.ambient), lit);
+    radiance = lit;
+  }
   if (model.camera_blur_px > 0.0) {
     cv::Mat blurred;
     cv::GaussianBlur(radiance, blurred, cv::Size(0, 0), model.camera_blur_px, model.camera_blur_px,
