@@ -126,11 +126,11 @@ SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world,
 
 // A defocused projector: the light of `codes` (each channel's response, ResponseCurve::Light)
 // blurred by a Gaussian of σ = sigma_px projector pixels — nothing beyond the image's edge — and
-// turned back into the codes whose light is nearest (ResponseCurve::Drive, rounded). Blurring
-// the light of each primary is blurring the output, which is affine in it (colour mixing is
-// linear); going back to codes lets the rig render it as any image. The rounding costs at most
-// half a code step of light (gamma 2.2, 8 bits: under 0.45% of full white), less than the
-// camera's own 8-bit step. `codes` itself when sigma_px is 0.
+// turned back into codes: the drive that emits the blurred light (ResponseCurve::Drive),
+// rounded to the nearest code. Blurring the light of each primary is blurring the output, which
+// is affine in it (colour mixing is linear); going back to codes lets the rig render it as any
+// image. The rounding costs at most half a code step of light (gamma 2.2, 8 bits: under 0.45%
+// of full white), less than the camera's own 8-bit step. `codes` itself when sigma_px is 0.
 ProjectorImage DefocusProjectorCodes(const ProjectorImage& codes, const Projector& projector,
                                      double sigma_px);
 
