@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <limits>
 #include <set>
 #include <stdexcept>
 
@@ -17,10 +18,12 @@ namespace {
 using nlohmann::json;
 
 // The entry keys that set a TestCameraOptions field, in TestCameraOptions::Check's words (its
-// messages begin with the key they are about).
-const std::set<std::string> kSettingKeys = {"format",         "exposure_us", "reference_exposure_us",
-                                            "gain_db",        "black",       "noise",
-                                            "response_gamma", "fps",         "latency_ms"};
+// messages begin with the key they are about): the format and TestCameraSettings().
+std::set<std::string> SettingKeys() {
+  std::set<std::string> keys = {"format"};
+  for (const TestCameraSetting& setting : TestCameraSettings()) keys.insert(setting.key);
+  return keys;
+}
 
 bool UsableName(const std::string& name) {
   return !name.empty() && std::all_of(name.begin(), name.end(), [](char c) {
@@ -31,7 +34,8 @@ bool UsableName(const std::string& name) {
 SceneCamera ParseSceneCamera(const json& object, const std::string& file, const std::string& prefix,
                              const std::filesystem::path& base, int index) {
   const JsonFields fields(object, file, prefix);
-  std::set<std::string> known = kSettingKeys;
+  const std::set<std::string> setting_keys = SettingKeys();
+  std::set<std::string> known = setting_keys;
   known.insert({"name", "model"});
   fields.RejectUnknown(known);
   SceneCamera camera;
@@ -62,21 +66,23 @@ SceneCamera ParseSceneCamera(const json& object, const std::string& file, const 
     if (!format) throw fields.Error("format", "unknown pixel format '" + name + "'");
     settings.pixel_format = *format;
   }
-  const auto number = [&](const char* key, double* value) {
-    if (fields.Has(key)) *value = fields.Number(key);
-  };
-  number("exposure_us", &settings.exposure_us);
-  number("reference_exposure_us", &settings.reference_exposure_us);
-  number("gain_db", &settings.gain_db);
-  number("black", &settings.black_level);
-  number("noise", &settings.noise_sigma);
-  number("response_gamma", &settings.response_gamma);
-  number("fps", &settings.frame_rate);
-  number("latency_ms", &settings.display_latency_ms);
+  for (const TestCameraSetting& setting : TestCameraSettings()) {
+    if (!fields.Has(setting.key)) continue;
+    if (setting.number) {
+      settings.*setting.number = fields.Number(setting.key);
+    } else {
+      const json& value = fields.At(setting.key);
+      if (!value.is_number_integer()) throw fields.Error(setting.key, "must be an integer");
+      const long long integer = value.get<long long>();
+      if (integer < std::numeric_limits<int>::min() || integer > std::numeric_limits<int>::max())
+        throw fields.Error(setting.key, "must be an integer in the int range");
+      settings.*setting.integer = static_cast<int>(integer);
+    }
+  }
   std::string why;
   if (!settings.Check(&why)) {
     const std::string key = why.substr(0, why.find(' '));
-    if (kSettingKeys.count(key)) throw fields.Error(key, why.substr(key.size() + 1));
+    if (setting_keys.count(key)) throw fields.Error(key, why.substr(key.size() + 1));
     throw fields.Error("model", camera.model_path.filename().string() + ": " + why);
   }
   return camera;

@@ -2,8 +2,9 @@
 // The cameras of a scene file: its "cameras" array (docs/scene_format.md, section Cameras). A
 // camera entry names the camera's mrcal .cameramodel (lens, image size and pose in the room)
 // and, for a simulated rig built from the scene (`synthetic:ROOM.json`), the camera's
-// photometric settings in the test camera's model (test_camera.h): exposure, gain, black level,
-// read noise, response, frame rate and display latency.
+// photometric settings in the test camera's model (test_camera.h): the pixel format and every
+// key of TestCameraSettings() — exposure, gain, black level, read noise, response, frame rate,
+// display latency, projector and camera defocus, ambient light and JPEG quality.
 //
 //   "cameras": [
 //     {"name": "camera", "model": "camera.cameramodel", "format": "BGR8",

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 #include <thread>
@@ -13,6 +14,8 @@ namespace {
 constexpr double kMinExposureUs = 10.0;
 constexpr double kMaxExposureUs = 1e7;
 constexpr double kMaxGainDb = 24.0;
+constexpr double kMaxBlurPx = 20.0;
+constexpr double kMaxAmbient = 10.0;
 
 bool Fail(std::string* why, const std::string& message) {
   if (why) *why = message;
@@ -68,9 +71,54 @@ bool TestCameraOptions::Check(std::string* why) const {
     return Fail(why, "response_gamma must be in (0, 10]");
   if (!(display_latency_ms >= 0 && display_latency_ms <= 10000))
     return Fail(why, "latency_ms must be in [0, 10000]");
+  if (!(projector_blur_px >= 0 && projector_blur_px <= kMaxBlurPx))
+    return Fail(why, "projector_blur must be in [0, 20] projector pixels");
+  if (!(camera_blur_px >= 0 && camera_blur_px <= kMaxBlurPx))
+    return Fail(why, "camera_blur must be in [0, 20] camera pixels");
+  if (!(ambient >= 0 && ambient <= kMaxAmbient))
+    return Fail(why, "ambient must be in [0, 10] (radiance 1 = full scale)");
+  if (jpeg_quality < 0 || jpeg_quality > 100)
+    return Fail(why, "jpeg_quality must be in [1, 100], or 0 for no JPEG");
+  if (jpeg_quality > 0 && pixel_format != PixelFormat::kMono8 &&
+      pixel_format != PixelFormat::kRGB8 && pixel_format != PixelFormat::kBGR8) {
+    return Fail(why, "jpeg_quality needs an 8-bit Mono8, RGB8 or BGR8 format, not " +
+                         PixelFormatName(pixel_format));
+  }
   if (fault_after_frames < 0 || fault_grabs < 0)
     return Fail(why, "fault_after and fault_grabs must be >= 0");
   return true;
+}
+
+const std::vector<TestCameraSetting>& TestCameraSettings() {
+  using O = TestCameraOptions;
+  static const std::vector<TestCameraSetting> settings = {
+      {"exposure_us", &O::exposure_us, nullptr, "initial exposure, µs, [10, 10⁷] (default 10000)"},
+      {"reference_exposure_us", &O::reference_exposure_us, nullptr,
+       "the exposure at which radiance 1 reads full scale, µs, > 0 (default 10000)"},
+      {"gain_db", &O::gain_db, nullptr, "initial gain, dB, [0, 24] (default 0)"},
+      {"black", &O::black_level, nullptr, "black level, digital numbers, [0, full scale) (default 0)"},
+      {"noise", &O::noise_sigma, nullptr, "read noise σ, digital numbers, [0, full scale] (default 0)"},
+      {"response_gamma", &O::response_gamma, nullptr,
+       "non-linear response: value = linear^(1/γ) between black and full scale, before "
+       "rounding, (0, 10] (default 1: linear)"},
+      {"fps", &O::frame_rate, nullptr, "frame rate, (0, 10000] (default 30)"},
+      {"latency_ms", &O::display_latency_ms, nullptr,
+       "display-to-camera latency: a frame sees the projectors as they were this long before its "
+       "exposure, ms, [0, 10000] (default 0)"},
+      {"projector_blur", &O::projector_blur_px, nullptr,
+       "projector defocus: Gaussian σ in projector pixels of the light each projector shows, "
+       "[0, 20] (default 0)"},
+      {"camera_blur", &O::camera_blur_px, nullptr,
+       "camera defocus: Gaussian σ in camera pixels of the photographed image, [0, 20] (default 0)"},
+      {"ambient", &O::ambient, nullptr,
+       "ambient light: a constant radiance added to every pixel, in units of full scale at the "
+       "reference exposure (synthetic rooms: the brightest pixel under full white), [0, 10] "
+       "(default 0)"},
+      {"jpeg_quality", nullptr, &O::jpeg_quality,
+       "JPEG compression: every frame is encoded and decoded in memory at this quality, [1, 100]; "
+       "0 = off (default); Mono8, RGB8 and BGR8 only"},
+  };
+  return settings;
 }
 
 TestCameraOptions TestCameraOptionsFromUri(const CameraUri& uri) {
@@ -87,16 +135,14 @@ TestCameraOptions TestCameraOptionsFromUri(const CameraUri& uri, TestCameraOptio
   options.pixel_format = *parsed;
   options.width = uri.GetInt("width", options.width);
   options.height = uri.GetInt("height", options.height);
-  options.frame_rate = uri.GetDouble("fps", options.frame_rate);
   options.buffers = uri.GetInt("buffers", options.buffers);
-  options.exposure_us = uri.GetDouble("exposure_us", options.exposure_us);
-  options.reference_exposure_us =
-      uri.GetDouble("reference_exposure_us", options.reference_exposure_us);
-  options.gain_db = uri.GetDouble("gain_db", options.gain_db);
-  options.black_level = uri.GetDouble("black", options.black_level);
-  options.noise_sigma = uri.GetDouble("noise", options.noise_sigma);
-  options.response_gamma = uri.GetDouble("response_gamma", options.response_gamma);
-  options.display_latency_ms = uri.GetDouble("latency_ms", options.display_latency_ms);
+  for (const TestCameraSetting& setting : TestCameraSettings()) {
+    if (setting.number) {
+      options.*setting.number = uri.GetDouble(setting.key, options.*setting.number);
+    } else {
+      options.*setting.integer = uri.GetInt(setting.key, options.*setting.integer);
+    }
+  }
   options.seed = static_cast<uint32_t>(uri.GetInt("seed", static_cast<int>(options.seed)));
   const std::string fault = uri.GetString("fault", "none");
   if (fault == "none") {
@@ -117,7 +163,23 @@ TestCameraOptions TestCameraOptionsFromUri(const CameraUri& uri, TestCameraOptio
   return options;
 }
 
+SceneView ProjectorBlurredView(SceneView view, double sigma_px) {
+  if (!view || !(sigma_px > 0.0)) return view;
+  return [view = std::move(view), sigma_px](int64_t exposure_start_ns) {
+    cv::Mat radiance = view(exposure_start_ns);
+    if (radiance.empty()) return radiance;
+    if (radiance.depth() != CV_32F) radiance.convertTo(radiance, CV_32F);
+    cv::Mat blurred;
+    cv::GaussianBlur(radiance, blurred, cv::Size(0, 0), sigma_px, sigma_px, cv::BORDER_REFLECT);
+    return blurred;
+  };
+}
+
 TestCamera::TestCamera(const TestCameraOptions& options, SceneView view)
+    : TestCamera(options, ProjectorBlurredView(std::move(view), options.projector_blur_px),
+                 ViewHasProjectorBlur{}) {}
+
+TestCamera::TestCamera(const TestCameraOptions& options, SceneView view, ViewHasProjectorBlur)
     : options_(options), view_(std::move(view)), rng_(options.seed) {
   std::string why;
   if (!options_.Check(&why)) throw std::invalid_argument("TestCameraOptions: " + why);
@@ -309,6 +371,17 @@ cv::Mat PhotographRadiance(cv::Mat radiance, const TestCameraOptions& model,
     }
     radiance = resized;
   }
+  if (model.ambient > 0.0) {  // into a new matrix: `radiance` may share the caller's pixels
+    cv::Mat lit;
+    cv::add(radiance, cv::Scalar::all(model.ambient), lit);
+    radiance = lit;
+  }
+  if (model.camera_blur_px > 0.0) {
+    cv::Mat blurred;
+    cv::GaussianBlur(radiance, blurred, cv::Size(0, 0), model.camera_blur_px, model.camera_blur_px,
+                     cv::BORDER_REFLECT);
+    radiance = blurred;
+  }
   const bool colour = IsColour(format);
   if (colour && radiance.channels() == 1) {
     cv::cvtColor(radiance, radiance, cv::COLOR_GRAY2BGR);
@@ -337,6 +410,11 @@ cv::Mat PhotographRadiance(cv::Mat radiance, const TestCameraOptions& model,
   }
   cv::Mat image;  // convertTo rounds and saturates to [0, full scale]
   digital.convertTo(image, format == PixelFormat::kMono16 ? CV_16U : CV_8U);
+  if (model.jpeg_quality > 0) {  // Check() allows it for 8-bit Mono8, RGB8 and BGR8 only
+    std::vector<uchar> jpeg;
+    cv::imencode(".jpg", image, jpeg, {cv::IMWRITE_JPEG_QUALITY, model.jpeg_quality});
+    image = cv::imdecode(jpeg, image.channels() == 1 ? cv::IMREAD_GRAYSCALE : cv::IMREAD_COLOR);
+  }
   return image;
 }
 

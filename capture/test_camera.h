@@ -20,17 +20,32 @@
 //     before rounding.
 //     Colour views seen by a mono camera use Rec. 709 luma (0.2126 R + 0.7152 G + 0.0722 B).
 //   - Bayer formats mosaic the colour image and go through the same demosaicing as devices.
+//   - What real photographs have besides noise, each off by default (TestCameraOptions):
+//     projector defocus: the view is blurred by a Gaussian of σ = projector_blur_px in the
+//       view's own pixels — for the test camera the view is the display's image, so these are
+//       projector pixels; a synthetic camera (datasets_synthetic/synthetic_camera.h) blurs each
+//       projector's light before it lights the room instead;
+//     ambient light: radiance + ambient (a constant, in units of radiance 1 = full scale at the
+//       reference exposure), after resampling, on every pixel and channel;
+//     camera defocus: the resampled radiance blurred by a Gaussian of σ = camera_blur_px camera
+//       pixels (borders reflected), before exposure, noise and the response;
+//     JPEG: with jpeg_quality q > 0 the quantised 8-bit image is JPEG-encoded at quality q in
+//       memory (OpenCV's libjpeg: 4:2:0 chroma for colour) and decoded again.
+//   Order: view → projector blur → resample → ambient → camera blur → luma → exposure, gain,
+//   black, noise → response → rounding → JPEG.
 //
 // URI: test:<name>?key=value&..., keys (defaults in TestCameraOptions): format, width, height,
-// fps, buffers, exposure_us, reference_exposure_us, gain_db, black, noise, response_gamma,
-// latency_ms, seed,
-// fault (none|timeout|disconnect), fault_after (frames delivered first), fault_grabs (failing
-// grabs for fault=timeout; 0 = for ever).
+// buffers, seed, fault (none|timeout|disconnect), fault_after (frames delivered first),
+// fault_grabs (failing grabs for fault=timeout; 0 = for ever), and every key of
+// TestCameraSettings() (fps, exposure_us, reference_exposure_us, gain_db, black, noise,
+// response_gamma, latency_ms, projector_blur, camera_blur, ambient, jpeg_quality), which a scene
+// file's camera entry may set too (capture/scene_cameras.h).
 
 #include <cstdint>
 #include <deque>
 #include <opencv2/core.hpp>
 #include <string>
+#include <vector>
 
 #include "capture/camera.h"
 
@@ -56,6 +71,12 @@ struct TestCameraOptions {
   double noise_sigma = 0.0;                // read noise, digital numbers, [0, full scale]
   double response_gamma = 1.0;             // output response exponent (1 = linear), (0, 10]
   double display_latency_ms = 0.0;         // the scene lags by this much, milliseconds, [0, 10000]
+  // Defects of real photographs (file comment), all off by default:
+  double projector_blur_px = 0.0;  // projector defocus, Gaussian σ in projector pixels, [0, 20]
+  double camera_blur_px = 0.0;     // camera defocus, Gaussian σ in camera pixels, [0, 20]
+  double ambient = 0.0;            // ambient radiance added, units of full scale (radiance 1), [0, 10]
+  // JPEG round trip at this quality, [1, 100], 0 = off; 8-bit formats only (Mono8, RGB8, BGR8).
+  int jpeg_quality = 0;
   uint32_t seed = 1;                       // noise generator seed
   Fault fault = Fault::kNone;
   int fault_after_frames = 0;  // frames delivered before the fault strikes, >= 0
@@ -63,6 +84,18 @@ struct TestCameraOptions {
 
   bool Check(std::string* why) const;
 };
+
+// A camera setting that a URI key and a scene file's camera entry both set, declared once: the
+// key (also the first word of TestCameraOptions::Check()'s message about it), the field (a
+// number or an integer) and what it means, with units and range, as the docs' tables say it.
+struct TestCameraSetting {
+  const char* key;
+  double TestCameraOptions::*number = nullptr;  // exactly one of number and integer is set
+  int TestCameraOptions::*integer = nullptr;
+  const char* meaning;
+};
+// The settings above in the order the docs list them.
+const std::vector<TestCameraSetting>& TestCameraSettings();
 
 // Reads the URI's keys (see the file comment). Throws IoError naming the URI and key.
 TestCameraOptions TestCameraOptionsFromUri(const CameraUri& uri);
@@ -80,19 +113,27 @@ struct PhotographSettings {
 };
 
 // The test camera's picture of a radiance image (the model above, without its timing):
-// resampled to width × height (nearest neighbour), Rec. 709 luma for mono formats, scaled to
-// digital numbers by exposure and gain, black level, read noise drawn from `rng`, the response
-// curve, rounded and clipped. Takes the model's reference_exposure_us, black_level, noise_sigma
-// and response_gamma (its size, format, exposure and gain are `settings`'). Returns the decoded
+// resampled to width × height (nearest neighbour), ambient light, camera blur, Rec. 709 luma
+// for mono formats, scaled to digital numbers by exposure and gain, black level, read noise
+// drawn from `rng`, the response curve, rounded and clipped, the JPEG round trip. Takes the
+// model's reference_exposure_us, black_level, noise_sigma, response_gamma, ambient,
+// camera_blur_px and jpeg_quality (its size, format, exposure and gain are `settings`'; the
+// projector blur belongs to the view, see ProjectorBlurredView). Returns the decoded
 // layout of the format: CV_8UC1 (Mono8), CV_16UC1 (Mono16) or CV_8UC3 B, G, R (colour and Bayer
 // formats, before any mosaic). An empty `radiance` is black.
 cv::Mat PhotographRadiance(cv::Mat radiance, const TestCameraOptions& model,
                            const PhotographSettings& settings, cv::RNG& rng);
 
+// `view` blurred by a Gaussian of σ = sigma_px in its own pixels (borders reflected): the test
+// camera's projector defocus, its view being the display's image. `view` itself when sigma_px is
+// 0 or the view is empty.
+SceneView ProjectorBlurredView(SceneView view, double sigma_px);
+
 class TestCamera : public Camera {
  public:
   // `view` may be empty: the camera then sees a fixed chart (a horizontal ramp from 0 to 1,
-  // with a red, green and blue band in its lower third). Throws std::invalid_argument when
+  // with a red, green and blue band in its lower third). The camera sees
+  // ProjectorBlurredView(view, options.projector_blur_px). Throws std::invalid_argument when
   // options.Check() fails.
   TestCamera(const TestCameraOptions& options, SceneView view);
 
@@ -110,6 +151,12 @@ class TestCamera : public Camera {
   // Counters for tests: frames handed out by Grab, and frames lost because buffers were full.
   int frames_delivered() const { return frames_delivered_; }
   int frames_overrun() const { return frames_overrun_; }
+
+ protected:
+  // For cameras whose view already carries the projector blur (a synthetic room blurs each
+  // projector's light before it lights the room): `view` is used as it is.
+  struct ViewHasProjectorBlur {};
+  TestCamera(const TestCameraOptions& options, SceneView view, ViewHasProjectorBlur);
 
  private:
   struct PendingFrame {

@@ -1,6 +1,7 @@
 #include "datasets_synthetic/synthetic_camera.h"
 
 #include <algorithm>
+#include <array>
 #include <map>
 #include <mutex>
 #include <tuple>
@@ -10,6 +11,7 @@
 #include <cmath>
 
 #include <fmt/format.h>
+#include <opencv2/imgproc.hpp>
 
 #include "base/image_io.h"
 #include "datasets_synthetic/chessboard_views.h"
@@ -269,7 +271,40 @@ std::shared_ptr<SyntheticWorld> MakeSceneFileWorld(const std::filesystem::path& 
                     albedo_variation);
 }
 
-SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world) {
+ProjectorImage DefocusProjectorCodes(const ProjectorImage& codes, const Projector& projector,
+                                     double sigma_px) {
+  if (!(sigma_px > 0.0)) return codes;
+  const ProjectorPhotometry& photometry = projector.photometry;
+  const int max_code = photometry.MaxCode();
+  std::array<std::vector<float>, 3> light_of_code;  // per channel, code → relative light
+  for (int c = 0; c < 3; ++c) {
+    light_of_code[c].resize(max_code + 1);
+    for (int code = 0; code <= max_code; ++code)
+      light_of_code[c][code] = static_cast<float>(photometry.response[c].Light(static_cast<double>(code) / max_code));
+  }
+  cv::Mat light(codes.codes.size(), CV_32FC3);
+  for (int row = 0; row < light.rows; ++row) {
+    const cv::Vec3w* in = codes.codes.ptr<cv::Vec3w>(row);
+    cv::Vec3f* out = light.ptr<cv::Vec3f>(row);
+    for (int col = 0; col < light.cols; ++col)
+      for (int c = 0; c < 3; ++c) out[col][c] = light_of_code[c][std::min<int>(in[col][c], max_code)];
+  }
+  cv::Mat blurred;
+  cv::GaussianBlur(light, blurred, cv::Size(0, 0), sigma_px, sigma_px, cv::BORDER_CONSTANT);
+  ProjectorImage defocused;
+  defocused.bits = codes.bits;
+  defocused.codes.create(codes.codes.size(), CV_16UC3);
+  for (int row = 0; row < light.rows; ++row) {
+    const cv::Vec3f* in = blurred.ptr<cv::Vec3f>(row);
+    cv::Vec3w* out = defocused.codes.ptr<cv::Vec3w>(row);
+    for (int col = 0; col < light.cols; ++col)
+      for (int c = 0; c < 3; ++c)
+        out[col][c] = static_cast<uint16_t>(std::lround(max_code * photometry.response[c].Drive(in[col][c])));
+  }
+  return defocused;
+}
+
+SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world, double projector_blur_px) {
   if (!world || !world->rig) throw std::invalid_argument("MakeSyntheticView: no world");
   if (world->displays.size() != world->rig->projectors().size()) {
     throw std::invalid_argument("MakeSyntheticView: " + std::to_string(world->displays.size()) +
@@ -282,7 +317,7 @@ SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world) {
     cv::Mat view;                // its SceneView image
   };
   auto cache = std::make_shared<Cache>();
-  return [world, cache](int64_t exposure_start_ns) -> cv::Mat {
+  return [world, cache, projector_blur_px](int64_t exposure_start_ns) -> cv::Mat {
     std::vector<cv::Mat> shown;
     for (const auto& display : world->displays)
       shown.push_back(display->ShownAt(exposure_start_ns));
@@ -293,7 +328,8 @@ SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world) {
       const SimulatedRig& rig = *world->rig;
       std::vector<ProjectorImage> images;
       for (size_t k = 0; k < shown.size(); ++k)
-        images.push_back(CodesFromPattern(shown[k], rig.projectors()[k]));
+        images.push_back(DefocusProjectorCodes(CodesFromPattern(shown[k], rig.projectors()[k]),
+                                               rig.projectors()[k], projector_blur_px));
       cache->view = ViewFromRadiance(rig.RenderRadiance(images), world->radiance_scale);
       cache->shown = std::move(shown);
       ++world->renders;
@@ -333,7 +369,8 @@ std::shared_ptr<SyntheticWorld> OpenSyntheticWorld(const CameraUri& uri) {
 
 SyntheticCamera::SyntheticCamera(const TestCameraOptions& options,
                                  std::shared_ptr<SyntheticWorld> world)
-    : TestCamera(options, MakeSyntheticView(world)), world_(std::move(world)) {}
+    : TestCamera(options, MakeSyntheticView(world, options.projector_blur_px), ViewHasProjectorBlur{}),
+      world_(std::move(world)) {}
 
 CameraInfo SyntheticCamera::Info() const {
   CameraInfo info = TestCamera::Info();

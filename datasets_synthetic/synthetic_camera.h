@@ -6,6 +6,11 @@
 //
 //   synthetic:c_shaped?patches=300&format=BGR8&noise=1
 //
+// What real photographs have besides noise (test_camera.h, each off by default): projector
+// defocus (`projector_blur`: applied to each projector's light before it lights the room,
+// DefocusProjectorCodes), camera defocus (`camera_blur`), ambient light (`ambient`, a fraction of
+// radiance 1), a non-linear response (`response_gamma`) and JPEG compression (`jpeg_quality`).
+//
 // Keys: `patches` (the solver patch count the scene and the rig's world mesh are built for,
 // [20, 5000], default 300; the world mesh is SimulatedRigOptions::world_factor = 4 times finer),
 // `albedo` (SimulatedRigOptions::albedo_variation: the room's uneven paint, [0, 0.5), default 0)
@@ -113,9 +118,21 @@ std::shared_ptr<SyntheticWorld> MakeSceneFileWorld(const std::filesystem::path& 
 // patterns become projector codes, R, G, B, scaled to the projector's bits; a display that has
 // shown nothing shows black), as CV_32FC3 B, G, R scaled by world->radiance_scale, at the rig
 // camera's resolution. The last render is cached, keyed by the patterns shown (same buffer or
-// same pixels), so the frames of one pattern render once. Thread-safe. Throws
-// std::invalid_argument when `world` is empty or its displays do not match its projectors.
-SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world);
+// same pixels), so the frames of one pattern render once. Thread-safe. With projector_blur_px
+// > 0 each projector's codes pass through DefocusProjectorCodes first (the projectors' defocus).
+// Throws std::invalid_argument when `world` is empty or its displays do not match its projectors.
+SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world,
+                            double projector_blur_px = 0.0);
+
+// A defocused projector: the light of `codes` (each channel's response, ResponseCurve::Light)
+// blurred by a Gaussian of σ = sigma_px projector pixels — nothing beyond the image's edge — and
+// turned back into codes: the drive that emits the blurred light (ResponseCurve::Drive),
+// rounded to the nearest code. Blurring the light of each primary is blurring the output, which
+// is affine in it (colour mixing is linear); going back to codes lets the rig render it as any
+// image. The rounding costs at most half a code step of light (gamma 2.2, 8 bits: under 0.45%
+// of full white), less than the camera's own 8-bit step. `codes` itself when sigma_px is 0.
+ProjectorImage DefocusProjectorCodes(const ProjectorImage& codes, const Projector& projector,
+                                     double sigma_px);
 
 // The world's camera value per unit exitance (the scale calibrate all needs of a camera) for a
 // single exposure: radiance_scale · full scale · exposure / the camera's reference exposure ·
@@ -141,7 +158,9 @@ ProjectorImage CodesFromPattern(const cv::Mat& pattern, const Projector& project
 
 class SyntheticCamera : public TestCamera {
  public:
-  // Throws std::invalid_argument when options.Check() fails or world is empty.
+  // options.projector_blur_px defocuses the world's projectors (MakeSyntheticView), the rest of
+  // the options are the test camera's. Throws std::invalid_argument when options.Check() fails
+  // or world is empty.
   SyntheticCamera(const TestCameraOptions& options, std::shared_ptr<SyntheticWorld> world);
 
   CameraInfo Info() const override;

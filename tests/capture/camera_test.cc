@@ -173,6 +173,106 @@ TEST(TestCamera, ColourViewsThroughABayerSensorComeBackInColour) {
               (0.0722 * 0.2 + 0.7152 * 0.5 + 0.2126 * 0.9) * 255, 1.0);
 }
 
+// What real photographs have besides noise (test_camera.h), each against its closed form.
+// A unit step from 0 to 1 between columns 15 and 16, blurred by a Gaussian of σ pixels (sampled
+// at the pixels and normalised), reads Σ_{k ≥ 16} g(x − k) at column x, g(j) ∝ exp(−j²/2σ²).
+// Mono16 resolves that to 1e-5; a kernel cut at 3σ or more changes it by under 3e-3.
+double BlurredStep(int x, double sigma) {
+  double above = 0.0, all = 0.0;
+  for (int k = x - 50; k <= x + 50; ++k) {
+    const double g = std::exp(-(x - k) * (x - k) / (2.0 * sigma * sigma));
+    all += g;
+    if (k >= 16) above += g;
+  }
+  return above / all;
+}
+
+cv::Mat Step(int width, int height) {
+  cv::Mat step(height, width, CV_32FC1, cv::Scalar(0.0f));
+  step.colRange(16, width) = 1.0f;
+  return step;
+}
+
+TEST(TestCamera, DefocusAmbientLightAndJpegFollowTheirModels) {
+  TestCameraOptions options;
+  options.width = 32;
+  options.height = 8;
+  options.pixel_format = PixelFormat::kMono16;
+  PhotographSettings settings;
+  settings.width = options.width;
+  settings.height = options.height;
+  settings.pixel_format = options.pixel_format;
+  cv::RNG rng(1);
+  const double full = 65535.0;
+
+  // Camera defocus, and ambient light added before it (a constant stays constant).
+  options.camera_blur_px = 2.0;
+  options.ambient = 0.25;
+  settings.exposure_us = options.reference_exposure_us / 2;  // so that 1.25 does not clip
+  cv::Mat photo = PhotographRadiance(Step(32, 8), options, settings, rng);
+  for (int x = 8; x < 24; ++x)
+    EXPECT_NEAR(photo.at<uint16_t>(4, x) / full, 0.5 * (0.25 + BlurredStep(x, 2.0)), 0.003) << x;
+
+  // Projector defocus belongs to the view: the test camera, whose view is the display's image,
+  // blurs it in the view's pixels before resampling (here 2 camera pixels per view pixel).
+  options.camera_blur_px = 0.0;
+  options.ambient = 0.0;
+  options.projector_blur_px = 1.5;
+  options.width = settings.width = 64;
+  options.frame_rate = 500;
+  TestCamera camera(options, [](int64_t) { return Step(32, 8); });
+  photo = camera.Grab(milliseconds(500)).image;
+  for (int x = 8; x < 24; ++x) {
+    EXPECT_NEAR(photo.at<uint16_t>(4, 2 * x) / full, BlurredStep(x, 1.5), 0.003) << x;
+    EXPECT_EQ(photo.at<uint16_t>(4, 2 * x), photo.at<uint16_t>(4, 2 * x + 1)) << x;
+  }
+
+  // JPEG: a smooth ramp survives quality 95 within a few DN; random texture at quality 10 loses
+  // most of its detail (8×8 blocks of few coefficients); colour stays colour.
+  TestCameraOptions jpeg;
+  jpeg.width = settings.width = 64;
+  jpeg.height = settings.height = 64;
+  jpeg.pixel_format = settings.pixel_format = PixelFormat::kBGR8;
+  settings.exposure_us = jpeg.reference_exposure_us;
+  cv::Mat ramp(64, 64, CV_32FC3);
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) ramp.at<cv::Vec3f>(y, x) = cv::Vec3f(0.2f, 0.2f + x / 128.0f, 0.7f - y / 128.0f);
+  const cv::Mat exact = PhotographRadiance(ramp, jpeg, settings, rng);
+  jpeg.jpeg_quality = 95;
+  const cv::Mat compressed = PhotographRadiance(ramp, jpeg, settings, rng);
+  ASSERT_EQ(compressed.type(), CV_8UC3);
+  EXPECT_LE(cv::norm(exact, compressed, cv::NORM_INF), 6.0);
+  EXPECT_LE(cv::norm(exact, compressed, cv::NORM_L1) / exact.total() / 3, 1.0);  // mean, DN
+  EXPECT_GT(cv::norm(exact, compressed, cv::NORM_INF), 0.0) << "the JPEG round trip ran";
+  cv::Mat texture(64, 64, CV_32FC1);
+  rng.fill(texture, cv::RNG::UNIFORM, 0.0, 1.0);
+  jpeg.pixel_format = settings.pixel_format = PixelFormat::kMono8;
+  jpeg.jpeg_quality = 0;
+  const cv::Mat sharp = PhotographRadiance(texture, jpeg, settings, rng);
+  jpeg.jpeg_quality = 10;
+  const cv::Mat blocky = PhotographRadiance(texture, jpeg, settings, rng);
+  ASSERT_EQ(blocky.type(), CV_8UC1);
+  // Uniform noise has σ = 255/√12 ≈ 74 DN; what is left of it differs from it by most of that.
+  EXPECT_GT(cv::norm(sharp, blocky, cv::NORM_L2) / 64.0, 30.0);
+  EXPECT_NEAR(cv::mean(blocky)[0], cv::mean(sharp)[0], 3.0);  // the DC terms survive
+}
+
+TEST(TestCamera, DefectSettingsAreCheckedByName) {
+  EXPECT_NE(ErrorOf([] { OpenCamera("test:x?projector_blur=21"); }).find("projector_blur must be in [0, 20]"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { OpenCamera("test:x?camera_blur=-1"); }).find("camera_blur must be in [0, 20]"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { OpenCamera("test:x?ambient=11"); }).find("ambient must be in [0, 10]"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { OpenCamera("test:x?jpeg_quality=101"); }).find("jpeg_quality must be in [1, 100]"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { OpenCamera("test:x?jpeg_quality=90&format=BayerRG8"); })
+                .find("jpeg_quality needs an 8-bit Mono8, RGB8 or BGR8 format, not BayerRG8"),
+            std::string::npos);
+  const auto camera = OpenCamera("test:x?jpeg_quality=90&format=RGB8&ambient=0.1&camera_blur=1&projector_blur=2");
+  EXPECT_EQ(camera->Settings().pixel_format, PixelFormat::kRGB8);
+}
+
 TEST(TestCamera, NoiseHasTheConfiguredSpread) {
   TestCameraOptions options;
   options.width = 200;

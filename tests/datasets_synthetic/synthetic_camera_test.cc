@@ -11,7 +11,9 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <functional>
+#include <iterator>
 
 #include <nlohmann/json.hpp>
 
@@ -348,6 +350,20 @@ TEST(SyntheticCamera, SceneFileErrorsNameTheFileAndTheKey) {
        "twice.json: cameras[1].name: 'camera' is already the name of another camera"},
       {variant("noise", [](nlohmann::json& s) { s["cameras"][0]["noise"] = -1; }),
        "noise.json: cameras[0].noise: must be in [0, full scale]"},
+      {variant("projector_blur", [](nlohmann::json& s) { s["cameras"][0]["projector_blur"] = 25; }),
+       "projector_blur.json: cameras[0].projector_blur: must be in [0, 20] projector pixels"},
+      {variant("camera_blur", [](nlohmann::json& s) { s["cameras"][0]["camera_blur"] = -0.5; }),
+       "camera_blur.json: cameras[0].camera_blur: must be in [0, 20] camera pixels"},
+      {variant("ambient", [](nlohmann::json& s) { s["cameras"][0]["ambient"] = -0.1; }),
+       "ambient.json: cameras[0].ambient: must be in [0, 10]"},
+      {variant("jpeg", [](nlohmann::json& s) { s["cameras"][0]["jpeg_quality"] = 101; }),
+       "jpeg.json: cameras[0].jpeg_quality: must be in [1, 100], or 0 for no JPEG"},
+      {variant("jpeg_real", [](nlohmann::json& s) { s["cameras"][0]["jpeg_quality"] = 7.5; }),
+       "jpeg_real.json: cameras[0].jpeg_quality: must be an integer"},
+      {variant("jpeg_mono16", [](nlohmann::json& s) {
+         s["cameras"][0].merge_patch({{"jpeg_quality", 80}, {"format", "Mono16"}});
+       }),
+       "jpeg_mono16.json: cameras[0].jpeg_quality: needs an 8-bit Mono8, RGB8 or BGR8 format, not Mono16"},
   };
   for (const Case& c : cases) {
     try {
@@ -369,7 +385,9 @@ TEST(SyntheticCamera, SceneFileErrorsNameTheFileAndTheKey) {
   }
   // The entry's settings are the camera's defaults.
   const std::string noisy = variant("noisy", [](nlohmann::json& s) {
-    s["cameras"][0].merge_patch({{"exposure_us", 2500}, {"gain_db", 6}, {"noise", 1.5}, {"format", "Mono8"}});
+    s["cameras"][0].merge_patch({{"exposure_us", 2500}, {"gain_db", 6}, {"noise", 1.5}, {"format", "Mono8"},
+                                 {"projector_blur", 1.5}, {"camera_blur", 0.7}, {"ambient", 0.2},
+                                 {"jpeg_quality", 80}});
   });
   const std::unique_ptr<Camera> camera = OpenCamera("synthetic:" + noisy + "?patches=40");
   EXPECT_EQ(camera->Settings().exposure_us, 2500.0);
@@ -379,7 +397,31 @@ TEST(SyntheticCamera, SceneFileErrorsNameTheFileAndTheKey) {
       ReadJsonFile(noisy)["cameras"].dump(), noisy, dir.path());
   ASSERT_EQ(cameras.size(), 1u);
   EXPECT_EQ(cameras[0].settings.noise_sigma, 1.5);
+  EXPECT_EQ(cameras[0].settings.projector_blur_px, 1.5);
+  EXPECT_EQ(cameras[0].settings.camera_blur_px, 0.7);
+  EXPECT_EQ(cameras[0].settings.ambient, 0.2);
+  EXPECT_EQ(cameras[0].settings.jpeg_quality, 80);
   EXPECT_EQ(cameras[0].settings.width, 240);
+  // A URI key overrides the entry's.
+  const std::string uri = "synthetic:" + noisy + "?ambient=0.5&jpeg_quality=0";
+  const TestCameraOptions overridden =
+      TestCameraOptionsFromUri(CameraUri::Parse(uri), cameras[0].settings);
+  EXPECT_EQ(overridden.ambient, 0.5);
+  EXPECT_EQ(overridden.jpeg_quality, 0);
+  EXPECT_EQ(overridden.camera_blur_px, 0.7);
+}
+
+// Every setting of a camera entry and a synthetic URI is declared once (TestCameraSettings) and
+// documented in the camera table of docs/scene_format.md, in the declaration's words.
+TEST(SyntheticCamera, EveryCameraSettingIsDocumented) {
+  std::ifstream in(testing::SourceDir() / "docs" / "scene_format.md");
+  const std::string scene_format((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(scene_format.empty());
+  for (const TestCameraSetting& setting : TestCameraSettings()) {
+    const std::string row = "| `" + std::string(setting.key) + "` | no | " + setting.meaning + " |";
+    EXPECT_NE(scene_format.find(row), std::string::npos)
+        << "docs/scene_format.md's camera table lacks the row\n" << row;
+  }
 }
 
 TEST(SyntheticCamera, ListsOneVirtualCameraPerScene) {
