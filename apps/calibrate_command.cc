@@ -12,6 +12,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "base/output_directory.h"
 #include "calibration/camera_stage.h"
 #include "calibration/photometric_stage.h"
 
@@ -76,7 +77,10 @@ void AddCalibrateCommands(CLI::App& app) {
       ->capture_default_str();
   camera->add_flag("!--no-outlier-rejection", args->options.reject_outliers,
                    "Keep every corner");
-  camera->callback([args] { RunCalibrateCamera(*args); });
+  camera->callback([args] {
+    CheckOutputDirectory(args->out, DirectoryKind::kRig);
+    RunCalibrateCamera(*args);
+  });
 
   auto photometric_args = std::make_shared<PhotometricStageOptions>();
   photometric_args->progress = PrintProgress();
@@ -100,7 +104,10 @@ void AddCalibrateCommands(CLI::App& app) {
                    "Entries of the response table (lut)")
       ->capture_default_str();
   AddPhotometricStageOptions(photometric, photometric_args.get());
-  photometric->callback([photometric_args] { RunPhotometricStage(*photometric_args); });
+  photometric->callback([photometric_args] {
+    CheckOutputDirectory(photometric_args->out, DirectoryKind::kRig);
+    RunPhotometricStage(*photometric_args);
+  });
 
   AddCalibrateResponseCommand(*calibrate);
   AddCalibrateAllCommand(*calibrate);

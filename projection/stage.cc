@@ -6,6 +6,7 @@
 #include <chrono>
 
 #include "base/io.h"
+#include "base/output_directory.h"
 #include "base/timing.h"
 #include "geometry/stage.h"
 
@@ -77,16 +78,17 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
 
   const auto write_start = Clock::now();
   const std::filesystem::path& out = args.out;
-  std::error_code error;
-  std::filesystem::create_directories(out, error);
-  if (error) throw IoError(out.string() + ": cannot create directory: " + error.message());
-  RemoveManifest(out / "result.json");  // written last: a rewrite cut short is not a result
+  CheckOutputDirectory(out, DirectoryKind::kProjectorImages);
+  // Written beside `out`, then swapped in: the directory holds the earlier images or these.
+  ReplacedDirectory replaced(out);
+  const std::filesystem::path& dir = replaced.staging();
+  try {
   const std::vector<std::string> encoded = EncodeProjectorImages(images);
   nlohmann::json projector_json = nlohmann::json::array();
   for (size_t k = 0; k < images.size(); ++k) {
     const Projector& projector = rig.projectors[k];
     const std::string image_name = projector.name + ".png";
-    WriteFileAtomically(out / image_name, encoded[k]);
+    WriteFileAtomically(dir / image_name, encoded[k]);
     projector_json.push_back({{"name", projector.name},
                               {"image", image_name},
                               {"model", projector.model_path.string()},
@@ -99,9 +101,9 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
                               {"detail_saturated_pixels", summary.detail_saturated_pixels[k]},
                               {"clipped_pixels", summary.clipped_pixels[k]}});
   }
-  WriteNpy(out / "E_delivered.npy", RowMatrixXd(summary.delivered));
-  WriteNpy(out / "lower.npy", RowMatrixXd(rig.lower));
-  WriteNpy(out / "upper.npy", RowMatrixXd(rig.upper));
+  WriteNpy(dir / "E_delivered.npy", RowMatrixXd(summary.delivered));
+  WriteNpy(dir / "lower.npy", RowMatrixXd(rig.lower));
+  WriteNpy(dir / "upper.npy", RowMatrixXd(rig.upper));
   const double write_seconds = SecondsSince(write_start);
   nlohmann::json result = {{"solution", solution.dir.string()},
                            {"scene", geometry.scene.path.string()},
@@ -126,7 +128,12 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
                              {"write", write_seconds},
                              {"total", args.load_seconds + SecondsSince(start)}}}};
   if (!rig_description.is_null()) result["rig"] = rig_description;
-  WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
+  WriteFileAtomically(dir / "result.json", result.dump(2) + "\n");
+  } catch (const IoError& error) {
+    throw IoError(out.string() + ": left as it was; writing the new images beside it failed: " +
+                  error.what());
+  }
+  replaced.Commit();
 
   for (size_t k = 0; k < images.size(); ++k) {
     Report(args.progress,
