@@ -161,21 +161,21 @@ void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run
   ReplacedDirectory replaced(out);
   const std::filesystem::path& dir = replaced.staging();
   try {
-  if (export_problem) {
-    if (run.fine.compressed()) {
-      throw std::invalid_argument(
-          "--export writes the dense F.npy: not with compressed form factors");
+    if (export_problem) {
+      if (run.fine.compressed()) {
+        throw std::invalid_argument(
+            "--export writes the dense F.npy: not with compressed form factors");
+      }
+      nlohmann::json settings = {{"scene", geometry.scene.path.string()},
+                                 {"method", MethodName(run.summary.method)}};
+      ExportProblem(run.fine, geometry.patches.fine, geometry.patches.coarse_of_fine, dir,
+                    settings.dump());
     }
-    nlohmann::json settings = {{"scene", geometry.scene.path.string()},
-                               {"method", MethodName(run.summary.method)}};
-    ExportProblem(run.fine, geometry.patches.fine, geometry.patches.coarse_of_fine, dir,
-                  settings.dump());
-  }
-  WriteNpy(dir / "E.npy", RowMatrixXd(run.solution.emittance));
-  WriteNpy(dir / "B.npy", RowMatrixXd(run.solution.radiosity));
-  nlohmann::json result = CompensationResultJson(geometry, run);
-  if (extra.is_object()) result.update(extra);
-  WriteFileAtomically(dir / "result.json", result.dump(2) + "\n");
+    WriteNpy(dir / "E.npy", RowMatrixXd(run.solution.emittance));
+    WriteNpy(dir / "B.npy", RowMatrixXd(run.solution.radiosity));
+    nlohmann::json result = CompensationResultJson(geometry, run);
+    if (extra.is_object()) result.update(extra);
+    WriteFileAtomically(dir / "result.json", result.dump(2) + "\n");
   } catch (const IoError& error) {
     throw IoError(out.string() + ": left as it was; writing the new solution beside it failed: " +
                   error.what());

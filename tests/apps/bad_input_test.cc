@@ -217,7 +217,7 @@ TEST(BadInput, SurfaceNamesAreUnique) {
 TEST(BadInput, PatchCountsBeyondMemoryAreRefusedUpFront) {
   testing::TempDir dir;
   for (const std::string& command :
-       {"scene info synthetic:tiny_box --patches 1000000",
+       {std::string("scene info synthetic:tiny_box --patches 1000000"),
         "compensate synthetic:tiny_box --patches 1000000 --out " + (dir / "solution").string()}) {
     const CommandRun run = testing::RunProcamStderr(command);
     testing::ExpectOneErrorLine(run, "--form-factors compressed", command);
@@ -230,8 +230,8 @@ TEST(BadInput, PatchCountsBeyondMemoryAreRefusedUpFront) {
 // within the scene's bounds and that project will need a rig.
 TEST(BadInput, CompensateWithoutProjectorsSaysItSolvesOnBounds) {
   testing::TempDir dir;
-  const CommandRun run = testing::RunProcamStderr("compensate synthetic:c_shaped --patches 60 --out " +
-                                                  (dir / "solution").string());
+  const CommandRun run = testing::RunProcam("compensate synthetic:c_shaped --patches 60 --out " +
+                                            (dir / "solution").string());
   EXPECT_EQ(run.exit_code, 0) << run.output;
   EXPECT_NE(run.output.find("lists no projectors and no --rig was given: solving within the "
                             "scene's bounds"),
@@ -285,6 +285,7 @@ TEST(BadInput, NamesGivenTwiceAreRefused) {
 // procam keys creates the secret keys readable by their owner only, the public ones by all.
 TEST(BadInput, SecretKeysAreCreatedForTheirOwnerOnly) {
   testing::TempDir dir;
+  std::filesystem::create_directories(dir / "rig");
   const mode_t umask_before = ::umask(0);  // the most permissive umask: the mode is procam's own
   const CommandRun run = testing::RunProcam("keys --rig " + (dir / "rig").string());
   ::umask(umask_before);

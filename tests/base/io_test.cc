@@ -161,6 +161,7 @@ TEST(ReplacedDirectory, SwapsWholeOrLeavesTheEarlierFiles) {
 // Each kind is told by its manifest; --out of another kind is refused naming both.
 TEST(OutputDirectory, AnotherKindIsRefused) {
   testing::TempDir dir;
+  std::filesystem::create_directories(dir / "rig");
   WriteFileAtomically(dir / "rig" / "rig.json", "{}");
   std::filesystem::create_directories(dir / "solution");
   WriteFileAtomically(dir / "solution" / "result.json",
