@@ -24,7 +24,7 @@ void AddBenchCommands(CLI::App& app) {
       ->capture_default_str();
   solver->add_option("--ceres-max-variables", args->ceres_max_variables, "Skip Ceres above this many variables")
       ->capture_default_str();
-  solver->add_option("--alpha", args->alpha, "Weight of the absolute term")->check(CLI::Range(1e-9, 1.0))
+  solver->add_option("--alpha", args->alpha, "Weight of the absolute term")->check(FiniteRange(1e-9, 1.0))
       ->capture_default_str();
   solver->add_option("--json", args->json, "Also write the results as JSON here");
   solver->add_option("--device", args->device, "Rows to run: cpu, cuda (the GPU solver) or both")
@@ -42,12 +42,12 @@ void AddBenchCommands(CLI::App& app) {
                     "Also compute the dense F (time, product error) up to this many patches")
       ->capture_default_str();
   scale->add_option("--leaf-size", args->clusters.leaf_size, "Most patches per leaf cluster")
-      ->check(CLI::PositiveNumber)->capture_default_str();
+      ->check(FinitePositive())->capture_default_str();
   scale->add_option("--admissibility", args->clusters.admissibility,
                     "Far when diameters <= this x distance, in (0, 1]")
-      ->check(CLI::Range(1e-6, 1.0))->capture_default_str();
+      ->check(FiniteRange(1e-6, 1.0))->capture_default_str();
   scale->add_option("--threads", args->threads, "Form-factor threads (0: all cores)")->capture_default_str();
-  scale->add_option("--alpha", args->alpha, "Weight of the absolute term")->check(CLI::Range(1e-9, 1.0))
+  scale->add_option("--alpha", args->alpha, "Weight of the absolute term")->check(FiniteRange(1e-9, 1.0))
       ->capture_default_str();
   scale->add_option("--device", args->device, "Solves to run: cpu, cuda or both")
       ->check(CLI::IsMember({"cpu", "cuda", "both"}))->capture_default_str();

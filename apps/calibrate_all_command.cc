@@ -7,6 +7,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "base/output_directory.h"
 #include "calibration/calibrate_all_stage.h"
 #include "capture/devices.h"
 
@@ -120,14 +121,17 @@ void AddCalibrateAllCommand(CLI::App& calibrate) {
   all->add_option("--timeout-ms", args->timeout_ms,
                   "Grab timeout per frame, milliseconds (a camera that delivers nothing for this long is retried, "
                   "then the capture stops with one line; run the same command again to resume)")
-      ->check(CLI::Range(1.0, 600000.0))
+      ->check(FiniteRange(1.0, 600000.0))
       ->capture_default_str();
   all->add_option("--exposure-us", args->exposures_us,
                   "Exposure(s), microseconds; several bracket and merge to HDR")
       ->delimiter(',');
   all->add_option("--levels", args->levels, "Photometric drive levels, comma-separated")
       ->capture_default_str();
-  all->callback([args] { CalibrateAll(*args); });
+  all->callback([args] {
+    CheckOutputDirectory(args->out, DirectoryKind::kRig);
+    CalibrateAll(*args);
+  });
 }
 
 }  // namespace procam

@@ -16,6 +16,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "base/output_directory.h"
 #include "calibration/board_stage.h"
 #include "calibration/camera_stage.h"
 #include "calibration/photometric_stage.h"
@@ -53,6 +54,7 @@ void RunCalibrateBoard(const CalibrateBoardArguments& args) {
   options.sessions.assign(args.sessions.begin(), args.sessions.end());
   options.board = ParseChessboard(args.corners, args.square);
   options.progress = PrintProgress();
+  CheckOutputDirectory(options.out, DirectoryKind::kRig);
   RunBoardStage(options);
 }
 
@@ -139,7 +141,10 @@ void AddCalibrateCommands(CLI::App& app) {
       ->capture_default_str();
   camera->add_flag("!--no-outlier-rejection", args->options.reject_outliers,
                    "Keep every corner");
-  camera->callback([args] { RunCalibrateCamera(*args); });
+  camera->callback([args] {
+    CheckOutputDirectory(args->out, DirectoryKind::kRig);
+    RunCalibrateCamera(*args);
+  });
 
   auto photometric_args = std::make_shared<PhotometricStageOptions>();
   photometric_args->progress = PrintProgress();
@@ -163,7 +168,10 @@ void AddCalibrateCommands(CLI::App& app) {
                    "Entries of the response table (lut)")
       ->capture_default_str();
   AddPhotometricStageOptions(photometric, photometric_args.get());
-  photometric->callback([photometric_args] { RunPhotometricStage(*photometric_args); });
+  photometric->callback([photometric_args] {
+    CheckOutputDirectory(photometric_args->out, DirectoryKind::kRig);
+    RunPhotometricStage(*photometric_args);
+  });
 
   AddCalibrateBoardCommand(calibrate);
   AddCalibrateResponseCommand(*calibrate);

@@ -7,6 +7,7 @@
 #include "apps/command_line.h"
 #include "apps/commands.h"
 #include "base/io.h"
+#include "base/output_directory.h"
 #include "calibration/projectors_stage.h"
 #include "geometry/stage.h"
 
@@ -136,8 +137,11 @@ void AddCalibrateProjectorsCommand(CLI::App& calibrate) {
                        " with --scene, " +
                        std::to_string(SelfCalibrationOptions().max_correspondences) +
                        " scanning the room")
-      ->check(CLI::PositiveNumber);
-  command->callback([args] { RunCalibrateProjectors(*args); });
+      ->check(FinitePositive());
+  command->callback([args] {
+    CheckOutputDirectory(args->out, DirectoryKind::kRig);
+    RunCalibrateProjectors(*args);
+  });
 }
 
 }  // namespace procam

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "apps/commands.h"
+#include "base/output_directory.h"
 #include "calibration/camera_response.h"
 #include "calibration/rig_directory.h"
 #include "capture/session.h"
@@ -117,7 +118,10 @@ void AddCalibrateResponseCommand(CLI::App& calibrate) {
       ->capture_default_str();
   response->add_option("--lambda", args->options.lambda, "Smoothness weight")
       ->capture_default_str();
-  response->callback([args] { RunCalibrateResponse(*args); });
+  response->callback([args] {
+    CheckOutputDirectory(args->out, DirectoryKind::kRig);
+    RunCalibrateResponse(*args);
+  });
 }
 
 }  // namespace procam

@@ -8,6 +8,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "base/output_directory.h"
 #include "calibration/capture_stage.h"
 #include "capture/camera.h"
 #include "capture/devices.h"
@@ -201,7 +202,10 @@ void AddCaptureCommands(CLI::App& app) {
       ->capture_default_str();
   capture->add_option("images", args->images,
                       "verify: the images to show, each at projector resolution");
-  capture->callback([args] { RunCapture(*args); });
+  capture->callback([args] {
+    CheckOutputDirectory(args->out, DirectoryKind::kCaptureSession);
+    RunCapture(*args);
+  });
 }
 
 }  // namespace procam

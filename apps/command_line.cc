@@ -6,6 +6,7 @@
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <map>
 #include <sstream>
 
@@ -16,6 +17,35 @@
 #endif
 
 namespace procam {
+
+namespace {
+
+CLI::Validator FiniteValidator(double min, double max, bool open_min, const std::string& range) {
+  return CLI::Validator(
+      [=](std::string& text) -> std::string {
+        double value = 0.0;
+        if (!CLI::detail::lexical_cast(text, value)) return "'" + text + "' is not a number";
+        if (!std::isfinite(value) || value < min || value > max || (open_min && value == min)) {
+          return "'" + text + "' is not a number in " + range;
+        }
+        return std::string();
+      },
+      range);
+}
+
+}  // namespace
+
+CLI::Validator FiniteRange(double min, double max) {
+  return FiniteValidator(min, max, false, fmt::format("[{}, {}]", min, max));
+}
+
+CLI::Validator FiniteNonNegative() {
+  return FiniteValidator(0.0, std::numeric_limits<double>::max(), false, "[0, ∞)");
+}
+
+CLI::Validator FinitePositive() {
+  return FiniteValidator(0.0, std::numeric_limits<double>::max(), true, "(0, ∞)");
+}
 
 ProgressCallback LogProgress() {
   return [](const std::string& line) { spdlog::info("{}", line); };
@@ -120,7 +150,7 @@ void AddPlayToleranceOption(CLI::App* command, double* tolerance) {
       ->add_option("--tolerance", *tolerance,
                    "Each frame's solve stops when an iteration lowers the cost by less than this "
                    "fraction of it")
-      ->check(CLI::Range(0.0, 0.1))
+      ->check(FiniteRange(0.0, 0.1))
       ->capture_default_str();
 }
 

@@ -14,9 +14,7 @@
 #include "geometry/stage.h"
 #include "projection/projector_images.h"
 
-namespace CLI {
-class App;
-}
+#include <CLI/CLI.hpp>
 
 namespace procam {
 
@@ -54,6 +52,14 @@ struct SettleSetting {
   std::string Text() const;  // as the option is written
 };
 void AddSettleOption(CLI::App* command, SettleSetting* settle);
+
+// CLI::Range that also refuses what is not a finite number ("nan", "inf"): every comparison
+// with NaN is false, so CLI::Range, CLI::PositiveNumber and CLI::NonNegativeNumber let it through.
+// `min` and `max` are inclusive.
+CLI::Validator FiniteRange(double min, double max);
+// A finite number ≥ 0, and > 0.
+CLI::Validator FiniteNonNegative();
+CLI::Validator FinitePositive();
 
 // Human-readable summary: surfaces, areas, patch counts, form-factor statistics.
 std::string DescribeGeometry(const GeometryStage& stage);

@@ -1,4 +1,6 @@
 // procam compensate.
+#include <spdlog/spdlog.h>
+
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -6,6 +8,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "base/output_directory.h"
 #include "compensation/stage.h"
 #include "geometry/stage.h"
 #include "calibration/rig_directory.h"
@@ -39,15 +42,15 @@ void AddCompensationCommands(CLI::App& app) {
       ->check(CLI::IsMember({"squared", "soft_l1", "huber", "cauchy"}))
       ->capture_default_str();
   cmd->add_option("--loss-scale", args->loss_scale, "perceptual2000: the loss's scale, ΔE00 units")
-      ->check(CLI::Range(1e-6, 1e6))
+      ->check(FiniteRange(1e-6, 1e6))
       ->capture_default_str();
   cmd->add_option("--metric-rounds", args->metric_rounds,
                   "perceptual2000: reweighting rounds (CIEDE2000's metric and the loss's weights "
                   "re-evaluated at the last round's result)")
-      ->check(CLI::Range(1, 100))
+      ->check(FiniteRange(1, 100))
       ->capture_default_str();
   cmd->add_option("--alpha", args->alpha, "Weight of the absolute term against the spatial term, in (0,1]")
-      ->check(CLI::Range(1e-9, 1.0))
+      ->check(FiniteRange(1e-9, 1.0))
       ->capture_default_str();
   cmd->add_option("--patches", args->patches, "Override the scene's target patch count");
   cmd->add_option("--device", args->device,
@@ -66,6 +69,7 @@ void AddCompensationCommands(CLI::App& app) {
                   "scene's, its reflectance.npy the scene's reflectance");
   cmd->add_option("--out", args->out, "Output directory")->required();
   cmd->callback([args] {
+    CheckOutputDirectory(args->out, DirectoryKind::kSolution);
     Device device = Device::kCpu;
     ParseDevice(args->device, &device);
     if (device == Device::kCuda) {
@@ -95,6 +99,16 @@ void AddCompensationCommands(CLI::App& app) {
     options.progress = LogProgress();
     // With projectors in the scene, their light sets the bounds; otherwise the scene's "bounds".
     std::vector<Projector> projectors = rig_dir ? rig_dir->projectors : ReadProjectors(stage.scene);
+    if (projectors.empty()) {
+      // A scene without projectors (a built-in scene by name, a scene file without
+      // "projectors") is solved within its bounds: said before the solve, as project needs
+      // projectors to use the solution.
+      spdlog::warn(
+          "compensate: {} lists no projectors and no --rig was given: solving within the scene's "
+          "bounds; procam project will need --rig (or write the scene with its projectors: procam "
+          "scene write NAME --out DIR)",
+          args->scene);
+    }
     if (!projectors.empty()) {
       const ProjectionRig rig = BuildProjectionRig(stage.patches.fine, std::move(projectors), ProjectionRigOptions());
       options.lower = rig.lower;

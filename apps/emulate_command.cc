@@ -8,12 +8,14 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include <fmt/format.h>
 
+#include "apps/command_line.h"
 #include "apps/commands.h"
 #include "base/io.h"
 #include "capture/pixel_format.h"
@@ -140,17 +142,25 @@ void AddEmulateCommand(CLI::App& app) {
   emulate->add_option("--address", args->address, "Local IPv4 address to serve the camera on")->capture_default_str();
   emulate->add_option("--latency-ms", args->latency_ms,
                       "Display-to-camera latency, milliseconds (default: the camera entry's latency_ms)")
-      ->check(CLI::Range(0.0, 10000.0));
-  emulate->add_option("--fps", args->fps, "Frame rate (default: the camera entry's fps)")->check(CLI::Range(0.1, 1000.0));
+      ->check(FiniteRange(0.0, 10000.0));
+  emulate->add_option("--fps", args->fps, "Frame rate (default: the camera entry's fps)")->check(FiniteRange(0.1, 1000.0));
   emulate->add_option("--patches", args->patches, "Solver patches the simulated room is built for (its mesh is 4x finer)")
-      ->check(CLI::Range(20, 5000))
+      ->check(FiniteRange(20, 5000))
       ->capture_default_str();
   emulate->add_option("--seconds", args->seconds, "Stop after this long (default: at Ctrl+C or SIGTERM)")
-      ->check(CLI::Range(0.0, 1e7));
+      ->check(FiniteRange(0.0, 1e7));
   emulate->add_option("--watch-hz", args->watch_hz, "Monitor captures per second at most")
-      ->check(CLI::Range(1.0, 1000.0))
+      ->check(FiniteRange(1.0, 1000.0))
       ->capture_default_str();
   emulate->callback([args] {
+    for (size_t k = 0; k < args->monitors.size(); ++k) {
+      for (size_t j = 0; j < k; ++j) {
+        if (args->monitors[j] == args->monitors[k]) {
+          throw std::invalid_argument("--monitors: '" + args->monitors[k] +
+                                      "' is given twice: each projector has its own output");
+        }
+      }
+    }
 #if PROCAM_WITH_ARAVIS
     RunEmulate(*args);
 #else

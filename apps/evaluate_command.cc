@@ -87,7 +87,7 @@ void AddEvaluationCommands(CLI::App& app) {
   cmd->add_option("--patches", args->patches, "Solver patches per scene")->capture_default_str();
   cmd->add_option("--world-factor", args->world_factor, "World mesh patches per solver patch (the simulated room)")
       ->capture_default_str();
-  cmd->add_option("--alpha", args->alpha, "Weight of the absolute term, in (0,1]")->check(CLI::Range(1e-9, 1.0))
+  cmd->add_option("--alpha", args->alpha, "Weight of the absolute term, in (0,1]")->check(FiniteRange(1e-9, 1.0))
       ->capture_default_str();
   cmd->add_option("--methods", args->methods,
                   "Methods to compare (default: naive reverse linear perceptual perceptual2000)")
@@ -96,7 +96,7 @@ void AddEvaluationCommands(CLI::App& app) {
       ->check(CLI::IsMember({"squared", "soft_l1", "huber", "cauchy"}))
       ->capture_default_str();
   cmd->add_option("--loss-scale", args->loss_scale, "perceptual2000's loss scale, ΔE00 units")
-      ->check(CLI::Range(1e-6, 1e6))
+      ->check(FiniteRange(1e-6, 1e6))
       ->capture_default_str();
   cmd->add_option("--out", args->out, "Output directory")->capture_default_str();
   AddLightOption(cmd, &args->light);

@@ -3,13 +3,16 @@
 #include <fmt/format.h>
 
 #include <csignal>
+#include <functional>
 #include <iostream>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "base/output_directory.h"
 #include "nodes/node.h"
 #include "nodes/outputs.h"
 #include "nodes/play.h"
@@ -37,6 +40,25 @@ struct PlayArguments {
   int frames = 0, patches = 0;
 };
 
+// Throws std::invalid_argument naming `option` when a value is given twice (a projector shown
+// by one node twice, a monitor given two projectors, two nodes of one name or address).
+// `counts(value)` says whether the value must be unique (memory outputs may repeat).
+void CheckUnique(const std::vector<std::string>& values, const std::string& option,
+                 const std::function<bool(const std::string&)>& counts = nullptr) {
+  for (size_t k = 0; k < values.size(); ++k) {
+    if (counts && !counts(values[k])) continue;
+    for (size_t j = 0; j < k; ++j) {
+      if (values[j] == values[k]) {
+        throw std::invalid_argument(option + ": '" + values[k] + "' is given twice (entries " +
+                                    std::to_string(j + 1) + " and " + std::to_string(k + 1) + ")");
+      }
+    }
+  }
+}
+
+// A display output that is a device (a monitor), which two projectors cannot share.
+bool IsMonitor(const std::string& display) { return display.starts_with("glfw:"); }
+
 void RunPlayCommand(const PlayArguments& args) {
   PlayOptions options;
   options.scene = args.scene;
@@ -57,8 +79,15 @@ void RunPlayCommand(const PlayArguments& args) {
   options.light = args.light;
   options.frame_timeout_s = 1e-3 * args.frame_timeout_ms;
   options.local_gpu = args.render == "gpu";
-  for (size_t k = 0; k < args.nodes.size(); ++k)
+  std::vector<std::string> names, endpoints;
+  for (size_t k = 0; k < args.nodes.size(); ++k) {
     options.nodes.push_back(ParseNodeAddress(args.nodes[k], int(k)));
+    names.push_back(options.nodes.back().name);
+    endpoints.push_back(options.nodes.back().endpoint);
+  }
+  CheckUnique(names, "--nodes");
+  CheckUnique(endpoints, "--nodes");
+  CheckUnique(args.display, "--display", IsMonitor);
   if (options.nodes.empty()) options.local_outputs = MakeNodeOutputs(args.display);
   options.progress = PrintProgress();
   const PlaySummary summary = RunPlay(options);
@@ -110,8 +139,11 @@ void AddNodeCommands(CLI::App& app) {
       ->check(CLI::IsMember({"gpu", "cpu"}))
       ->capture_default_str();
   node->add_option("--seconds", node_args->seconds, "Run at most this long (0: until interrupted)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(FiniteNonNegative());
   node->callback([node_args] {
+    CheckUnique(node_args->projectors, "--projectors");
+    CheckUnique(node_args->display, "--display", IsMonitor);
+    CheckTcpPort(node_args->listen, /*bind=*/true, "--listen");
     NodeOptions options;
     options.name = node_args->name;
     options.rig_dir = node_args->rig;
@@ -152,12 +184,12 @@ void AddNodeCommands(CLI::App& app) {
       ->capture_default_str();
   play->add_option("--fps", play_args->fps,
                    "Target frame rate (frames due while one is shown are dropped)")
-      ->check(CLI::Range(0.01, 1000.0))
+      ->check(FiniteRange(0.01, 1000.0))
       ->capture_default_str();
   play->add_option("--frames", play_args->frames, "Frames to play (0: the whole source)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(FiniteNonNegative());
   play->add_option("--patches", play_args->patches, "Target patch count (0: the room's)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(FiniteNonNegative());
   play->add_option("--method", play_args->method,
                    "naive | reverse | linear | perceptual | perceptual2000")
       ->check(CLI::IsMember({"naive", "reverse", "linear", "perceptual", "perceptual2000"}))
@@ -167,7 +199,7 @@ void AddNodeCommands(CLI::App& app) {
       ->capture_default_str();
   AddPlayToleranceOption(play, &play_args->tolerance);
   play->add_option("--alpha", play_args->alpha, "Weight of the absolute term, (0,1]")
-      ->check(CLI::Range(1e-9, 1.0));
+      ->check(FiniteRange(1e-9, 1.0));
   play->add_option("--dither", play_args->dither, "none | ordered | error-diffusion")
       ->capture_default_str();
   AddLightOption(play, &play_args->light);
@@ -179,13 +211,16 @@ void AddNodeCommands(CLI::App& app) {
   play->add_option(
           "--frame-timeout-ms", play_args->frame_timeout_ms,
           "A node that does not answer a frame in this time is reported lost; the others go on")
-      ->check(CLI::Range(1.0, 60000.0))
+      ->check(FiniteRange(1.0, 60000.0))
       ->capture_default_str();
   play->add_option("--setup-timeout", play_args->setup_timeout,
                    "Seconds for every node to answer and build the rig before the first frame")
-      ->check(CLI::Range(0.1, 3600.0))
+      ->check(FiniteRange(0.1, 3600.0))
       ->capture_default_str();
-  play->callback([play_args] { RunPlayCommand(*play_args); });
+  play->callback([play_args] {
+    CheckOutputDirectory(play_args->out, DirectoryKind::kShow);
+    RunPlayCommand(*play_args);
+  });
 }
 
 }  // namespace procam

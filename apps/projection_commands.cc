@@ -9,6 +9,7 @@
 #include "apps/command_line.h"
 #include "apps/commands.h"
 #include "base/io.h"
+#include "base/output_directory.h"
 #include "base/timing.h"
 #include "calibration/rig_directory.h"
 #include "datasets_synthetic/benchmarks.h"
@@ -110,7 +111,7 @@ void AddProjectionCommands(CLI::App& app) {
   project
       ->add_option("--feather", args->feather,
                    "Blending ramp at image borders, fraction of the image size")
-      ->check(CLI::Range(0.0, 0.5))
+      ->check(FiniteRange(0.0, 0.5))
       ->capture_default_str();
   project->add_option("--patches", args->patches,
                       "Patch target given to compensate with --patches, if any");
@@ -118,7 +119,10 @@ void AddProjectionCommands(CLI::App& app) {
   project->add_flag("--detail", args->detail,
                     "Modulate the light within each patch by the desired texture's detail "
                     "(patch totals unchanged; untextured surfaces as without)");
-  project->callback([args] { RunProject(*args); });
+  project->callback([args] {
+    CheckOutputDirectory(args->out, DirectoryKind::kProjectorImages);
+    RunProject(*args);
+  });
 
   auto show_args = std::make_shared<ShowArguments>();
   CLI::App* show = app.add_subcommand(
@@ -138,7 +142,7 @@ void AddProjectionCommands(CLI::App& app) {
       ->check(CLI::IsMember({"grid", "bars", "white", "black"}));
   show->add_option("--seconds", show_args->seconds,
                    "Close after this long (default: until Esc or Q)")
-      ->check(CLI::Range(0.0, 1e6));
+      ->check(FiniteRange(0.0, 1e6));
   show->add_option("--readback", show_args->readback,
                    "Write what each window shows (monitorN.png) into this directory");
   show->callback([show_args] { RunShowCommand(*show_args); });
@@ -159,7 +163,7 @@ void AddProjectionCommands(CLI::App& app) {
   bench_projection->add_option("--patches", bench_args->patches, "Target patch count")
       ->capture_default_str();
   bench_projection->add_option("--repeat", bench_args->repeat, "Timed runs")
-      ->check(CLI::Range(1, 1000))
+      ->check(FiniteRange(1, 1000))
       ->capture_default_str();
   bench_projection->add_option("--dither", *bench_dither, "none | ordered | error-diffusion")
       ->check(CLI::IsMember({"none", "ordered", "error-diffusion"}))
@@ -183,7 +187,7 @@ void AddProjectionCommands(CLI::App& app) {
   bench_play->add_option("--height", play_args->height, "Projector height, pixels")->capture_default_str();
   bench_play->add_option("--patches", play_args->patches, "Target patch count (3 variables each)")->capture_default_str();
   bench_play->add_option("--frames", play_args->frames, "Timed frames (after a first, cold one)")
-      ->check(CLI::Range(1, 10000))
+      ->check(FiniteRange(1, 10000))
       ->capture_default_str();
   bench_play->add_option("--method", (*play_strings)[0], "linear | perceptual | perceptual2000")
       ->check(CLI::IsMember({"linear", "perceptual", "perceptual2000"}))

@@ -227,7 +227,7 @@ void AddSceneCommands(CLI::App& app) {
   export_cmd->add_option("--out", args->out, "Output directory")->required();
   export_cmd->add_option("--patches", args->patches, "Override the scene's target patch count");
   export_cmd->add_option("--alpha", args->alpha, "Weight of the absolute term, in (0,1]")
-      ->check(CLI::Range(1e-9, 1.0))
+      ->check(FiniteRange(1e-9, 1.0))
       ->capture_default_str();
   export_cmd->callback([args] {
     const GeometryStage stage = RunGeometryStage(args->scene, GeometryArguments(args->patches));

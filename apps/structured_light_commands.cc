@@ -8,6 +8,7 @@
 #include <memory>
 
 #include "apps/commands.h"
+#include "base/output_directory.h"
 #include "calibration/capture_layout.h"
 
 namespace procam {
@@ -57,6 +58,7 @@ void AddStructuredLightCommands(CLI::App& app) {
       args->options.folder = args->folder;
       args->options.out = args->out;
       args->options.progress = PrintLine;
+      CheckOutputDirectory(args->options.out, DirectoryKind::kCaptureSession);
       ImportCaptures(args->options);
       std::printf("wrote %s/session.json and %s/decode/\n", args->out.c_str(), args->out.c_str());
     });

@@ -5,6 +5,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "base/output_directory.h"
 #include "verification/verification.h"
 #include "capture/camera.h"
 #include "capture/devices.h"
@@ -106,7 +107,10 @@ void AddVerifyCommand(CLI::App& app) {
   cmd->add_option("--timeout-ms", args->options.sequencer.grab_timeout_ms, "Grab timeout per frame")
       ->capture_default_str();
   AddLightOption(cmd, &args->options.light);
-  cmd->callback([args] { RunVerify(*args); });
+  cmd->callback([args] {
+    CheckOutputDirectory(args->out, DirectoryKind::kVerificationRun);
+    RunVerify(*args);
+  });
 }
 
 }  // namespace procam

@@ -1,5 +1,7 @@
 #include "base/image_io.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cstdlib>
 #include <opencv2/imgcodecs.hpp>
 #include <optional>
@@ -88,14 +90,37 @@ std::optional<HeaderSize> TiffSize(const std::string& bytes) {
   return size;
 }
 
-// Refuses, before decoding, a file that is not PNG, JPEG, TIFF or BMP or whose header states a
+// Netpbm (P1 to P6): the magic, then width and height as decimal text, with whitespace and
+// `#` comments between.
+std::optional<HeaderSize> PnmSize(const std::string& bytes) {
+  if (bytes.size() < 3 || bytes[0] != 'P' || bytes[1] < '1' || bytes[1] > '6') return {};
+  size_t at = 2;
+  int64_t sides[2] = {0, 0};
+  for (int64_t& side : sides) {
+    while (at < bytes.size() && (std::isspace(static_cast<unsigned char>(bytes[at])) || bytes[at] == '#')) {
+      if (bytes[at] == '#') {
+        while (at < bytes.size() && bytes[at] != '\n') ++at;
+      } else {
+        ++at;
+      }
+    }
+    if (at >= bytes.size() || !std::isdigit(static_cast<unsigned char>(bytes[at]))) return {};
+    while (at < bytes.size() && std::isdigit(static_cast<unsigned char>(bytes[at]))) {
+      side = std::min<int64_t>(side * 10 + (bytes[at] - '0'), int64_t{1} << 40);
+      ++at;
+    }
+  }
+  return HeaderSize{sides[0], sides[1]};
+}
+
+// Refuses, before decoding, a file that is not PNG, JPEG, TIFF, BMP or Netpbm or whose header states a
 // size beyond kMaxImagePixels: a few bytes must not make a decoder allocate gigabytes.
 void CheckImageHeader(const std::filesystem::path& path, const std::string& bytes) {
   std::optional<HeaderSize> size = PngSize(bytes);
-  for (const auto reader : {JpegSize, TiffSize, BmpSize}) {
+  for (const auto reader : {JpegSize, TiffSize, BmpSize, PnmSize}) {
     if (!size) size = reader(bytes);
   }
-  if (!size) throw IoError(path.string() + ": not a readable image (PNG, JPEG, TIFF or BMP)");
+  if (!size) throw IoError(path.string() + ": not a readable image (PNG, JPEG, TIFF, BMP or PPM)");
   // Each side first: sides of up to 2^32 would overflow the product.
   if (size->width < 1 || size->height < 1 || size->width > kMaxImagePixels ||
       size->height > kMaxImagePixels || size->width * size->height > kMaxImagePixels) {

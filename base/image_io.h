@@ -18,7 +18,7 @@ constexpr uintmax_t kMaxImageBytes = uintmax_t{1} << 30;
 // The most pixels ReadImage decodes: 2^27 (e.g. 16384 x 8192), 1.6 GB as float RGB.
 constexpr int64_t kMaxImagePixels = int64_t{1} << 27;
 
-// Decodes a PNG, JPEG, TIFF or BMP file as cv::imread does with `flags` (cv::ImreadModes), after
+// Decodes a PNG, JPEG, TIFF, BMP or Netpbm (PPM, PGM, PBM) file as cv::imread does with `flags` (cv::ImreadModes), after
 // checking that it is a regular file of at most `max_bytes` (io.h CheckRegularFile) and that the
 // size its header states is at most kMaxImagePixels (so that a few bytes cannot make a decoder
 // allocate gigabytes), with the decoders' own messages (libpng's, OpenCV's) silenced. Throws

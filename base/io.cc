@@ -82,29 +82,40 @@ void RemoveStaleTemporaries(const std::filesystem::path& path) {
 
 }  // namespace
 
-void WriteFileAtomically(const std::filesystem::path& path, const std::string& bytes) {
+void WriteFileAtomically(const std::filesystem::path& path, const std::string& bytes,
+                         unsigned mode) {
   std::random_device entropy;
   const std::filesystem::path temp =
       path.string() + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(entropy());
   {
-    errno = 0;
-    std::ofstream out(temp, std::ios::binary | std::ios::trunc);
-    if (!out) throw IoError(path.string() + ": cannot create file: " + std::strerror(errno));
-    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-    out.flush();
-    const int write_errno = errno;
-    out.close();
-    if (!out) {
+    // Created with `mode` (less the umask) from the start: a secret is never readable by others,
+    // not even between its creation and a chmod.
+    const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC,
+                          static_cast<mode_t>(mode));
+    if (fd < 0) throw IoError(path.string() + ": cannot create file: " + std::strerror(errno));
+    size_t written = 0;
+    int write_errno = 0;
+    while (written < bytes.size()) {
+      const ssize_t count = ::write(fd, bytes.data() + written, bytes.size() - written);
+      if (count < 0 && errno == EINTR) continue;
+      if (count <= 0) {
+        write_errno = count < 0 ? errno : ENOSPC;
+        break;
+      }
+      written += static_cast<size_t>(count);
+    }
+    if (::close(fd) != 0 && write_errno == 0) write_errno = errno;
+    if (write_errno != 0) {
       std::error_code ignored;
       std::filesystem::remove(temp, ignored);
-      throw IoError(path.string() + ": write failed: " +
-                    (write_errno != 0 ? std::strerror(write_errno) : "disk full or I/O error"));
+      throw IoError(path.string() + ": write failed: " + std::strerror(write_errno));
     }
   }
   std::error_code error;
   std::filesystem::rename(temp, path, error);
   if (error) {
-    std::filesystem::remove(temp, error);
+    std::error_code ignored;  // the rename's error is the one to report
+    std::filesystem::remove(temp, ignored);
     throw IoError(path.string() + ": cannot replace file: " + error.message());
   }
   RemoveStaleTemporaries(path);

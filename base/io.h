@@ -26,8 +26,10 @@ class IoError : public std::runtime_error {
 // `path` (a full disk, a read-only directory); the temporary file is removed on failure. A
 // process killed mid-write leaves only its temporary file, `NAME.tmp-PID-N`, which no reader
 // opens and which the next write of `path` removes (once no process PID exists here and the
-// file is over a minute old).
-void WriteFileAtomically(const std::filesystem::path& path, const std::string& bytes);
+// file is over a minute old). The file is created with permissions `mode` less the umask (0600
+// for a secret: never readable by others, at no moment).
+void WriteFileAtomically(const std::filesystem::path& path, const std::string& bytes,
+                         unsigned mode = 0666);
 
 // Removes the manifest of a multi-file output (a solution's or an images directory's
 // result.json) before its files are replaced: the manifest is written last, so a directory

@@ -1,5 +1,7 @@
 #include "calibration/rig_directory.h"
 
+#include <fmt/format.h>
+
 #include <cmath>
 #include <fstream>
 #include <sstream>
@@ -269,10 +271,70 @@ void UpdateRigResult(const std::filesystem::path& rig_dir, const std::vector<std
 nlohmann::json RigDirectory::Describe() const {
   nlohmann::json names = nlohmann::json::array();
   for (const Projector& projector : projectors) names.push_back(projector.name);
-  nlohmann::json description = {{"dir", dir.string()}, {"projectors", names}};
+  // Absolute: a solution or run that records it is read from other working directories.
+  nlohmann::json description = {{"dir", std::filesystem::absolute(dir).lexically_normal().string()},
+                                 {"projectors", names}};
   description["reflectance"] = reflectance.rows() > 0;
   return description;
 }
+
+namespace {
+
+// What can be checked cheaply of a rig's parts against each other: every projector has its own
+// model, none is the camera's (the same file, or a copy: the camera's size and intrinsics), and
+// the registration record agrees with the camera's model on where the camera is (a rig.json of
+// another rig, or a model from another calibration, does not). Throws IoError naming the key.
+void CheckRigConsistency(const RigDirectory& rig) {
+  const std::string file = (rig.dir / "rig.json").string();
+  std::error_code error;
+  const auto same_file = [&](const std::filesystem::path& a, const std::filesystem::path& b) {
+    return std::filesystem::equivalent(a, b, error) && !error;
+  };
+  for (size_t k = 0; k < rig.projectors.size(); ++k) {
+    for (size_t j = 0; j < k; ++j) {
+      if (same_file(rig.projectors[k].model_path, rig.projectors[j].model_path)) {
+        throw IoError(file + ": projectors[" + std::to_string(k) + "].model: the same file as " +
+                      "projectors[" + std::to_string(j) + "].model (each projector has its own)");
+      }
+    }
+  }
+  if (rig.file.camera.model.empty()) return;
+  const std::filesystem::path camera_path = rig.dir / rig.file.camera.model;
+  if (!std::filesystem::exists(camera_path)) return;  // the commands that need it say so
+  const ProjectorGeometry camera = ReadCameraModel(camera_path);
+  for (size_t k = 0; k < rig.projectors.size(); ++k) {
+    const ProjectorGeometry& projector = rig.projectors[k].geometry;
+    if (same_file(rig.projectors[k].model_path, camera_path) ||
+        (projector.width() == camera.width() && projector.height() == camera.height() &&
+         projector.intrinsics() == camera.intrinsics())) {
+      throw IoError(file + ": projectors[" + std::to_string(k) + "].model: " +
+                    rig.projectors[k].model_path.string() + " is the camera's model (" +
+                    std::to_string(camera.width()) + "x" + std::to_string(camera.height()) +
+                    ", the same lens as camera.model)");
+    }
+  }
+  const nlohmann::json& registration = rig.file.registration;
+  if (registration.is_object() && registration.contains("camera_centre_m") &&
+      registration["camera_centre_m"].is_array() && registration["camera_centre_m"].size() == 3) {
+    Vec3 recorded;
+    for (int c = 0; c < 3; ++c) {
+      if (!registration["camera_centre_m"][c].is_number()) return;
+      recorded[c] = registration["camera_centre_m"][c].get<double>();
+    }
+    const Vec3 centre = camera.CentreInWorld();
+    constexpr double kToleranceM = 0.01;  // far above the models' printed precision
+    if ((recorded - centre).norm() > kToleranceM) {
+      throw IoError(fmt::format(
+          "{}: registration.camera_centre_m: ({:.3f}, {:.3f}, {:.3f}) m, but {} puts the camera at "
+          "({:.3f}, {:.3f}, {:.3f}) m: rig.json and the camera's model are of different "
+          "calibrations (run procam calibrate projectors again)",
+          file, recorded[0], recorded[1], recorded[2], camera_path.string(), centre[0], centre[1],
+          centre[2]));
+    }
+  }
+}
+
+}  // namespace
 
 RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir) {
   const std::filesystem::path path = rig_dir / "rig.json";
@@ -306,6 +368,7 @@ RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir) {
     }
   }
   rig.projectors = ParseProjectors(rig.file.ProjectorsJson().dump(), file, rig_dir);
+  CheckRigConsistency(rig);
 
   if (rig.file.reflectance) {
     const RigReflectance& info = *rig.file.reflectance;

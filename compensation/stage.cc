@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "base/io.h"
+#include "base/output_directory.h"
 
 namespace procam {
 
@@ -101,6 +102,20 @@ nlohmann::json FormFactorJson(const GeometryStage& geometry) {
 
 }  // namespace
 
+namespace {
+
+// The scene as result.json records it: a scene file's absolute path, so that `project` run from
+// another directory reads the same file; a built-in scene's name as it is.
+std::string RecordedScenePath(const std::filesystem::path& path) {
+  std::error_code error;
+  if (path.empty() || path.is_absolute() || !std::filesystem::is_regular_file(path, error)) {
+    return path.string();
+  }
+  return std::filesystem::absolute(path).lexically_normal().string();
+}
+
+}  // namespace
+
 nlohmann::json CompensationResultJson(const GeometryStage& geometry, const CompensationRun& run) {
   const SolverSummary& s = run.summary;
   nlohmann::json trace = nlohmann::json::array();
@@ -115,7 +130,7 @@ nlohmann::json CompensationResultJson(const GeometryStage& geometry, const Compe
   return {{"format_version", kSolutionFormatVersion},
           {"method", MethodName(s.method)},
           {"multires", s.coarse_iterations > 0},
-          {"scene", geometry.scene.path.string()},
+          {"scene", RecordedScenePath(geometry.scene.path)},
           {"patches", run.fine.size()},
           {"target_patches", geometry.scene.target_patches},
           {"variables", 3 * run.fine.size()},
@@ -140,25 +155,32 @@ nlohmann::json CompensationResultJson(const GeometryStage& geometry, const Compe
 void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run,
                        const std::filesystem::path& out, bool export_problem,
                        const nlohmann::json& extra) {
-  std::error_code error;
-  std::filesystem::create_directories(out, error);
-  if (error) throw IoError(out.string() + ": cannot create directory: " + error.message());
-  RemoveManifest(out / "result.json");  // written last: a rewrite cut short is not a solution
-  if (export_problem) {
-    if (run.fine.compressed()) {
-      throw std::invalid_argument(
-          "--export writes the dense F.npy: not with compressed form factors");
+  CheckOutputDirectory(out, DirectoryKind::kSolution);
+  // Written beside `out`, then swapped in: the directory holds the earlier solution or this
+  // one, never a mix, whatever stops the writing part-way.
+  ReplacedDirectory replaced(out);
+  const std::filesystem::path& dir = replaced.staging();
+  try {
+    if (export_problem) {
+      if (run.fine.compressed()) {
+        throw std::invalid_argument(
+            "--export writes the dense F.npy: not with compressed form factors");
+      }
+      nlohmann::json settings = {{"scene", geometry.scene.path.string()},
+                                 {"method", MethodName(run.summary.method)}};
+      ExportProblem(run.fine, geometry.patches.fine, geometry.patches.coarse_of_fine, dir,
+                    settings.dump());
     }
-    nlohmann::json settings = {{"scene", geometry.scene.path.string()},
-                               {"method", MethodName(run.summary.method)}};
-    ExportProblem(run.fine, geometry.patches.fine, geometry.patches.coarse_of_fine, out,
-                  settings.dump());
+    WriteNpy(dir / "E.npy", RowMatrixXd(run.solution.emittance));
+    WriteNpy(dir / "B.npy", RowMatrixXd(run.solution.radiosity));
+    nlohmann::json result = CompensationResultJson(geometry, run);
+    if (extra.is_object()) result.update(extra);
+    WriteFileAtomically(dir / "result.json", result.dump(2) + "\n");
+  } catch (const IoError& error) {
+    throw IoError(out.string() + ": left as it was; writing the new solution beside it failed: " +
+                  error.what());
   }
-  WriteNpy(out / "E.npy", RowMatrixXd(run.solution.emittance));
-  WriteNpy(out / "B.npy", RowMatrixXd(run.solution.radiosity));
-  nlohmann::json result = CompensationResultJson(geometry, run);
-  if (extra.is_object()) result.update(extra);
-  WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
+  replaced.Commit();
 }
 
 namespace {

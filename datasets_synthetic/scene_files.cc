@@ -3,7 +3,11 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <utility>
+#include <vector>
 
+#include "base/camera_model.h"
 #include "base/image_io.h"
 #include "base/io.h"
 #include "datasets_synthetic/paper_scenes.h"
@@ -25,7 +29,7 @@ std::string FileStem(const std::string& text) {
 }
 
 // A linear RGB texture (CV_32FC3, row 0 = top) as a 16-bit sRGB PNG (B, G, R as PNGs store it).
-void WriteTexture(const std::filesystem::path& path, const cv::Mat& linear_rgb) {
+std::string TexturePng(const std::filesystem::path& path, const cv::Mat& linear_rgb) {
   cv::Mat bgr(linear_rgb.size(), CV_16UC3);
   for (int row = 0; row < bgr.rows; ++row) {
     const cv::Vec3f* in = linear_rgb.ptr<cv::Vec3f>(row);
@@ -36,7 +40,9 @@ void WriteTexture(const std::filesystem::path& path, const cv::Mat& linear_rgb) 
       }
     }
   }
-  WritePng(path, bgr);
+  std::vector<uchar> bytes;
+  if (!cv::imencode(".png", bgr, bytes)) throw IoError(path.string() + ": cannot encode PNG");
+  return std::string(bytes.begin(), bytes.end());
 }
 
 json ProjectorEntry(const Projector& projector, const std::string& model) {
@@ -56,7 +62,9 @@ json ProjectorEntry(const Projector& projector, const std::string& model) {
 std::filesystem::path WriteSyntheticSceneFile(const std::string& name, int patches,
                                               const std::filesystem::path& dir) {
   const SyntheticScene synthetic = MakeSyntheticScene(name, patches);
-  std::filesystem::create_directories(dir);
+  // Every file is made first, then checked against what `dir` holds, then written: a file
+  // edited by hand is never replaced, and a refusal leaves nothing new behind.
+  std::vector<std::pair<std::string, std::string>> files;  // name in `dir`, bytes
   const Scene& scene = synthetic.scene;
   json surfaces = json::array();
   for (const Surface& surface : scene.surfaces) {
@@ -66,11 +74,11 @@ std::filesystem::path WriteSyntheticSceneFile(const std::string& name, int patch
       entry["quad"] = json::array();
       for (const Vec3& corner : surface.quad) entry["quad"].push_back(Triple(corner));
     } else {
-      WriteFileAtomically(dir / (stem + ".obj"), ObjMeshText(surface, "written by procam scene write"));
+      files.emplace_back(stem + ".obj", ObjMeshText(surface, "written by procam scene write"));
       entry["mesh"] = stem + ".obj";
     }
     if (surface.desired.HasTexture()) {
-      WriteTexture(dir / (stem + ".png"), surface.desired.texture_linear);
+      files.emplace_back(stem + ".png", TexturePng(dir / (stem + ".png"), surface.desired.texture_linear));
       entry["desired"] = {{"texture", stem + ".png"}};
     } else {
       entry["desired"] = Triple(surface.desired.srgb);
@@ -81,12 +89,14 @@ std::filesystem::path WriteSyntheticSceneFile(const std::string& name, int patch
   for (const DevicePlacement& placement : synthetic.projectors) {
     const Projector projector = ProjectorFromPlacement(placement);
     const std::string model = FileStem(name + "_" + projector.name) + ".cameramodel";
-    WriteCameraModel(dir / model, projector.geometry);
+    files.emplace_back(model, CameraModelText(projector.geometry));
     projectors.push_back(ProjectorEntry(projector, model));
   }
   const std::string camera_model = FileStem(name + "_camera") + ".cameramodel";
-  WriteCameraModelFile(dir / camera_model, CameraFromPlacement(synthetic.camera).Model(),
-                       "procam synthetic camera of " + name + "; extrinsics = mrcal rt_cam_ref with ref = world");
+  files.emplace_back(camera_model,
+                     CameraModelText(CameraFromPlacement(synthetic.camera).Model(),
+                                     "procam synthetic camera of " + name +
+                                         "; extrinsics = mrcal rt_cam_ref with ref = world"));
   const json file = {
       {"name", name},
       {"description", "procam's built-in synthetic scene " + name},
@@ -96,9 +106,28 @@ std::filesystem::path WriteSyntheticSceneFile(const std::string& name, int patch
       {"surfaces", surfaces},
       {"projectors", projectors},
       {"cameras", json::array({{{"name", "camera"}, {"model", camera_model}, {"format", "BGR8"}}})}};
-  const std::filesystem::path path = dir / (name + ".json");
-  WriteFileAtomically(path, file.dump(2) + "\n");
-  return path;
+  files.emplace_back(name + ".json", file.dump(2) + "\n");  // last: the file that names the rest
+
+  std::error_code error;
+  if (std::filesystem::exists(dir, error) && !std::filesystem::is_directory(dir, error)) {
+    throw IoError(dir.string() + ": --out must be a directory, and this is a file");
+  }
+  for (const auto& [file_name, bytes] : files) {
+    const std::filesystem::path path = dir / file_name;
+    const std::filesystem::file_status status = std::filesystem::symlink_status(path, error);
+    if (!std::filesystem::exists(status)) continue;
+    if (!std::filesystem::is_regular_file(status)) {
+      throw IoError(path.string() + ": exists and is not a regular file; scene write writes nothing");
+    }
+    if (ReadFile(path) != bytes) {
+      throw IoError(path.string() + ": exists and differs from what scene write would write " +
+                    "(edited?); scene write replaces nothing: remove it or give another --out");
+    }
+  }
+  std::filesystem::create_directories(dir, error);
+  if (error) throw IoError(dir.string() + ": cannot create directory: " + error.message());
+  for (const auto& [file_name, bytes] : files) WriteFileAtomically(dir / file_name, bytes);
+  return dir / (name + ".json");
 }
 
 }  // namespace procam

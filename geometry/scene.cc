@@ -199,6 +199,13 @@ Scene LoadScene(const std::filesystem::path& path) {
     fields.RejectUnknown({"name", "quad", "mesh", "reflectance", "desired"});
     Surface surface;
     surface.name = fields.Has("name") ? fields.String("name") : "surface" + std::to_string(s);
+    // Surfaces are told apart by name (reports, the scan's registration, per-surface results).
+    for (size_t other = 0; other < scene.surfaces.size(); ++other) {
+      if (scene.surfaces[other].name == surface.name) {
+        throw fields.Error("name", "'" + surface.name + "' is already the name of surfaces[" +
+                                       std::to_string(other) + "]");
+      }
+    }
     if (fields.Has("quad") == fields.Has("mesh")) {
       throw fields.Error("", "needs exactly one of 'quad' and 'mesh'");
     }

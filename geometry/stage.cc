@@ -1,5 +1,7 @@
 #include "geometry/stage.h"
 
+#include <unistd.h>
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -88,6 +90,23 @@ std::string GeometryStage::BriefReport() const {
       subdivision_seconds);
 }
 
+uint64_t PhysicalMemoryBytes() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page_size = ::sysconf(_SC_PAGE_SIZE);
+  if (pages <= 0 || page_size <= 0) return 0;  // unknown
+  return static_cast<uint64_t>(pages) * static_cast<uint64_t>(page_size);
+}
+
+void CheckDenseFormFactorMemory(int64_t patches, uint64_t memory_bytes) {
+  if (memory_bytes == 0) return;  // unknown: the allocation will tell
+  const double needed = 8.0 * static_cast<double>(patches) * static_cast<double>(patches);
+  if (needed <= static_cast<double>(memory_bytes)) return;
+  throw IoError(fmt::format(
+      "--patches: the dense form factors of {} patches need {:.1f} GB (8 bytes × n²), more than "
+      "this machine's {:.1f} GB of memory: give fewer patches, or compensate with --form-factors "
+      "compressed",
+      patches, needed / 1e9, static_cast<double>(memory_bytes) / 1e9));
+}
+
 GeometryStage RunGeometryStage(const std::string& scene, const GeometryOptions& options) {
   return RunGeometryStage(LoadSceneArgument(scene), options);
 }
@@ -102,10 +121,16 @@ GeometryStage RunGeometryStage(Scene scene, const GeometryOptions& options) {
   SubdivisionOptions subdivision;
   subdivision.target_patches = stage.scene.target_patches;
   if (!subdivision.Check(&why)) throw IoError("--patches: " + why);
+  if (options.storage == FormFactorStorage::kDense) {
+    CheckDenseFormFactorMemory(stage.scene.target_patches);  // before subdividing: at once
+  }
   const auto start = Clock::now();
   stage.patches = SubdividePatches(stage.scene, subdivision);
   stage.subdivision_seconds =
       SecondsSince(start);
+  if (options.storage == FormFactorStorage::kDense) {
+    CheckDenseFormFactorMemory(stage.patches.fine.size());  // the count made may exceed the target
+  }
   Report(options.progress,
          fmt::format("{}: {} fine patches ({} coarse), {} adjacent pairs", stage.scene.name,
                      stage.patches.fine.size(), stage.patches.coarse.size(),

@@ -5,6 +5,7 @@
 // source. The product registers none; the synthetic world (datasets_synthetic) registers
 // "synthetic" (synthetic:c_shaped, ...) where the command line, tests and benchmarks ask for it.
 
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -59,6 +60,14 @@ struct GeometryStage {
   // One line: patches, pairs, row sums, seconds.
   std::string BriefReport() const;
 };
+
+// This machine's physical memory in bytes (0 when unknown).
+uint64_t PhysicalMemoryBytes();
+
+// Throws IoError naming --patches, the memory the dense form factors of `patches` patches need
+// (8 n² bytes) and --form-factors compressed, when that exceeds `memory_bytes` (0: unknown, no
+// check): a count that cannot fit is refused before anything is allocated.
+void CheckDenseFormFactorMemory(int64_t patches, uint64_t memory_bytes = PhysicalMemoryBytes());
 
 // Validates the scene, subdivides it and computes the fine level's form factors. Throws IoError
 // for an invalid scene (naming its file and key) or bad options (naming the option).

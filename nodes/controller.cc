@@ -26,6 +26,7 @@ NodeAddress ParseNodeAddress(const std::string& text, int index) {
       !(address.endpoint.starts_with("tcp://") || address.endpoint.starts_with("inproc://"))) {
     throw std::invalid_argument("--nodes: '" + text + "' is not NAME=tcp://HOST:PORT");
   }
+  CheckTcpPort(address.endpoint, /*bind=*/false, "--nodes " + address.name);
   return address;
 }
 

@@ -11,6 +11,7 @@
 #include <random>
 #include <thread>
 
+#include "base/image_io.h"
 #include "base/io.h"
 #include "base/timing.h"
 #include "calibration/rig_directory.h"
@@ -34,8 +35,11 @@ class FrameSource {
         std::transform(extension.begin(), extension.end(), extension.begin(), ::tolower);
         if (extension == ".png" || extension == ".jpg" || extension == ".jpeg" ||
             extension == ".tif" || extension == ".tiff" || extension == ".ppm" ||
-            extension == ".pnm")
+            extension == ".pnm" || extension == ".bmp") {
+          // A FIFO or device named like an image would block or never end: refused now.
+          CheckRegularFile(entry.path(), kMaxImageBytes);
           files_.push_back(entry.path());
+        }
       }
       std::sort(files_.begin(), files_.end());
       if (files_.empty())
@@ -49,6 +53,11 @@ class FrameSource {
       throw IoError(path.string() + ": not a video OpenCV can read (nor a directory of images)");
     }
     count_ = static_cast<int>(video_.get(cv::CAP_PROP_FRAME_COUNT));  // may be an estimate
+    // A video without a frame would show nothing and replace the last result: refused now.
+    if (!video_.read(first_) || first_.empty()) {
+      throw IoError(path.string() + ": the video has no frame that can be read");
+    }
+    next_ = 1;
   }
   // Frames in the source (a video's may be an estimate; 0 if unknown).
   int count() const { return count_; }
@@ -57,11 +66,15 @@ class FrameSource {
   cv::Mat Read(int index) {
     if (!files_.empty()) {
       if (index >= static_cast<int>(files_.size())) return cv::Mat();
-      cv::Mat image = cv::imread(files_[index].string(), cv::IMREAD_COLOR | cv::IMREAD_ANYDEPTH);
-      if (image.empty()) throw IoError(files_[index].string() + ": not an image OpenCV can read");
-      return image;
+      // ReadImage: the header's size checked before decoding, the decoders' lines silenced.
+      return ReadImage(files_[index], cv::IMREAD_COLOR | cv::IMREAD_ANYDEPTH);
     }
     cv::Mat frame;
+    if (!first_.empty()) {  // read by the constructor
+      frame = first_;
+      first_.release();
+      if (index == 0) return frame;
+    }
     while (next_ <= index) {
       if (!video_.read(frame) || frame.empty()) return cv::Mat();
       ++next_;
@@ -73,6 +86,7 @@ class FrameSource {
   std::filesystem::path path_;
   std::vector<std::filesystem::path> files_;
   cv::VideoCapture video_;
+  cv::Mat first_;  // a video's first frame, read by the constructor until Read() takes it
   int count_ = 0, next_ = 0;
 };
 

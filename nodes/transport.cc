@@ -4,6 +4,7 @@
 
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstring>
@@ -101,7 +102,7 @@ RigKeys MakeRigKeys(const std::filesystem::path& rig_dir, bool replace) {
     pair->public_key = public_key;
     pair->secret_key = secret_key;
   }
-  // Secrets first, each written atomically and then made readable by its owner only.
+  // Secrets first, each written atomically and created readable by its owner only.
   const std::pair<std::string, std::string> files[] = {
       {"controller.key", keys.controller.secret_key},
       {"node.key", keys.node.secret_key},
@@ -109,8 +110,7 @@ RigKeys MakeRigKeys(const std::filesystem::path& rig_dir, bool replace) {
       {"node.pub", keys.node.public_key}};
   for (const auto& [name, key] : files) {
     const std::filesystem::path path = KeyFile(rig_dir, name);
-    WriteFileAtomically(path, key + "\n");
-    if (name.ends_with(".key")) ::chmod(path.c_str(), 0600);
+    WriteFileAtomically(path, key + "\n", name.ends_with(".key") ? 0600 : 0644);
   }
   return keys;
 }
@@ -236,6 +236,21 @@ class NodeSocket::ZapHandler {
   std::thread thread_;
 };
 
+void CheckTcpPort(const std::string& endpoint, bool bind, const std::string& what) {
+  if (!endpoint.starts_with("tcp://")) return;
+  const size_t colon = endpoint.rfind(':');
+  const std::string port = colon == std::string::npos || colon < 6 ? "" : endpoint.substr(colon + 1);
+  if (bind && port == "*") return;
+  const bool digits = !port.empty() && port.size() <= 5 &&
+                      std::all_of(port.begin(), port.end(), [](char c) { return c >= '0' && c <= '9'; });
+  const long value = digits ? std::stol(port) : -1;
+  if (!digits || value > 65535 || (value == 0 && !bind)) {
+    throw IoError(what + ": " + endpoint + ": the port must be a number in " +
+                  (bind ? "0..65535 or *" : "1..65535") +
+                  (port.empty() ? std::string(" (none given)") : ", not " + port));
+  }
+}
+
 NodeSocket::NodeSocket(zmq::context_t& context, const std::string& endpoint, const RigKeys* keys,
                        std::function<void(const std::string&)> log)
     : log_(std::move(log)) {
@@ -260,6 +275,7 @@ NodeSocket::NodeSocket(zmq::context_t& context, const std::string& endpoint, con
   } else if (!endpoint.starts_with("inproc://")) {
     throw IoError("node " + endpoint + ": a network endpoint needs the rig's keys");
   }
+  CheckTcpPort(endpoint, /*bind=*/true, "node");
   try {
     socket_.bind(endpoint);
   } catch (const zmq::error_t& e) {
@@ -332,6 +348,7 @@ ControllerSocket::ControllerSocket(zmq::context_t& context, const std::string& e
   } else if (!endpoint.starts_with("inproc://")) {
     throw IoError("controller: node " + endpoint + " is on the network: the rig's keys are needed");
   }
+  CheckTcpPort(endpoint, /*bind=*/false, "controller: node");
   try {
     socket_.connect(endpoint);
   } catch (const zmq::error_t& e) {

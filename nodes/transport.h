@@ -59,6 +59,10 @@ struct Envelope {
   Message message;
 };
 
+// Throws IoError naming `what` (e.g. "--listen") and the endpoint when a tcp:// endpoint's port
+// is not a number in 1..65535 (or "*", or 0, where `bind`): libzmq would take 99999 modulo 65536.
+void CheckTcpPort(const std::string& endpoint, bool bind, const std::string& what);
+
 // The node's end: a ROUTER bound to `endpoint` (tcp://ADDRESS:PORT, or inproc://NAME with no
 // keys). With keys, a CURVE server whose ZAP handler admits only `keys->controller.public_key`;
 // `log` gets one line per refused peer and per malformed message.

@@ -6,6 +6,7 @@
 #include <chrono>
 
 #include "base/io.h"
+#include "base/output_directory.h"
 #include "base/timing.h"
 #include "geometry/stage.h"
 
@@ -77,56 +78,63 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
 
   const auto write_start = Clock::now();
   const std::filesystem::path& out = args.out;
-  std::error_code error;
-  std::filesystem::create_directories(out, error);
-  if (error) throw IoError(out.string() + ": cannot create directory: " + error.message());
-  RemoveManifest(out / "result.json");  // written last: a rewrite cut short is not a result
-  const std::vector<std::string> encoded = EncodeProjectorImages(images);
-  nlohmann::json projector_json = nlohmann::json::array();
-  for (size_t k = 0; k < images.size(); ++k) {
-    const Projector& projector = rig.projectors[k];
-    const std::string image_name = projector.name + ".png";
-    WriteFileAtomically(out / image_name, encoded[k]);
-    projector_json.push_back({{"name", projector.name},
-                              {"image", image_name},
-                              {"model", projector.model_path.string()},
-                              {"width", projector.geometry.width()},
-                              {"height", projector.geometry.height()},
-                              {"bits", images[k].bits},
-                              {"lit_pixels", rig.maps[k].lit_pixels},
-                              {"patches_reached", rig.maps[k].patches_reached},
-                              {"saturated_pixels", summary.saturated_pixels[k]},
-                              {"detail_saturated_pixels", summary.detail_saturated_pixels[k]},
-                              {"clipped_pixels", summary.clipped_pixels[k]}});
+  CheckOutputDirectory(out, DirectoryKind::kProjectorImages);
+  // Written beside `out`, then swapped in: the directory holds the earlier images or these.
+  ReplacedDirectory replaced(out);
+  const std::filesystem::path& dir = replaced.staging();
+  double write_seconds = 0.0;
+  try {
+    const std::vector<std::string> encoded = EncodeProjectorImages(images);
+    nlohmann::json projector_json = nlohmann::json::array();
+    for (size_t k = 0; k < images.size(); ++k) {
+      const Projector& projector = rig.projectors[k];
+      const std::string image_name = projector.name + ".png";
+      WriteFileAtomically(dir / image_name, encoded[k]);
+      projector_json.push_back({{"name", projector.name},
+                                {"image", image_name},
+                                {"model", projector.model_path.string()},
+                                {"width", projector.geometry.width()},
+                                {"height", projector.geometry.height()},
+                                {"bits", images[k].bits},
+                                {"lit_pixels", rig.maps[k].lit_pixels},
+                                {"patches_reached", rig.maps[k].patches_reached},
+                                {"saturated_pixels", summary.saturated_pixels[k]},
+                                {"detail_saturated_pixels", summary.detail_saturated_pixels[k]},
+                                {"clipped_pixels", summary.clipped_pixels[k]}});
+    }
+    WriteNpy(dir / "E_delivered.npy", RowMatrixXd(summary.delivered));
+    WriteNpy(dir / "lower.npy", RowMatrixXd(rig.lower));
+    WriteNpy(dir / "upper.npy", RowMatrixXd(rig.upper));
+    write_seconds = SecondsSince(write_start);
+    nlohmann::json result = {{"solution", solution.dir.string()},
+                             {"scene", geometry.scene.path.string()},
+                             {"patches", rig.size()},
+                             {"target_patches", geometry.scene.target_patches},
+                             {"projectors", projector_json},
+                             {"dither", DitherName(args.dither)},
+                             {"feather", args.feather},
+                             {"detail", args.detail},
+                             {"light", LightFieldName(args.light)},
+                             {"detail_pixels", summary.detail_pixels},
+                             {"patches_reached", rig_summary.patches_reached},
+                             {"patches_unreached", summary.patches_unreached},
+                             {"patches_below_lower", summary.patches_below_lower},
+                             {"patches_above_upper", summary.patches_above_upper},
+                             {"level_passes", summary.level_passes},
+                             {"max_relative_error", summary.max_relative_error},
+                             {"seconds",
+                              {{"load", args.load_seconds},
+                               {"maps", rig_summary.seconds},
+                               {"render", summary.seconds},
+                               {"write", write_seconds},
+                               {"total", args.load_seconds + SecondsSince(start)}}}};
+    if (!rig_description.is_null()) result["rig"] = rig_description;
+    WriteFileAtomically(dir / "result.json", result.dump(2) + "\n");
+  } catch (const IoError& error) {
+    throw IoError(out.string() + ": left as it was; writing the new images beside it failed: " +
+                  error.what());
   }
-  WriteNpy(out / "E_delivered.npy", RowMatrixXd(summary.delivered));
-  WriteNpy(out / "lower.npy", RowMatrixXd(rig.lower));
-  WriteNpy(out / "upper.npy", RowMatrixXd(rig.upper));
-  const double write_seconds = SecondsSince(write_start);
-  nlohmann::json result = {{"solution", solution.dir.string()},
-                           {"scene", geometry.scene.path.string()},
-                           {"patches", rig.size()},
-                           {"target_patches", geometry.scene.target_patches},
-                           {"projectors", projector_json},
-                           {"dither", DitherName(args.dither)},
-                           {"feather", args.feather},
-                           {"detail", args.detail},
-                           {"light", LightFieldName(args.light)},
-                           {"detail_pixels", summary.detail_pixels},
-                           {"patches_reached", rig_summary.patches_reached},
-                           {"patches_unreached", summary.patches_unreached},
-                           {"patches_below_lower", summary.patches_below_lower},
-                           {"patches_above_upper", summary.patches_above_upper},
-                           {"level_passes", summary.level_passes},
-                           {"max_relative_error", summary.max_relative_error},
-                           {"seconds",
-                            {{"load", args.load_seconds},
-                             {"maps", rig_summary.seconds},
-                             {"render", summary.seconds},
-                             {"write", write_seconds},
-                             {"total", args.load_seconds + SecondsSince(start)}}}};
-  if (!rig_description.is_null()) result["rig"] = rig_description;
-  WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
+  replaced.Commit();
 
   for (size_t k = 0; k < images.size(); ++k) {
     Report(args.progress,

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 #include <vector>
 
@@ -182,6 +183,121 @@ TEST(BadInput, MeshesAndTexturesAreReadSafely) {
                        name);
   }
   EXPECT_FALSE(std::filesystem::exists(dir / "solution"));
+}
+
+
+// scene write replaces no file that differs from what it would write (a scene edited by hand)
+// and, refusing, writes nothing; run again over its own output it succeeds.
+TEST(BadInput, SceneWriteKeepsFilesEditedByHand) {
+  testing::TempDir dir;
+  const std::string write = "scene write tiny_box --patches 50 --out ";
+  ASSERT_EQ(testing::RunProcam(write + (dir / "a").string()).exit_code, 0);
+  EXPECT_EQ(testing::RunProcam(write + (dir / "a").string()).exit_code, 0);  // the same files
+  const std::string edited = "{\"edited\": \"by hand\"}\n";
+  dir.Write("a/tiny_box.json", edited);
+  ExpectOneErrorLine(write + (dir / "a").string(), "tiny_box.json: exists and differs");
+  std::ifstream in(dir / "a" / "tiny_box.json");
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), {}), edited);
+  std::filesystem::create_directories(dir / "b" / "tiny_box.json");
+  ExpectOneErrorLine(write + (dir / "b").string(), "tiny_box.json: exists and is not a regular file");
+  size_t files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir / "b")) files += entry.is_regular_file();
+  EXPECT_EQ(files, 0u);
+}
+
+// Two surfaces of one name are refused where the scene is read.
+TEST(BadInput, SurfaceNamesAreUnique) {
+  testing::TempDir dir;
+  const auto scene = dir.Write("scene.json", Scene(std::string(kQuad) + ", " + kQuad));
+  ExpectOneErrorLine("scene info " + scene.string(), "surfaces[1].name: 'floor' is already the name of surfaces[0]");
+}
+
+// A patch count whose dense form factors cannot fit in memory is refused at once, saying how
+// much they need and what to use instead, before anything is allocated or written.
+TEST(BadInput, PatchCountsBeyondMemoryAreRefusedUpFront) {
+  testing::TempDir dir;
+  for (const std::string& command :
+       {std::string("scene info synthetic:tiny_box --patches 1000000"),
+        "compensate synthetic:tiny_box --patches 1000000 --out " + (dir / "solution").string()}) {
+    const CommandRun run = testing::RunProcamStderr(command);
+    testing::ExpectOneErrorLine(run, "--form-factors compressed", command);
+    EXPECT_NE(run.output.find("8000.0 GB"), std::string::npos) << run.output;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "solution"));
+}
+
+// A built-in scene by name has no projectors: compensate says, before solving, that it solves
+// within the scene's bounds and that project will need a rig.
+TEST(BadInput, CompensateWithoutProjectorsSaysItSolvesOnBounds) {
+  testing::TempDir dir;
+  const CommandRun run = testing::RunProcam("compensate synthetic:c_shaped --patches 60 --out " +
+                                            (dir / "solution").string());
+  EXPECT_EQ(run.exit_code, 0) << run.output;
+  EXPECT_NE(run.output.find("lists no projectors and no --rig was given: solving within the "
+                            "scene's bounds"),
+            std::string::npos)
+      << run.output;
+}
+
+
+// Option values that are not finite numbers (CLI11's range checks let NaN through) and ports out
+// of range (libzmq takes them modulo 65536) are refused in one line naming the option, before
+// anything starts.
+TEST(BadInput, NotANumberAndPortsOutOfRangeAreRefused) {
+  testing::TempDir dir;
+  const std::string rig = (dir / "rig").string(), out = " --out " + (dir / "out").string();
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"emulate room.json --monitors A --latency-ms nan", "--latency-ms"},
+      {"emulate room.json --monitors A --fps nan", "--fps"},
+      {"emulate room.json --monitors A --seconds nan", "--seconds"},
+      {"emulate room.json --monitors A --fps inf", "--fps"},
+      {"play room.json --rig " + rig + out + " --setup-timeout nan", "--setup-timeout"},
+      {"play room.json --rig " + rig + out + " --frame-timeout-ms nan", "--frame-timeout-ms"},
+      {"compensate room.json --alpha nan" + out, "--alpha"},
+      {"node --rig " + rig + " --scene room.json --projectors a --seconds nan", "--seconds"},
+      {"node --rig " + rig + " --scene room.json --projectors a --listen tcp://127.0.0.1:99999",
+       "--listen: tcp://127.0.0.1:99999: the port must be a number in 0..65535"},
+      {"play room.json --rig " + rig + out + " --nodes a=tcp://127.0.0.1:70000",
+       "the port must be a number in 1..65535"},
+  };
+  for (const auto& [arguments, expected] : cases) ExpectOneErrorLine(arguments, expected);
+  EXPECT_FALSE(std::filesystem::exists(dir / "out"));
+}
+
+// One name, monitor or address given twice is refused in one line, before anything starts.
+TEST(BadInput, NamesGivenTwiceAreRefused) {
+  testing::TempDir dir;
+  const std::string rig = (dir / "rig").string(), out = " --out " + (dir / "out").string();
+  const std::string node = "node --rig " + rig + " --scene room.json ";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {node + "--projectors left,left --display memory,memory", "--projectors: 'left' is given twice"},
+      {node + "--projectors left,right --display glfw:0,glfw:0", "--display: 'glfw:0' is given twice"},
+      {"play room.json --rig " + rig + out + " --nodes a=tcp://127.0.0.1:5600,a=tcp://127.0.0.1:5601",
+       "--nodes: 'a' is given twice"},
+      {"play room.json --rig " + rig + out + " --nodes a=tcp://127.0.0.1:5600,b=tcp://127.0.0.1:5600",
+       "--nodes: 'tcp://127.0.0.1:5600' is given twice"},
+      {"emulate room.json --monitors A,A", "--monitors: 'A' is given twice"},
+  };
+  for (const auto& [arguments, expected] : cases) ExpectOneErrorLine(arguments, expected);
+  EXPECT_FALSE(std::filesystem::exists(dir / "out"));
+}
+
+// procam keys creates the secret keys readable by their owner only, the public ones by all.
+TEST(BadInput, SecretKeysAreCreatedForTheirOwnerOnly) {
+  testing::TempDir dir;
+  std::filesystem::create_directories(dir / "rig");
+  const mode_t umask_before = ::umask(0);  // the most permissive umask: the mode is procam's own
+  const CommandRun run = testing::RunProcam("keys --rig " + (dir / "rig").string());
+  ::umask(umask_before);
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  for (const char* name : {"controller.key", "node.key"}) {
+    struct stat info {};
+    ASSERT_EQ(::stat((dir / "rig" / "keys" / name).c_str(), &info), 0) << name;
+    EXPECT_EQ(info.st_mode & 0777, 0600u) << name;
+  }
+  struct stat info {};
+  ASSERT_EQ(::stat((dir / "rig" / "keys" / "node.pub").c_str(), &info), 0);
+  EXPECT_EQ(info.st_mode & 0777, 0644u);
 }
 
 }  // namespace

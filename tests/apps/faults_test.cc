@@ -15,6 +15,8 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
+#include <map>
 #include <set>
 #include <string>
 
@@ -403,6 +405,154 @@ TEST_F(Faults, TruncatedFilesAreNamedOrCapturedAgain) {
   EXPECT_NE(resumed.output.find("(1 this run, 3 already there)"), std::string::npos)
       << resumed.output;
   ExpectEveryFileReads(dir / "flat");
+}
+
+
+// Every regular file under `dir` (captures apart) and its bytes: what a refused command must
+// leave as it was.
+std::map<std::string, std::string> Contents(const fs::path& dir) {
+  std::map<std::string, std::string> contents;
+  for (const std::string& name : FilesUnder(dir)) {
+    if (name.rfind("captures/", 0) != 0) contents[name] = Bytes(dir / name);
+  }
+  return contents;
+}
+
+// --out pointed at a directory another command wrote: each command that writes a directory
+// refuses one of another kind in one line naming it, before anything is written.
+TEST_F(Faults, OutputDirectoryOfAnotherKindIsRefusedAndKept) {
+  const fs::path solution = dir / "solution", images = dir / "images";
+  Compensate(Rig(), solution);
+  ASSERT_EQ(testing::RunProcam("project " + solution.string() + " --rig " + Rig().string() +
+                               " --out " + images.string())
+                .exit_code,
+            0);
+  const auto rig_before = Contents(Rig());
+  const auto solution_before = Contents(solution);
+  const auto images_before = Contents(images);
+  const std::string rig = Rig().string(), sol = solution.string();
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"project " + sol + " --rig " + rig + " --out " + sol, "is a solution directory"},
+      {"project " + sol + " --rig " + rig + " --out " + rig, "is a rig directory"},
+      {"compensate " + kScene + " --rig " + rig + " --out " + rig, "is a rig directory"},
+      {"compensate " + kScene + " --rig " + rig + " --out " + images.string(),
+       "is a projector images directory"},
+      {"verify " + rig + " " + sol + " --camera " + kCamera + "'" + kCapture + "--out " + sol,
+       "is a solution directory"},
+      {"play " + kScene + " --rig " + rig + " --solution " + sol + " --out " + rig,
+       "is a rig directory"},
+      {"calibrate all --camera " + kCamera + "'" + kCapture + "--out " + sol,
+       "is a solution directory"},
+      {"capture --camera test:loopback --sequence photometric --out " + rig, "is a rig directory"},
+  };
+  for (const auto& [arguments, expected] : cases) {
+    testing::ExpectOneErrorLine(testing::RunProcamStderr(arguments), expected, arguments);
+  }
+  EXPECT_EQ(Contents(Rig()), rig_before);
+  EXPECT_EQ(Contents(solution), solution_before);
+  EXPECT_EQ(Contents(images), images_before);
+}
+
+// A rewrite that fails part-way (compensate --export into a 64 KiB tmpfs holding the earlier
+// solution: F.npy does not fit) leaves the earlier solution whole, result.json included: the new
+// files are written beside it and swapped in only when all are written.
+TEST_F(Faults, ARewriteThatFailsPartWayKeepsTheEarlierSolutionWhole) {
+  const std::string solution = (dir / "solution").string();
+  Compensate(Rig(), solution);
+  const fs::path mount = dir / "small", after = dir / "after";
+  fs::create_directories(mount);
+  const std::string script = "mount -t tmpfs -o size=64k tmpfs " + mount.string() + " && cp -r " +
+                             solution + " " + (mount / "old").string() + " && " +
+                             ProcamInScript("compensate " + kScene + " --rig " + Rig().string() +
+                                                " --export --out " + (mount / "old").string(),
+                                            dir.path()) +
+                             " && cp -r " + mount.string() + " " + after.string();
+  std::string why;
+  if (!RunInMountNamespace(script, &why)) GTEST_SKIP() << why;
+  testing::ExpectOneErrorLine(ScriptRun(dir.path()), (mount / "old").string(), "compensate");
+  EXPECT_NE(ScriptRun(dir.path()).output.find("No space left on device"), std::string::npos);
+  EXPECT_EQ(Contents(after / "old"), Contents(solution));
+  for (const auto& entry : fs::directory_iterator(after)) {  // no staging directory left
+    EXPECT_EQ(entry.path().filename().string().find(".tmp-"), std::string::npos) << entry.path();
+  }
+}
+
+// A solution made with a relative --rig is used with that rig from any working directory, not
+// with whatever ./rig is there.
+TEST_F(Faults, ASolutionFindsItsRigFromAnotherDirectory) {
+  CopyRig(dir / "made" / "rig");
+  fs::create_directories(dir / "elsewhere" / "rig");
+  dir.Write("elsewhere/rig/rig.json", "{\"format_version\": 1}");  // another, unusable, rig
+  const CommandRun made = testing::RunShell(
+      "cd " + (dir / "made").string() + " && " + std::getenv("PROCAM_BINARY") + " compensate " +
+      kScene + " --rig rig --out solution");
+  ASSERT_EQ(made.exit_code, 0) << made.output;
+  const CommandRun project = testing::RunShell(
+      "cd " + (dir / "elsewhere").string() + " && " + std::getenv("PROCAM_BINARY") + " project " +
+      (dir / "made" / "solution").string() + " --out images");
+  ASSERT_EQ(project.exit_code, 0) << project.output;
+  const nlohmann::json result =
+      nlohmann::json::parse(Bytes(dir / "elsewhere" / "images" / "result.json"));
+  EXPECT_EQ(fs::path(result.at("rig").at("dir").get<std::string>()), dir / "made" / "rig");
+}
+
+// play --desired: a video without frames, a FIFO named like an image, an image whose header
+// states 30000x30000 pixels: one line naming it, before anything is shown, the earlier
+// result.json kept.
+TEST_F(Faults, DesiredFramesThatCannotBeShownAreRefusedUpFront) {
+  const fs::path out = dir / "show";
+  const std::string earlier = R"({"fps_target": 30, "frames_shown": 3})";
+  dir.Write("show/result.json", earlier);
+  const auto play = [&](const fs::path& desired) {
+    return "play " + kScene + " --rig " + Rig().string() + " --desired " + desired.string() +
+           " --display memory,memory --out " + out.string();
+  };
+  const fs::path video = dir / "empty.avi";
+  {
+    cv::VideoWriter writer(video.string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30,
+                           cv::Size(64, 48));
+    ASSERT_TRUE(writer.isOpened());
+  }  // closed with no frame
+  testing::ExpectOneErrorLine(testing::RunProcamStderr(play(video)), video.string(), "empty video");
+  fs::create_directories(dir / "fifo");
+  ASSERT_EQ(::mkfifo((dir / "fifo" / "a.png").c_str(), 0600), 0);
+  testing::ExpectOneErrorLine(testing::RunProcamStderr(play(dir / "fifo")), "a.png", "FIFO");
+  fs::create_directories(dir / "huge");
+  fs::copy_file(testing::SourceDir() / "fuzz/regressions/image/png_header_30000x30000.png",
+                dir / "huge" / "a.png");
+  const CommandRun huge = testing::RunProcamStderr(play(dir / "huge"));
+  testing::ExpectOneErrorLine(huge, "a.png", "huge frame");
+  EXPECT_NE(huge.output.find("30000x30000"), std::string::npos) << huge.output;
+  EXPECT_EQ(Bytes(out / "result.json"), earlier);
+}
+
+// What can be checked of a rig's parts against each other cheaply is, in one line: two
+// projectors given one model, the camera's model given for a projector, a rig.json whose
+// registration puts the camera elsewhere than its model does.
+TEST_F(Faults, InconsistentRigsAreRefusedInOneLine) {
+  const nlohmann::json good = nlohmann::json::parse(Bytes(Rig() / "rig.json"));
+  const std::vector<std::pair<std::function<void(nlohmann::json&)>, std::string>> cases = {
+      {[](nlohmann::json& rig) { rig["projectors"][1]["model"] = rig["projectors"][0]["model"]; },
+       "projectors[1].model: the same file as projectors[0].model"},
+      {[](nlohmann::json& rig) { rig["projectors"][0]["model"] = rig["camera"]["model"]; },
+       "is the camera's model"},
+      {[](nlohmann::json& rig) { rig["registration"]["camera_centre_m"][0] =
+                                     rig["registration"]["camera_centre_m"][0].get<double>() + 0.5; },
+       "registration.camera_centre_m"},
+  };
+  for (const auto& [edit, expected] : cases) {
+    const fs::path rig = dir / "rig";
+    fs::remove_all(rig);
+    CopyRig(rig);
+    nlohmann::json edited = good;
+    edit(edited);
+    dir.Write("rig/rig.json", edited.dump(2));
+    testing::ExpectOneErrorLine(
+        testing::RunProcamStderr("compensate " + kScene + " --rig " + rig.string() + " --out " +
+                                 (dir / "solution").string()),
+        expected, expected);
+    EXPECT_FALSE(fs::exists(dir / "solution")) << expected;
+  }
 }
 
 }  // namespace

@@ -32,8 +32,8 @@ TEST(ReadImage, RefusesHeadersStatingMorePixelsThanItReads) {
 }
 
 // The formats procam writes and reads keep working: PNG (8 and 16 bits), JPEG, TIFF (float, as
-// capture sessions' HDR frames) and BMP; anything else is refused by name.
-TEST(ReadImage, ReadsPngJpegTiffAndBmpAndRefusesOtherFormats) {
+// capture sessions' HDR frames), BMP and Netpbm; anything else is refused by name.
+TEST(ReadImage, ReadsPngJpegTiffBmpAndPpmAndRefusesOtherFormats) {
   const testing::TempDir dir;
   cv::Mat image(3, 5, CV_8UC3, cv::Scalar(10, 200, 30));
   for (const char* extension : {".png", ".jpg", ".tiff", ".bmp"}) {
@@ -48,10 +48,14 @@ TEST(ReadImage, ReadsPngJpegTiffAndBmpAndRefusesOtherFormats) {
   ASSERT_TRUE(cv::imencode(".tiff", radiance, hdr));
   EXPECT_EQ(ReadImage(dir.Write("hdr.tiff", std::string(hdr.begin(), hdr.end())), cv::IMREAD_UNCHANGED).type(),
             CV_32FC3);
+  // Netpbm, which play's frame directories accept, is read with its header's size checked.
   std::vector<uchar> ppm;
   ASSERT_TRUE(cv::imencode(".ppm", image, ppm));
-  EXPECT_THROW(ReadImage(dir.Write("a.ppm", std::string(ppm.begin(), ppm.end())), cv::IMREAD_UNCHANGED),
+  EXPECT_EQ(ReadImage(dir.Write("a.ppm", std::string(ppm.begin(), ppm.end())), cv::IMREAD_UNCHANGED).size(),
+            image.size());
+  EXPECT_THROW(ReadImage(dir.Write("big.ppm", "P6\n# a comment\n30000 30000\n255\n"), cv::IMREAD_UNCHANGED),
                IoError);
+  EXPECT_THROW(ReadImage(dir.Write("a.gif", "GIF89a\x05\x00\x03\x00"), cv::IMREAD_UNCHANGED), IoError);
 }
 
 }  // namespace

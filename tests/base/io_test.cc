@@ -4,10 +4,14 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
+#include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
+#include "base/output_directory.h"
 #include "tests/testing/testing.h"
 
 namespace procam {
@@ -92,6 +96,88 @@ TEST(AtomicWrite, ErrorsNameTheTarget) {
     EXPECT_EQ(std::string(error.what()).rfind((dir / "missing" / "x.txt").string() + ": ", 0), 0u)
         << error.what();
     EXPECT_EQ(std::string(error.what()).find(".tmp-"), std::string::npos) << error.what();
+  }
+}
+
+// A rename that fails (the target a directory that is not empty) is reported with its own
+// error, not the cleanup's ("cannot replace file: Success").
+TEST(AtomicWrite, AFailedRenameNamesItsOwnError) {
+  testing::TempDir dir;
+  std::filesystem::create_directories(dir / "B.npy" / "inner");
+  try {
+    WriteFileAtomically(dir / "B.npy", "new");
+    ADD_FAILURE() << "no error";
+  } catch (const IoError& error) {
+    const std::string what = error.what();
+    EXPECT_NE(what.find("B.npy: cannot replace file: "), std::string::npos) << what;
+    EXPECT_EQ(what.find("Success"), std::string::npos) << what;
+    EXPECT_TRUE(what.find("directory") != std::string::npos) << what;  // EISDIR or ENOTEMPTY
+  }
+  size_t entries = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path())) entries += !entry.path().empty();
+  EXPECT_EQ(entries, 1u);  // no temporary left
+}
+
+// ReplacedDirectory: the directory holds the earlier files or the new ones, never a mix; files
+// the new output does not write are kept; nothing is left beside it.
+TEST(ReplacedDirectory, SwapsWholeOrLeavesTheEarlierFiles) {
+  testing::TempDir dir;
+  const std::filesystem::path out = dir / "solution";
+  std::filesystem::create_directories(out);
+  WriteFileAtomically(out / "E.npy", "old E");
+  WriteFileAtomically(out / "result.json", "old result");
+  WriteFileAtomically(out / "notes.txt", "the user's");
+  try {
+    ReplacedDirectory replaced(out);
+    WriteFileAtomically(replaced.staging() / "E.npy", "new E");
+    throw IoError("B.npy: write failed");  // stopped part-way
+  } catch (const IoError&) {
+  }
+  EXPECT_EQ(ReadFile(out / "E.npy"), "old E");
+  EXPECT_EQ(ReadFile(out / "result.json"), "old result");
+  {
+    ReplacedDirectory replaced(out);
+    WriteFileAtomically(replaced.staging() / "E.npy", "new E");
+    WriteFileAtomically(replaced.staging() / "result.json", "new result");
+    replaced.Commit();
+  }
+  EXPECT_EQ(ReadFile(out / "E.npy"), "new E");
+  EXPECT_EQ(ReadFile(out / "result.json"), "new result");
+  EXPECT_EQ(ReadFile(out / "notes.txt"), "the user's");
+  {
+    ReplacedDirectory replaced(dir / "fresh");
+    WriteFileAtomically(replaced.staging() / "E.npy", "first");
+    replaced.Commit();
+  }
+  EXPECT_EQ(ReadFile(dir / "fresh" / "E.npy"), "first");
+  std::vector<std::string> beside;
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path())) {
+    beside.push_back(entry.path().filename().string());
+  }
+  std::sort(beside.begin(), beside.end());
+  EXPECT_EQ(beside, (std::vector<std::string>{"fresh", "solution"}));
+}
+
+// Each kind is told by its manifest; --out of another kind is refused naming both.
+TEST(OutputDirectory, AnotherKindIsRefused) {
+  testing::TempDir dir;
+  std::filesystem::create_directories(dir / "rig");
+  WriteFileAtomically(dir / "rig" / "rig.json", "{}");
+  std::filesystem::create_directories(dir / "solution");
+  WriteFileAtomically(dir / "solution" / "result.json",
+                      R"({"format_version": 1, "method": "perceptual", "alpha": 0.5})");
+  EXPECT_EQ(DirectoryKindOf(dir / "rig"), DirectoryKind::kRig);
+  EXPECT_EQ(DirectoryKindOf(dir / "solution"), DirectoryKind::kSolution);
+  EXPECT_EQ(DirectoryKindOf(dir / "none"), std::nullopt);
+  CheckOutputDirectory(dir / "solution", DirectoryKind::kSolution);
+  CheckOutputDirectory(dir / "none", DirectoryKind::kSolution);
+  try {
+    CheckOutputDirectory(dir / "rig", DirectoryKind::kSolution);
+    ADD_FAILURE() << "no error";
+  } catch (const IoError& error) {
+    EXPECT_NE(std::string(error.what()).find("rig: --out is a rig directory, not a solution directory"),
+              std::string::npos)
+        << error.what();
   }
 }
 
