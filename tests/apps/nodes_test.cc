@@ -53,6 +53,10 @@ struct Rig {
     nlohmann::json projectors = file.at("projectors");
     nlohmann::json centre = projectors.at(0);
     centre["name"] = "centre";
+    // Left's lens and pose in a file of its own (a rig refuses two projectors sharing one file).
+    const std::string left_model = centre.at("model").get<std::string>();
+    std::filesystem::copy_file(room / left_model, room / ("centre_" + left_model));
+    centre["model"] = "centre_" + left_model;
     projectors.push_back(centre);
     const nlohmann::json rig = {{"format_version", 1},
                                 {"camera", {{"model", file.at("cameras").at(0).at("model")}}},
