@@ -59,7 +59,7 @@ case "$command" in
     # the sanitizers in the unit tests of each library; package/install and layering/* check
     # files, not code. apps/bad_input (every command on malformed input) stays.
     ctest --preset asan --parallel 2 \
-      -E '^(apps/(faults|nodes|cli|emulated_room)|calibration/(calibrate_all|projectors_command|photometric_command)|projection/(project_command|multi_monitor)|capture/cli|verification/verify|package/install|layering/.*)$' \
+      -E '^(apps/(faults|nodes|cli|emulated_room)|calibration/(calibrate_all|projectors_command|photometric_command|board_command)|projection/(project_command|multi_monitor)|capture/cli|verification/verify|package/install|layering/.*)$' \
       "$@"
     ;;
   build)
