@@ -303,17 +303,22 @@ CaptureLayout CaptureLayoutOf(const StructuredLightOptions& options) {
   layout.width = options.width;
   layout.height = options.height;
   layout.file_pattern = "pat%03d.png";
-  layout.blocks.push_back(LayoutBlock{.kind = "white"});
-  layout.blocks.push_back({.kind = "black"});
+  const auto block = [](const char* kind) {
+    LayoutBlock made;
+    made.kind = kind;
+    return made;
+  };
+  layout.blocks.push_back(block("white"));
+  layout.blocks.push_back(block("black"));
   for (bool column : {true, false}) {
     if (column ? !options.columns : !options.rows) continue;
-    LayoutBlock gray{.kind = "gray"};
+    LayoutBlock gray = block("gray");
     gray.code = options.xor_codes ? "xor" : "gray";
     gray.axes = column ? "columns" : "rows";
     gray.finest_bit = StructuredLightFinestBit(options);
     layout.blocks.push_back(gray);
     if (options.phase_period == 0) continue;
-    LayoutBlock phase{.kind = "phase"};
+    LayoutBlock phase = block("phase");
     phase.axis = column ? "columns" : "rows";
     phase.period = options.phase_period;
     for (int step = 0; step < options.phase_steps; ++step)
