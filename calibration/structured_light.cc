@@ -210,7 +210,8 @@ StructuredLightLayout LayoutOf(const StructuredLightOptions& options) {
   layout.height = options.height;
   layout.white = 0;
   layout.black = 1;
-  for (const AxisLayout& axis : Layout(options)) {
+  const std::vector<AxisLayout> axes = Layout(options);
+  for (const AxisLayout& axis : axes) {
     StructuredLightLayout::Gray gray;
     gray.column = axis.is_column;
     gray.bits = axis.bits;
@@ -232,7 +233,7 @@ StructuredLightLayout LayoutOf(const StructuredLightOptions& options) {
     }
     layout.phases.push_back(phase);
   }
-  const AxisLayout& last = Layout(options).back();
+  const AxisLayout& last = axes.back();
   layout.image_count = last.phase_index + (options.phase_period > 0 ? options.phase_steps : 0);
   return layout;
 }
