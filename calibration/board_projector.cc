@@ -483,28 +483,25 @@ bool CalibrateBoardProjector(const BoardProjectorOptions& options, const Chessbo
   return finish(BoardProjectorSummary::kConverged, "");
 }
 
-CameraModel BoardProjectorCalibration::CameraModelOut() const {
+// Device 0 (the camera, at the reference) or 1 (the projector) as a .cameramodel carrying the
+// joint solve's optimization inputs.
+namespace {
+CameraModel DeviceModel(const BoardProjectorCalibration& rig, int device) {
   CameraModel model;
-  model.lens_model = lens_model;
-  model.intrinsics = camera_intrinsics;
-  model.width = camera_width;
-  model.height = camera_height;
-  model.optimization_inputs = MrcalOptimizationInputs(ToMrcalRig(*this), lens_model);
-  model.icam_intrinsics = 0;
+  model.lens_model = rig.lens_model;
+  model.intrinsics = device == 0 ? rig.camera_intrinsics : rig.projector_intrinsics;
+  model.width = device == 0 ? rig.camera_width : rig.projector_width;
+  model.height = device == 0 ? rig.camera_height : rig.projector_height;
+  if (device == 1) model.cam_from_ref = rig.projector_from_camera;
+  model.optimization_inputs = MrcalOptimizationInputs(ToMrcalRig(rig), rig.lens_model);
+  model.icam_intrinsics = device;
   return model;
 }
+}  // namespace
 
-CameraModel BoardProjectorCalibration::ProjectorModelOut() const {
-  CameraModel model;
-  model.lens_model = lens_model;
-  model.intrinsics = projector_intrinsics;
-  model.width = projector_width;
-  model.height = projector_height;
-  model.cam_from_ref = projector_from_camera;
-  model.optimization_inputs = MrcalOptimizationInputs(ToMrcalRig(*this), lens_model);
-  model.icam_intrinsics = 1;
-  return model;
-}
+CameraModel BoardProjectorCalibration::CameraModelOut() const { return DeviceModel(*this, 0); }
+
+CameraModel BoardProjectorCalibration::ProjectorModelOut() const { return DeviceModel(*this, 1); }
 
 bool BoardProjectorUncertainty(const BoardProjectorCalibration& calibration,
                                ProjectionUncertaintyMap* camera_map,
