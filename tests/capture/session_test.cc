@@ -58,6 +58,25 @@ double ExpectedLuma(const cv::Mat& pattern) {
 
 std::string Bytes(const fs::path& path) { return ReadFile(path); }
 
+// The file of `pattern`'s first exposure in the session in `dir`.
+fs::path FrameFile(const fs::path& dir, int pattern) {
+  const CaptureSessionData data = CaptureSessionData::Load(dir);
+  return dir / data.manifest()["patterns"][pattern]["captured"]["exposures"][0]["file"]
+                   .get<std::string>();
+}
+
+// Resumes the complete photometric session in `dir` after `pattern`'s frame was damaged: that
+// pattern alone is captured again, and reads as the camera sees it.
+void ExpectResumeRecapturesOnly(const fs::path& dir, const CaptureSequence& sequence,
+                                TestCamera& camera, MemoryDisplay& display, int pattern) {
+  const CaptureSummary summary = RunCaptureSession(Options(dir), sequence, camera, display);
+  EXPECT_EQ(summary.patterns_before, 6);
+  EXPECT_EQ(summary.patterns_captured, 1);
+  double low = 0;
+  cv::minMaxLoc(CaptureSessionData::Load(dir).Mean(pattern), &low);
+  EXPECT_NEAR(low, ExpectedLuma(sequence.patterns[pattern].image), 0.501);
+}
+
 // A session.json pattern without a "captured" key aborted captured() on an assertion of
 // nlohmann::json (found by fuzz_session; the input is fuzz/regressions/session/).
 TEST(CaptureSessionData, PatternWithoutCapturedKeyIsNotCaptured) {
@@ -188,15 +207,8 @@ TEST(CaptureSession, APatternWhoseFilesAreMissingIsCapturedAgain) {
   auto display = std::make_shared<MemoryDisplay>(cv::Size(12, 8));
   TestCamera camera(SessionCamera(), MakeLoopbackView(display));
   RunCaptureSession(Options(dir.path()), sequence, camera, *display);
-  const CaptureSessionData data = CaptureSessionData::Load(dir.path());
-  fs::remove(dir.path() /
-             data.manifest()["patterns"][3]["captured"]["exposures"][0]["file"].get<std::string>());
-  const CaptureSummary summary = RunCaptureSession(Options(dir.path()), sequence, camera, *display);
-  EXPECT_EQ(summary.patterns_before, 6);
-  EXPECT_EQ(summary.patterns_captured, 1);
-  double low = 0;
-  cv::minMaxLoc(CaptureSessionData::Load(dir.path()).Mean(3), &low);
-  EXPECT_NEAR(low, ExpectedLuma(sequence.patterns[3].image), 0.501);
+  fs::remove(FrameFile(dir.path(), 3));
+  ExpectResumeRecapturesOnly(dir.path(), sequence, camera, *display, 3);
 }
 
 // A frame altered or truncated after it was captured (a disk fault, a copy gone wrong) still
@@ -209,10 +221,7 @@ TEST(CaptureSession, AFrameChangedAfterCaptureIsRefusedAndCapturedAgain) {
     auto display = std::make_shared<MemoryDisplay>(cv::Size(12, 8));
     TestCamera camera(SessionCamera(), MakeLoopbackView(display));
     RunCaptureSession(Options(dir.path()), sequence, camera, *display);
-    const CaptureSessionData data = CaptureSessionData::Load(dir.path());
-    const fs::path frame =
-        dir.path() /
-        data.manifest()["patterns"][4]["captured"]["exposures"][0]["file"].get<std::string>();
+    const fs::path frame = FrameFile(dir.path(), 4);
     if (truncate) {
       const std::string bytes = Bytes(frame);
       WriteFileAtomically(frame, bytes.substr(0, bytes.size() - 5));
@@ -230,12 +239,7 @@ TEST(CaptureSession, AFrameChangedAfterCaptureIsRefusedAndCapturedAgain) {
       EXPECT_NE(std::string(error.what()).find(frame.filename().string()), std::string::npos)
           << error.what();
     }
-    const CaptureSummary summary = RunCaptureSession(Options(dir.path()), sequence, camera, *display);
-    EXPECT_EQ(summary.patterns_before, 6);
-    EXPECT_EQ(summary.patterns_captured, 1);
-    double low = 0;
-    cv::minMaxLoc(CaptureSessionData::Load(dir.path()).Mean(4), &low);
-    EXPECT_NEAR(low, ExpectedLuma(sequence.patterns[4].image), 0.501);
+    ExpectResumeRecapturesOnly(dir.path(), sequence, camera, *display, 4);
   }
 }
 
