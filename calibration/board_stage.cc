@@ -43,11 +43,9 @@ BoardPoseCapture ReadBoardSession(const std::filesystem::path& directory,
                                   const StructuredLightDecodeOptions& decode, int* projector_width,
                                   int* projector_height) {
   // Procam's own sessions and imported ones (calibration/capture_layout.h) alike.
-  const StructuredLightSession session = ReadStructuredLightSession(directory);
+  const StructuredLightSession session = ReadStructuredLightSession(directory, /*both_axes=*/true);
   const std::string manifest = (directory / "session.json").string();
   const StructuredLightLayout& layout = session.layout;
-  if (!layout.Encodes(true) || !layout.Encodes(false))
-    throw IoError(manifest + ": sequence.parameters: both columns and rows must be encoded");
   *projector_width = layout.width;
   *projector_height = layout.height;
   BoardPoseCapture capture;

@@ -374,7 +374,7 @@ std::string DecodeSummary::BriefReport() const {
       map.gray_phase_agree + map.gray_phase_disagree, map.noise_sigma, seconds);
 }
 
-StructuredLightSession ReadStructuredLightSession(const fs::path& directory) {
+StructuredLightSession ReadStructuredLightSession(const fs::path& directory, bool both_axes) {
   if (!fs::is_directory(directory)) throw IoError(directory.string() + ": not a directory");
   const CaptureSessionData data = CaptureSessionData::Load(directory);
   const std::string manifest = (directory / "session.json").string();
@@ -408,6 +408,8 @@ StructuredLightSession ReadStructuredLightSession(const fs::path& directory) {
     if (!options.Check(&why)) throw IoError(manifest + ": sequence.parameters: " + why);
     session.layout = LayoutOf(options);
   }
+  if (both_axes && (!session.layout.Encodes(true) || !session.layout.Encodes(false)))
+    throw IoError(manifest + ": sequence.parameters: both columns and rows must be encoded");
   if (data.pattern_count() != session.layout.image_count)
     throw IoError(manifest + ": " + std::to_string(data.pattern_count()) +
                   " patterns for a sequence of " + std::to_string(session.layout.image_count));

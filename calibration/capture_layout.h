@@ -95,8 +95,10 @@ struct StructuredLightSession {
   std::string display_name;  // the display's name as the session recorded it
 };
 // Throws IoError naming session.json or a photo: not a structured-light session, a pattern not
-// captured, a photo changed since it was recorded, sizes that differ.
-StructuredLightSession ReadStructuredLightSession(const std::filesystem::path& directory);
+// captured, a photo changed since it was recorded, sizes that differ; with `both_axes`, a
+// sequence that does not encode both columns and rows (checked before any photo is read).
+StructuredLightSession ReadStructuredLightSession(const std::filesystem::path& directory,
+                                                  bool both_axes = false);
 
 // Decodes `session`. Throws IoError when its layout and photos do not fit.
 DecodeSummary DecodeSession(const StructuredLightSession& session,

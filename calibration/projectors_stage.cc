@@ -49,11 +49,9 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
 ProjectorObservations ReadSession(const std::filesystem::path& directory, int camera_width,
                                   int camera_height, const std::filesystem::path& camera_model,
                                   std::string name, const ProgressCallback& progress) {
-  const StructuredLightSession session = ReadStructuredLightSession(directory);
+  const StructuredLightSession session = ReadStructuredLightSession(directory, /*both_axes=*/true);
   const std::string manifest = (directory / "session.json").string();
   const StructuredLightLayout& layout = session.layout;
-  if (!layout.Encodes(true) || !layout.Encodes(false))
-    throw IoError(manifest + ": sequence.parameters: both columns and rows must be encoded");
   const cv::Mat& first = session.images.front();
   if (first.cols != camera_width || first.rows != camera_height)
     throw IoError(manifest + ": its photos are " + std::to_string(first.cols) + "x" +
