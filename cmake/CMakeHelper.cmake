@@ -9,6 +9,12 @@ function(procam_add_library name)
   add_library(procam_${name} STATIC ${ARG_SOURCES})
   add_library(procam::${name} ALIAS procam_${name})
   set_target_properties(procam_${name} PROPERTIES EXPORT_NAME ${name})
+  # The Python module (python/) links the libraries into a shared object: their code must be
+  # position-independent (-fPIC; Debian's default -fPIE makes thread-local variables that a
+  # shared object cannot hold).
+  if(PROCAM_WITH_PYTHON)
+    set_target_properties(procam_${name} PROPERTIES POSITION_INDEPENDENT_CODE ON)
+  endif()
   target_include_directories(procam_${name} PUBLIC
     $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}> $<BUILD_INTERFACE:${PROJECT_BINARY_DIR}/include>
     $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}/procam>)

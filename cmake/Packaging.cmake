@@ -14,6 +14,10 @@ endif()
 if(PROCAM_WITH_GLFW)
   list(APPEND PROCAM_DEB_DEPENDS libglfw3-dev libgl-dev libepoxy-dev libx11-dev libxrandr-dev)
 endif()
+if(PROCAM_PYTHON_MODULE)
+  # `import procam` from /usr/lib/python3/dist-packages: the interpreter and NumPy it returns.
+  list(APPEND PROCAM_DEB_DEPENDS python3 python3-numpy)
+endif()
 list(JOIN PROCAM_DEB_DEPENDS ", " CPACK_DEBIAN_PACKAGE_DEPENDS)
 
 set(CPACK_GENERATOR DEB)

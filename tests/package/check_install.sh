@@ -16,6 +16,15 @@ for file in lib/cmake/procam/procamConfig.cmake include/procam/compensation/solv
   [ -f "$scratch/prefix/$file" ] || { echo "FAIL: $file not installed"; exit 1; }
 done
 
+# The Python module, where this build made one: imported from the installed prefix alone.
+python_module=no
+if [ -f "$build/python/procam/__init__.py" ]; then
+  python_module=yes
+  PYTHONPATH="$scratch/prefix/lib/python3/dist-packages" /usr/bin/python3 -c \
+    "import procam, sys; g = procam.geometry('synthetic:tiny_box', patches=64); assert g.fine.size > 0; \
+assert procam.__file__.startswith(sys.argv[1]), procam.__file__" "$scratch/prefix"
+fi
+
 cmake -S "$source/tests/package/consumer" -B "$scratch/consumer" -G Ninja \
       -DCMAKE_PREFIX_PATH="$scratch/prefix" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$scratch/consumer" >/dev/null
@@ -33,4 +42,9 @@ for file in ./usr/bin/procam ./usr/lib/cmake/procam/procamConfig.cmake \
             ./usr/include/procam/geometry/scene.h; do
   grep -q " $file\$" <<<"$contents" || { echo "FAIL: $deb lacks $file"; exit 1; }
 done
+if [ "$python_module" = yes ]; then
+  grep -q " ./usr/lib/python3/dist-packages/procam/__init__.py\$" <<<"$contents" ||
+    { echo "FAIL: $deb lacks the Python module"; exit 1; }
+  grep -q "python3-numpy" <<<"$depends" || { echo "FAIL: $deb does not depend on python3-numpy"; exit 1; }
+fi
 echo "$(basename "$deb"): depends on $depends"
