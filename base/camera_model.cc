@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <regex>
 #include <stdexcept>
 
 #include "base/io.h"
@@ -96,14 +97,33 @@ std::string CheckModelNumbers(const mrcal_cameramodel_t& model, int intrinsics_c
   return "";
 }
 
+// Where libmrcal could not parse a file: the key whose list holds a word that is not a number
+// (nan, inf), as "KEY: not a number: WORD", or "" when there is none.
+std::string NonNumberKey(const std::string& text) {
+  static const std::regex word(R"([-+]?\b(nan|inf|infinity)\b)", std::regex::icase);
+  std::smatch found;
+  if (!std::regex_search(text, found, word)) return "";
+  static const std::regex key(R"('([A-Za-z_]+)'\s*:)");
+  const std::string before = text.substr(0, found.position(0));
+  std::string last;
+  for (auto it = std::sregex_iterator(before.begin(), before.end(), key); it != std::sregex_iterator(); ++it) {
+    last = (*it)[1];
+  }
+  return (last.empty() ? std::string("a value") : last) + ": not a number: " + found.str(0);
+}
+
 }  // namespace
 
 CameraModel ReadCameraModelFile(const std::filesystem::path& path) {
   const std::string file = path.string();
   // A .cameramodel is a few kilobytes (splined models: some hundred numbers).
-  const ParsedCameraModel parsed = ParseCameraModel(ReadFile(path, uintmax_t{16} << 20));
-  if (!parsed)
+  const std::string text = ReadFile(path, uintmax_t{16} << 20);
+  const ParsedCameraModel parsed = ParseCameraModel(text);
+  if (!parsed) {
+    const std::string key = NonNumberKey(text);
+    if (!key.empty()) throw IoError(file + ": " + key);
     throw IoError(file + ": not a valid mrcal .cameramodel (libmrcal could not parse it)");
+  }
   CameraModel model;
   char name[1024];
   if (!mrcal_lensmodel_name(name, sizeof(name), &parsed->lensmodel)) {

@@ -130,7 +130,15 @@ void RemoveManifest(const std::filesystem::path& path) {
 void CheckRegularFile(const std::filesystem::path& path, uintmax_t max_bytes) {
   std::error_code error;
   const std::filesystem::file_status status = std::filesystem::status(path, error);
-  if (!std::filesystem::exists(status)) throw IoError(path.string() + ": file not found");
+  // A loop of symbolic links, a directory that may not be searched: the system's reason, not
+  // "not found".
+  if (error && error != std::errc::no_such_file_or_directory) throw IoError(path.string() + ": " + error.message());
+  if (!std::filesystem::exists(status)) {
+    if (std::filesystem::is_symlink(std::filesystem::symlink_status(path, error))) {
+      throw IoError(path.string() + ": a symbolic link to a file that does not exist");
+    }
+    throw IoError(path.string() + ": file not found");
+  }
   if (!std::filesystem::is_regular_file(status)) {
     throw IoError(path.string() + ": not a regular file (a directory, device, FIFO or socket)");
   }

@@ -4,7 +4,9 @@
 #include <pybind11/functional.h>
 #include <pybind11/stl.h>
 
+#include <chrono>
 #include <stdexcept>
+#include <vector>
 
 #include "compensation/problem.h"
 #include "compensation/solver.h"
@@ -149,6 +151,28 @@ void BindCompensation(py::module_& m) {
       "Solves `problem`: returns (Solution, SolverSummary). Raises ValueError for an invalid "
       "problem or options. `progress`: None or a callable taking one line per outer iteration. "
       "Releases the GIL while it solves.");
+
+  // The same solve timed in C++ alone, for tools/python_overhead.py: what a call from Python
+  // costs beyond it is the binding's overhead.
+  m.def(
+      "_solve_seconds_in_cpp",
+      [](const CompensationProblem& problem, const SolverOptions& options, int repeats) {
+        CheckOptions(options);
+        py::gil_scoped_release release;
+        std::vector<double> seconds;
+        for (int k = 0; k < repeats; ++k) {
+          // Timed until the result is freed, as a call from Python that drops it is.
+          const auto start = std::chrono::steady_clock::now();
+          {
+            SolverSummary summary;
+            const CompensationSolution solution = Solve(options, problem, &summary);
+          }
+          seconds.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+        }
+        return seconds;
+      },
+      py::arg("problem"), py::arg("options"), py::arg("repeats"),
+      "Wall seconds of each of `repeats` calls of the C++ Solve on `problem` (benchmarks only).");
 
   py::class_<CompensationRun>(m, "Compensation",
                               "A compensation of a scene: the solution and its colour differences.")

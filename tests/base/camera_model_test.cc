@@ -98,6 +98,9 @@ TEST(CameraModelFile, RefusesAbsurdNumbers) {
        "intrinsics: focal lengths fx, fy must be in (0, "},
       {model(good_k, "0, 80", good_rt), "not a valid mrcal .cameramodel"},  // libmrcal's check
       {model(good_k, "100000, 80", good_rt), "imagersize: each side must be in [1, 65536]"},
+      // Words that are not numbers, whether or not libmrcal parses them: the key is named.
+      {model("nan, 100, 50, 40", good_size, good_rt), "intrinsics"},
+      {model(good_k, good_size, "0, 0, 0, 1, -inf, 3"), "extrinsics"},
   };
   for (const Case& c : cases) {
     const auto path = dir.Write("m.cameramodel", c.text);

@@ -256,5 +256,24 @@ TEST(ReadFile, RefusesWhatIsNotARegularFileOrTooLarge) {
   EXPECT_THROW(ReadFile(small, 9), IoError);
 }
 
+TEST(ReadFile, NamesALoopOfLinksAndADanglingLinkForWhatTheyAre) {
+  testing::TempDir dir;
+  std::filesystem::create_symlink(dir / "b", dir / "a");
+  std::filesystem::create_symlink(dir / "a", dir / "b");
+  std::filesystem::create_symlink(dir / "gone", dir / "dangling");
+  const auto message = [](const std::filesystem::path& path) {
+    try {
+      ReadFile(path);
+    } catch (const IoError& error) {
+      return std::string(error.what());
+    }
+    return std::string("no error");
+  };
+  // The system's own wording of ELOOP, not "file not found".
+  EXPECT_EQ(message(dir / "a"), (dir / "a").string() + ": " + std::make_error_code(std::errc::too_many_symbolic_link_levels).message());
+  EXPECT_EQ(message(dir / "dangling"), (dir / "dangling").string() + ": a symbolic link to a file that does not exist");
+  EXPECT_EQ(message(dir / "absent"), (dir / "absent").string() + ": file not found");
+}
+
 }  // namespace
 }  // namespace procam
