@@ -9,11 +9,6 @@
 namespace procam {
 
 bool CalibratedRoomOptions::Check(std::string* why) const {
-  if (patches != 0 && patches < 4) {
-    *why = "patches must be 0 (the solution's or the scene's) or ≥ 4, got " +
-           std::to_string(patches);
-    return false;
-  }
   if (expected_patches < 0) {
     *why = "expected_patches must be ≥ 0, got " + std::to_string(expected_patches);
     return false;
@@ -90,6 +85,8 @@ GeometryStage RoomGeometry(const CalibratedRoomOptions& options, Scene scene, in
   if (target > 0) geometry.scene.target_patches = target;
   SubdivisionOptions subdivision;
   subdivision.target_patches = geometry.scene.target_patches;
+  std::string why;
+  if (!subdivision.Check(&why)) throw IoError("--patches: " + why);  // as the geometry stage
   geometry.patches = SubdividePatches(geometry.scene, subdivision);
   return geometry;
 }

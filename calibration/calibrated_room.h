@@ -38,8 +38,8 @@ struct CalibratedRoomOptions {
   std::filesystem::path rig_dir;
   // A solution directory (procam compensate's): its patch count must be the room's. Optional.
   std::filesystem::path solution_dir;
-  // Target patch count of the fine level, 0 or ≥ 4. 0: the solution's target_patches (with a
-  // solution), else the scene's `patches`.
+  // Target patch count of the fine level, 0 or ≥ 4 (checked by the geometry stage, naming
+  // --patches). 0: the solution's target_patches (with a solution), else the scene's `patches`.
   int patches = 0;
   // Fine patches the room must subdivide into, as another process counted them (a display node:
   // the controller's room); 0: no such count. With `expected_by` naming who counted them and
