@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <cmath>
+#include <numbers>
 #include <optional>
 #include <opencv2/imgcodecs.hpp>
 
@@ -128,7 +129,7 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
 
   // Accuracy against the world's true projectors and camera.
   const auto angle_deg = [](const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
-    return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / M_PI;
+    return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / std::numbers::pi;
   };
   nlohmann::json accuracy = nlohmann::json::array();
   for (const Projector& truth : evaluation.world->projectors()) {
