@@ -10,10 +10,8 @@
 #include "apps/commands.h"
 #include "base/output_directory.h"
 #include "compensation/stage.h"
+#include "calibration/calibrated_room.h"
 #include "geometry/stage.h"
-#include "calibration/rig_directory.h"
-#include "projection/projection_rig.h"
-#include "projection/projector.h"
 
 namespace procam {
 namespace {
@@ -77,17 +75,19 @@ void AddCompensationCommands(CLI::App& app) {
       std::string why;
       if (!CudaAvailable(&why)) throw std::runtime_error("--device cuda: " + why);
     }
+    CalibratedRoomOptions room_options;
+    room_options.scene = args->scene;
+    room_options.rig_dir = args->rig;
+    room_options.patches = args->patches;
+    room_options.storage =
+        args->form_factors == "compressed" ? FormFactorStorage::kCompressed : FormFactorStorage::kDense;
+    room_options.problem = false;  // RunCompensation makes the fine and coarse problems
+    room_options.progress = LogProgress();
     // The rig is read first: a bad rig.json fails before the form factors are computed.
-    std::optional<RigDirectory> rig_dir;
-    if (!args->rig.empty()) rig_dir = ReadRigDirectory(args->rig);
+    RoomSources sources = ReadRoomSources(room_options);
     if (args->export_problem && args->form_factors == "compressed") {
       throw std::invalid_argument("--export writes the dense F.npy: not with --form-factors compressed");
     }
-    GeometryStage stage =
-        RunGeometryStage(args->scene, GeometryArguments(args->patches, args->form_factors == "compressed"
-                                                                           ? FormFactorStorage::kCompressed
-                                                                           : FormFactorStorage::kDense));
-    if (rig_dir) ApplyRigReflectance(*rig_dir, &stage.patches);
     CompensationOptions options;
     ParseMethod(args->method, &options.solver.method);
     ParseRobustLoss(args->loss, &options.solver.robust_loss);
@@ -97,9 +97,10 @@ void AddCompensationCommands(CLI::App& app) {
     options.solver.device = device;
     options.alpha = args->alpha;
     options.progress = LogProgress();
-    // With projectors in the scene, their light sets the bounds; otherwise the scene's "bounds".
-    std::vector<Projector> projectors = rig_dir ? rig_dir->projectors : ReadProjectors(stage.scene);
-    if (projectors.empty()) {
+    CalibratedRoom room = BuildCalibratedRoom(room_options, std::move(sources));
+    // With projectors (the rig's or the scene's), their light sets the bounds; otherwise the
+    // scene's "bounds".
+    if (room.projectors.empty()) {
       // A scene without projectors (a built-in scene by name, a scene file without
       // "projectors") is solved within its bounds: said before the solve, as project needs
       // projectors to use the solution.
@@ -108,15 +109,14 @@ void AddCompensationCommands(CLI::App& app) {
           "bounds; procam project will need --rig (or write the scene with its projectors: procam "
           "scene write NAME --out DIR)",
           args->scene);
+    } else {
+      options.lower = room.projection.lower;
+      options.upper = room.projection.upper;
     }
-    if (!projectors.empty()) {
-      const ProjectionRig rig = BuildProjectionRig(stage.patches.fine, std::move(projectors), ProjectionRigOptions());
-      options.lower = rig.lower;
-      options.upper = rig.upper;
-    }
+    const GeometryStage& stage = room.geometry;
     const CompensationRun run = RunCompensation(stage, options);
     nlohmann::json extra = nlohmann::json::object();
-    if (rig_dir) extra["rig"] = rig_dir->Describe();
+    if (room.rig) extra["rig"] = room.rig->Describe();
     WriteCompensation(stage, run, args->out, args->export_problem, extra);
     std::cout << run.summary.BriefReport() << "\n"
               << "objective (L*a*b*) " << run.perceptual_objective << "; ΔE76 mean " << run.mean_delta_e76

@@ -26,6 +26,7 @@
 #include "datasets_synthetic/evaluation.h"
 #include "geometry/stage.h"
 #include "base/html_report.h"
+#include "calibration/calibrated_room.h"
 #include "calibration/rig_directory.h"
 #include "verification/verification.h"
 #include "datasets_synthetic/paper_scenes.h"
@@ -109,19 +110,21 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
   spdlog::info("stage 2/4 compensation with the calibrated rig");
   std::printf("\n$ procam compensate %s --method perceptual --multires --patches %d --rig %s --out %s\n",
               scene.c_str(), patches, rig_dir.c_str(), solution_dir.c_str());
-  const RigDirectory rig_directory = ReadRigDirectory(rig_dir);
-  GeometryStage geometry = RunGeometryStage(scene, GeometryArguments(patches));
-  ApplyRigReflectance(rig_directory, &geometry.patches);
-  const ProjectionRig projection_rig =
-      BuildProjectionRig(geometry.patches.fine, rig_directory.projectors, ProjectionRigOptions());
+  CalibratedRoomOptions room_options;
+  room_options.scene = scene;
+  room_options.rig_dir = rig_dir;
+  room_options.patches = patches;
+  room_options.problem = false;  // RunCompensation makes the fine and coarse problems
+  room_options.progress = LogProgress();
+  const CalibratedRoom room = LoadCalibratedRoom(room_options);
   CompensationOptions compensation;
   compensation.solver.method = CompensationMethod::kPerceptual;
   compensation.solver.multires = true;
-  compensation.lower = projection_rig.lower;
-  compensation.upper = projection_rig.upper;
+  compensation.lower = room.projection.lower;
+  compensation.upper = room.projection.upper;
   compensation.progress = LogProgress();
-  const CompensationRun run = RunCompensation(geometry, compensation);
-  WriteCompensation(geometry, run, solution_dir, false, {{"rig", rig_directory.Describe()}});
+  const CompensationRun run = RunCompensation(room.geometry, compensation);
+  WriteCompensation(room.geometry, run, solution_dir, false, {{"rig", room.rig->Describe()}});
 
   spdlog::info("stage 3/4 projector images");
   std::printf("\n$ procam project %s --out %s --light %s\n", solution_dir.c_str(), images.c_str(),

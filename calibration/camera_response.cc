@@ -2,17 +2,17 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <set>
+#include <sstream>
 
 #include <opencv2/photo.hpp>
 
+#include "base/check.h"
+#include "base/io.h"
+
 namespace procam {
 namespace {
-
-bool Fail(std::string* why, const std::string& message) {
-  if (why) *why = message;
-  return false;
-}
 
 // About `count` pixels spread evenly over the codes of the middle exposure's green channel
 // (strata of 8 codes, pixels within a stratum taken at an even stride).
@@ -123,15 +123,6 @@ bool CalibrateCameraResponse(const std::vector<cv::Mat>& images,
   }
   return true;
 }
-
-}  // namespace procam
-
-#include <fstream>
-#include <sstream>
-
-#include "base/io.h"
-
-namespace procam {
 
 nlohmann::json CameraResponseJson(const CameraResponse& response) {
   return {{"format", "procam camera response"},

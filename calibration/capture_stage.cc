@@ -4,6 +4,7 @@
 #include <optional>
 #include <set>
 
+#include "base/check.h"
 #include "base/io.h"
 #include "calibration/camera_response.h"
 #include "calibration/structured_light.h"
@@ -88,11 +89,6 @@ std::shared_ptr<PatternDisplay> SimulatedProjectorDisplay(const CaptureStageOpti
 
 nlohmann::json CaptureResult(const CaptureSequence& sequence, const Camera& camera) {
   return {{"command", "capture"}, {"sequence", sequence.kind}, {"camera", camera.Info().uri}};
-}
-
-bool Fail(std::string* why, const std::string& message) {
-  *why = message;
-  return false;
 }
 
 bool InGammaRange(double gamma) { return gamma > 0.0 && gamma <= 10.0; }  // false for NaN

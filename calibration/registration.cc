@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <numbers>
 #include <numeric>
 #include <random>
 #include <stdexcept>
@@ -27,8 +28,6 @@ extern "C" {
 namespace procam {
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // A rigid transform as Ceres parameter blocks: angle-axis rotation, then translation.
 struct PoseBlock {
@@ -55,7 +54,7 @@ struct PoseBlock {
 };
 
 double TurnDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
-  return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / kPi;
+  return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / std::numbers::pi;
 }
 
 ceres::Solver::Options SolverOptions(int max_iterations) {
@@ -1200,7 +1199,7 @@ bool RegisterModelToCloud(const RegistrationOptions& options, const RoomModel& m
     gate = std::max(options.min_gate, std::min(gate, 3.0 * 1.4826 * matched[matched.size() / 2]));
     const Eigen::Isometry3d moved = pose.Pose();
     const double step = (moved.translation() - current.translation()).norm() +
-                        TurnDeg(moved.linear(), current.linear()) * kPi / 180.0;
+                        TurnDeg(moved.linear(), current.linear()) * std::numbers::pi / 180.0;
     if (step < options.tolerance && gate > 0.99 * previous_gate) {
       termination = RegistrationSummary::kConverged;
       break;

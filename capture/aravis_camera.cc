@@ -12,13 +12,10 @@
 #include <limits>
 #include <mutex>
 
+#include "base/check.h"
+
 namespace procam {
 namespace {
-
-bool Fail(std::string* why, const std::string& message) {
-  if (why) *why = message;
-  return false;
-}
 
 // The local address the kernel would send from to reach `address` (a connected UDP socket:
 // connecting sends nothing). Empty when there is no route.

@@ -15,6 +15,7 @@
 #include <mutex>
 #include <stdexcept>
 
+#include "base/check.h"
 #include "base/io.h"
 #include "capture/aravis_camera.h"
 #include "capture/camera.h"
@@ -26,11 +27,6 @@ constexpr int kGvcpPort = 3956;  // GigE Vision's control port (fixed by the sta
 // How often a waiting software trigger is looked at: the fake camera polls its trigger register
 // at this rate, so a triggered exposure starts at most 1 ms after the trigger arrives.
 constexpr double kTriggerPollHz = 1000.0;
-
-bool Fail(std::string* why, const std::string& message) {
-  if (why) *why = message;
-  return false;
-}
 
 bool FrameRateInRange(double frame_rate) { return frame_rate >= 0.1 && frame_rate <= 1000.0; }
 bool LatencyInRange(double latency_ms) { return latency_ms >= 0.0 && latency_ms <= 10000.0; }

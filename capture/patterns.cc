@@ -9,16 +9,12 @@
 #include <set>
 #include <stdexcept>
 
+#include "base/check.h"
 #include "base/image_io.h"
 #include "base/io.h"
 
 namespace procam {
 namespace {
-
-bool Fail(std::string* why, const std::string& message) {
-  if (why) *why = message;
-  return false;
-}
 
 void CheckOrThrow(bool ok, const std::string& what, const std::string& why) {
   if (!ok) throw std::invalid_argument(what + ": " + why);

@@ -6,15 +6,9 @@
 #include <stdexcept>
 #include <thread>
 
+#include "base/check.h"
+
 namespace procam {
-namespace {
-
-bool Fail(std::string* why, const std::string& message) {
-  if (why) *why = message;
-  return false;
-}
-
-}  // namespace
 
 bool HdrMergeOptions::Check(std::string* why) const {
   if (!(black_level >= 0)) return Fail(why, "hdr.black_level must be >= 0");

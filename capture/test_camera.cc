@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <thread>
 
+#include "base/check.h"
+
 namespace procam {
 namespace {
 
@@ -16,11 +18,6 @@ constexpr double kMaxExposureUs = 1e7;
 constexpr double kMaxGainDb = 24.0;
 constexpr double kMaxBlurPx = 20.0;
 constexpr double kMaxAmbient = 10.0;
-
-bool Fail(std::string* why, const std::string& message) {
-  if (why) *why = message;
-  return false;
-}
 
 bool Simulatable(PixelFormat format) {
   return format != PixelFormat::kYUYV && format != PixelFormat::kMJPEG;

@@ -15,13 +15,10 @@
 #include <filesystem>
 #include <set>
 
+#include "base/check.h"
+
 namespace procam {
 namespace {
-
-bool Fail(std::string* why, const std::string& message) {
-  if (why) *why = message;
-  return false;
-}
 
 std::string CString(const uint8_t* text, size_t size) {
   return std::string(reinterpret_cast<const char*>(text),

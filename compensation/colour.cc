@@ -1,6 +1,7 @@
 #include "compensation/colour.h"
 
 #include <algorithm>
+#include <numbers>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -9,10 +10,8 @@
 namespace procam {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-
-double Degrees(double radians) { return radians * 180.0 / kPi; }
-double Radians(double degrees) { return degrees * kPi / 180.0; }
+double Degrees(double radians) { return radians * 180.0 / std::numbers::pi; }
+double Radians(double degrees) { return degrees * std::numbers::pi / 180.0; }
 
 Eigen::Vector3d XyzOfChromaticity(const Eigen::Vector2d& xy) {
   return Eigen::Vector3d(xy[0] / xy[1], 1.0, (1.0 - xy[0] - xy[1]) / xy[1]);

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <cmath>
+#include <numbers>
 #include <optional>
 #include <opencv2/imgcodecs.hpp>
 
@@ -13,6 +14,7 @@
 #include "base/image_io.h"
 #include "base/io.h"
 #include "calibration/calibrate_all_stage.h"
+#include "calibration/calibrated_room.h"
 #include "calibration/camera_report.h"
 #include "calibration/projectors_stage.h"
 #include "calibration/registration.h"
@@ -33,7 +35,7 @@ namespace {
 struct CalibrationStage {
   std::string camera;                              // the synthetic camera's URI
   std::vector<std::vector<std::string>> accuracy;  // table rows
-  GeometryStage geometry;                          // the patches with the rig's reflectance
+  CalibratedRoom room;  // the evaluation's patches with the rig's reflectance, its projectors
   MethodEvaluation perceptual;                     // with the recovered rig
   nlohmann::json json;
 };
@@ -66,16 +68,14 @@ RigDirectory CalibrateSyntheticRig(const std::string& camera, bool scan,
   return ReadRigDirectory(rig_dir);
 }
 
-// Perceptual compensation of `geometry` (the patches the rig's projectors light, with the rig's
-// reflectance) by `projectors`, their images shown by the world's true projectors and
-// photographed in the true world; ΔE against the true desired appearance.
-MethodEvaluation CompensateAndPhotograph(const GeometryStage& geometry,
-                                         const std::vector<Projector>& projectors,
+// Perceptual compensation of `room` (the patches the rig's projectors light, with the rig's
+// reflectance, within its projection rig's bounds), its images shown by the world's true
+// projectors and photographed in the true world; ΔE against the true desired appearance.
+MethodEvaluation CompensateAndPhotograph(const CalibratedRoom& room,
                                          const SceneEvaluation& evaluation,
                                          const EvaluationOptions& options,
                                          const ProgressCallback& progress) {
-  const ProjectionRig recovered =
-      BuildProjectionRig(geometry.patches.fine, projectors, ProjectionRigOptions());
+  const ProjectionRig& recovered = room.projection;
   MethodEvaluation result;
   CompensationOptions compensation;
   compensation.solver.method = CompensationMethod::kPerceptual;
@@ -84,13 +84,30 @@ MethodEvaluation CompensateAndPhotograph(const GeometryStage& geometry,
   compensation.lower = recovered.lower;
   compensation.upper = recovered.upper;
   compensation.progress = progress;
-  result.run = RunCompensation(geometry, compensation);
+  result.run = RunCompensation(room.geometry, compensation);
   result.images = RenderProjectorImages(recovered, result.run.solution.emittance, options.render,
                                         &result.render);
   result.radiance = evaluation.world->RenderRadiance(result.images);
   PixelDeltaE(result.radiance, evaluation, result.run.fine.rgb_to_xyz, result.run.fine.white_xyz,
               &result);
   return result;
+}
+
+// The room as the recovered rig `rig` calibrates it: `geometry` when given (the evaluation's),
+// else `scene` subdivided at `patches`; with the rig's camera's rays when there is no geometry
+// (the scanned room, whose desired appearance comes through the camera).
+CalibratedRoom RecoveredRoom(const RigDirectory& rig, std::optional<GeometryStage> geometry,
+                             const std::string& scene, int patches) {
+  CalibratedRoomOptions room;
+  room.scene = scene;
+  room.rig_dir = rig.dir;
+  room.patches = patches;
+  room.problem = false;  // RunCompensation makes the problems
+  room.camera_rays = !geometry;
+  RoomSources sources;
+  sources.rig = rig;
+  sources.geometry = std::move(geometry);
+  return BuildCalibratedRoom(room, ReadRoomSources(room, std::move(sources)));
 }
 
 nlohmann::json DeltaEJson(const MethodEvaluation& result) {
@@ -112,7 +129,7 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
 
   // Accuracy against the world's true projectors and camera.
   const auto angle_deg = [](const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
-    return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / M_PI;
+    return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / std::numbers::pi;
   };
   nlohmann::json accuracy = nlohmann::json::array();
   for (const Projector& truth : evaluation.world->projectors()) {
@@ -165,10 +182,8 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
 
   // Perceptual compensation with the recovered rig (projectors, photometry, reflectance), shown
   // by the true projectors in the true world.
-  GeometryStage& geometry = stage.geometry = evaluation.geometry;
-  ApplyRigReflectance(rig, &geometry.patches);
-  stage.perceptual =
-      CompensateAndPhotograph(geometry, rig.projectors, evaluation, options, progress);
+  stage.room = RecoveredRoom(rig, evaluation.geometry, "", options.patches);
+  stage.perceptual = CompensateAndPhotograph(stage.room, evaluation, options, progress);
   stage.json["perceptual_with_calibrated_rig"] = DeltaEJson(stage.perceptual);
   return stage;
 }
@@ -203,49 +218,38 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
   const RigDirectory rig =
       CalibrateSyntheticRig(SyntheticCameraUri(evaluation, options), true, rig_dir, steps);
 
-  GeometryOptions geometry_options;
-  geometry_options.patches = options.patches;
-  GeometryStage geometry = RunGeometryStage((rig_dir / "room.json").string(), geometry_options);
-  ApplyRigReflectance(rig, &geometry.patches);
+  CalibratedRoom room =
+      RecoveredRoom(rig, std::nullopt, (rig_dir / "room.json").string(), options.patches);
+  GeometryStage& geometry = room.geometry;
+  const ProjectorGeometry& rig_camera = room.camera;
 
   // The desired appearance through the camera: the true desired picture averaged per scanned
   // patch over the pixels that see it; a patch no pixel sees takes the picture's mean.
-  const ProjectorGeometry rig_camera = ReadCameraModel(rig_dir / "camera.cameramodel");
   PatchLevel& fine = geometry.patches.fine;
-  const CameraPixelRays rays = CastCameraPixels(geometry.scene, fine, {}, rig_camera);
-  Eigen::MatrixX3d sum = Eigen::MatrixX3d::Zero(fine.size(), 3);
-  Eigen::VectorXd count = Eigen::VectorXd::Zero(fine.size());
+  const CameraPixelRays& rays = room.camera_rays;
   const cv::Mat& desired = evaluation.desired;
   Vec3 mean = Vec3::Zero();
   int seen = 0;
-  for (int y = 0; y < std::min(rays.height, desired.rows); ++y) {
-    for (int x = 0; x < std::min(rays.width, desired.cols); ++x) {
-      const cv::Vec3f& value = desired.at<cv::Vec3f>(y, x);
-      const Vec3 rgb(value[0], value[1], value[2]);  // linear R, G, B (RenderDesired)
-      const int patch = rays.patch[static_cast<size_t>(y) * rays.width + x];
-      if (patch < 0 || !(rgb.maxCoeff() > 0.0)) continue;
-      sum.row(patch) += rgb.transpose();
-      count[patch] += 1.0;
-      mean += rgb;
-      ++seen;
-    }
-  }
+  const PatchPixelSums sums = SumPixelsPerPatch(
+      rays.patch, rays.width, rays.height, fine.size(), [&](int x, int y, Eigen::RowVector3d* rgb) {
+        if (x >= desired.cols || y >= desired.rows) return false;
+        const cv::Vec3f& value = desired.at<cv::Vec3f>(y, x);
+        *rgb = Eigen::RowVector3d(value[0], value[1], value[2]);  // linear R, G, B (RenderDesired)
+        if (!(rgb->maxCoeff() > 0.0)) return false;
+        mean += rgb->transpose();
+        ++seen;
+        return true;
+      });
   if (seen == 0) throw std::runtime_error("demo: the camera sees none of the scanned room");
   mean /= seen;
-  int unseen = 0;
-  for (int i = 0; i < fine.size(); ++i) {
-    if (count[i] > 0.0) {
-      fine.desired_linear.row(i) = sum.row(i) / count[i];
-    } else {
-      fine.desired_linear.row(i) = mean.transpose();
-      ++unseen;
-    }
-  }
+  fine.desired_linear =
+      sums.Means(mean.transpose().replicate(fine.size(), 1));
+  const int unseen = static_cast<int>((sums.count.array() == 0).count());
   geometry.patches.coarse.desired_linear =
       CoarsenPatchValues(fine.desired_linear, fine.Areas(), geometry.patches.coarse_of_fine,
                          geometry.patches.coarse.size());
-  stage.perceptual =
-      CompensateAndPhotograph(geometry, rig.projectors, evaluation, options, progress);
+  room.projection.desired = fine.desired_linear;  // the projection rig's copy (seamless light)
+  stage.perceptual = CompensateAndPhotograph(room, evaluation, options, progress);
 
   // The scanned surfaces against the true ones: the frames differ by the camera's pose (true
   // in the world, calibrated in the scanned room).
@@ -377,7 +381,7 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
   Report(demo.progress,
          "demo: verification stage — photos against the predicted L*a*b*, the closed loop (procam "
          "verify)");
-  WriteCompensation(calibration.geometry, calibration.perceptual.run, out / "perceptual_calibrated",
+  WriteCompensation(calibration.room.geometry, calibration.perceptual.run, out / "perceptual_calibrated",
                     false);
   VerificationOptions verification;
   verification.rig_dir = out / "rig";

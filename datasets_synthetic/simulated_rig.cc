@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <random>
 #include <stdexcept>
 
@@ -10,8 +11,6 @@
 
 namespace procam {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 }  // namespace
 
@@ -34,7 +33,7 @@ bool SimulatedRigOptions::Check(std::string* why) const {
 }
 
 CameraGeometry CameraFromPlacement(const DevicePlacement& placement, bool distortion) {
-  const double f = 0.5 * placement.width / std::tan(0.5 * placement.horizontal_fov_deg * kPi / 180.0);
+  const double f = 0.5 * placement.width / std::tan(0.5 * placement.horizontal_fov_deg * std::numbers::pi / 180.0);
   const double cx = 0.5 * (placement.width - 1), cy = 0.5 * (placement.height - 1);
   const Eigen::Isometry3d cam_from_world = ProjFromWorldLookingAt(placement.centre, placement.target, placement.up);
   if (!distortion) return CameraGeometry::Pinhole(f, f, cx, cy, placement.width, placement.height, cam_from_world);
@@ -45,7 +44,7 @@ CameraGeometry CameraFromPlacement(const DevicePlacement& placement, bool distor
 Projector ProjectorFromPlacement(const DevicePlacement& placement) {
   Projector projector;
   projector.name = placement.name;
-  const double f = 0.5 * placement.width / std::tan(0.5 * placement.horizontal_fov_deg * kPi / 180.0);
+  const double f = 0.5 * placement.width / std::tan(0.5 * placement.horizontal_fov_deg * std::numbers::pi / 180.0);
   projector.geometry = ProjectorGeometry::Pinhole(
       f, f, 0.5 * (placement.width - 1), 0.5 * (placement.height - 1), placement.width, placement.height,
       ProjFromWorldLookingAt(placement.centre, placement.target, placement.up));
@@ -129,8 +128,8 @@ double SimulatedRig::AlbedoFactor(int surface, const Vec2& uv) const {
   if (options_.albedo_variation == 0.0) return 1.0;
   // A smooth, deterministic pattern in [−1, 1]: a few incommensurate waves, different per surface.
   const double s = 0.61803398875 * (surface + 1);
-  const double pattern = 0.5 * std::sin(2 * kPi * (3.0 * uv.x() + s)) * std::cos(2 * kPi * (4.0 * uv.y() + 0.5 * s)) +
-                         0.5 * std::sin(2 * kPi * (7.0 * uv.x() + 5.0 * uv.y()) + 3.0 * s);
+  const double pattern = 0.5 * std::sin(2 * std::numbers::pi * (3.0 * uv.x() + s)) * std::cos(2 * std::numbers::pi * (4.0 * uv.y() + 0.5 * s)) +
+                         0.5 * std::sin(2 * std::numbers::pi * (7.0 * uv.x() + 5.0 * uv.y()) + 3.0 * s);
   return 1.0 + options_.albedo_variation * pattern;
 }
 

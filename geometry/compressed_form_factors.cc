@@ -1,5 +1,6 @@
 #include "geometry/compressed_form_factors.h"
 
+#include <numbers>
 #include <omp.h>
 
 #include <algorithm>
@@ -16,8 +17,6 @@
 
 namespace procam {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // One cluster of the tree while it is built.
 struct Node {
@@ -335,7 +334,7 @@ CompressedFormFactors BuildCompressedFormFactors(const std::vector<ClusterPatch>
       *blocked = true;
       return 0.0;
     }
-    return a.area * b.area * cos_a * cos_b / (kPi * r2 * r2);
+    return a.area * b.area * cos_a * cos_b / (std::numbers::pi * r2 * r2);
   };
 
   // Block traversal of unordered cluster pairs (a, b), a == b allowed. Pairs far enough apart

@@ -1,5 +1,6 @@
 #include "geometry/form_factors.h"
 
+#include <numbers>
 #include <omp.h>
 
 #include <Eigen/Geometry>
@@ -14,8 +15,6 @@
 
 namespace procam {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // Sutherland–Hodgman: keeps the part of the polygon with normal·(p − x) ≥ 0.
 int ClipToHemisphere(const Vec3& x, const Vec3& normal, const Vec3* polygon, int count, Vec3* out) {
@@ -66,7 +65,7 @@ double PointToPolygonFormFactor(const Vec3& x, const Vec3& normal, const Vec3* p
     const double angle = std::atan2(sine, a.dot(b));
     sum += angle * normal.dot(cross) / sine;
   }
-  return std::abs(sum) / (2.0 * kPi);
+  return std::abs(sum) / (2.0 * std::numbers::pi);
 }
 
 namespace {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <numbers>
 #include <set>
 #include <unordered_map>
 
@@ -131,14 +132,13 @@ void SamplePatch(const Patch& patch, int k, std::vector<PatchSample>* samples) {
 const GaussLegendreRule& GaussLegendre(int k) {
   static const std::vector<GaussLegendreRule> rules = [] {
     std::vector<GaussLegendreRule> table(kMaxQuadratureOrder + 1);
-    constexpr double kPi = 3.14159265358979323846;
     for (int n = 1; n <= kMaxQuadratureOrder; ++n) {
       GaussLegendreRule& rule = table[n];
       rule.nodes.resize(n);
       rule.weights.resize(n);
       for (int i = 0; i < n; ++i) {
         // Newton's method on P_n from the Chebyshev-like first guess, on [-1, 1].
-        double x = std::cos(kPi * (i + 0.75) / (n + 0.5)), derivative = 1.0;
+        double x = std::cos(std::numbers::pi * (i + 0.75) / (n + 0.5)), derivative = 1.0;
         for (int iteration = 0; iteration < 100; ++iteration) {
           double p0 = 1.0, p1 = x;
           for (int order = 2; order <= n; ++order) {

@@ -8,6 +8,8 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "base/check.h"
+
 namespace procam {
 namespace {
 
@@ -77,11 +79,6 @@ void AppendFrame(const std::vector<double>& emittance, std::string* bytes) {
     const uint16_t bits = HalfBits(s == 0.0 ? 0.0 : emittance[i] / s);
     std::memcpy(bytes->data() + values + 2 * i, &bits, 2);
   }
-}
-
-bool Fail(std::string* why, const std::string& text) {
-  *why = text;
-  return false;
 }
 
 // The JSON payload of `bytes` [begin, size): an object of at most kMaxTextBytes.

@@ -8,6 +8,7 @@
 
 #include "base/io.h"
 #include "base/timing.h"
+#include "calibration/calibrated_room.h"
 #include "calibration/rig_directory.h"
 #include "geometry/patches.h"
 #include "geometry/stage.h"
@@ -183,20 +184,17 @@ class Node {
       }
       Log(fmt::format("node {}: setting up {} patches (target {})", options_.name, setup->patches,
                       setup->target_patches));
-      Scene scene = LoadSceneArgument(options_.scene);
-      SubdivisionOptions subdivision;
-      subdivision.target_patches = setup->target_patches;
-      PatchHierarchy patches = SubdividePatches(scene, subdivision);
-      if (patches.fine.size() != setup->patches) {
-        throw IoError(fmt::format(
-            "{}: subdivides into {} patches for target {}, the controller's room into {}: "
-            "the display PC's copy of the room differs",
-            scene.path.string(), patches.fine.size(), setup->target_patches, setup->patches));
-      }
-      ApplyRigReflectance(rig_dir_, &patches);
-      ProjectionRigOptions rig_options;
-      rig_options.feather = setup->feather;
-      setup->rig = BuildProjectionRig(patches.fine, rig_dir_.projectors, rig_options);
+      CalibratedRoomOptions room_options;
+      room_options.scene = options_.scene;
+      room_options.rig_dir = options_.rig_dir;
+      room_options.patches = setup->target_patches;
+      room_options.expected_patches = setup->patches;  // the controller's count
+      room_options.form_factors = false;               // a node renders, it does not solve
+      room_options.problem = false;
+      room_options.projection.feather = setup->feather;
+      RoomSources sources;
+      sources.rig = rig_dir_;
+      setup->rig = BuildCalibratedRoom(room_options, std::move(sources)).projection;
       PrepareOutputs(setup.get());
       setup_ = std::move(setup);
       rendered_.reset();

@@ -14,6 +14,7 @@
 #include "base/image_io.h"
 #include "base/io.h"
 #include "base/timing.h"
+#include "calibration/calibrated_room.h"
 #include "calibration/rig_directory.h"
 #include "compensation/problem.h"
 #include "compensation/stage.h"
@@ -112,74 +113,44 @@ nlohmann::json FrameJson(const PlayFrame& frame, const std::vector<NodeAddress>&
   return json;
 }
 
-// Everything the frames share: the problem with the rig's bounds and reflectance, the camera's
-// view of the patches, the nodes' setup.
+// Everything the frames share: the room (the problem with the rig's bounds and reflectance, the
+// camera's view of the patches), the solution shown when playing one, the nodes' setup.
 struct PlayScene {
-  GeometryStage geometry;
-  CompensationProblem problem;
+  CalibratedRoom room;
   Eigen::MatrixX3d solution;  // shown as every frame, when playing a solution
-  std::vector<int> pixel_patch;
-  int camera_width = 0, camera_height = 0;
   nlohmann::json setup;
 };
 
 // kSetup's body: a fresh id, the subdivision and the render options.
 nlohmann::json SetupJson(const PlayOptions& options, const PlayScene& play) {
   return {{"setup", RandomId()},
-          {"target_patches", play.geometry.scene.target_patches},
-          {"patches", play.geometry.patches.fine.size()},
+          {"target_patches", play.room.geometry.scene.target_patches},
+          {"patches", play.room.size()},
           {"light", LightFieldName(options.light)},
           {"dither", DitherName(options.dither)},
           {"feather", options.feather}};
 }
 
-PlayScene PreparePlay(const PlayOptions& options, const RigDirectory& rig) {
+PlayScene PreparePlay(const PlayOptions& options, RigDirectory rig) {
   PlayScene play;
-  GeometryOptions geometry_options;
-  geometry_options.patches = options.patches;
-  std::optional<SolutionDirectory> solution;
-  if (!options.solution.empty()) {
-    solution = ReadSolutionDirectory(options.solution);
-    if (geometry_options.patches == 0) geometry_options.patches = solution->target_patches;
-  }
-  Report(options.progress, "play: subdividing the room and computing form factors");
-  play.geometry = RunGeometryStage(options.scene, geometry_options);
-  ApplyRigReflectance(rig, &play.geometry.patches);
-  const PatchLevel& fine = play.geometry.patches.fine;
-  if (solution) {
-    if (solution->patches != fine.size()) {
-      throw IoError(
-          fmt::format("{}: the solution has {} patches, {} subdivides into {} (give --patches as "
-                      "compensate was given it)",
-                      (options.solution / "result.json").string(), solution->patches, options.scene,
-                      fine.size()));
-    }
-    play.solution = solution->emittance;
-  }
-  play.problem = MakeProblem(play.geometry.scene, fine, play.geometry.form_factors, options.alpha);
-  ProjectionRigOptions rig_options;
-  rig_options.feather = options.feather;
-  {
-    const ProjectionRig bounds = BuildProjectionRig(fine, rig.projectors, rig_options);
-    play.problem.lower = bounds.lower;
-    play.problem.upper = bounds.upper;
-  }
-  if (!options.solution.empty()) {  // the solution's emittance: no camera needed
-    play.setup = SetupJson(options, play);
-    return play;
-  }
-  if (rig.file.camera.model.empty()) {
-    throw IoError(
-        (options.rig_dir / "rig.json").string() +
-        ": camera.model: the rig has no registered camera, which play needs to map the desired "
-        "images onto the room (run procam calibrate all)");
-  }
-  Report(options.progress, "play: casting the camera's rays into the room");
-  const ProjectorGeometry camera = ReadCameraModel(options.rig_dir / rig.file.camera.model);
-  const CameraPixelRays rays = CastCameraPixels(play.geometry.scene, fine, {}, camera);
-  play.pixel_patch = rays.patch;
-  play.camera_width = rays.width;
-  play.camera_height = rays.height;
+  CalibratedRoomOptions room;
+  room.scene = options.scene;
+  room.rig_dir = options.rig_dir;
+  room.solution_dir = options.solution;
+  room.patches = options.patches;
+  room.alpha = options.alpha;
+  room.projection.feather = options.feather;
+  // The solution's emittance needs no camera; desired images are mapped through it.
+  room.camera_rays = options.solution.empty();
+  RoomSources sources;
+  sources.rig = std::move(rig);  // read already (its keys, its projectors' outputs)
+  sources = ReadRoomSources(room, std::move(sources));
+  Report(options.progress,
+         options.solution.empty()
+             ? "play: subdividing the room, computing form factors, casting the camera's rays"
+             : "play: subdividing the room and computing form factors");
+  play.room = BuildCalibratedRoom(room, std::move(sources));
+  if (play.room.solution) play.solution = play.room.solution->emittance;
   play.setup = SetupJson(options, play);
   return play;
 }
@@ -190,7 +161,7 @@ void WritePlayResult(const PlayOptions& options, const PlaySummary& summary,
                            {"rig", options.rig_dir.string()},
                            {"desired", options.desired.string()},
                            {"solution", options.solution.string()},
-                           {"patches", play.problem.size()},
+                           {"patches", play.room.problem.size()},
                            {"method", MethodName(options.solver.method)},
                            {"function_tolerance", options.solver.function_tolerance},
                            {"fps_target", options.fps},
@@ -226,7 +197,9 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
   const auto period = std::chrono::duration<double>(1.0 / options.fps);
   std::shared_ptr<const RadiositySystem> radiosity;
   Eigen::MatrixX3d previous;
-  const Eigen::MatrixX3d room_desired = play.problem.desired;
+  CompensationProblem& problem = play.room.problem;
+  const CameraPixelRays& rays = play.room.camera_rays;
+  const Eigen::MatrixX3d room_desired = problem.desired;
   auto last_progress = Clock::now();
   Clock::time_point t0;
   int index = 0;
@@ -239,13 +212,12 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
       if (image.empty()) break;  // the end of a video
       frame.read_ms = MsSince(frame_start);
       auto step = Clock::now();
-      play.problem.desired = DesiredFromImage(image, play.pixel_patch, play.camera_width,
-                                              play.camera_height, room_desired);
+      problem.desired = DesiredFromImage(image, rays.patch, rays.width, rays.height, room_desired);
       frame.desired_ms = MsSince(step);
       step = Clock::now();
       SolverSummary solver_summary;
       const CompensationSolution solution =
-          Solve(options.solver, play.problem, &solver_summary, {}, WarmStart{radiosity, previous});
+          Solve(options.solver, problem, &solver_summary, {}, WarmStart{radiosity, previous});
       radiosity = solution.radiosity_system;
       previous = solution.emittance;
       frame.solve_ms = MsSince(step);
@@ -299,30 +271,22 @@ Eigen::MatrixX3d DesiredFromImage(const cv::Mat& image, const std::vector<int>& 
   // sRGB decoding per code value (a table: 256 or 65536 entries).
   std::vector<double> linear(image.depth() == CV_8U ? 256 : 65536);
   for (size_t q = 0; q < linear.size(); ++q) linear[q] = SrgbToLinear(q * scale);
-  const int n = static_cast<int>(fallback.rows());
-  Eigen::MatrixX3d sum = Eigen::MatrixX3d::Zero(n, 3);
-  Eigen::VectorXd count = Eigen::VectorXd::Zero(n);
-  for (int y = 0; y < height; ++y) {
-    for (int x = 0; x < width; ++x) {
-      const int patch = pixel_patch[static_cast<size_t>(y) * width + x];
-      if (patch < 0 || patch >= n) continue;
-      int b, g, r;
-      if (resized.depth() == CV_8U) {
-        const cv::Vec3b& p = resized.at<cv::Vec3b>(y, x);
-        b = p[0], g = p[1], r = p[2];
-      } else {
-        const cv::Vec3w& p = resized.at<cv::Vec3w>(y, x);
-        b = p[0], g = p[1], r = p[2];
-      }
-      sum.row(patch) += Eigen::RowVector3d(linear[r], linear[g], linear[b]);
-      count[patch] += 1.0;
-    }
-  }
-  Eigen::MatrixX3d desired = fallback;
-  for (int i = 0; i < n; ++i) {
-    if (count[i] > 0.0) desired.row(i) = sum.row(i) / count[i];
-  }
-  return desired;
+  const bool eight_bit = resized.depth() == CV_8U;
+  const PatchPixelSums sums = SumPixelsPerPatch(
+      pixel_patch, width, height, static_cast<int>(fallback.rows()),
+      [&](int x, int y, Eigen::RowVector3d* rgb) {
+        int b, g, r;
+        if (eight_bit) {
+          const cv::Vec3b& p = resized.at<cv::Vec3b>(y, x);
+          b = p[0], g = p[1], r = p[2];
+        } else {
+          const cv::Vec3w& p = resized.at<cv::Vec3w>(y, x);
+          b = p[0], g = p[1], r = p[2];
+        }
+        *rgb = Eigen::RowVector3d(linear[r], linear[g], linear[b]);
+        return true;
+      });
+  return sums.Means(fallback);
 }
 
 PlaySummary RunPlay(const PlayOptions& options) {

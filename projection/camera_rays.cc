@@ -3,12 +3,39 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 #include "compensation/radiosity.h"
 #include "geometry/ray_scene.h"
 #include "projection/direct_light.h"
 
 namespace procam {
+
+Eigen::MatrixX3d PatchPixelSums::Means(const Eigen::MatrixX3d& fallback, int min_pixels) const {
+  Eigen::MatrixX3d means = fallback;
+  for (int i = 0; i < count.size(); ++i) {
+    if (count[i] >= std::max(1, min_pixels)) means.row(i) = Mean(i);
+  }
+  return means;
+}
+
+PatchPixelSums SumPixelsPerPatch(const cv::Mat& picture, const std::vector<int>& pixel_patch,
+                                 int patches, const std::vector<bool>* mask) {
+  if (picture.type() != CV_32FC3 ||
+      pixel_patch.size() != static_cast<size_t>(picture.rows) * picture.cols ||
+      (mask != nullptr && mask->size() != pixel_patch.size())) {
+    throw std::invalid_argument("SumPixelsPerPatch: need a CV_32FC3 picture of the map's size");
+  }
+  return SumPixelsPerPatch(pixel_patch, picture.cols, picture.rows, patches,
+                           [&](int x, int y, Eigen::RowVector3d* rgb) {
+                             if (mask != nullptr &&
+                                 !(*mask)[static_cast<size_t>(y) * picture.cols + x])
+                               return false;
+                             const cv::Vec3f& v = picture.at<cv::Vec3f>(y, x);
+                             *rgb = Eigen::RowVector3d(v[0], v[1], v[2]);
+                             return true;
+                           });
+}
 
 CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
                                  const std::vector<Projector>& projectors,

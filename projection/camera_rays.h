@@ -39,6 +39,44 @@ CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
                                  const std::vector<Projector>& projectors,
                                  const ProjectorGeometry& camera, double ray_margin = 1e-4);
 
+// Per patch: the sum and the number of a picture's values over the camera pixels that see it
+// (CameraPixelRays::patch) — the per-patch mean over camera pixels, made here once for play's
+// desired images, the demo's desired picture and verification's photos.
+struct PatchPixelSums {
+  Eigen::MatrixX3d sum;  // (n,3) the values' sum, channels as the picture stores them
+  Eigen::VectorXi count;  // (n) pixels summed
+  // Patch i's mean (count[i] > 0).
+  Eigen::RowVector3d Mean(int i) const { return sum.row(i) / count[i]; }
+  // Each patch's mean where it has at least `min_pixels` (≥ 1) pixels, `fallback`'s row
+  // elsewhere (n rows).
+  Eigen::MatrixX3d Means(const Eigen::MatrixX3d& fallback, int min_pixels = 1) const;
+};
+
+// Sums `value(x, y, &rgb)` (false: pixel (x, y) left out) over the pixels of a width × height
+// row-major pixel → patch map whose patch is in [0, patches) (−1: none).
+template <typename PixelValue>
+PatchPixelSums SumPixelsPerPatch(const std::vector<int>& pixel_patch, int width, int height,
+                                 int patches, PixelValue&& value) {
+  PatchPixelSums sums;
+  sums.sum = Eigen::MatrixX3d::Zero(patches, 3);
+  sums.count = Eigen::VectorXi::Zero(patches);
+  Eigen::RowVector3d rgb;
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const int patch = pixel_patch[static_cast<size_t>(y) * width + x];
+      if (patch < 0 || patch >= patches || !value(x, y, &rgb)) continue;
+      sums.sum.row(patch) += rgb;
+      ++sums.count[patch];
+    }
+  }
+  return sums;
+}
+
+// The same for a CV_32FC3 picture of the map's size (pixel_patch: picture.rows × picture.cols),
+// only the pixels `mask` marks when given (one per pixel, row-major).
+PatchPixelSums SumPixelsPerPatch(const cv::Mat& picture, const std::vector<int>& pixel_patch,
+                                 int patches, const std::vector<bool>* mask = nullptr);
+
 // Casts every camera pixel's ray (camera = a ProjectorGeometry whose proj_from_world is
 // cam_from_room) against the fine patches, and lights the hit from the projector: in its image,
 // facing it and unoccluded (shadow ray against the scene's surfaces, `ray_margin` metres).

@@ -15,6 +15,7 @@
 #include "base/timing.h"
 #include "calibration/camera_response.h"
 #include "calibration/model_fit.h"
+#include "calibration/calibrated_room.h"
 #include "calibration/rig_directory.h"
 #include "capture/camera.h"
 #include "capture/patterns.h"
@@ -164,42 +165,24 @@ void ComparePatches(const cv::Mat& exitance, const std::vector<int>& pixel_patch
                     const std::vector<Eigen::Vector3d>& lab_predicted,
                     const cv::Mat& predicted_pixels, int min_pixels, Comparison* result) {
   const int n = problem.size();
-  Eigen::MatrixX3d sum_all = Eigen::MatrixX3d::Zero(n, 3), sum_interior = sum_all;
-  Eigen::MatrixX3d predicted_all = sum_all, predicted_interior = sum_all;
-  std::vector<int> count_all(n, 0), count_interior(n, 0);
-  for (int row = 0; row < exitance.rows; ++row) {
-    for (int col = 0; col < exitance.cols; ++col) {
-      const size_t index = static_cast<size_t>(row) * exitance.cols + col;
-      const int i = pixel_patch[index];
-      if (i < 0) continue;
-      const cv::Vec3f& v = exitance.at<cv::Vec3f>(row, col);
-      const cv::Vec3f& p = predicted_pixels.at<cv::Vec3f>(row, col);
-      const Eigen::RowVector3d x(v[0], v[1], v[2]), predicted(p[0], p[1], p[2]);
-      sum_all.row(i) += x;
-      predicted_all.row(i) += predicted;
-      ++count_all[i];
-      if (interior[index]) {
-        sum_interior.row(i) += x;
-        predicted_interior.row(i) += predicted;
-        ++count_interior[i];
-      }
-    }
-  }
+  const PatchPixelSums all = SumPixelsPerPatch(exitance, pixel_patch, n);
+  const PatchPixelSums inside = SumPixelsPerPatch(exitance, pixel_patch, n, &interior);
+  const PatchPixelSums predicted_all = SumPixelsPerPatch(predicted_pixels, pixel_patch, n);
+  const PatchPixelSums predicted_inside =
+      SumPixelsPerPatch(predicted_pixels, pixel_patch, n, &interior);
   result->patch_exitance =
       Eigen::MatrixX3d::Constant(n, 3, std::numeric_limits<double>::quiet_NaN());
   result->seen.assign(n, false);
   double area = 0, patch76 = 0, patch2000 = 0, model_patch76 = 0, model_patch2000 = 0,
          predicted76 = 0, predicted2000 = 0;
   for (int i = 0; i < n; ++i) {
-    if (count_all[i] < min_pixels) continue;
+    if (all.count[i] < min_pixels) continue;
     result->seen[i] = true;
     ++result->seen_patches;
-    const bool use_interior = count_interior[i] >= min_pixels;
-    result->patch_exitance.row(i) = use_interior ? sum_interior.row(i) / count_interior[i]
-                                                 : sum_all.row(i) / count_all[i];
-    const Eigen::RowVector3d predicted_mean = use_interior
-                                                  ? predicted_interior.row(i) / count_interior[i]
-                                                  : predicted_all.row(i) / count_all[i];
+    const bool use_interior = inside.count[i] >= min_pixels;
+    result->patch_exitance.row(i) = use_interior ? inside.Mean(i) : all.Mean(i);
+    const Eigen::RowVector3d predicted_mean =
+        use_interior ? predicted_inside.Mean(i) : predicted_all.Mean(i);
     const Eigen::Vector3d lab_measured = lab.Lab(result->patch_exitance.row(i).transpose());
     const Eigen::Vector3d lab_model = lab.Lab(predicted_mean.transpose());
     const double a = problem.area[i];
@@ -471,6 +454,8 @@ class PhotoFault : public IoError {
 
 // Everything the loop reads, checked before anything is shown or written.
 struct VerificationInputs {
+  CalibratedRoomOptions room;  // what the model is built with (RoomOptions)
+  std::optional<Scene> scene;  // VerificationOptions::scene
   RigDirectory rig;
   std::string rig_file;
   std::filesystem::path camera_model_path;
@@ -482,22 +467,31 @@ struct VerificationInputs {
   std::vector<std::string> names;  // the rig's projectors, in rig.json's order
 };
 
+// The room as the loop models it: the solution's (or options.scene's) room at the solution's patch
+// count, the rig's projectors at the displays' 8 bits, the camera's rays with each projector's
+// light.
+CalibratedRoomOptions RoomOptions(const VerificationOptions& options) {
+  CalibratedRoomOptions room;
+  room.rig_dir = options.rig_dir;
+  room.solution_dir = options.solution_dir;
+  room.display_bits = 8;
+  room.camera_rays = true;
+  room.camera_lighting = true;
+  room.progress = options.progress;
+  return room;
+}
+
 VerificationInputs ReadInputs(const VerificationOptions& options) {
   VerificationInputs in;
-  in.rig = ReadRigDirectory(options.rig_dir);
   in.rig_file = (options.rig_dir / "rig.json").string();
-  if (in.rig.file.camera.model.empty()) {
-    throw IoError(in.rig_file +
-                  ": camera.model: required key is missing (the camera registered in "
-                  "the room, from procam calibrate projectors)");
-  }
-  in.camera_model_path = options.rig_dir / in.rig.file.camera.model;
-  if (!std::filesystem::exists(in.camera_model_path)) {
-    throw IoError(in.rig_file + ": camera.model: " + in.camera_model_path.string() +
-                  ": file not found");
-  }
-  in.camera_geometry = ReadCameraModel(in.camera_model_path);
-  in.solution = ReadSolutionDirectory(options.solution_dir);
+  in.room = RoomOptions(options);
+  RoomSources sources = ReadRoomSources(in.room);
+  in.rig = std::move(*sources.rig);
+  in.camera_model_path = sources.camera_model_path;
+  in.camera_geometry = sources.camera;
+  in.solution = std::move(*sources.solution);
+  in.scene = options.scene;
+  in.room.alpha = in.solution.alpha;  // the problem as solved
 
   in.simulated = FindSimulatedCamera(options.camera);
   in.colour_source =
@@ -525,50 +519,25 @@ VerificationInputs ReadInputs(const VerificationOptions& options) {
   return in;
 }
 
-// The model the loop refines: geometry with the rig's reflectance, the projection rig (8-bit
-// displays), the camera's rays, and the problem as solved.
+// The model the loop refines: the room (geometry with the rig's reflectance, the projection rig
+// at 8-bit displays, the camera's rays, the problem as solved), and the camera pixels away from
+// patch borders.
 struct VerificationModel {
-  GeometryStage geometry;
-  std::vector<Projector> projectors;
-  ProjectionRig rig;
-  CameraPixelRays lighting;
+  CalibratedRoom room;
   std::vector<bool> interior;  // pixels whose four neighbours see the same patch
-  CompensationProblem problem;
 };
 
-VerificationModel BuildModel(const VerificationOptions& options, const VerificationInputs& in) {
+VerificationModel BuildModel(const VerificationInputs& in) {
   VerificationModel model;
-  GeometryOptions geometry_options;
-  geometry_options.patches = in.solution.target_patches;
-  geometry_options.progress = options.progress;
-  model.geometry = options.scene ? RunGeometryStage(*options.scene, geometry_options)
-                                 : RunGeometryStage(in.solution.scene, geometry_options);
-  if (model.geometry.patches.fine.size() != in.solution.patches) {
-    throw IoError((options.solution_dir / "result.json").string() + ": the solution has " +
-                  std::to_string(in.solution.patches) + " patches but its scene subdivides into " +
-                  std::to_string(model.geometry.patches.fine.size()) + " for target " +
-                  std::to_string(in.solution.target_patches));
-  }
-  ApplyRigReflectance(in.rig, &model.geometry.patches);
-  model.projectors = in.rig.projectors;
-  for (Projector& projector : model.projectors) {
-    if (projector.photometry.bits != 8) {
-      Report(options.progress,
-             fmt::format("verify: projector '{}' is {}-bit; the displays show 8 bits, "
-                         "rendering at 8",
-                         projector.name, projector.photometry.bits));
-      projector.photometry.bits = 8;
-    }
-  }
-  model.rig =
-      BuildProjectionRig(model.geometry.patches.fine, model.projectors, ProjectionRigOptions());
-  if (in.camera_geometry.width() <= 0) throw IoError(in.camera_model_path.string() + ": bad size");
-  Report(options.progress, fmt::format("verify: casting the camera's {}x{} rays",
-                                       in.camera_geometry.width(), in.camera_geometry.height()));
+  RoomSources sources;
+  sources.rig = in.rig;
+  sources.solution = in.solution;
+  sources.camera_model_path = in.camera_model_path;
+  sources.camera = in.camera_geometry;
+  sources.scene = in.scene;
   // The geometry is fixed; the photometry the loop refines is applied per photo (PredictPixels).
-  model.lighting = CastCameraPixels(model.geometry.scene, model.geometry.patches.fine,
-                                    model.projectors, in.camera_geometry);
-  const CameraPixelRays& rays = model.lighting;
+  model.room = BuildCalibratedRoom(in.room, std::move(sources));
+  const CameraPixelRays& rays = model.room.camera_rays;
   model.interior.assign(rays.patch.size(), false);
   for (int row = 1; row + 1 < rays.height; ++row) {
     for (int col = 1; col + 1 < rays.width; ++col) {
@@ -579,25 +548,21 @@ VerificationModel BuildModel(const VerificationOptions& options, const Verificat
                               rays.patch[index + rays.width] == i;
     }
   }
-  model.problem = MakeProblem(model.geometry.scene, model.geometry.patches.fine,
-                              model.geometry.form_factors, in.solution.alpha);
-  model.problem.lower = model.rig.lower;
-  model.problem.upper = model.rig.upper;
   return model;
 }
 
 // The desired appearance as the camera sees it (8-bit BGR): each pixel its patch's desired colour.
 cv::Mat DesiredPicture(const VerificationModel& model) {
-  const CameraPixelRays& rays = model.lighting;
-  const double white = model.geometry.scene.white;
+  const CameraPixelRays& rays = model.room.camera_rays;
+  const double white = model.room.geometry.scene.white;
   cv::Mat desired = cv::Mat::zeros(rays.height, rays.width, CV_32FC3);
   for (int row = 0; row < rays.height; ++row) {
     for (int col = 0; col < rays.width; ++col) {
       const int i = rays.patch[static_cast<size_t>(row) * rays.width + col];
       if (i < 0) continue;
-      desired.at<cv::Vec3f>(row, col) = cv::Vec3f(float(model.problem.desired(i, 0) / white),
-                                                  float(model.problem.desired(i, 1) / white),
-                                                  float(model.problem.desired(i, 2) / white));
+      desired.at<cv::Vec3f>(row, col) = cv::Vec3f(float(model.room.problem.desired(i, 0) / white),
+                                                  float(model.room.problem.desired(i, 1) / white),
+                                                  float(model.room.problem.desired(i, 2) / white));
     }
   }
   return LinearToDisplay(desired);
@@ -615,7 +580,7 @@ class VerificationLoop {
                     "': delivers grey images; verification needs colour");
     }
     const CameraSettings settings = camera_->Settings();
-    const CameraPixelRays& rays = model->lighting;
+    const CameraPixelRays& rays = model->room.camera_rays;
     if (settings.width > 0 && (settings.width != rays.width || settings.height != rays.height)) {
       throw IoError("camera '" + options.camera + "' delivers " + std::to_string(settings.width) +
                     "x" + std::to_string(settings.height) + " photos but " +
@@ -704,7 +669,7 @@ CaptureSessionOptions VerificationLoop::SessionOptions(int k) const {
 void VerificationLoop::Prepare(int k) {
   RenderOptions render_options;
   render_options.light = options_.light;
-  images_ = RenderProjectorImages(model_.rig, model_.geometry.scene, emittance_, render_options,
+  images_ = RenderProjectorImages(model_.room.projection, model_.room.geometry.scene, emittance_, render_options,
                                   &render_);
   std::vector<cv::Mat> patterns;
   for (const ProjectorImage& image : images_) patterns.push_back(PatternFromImage(image));
@@ -729,7 +694,7 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   }
   WriteNpy(it.directory / "E.npy", RowMatrixXd(emittance_));
   WriteNpy(it.directory / "B.npy", RowMatrixXd(radiosity_));
-  WriteNpy(it.directory / "reflectance.npy", RowMatrixXd(model_.rig.reflectance));
+  WriteNpy(it.directory / "reflectance.npy", RowMatrixXd(model_.room.projection.reflectance));
 
   // Show and photograph: the session keeps the photo the moment it is taken.
   const CaptureSessionOptions session_options = SessionOptions(k);
@@ -742,7 +707,7 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   it.capture_seconds = SecondsSince(capture_start);
   const CaptureSessionData session = CaptureSessionData::Load(session_options.directory);
   const cv::Mat photo = hdr_ ? session.Hdr(0) : session.Mean(0);
-  const CameraPixelRays& rays = model_.lighting;
+  const CameraPixelRays& rays = model_.room.camera_rays;
   if (photo.channels() != 3)
     throw IoError(session_options.directory.string() + ": the photo is not colour");
   if (photo.cols != rays.width || photo.rows != rays.height) {
@@ -754,20 +719,20 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   cv::Mat photo32;
   photo.convertTo(photo32, CV_32FC3);
   const cv::Mat exitance = PhotoToExitance(photo32, colour);
-  const cv::Mat predicted = PredictPixels(rays, model_.rig, images_, model_.geometry.form_factors);
-  comparison_ = Compare(exitance, rays.patch, model_.rig.surface, model_.interior, model_.problem,
+  const cv::Mat predicted = PredictPixels(rays, model_.room.projection, images_, model_.room.geometry.form_factors);
+  comparison_ = Compare(exitance, rays.patch, model_.room.projection.surface, model_.interior, model_.room.problem,
                         radiosity_, predicted, options_.min_patch_pixels);
   it.seams = comparison_.seams;
   it.measured = comparison_.measured;
   it.model = comparison_.model;
   it.predicted_mean76 = comparison_.predicted_mean76;
   it.predicted_mean2000 = comparison_.predicted_mean2000;
-  it.solver_mean76 = SolverMeanDeltaE76(model_.problem, radiosity_);
+  it.solver_mean76 = SolverMeanDeltaE76(model_.room.problem, radiosity_);
   it.seen_pixels = comparison_.seen_pixels;
   it.seen_patches = comparison_.seen_patches;
   it.model_constant_mean76 = comparison_.model_constant_mean76;
   if (k == 0) heat_scale_ = std::max(10.0, 10.0 * std::ceil(3.0 * it.measured.mean76 / 10.0));
-  const double white = model_.geometry.scene.white;
+  const double white = model_.room.geometry.scene.white;
   it.photo = LinearToDisplay(exitance / white);
   it.predicted = LinearToDisplay(comparison_.predicted / white);
   it.delta_e76 = HeatMapWithColourBar(comparison_.delta_e76, heat_scale_, "dE76");
@@ -802,7 +767,7 @@ void VerificationLoop::UpdateAndSolve(VerificationIteration* it) {
   fit.fit_response = options_.fit_response;
   fit.fit_reflectance = options_.fit_reflectance;
   fit.reflectance_step = options_.reflectance_step;
-  const ModelUpdate update = FitModel(fit, model_.rig, images_, model_.geometry.form_factors,
+  const ModelUpdate update = FitModel(fit, model_.room.projection, images_, model_.room.geometry.form_factors,
                                       comparison_.patch_exitance, comparison_.seen, radiosity_);
   it->response_exponent = update.exponent;
   it->reflectance_scale = update.scale;
@@ -817,18 +782,18 @@ void VerificationLoop::UpdateAndSolve(VerificationIteration* it) {
                        in_.names[p], update.exponent[p][0], update.exponent[p][1],
                        update.exponent[p][2]));
   }
-  ApplyModelUpdate(update, &model_.rig, &model_.geometry.patches);
+  ApplyModelUpdate(update, &model_.room.projection, &model_.room.geometry.patches);
   CompensationOptions compensation;
   compensation.solver.method = in_.solution.method;
   compensation.solver.multires = in_.solution.multires;
   compensation.alpha = in_.solution.alpha;
-  compensation.lower = model_.rig.lower;
-  compensation.upper = model_.rig.upper;
+  compensation.lower = model_.room.projection.lower;
+  compensation.upper = model_.room.projection.upper;
   compensation.progress = options_.progress;
-  const CompensationRun run = RunCompensation(model_.geometry, compensation);
+  const CompensationRun run = RunCompensation(model_.room.geometry, compensation);
   emittance_ = run.solution.emittance;
   radiosity_ = run.solution.radiosity;
-  model_.problem = run.fine;
+  model_.room.problem = run.fine;
   it->solve_seconds = SecondsSince(solve_start);
 }
 
@@ -853,7 +818,7 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
   std::string why;
   if (!options.Check(&why)) throw IoError("verify: " + why);
   const VerificationInputs in = ReadInputs(options);
-  VerificationModel model = BuildModel(options, in);
+  VerificationModel model = BuildModel(in);
   VerificationLoop loop(options, in, &model);
   loop.Prepare(0);  // a run left there with other inputs is refused before anything is written
 
@@ -903,7 +868,7 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
     it.seconds = SecondsSince(iteration_start);
     nlohmann::json json = IterationJson(it);
     json.update(extra);
-    json["projectors"] = ProjectorResponses(model.rig, in.names);
+    json["projectors"] = ProjectorResponses(model.room.projection, in.names);
     WriteFileAtomically(it.directory / "result.json", json.dump(2) + "\n");
     summary.iterations.push_back(std::move(it));
     summary.seconds = SecondsSince(start);

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <numbers>
 #include <random>
 
 #include "calibration/structured_light.h"
@@ -20,8 +21,6 @@
 
 namespace procam {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 std::unique_ptr<SimulatedRig> MakeRig(const std::string& name) {
   const SyntheticScene synthetic = MakeSyntheticScene(name, 60);
@@ -105,7 +104,7 @@ Errors Compare(const ProjectorCalibration& calibration, const SimulatedRig& rig,
                          proj_from_cam.inverse().translation()).norm();
   e.orientation_deg =
       Eigen::AngleAxisd(calibration.proj_from_cam.linear() * proj_from_cam.linear().transpose())
-          .angle() * 180.0 / kPi;
+          .angle() * 180.0 / std::numbers::pi;
   return e;
 }
 

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <string>
 
 #include "base/camera_model.h"
@@ -24,8 +25,6 @@ namespace {
 
 using testing::CommandRun;
 using testing::RunProcam;
-
-constexpr double kPi = 3.14159265358979323846;
 
 nlohmann::json ReadJson(const std::filesystem::path& path) {
   std::ifstream file(path);
@@ -99,7 +98,7 @@ TEST_F(CalibrateProjectorsCommand, RecoversTheSyntheticRig) {
   const double camera_mm = 1e3 * (estimate.translation() - room_from_camera.translation()).norm();
   const double camera_deg =
       Eigen::AngleAxisd(estimate.linear() * room_from_camera.linear().transpose()).angle() * 180 /
-      kPi;
+      std::numbers::pi;
   std::printf("camera: position %.3f mm, orientation %.4f deg\n", camera_mm, camera_deg);
   EXPECT_LT(camera_mm, 5.0);
   EXPECT_LT(camera_deg, 0.2);  // see the projectors' orientation below
@@ -123,7 +122,7 @@ TEST_F(CalibrateProjectorsCommand, RecoversTheSyntheticRig) {
                                          .norm();
     const double orientation_deg =
         Eigen::AngleAxisd(model.cam_from_ref.linear() * g.proj_from_world().linear().transpose())
-            .angle() * 180 / kPi;
+            .angle() * 180 / std::numbers::pi;
     std::printf("%s: fx %.4f%%, fy %.4f%%, position %.3f mm, orientation %.4f deg\n",
                 projector.name.c_str(), 100 * fx, 100 * fy, position_mm, orientation_deg);
     EXPECT_EQ(model.width, g.width());

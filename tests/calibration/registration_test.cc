@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <numbers>
 #include <tuple>
 #include <random>
 
@@ -28,8 +29,6 @@
 
 namespace procam {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // `camera_scale` < 1 shrinks the camera's image (same field of view): fewer pixels to render.
 std::unique_ptr<SimulatedRig> MakeRig(const std::string& name, double camera_scale = 1.0) {
@@ -55,13 +54,13 @@ Eigen::Isometry3d PerturbedGuess(const Eigen::Isometry3d& truth) {
   Eigen::Isometry3d guess = truth;
   guess.translation() += 0.05 * Vec3(0.6, -0.64, 0.48);
   guess.linear() =
-      Eigen::AngleAxisd(2.0 * kPi / 180.0, Vec3(0.3, 1.0, -0.5).normalized()).toRotationMatrix() *
+      Eigen::AngleAxisd(2.0 * std::numbers::pi / 180.0, Vec3(0.3, 1.0, -0.5).normalized()).toRotationMatrix() *
       truth.linear();
   return guess;
 }
 
 double TurnDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
-  return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / kPi;
+  return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / std::numbers::pi;
 }
 
 RoomCalibrationProblem EmptyProblem(const SimulatedRig& rig) {
@@ -727,7 +726,7 @@ TEST_F(CShapedDecoded, TriangulationAndIcpRegistration) {
     const double offset_in_room = plane.offset - normal_in_room.dot(truth.translation());
     for (const ModelFacet& facet : model.facets()) {
       const double angle =
-          std::acos(std::clamp(std::abs(normal_in_room.dot(facet.normal)), 0.0, 1.0)) * 180 / kPi;
+          std::acos(std::clamp(std::abs(normal_in_room.dot(facet.normal)), 0.0, 1.0)) * 180 / std::numbers::pi;
       const double offset = normal_in_room.dot(facet.normal) > 0 ? offset_in_room - facet.offset
                                                                  : offset_in_room + facet.offset;
       if (angle < 0.5 && std::abs(offset) < 0.01) {

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
+#include <numbers>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -29,7 +30,6 @@
 namespace procam {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 constexpr double kPlateDistance = 0.5;  // m
 
 // Two facing unit plates, g×g patches each: plate 0 at z = 0 facing +z, plate 1 at z = 0.5
@@ -59,7 +59,7 @@ std::shared_ptr<const CompressedFormFactors> CompressedPlates(int g, const Clust
   const PairExchange exchange = [&patches](int i, int j) {
     if (patches[i].surface == patches[j].surface) return 0.0;
     const double r2 = (patches[i].centroid - patches[j].centroid).squaredNorm();
-    return patches[i].area * patches[j].area * kPlateDistance * kPlateDistance / (kPi * r2 * r2);
+    return patches[i].area * patches[j].area * kPlateDistance * kPlateDistance / (std::numbers::pi * r2 * r2);
   };
   CompressedBuildSummary local;
   return std::make_shared<const CompressedFormFactors>(BuildCompressedFormFactors(

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include <gtest/gtest.h>
+#include <numbers>
 
 #include "datasets_synthetic/rooms.h"
 #include "geometry/patches.h"
@@ -11,14 +12,12 @@
 namespace procam {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-
 // Closed forms (Howell, "A Catalog of Radiation Heat Transfer Configuration Factors").
 // Coaxial parallel rectangles a × b at distance c.
 double ParallelRectangles(double a, double b, double c) {
   const double x = a / c, y = b / c;
   const double x2 = 1 + x * x, y2 = 1 + y * y;
-  return 2.0 / (kPi * x * y) *
+  return 2.0 / (std::numbers::pi * x * y) *
          (0.5 * std::log(x2 * y2 / (1 + x * x + y * y)) + x * std::sqrt(y2) * std::atan(x / std::sqrt(y2)) +
           y * std::sqrt(x2) * std::atan(y / std::sqrt(x2)) - x * std::atan(x) - y * std::atan(y));
 }
@@ -30,7 +29,7 @@ double PerpendicularRectangles(double w, double h, double l) {
       std::log((1 + W2) * (1 + H2) / (1 + W2 + H2)) +
       W2 * std::log(W2 * (1 + W2 + H2) / ((1 + W2) * (W2 + H2))) +
       H2 * std::log(H2 * (1 + H2 + W2) / ((1 + H2) * (H2 + W2)));
-  return (W * std::atan(1 / W) + H * std::atan(1 / H) - S * std::atan(1 / S) + 0.25 * log_term) / (kPi * W);
+  return (W * std::atan(1 / W) + H * std::atan(1 / H) - S * std::atan(1 / S) + 0.25 * log_term) / (std::numbers::pi * W);
 }
 
 // Differential element to a parallel rectangle a × b whose corner lies above it at height c.
@@ -38,7 +37,7 @@ double ElementToCornerRectangle(double a, double b, double c) {
   const double A = a / c, B = b / c;
   return (A / std::sqrt(1 + A * A) * std::atan(B / std::sqrt(1 + A * A)) +
           B / std::sqrt(1 + B * B) * std::atan(A / std::sqrt(1 + B * B))) /
-         (2 * kPi);
+         (2 * std::numbers::pi);
 }
 
 // Total form factor from surface `from` to surface `to`, summed over their patches.
