@@ -632,6 +632,10 @@ TEST(SolveCudaAnalytic, DISABLED_Timings) {
       options.device_float32 = row.float32;
       options.device_host_loop = row.host_loop;
       options.device_fused = row.fused;
+      // PROCAM_BENCH_ROUND_TOLERANCE: perceptual2000's metric_round_tolerance (CPU and GPU rows).
+      if (const char* tolerance = std::getenv("PROCAM_BENCH_ROUND_TOLERANCE")) {
+        options.metric_round_tolerance = std::atof(tolerance);
+      }
       // PROCAM_BENCH_CG_TOLERANCE: the inexact-Newton forcing term of the GPU rows, to compare.
       if (const char* tolerance = std::getenv("PROCAM_BENCH_CG_TOLERANCE"); tolerance && row.device == Device::kCuda) {
         options.cg_tolerance = std::atof(tolerance);
