@@ -1,5 +1,6 @@
 #include "compensation/solver.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -506,6 +507,10 @@ bool SolverOptions::Check(std::string* why) const {
     *why = "metric_rounds must be in [1, 100]";
     return false;
   }
+  if (!(metric_round_tolerance >= 0.0 && metric_round_tolerance < 1.0)) {
+    *why = "metric_round_tolerance must be in [0, 1)";
+    return false;
+  }
   if (!(gradient_tolerance >= 0.0) || !(function_tolerance >= 0.0)) {
     *why = "tolerances must be >= 0";
     return false;
@@ -641,7 +646,13 @@ void SolveCiede2000Rounds(const SolverOptions& options, const CompensationProble
     const CompensationObjective objective(problem, radiosity, ColourModel::kLab, metric);
     SolverSummary round_summary;
     Eigen::MatrixX3d round_radiosity;  // filled by the device loop only
-    emittance = Minimise(options, objective, emittance, &round_summary, &round_radiosity);
+    // Every round but the last only sets the next round's metric and weights: solved to
+    // metric_round_tolerance where that is set (docs/solver.md).
+    SolverOptions round_options = options;
+    if (round + 1 < options.metric_rounds) {
+      round_options.function_tolerance = std::max(options.function_tolerance, options.metric_round_tolerance);
+    }
+    emittance = Minimise(round_options, objective, emittance, &round_summary, &round_radiosity);
     current_radiosity = round_radiosity.rows() == problem.size() ? std::move(round_radiosity)
                                                                    : radiosity.Solve(emittance);
     if (round == 0) summary->initial_cost = round_summary.initial_cost;

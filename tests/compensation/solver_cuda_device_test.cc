@@ -33,6 +33,7 @@
 #include "base/io.h"
 #include "compensation/solver.h"
 #include "tests/compensation/analytic_problem.h"
+#include "tests/compensation/exported_problem.h"
 
 namespace procam {
 namespace {
@@ -59,42 +60,6 @@ void ExpectConsistentSummary(const SolverSummary& summary, const std::string& la
   EXPECT_LE(summary.final_cost, summary.initial_cost) << label;
 }
 
-// A problem written by `procam compensate ... --export` (F from Embree's shadow rays, the
-// projectors' bounds): real rooms on a machine that has no Embree. The desired radiosity comes
-// back from desired_lab.npy through LabToXyz and T⁻¹.
-CompensationProblem ReadExportedProblem(const std::filesystem::path& directory) {
-  const auto matrix = [&](const char* name) {
-    const NpyArray array = ReadNpy(directory / name);
-    const int64_t rows = array.shape.at(0), columns = array.shape.size() > 1 ? array.shape[1] : 1;
-    Eigen::MatrixXd m(rows, columns);
-    for (int64_t i = 0; i < rows; ++i) {
-      for (int64_t j = 0; j < columns; ++j) m(i, j) = array.values[i * columns + j];
-    }
-    return m;
-  };
-  CompensationProblem p;
-  p.form_factors = matrix("F.npy");
-  p.area = matrix("area.npy").col(0);
-  p.reflectance = matrix("rho.npy");
-  p.lower = matrix("lower.npy");
-  p.upper = matrix("upper.npy");
-  p.rgb_to_xyz = matrix("T.npy");
-  p.white_xyz = matrix("white_xyz.npy").col(0);
-  const Eigen::MatrixXd adjacency = matrix("adjacency.npy");
-  for (int k = 0; k < adjacency.rows(); ++k) {
-    p.adjacency.push_back({static_cast<int>(adjacency(k, 0)), static_cast<int>(adjacency(k, 1))});
-  }
-  const Eigen::MatrixXd lab = matrix("desired_lab.npy");
-  const Eigen::Matrix3d to_rgb = p.rgb_to_xyz.inverse();
-  p.desired.resize(lab.rows(), 3);
-  for (int i = 0; i < lab.rows(); ++i) {
-    p.desired.row(i) = (to_rgb * LabToXyz(lab.row(i).transpose(), p.white_xyz)).transpose();
-  }
-  std::ifstream meta(directory / "problem.json");
-  p.alpha = nlohmann::json::parse(meta).at("alpha").get<double>();
-  return p;
-}
-
 // Every problem directory under $PROCAM_DEVICE_PROBLEMS (written on the build machine by
 // `procam compensate ROOM --export`: Embree's F, the projectors' bounds): solved on the CPU, the
 // resident loop (fused below 4096 patches, and with a kernel per step) and the host loop,
@@ -109,7 +74,7 @@ TEST(SolveCudaExported, ResidentAndHostLoopMatchTheCpuOnRealRooms) {
               "relative to the CPU |\n|---|---:|---:|---|---|---:|---:|---:|---:|---:|\n");
   for (const auto& entry : std::filesystem::directory_iterator(root)) {
     if (!std::filesystem::exists(entry.path() / "F.npy")) continue;
-    const CompensationProblem p = ReadExportedProblem(entry.path());
+    const CompensationProblem p = testing::ReadExportedProblem(entry.path());
     ASSERT_EQ(p.Validate(), "") << entry.path();
     const std::string room = entry.path().filename().string();
     for (const CompensationMethod method : {CompensationMethod::kPerceptual, CompensationMethod::kLinear,
@@ -667,6 +632,10 @@ TEST(SolveCudaAnalytic, DISABLED_Timings) {
       options.device_float32 = row.float32;
       options.device_host_loop = row.host_loop;
       options.device_fused = row.fused;
+      // PROCAM_BENCH_ROUND_TOLERANCE: perceptual2000's metric_round_tolerance (CPU and GPU rows).
+      if (const char* tolerance = std::getenv("PROCAM_BENCH_ROUND_TOLERANCE")) {
+        options.metric_round_tolerance = std::atof(tolerance);
+      }
       // PROCAM_BENCH_CG_TOLERANCE: the inexact-Newton forcing term of the GPU rows, to compare.
       if (const char* tolerance = std::getenv("PROCAM_BENCH_CG_TOLERANCE"); tolerance && row.device == Device::kCuda) {
         options.cg_tolerance = std::atof(tolerance);
