@@ -15,6 +15,7 @@ namespace procam::python {
 void BindGeometry(pybind11::module_& m);
 void BindCompensation(pybind11::module_& m);
 void BindCalibration(pybind11::module_& m);
+void BindRoom(pybind11::module_& m);
 
 // A ProgressCallback that calls the Python callable `callback` (None: no callback) with each line,
 // holding the GIL while it runs (the long calls that take it release the GIL).

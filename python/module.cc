@@ -79,4 +79,5 @@ PYBIND11_MODULE(_procam, m) {
   procam::python::BindGeometry(m);
   procam::python::BindCompensation(m);
   procam::python::BindCalibration(m);
+  procam::python::BindRoom(m);
 }

@@ -193,3 +193,22 @@ def test_the_documented_pytorch_loop_runs(tmp_path, monkeypatch):
     pytest.importorskip("torch")
     monkeypatch.chdir(tmp_path)
     exec(compile(python_blocks()[1], "docs/python.md", "exec"), {})
+
+
+def test_a_room_with_projectors_compensates_and_writes_as_the_command_line_does(tmp_path):
+    # A scene file with its projectors and camera (procam scene write): the projectors' light
+    # bounds the emittance, on the command line and here alike.
+    run_procam("scene", "write", "tiny_box", "--out", tmp_path / "rig")
+    scene = tmp_path / "rig" / "tiny_box.json"
+    run_procam("compensate", scene, "--patches", 150, "--out", tmp_path / "cli")
+    room = procam.load_room(str(scene), patches=150)
+    assert room.projectors and room.upper.shape == (room.size, 3)
+    run = procam.compensate(room)
+    assert np.all(run.emittance <= room.upper + 1e-12) and np.all(run.emittance >= room.lower - 1e-12)
+    procam.write_solution(room, run, tmp_path / "python")
+    assert np.array_equal(np.load(tmp_path / "python" / "E.npy"), np.load(tmp_path / "cli" / "E.npy"))
+    back = procam.read_solution(tmp_path / "python")
+    assert back.patches == room.size and np.array_equal(back.emittance, run.emittance)
+    # The solution checks the room it is loaded with: another patch count is refused by name.
+    with pytest.raises(procam.IoError, match="patches"):
+        procam.load_room(str(scene), patches=400, solution=tmp_path / "python")
