@@ -84,6 +84,7 @@ bool ScanJudgeOptions::Check(std::string* why) const {
   if (!(decoding_noise_px >= 0.0)) return fail("decoding_noise_px must be ≥ 0");
   if (!(min_seen_m2 >= 0.0)) return fail("min_seen_m2 must be ≥ 0");
   if (!(off_m > 0.0) || !(cell_m > 0.0)) return fail("off_m and cell_m must be > 0");
+  if (!(found_share > 0.0 && found_share <= 1.0)) return fail("found_share must be in (0, 1]");
   if (patches < 20 || patches > 5000) return fail("patches must be in [20, 5000]");
   if (!(planar_rms_mm > 0.0 && curved_rms_mm > 0.0 && area_percent > 0.0 && spurious_percent > 0.0))
     return fail("the aims must be > 0");
@@ -372,7 +373,7 @@ ScanJudgement ScanAndJudge(const std::filesystem::path& scene_file, const ScanJu
     p.rms_mm = samples[g] > 0 ? 1e3 * std::sqrt(squares[g] / samples[g]) : 0.0;
     if (p.seen_and_lit_m2 > 0.0) p.area_error_percent = 100.0 * (p.scanned_m2 / p.seen_and_lit_m2 - 1.0);
     if (!p.expected) continue;
-    if (p.scanned_m2 > 0.0) ++judgement.found;
+    if (p.scanned_m2 >= options.found_share * p.seen_and_lit_m2) ++judgement.found;
     double& worst_rms = p.curved ? judgement.worst_curved_rms_mm : judgement.worst_planar_rms_mm;
     worst_rms = std::max(worst_rms, p.rms_mm);
     if (std::abs(p.area_error_percent) > std::abs(judgement.worst_area_error_percent))

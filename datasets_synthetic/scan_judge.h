@@ -5,7 +5,7 @@
 // matched to the true ones by what they cover, and the aims measured:
 //
 //   found     every physical surface the camera sees and a projector lights (at least
-//             `min_seen_m2`) has scanned area on it;
+//             `min_seen_m2`) has scanned area on it (at least `found_share` of what is seen);
 //   RMS       the scanned facets lying on a planar physical surface within 5 mm RMS of the true
 //             room (corners and centroids, through the camera's pose), on a curved one within
 //             1 cm;
@@ -41,6 +41,9 @@ struct ScanJudgeOptions {
   // floor held to a board normal 0.03° off; false: the true lens and floor normal.
   bool chessboard_lens = true;
   double min_seen_m2 = 0.05;       // physical surfaces seen and lit less than this are not expected, m², ≥ 0
+  // A physical surface is found when the scanned area lying on it is at least this share of its
+  // seen-and-lit area, (0, 1].
+  double found_share = 0.5;
   double off_m = 0.02;             // a scanned facet's centroid farther than this from the truth is off, metres, > 0
   double cell_m = 0.01;            // SeenAndLitArea's cells, metres, > 0
   // Also compensate (perceptual) on the true model with the true rig and on the scanned room

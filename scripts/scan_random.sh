@@ -46,9 +46,11 @@ done
 # Median and worst per measure; the seeds that missed an aim (5 mm planar, 1 cm curved, 1% area,
 # 1% spurious, every seen-and-lit surface found).
 awk '
-  function median(values, n,   sorted, i) {
-    for (i = 1; i <= n; ++i) sorted[i] = values[i]
-    asort(sorted)
+  function median(values, n,   sorted, i, j) {
+    for (i = 1; i <= n; ++i) {  # insertion sort (POSIX awk has no asort)
+      for (j = i; j > 1 && sorted[j - 1] > values[i] + 0; --j) sorted[j] = sorted[j - 1]
+      sorted[j] = values[i] + 0
+    }
     return n % 2 ? sorted[(n + 1) / 2] : (sorted[n / 2] + sorted[n / 2 + 1]) / 2
   }
   function abs(x) { return x < 0 ? -x : x }
