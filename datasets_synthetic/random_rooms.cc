@@ -8,6 +8,7 @@
 #include <optional>
 #include <random>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "calibration/registration.h"
@@ -144,9 +145,9 @@ bool InsidePlan(const std::vector<Vec3>& plan, const Vec3& p, double margin) {
   return true;
 }
 
+// Adds surfaces to the scene under a name, with a finish.
 struct RoomBuilder {
   Scene* scene;
-  int count = 0;
   void Add(const Surface& surface, const std::string& name, const Finish& finish) {
     scene->surfaces.push_back(Finished(surface, name, finish));
   }
@@ -242,8 +243,9 @@ Vec3 Turned(double angle, double x, double y) {
   return Vec3(std::cos(angle) * x - std::sin(angle) * y, std::sin(angle) * x + std::cos(angle) * y, 0.0);
 }
 
-// One free-standing object standing at `centre`, its front turned by `facing` from −y (towards
-// the audience). Returns its footprint's radius before adding it (AddObject adds).
+// A free-standing object: what it is, its drawn sizes, and the radius of its footprint (the
+// circle about its centre it stands within), which placing it keeps clear of walls and others.
+// Its front faces −y (the audience) turned by `facing` radians.
 enum class ObjectKind { kBox, kPlinth, kRoundColumn, kPolygonalColumn, kSlantedPanel, kSteps };
 
 struct Object {

@@ -132,7 +132,7 @@ TEST_P(RandomRoomSeed, IsARigWhoseWallsAreNotSquareAndWhoseDevicesStandInside) {
     area += scene.surfaces[s].Area();
   }
   EXPECT_NEAR(seen / area, room.coverage, 1e-3);
-  // What the placement reaches (measured over seeds 1–20: 22–45%): a fifth of the room at least.
+  // What the placement reaches (measured over seeds 1–20: 24–45%): a fifth of the room at least.
   EXPECT_GT(seen / area, 0.2);
 }
 
