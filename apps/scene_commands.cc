@@ -17,7 +17,10 @@
 #include "capture/devices.h"
 #include "capture/pixel_format.h"
 #include "capture/scene_cameras.h"
+#include "datasets_synthetic/random_rooms.h"
+#include "datasets_synthetic/scan_judge.h"
 #include "datasets_synthetic/scene_files.h"
+#include "datasets_synthetic/synthetic_camera.h"
 #include "projection/projector.h"
 #include "projection/stage.h"
 #include <fmt/ranges.h>
@@ -223,6 +226,47 @@ void AddSceneCommands(CLI::App& app) {
         WriteSyntheticSceneFile(args->scene, args->patches > 0 ? args->patches : 1000, args->out);
     std::cout << "wrote " << path.string() << " with its projectors' and camera's models; open it as a rig with "
               << "--camera synthetic:" << path.string() << "\n";
+  });
+
+  auto random = std::make_shared<RandomRoomOptions>();
+  CLI::App* random_cmd = scene->add_subcommand(
+      "random", "Write a room made at random from a seed as a scene file with its projectors and camera "
+                "(docs/synthetic.md#rooms-made-at-random)");
+  random_cmd->add_option("--seed", random->seed, "The seed: the same seed gives the same room")->required();
+  random_cmd->add_option("--out", args->out, "Output directory")->required();
+  random_cmd->add_option("--patches", random->patches, "The scene file's patch target")->capture_default_str();
+  random_cmd->callback([random, args] {
+    const std::filesystem::path path = WriteRandomRoom(*random, args->out);
+    std::cout << "wrote " << path.string() << "; open it as a rig with --camera synthetic:" << path.string()
+              << "\n";
+  });
+
+  auto judge = std::make_shared<ScanJudgeOptions>();
+  auto judge_json = std::make_shared<std::string>();
+  CLI::App* judge_cmd = scene->add_subcommand(
+      "judge-scan", "Scan a scene file's rig without its model (exact correspondences plus decoding noise) and "
+                    "judge the scanned room against the file (docs/scan.md#rooms-made-at-random)");
+  judge_cmd->add_option("scene", args->scene, "Scene JSON with projectors and a camera")->required();
+  judge_cmd->add_option("--camera-scale", judge->camera_scale, "The camera's image scaled, (0, 1]")
+      ->capture_default_str();
+  judge_cmd->add_option("--noise-seed", judge->noise_seed, "The decoding noise's seed")->capture_default_str();
+  judge_cmd->add_flag("--compensate", judge->compensate,
+                      "Also compensate on the true model and on the scan and compare their photographs");
+  judge_cmd->add_option("--patches", judge->patches, "Solver patches with --compensate, [20, 5000]")
+      ->capture_default_str();
+  judge_cmd->add_option("--json", *judge_json, "Also write the judgement as JSON to this file");
+  judge_cmd->callback([judge, judge_json, args] {
+    const ScanJudgement judgement = ScanAndJudge(args->scene, *judge);
+    std::cout << judgement.calibration_report << "\n" << judgement.Report() << "\n"
+              << fmt::format("judged {} calibrated {} found {} expected {} planar_rms_mm {:.2f} curved_rms_mm {:.2f} "
+                             "area_percent {:+.2f} spurious_percent {:.2f} delta_e2000_model {:.2f} delta_e2000_scan {:.2f} "
+                             "seam_scan {:.2f} seconds {:.1f}\n",
+                             judgement.room, judgement.calibrated ? 1 : 0, judgement.found, judgement.expected,
+                             judgement.worst_planar_rms_mm, judgement.worst_curved_rms_mm,
+                             judgement.worst_area_error_percent, judgement.largest_spurious_percent,
+                             judgement.model_delta_e2000, judgement.scan_delta_e2000, judgement.scan_seam,
+                             judgement.seconds);
+    if (!judge_json->empty()) WriteFileAtomically(*judge_json, judgement.Json().dump(2) + "\n");
   });
 
   CLI::App* export_cmd = scene->add_subcommand("export", "Write the problem as NumPy .npy files and problem.json");

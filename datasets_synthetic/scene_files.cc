@@ -61,7 +61,15 @@ json ProjectorEntry(const Projector& projector, const std::string& model) {
 
 std::filesystem::path WriteSyntheticSceneFile(const std::string& name, int patches,
                                               const std::filesystem::path& dir) {
-  const SyntheticScene synthetic = MakeSyntheticScene(name, patches);
+  return WriteSyntheticSceneFile(MakeSyntheticScene(name, patches), name,
+                                 "procam's built-in synthetic scene " + name, dir);
+}
+
+std::filesystem::path WriteSyntheticSceneFile(const SyntheticScene& synthetic,
+                                              const std::string& name,
+                                              const std::string& description,
+                                              const std::filesystem::path& dir) {
+  const int patches = synthetic.scene.target_patches;
   // Every file is made first, then checked against what `dir` holds, then written: a file
   // edited by hand is never replaced, and a refusal leaves nothing new behind.
   std::vector<std::pair<std::string, std::string>> files;  // name in `dir`, bytes
@@ -99,7 +107,7 @@ std::filesystem::path WriteSyntheticSceneFile(const std::string& name, int patch
                                          "; extrinsics = mrcal rt_cam_ref with ref = world"));
   const json file = {
       {"name", name},
-      {"description", "procam's built-in synthetic scene " + name},
+      {"description", description},
       {"patches", patches},
       {"white", scene.white},
       {"weld_tolerance", scene.weld_tolerance},

@@ -5,6 +5,8 @@
 #include <filesystem>
 #include <string>
 
+#include "datasets_synthetic/paper_scenes.h"
+
 namespace procam {
 
 // Writes synthetic scene `name` (SyntheticSceneNames()) with `patches` as its patch target into
@@ -15,6 +17,13 @@ namespace procam {
 // photographs what `synthetic:NAME` does. Returns the scene file's path. Throws
 // std::invalid_argument for an unknown scene, IoError naming a file that cannot be written.
 std::filesystem::path WriteSyntheticSceneFile(const std::string& name, int patches,
+                                              const std::filesystem::path& dir);
+
+// The same for a scene made in code (its placements, patch target `synthetic.scene.target_patches`),
+// written as NAME.json with `description`: the one writer of scene files with their devices.
+std::filesystem::path WriteSyntheticSceneFile(const SyntheticScene& synthetic,
+                                              const std::string& name,
+                                              const std::string& description,
                                               const std::filesystem::path& dir);
 
 }  // namespace procam
