@@ -9,6 +9,7 @@
 
 #include "calibration/calibrated_room.h"
 #include "compensation/stage.h"
+#include "projection/projector_images.h"
 #include "python/bindings.h"
 
 namespace py = pybind11;
@@ -110,6 +111,31 @@ void BindRoom(py::module_& m) {
       py::arg("room"), py::arg("compensation"), py::arg("out"), py::arg("export_problem") = false,
       "Writes the solution directory `out` as `procam compensate --out` does (result.json, E.npy, B.npy; "
       "with export_problem the whole problem), each file atomically; `procam project` and `verify` read it.");
+
+  m.def(
+      "projector_images",
+      [](const CalibratedRoom& room, const Eigen::MatrixX3d& emittance, const std::string& dither,
+         const std::string& light) {
+        if (room.projectors.empty()) throw std::invalid_argument("room: no projectors (load_room with a rig, or a scene with projectors)");
+        RenderOptions options;
+        if (!ParseDither(dither, &options.dither)) throw std::invalid_argument("dither: unknown '" + dither + "'");
+        if (!ParseLightField(light, &options.light)) throw std::invalid_argument("light: unknown '" + light + "'");
+        std::vector<ProjectorImage> images;
+        {
+          py::gil_scoped_release release;
+          RenderSummary summary;
+          images = RenderProjectorImages(room.projection, room.geometry.scene, emittance, options, &summary);
+        }
+        py::list arrays;
+        for (const ProjectorImage& image : images) arrays.append(MatArray(image.codes));
+        return arrays;
+      },
+      py::arg("room"), py::arg("emittance"), py::arg("dither") = DitherName(RenderOptions().dither),
+      py::arg("light") = LightFieldName(RenderOptions().light),
+      "Each projector's image that delivers `emittance` (n,3) (e.g. compensate(room).emittance), in "
+      "room.projectors' order: (height,width,3) uint16 code values, row 0 at the top, R,G,B, each in "
+      "[0, 2^bits - 1] of that projector (what `procam project` writes as PNG). `dither`: the command "
+      "line's --dither names; `light`: its --light names. Releases the GIL while it renders.");
 
   py::class_<SolutionDirectory>(m, "SolutionDirectory", "A solution directory as read back (docs/solution_format.md).")
       .def_property_readonly("scene", [](const SolutionDirectory& s) { return s.scene; })

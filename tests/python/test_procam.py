@@ -209,6 +209,14 @@ def test_a_room_with_projectors_compensates_and_writes_as_the_command_line_does(
     assert np.array_equal(np.load(tmp_path / "python" / "E.npy"), np.load(tmp_path / "cli" / "E.npy"))
     back = procam.read_solution(tmp_path / "python")
     assert back.patches == room.size and np.array_equal(back.emittance, run.emittance)
+    # The projector images equal what `procam project` writes for the same solution.
+    run_procam("project", tmp_path / "cli", "--out", tmp_path / "images")
+    images = procam.projector_images(room, run.emittance)
+    assert len(images) == len(room.projectors)
+    for name, image in zip(room.projectors, images):
+        written = procam.read_image(tmp_path / "images" / f"{name}.png")
+        assert written.shape == image.shape
+        assert np.array_equal(written.astype(np.uint16), image)
     # The solution checks the room it is loaded with: another patch count is refused by name.
     with pytest.raises(procam.IoError, match="patches"):
         procam.load_room(str(scene), patches=400, solution=tmp_path / "python")
