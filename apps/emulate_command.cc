@@ -139,7 +139,9 @@ void AddEmulateCommand(CLI::App& app) {
       ->delimiter(',')
       ->required();
   emulate->add_option("--camera", args->camera, "The scene's camera entry by name (default: the first)");
-  emulate->add_option("--address", args->address, "Local IPv4 address to serve the camera on")->capture_default_str();
+  emulate->add_option("--address", args->address, "Local IPv4 address to serve the camera on")
+      ->check(CLI::ValidIPV4)
+      ->capture_default_str();
   emulate->add_option("--latency-ms", args->latency_ms,
                       "Display-to-camera latency, milliseconds (default: the camera entry's latency_ms)")
       ->check(FiniteRange(0.0, 10000.0));

@@ -143,6 +143,12 @@ void AddNodeCommands(CLI::App& app) {
   node->callback([node_args] {
     CheckUnique(node_args->projectors, "--projectors");
     CheckUnique(node_args->display, "--display", IsMonitor);
+    // inproc:// endpoints are for nodes run inside the controller's process (tests); another
+    // process could never reach this one.
+    if (!node_args->listen.starts_with("tcp://")) {
+      throw std::invalid_argument("--listen: " + node_args->listen +
+                                  ": a node listens at tcp://ADDRESS:PORT (another process cannot reach any other endpoint)");
+    }
     CheckTcpPort(node_args->listen, /*bind=*/true, "--listen");
     NodeOptions options;
     options.name = node_args->name;

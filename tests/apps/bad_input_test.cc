@@ -251,12 +251,16 @@ TEST(BadInput, NotANumberAndPortsOutOfRangeAreRefused) {
       {"emulate room.json --monitors A --fps nan", "--fps"},
       {"emulate room.json --monitors A --seconds nan", "--seconds"},
       {"emulate room.json --monitors A --fps inf", "--fps"},
+      // An address that is not IPv4 is the option's fault, not the scene file's.
+      {"emulate room.json --monitors A --address 999.1.1.1", "--address"},
       {"play room.json --rig " + rig + out + " --setup-timeout nan", "--setup-timeout"},
       {"play room.json --rig " + rig + out + " --frame-timeout-ms nan", "--frame-timeout-ms"},
       {"compensate room.json --alpha nan" + out, "--alpha"},
       {"node --rig " + rig + " --scene room.json --projectors a --seconds nan", "--seconds"},
       {"node --rig " + rig + " --scene room.json --projectors a --listen tcp://127.0.0.1:99999",
        "--listen: tcp://127.0.0.1:99999: the port must be a number in 0..65535"},
+      {"node --rig " + rig + " --scene room.json --projectors a --listen inproc://x",
+       "--listen: inproc://x: a node listens at tcp://ADDRESS:PORT"},
       {"play room.json --rig " + rig + out + " --nodes a=tcp://127.0.0.1:70000",
        "the port must be a number in 1..65535"},
   };
