@@ -55,11 +55,12 @@ case "$command" in
     # stalls whole commands, apps/nodes starts, kills and restarts node processes against
     # wall-clock deadlines (process and timing behaviour, not memory); the end-to-end command
     # tests (apps/cli, apps/emulated_room, calibrate_all, the *_command tests, capture/cli,
-    # projection/multi_monitor, verification/verify) run whole pipelines whose code runs under
-    # the sanitizers in the unit tests of each library; package/install and layering/* check
-    # files, not code. apps/bad_input (every command on malformed input) stays.
+    # projection/multi_monitor, verification/verify, and datasets_synthetic/scan_random: whole
+    # scans of random rooms) run whole pipelines whose code runs under the sanitizers in the unit
+    # tests of each library; package/install and layering/* check files, not code.
+    # apps/bad_input (every command on malformed input) stays.
     ctest --preset asan --parallel 2 \
-      -E '^(apps/(faults|nodes|cli|emulated_room)|calibration/(calibrate_all|projectors_command|photometric_command|board_command)|projection/(project_command|multi_monitor)|capture/cli|verification/verify|package/install|layering/.*)$' \
+      -E '^(apps/(faults|nodes|cli|emulated_room)|calibration/(calibrate_all|projectors_command|photometric_command|board_command)|projection/(project_command|multi_monitor)|capture/cli|verification/verify|datasets_synthetic/scan_random|package/install|layering/.*)$' \
       "$@"
     ;;
   build)
