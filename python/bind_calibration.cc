@@ -7,6 +7,7 @@
 
 #include <stdexcept>
 
+#include "calibration/board_projector.h"
 #include "calibration/camera_calibration.h"
 #include "calibration/capture_layout.h"
 #include "calibration/structured_light.h"
@@ -69,6 +70,8 @@ StructuredLightLayout LayoutArgument(const py::object& layout) {
 }
 
 }  // namespace
+
+void BindBoardProjector(py::module_& m);
 
 void BindCalibration(py::module_& m) {
   py::class_<StructuredLightOptions>(m, "StructuredLightOptions",
@@ -232,6 +235,100 @@ void BindCalibration(py::module_& m) {
       "Calibrates a camera of width x height pixels from the corners of `board` seen in each view "
       "(a list of (corners_x*corners_y, 2) arrays, e.g. detect_chessboard's): returns "
       "(CameraCalibration, CameraCalibrationSummary). Releases the GIL while mrcal solves.");
+  BindBoardProjector(m);
+}
+
+
+// A projector calibrated with the camera from a chessboard and structured light (docs/chessboard.md).
+void BindBoardProjector(py::module_& m) {
+  py::class_<BoardProjectorSummary>(m, "BoardProjectorSummary")
+      .def_property_readonly("converged", [](const BoardProjectorSummary& s) { return s.termination == BoardProjectorSummary::kConverged; })
+      .def_readonly("poses", &BoardProjectorSummary::poses)
+      .def_readonly("camera_rms", &BoardProjectorSummary::camera_rms, "px, per coordinate, inliers")
+      .def_readonly("projector_rms", &BoardProjectorSummary::projector_rms, "px, per coordinate, inliers")
+      .def_readonly("message", &BoardProjectorSummary::message)
+      .def("brief_report", &BoardProjectorSummary::BriefReport);
+  py::class_<BoardProjectorCalibration>(m, "BoardProjectorCalibration",
+                                        "A camera and a projector calibrated together (mrcal).")
+      .def_readonly("lens_model", &BoardProjectorCalibration::lens_model)
+      .def_readonly("camera_intrinsics", &BoardProjectorCalibration::camera_intrinsics, "mrcal order")
+      .def_readonly("projector_intrinsics", &BoardProjectorCalibration::projector_intrinsics, "mrcal order")
+      .def_property_readonly("projector_from_camera", [](const BoardProjectorCalibration& c) {
+            return Eigen::Matrix4d(c.projector_from_camera.matrix());
+          }, "(4,4) rigid transform from camera to projector coordinates, metres")
+      .def("write", [](const BoardProjectorCalibration& c, const std::filesystem::path& camera,
+                       const std::filesystem::path& projector) {
+            WriteCameraModelFile(camera, c.CameraModelOut(), "procam board calibration: the camera");
+            WriteCameraModelFile(projector, c.ProjectorModelOut(), "procam board calibration: the projector");
+          }, py::arg("camera"), py::arg("projector"), "Writes both .cameramodel files atomically.");
+
+  m.def(
+      "locate_board_corners",
+      [](const py::array& white, const StructuredLightMap& map, const ChessboardSpec& board) -> py::object {
+        BoardPoseCapture capture;
+        capture.white = ArrayMat(white, "white");
+        capture.map = map;
+        BoardPoseCorners corners;
+        bool found;
+        {
+          py::gil_scoped_release release;
+          found = LocateBoardCorners(BoardProjectorOptions(), board, capture, &corners);
+        }
+        if (!found) return py::none();
+        Eigen::MatrixX2d camera(corners.camera.size(), 2), projector(corners.projector.size(), 2);
+        Eigen::Matrix<bool, Eigen::Dynamic, 1> seen(corners.projector_found.size());
+        for (size_t k = 0; k < corners.camera.size(); ++k) camera.row(k) = corners.camera[k].transpose();
+        for (size_t k = 0; k < corners.projector.size(); ++k) projector.row(k) = corners.projector[k].transpose();
+        for (size_t k = 0; k < corners.projector_found.size(); ++k) seen(k) = corners.projector_found[k];
+        return py::make_tuple(camera, projector, seen);
+      },
+      py::arg("white"), py::arg("map"), py::arg("board"),
+      "One pose: the board's corners in the photo under full white and, through local homographies "
+      "of the decoded structured light `map`, in the projector: (camera (k,2), projector (k,2), "
+      "seen (k,) bool), or None when the board is not found.");
+
+  m.def(
+      "calibrate_board_projector",
+      [](const std::vector<std::tuple<Eigen::MatrixX2d, Eigen::MatrixX2d, std::vector<bool>>>& poses,
+         const ChessboardSpec& board, std::pair<int, int> camera_size, std::pair<int, int> projector_size,
+         const std::string& lens_model) {
+        BoardProjectorOptions options;
+        options.lens_model = lens_model;
+        std::string why;
+        if (!options.Check(&why)) throw std::invalid_argument(why);
+        std::vector<BoardPoseCorners> corners;
+        for (size_t p = 0; p < poses.size(); ++p) {
+          const auto& [camera, projector, seen] = poses[p];
+          if (camera.rows() != board.CornerCount() || projector.rows() != board.CornerCount() ||
+              static_cast<int>(seen.size()) != board.CornerCount()) {
+            throw std::invalid_argument("poses[" + std::to_string(p) + "]: " + std::to_string(board.CornerCount()) +
+                                        " corners in each of camera, projector and seen");
+          }
+          BoardPoseCorners pose;
+          pose.name = "poses[" + std::to_string(p) + "]";
+          for (int k = 0; k < board.CornerCount(); ++k) {
+            pose.camera.push_back(camera.row(k).transpose());
+            pose.projector.push_back(projector.row(k).transpose());
+          }
+          pose.projector_found = seen;
+          pose.window_pixels.assign(board.CornerCount(), 0);
+          corners.push_back(std::move(pose));
+        }
+        BoardProjectorCalibration calibration;
+        BoardProjectorSummary summary;
+        {
+          py::gil_scoped_release release;
+          CalibrateBoardProjector(options, board, corners, camera_size.first, camera_size.second, projector_size.first,
+                                  projector_size.second, &calibration, &summary);
+        }
+        return py::make_tuple(calibration, summary);
+      },
+      py::arg("poses"), py::arg("board"), py::arg("camera_size"), py::arg("projector_size"),
+      py::arg("lens_model") = BoardProjectorOptions().lens_model,
+      "Calibrates the camera and the projector together (Moreno & Taubin's method, solved by mrcal) "
+      "from poses of `board`: each (camera (k,2), projector (k,2), seen (k,)) as locate_board_corners "
+      "gives. Sizes are (width, height). Returns (BoardProjectorCalibration, BoardProjectorSummary). "
+      "Releases the GIL while mrcal solves.");
 }
 
 }  // namespace procam::python
