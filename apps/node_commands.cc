@@ -12,6 +12,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "geometry/stage.h"
 #include "base/output_directory.h"
 #include "nodes/node.h"
 #include "nodes/outputs.h"
@@ -150,6 +151,9 @@ void AddNodeCommands(CLI::App& app) {
                                   ": a node listens at tcp://ADDRESS:PORT (another process cannot reach any other endpoint)");
     }
     CheckTcpPort(node_args->listen, /*bind=*/true, "--listen");
+    // The room is read when the controller's setup arrives; a file that cannot be read is said
+    // now, not minutes later on the controller.
+    LoadSceneArgument(node_args->scene);
     NodeOptions options;
     options.name = node_args->name;
     options.rig_dir = node_args->rig;

@@ -261,6 +261,9 @@ TEST(BadInput, NotANumberAndPortsOutOfRangeAreRefused) {
        "--listen: tcp://127.0.0.1:99999: the port must be a number in 0..65535"},
       {"node --rig " + rig + " --scene room.json --projectors a --listen inproc://x",
        "--listen: inproc://x: a node listens at tcp://ADDRESS:PORT"},
+      // The scene is read at start, not when the controller's setup arrives.
+      {"node --rig " + rig + " --scene " + (dir / "missing.json").string() + " --projectors a --seconds 2",
+       "missing.json: file not found"},
       {"play room.json --rig " + rig + out + " --nodes a=tcp://127.0.0.1:70000",
        "the port must be a number in 1..65535"},
   };
