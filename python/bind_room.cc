@@ -137,6 +137,31 @@ void BindRoom(py::module_& m) {
       "[0, 2^bits - 1] of that projector (what `procam project` writes as PNG). `dither`: the command "
       "line's --dither names; `light`: its --light names. Releases the GIL while it renders.");
 
+  py::class_<RigDirectory>(m, "RigDirectory", "A rig directory as read back (docs/rig_format.md).")
+      .def_property_readonly("dir", [](const RigDirectory& r) { return r.dir.string(); })
+      .def_property_readonly("projectors", [](const RigDirectory& r) {
+            std::vector<std::string> names;
+            for (const Projector& projector : r.projectors) names.push_back(projector.name);
+            return names;
+          }, "the projectors' names, in rig.json's order")
+      .def_property_readonly("projector_models", [](const RigDirectory& r) {
+            std::vector<std::string> paths;
+            for (const Projector& projector : r.projectors) paths.push_back(projector.model_path.string());
+            return paths;
+          }, "each projector's .cameramodel ('' before calibrate projectors)")
+      .def_property_readonly("camera_model", [](const RigDirectory& r) {
+            return r.file.camera.model.empty() ? std::string() : (r.dir / r.file.camera.model).string();
+          }, "the camera's .cameramodel ('' before it is calibrated)")
+      .def_readonly("reflectance", &RigDirectory::reflectance,
+                    "(n,3) the patches' reflectance estimated by calibrate photometric (empty without; view)")
+      .def_readonly("reflectance_target_patches", &RigDirectory::reflectance_target_patches,
+                    "the patch target `reflectance` was estimated for")
+      .def("describe", [](const RigDirectory& r) { return r.Describe().dump(); },
+           "What a solution's result.json records about the rig (JSON text).");
+  m.def("read_rig", &ReadRigDirectory, py::arg("directory"),
+        "Reads and checks a rig directory (rig.json and what it names); raises procam.IoError naming "
+        "the file and key.");
+
   py::class_<SolutionDirectory>(m, "SolutionDirectory", "A solution directory as read back (docs/solution_format.md).")
       .def_property_readonly("scene", [](const SolutionDirectory& s) { return s.scene; })
       .def_readonly("patches", &SolutionDirectory::patches)

@@ -129,6 +129,10 @@ def test_bad_input_raises_one_line_naming_it(tmp_path):
         procam.decode_structured_light(np.zeros((4, 4)), procam.StructuredLightOptions(16, 16))
     with pytest.raises(procam.IoError, match="nothing.png"):
         procam.read_image(tmp_path / "nothing.png")
+    (tmp_path / "rig").mkdir()
+    (tmp_path / "rig" / "rig.json").write_text('{"format": "procam rig", "version": 1, "projectors": 3}')
+    with pytest.raises(procam.IoError, match="rig.json"):
+        procam.read_rig(tmp_path / "rig")
 
 
 def test_decoding_an_ideal_capture_gives_every_projector_pixel():
