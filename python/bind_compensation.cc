@@ -106,6 +106,37 @@ void BindCompensation(py::module_& m) {
                      "stop when the projected gradient's max norm <= this (1 + f)")
       .def_readwrite("function_tolerance", &SolverOptions::function_tolerance,
                      "stop when an iteration lowers f by <= this times f")
+      .def_readwrite("device_float32", &SolverOptions::device_float32,
+                     "cuda: objective values, gradients and line searches with the float32 K^-1 too")
+      .def_readwrite("device_host_loop", &SolverOptions::device_host_loop,
+                     "cuda: Alg. 1 on the host, only K^-1 products on the device (for comparison)")
+      .def_readwrite("device_fused", &SolverOptions::device_fused,
+                     "cuda: problems under 4096 patches run the whole loop in one cooperative kernel")
+      .def_readwrite("device_product_rows", &SolverOptions::device_product_rows,
+                     "cuda, dense F: outputs per block of the K^-1 product kernel (1, 2, 4, 8; 0 cuBLAS; -1 best)")
+      .def_readwrite("device_graphs", &SolverOptions::device_graphs, "cuda: replay fixed kernel sequences as CUDA graphs")
+      .def_readwrite("device_fused_blocks", &SolverOptions::device_fused_blocks,
+                     "cuda, fused loop: blocks of the cooperative grid (0: one per multiprocessor)")
+      .def_readwrite("device_profile", &SolverOptions::device_profile, "cuda: print where each solve's time went (stderr)")
+      .def_property("device_preconditioner",
+                    [](const SolverOptions& o) { return DevicePreconditionerName(o.device_preconditioner); },
+                    [](SolverOptions& o, const std::string& name) {
+                      if (name == "block_jacobi_neumann") o.device_preconditioner = SolverOptions::DevicePreconditioner::kBlockJacobiNeumann;
+                      else if (name == "block_jacobi") o.device_preconditioner = SolverOptions::DevicePreconditioner::kBlockJacobi;
+                      else throw std::invalid_argument("SolverOptions.device_preconditioner: unknown value '" + name + "'");
+                    },
+                    "cuda: CG's preconditioner, block_jacobi_neumann | block_jacobi")
+      .def_property("device_cg_matrix", [](const SolverOptions& o) { return DeviceCgMatrixName(o.device_cg_matrix); },
+                    [](SolverOptions& o, const std::string& name) {
+                      if (name == "float16") o.device_cg_matrix = SolverOptions::DeviceCgMatrix::kFloat16;
+                      else if (name == "float32") o.device_cg_matrix = SolverOptions::DeviceCgMatrix::kFloat32;
+                      else throw std::invalid_argument("SolverOptions.device_cg_matrix: unknown value '" + name + "'");
+                    },
+                    "cuda, dense F: the copy of K^-1 CG's products read, float16 | float32")
+      .def_readwrite("metric_round_tolerance", &SolverOptions::metric_round_tolerance,
+                     "perceptual2000: relative decrease at which every round but the last stops (0: the full tolerances)")
+      .def_readwrite("armijo", &SolverOptions::armijo, "the line search's sufficient-decrease constant")
+      .def_readwrite("second_order", &SolverOptions::second_order, "Gauss-Newton's second-order term")
       .def("check", [](const SolverOptions& o) { CheckOptions(o); }, "Raises ValueError naming the first bad option.");
 
   py::class_<SolverSummary>(m, "SolverSummary", "What a solve did (compensation/solver.h).")

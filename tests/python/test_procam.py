@@ -122,6 +122,8 @@ def test_bad_input_raises_one_line_naming_it(tmp_path):
     options = procam.SolverOptions()
     with pytest.raises(ValueError, match="method"):
         options.method = "fastest"
+    with pytest.raises(ValueError, match="device_preconditioner"):
+        options.device_preconditioner = "jacobi"
     options.metric_rounds = 0
     with pytest.raises(ValueError):
         options.check()
