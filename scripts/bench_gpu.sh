@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# GPU benchmark and checks of the solver (issue 9), in one call on a machine with a CUDA device:
+# GPU benchmark and checks of the solver, in one call on a machine with a CUDA device:
 #   scripts/bench_gpu.sh BINARY_DIR OUTPUT.md [COMMIT]
 # BINARY_DIR holds compensation_solver_cuda_device_test and compensation_compressed_cuda_device_test
 # (tests/compensation/*_device_test.cc: built from the solver's sources with only the CUDA
