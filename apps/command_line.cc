@@ -8,9 +8,11 @@
 #include <cstdio>
 #include <limits>
 #include <map>
+#include <optional>
 #include <sstream>
 
 #include "base/io.h"
+#include "base/output_directory.h"
 #include "procam/config.h"
 #if PROCAM_WITH_GLFW
 #include "projection/glfw_display.h"
@@ -176,6 +178,18 @@ void AddSettleOption(CLI::App* command, SettleSetting* settle) {
           "Wait after each pattern before frames count: auto (measure the display-to-camera latency first with "
           "a flash sequence) or milliseconds")
       ->option_text("auto|MS (default " + settle->Text() + ")");
+}
+
+void CheckNotProcamDirectory(const std::filesystem::path& dir, const std::string& command,
+                             const std::string& option) {
+  std::error_code error;
+  if (std::filesystem::exists(dir, error) && !std::filesystem::is_directory(dir, error)) {
+    throw IoError(dir.string() + ": " + option + " must be a directory, and this is a file");
+  }
+  if (const std::optional<DirectoryKind> found = DirectoryKindOf(dir)) {
+    throw IoError(dir.string() + ": " + option + " is " + DirectoryKindName(*found) + "; " + command +
+                  " would write its own files into it: give a new directory");
+  }
 }
 
 }  // namespace procam

@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -60,6 +61,12 @@ CLI::Validator FiniteRange(double min, double max);
 // A finite number ≥ 0, and > 0.
 CLI::Validator FiniteNonNegative();
 CLI::Validator FinitePositive();
+
+// For commands whose output is no directory kind of their own (scene export, evaluate): throws
+// IoError naming `dir` when it is a file or holds a rig, a session, a solution or another of
+// procam's outputs, whose files the command would overwrite or mix with its own.
+void CheckNotProcamDirectory(const std::filesystem::path& dir, const std::string& command,
+                             const std::string& option = "--out");
 
 // Human-readable summary: surfaces, areas, patch counts, form-factor statistics.
 std::string DescribeGeometry(const GeometryStage& stage);

@@ -113,6 +113,7 @@ void AddEvaluationCommands(CLI::App& app) {
       scenes.erase(std::remove(scenes.begin(), scenes.end(), "tiny_box"), scenes.end());
     }
     const std::filesystem::path out = args->out;
+    CheckNotProcamDirectory(out, "evaluate");
     std::filesystem::create_directories(out);
     EvaluationOptions options;
     options.patches = args->patches;

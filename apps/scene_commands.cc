@@ -277,6 +277,7 @@ void AddSceneCommands(CLI::App& app) {
       ->check(FiniteRange(1e-9, 1.0))
       ->capture_default_str();
   export_cmd->callback([args] {
+    CheckNotProcamDirectory(args->out, "scene export");
     const GeometryStage stage = RunGeometryStage(args->scene, GeometryArguments(args->patches));
     const std::string description = DescribeScene(stage);  // checks the projectors first
     ExportGeometryProblem(stage, args->alpha, args->out);

@@ -186,6 +186,24 @@ TEST(BadInput, MeshesAndTexturesAreReadSafely) {
 }
 
 
+// scene export and evaluate write files of no directory kind of their own: into a rig (or any of
+// procam's outputs) they are refused in one line, and the rig is as it was.
+TEST(BadInput, ExportAndEvaluateRefuseProcamDirectories) {
+  testing::TempDir dir;
+  const auto rig_json = dir.Write("rig/rig.json", R"({"format": "procam rig", "version": 1, "projectors": []})");
+  const auto contents = [](const std::filesystem::path& path) {
+    std::ifstream in(path);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const std::string rig = (dir / "rig").string(), before = contents(rig_json);
+  ExpectOneErrorLine("scene export synthetic:tiny_box --patches 50 --out " + rig,
+                     "--out is a rig directory; scene export would write its own files into it");
+  ExpectOneErrorLine("evaluate tiny_box --patches 50 --out " + rig,
+                     "--out is a rig directory; evaluate would write its own files into it");
+  EXPECT_EQ(contents(rig_json), before);
+  EXPECT_FALSE(std::filesystem::exists(dir / "rig" / "F.npy"));
+}
+
 // scene write replaces no file that differs from what it would write (a scene edited by hand)
 // and, refusing, writes nothing; run again over its own output it succeeds.
 TEST(BadInput, SceneWriteKeepsFilesEditedByHand) {
