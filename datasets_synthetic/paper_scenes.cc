@@ -155,24 +155,12 @@ Surface CurvedWall(const char* name, const Vec3& axis, double radius, double a0,
   return surface;
 }
 
-DevicePlacement Device(const char* name, const Vec3& centre, const Vec3& target, double fov_deg, int width,
-                       int height) {
-  DevicePlacement device;
-  device.name = name;
-  device.centre = centre;
-  device.target = target;
-  device.horizontal_fov_deg = fov_deg;
-  device.width = width;
-  device.height = height;
-  return device;
-}
-
 DevicePlacement Projector(const char* name, const Vec3& centre, const Vec3& target, double fov_deg = 72.0) {
-  return Device(name, centre, target, fov_deg, 1280, 800);
+  return MakeDevicePlacement(name, centre, target, fov_deg, 1280, 800);
 }
 
 DevicePlacement Camera(const Vec3& centre, const Vec3& target, double fov_deg = 70.0) {
-  return Device("camera", centre, target, fov_deg, 960, 640);
+  return MakeDevicePlacement("camera", centre, target, fov_deg, 960, 640);
 }
 
 SyntheticScene LShaped() {
@@ -287,6 +275,18 @@ SyntheticScene TinyBox() {
 }
 
 }  // namespace
+
+DevicePlacement MakeDevicePlacement(const std::string& name, const Vec3& centre, const Vec3& target,
+                                    double fov_deg, int width, int height) {
+  DevicePlacement device;
+  device.name = name;
+  device.centre = centre;
+  device.target = target;
+  device.horizontal_fov_deg = fov_deg;
+  device.width = width;
+  device.height = height;
+  return device;
+}
 
 std::vector<std::string> SyntheticSceneNames() {
   return {"l_shaped", "columns", "green_trapezoid", "interior_partitions", "c_shaped", "blue_curves", "tiny_box"};

@@ -24,6 +24,9 @@ struct DevicePlacement {
   double horizontal_fov_deg = 50.0;
   int width = 1280, height = 800;
 };
+// A placement with the default up (+z).
+DevicePlacement MakeDevicePlacement(const std::string& name, const Vec3& centre, const Vec3& target,
+                                    double fov_deg, int width, int height);
 
 struct SyntheticScene {
   Scene scene;

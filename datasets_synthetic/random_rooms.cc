@@ -357,18 +357,6 @@ void AddObject(RoomBuilder& room, const Object& object, const Vec3& centre, int 
   }
 }
 
-DevicePlacement Device(const std::string& name, const Vec3& centre, const Vec3& target, double fov_deg,
-                       int width, int height) {
-  DevicePlacement device;
-  device.name = name;
-  device.centre = centre;
-  device.target = target;
-  device.horizontal_fov_deg = fov_deg;
-  device.width = width;
-  device.height = height;
-  return device;
-}
-
 // Projectors and camera near the open front, inside the plan, looking in.
 void DrawPlacements(Draw& draw, const std::vector<Vec3>& plan, double width, double depth, double height,
                     int projectors, SyntheticScene* synthetic) {
@@ -388,7 +376,7 @@ void DrawPlacements(Draw& draw, const std::vector<Vec3>& plan, double width, dou
     const double ty = depth * draw.Uniform(0.55, 0.8);
     const double tz = draw.Uniform(0.3, 0.8);
     synthetic->projectors.push_back(
-        Device(fmt::format("projector{}", k + 1), centre, Vec3(tx, ty, tz), 72.0, 1280, 800));
+        MakeDevicePlacement(fmt::format("projector{}", k + 1), centre, Vec3(tx, ty, tz), 72.0, 1280, 800));
   }
   Vec3 centre;
   int attempts = 0;
@@ -401,7 +389,7 @@ void DrawPlacements(Draw& draw, const std::vector<Vec3>& plan, double width, dou
   const double tx = width * draw.Uniform(0.42, 0.58);
   const double ty = depth * draw.Uniform(0.6, 0.8);
   const double tz = draw.Uniform(0.2, 0.6);
-  synthetic->camera = Device("camera", centre, Vec3(tx, ty, tz), 80.0, 960, 640);
+  synthetic->camera = MakeDevicePlacement("camera", centre, Vec3(tx, ty, tz), 80.0, 960, 640);
 }
 
 double Coverage(const SyntheticScene& synthetic) {
