@@ -57,10 +57,10 @@ case "$command" in
     # tests (apps/cli, apps/emulated_room, calibrate_all, the *_command tests, capture/cli,
     # projection/multi_monitor, verification/verify, and datasets_synthetic/scan_random: whole
     # scans of random rooms) run whole pipelines whose code runs under the sanitizers in the unit
-    # tests of each library; package/install and layering/* check files, not code.
+    # tests of each library; package/install, layering/* and format/* check files, not code.
     # apps/bad_input (every command on malformed input) stays.
     ctest --preset asan --parallel 2 \
-      -E '^(apps/(faults|nodes|cli|emulated_room)|calibration/(calibrate_all|projectors_command|photometric_command|board_command)|projection/(project_command|multi_monitor)|capture/cli|verification/verify|datasets_synthetic/scan_random|package/install|layering/.*)$' \
+      -E '^(apps/(faults|nodes|cli|emulated_room)|calibration/(calibrate_all|projectors_command|photometric_command|board_command)|projection/(project_command|multi_monitor)|capture/cli|verification/verify|datasets_synthetic/scan_random|package/install|layering/.*|format/.*)$' \
       "$@"
     ;;
   build)
