@@ -37,6 +37,57 @@ CLI::Validator FiniteValidator(double min, double max, bool open_min, const std:
 
 }  // namespace
 
+void AddOptions(CLI::App* command, const OptionTable& table) {
+  for (const OptionTable::Option& option : table.options()) {
+    const std::string flag = "--" + option.name;
+    std::string help = option.help;
+    if (!option.unit.empty()) help += " (" + option.unit + ")";
+    const auto set = option.set;
+    if (option.kind == OptionTable::Kind::kFlag) {
+      // --NAME sets it, --NAME=false clears it (CLI11 counts a false as -1).
+      command->add_flag_function(
+          flag,
+          [set](std::int64_t count) {
+            std::string why;
+            set(count > 0 ? "true" : "false", &why);
+          },
+          help);
+      continue;
+    }
+    CLI::Option* added = command->add_option_function<std::string>(
+        flag,
+        [set, flag](const std::string& text) {
+          std::string why;
+          if (!set(text, &why)) throw CLI::ValidationError(flag, why);
+        },
+        help);
+    added->default_str(option.default_text);
+    switch (option.kind) {
+      case OptionTable::Kind::kInteger:
+        added->type_name(fmt::format("INT in [{}, {}]", OptionNumberText(*option.min),
+                                     OptionNumberText(*option.max)));
+        break;
+      case OptionTable::Kind::kNumber:
+        added->type_name(fmt::format("FLOAT in [{}, {}]", OptionNumberText(*option.min),
+                                     OptionNumberText(*option.max)));
+        break;
+      case OptionTable::Kind::kChoice: {
+        std::string choices;
+        for (const std::string& choice : option.choices)
+          choices += (choices.empty() ? "" : "|") + choice;
+        added->type_name("{" + choices + "}");
+        break;
+      }
+      case OptionTable::Kind::kPath:
+        added->type_name("PATH");
+        break;
+      default:
+        added->type_name("TEXT");
+        break;
+    }
+  }
+}
+
 CLI::Validator FiniteRange(double min, double max) {
   return FiniteValidator(min, max, false, fmt::format("[{}, {}]", min, max));
 }

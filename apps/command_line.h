@@ -1,6 +1,7 @@
 #pragma once
 // Values the commands read from their options (and rig.json keys) beyond what CLI11 parses.
 
+#include <CLI/CLI.hpp>
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <filesystem>
@@ -8,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "base/option_table.h"
 #include "base/parse.h"
 #include "base/progress.h"
 #include "calibration/camera_calibration.h"
@@ -15,9 +17,13 @@
 #include "geometry/stage.h"
 #include "projection/projector_images.h"
 
-#include <CLI/CLI.hpp>
-
 namespace procam {
+
+// Registers every option of `table` on `command`, each flag bound straight to its field (the
+// table is the only declaration: no copy of the options in apps/). Values are parsed by the table
+// (its ranges and choices: an error is one line naming the flag); --help shows each option's
+// default, values and unit. The table's fields must outlive the command's parse.
+void AddOptions(CLI::App* command, const OptionTable& table);
 
 // A stage's progress lines as the command line shows them: logged (spdlog, info), or printed on
 // stdout as they are (the calibration stages' reports).

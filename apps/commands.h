@@ -25,5 +25,8 @@ void AddCalibrateCommands(CLI::App& app);     // calibrate camera, photometric, 
 void AddCalibrateResponseCommand(CLI::App& calibrate);  // calibrate response (the group)
 void AddCalibrateAllCommand(CLI::App& calibrate);       // calibrate all (the group)
 void AddCalibrateProjectorsCommand(CLI::App& calibrate);  // calibrate projectors (the group)
+void AddOptionsCommand(CLI::App& app);                    // options (the declared option tables)
+// The option tables at their defaults as docs/options.md holds them (procam options --markdown).
+std::string DeclaredOptionsMarkdown();
 
 }  // namespace procam

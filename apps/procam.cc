@@ -45,6 +45,7 @@ int main(int argc, char** argv) {
   procam::AddCalibrateCommands(app);
   procam::AddProjectionCommands(app);
   procam::AddNodeCommands(app);
+  procam::AddOptionsCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {

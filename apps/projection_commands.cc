@@ -26,25 +26,21 @@
 namespace procam {
 namespace {
 
+// The projection stage's options (declared once by ProjectionStageOptions) and the command's own.
 struct ProjectArguments {
-  std::string solution, out, rig, dither = "ordered";
-  LightField light = LightField::kSmooth;
-  double feather = 0.1;
+  std::string solution, rig;
   int patches = 0;
-  bool detail = false;
+  ProjectionStageOptions stage;
+  OptionTable table{"project"};
 };
 
 void RunProject(const ProjectArguments& args) {
   const auto start = Clock::now();
-  ProjectionStageOptions options;
-  if (!ParseDither(args.dither, &options.dither)) throw std::invalid_argument("--dither: unknown method " + args.dither);
+  ProjectionStageOptions options = args.stage;
   const SolutionDirectory solution = ReadSolutionDirectory(args.solution);
   SolutionGeometry geometry = ReadSolutionGeometry(solution, args.patches);
-  SolutionProjectors projectors = ProjectorsForSolution(solution, args.rig, geometry.scene, &geometry.patches);
-  options.out = args.out;
-  options.feather = args.feather;
-  options.detail = args.detail;
-  options.light = args.light;
+  SolutionProjectors projectors =
+      ProjectorsForSolution(solution, args.rig, geometry.scene, &geometry.patches);
   options.load_seconds = SecondsSince(start);
   options.progress = PrintProgress();
   RunProjectionStage(solution, geometry, std::move(projectors.projectors), projectors.rig_description, options);
@@ -99,28 +95,17 @@ void AddProjectionCommands(CLI::App& app) {
       ->add_option("solution", args->solution,
                    "Directory written by `procam compensate SCENE --out DIR`")
       ->required();
-  project->add_option("--out", args->out, "Output directory (PNG per projector, result.json)")
+  project->add_option("--out", args->stage.out, "Output directory (PNG per projector, result.json)")
       ->required();
-  project
-      ->add_option("--rig", args->rig,
-                   "Rig directory whose projectors (and reflectance) to use; default: the rig "
-                   "the solution was computed with (compensate --rig), else the scene's");
-  project->add_option("--dither", args->dither, "none | ordered | error-diffusion")
-      ->check(CLI::IsMember({"none", "ordered", "error-diffusion"}))
-      ->capture_default_str();
-  project
-      ->add_option("--feather", args->feather,
-                   "Blending ramp at image borders, fraction of the image size")
-      ->check(FiniteRange(0.0, 0.5))
-      ->capture_default_str();
+  project->add_option("--rig", args->rig,
+                      "Rig directory whose projectors (and reflectance) to use; default: the rig "
+                      "the solution was computed with (compensate --rig), else the scene's");
   project->add_option("--patches", args->patches,
                       "Patch target given to compensate with --patches, if any");
-  AddLightOption(project, &args->light);
-  project->add_flag("--detail", args->detail,
-                    "Modulate the light within each patch by the desired texture's detail "
-                    "(patch totals unchanged; untextured surfaces as without)");
+  args->stage.Declare(&args->table);
+  AddOptions(project, args->table);
   project->callback([args] {
-    CheckOutputDirectory(args->out, DirectoryKind::kProjectorImages);
+    CheckOutputDirectory(args->stage.out, DirectoryKind::kProjectorImages);
     RunProject(*args);
   });
 

@@ -2,11 +2,27 @@
 
 #include <fmt/format.h>
 
+#include <limits>
 #include <stdexcept>
 
 #include "base/io.h"
+#include "base/option_table.h"
 
 namespace procam {
+
+void CalibratedRoomOptions::Declare(OptionTable* table) {
+  table
+      ->Path("rig", &rig_dir,
+             "rig directory (rig.json from procam calibrate): its projectors replace the scene's, "
+             "its reflectance.npy the scene's reflectance")
+      .Integer("patches", &patches, 0, std::numeric_limits<int>::max(), "",
+               "target patch count of the fine level, ≥ 4 (0: the scene's)")
+      .Choice(
+          "form-factors", &storage,
+          {{"dense", FormFactorStorage::kDense}, {"compressed", FormFactorStorage::kCompressed}},
+          "dense (n² doubles) or compressed (near pairs exact, far cluster pairs rank-1: rooms "
+          "of 10k–100k+ patches, solved matrix-free; docs/gpu.md)");
+}
 
 bool CalibratedRoomOptions::Check(std::string* why) const {
   if (expected_patches < 0) {
@@ -70,7 +86,6 @@ RoomSources ReadRoomSources(const CalibratedRoomOptions& options, RoomSources gi
 
 namespace {
 
-// The geometry stage's patches, and with options.form_factors its form factors.
 // The geometry stage's patches, and with options.form_factors its form factors, of `scene`.
 GeometryStage RoomGeometry(const CalibratedRoomOptions& options, Scene scene, int target) {
   if (options.form_factors) {

@@ -23,6 +23,10 @@
 #include "compensation/problem.h"
 #include "compensation/stage.h"
 #include "geometry/stage.h"
+
+namespace procam {
+class OptionTable;
+}  // namespace procam
 #include "projection/camera_rays.h"
 #include "projection/projection_rig.h"
 #include "projection/projector.h"
@@ -67,6 +71,9 @@ struct CalibratedRoomOptions {
   bool camera_lighting = false;
   // The geometry stage's progress (patch counts, form factors every 10%) and the room's lines.
   ProgressCallback progress;
+  // Declares what a person chooses of the room — --rig, --patches, --form-factors — in `table`,
+  // bound to this struct's fields (base/option_table.h).
+  void Declare(OptionTable* table);
   bool Check(std::string* why) const;
 };
 

@@ -6,15 +6,49 @@
 #include <stdexcept>
 
 #include "base/io.h"
+#include "base/option_table.h"
 #include "base/output_directory.h"
 
 namespace procam {
 
-bool CompensationOptions::Check(std::string* why) const {
-  if (!(alpha > 0.0 && alpha <= 1.0)) {
-    *why = "alpha must be in (0, 1], got " + std::to_string(alpha);
-    return false;
+void CompensationOptions::Declare(OptionTable* table) {
+  std::vector<std::pair<std::string, CompensationMethod>> methods;
+  for (CompensationMethod method :
+       {CompensationMethod::kNaive, CompensationMethod::kReverse, CompensationMethod::kLinear,
+        CompensationMethod::kPerceptual, CompensationMethod::kPerceptual2000}) {
+    methods.emplace_back(MethodName(method), method);
   }
+  std::vector<std::pair<std::string, SolverOptions::RobustLoss>> losses;
+  for (SolverOptions::RobustLoss loss :
+       {SolverOptions::RobustLoss::kSquared, SolverOptions::RobustLoss::kSoftL1,
+        SolverOptions::RobustLoss::kHuber, SolverOptions::RobustLoss::kCauchy}) {
+    losses.emplace_back(RobustLossName(loss), loss);
+  }
+  std::vector<std::pair<std::string, Device>> devices;
+  for (Device device : {Device::kCpu, Device::kCuda})
+    devices.emplace_back(DeviceName(device), device);
+  table
+      ->Choice("method", &solver.method, methods,
+               "the objective: naive, reverse, linear, perceptual (the paper's, in CIE76) or "
+               "perceptual2000 (CIEDE2000 with a robust loss; docs/solver.md)")
+      .Choice("loss", &solver.robust_loss, losses, "perceptual2000: the loss on each patch's ΔE00²")
+      .Number("loss-scale", &solver.robust_scale, 1e-6, 1e6, "ΔE00",
+              "perceptual2000: the loss's scale")
+      .Integer("metric-rounds", &solver.metric_rounds, 1, 100, "",
+               "perceptual2000: reweighting rounds (CIEDE2000's metric and the loss's weights "
+               "re-evaluated at the last round's result)")
+      .Number("alpha", &alpha, 1e-9, 1.0, "",
+              "weight of the absolute term against the spatial term")
+      .Flag("multires", &solver.multires, "solve the coarse patch level first and start from it")
+      .Choice("device", &solver.device, devices,
+              "where K⁻¹ is applied (cuda needs a CUDA build and a GPU; docs/gpu.md)");
+}
+
+bool CompensationOptions::Check(std::string* why) const {
+  // The table only reads the fields here.
+  OptionTable table("compensate");
+  const_cast<CompensationOptions*>(this)->Declare(&table);
+  if (!table.Check(why)) return false;
   if (lower.rows() != upper.rows()) {
     *why = "lower and upper bounds must have the same number of patches";
     return false;

@@ -13,6 +13,8 @@
 
 namespace procam {
 
+class OptionTable;
+
 struct CompensationRun {
   CompensationProblem fine, coarse;
   CompensationSolution solution;
@@ -31,6 +33,11 @@ struct CompensationOptions {
   Eigen::MatrixX3d lower, upper;
   // A line per solver iteration and the solver's brief report (when solver.progress is unset).
   ProgressCallback progress;
+  // Declares the options a person sets — --method, --loss, --loss-scale, --metric-rounds,
+  // --alpha, --multires, --device — in `table`, bound to this struct's fields, with their ranges
+  // and choices (base/option_table.h; the command line and docs/options.md come from it).
+  void Declare(OptionTable* table);
+  // The declared options within their ranges, the bounds' shapes, and solver.Check().
   bool Check(std::string* why) const;
 };
 

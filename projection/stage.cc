@@ -6,11 +6,35 @@
 #include <chrono>
 
 #include "base/io.h"
+#include "base/option_table.h"
 #include "base/output_directory.h"
 #include "base/timing.h"
 #include "geometry/stage.h"
 
 namespace procam {
+
+void ProjectionStageOptions::Declare(OptionTable* table) {
+  std::vector<std::pair<std::string, DitherMethod>> dithers;
+  for (DitherMethod method :
+       {DitherMethod::kNone, DitherMethod::kOrdered, DitherMethod::kErrorDiffusion}) {
+    dithers.emplace_back(DitherName(method), method);
+  }
+  table
+      ->Choice("dither", &dither, dithers,
+               "none (nearest code value), ordered (8×8 Bayer) or error-diffusion "
+               "(Floyd–Steinberg), in linear light")
+      .Number("feather", &feather, 0.0, 0.5, "of the image size",
+              "blending ramp at the image borders")
+      .Choice("light", &light,
+              {{LightFieldName(LightField::kSmooth), LightField::kSmooth},
+               {LightFieldName(LightField::kFlat), LightField::kFlat}},
+              "smooth: the light varies smoothly over each surface, stepping only where the "
+              "desired appearance does, each patch's flux kept (seamless); flat: one uniform "
+              "level per patch")
+      .Flag("detail", &detail,
+            "modulate the light within each patch by the desired texture's detail (patch totals "
+            "unchanged; untextured surfaces as without)");
+}
 namespace {
 
 

@@ -18,6 +18,8 @@
 
 namespace procam {
 
+class OptionTable;
+
 // The scene and patches a solution was computed on: its scene (LoadSceneArgument) subdivided by
 // the patch target that gives the solution's patch count (`patches_override` > 0: that target;
 // else the solution's target_patches, the scene's, or the count itself).
@@ -37,6 +39,9 @@ struct ProjectionStageOptions {
   LightField light = LightField::kSmooth;  // seamless light, or flat per patch (projector_images.h)
   double load_seconds = 0.0;               // what reading the inputs took, for result.json
   ProgressCallback progress;  // per projector: pixels lit, patches, saturation; bounds; times
+  // Declares --dither, --feather, --light and --detail in `table`, bound to these fields
+  // (base/option_table.h).
+  void Declare(OptionTable* table);
 };
 
 struct ProjectionStageSummary {

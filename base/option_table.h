@@ -1,0 +1,118 @@
+#pragma once
+// Each option of a stage declared once. A stage's Options struct lists its options in an
+// OptionTable — the flag's name, the field it sets, its range or choices, its unit and its help —
+// and everything else comes from that one declaration: the command line (apps/ binds each flag
+// straight to its field), the range checks of Check(), the equivalent command a stage prints
+// (only what differs from the defaults) and the option tables of docs/options.md (`procam
+// options`). As COLMAP's OptionManager binds flags to struct fields, and as Ceres documents each
+// option beside its field.
+//
+//   OptionTable table("compensate");
+//   table.Number("alpha", &options.alpha, 1e-9, 1.0, "", "weight of the absolute term");
+//   table.Choice("method", &options.method, {{"linear", kLinear}, {"perceptual", kPerceptual}},
+//                "the objective");
+//   std::string why;
+//   if (!table.Check(&why)) ...            // "--alpha: must be in [1e-09, 1], got 2"
+//   table.ChangedArguments()               // {"--alpha", "0.3"}: what differs from the defaults
+//
+// A table holds pointers to the fields it was built on: it lives no longer than they do, and a
+// copy of the Options struct needs a table of its own (each struct's Declare(OptionTable*)).
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace procam {
+
+class OptionTable {
+ public:
+  enum class Kind { kFlag, kInteger, kNumber, kText, kPath, kChoice };
+
+  struct Option {
+    std::string name;  // the flag without its dashes, e.g. "loss-scale"
+    Kind kind = Kind::kText;
+    std::string help;                  // one sentence, lower case, no final full stop
+    std::string unit;                  // e.g. "ms", "m", "ΔE00"; empty if none
+    std::optional<double> min, max;    // kInteger, kNumber: inclusive range
+    std::vector<std::string> choices;  // kChoice: the names accepted, in the order declared
+    std::string default_text;          // the field's value when declared, as written
+    // The field's value as written on a command line ("true"/"false" for a flag).
+    std::function<std::string()> get;
+    // Parses `text` into the field: false and `*why` (without the flag's name) if it is not a
+    // value of this option (not a number, out of range, not one of the choices).
+    std::function<bool(const std::string& text, std::string* why)> set;
+    // The field's value is within the declared range or choices; `*why` as for set.
+    std::function<bool(std::string* why)> check;
+  };
+
+  // `owner` names the table in docs/options.md and in messages, e.g. "compensate".
+  explicit OptionTable(std::string owner = "") : owner_(std::move(owner)) {}
+
+  // Each adds an option bound to `field` and returns the table (for the next declaration).
+  // Names are unique within a table (std::invalid_argument otherwise).
+  OptionTable& Flag(const std::string& name, bool* field, const std::string& help);
+  OptionTable& Integer(const std::string& name, int* field, int min, int max,
+                       const std::string& unit, const std::string& help);
+  OptionTable& Number(const std::string& name, double* field, double min, double max,
+                      const std::string& unit, const std::string& help);
+  OptionTable& Text(const std::string& name, std::string* field, const std::string& help);
+  OptionTable& Path(const std::string& name, std::filesystem::path* field, const std::string& help);
+  // An enumeration by name: `names` pairs each accepted name with its value.
+  template <typename Enum>
+  OptionTable& Choice(const std::string& name, Enum* field,
+                      const std::vector<std::pair<std::string, Enum>>& names,
+                      const std::string& help);
+
+  const std::string& owner() const { return owner_; }
+  const std::vector<Option>& options() const { return options_; }
+  // The option named `name` (without dashes), or nullptr.
+  const Option* Find(const std::string& name) const;
+
+  // Every field within its declared range or choices. On failure `*why` is one line naming the
+  // flag: "--alpha: must be in [1e-09, 1], got 2".
+  bool Check(std::string* why) const;
+  // The options whose value differs from their default, as a command line writes them, in the
+  // order declared: {"--alpha", "0.3", "--multires"}.
+  std::vector<std::string> ChangedArguments() const;
+  // Sets an option from its written value (as the command line does). Throws
+  // std::invalid_argument naming the flag: no such option, or a value it does not take.
+  void Set(const std::string& name, const std::string& text);
+  // A Markdown table: option | default | values | help.
+  std::string Markdown() const;
+
+ private:
+  Option& Add(const std::string& name, Kind kind, const std::string& help);
+  void AddChoice(const std::string& name, std::vector<std::string> choices,
+                 std::function<int()> get_index, std::function<void(int)> set_index,
+                 const std::string& help);
+
+  std::string owner_;
+  std::vector<Option> options_;
+};
+
+// Writes a number as options are written: the shortest text that reads back to the same double.
+std::string OptionNumberText(double value);
+
+template <typename Enum>
+OptionTable& OptionTable::Choice(const std::string& name, Enum* field,
+                                 const std::vector<std::pair<std::string, Enum>>& names,
+                                 const std::string& help) {
+  std::vector<std::string> choices;
+  for (const auto& [text, value] : names) choices.push_back(text);
+  AddChoice(
+      name, std::move(choices),
+      [field, names] {
+        for (size_t i = 0; i < names.size(); ++i) {
+          if (names[i].second == *field) return static_cast<int>(i);
+        }
+        return -1;
+      },
+      [field, names](int index) { *field = names[static_cast<size_t>(index)].second; }, help);
+  return *this;
+}
+
+}  // namespace procam

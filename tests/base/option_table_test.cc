@@ -1,0 +1,163 @@
+// The option table: each option declared once gives its parsing, its range check, the
+// equivalent command (what differs from the defaults) and its row in the docs.
+#include "base/option_table.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace procam {
+namespace {
+
+enum class Shade { kRed, kGreen, kBlue };
+
+struct Settings {
+  double alpha = 0.5;
+  int rounds = 4;
+  bool fast = false;
+  bool smooth = true;
+  std::string label = "room";
+  std::filesystem::path out;
+  Shade shade = Shade::kGreen;
+
+  void Declare(OptionTable* table) {
+    table->Number("alpha", &alpha, 1e-9, 1.0, "", "weight of the absolute term")
+        .Integer("rounds", &rounds, 1, 100, "", "metric rounds")
+        .Flag("fast", &fast, "solve the coarse level first")
+        .Flag("smooth", &smooth, "shape the light within each patch")
+        .Text("label", &label, "a name")
+        .Path("out", &out, "output directory")
+        .Choice("shade", &shade,
+                {{"red", Shade::kRed}, {"green", Shade::kGreen}, {"blue", Shade::kBlue}},
+                "the colour");
+  }
+};
+
+TEST(OptionTable, DefaultsAreValidAndChangeNothing) {
+  Settings settings;
+  OptionTable table("test");
+  settings.Declare(&table);
+  std::string why;
+  EXPECT_TRUE(table.Check(&why)) << why;
+  EXPECT_TRUE(table.ChangedArguments().empty());
+  ASSERT_NE(table.Find("alpha"), nullptr);
+  EXPECT_EQ(table.Find("alpha")->default_text, "0.5");
+  EXPECT_EQ(table.Find("shade")->default_text, "green");
+  EXPECT_EQ(table.Find("missing"), nullptr);
+}
+
+TEST(OptionTable, SetParsesIntoTheFieldsAndTheEquivalentCommandReadsBack) {
+  Settings settings;
+  OptionTable table("test");
+  settings.Declare(&table);
+  table.Set("alpha", "0.1");  // not exactly representable: written back as the shortest text
+  table.Set("rounds", "7");
+  table.Set("smooth", "false");
+  table.Set("fast", "");
+  table.Set("shade", "blue");
+  table.Set("out", "dir/sub");
+  EXPECT_EQ(settings.alpha, 0.1);
+  EXPECT_EQ(settings.rounds, 7);
+  EXPECT_TRUE(settings.fast);
+  EXPECT_FALSE(settings.smooth);
+  EXPECT_EQ(settings.shade, Shade::kBlue);
+  EXPECT_EQ(settings.out, "dir/sub");
+  const std::vector<std::string> expected = {
+      "--alpha",        "0.1",   "--rounds", "7",       "--fast",
+      "--smooth=false", "--out", "dir/sub",  "--shade", "blue"};
+  EXPECT_EQ(table.ChangedArguments(), expected);
+
+  // The printed command, read by a table of fresh defaults, gives the same settings.
+  Settings again;
+  OptionTable reader("test");
+  again.Declare(&reader);
+  const std::vector<std::string> arguments = table.ChangedArguments();
+  for (size_t i = 0; i < arguments.size(); ++i) {
+    std::string name = arguments[i].substr(2), value;
+    if (const size_t equals = name.find('='); equals != std::string::npos) {
+      value = name.substr(equals + 1);
+      name = name.substr(0, equals);
+    } else if (reader.Find(name)->kind != OptionTable::Kind::kFlag) {
+      value = arguments[++i];
+    }
+    reader.Set(name, value);
+  }
+  EXPECT_EQ(again.alpha, settings.alpha);
+  EXPECT_EQ(again.rounds, settings.rounds);
+  EXPECT_EQ(again.fast, settings.fast);
+  EXPECT_EQ(again.smooth, settings.smooth);
+  EXPECT_EQ(again.shade, settings.shade);
+  EXPECT_EQ(again.out, settings.out);
+}
+
+TEST(OptionTable, RefusesValuesOutsideTheDeclarationNamingTheFlag) {
+  Settings settings;
+  OptionTable table("test");
+  settings.Declare(&table);
+  auto message = [&](const std::string& name, const std::string& text) {
+    try {
+      table.Set(name, text);
+    } catch (const std::invalid_argument& error) {
+      return std::string(error.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_EQ(message("alpha", "2"), "--alpha: must be in [1e-09, 1], got 2");
+  EXPECT_EQ(message("alpha", "nan"), "--alpha: expected a finite number, got 'nan'");
+  EXPECT_EQ(message("alpha", "0.5x"), "--alpha: expected a finite number, got '0.5x'");
+  EXPECT_EQ(message("rounds", "2.5"), "--rounds: expected a whole number, got '2.5'");
+  EXPECT_EQ(message("rounds", "0"), "--rounds: must be in [1, 100], got 0");
+  EXPECT_EQ(message("shade", "pink"), "--shade: expected red, green, blue; got 'pink'");
+  EXPECT_EQ(message("fast", "maybe"), "--fast: expected true or false, got 'maybe'");
+  EXPECT_EQ(message("colour", "red"), "test: no option --colour");
+  // A refused value leaves the field as it was.
+  EXPECT_EQ(settings.alpha, 0.5);
+  EXPECT_EQ(settings.rounds, 4);
+}
+
+TEST(OptionTable, CheckFindsFieldsSetOutsideTheTable) {
+  Settings settings;
+  OptionTable table("test");
+  settings.Declare(&table);
+  std::string why;
+  settings.rounds = 101;
+  EXPECT_FALSE(table.Check(&why));
+  EXPECT_EQ(why, "--rounds: must be in [1, 100], got 101");
+  settings.rounds = 4;
+  settings.alpha = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(table.Check(&why));
+  EXPECT_EQ(why, "--alpha: must be a finite number, got nan");
+  settings.alpha = 0.5;
+  settings.shade = static_cast<Shade>(7);
+  EXPECT_FALSE(table.Check(&why));
+  EXPECT_EQ(why, "--shade: holds a value that is none of red, green, blue");
+}
+
+TEST(OptionTable, NamesAreUnique) {
+  Settings settings;
+  OptionTable table("test");
+  settings.Declare(&table);
+  EXPECT_THROW(table.Flag("fast", &settings.fast, "again"), std::invalid_argument);
+  EXPECT_THROW(table.Flag("--dashed", &settings.fast, "dashes"), std::invalid_argument);
+}
+
+TEST(OptionTable, MarkdownHasARowPerOptionWithItsDefaultAndValues) {
+  Settings settings;
+  OptionTable table("test");
+  settings.Declare(&table);
+  const std::string markdown = table.Markdown();
+  EXPECT_NE(
+      markdown.find("| `--alpha` | `0.5` | number in [1e-09, 1] | weight of the absolute term |"),
+      std::string::npos)
+      << markdown;
+  EXPECT_NE(markdown.find("| `--shade` | `green` | red \\| green \\| blue | the colour |"),
+            std::string::npos)
+      << markdown;
+  EXPECT_NE(markdown.find("| `--fast` | `false` | flag |"), std::string::npos) << markdown;
+  EXPECT_EQ(std::count(markdown.begin(), markdown.end(), '\n'), 2 + 7);
+}
+
+}  // namespace
+}  // namespace procam
