@@ -64,12 +64,10 @@ void AddOptions(CLI::App* command, const OptionTable& table) {
     added->default_str(option.default_text);
     switch (option.kind) {
       case OptionTable::Kind::kInteger:
-        added->type_name(fmt::format("INT in [{}, {}]", OptionNumberText(*option.min),
-                                     OptionNumberText(*option.max)));
+        added->type_name("INT in " + option.range->Text());
         break;
       case OptionTable::Kind::kNumber:
-        added->type_name(fmt::format("FLOAT in [{}, {}]", OptionNumberText(*option.min),
-                                     OptionNumberText(*option.max)));
+        added->type_name("FLOAT in " + option.range->Text());
         break;
       case OptionTable::Kind::kChoice: {
         std::string choices;

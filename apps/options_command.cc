@@ -9,6 +9,7 @@
 #include "calibration/calibrated_room.h"
 #include "compensation/stage.h"
 #include "projection/stage.h"
+#include "verification/verification.h"
 
 namespace procam {
 namespace {
@@ -18,6 +19,7 @@ struct DeclaredOptions {
   CompensationOptions compensation;
   CalibratedRoomOptions room;
   ProjectionStageOptions projection;
+  VerificationOptions verification;
   struct Group {
     std::string title, struct_name, commands;
     OptionTable table;
@@ -34,6 +36,11 @@ struct DeclaredOptions {
     groups.push_back({"Projector images", "ProjectionStageOptions (projection/stage.h)", "project",
                       OptionTable("project")});
     projection.Declare(&groups.back().table);
+    groups.push_back({"The closed loop and its photos",
+                      "VerificationOptions (verification/verification.h), SequencerOptions "
+                      "(capture/sequencer.h)",
+                      "verify", OptionTable("verify")});
+    verification.Declare(&groups.back().table);
   }
 };
 

@@ -21,8 +21,9 @@ namespace {
 struct VerifyArguments {
   std::string rig, solution, out, camera, camera_response, camera_scale;
   std::vector<std::string> displays;
-  VerificationOptions options;
+  VerificationOptions options;  // the closed loop's and the sequencer's declared options
   SettleSetting settle{false, SequencerOptions().settle_ms};
+  OptionTable table{"verify"};
 };
 
 void RunVerify(VerifyArguments& args) {
@@ -66,22 +67,8 @@ void AddVerifyCommand(CLI::App& app) {
   cmd->add_option("--display", args->displays,
                   "Per projector, in rig.json's order: glfw:N|NAME, its monitor (procam show "
                   "--list); not for synthetic cameras");
-  cmd->add_option("--iterations", args->options.iterations,
-                  "Photos at most: 1 verifies only; more refine the model and solve again")
-      ->capture_default_str();
-  cmd->add_option("--min-improvement", args->options.min_improvement,
-                  "Stop when the measured mean ΔE76 drops by less than this fraction")
-      ->capture_default_str();
-  cmd->add_option("--reflectance-step", args->options.reflectance_step,
-                  "Damping of the per-patch reflectance update, (0,1]")
-      ->capture_default_str();
-  cmd->add_flag("!--no-response-fit", args->options.fit_response,
-                "Leave the projectors' responses as the rig has them");
-  cmd->add_flag("!--no-reflectance-fit", args->options.fit_reflectance,
-                "Leave the per-patch reflectance as the rig has it");
-  cmd->add_option("--min-patch-pixels", args->options.min_patch_pixels,
-                  "Camera pixels a patch needs to count as seen")
-      ->capture_default_str();
+  args->options.Declare(&args->table);
+  AddOptions(cmd, args->table);
   cmd->add_option("--camera-scale", args->camera_scale,
                   "Camera value per unit exitance (scene units), number or R,G,B; default: "
                   "rig.json camera.colour, or the synthetic camera's own");
@@ -92,21 +79,10 @@ void AddVerifyCommand(CLI::App& app) {
                   "camera_response.json (procam calibrate response) for a camera that is not "
                   "linear; needs --exposure-us bracketing");
   cmd->add_option("--gain", args->options.gain, "Camera gain (dB for Aravis/test cameras)");
-  cmd->add_option("--frames", args->options.sequencer.frames_per_pattern, "Frames averaged per photo")
-      ->capture_default_str();
   AddSettleOption(cmd, &args->settle);
   cmd->add_option("--exposure-us", args->options.sequencer.exposures_us,
                   "Exposure(s), microseconds; several bracket and merge to HDR")
       ->delimiter(',');
-  cmd->add_option("--retries", args->options.sequencer.max_retries,
-                  "Failed grabs retried in a row before giving up")
-      ->capture_default_str();
-  cmd->add_option("--retry-delay-ms", args->options.sequencer.retry_delay_ms,
-                  "Pause before a retry, milliseconds")
-      ->capture_default_str();
-  cmd->add_option("--timeout-ms", args->options.sequencer.grab_timeout_ms, "Grab timeout per frame")
-      ->capture_default_str();
-  AddLightOption(cmd, &args->options.light);
   cmd->callback([args] {
     CheckOutputDirectory(args->out, DirectoryKind::kVerificationRun);
     RunVerify(*args);

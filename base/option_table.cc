@@ -10,10 +10,6 @@
 namespace procam {
 namespace {
 
-std::string RangeText(double min, double max) {
-  return fmt::format("[{}, {}]", OptionNumberText(min), OptionNumberText(max));
-}
-
 std::string ChoicesText(const std::vector<std::string>& choices, const char* separator) {
   std::string text;
   for (size_t i = 0; i < choices.size(); ++i) text += (i ? separator : "") + choices[i];
@@ -27,15 +23,28 @@ bool ParseFinite(const std::string& text, double* value) {
   return error == std::errc() && last == end && std::isfinite(*value);
 }
 
-bool InRange(double min, double max, double value, std::string* why) {
-  if (value >= min && value <= max) return true;
-  *why = fmt::format("must be in {}, got {}", RangeText(min, max), OptionNumberText(value));
+bool InRange(const OptionTable::Interval& range, double value, std::string* why) {
+  if (range.Contains(value)) return true;
+  *why = fmt::format("must be in {}, got {}", range.Text(), OptionNumberText(value));
   return false;
 }
 
 }  // namespace
 
+bool OptionTable::Interval::Contains(double value) const {
+  return (min_open ? value > min : value >= min) && (max_open ? value < max : value <= max);
+}
+
+std::string OptionTable::Interval::Text() const {
+  return fmt::format("{}{}, {}{}", min_open ? "(" : "[", OptionNumberText(min),
+                     OptionNumberText(max), max_open ? ")" : "]");
+}
+
 std::string OptionNumberText(double value) {
+  // Whole numbers as people write them ("600000", not "6e+05").
+  if (std::isfinite(value) && value == std::floor(value) && std::abs(value) < 1e15) {
+    return fmt::format("{}", static_cast<long long>(value));
+  }
   char buffer[32];
   const auto [last, error] = std::to_chars(buffer, buffer + sizeof(buffer), value);
   return error == std::errc() ? std::string(buffer, last) : fmt::format("{}", value);
@@ -72,14 +81,33 @@ OptionTable& OptionTable::Flag(const std::string& name, bool* field, const std::
   return *this;
 }
 
+OptionTable& OptionTable::NegatedFlag(const std::string& name, bool* field,
+                                      const std::string& help) {
+  Option& option = Add(name, Kind::kFlag, help);
+  option.get = [field] { return std::string(*field ? "false" : "true"); };
+  option.set = [field](const std::string& text, std::string* why) {
+    if (text == "true" || text == "1" || text.empty()) {
+      *field = false;
+    } else if (text == "false" || text == "0") {
+      *field = true;
+    } else {
+      *why = "expected true or false, got '" + text + "'";
+      return false;
+    }
+    return true;
+  };
+  option.default_text = option.get();
+  return *this;
+}
+
 OptionTable& OptionTable::Integer(const std::string& name, int* field, int min, int max,
                                   const std::string& unit, const std::string& help) {
   Option& option = Add(name, Kind::kInteger, help);
   option.unit = unit;
-  option.min = min;
-  option.max = max;
+  const Interval range = Interval::Closed(min, max);
+  option.range = range;
   option.get = [field] { return std::to_string(*field); };
-  option.set = [field, min, max](const std::string& text, std::string* why) {
+  option.set = [field, range](const std::string& text, std::string* why) {
     int value = 0;
     const char* end = text.data() + text.size();
     const auto [last, error] = std::from_chars(text.data(), end, value);
@@ -87,38 +115,37 @@ OptionTable& OptionTable::Integer(const std::string& name, int* field, int min, 
       *why = "expected a whole number, got '" + text + "'";
       return false;
     }
-    if (!InRange(min, max, value, why)) return false;
+    if (!InRange(range, value, why)) return false;
     *field = value;
     return true;
   };
-  option.check = [field, min, max](std::string* why) { return InRange(min, max, *field, why); };
+  option.check = [field, range](std::string* why) { return InRange(range, *field, why); };
   option.default_text = option.get();
   return *this;
 }
 
-OptionTable& OptionTable::Number(const std::string& name, double* field, double min, double max,
+OptionTable& OptionTable::Number(const std::string& name, double* field, Interval range,
                                  const std::string& unit, const std::string& help) {
   Option& option = Add(name, Kind::kNumber, help);
   option.unit = unit;
-  option.min = min;
-  option.max = max;
+  option.range = range;
   option.get = [field] { return OptionNumberText(*field); };
-  option.set = [field, min, max](const std::string& text, std::string* why) {
+  option.set = [field, range](const std::string& text, std::string* why) {
     double value = 0.0;
     if (!ParseFinite(text, &value)) {
       *why = "expected a finite number, got '" + text + "'";
       return false;
     }
-    if (!InRange(min, max, value, why)) return false;
+    if (!InRange(range, value, why)) return false;
     *field = value;
     return true;
   };
-  option.check = [field, min, max](std::string* why) {
+  option.check = [field, range](std::string* why) {
     if (!std::isfinite(*field)) {
       *why = "must be a finite number, got " + OptionNumberText(*field);
       return false;
     }
-    return InRange(min, max, *field, why);
+    return InRange(range, *field, why);
   };
   option.default_text = option.get();
   return *this;
@@ -228,10 +255,10 @@ std::string OptionTable::Markdown() const {
         values = "flag";
         break;
       case Kind::kInteger:
-        values = "whole number in " + RangeText(*option.min, *option.max);
+        values = "whole number in " + option.range->Text();
         break;
       case Kind::kNumber:
-        values = "number in " + RangeText(*option.min, *option.max);
+        values = "number in " + option.range->Text();
         break;
       case Kind::kText:
         values = "text";

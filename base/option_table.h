@@ -32,12 +32,23 @@ class OptionTable {
  public:
   enum class Kind { kFlag, kInteger, kNumber, kText, kPath, kChoice };
 
+  // The values a number takes: [min, max], with either end open ("(0, 1]").
+  struct Interval {
+    double min = 0.0, max = 0.0;
+    bool min_open = false, max_open = false;
+    static Interval Closed(double min, double max) { return {min, max, false, false}; }
+    static Interval AboveMin(double min, double max) { return {min, max, true, false}; }
+    static Interval BelowMax(double min, double max) { return {min, max, false, true}; }
+    bool Contains(double value) const;
+    std::string Text() const;  // "[0, 1)"
+  };
+
   struct Option {
     std::string name;  // the flag without its dashes, e.g. "loss-scale"
     Kind kind = Kind::kText;
     std::string help;                  // one sentence, lower case, no final full stop
     std::string unit;                  // e.g. "ms", "m", "ΔE00"; empty if none
-    std::optional<double> min, max;    // kInteger, kNumber: inclusive range
+    std::optional<Interval> range;     // kInteger, kNumber
     std::vector<std::string> choices;  // kChoice: the names accepted, in the order declared
     std::string default_text;          // the field's value when declared, as written
     // The field's value as written on a command line ("true"/"false" for a flag).
@@ -58,7 +69,13 @@ class OptionTable {
   OptionTable& Integer(const std::string& name, int* field, int min, int max,
                        const std::string& unit, const std::string& help);
   OptionTable& Number(const std::string& name, double* field, double min, double max,
+                      const std::string& unit, const std::string& help) {
+    return Number(name, field, Interval::Closed(min, max), unit, help);
+  }
+  OptionTable& Number(const std::string& name, double* field, Interval range,
                       const std::string& unit, const std::string& help);
+  // A flag that clears `field` when given: "--no-response-fit" for a field on by default.
+  OptionTable& NegatedFlag(const std::string& name, bool* field, const std::string& help);
   OptionTable& Text(const std::string& name, std::string* field, const std::string& help);
   OptionTable& Path(const std::string& name, std::filesystem::path* field, const std::string& help);
   // An enumeration by name: `names` pairs each accepted name with its value.

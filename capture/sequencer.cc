@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "base/check.h"
+#include "base/option_table.h"
 
 namespace procam {
 
@@ -103,6 +104,15 @@ cv::Mat MergeExposures(const std::vector<cv::Mat>& means, const std::vector<doub
     }
   }
   return merged;
+}
+
+void SequencerOptions::Declare(OptionTable* table) {
+  table->Integer("frames", &frames_per_pattern, 1, 1000, "", "frames averaged per photo")
+      .Integer("retries", &max_retries, 0, 100, "",
+               "failed grabs retried in a row before giving up")
+      .Number("retry-delay-ms", &retry_delay_ms, 0.0, 60000.0, "ms", "pause before a retry")
+      .Number("timeout-ms", &grab_timeout_ms, OptionTable::Interval::AboveMin(0.0, 600000.0), "ms",
+              "grab timeout per frame (the exposure is added)");
 }
 
 bool SequencerOptions::Check(std::string* why) const {

@@ -14,6 +14,8 @@
 
 namespace procam {
 
+class OptionTable;
+
 // A camera kept failing (timeouts or disconnection) past SequencerOptions::max_retries.
 class CaptureFault : public IoError {
  public:
@@ -66,6 +68,10 @@ struct SequencerOptions {
   // does a person walking through the view (past max_retries the capture stops saying so).
   double max_changed_fraction = 0.005;
   HdrMergeOptions hdr;
+  // Declares --frames, --retries, --retry-delay-ms and --timeout-ms in `table`, bound to these
+  // fields (base/option_table.h). --settle-ms (auto|MS) and --exposure-us (a list) stay with
+  // the commands that take them.
+  void Declare(OptionTable* table);
   bool Check(std::string* why) const;
 };
 

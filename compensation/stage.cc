@@ -37,7 +37,7 @@ void CompensationOptions::Declare(OptionTable* table) {
       .Integer("metric-rounds", &solver.metric_rounds, 1, 100, "",
                "perceptual2000: reweighting rounds (CIEDE2000's metric and the loss's weights "
                "re-evaluated at the last round's result)")
-      .Number("alpha", &alpha, 1e-9, 1.0, "",
+      .Number("alpha", &alpha, OptionTable::Interval::AboveMin(0.0, 1.0), "",
               "weight of the absolute term against the spatial term")
       .Flag("multires", &solver.multires, "solve the coarse patch level first and start from it")
       .Choice("device", &solver.device, devices,

@@ -35,6 +35,17 @@ void ProjectionStageOptions::Declare(OptionTable* table) {
             "modulate the light within each patch by the desired texture's detail (patch totals "
             "unchanged; untextured surfaces as without)");
 }
+bool ProjectionStageOptions::Check(std::string* why) const {
+  if (out.empty()) {
+    *why = "--out: the images directory is required";
+    return false;
+  }
+  // The table only reads the fields here.
+  OptionTable table("project");
+  const_cast<ProjectionStageOptions*>(this)->Declare(&table);
+  return table.Check(why);
+}
+
 namespace {
 
 
@@ -78,6 +89,8 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
                                           const nlohmann::json& rig_description,
                                           const ProjectionStageOptions& args) {
   const auto start = Clock::now();
+  std::string why;
+  if (!args.Check(&why)) throw std::invalid_argument("project: " + why);
   if (projectors.empty()) {
     throw IoError(geometry.scene.path.string() +
                   ": projectors: the scene lists no projectors (add a \"projectors\" array: "

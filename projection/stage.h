@@ -42,6 +42,8 @@ struct ProjectionStageOptions {
   // Declares --dither, --feather, --light and --detail in `table`, bound to these fields
   // (base/option_table.h).
   void Declare(OptionTable* table);
+  // The declared options within their ranges and choices, and an output directory given.
+  bool Check(std::string* why) const;
 };
 
 struct ProjectionStageSummary {

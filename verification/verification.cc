@@ -12,10 +12,11 @@
 #include "base/image_io.h"
 #include "base/io.h"
 #include "base/json_fields.h"
+#include "base/option_table.h"
 #include "base/timing.h"
+#include "calibration/calibrated_room.h"
 #include "calibration/camera_response.h"
 #include "calibration/model_fit.h"
-#include "calibration/calibrated_room.h"
 #include "calibration/rig_directory.h"
 #include "capture/camera.h"
 #include "capture/patterns.h"
@@ -270,6 +271,28 @@ nlohmann::json IterationJson(const VerificationIteration& it) {
 
 // ---------------------------------------------------------------------------------------------
 
+void VerificationOptions::Declare(OptionTable* table) {
+  table
+      ->Integer("iterations", &iterations, 1, 50, "",
+                "photos at most: 1 verifies only; more refine the model and solve again")
+      .Number("min-improvement", &min_improvement, OptionTable::Interval::BelowMax(0.0, 1.0), "",
+              "stop when the measured mean ΔE76 drops by less than this fraction")
+      .Number("reflectance-step", &reflectance_step, OptionTable::Interval::AboveMin(0.0, 1.0), "",
+              "damping of the per-patch reflectance update")
+      .NegatedFlag("no-response-fit", &fit_response,
+                   "leave the projectors' responses as the rig has them")
+      .NegatedFlag("no-reflectance-fit", &fit_reflectance,
+                   "leave the per-patch reflectance as the rig has it")
+      .Integer("min-patch-pixels", &min_patch_pixels, 1, 1 << 30, "pixels",
+               "camera pixels a patch needs to count as seen")
+      .Choice("light", &light,
+              {{LightFieldName(LightField::kSmooth), LightField::kSmooth},
+               {LightFieldName(LightField::kFlat), LightField::kFlat}},
+              "how the projector images shape the light within each patch: smooth (seamless) or "
+              "flat");
+  sequencer.Declare(table);
+}
+
 bool VerificationOptions::Check(std::string* why) const {
   auto fail = [why](const std::string& text) {
     if (why) *why = text;
@@ -279,12 +302,11 @@ bool VerificationOptions::Check(std::string* why) const {
   if (solution_dir.empty()) return fail("the solution directory is required");
   if (out.empty()) return fail("--out is required");
   if (camera.empty()) return fail("--camera is required");
-  if (iterations < 1 || iterations > 50) return fail("--iterations must be in [1, 50]");
-  if (!(min_improvement >= 0.0 && min_improvement < 1.0))
-    return fail("--min-improvement must be in [0, 1)");
-  if (!(reflectance_step > 0.0 && reflectance_step <= 1.0))
-    return fail("--reflectance-step must be in (0, 1]");
-  if (min_patch_pixels < 1) return fail("--min-patch-pixels must be ≥ 1");
+  // The table only reads the fields here.
+  OptionTable table("verify");
+  const_cast<VerificationOptions*>(this)->Declare(&table);
+  std::string table_why;
+  if (!table.Check(&table_why)) return fail(table_why);
   std::string sequencer_why;
   if (!sequencer.Check(&sequencer_why)) return fail(sequencer_why);
   if (measure_latency && !latency.Check(&sequencer_why)) return fail("latency: " + sequencer_why);

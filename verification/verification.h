@@ -92,6 +92,10 @@ struct VerificationOptions {
   int min_patch_pixels = 4;       // camera pixels a patch needs to count as seen, ≥ 1
   LightField light = LightField::kSmooth;  // how the projector images shape the light in a patch
   ProgressCallback progress;      // a line per stage and iteration (ΔE, the model update)
+  // Declares the closed loop's options (--iterations, --min-improvement, --reflectance-step,
+  // --no-response-fit, --no-reflectance-fit, --min-patch-pixels, --light) and the sequencer's
+  // (SequencerOptions::Declare) in `table`, bound to these fields (base/option_table.h).
+  void Declare(OptionTable* table);
   bool Check(std::string* why) const;
 };
 

@@ -135,6 +135,28 @@ TEST(OptionTable, CheckFindsFieldsSetOutsideTheTable) {
   EXPECT_EQ(why, "--shade: holds a value that is none of red, green, blue");
 }
 
+TEST(OptionTable, OpenEndsAndNegatedFlags) {
+  double step = 1.0;
+  bool fit = true;
+  OptionTable table("test");
+  table.Number("step", &step, OptionTable::Interval::AboveMin(0.0, 1.0), "", "damping")
+      .NegatedFlag("no-fit", &fit, "leave it");
+  EXPECT_EQ(table.Find("no-fit")->default_text, "false");
+  EXPECT_THROW(table.Set("step", "0"), std::invalid_argument);  // (0, 1]: 0 is outside
+  table.Set("step", "1");
+  table.Set("no-fit", "");
+  EXPECT_FALSE(fit);
+  const std::vector<std::string> expected = {"--no-fit"};
+  EXPECT_EQ(table.ChangedArguments(), expected);
+  step = 0.0;
+  std::string why;
+  EXPECT_FALSE(table.Check(&why));
+  EXPECT_EQ(why, "--step: must be in (0, 1], got 0");
+  EXPECT_EQ(OptionTable::Interval::BelowMax(0.0, 1.0).Text(), "[0, 1)");
+  EXPECT_FALSE(OptionTable::Interval::BelowMax(0.0, 1.0).Contains(1.0));
+  EXPECT_TRUE(OptionTable::Interval::BelowMax(0.0, 1.0).Contains(0.0));
+}
+
 TEST(OptionTable, NamesAreUnique) {
   Settings settings;
   OptionTable table("test");
