@@ -117,7 +117,7 @@ class Node {
       }
       CheckOutputs();
       std::optional<Envelope> envelope = socket_->Receive(100);
-      if (!envelope) continue;
+      if (!envelope || !Admit(*envelope)) continue;
       peer_ = envelope->peer;
       try {
         Handle(envelope->message);
@@ -128,6 +128,35 @@ class Node {
   }
 
  private:
+  // One controller at a time. The first one heard is served until it ends the show (kStop) or
+  // its connection closes; a message from another one meanwhile is refused: logged (at the rate
+  // of the socket's refusals) naming both, and answered with a kFailed marked "busy", which ends
+  // that controller's setup with one line. A node in the controller's process has one controller.
+  bool Admit(const Envelope& envelope) {
+    if (envelope.address.empty()) return true;  // in-process
+    if (!controller_.empty() && envelope.peer != controller_ &&
+        socket_->Open(controller_connection_)) {
+      const std::string why =
+          fmt::format("serves the controller at {}, one controller at a time; the controller at "
+                      "{} is refused",
+                      controller_address_, envelope.address);
+      socket_->Refuse(envelope.address, fmt::format("node {}: refused a second controller at {}: "
+                                                    "it serves the controller at {}",
+                                                    options_.name, envelope.address,
+                                                    controller_address_));
+      Message refusal;
+      refusal.type = MessageType::kFailed;
+      refusal.sequence = envelope.message.sequence;
+      refusal.body = {{"node", options_.name}, {"error", why}, {"busy", true}};
+      socket_->Send(envelope.peer, refusal);
+      return false;
+    }
+    controller_ = envelope.peer;
+    controller_connection_ = envelope.connection;
+    controller_address_ = envelope.address;
+    return true;
+  }
+
   std::string Describe() const {
     std::string text;
     for (size_t k = 0; k < outputs_.size(); ++k)
@@ -151,6 +180,7 @@ class Node {
         break;
       case MessageType::kStop:
         rendered_.reset();
+        controller_.clear();  // another controller may be served now
         Log(fmt::format("node {}: stopped by the controller", options_.name));
         exit_ = message.body.is_object() && message.body.value("exit", false);
         break;
@@ -351,6 +381,11 @@ class Node {
   std::unique_ptr<NodeSetup> setup_;
   std::optional<uint64_t> rendered_;  // the frame in the back buffers
   std::string peer_;                  // the controller (the last peer heard)
+  // The controller served over the network (Admit): its routing id ("" while none is), its
+  // connection and address.
+  std::string controller_;
+  int64_t controller_connection_ = -1;
+  std::string controller_address_;
   bool exit_ = false;
 };
 
