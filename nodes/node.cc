@@ -129,13 +129,12 @@ class Node {
 
  private:
   // One controller at a time. The first one heard is served until it ends the show (kStop) or
-  // its connection closes; a message from another one meanwhile is refused: logged (at the rate
+  // its connection is gone; a message from another one meanwhile is refused: logged (at the rate
   // of the socket's refusals) naming both, and answered with a kFailed marked "busy", which ends
   // that controller's setup with one line. A node in the controller's process has one controller.
   bool Admit(const Envelope& envelope) {
     if (envelope.address.empty()) return true;  // in-process
-    if (!controller_.empty() && envelope.peer != controller_ &&
-        socket_->Open(controller_connection_)) {
+    if (!controller_.empty() && envelope.peer != controller_ && ControllerStillThere()) {
       const std::string why =
           fmt::format("serves the controller at {}, one controller at a time; the controller at "
                       "{} is refused",
@@ -151,10 +150,22 @@ class Node {
       socket_->Send(envelope.peer, refusal);
       return false;
     }
+    if (envelope.peer != controller_) controller_address_ = envelope.address;
     controller_ = envelope.peer;
-    controller_connection_ = envelope.connection;
-    controller_address_ = envelope.address;
     return true;
+  }
+
+  // Whether the controller served is still connected: ZeroMQ's router refuses a message to a
+  // routing id whose connection is gone (router_mandatory), once the messages it had received
+  // from it are read, so the node asks by sending it its status (a kPong, which a controller
+  // takes at any time). A controller reconnecting (its heartbeats timed out while the node was
+  // frozen) comes back under a new routing id: the old one is gone.
+  bool ControllerStillThere() {
+    Message status;
+    status.type = MessageType::kPong;
+    status.sequence = 0;
+    status.body = Status();
+    return socket_->Send(controller_, status);
   }
 
   std::string Describe() const {
@@ -381,10 +392,9 @@ class Node {
   std::unique_ptr<NodeSetup> setup_;
   std::optional<uint64_t> rendered_;  // the frame in the back buffers
   std::string peer_;                  // the controller (the last peer heard)
-  // The controller served over the network (Admit): its routing id ("" while none is), its
-  // connection and address.
+  // The controller served over the network (Admit): its routing id ("" while none is) and
+  // address.
   std::string controller_;
-  int64_t controller_connection_ = -1;
   std::string controller_address_;
   bool exit_ = false;
 };

@@ -214,7 +214,7 @@ long long RefusalLog::total() const {
 // ZeroMQ's authentication protocol (ZAP, RFC 27) for one context: a thread that answers the
 // CURVE server's requests (admit only the controller's public key) and watches the node
 // socket's monitor: the connections it accepts (their peers' addresses, read when they are
-// accepted, and whether they are still open) and the handshakes that fail, before ZAP is asked
+// accepted) and the handshakes that fail, before ZAP is asked
 // (a client without CURVE, or one that does not know the node's key) or by ZAP's refusal. libzmq's
 // monitor (version 1) names only the node's own endpoint in a failure; the connection's
 // descriptor comes with its acceptance and with its disconnection, which follows the failure at
@@ -242,30 +242,17 @@ class NodeSocket::ZapHandler {
     thread_ = std::thread([this] { Run(); });
   }
   long long refused() const { return refusals_.total(); }
-  // The connection (a number unique in this socket's life) descriptor `fd` is now, and its peer.
-  int64_t Connection(int fd, std::string* address) {
+  // The peer of the connection descriptor `fd` is now ("" if not known).
+  std::string Address(int fd) const {
     std::lock_guard<std::mutex> lock(mutex_);
     const auto found = accepted_.find(fd);
-    if (found == accepted_.end()) return -1;
-    *address = found->second.address;
-    return found->second.id;
-  }
-  bool Open(int64_t connection) const {
-    std::lock_guard<std::mutex> lock(mutex_);
-    for (const auto& [fd, accepted] : accepted_)
-      if (accepted.id == connection) return true;
-    return false;
+    return found == accepted_.end() ? "" : found->second;
   }
   void Refuse(const std::string& address, const std::string& line) {
     refusals_.Refuse(address, line);
   }
 
  private:
-  struct Accepted {
-    int64_t id = 0;
-    std::string address;  // "IP:PORT", or "" when it closed before it was read
-  };
-
   void Run() {
     zmq::pollitem_t items[] = {{handler_.handle(), 0, ZMQ_POLLIN, 0},
                                {monitor_.handle(), 0, ZMQ_POLLIN, 0}};
@@ -331,7 +318,7 @@ class NodeSocket::ZapHandler {
     switch (id) {
       case ZMQ_EVENT_ACCEPTED: {
         std::lock_guard<std::mutex> lock(mutex_);
-        accepted_[fd] = {++next_id_, PeerAddress(fd)};
+        accepted_[fd] = PeerAddress(fd);  // "" when it closed before it could be read
         break;
       }
       case ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL:
@@ -349,7 +336,7 @@ class NodeSocket::ZapHandler {
           std::lock_guard<std::mutex> lock(mutex_);
           const auto found = accepted_.find(fd);
           if (found != accepted_.end()) {
-            address = found->second.address;
+            address = found->second;
             accepted_.erase(found);
           }
         }
@@ -386,8 +373,7 @@ class NodeSocket::ZapHandler {
   Failure failure_;  // ZAP's last refusal, until the failure's event
   Failure failed_;   // a handshake failed: the refusal is logged at its disconnection
   mutable std::mutex mutex_;
-  std::map<int, Accepted> accepted_;  // open connections by descriptor
-  int64_t next_id_ = 0;
+  std::map<int, std::string> accepted_;  // open connections' peers by descriptor
   std::atomic<bool> stop_{false};
   std::thread thread_;
 };
@@ -449,10 +435,6 @@ NodeSocket::~NodeSocket() {
 
 long long NodeSocket::refused() const { return zap_ ? zap_->refused() : 0; }
 
-bool NodeSocket::Open(int64_t connection) const {
-  return zap_ == nullptr || connection < 0 || zap_->Open(connection);
-}
-
 void NodeSocket::Refuse(const std::string& address, const std::string& line) {
   if (zap_) {
     zap_->Refuse(address, line);
@@ -483,7 +465,7 @@ std::optional<Envelope> NodeSocket::Receive(int timeout_ms) {
       envelope.peer = parts[0].to_string();
       if (zap_) {  // the connection's descriptor (ZMQ_SRCFD, deprecated but kept by libzmq 4.3)
         const int fd = zmq_msg_get(parts[1].handle(), ZMQ_SRCFD);
-        if (fd >= 0) envelope.connection = zap_->Connection(fd, &envelope.address);
+        if (fd >= 0) envelope.address = zap_->Address(fd);
         if (envelope.address.empty() && fd >= 0) envelope.address = PeerAddress(fd);
       }
       if (ParseMessage(parts[1].data(), parts[1].size(), &envelope.message, &why)) return envelope;

@@ -56,13 +56,11 @@ RigKeys MakeRigKeys(const std::filesystem::path& rig_dir, bool replace);
 enum class KeyRole { kController, kNode };
 RigKeys ReadRigKeys(const std::filesystem::path& rig_dir, KeyRole role);
 
-// A message as it arrived at a node: who sent it (the ROUTER's routing id) and what, and over
-// which connection: its number (unique in the socket's life; −1 for an in-process peer) and its
+// A message as it arrived at a node: who sent it (the ROUTER's routing id) and what, and the
 // peer's address ("IP:PORT"; "" in-process).
 struct Envelope {
   std::string peer;
   Message message;
-  int64_t connection = -1;
   std::string address;
 };
 
@@ -121,8 +119,6 @@ class NodeSocket {
   const std::string& endpoint() const { return endpoint_; }  // as bound (the port if it was 0)
   long long malformed() const { return malformed_; }
   long long refused() const;
-  // Whether Envelope::connection is still open (always true for an in-process peer).
-  bool Open(int64_t connection) const;
   // A refusal the node makes itself (e.g. a second controller), logged as the socket's are.
   void Refuse(const std::string& address, const std::string& line);
 
