@@ -8,6 +8,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "apps/stop_signals.h"
 #include "base/output_directory.h"
 #include "calibration/capture_stage.h"
 #include "capture/camera.h"
@@ -65,6 +66,7 @@ std::shared_ptr<PatternDisplay> CaptureDisplay(const std::string& text, const st
 void RunCapture(const CaptureArguments& args) {
   RegisterDeviceBackends();
   CaptureStageOptions options;
+  options.stop = &StopOnSignals();  // before the display and camera open: a stop releases them
   options.camera = args.camera;
   options.sequence = args.sequence;
   options.out = args.out;

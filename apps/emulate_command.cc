@@ -3,7 +3,7 @@
 // (MonitorWatcher) and is photographed by its camera, served as a GigE Vision camera
 // (GigeEmulator), so that procam — calibrate all, capture, verify, the demo — drives a real
 // display server and a real camera protocol with no hardware.
-#include <csignal>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -17,6 +17,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "apps/stop_signals.h"
 #include "base/io.h"
 #include "capture/pixel_format.h"
 #include "datasets_synthetic/monitor_watcher.h"
@@ -41,8 +42,6 @@ struct EmulateArguments {
   double watch_hz = 200.0;
 };
 
-volatile std::sig_atomic_t g_stop = 0;
-void OnSignal(int) { g_stop = 1; }
 
 #if PROCAM_WITH_ARAVIS
 // The emulated camera's pixel format: the entry's where the GigE camera offers it, else RGB8
@@ -96,14 +95,13 @@ void RunEmulate(const EmulateArguments& args) {
   std::printf("  camera guess %s\n", world->camera_guess.c_str());
   std::fflush(stdout);
 
-  std::signal(SIGINT, OnSignal);
-  std::signal(SIGTERM, OnSignal);
+  const std::atomic<bool>& stop = StopOnSignals();
   const auto start = std::chrono::steady_clock::now();
   auto last_status = start;
-  while (!g_stop) {
+  while (!stop) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
     // A signal to the process group stops grim too: the watcher's error is then the stop's.
-    if (g_stop) break;
+    if (stop) break;
     const std::string error = watcher.error();
     if (!error.empty()) throw IoError("emulate: " + error);
     const auto now = std::chrono::steady_clock::now();

@@ -2,7 +2,7 @@
 // follows changing content): each parses, calls its library function, prints.
 #include <fmt/format.h>
 
-#include <csignal>
+#include <atomic>
 #include <functional>
 #include <iostream>
 #include <memory>
@@ -12,6 +12,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "apps/stop_signals.h"
 #include "geometry/stage.h"
 #include "base/output_directory.h"
 #include "nodes/node.h"
@@ -21,9 +22,6 @@
 
 namespace procam {
 namespace {
-
-std::atomic<bool> g_stop{false};
-void OnSignal(int) { g_stop = true; }
 
 struct NodeArguments {
   std::string rig, scene, listen = "tcp://*:5600", name = "node", render = "gpu";
@@ -91,9 +89,17 @@ void RunPlayCommand(const PlayArguments& args) {
   CheckUnique(args.display, "--display", IsMonitor);
   if (options.nodes.empty()) options.local_outputs = MakeNodeOutputs(args.display);
   options.progress = PrintProgress();
+  options.stop = &StopOnSignals();
   const PlaySummary summary = RunPlay(options);
-  std::cout << fmt::format("play: {} frames shown, {} dropped in {:.1f} s; wrote {}/result.json\n",
-                           summary.frames.size(), summary.dropped, summary.seconds, args.out);
+  if (summary.stopped && summary.frames.empty()) {
+    std::cout << fmt::format("play: stopped by a signal before the first frame; nothing written "
+                             "to {}\n",
+                             args.out);
+  } else {
+    std::cout << fmt::format("play: {}{} frames shown, {} dropped in {:.1f} s; wrote {}/result.json\n",
+                             summary.stopped ? "stopped by a signal: " : "", summary.frames.size(),
+                             summary.dropped, summary.seconds, args.out);
+  }
 }
 
 }  // namespace
@@ -163,11 +169,10 @@ void AddNodeCommands(CLI::App& app) {
     options.max_seconds = node_args->seconds;
     options.gpu = node_args->render == "gpu";
     options.log = [](const std::string& line) { std::cout << line << std::endl; };
-    std::signal(SIGINT, OnSignal);
-    std::signal(SIGTERM, OnSignal);
+    std::atomic<bool>& stop = StopOnSignals();
     zmq::context_t context;
-    RunNode(context, options, MakeNodeOutputs(node_args->display), g_stop);
-    if (g_stop) std::cout << "node " << options.name << ": stopped by a signal" << std::endl;
+    RunNode(context, options, MakeNodeOutputs(node_args->display), stop);
+    if (stop) std::cout << "node " << options.name << ": stopped by a signal" << std::endl;
   });
 
   auto play_args = std::make_shared<PlayArguments>();

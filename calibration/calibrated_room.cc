@@ -126,10 +126,13 @@ CalibratedRoom BuildCalibratedRoom(const CalibratedRoomOptions& options, RoomSou
     throw std::invalid_argument("room: no scene: give a scene or a solution (whose scene it is)");
   if (sources.geometry) {
     room.geometry = std::move(*sources.geometry);
+    if (room.rig) CheckRegisteredRoom(*room.rig, room.geometry.scene);
   } else {
     Scene scene = sources.scene ? std::move(*sources.scene)
                                 : LoadSceneArgument(options.scene.empty() ? room.solution->scene
                                                                           : options.scene);
+    // Before the form factors: a room changed since the rig's calibration is one line at once.
+    if (room.rig) CheckRegisteredRoom(*room.rig, scene);
     room.geometry = RoomGeometry(options, std::move(scene), target);
   }
   const int n = room.size();

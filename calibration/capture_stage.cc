@@ -150,6 +150,7 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
   CaptureSessionOptions options;
   options.directory = args.out;
   options.sequencer = args.sequencer;
+  options.stop = args.stop;
   if (!args.camera_response.empty()) {  // a camera that is not linear (procam calibrate response)
     options.sequencer.hdr.inverse_response = ReadInverseResponse(
         args.camera_response.string(), IsColour(camera->Settings().pixel_format) ? 3 : 1);
@@ -184,7 +185,8 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
   summary.settle_ms = options.sequencer.settle_ms;
   nlohmann::json result = CaptureResult(sequence, *camera);
   result.update({{"manifest", summary.manifest.string()},
-                 {"complete", true},
+                 {"complete", !summary.stopped},
+                 {"stopped", summary.stopped},
                  {"patterns_total", summary.patterns_total},
                  {"patterns_before", summary.patterns_before},
                  {"patterns_captured", summary.patterns_captured},
@@ -198,8 +200,13 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
 }
 
 std::string CaptureLine(const CaptureStageOptions& options, const CaptureSummary& summary) {
-  return "capture " + options.sequence + " with " + summary.camera + " into " +
-         options.out.string() + ": " + summary.BriefReport();
+  const std::string line = "capture " + options.sequence + " with " + summary.camera + " into " +
+                           options.out.string() + ": ";
+  if (summary.stopped) {
+    return line + "stopped by a signal: " + summary.BriefReport() +
+           "; run the same command again to resume";
+  }
+  return line + summary.BriefReport();
 }
 
 }  // namespace procam

@@ -4,6 +4,7 @@
 // structured light (XOR Gray code with phase shifting), photometric flat fields, or given
 // images. What `procam capture` runs, and `calibrate all` per projector.
 
+#include <atomic>
 #include <filesystem>
 #include <memory>
 #include <opencv2/core.hpp>
@@ -46,6 +47,9 @@ struct CaptureStageOptions {
   double projector_gamma = 1.0;           // memory display: the response the test camera sees
   std::filesystem::path camera_response;  // camera_response.json: linearise before HDR merges
   ProgressCallback progress;              // a warning when nothing shows the patterns
+  // Set (by a signal handler) to stop cleanly before the next pattern (CaptureSessionOptions):
+  // result.json then says complete false, stopped true; the same call again resumes.
+  const std::atomic<bool>* stop = nullptr;
 
   // Checks every value, whichever sequence uses it, so that a typing error is refused before
   // anything is shown or written: the sequence, the projector (>= 0), the gain, the gammas
@@ -58,7 +62,8 @@ struct CaptureStageOptions {
 // the camera, display, option or file for bad input, before anything is shown.
 CaptureSummary RunCaptureStage(const CaptureStageOptions& options);
 
-// The line `procam capture` prints: what was captured with which camera into where.
+// The line `procam capture` prints: what was captured with which camera into where (stopped:
+// how many patterns are kept, and that the same command resumes).
 std::string CaptureLine(const CaptureStageOptions& options, const CaptureSummary& summary);
 
 }  // namespace procam

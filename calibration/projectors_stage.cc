@@ -372,6 +372,11 @@ nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const Camera
   for (size_t k = 0; k < calibration.projectors.size(); ++k) {
     const RoomProjectorSummary& s = summary.projectors[k];
     per_projector.push_back({{"name", calibration.projectors[k].name},
+                             {"centre_m", JsonTriple(calibration.projectors[k]
+                                                         .proj_from_room.inverse()
+                                                         .translation())},
+                             {"imagersize",
+                              {calibration.projectors[k].width, calibration.projectors[k].height}},
                              {"correspondences", s.correspondences},
                              {"used", s.used},
                              {"on_model", s.points},
@@ -383,6 +388,10 @@ nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const Camera
                              {"projection_uncertainty", UncertaintyJson(s)}});
   }
   registration_json["projectors"] = per_projector;
+  // The room it was registered in, as ReadRigDirectory's and the calibrated room's checks read it
+  // (a model file of another projector, a room file changed since).
+  registration_json["camera_imagersize"] = {camera.width, camera.height};
+  registration_json["room"] = RegisteredRoomJson(scene);
   nlohmann::json per_surface = nlohmann::json::array();
   for (size_t s = 0; s < registration.per_surface.size(); ++s) {
     nlohmann::json entry = StatsJson(registration.per_surface[s]);

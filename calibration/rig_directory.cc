@@ -2,7 +2,11 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <numbers>
+#include <optional>
 #include <fstream>
 #include <sstream>
 
@@ -280,6 +284,71 @@ nlohmann::json RigDirectory::Describe() const {
 
 namespace {
 
+// registration[key] as a triple of numbers, if it is one.
+std::optional<Vec3> RecordedTriple(const nlohmann::json& record, const char* key) {
+  if (!record.is_object() || !record.contains(key)) return std::nullopt;
+  const nlohmann::json& value = record[key];
+  if (!value.is_array() || value.size() != 3) return std::nullopt;
+  Vec3 triple;
+  for (int c = 0; c < 3; ++c) {
+    if (!value[c].is_number()) return std::nullopt;
+    triple[c] = value[c].get<double>();
+  }
+  return triple;
+}
+
+// record[key] as an image size [width, height], if it is one.
+std::optional<std::array<int, 2>> RecordedSize(const nlohmann::json& record, const char* key) {
+  if (!record.is_object() || !record.contains(key)) return std::nullopt;
+  const nlohmann::json& value = record[key];
+  if (!value.is_array() || value.size() != 2 || !value[0].is_number_integer() ||
+      !value[1].is_number_integer())
+    return std::nullopt;
+  return std::array<int, 2>{value[0].get<int>(), value[1].get<int>()};
+}
+
+constexpr double kRegisteredCentreToleranceM = 0.01;  // far above the models' printed precision
+
+// Each projector's model against the registration's record of that projector (by name): where
+// it puts the projector and its image size. Two projectors' models swapped, or a model of another
+// projector or calibration, put it elsewhere.
+void CheckRegisteredProjectors(const RigDirectory& rig, const std::string& file) {
+  const nlohmann::json& registration = rig.file.registration;
+  if (!registration.is_object() || !registration.contains("projectors") ||
+      !registration["projectors"].is_array())
+    return;
+  const nlohmann::json& recorded = registration["projectors"];
+  for (size_t k = 0; k < rig.projectors.size(); ++k) {
+    const Projector& projector = rig.projectors[k];
+    for (size_t j = 0; j < recorded.size(); ++j) {
+      const nlohmann::json& entry = recorded[j];
+      if (!entry.is_object() || !entry.contains("name") || entry["name"] != projector.name)
+        continue;
+      const std::string key = fmt::format("registration.projectors[{}]", j);
+      if (const std::optional<std::array<int, 2>> size = RecordedSize(entry, "imagersize");
+          size && ((*size)[0] != projector.geometry.width() ||
+                   (*size)[1] != projector.geometry.height())) {
+        throw IoError(fmt::format(
+            "{}: projectors[{}].model: {} is {}x{}, projector '{}' was registered {}x{} ({}.imagersize): "
+            "the model of another device",
+            file, k, projector.model_path.string(), projector.geometry.width(),
+            projector.geometry.height(), projector.name, (*size)[0], (*size)[1], key));
+      }
+      if (const std::optional<Vec3> centre = RecordedTriple(entry, "centre_m")) {
+        const Vec3 found = projector.geometry.CentreInWorld();
+        if ((found - *centre).norm() > kRegisteredCentreToleranceM) {
+          throw IoError(fmt::format(
+              "{}: projectors[{}].model: {} puts '{}' at ({:.3f}, {:.3f}, {:.3f}) m, the "
+              "registration at ({:.3f}, {:.3f}, {:.3f}) m ({}.centre_m): the model of another "
+              "projector (models swapped?) or of another calibration",
+              file, k, projector.model_path.string(), projector.name, found[0], found[1], found[2],
+              (*centre)[0], (*centre)[1], (*centre)[2], key));
+        }
+      }
+    }
+  }
+}
+
 // What can be checked cheaply of a rig's parts against each other: every projector has its own
 // model, none is the camera's (the same file, or a copy: the camera's size and intrinsics), and
 // the registration record agrees with the camera's model on where the camera is (a rig.json of
@@ -314,6 +383,14 @@ void CheckRigConsistency(const RigDirectory& rig) {
     }
   }
   const nlohmann::json& registration = rig.file.registration;
+  CheckRegisteredProjectors(rig, file);
+  if (const std::optional<std::array<int, 2>> size = RecordedSize(registration, "camera_imagersize");
+      size && ((*size)[0] != camera.width() || (*size)[1] != camera.height())) {
+    throw IoError(fmt::format(
+        "{}: camera.model: {} is {}x{}, the camera registered (registration.camera_imagersize) "
+        "{}x{}: not the rig's camera",
+        file, camera_path.string(), camera.width(), camera.height(), (*size)[0], (*size)[1]));
+  }
   if (registration.is_object() && registration.contains("camera_centre_m") &&
       registration["camera_centre_m"].is_array() && registration["camera_centre_m"].size() == 3) {
     Vec3 recorded;
@@ -322,8 +399,7 @@ void CheckRigConsistency(const RigDirectory& rig) {
       recorded[c] = registration["camera_centre_m"][c].get<double>();
     }
     const Vec3 centre = camera.CentreInWorld();
-    constexpr double kToleranceM = 0.01;  // far above the models' printed precision
-    if ((recorded - centre).norm() > kToleranceM) {
+    if ((recorded - centre).norm() > kRegisteredCentreToleranceM) {
       throw IoError(fmt::format(
           "{}: registration.camera_centre_m: ({:.3f}, {:.3f}, {:.3f}) m, but {} puts the camera at "
           "({:.3f}, {:.3f}, {:.3f}) m: rig.json and the camera's model are of different "
@@ -335,6 +411,105 @@ void CheckRigConsistency(const RigDirectory& rig) {
 }
 
 }  // namespace
+
+namespace {
+
+struct SurfaceShape {
+  Vec3 centroid = Vec3::Zero();
+  double area = 0.0;
+  std::optional<Vec3> normal;  // quads
+};
+
+SurfaceShape ShapeOf(const Surface& surface) {
+  SurfaceShape shape;
+  const auto add_triangle = [&](const Vec3& a, const Vec3& b, const Vec3& c) {
+    const double area = 0.5 * (b - a).cross(c - a).norm();
+    shape.centroid += area * (a + b + c) / 3.0;
+    shape.area += area;
+  };
+  if (surface.kind == Surface::Kind::kQuad) {
+    const std::array<Vec3, 4>& q = surface.quad;
+    add_triangle(q[0], q[1], q[2]);
+    add_triangle(q[0], q[2], q[3]);
+    const Vec3 normal = (q[1] - q[0]).cross(q[2] - q[0]);
+    if (normal.norm() > 0) shape.normal = normal.normalized();
+  } else {
+    for (const MeshTriangle& t : surface.mesh_triangles) {
+      add_triangle(surface.mesh_vertices[t.vertex[0]], surface.mesh_vertices[t.vertex[1]],
+                   surface.mesh_vertices[t.vertex[2]]);
+    }
+  }
+  if (shape.area > 0) shape.centroid /= shape.area;
+  return shape;
+}
+
+}  // namespace
+
+nlohmann::json RegisteredRoomJson(const Scene& scene) {
+  nlohmann::json surfaces = nlohmann::json::array();
+  for (const Surface& surface : scene.surfaces) {
+    const SurfaceShape shape = ShapeOf(surface);
+    nlohmann::json entry = {{"name", surface.name},
+                            {"centroid_m", JsonTriple(shape.centroid)},
+                            {"area_m2", shape.area}};
+    if (shape.normal) entry["normal"] = JsonTriple(*shape.normal);
+    surfaces.push_back(entry);
+  }
+  return {{"scene", scene.path.filename().string()}, {"surfaces", surfaces}};
+}
+
+void CheckRegisteredRoom(const RigDirectory& rig, const Scene& scene) {
+  const nlohmann::json& registration = rig.file.registration;
+  if (!registration.is_object() || !registration.contains("room") ||
+      !registration["room"].is_object() || !registration["room"].contains("surfaces") ||
+      !registration["room"]["surfaces"].is_array())
+    return;
+  const nlohmann::json& recorded = registration["room"]["surfaces"];
+  const std::string where = scene.path.empty() ? scene.name : scene.path.string();
+  const std::string file = (rig.dir / "rig.json").string();
+  constexpr double kCentroidToleranceM = 0.05, kAreaTolerance = 0.05, kNormalToleranceDeg = 10.0;
+  for (size_t s = 0; s < scene.surfaces.size(); ++s) {
+    const Surface& surface = scene.surfaces[s];
+    for (size_t j = 0; j < recorded.size(); ++j) {
+      const nlohmann::json& entry = recorded[j];
+      if (!entry.is_object() || !entry.contains("name") || entry["name"] != surface.name) continue;
+      const SurfaceShape shape = ShapeOf(surface);
+      const std::string key = fmt::format("registration.room.surfaces[{}]", j);
+      const std::string intro =
+          fmt::format("{}: surfaces[{}] '{}': ", where, s, surface.name);
+      const std::string outro = fmt::format(
+          " ({} {}): not the room the rig was calibrated in (a wall moved or flipped since? "
+          "calibrate projectors again, or give that room)",
+          file, key);
+      if (const std::optional<Vec3> centroid = RecordedTriple(entry, "centroid_m")) {
+        const double moved = (shape.centroid - *centroid).norm();
+        if (moved > kCentroidToleranceM) {
+          throw IoError(intro + fmt::format("its centre is {:.3f} m from where the rig was "
+                                            "registered",
+                                            moved) +
+                        outro);
+        }
+      }
+      if (entry.contains("area_m2") && entry["area_m2"].is_number()) {
+        const double area = entry["area_m2"].get<double>();
+        if (std::abs(shape.area - area) > kAreaTolerance * std::max(area, 1e-12)) {
+          throw IoError(intro + fmt::format("{:.3f} m², registered {:.3f} m²", shape.area, area) +
+                        outro);
+        }
+      }
+      if (const std::optional<Vec3> normal = RecordedTriple(entry, "normal");
+          normal && shape.normal && normal->norm() > 0) {
+        const double cosine = std::clamp(shape.normal->dot(normal->normalized()), -1.0, 1.0);
+        const double degrees = std::acos(cosine) * 180.0 / std::numbers::pi;
+        if (degrees > kNormalToleranceDeg) {
+          throw IoError(intro + fmt::format("its lit side faces {:.0f}° from the registered one",
+                                            degrees) +
+                        outro);
+        }
+      }
+    }
+  }
+}
 
 RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir) {
   const std::filesystem::path path = rig_dir / "rig.json";

@@ -122,9 +122,25 @@ struct RigDirectory {
 
 // Reads RIG_DIR/rig.json. Throws IoError naming RIG_DIR/rig.json and the key: no file, no
 // non-empty "projectors", a projector whose photometry is in camera units ("photometric"
-// NAME.units, written by `calibrate photometric` without --scene), and every error of a scene
-// file's projectors (missing model file, no `max`, bad mixing, ...).
+// NAME.units, written by `calibrate photometric` without --scene), every error of a scene
+// file's projectors (missing model file, no `max`, bad mixing, ...), and the parts that do not
+// agree with each other: two projectors given one model, the camera's model given for a
+// projector, and, where the registration record has them, a model that puts its projector (or
+// the camera) more than 1 cm from where the registration did or is of another image size (two
+// projectors' models swapped, a rig.json of another rig).
 RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir);
+
+// The room a rig is registered in, as `calibrate projectors` records it in rig.json's
+// registration.room: per surface its name, centroid (m, area-weighted), area (m²) and, for a
+// quad, its unit normal.
+nlohmann::json RegisteredRoomJson(const Scene& scene);
+
+// Throws IoError (one line naming the scene file, the surface and rig.json's key) when `scene`
+// is not the room the rig was registered in: a surface of a recorded name whose centroid is more
+// than 5 cm from the record's, whose area differs by more than 5%, or a quad whose normal turned
+// by more than 10° (a wall moved, resized or flipped since the calibration). Surfaces named in
+// only one of the two are not compared; rigs without the record (older ones) pass.
+void CheckRegisteredRoom(const RigDirectory& rig, const Scene& scene);
 
 // Replaces the fine level's reflectance by the rig's (and the coarse level's by the area-weighted
 // mean of its children). Throws IoError naming RIG_DIR/rig.json when the rig's reflectance was

@@ -396,19 +396,32 @@ CaptureSummary RunCaptureSession(const CaptureSessionOptions& options,
   WriteManifest(directory, manifest);
 
   PatternSequencer sequencer(options.sequencer, &camera, &display);
+  const auto stopping = [&] { return options.stop != nullptr && options.stop->load(); };
+  // Records an interruption at pattern i (what the next run resumes from).
+  const auto interrupted = [&](size_t i, const std::string& reason) {
+    manifest["interruptions"].push_back({{"time", UtcNow()},
+                                         {"pattern", i},
+                                         {"name", sequence.patterns[i].name},
+                                         {"reason", reason}});
+    manifest["runs"].back()["patterns_captured"] = summary.patterns_captured;
+    WriteManifest(directory, manifest);
+  };
+  const auto stopped_at = [&](size_t i) {
+    interrupted(i, "stopped by a signal");
+    summary.stopped = true;
+    summary.seconds = SecondsSince(start);
+    return summary;
+  };
   for (size_t i = 0; i < sequence.patterns.size(); ++i) {
     if (!patterns[i]["captured"].is_null()) continue;
+    if (stopping()) return stopped_at(i);
     PatternCapture capture;
     try {
       capture = sequencer.Capture(sequence.patterns[i].image);
     } catch (const IoError& error) {  // camera or display: record where and why, keep the rest
+      if (stopping()) return stopped_at(i);  // a grab the signal cut short: the stop, no fault
       const int kept = summary.patterns_before + summary.patterns_captured;
-      manifest["interruptions"].push_back({{"time", UtcNow()},
-                                           {"pattern", i},
-                                           {"name", sequence.patterns[i].name},
-                                           {"reason", error.what()}});
-      manifest["runs"].back()["patterns_captured"] = summary.patterns_captured;
-      WriteManifest(directory, manifest);
+      interrupted(i, error.what());
       const std::string message =
           std::string(error.what()) + " at pattern " + std::to_string(i + 1) + "/" +
           std::to_string(sequence.patterns.size()) + " (" + sequence.patterns[i].name + "); " +

@@ -29,6 +29,7 @@
 // before the manifest entry that names them, so a crash at any point leaves a consistent
 // session: a pattern is either recorded with all its files or captured again on resume.
 
+#include <atomic>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
@@ -44,6 +45,10 @@ namespace procam {
 struct CaptureSessionOptions {
   std::filesystem::path directory;  // created when missing; resumed when it holds session.json
   SequencerOptions sequencer;
+  // Set (by a signal handler) to stop cleanly before the next pattern: the session keeps every
+  // pattern captured, records the stop as an interruption and resumes when run again. Null: run
+  // to the end.
+  const std::atomic<bool>* stop = nullptr;
   bool Check(std::string* why) const;
 };
 
@@ -57,11 +62,13 @@ struct CaptureSummary {
   std::filesystem::path manifest;
   std::string camera;  // the camera's URI as it names itself (set by callers that opened it)
   double settle_ms = 0.0;  // the settle time used (set by callers: given, or measured)
+  bool stopped = false;    // ended by CaptureSessionOptions::stop before every pattern was captured
   std::string BriefReport() const;  // one line
 };
 
 // Captures every pattern of `sequence` that options.directory does not hold yet, showing it on
-// `display` and photographing it with `camera`.
+// `display` and photographing it with `camera`. Returns early, `stopped` set, when options.stop
+// is set (a grab that fails once the stop is set is taken as the stop, not as a fault).
 // Throws IoError when the directory holds a session of another sequence, another camera or other
 // capture settings (the message names what differs); CaptureFault when the camera keeps failing
 // — the patterns captured so far and the interruption are in the manifest, and running the same

@@ -6,6 +6,7 @@
 #include <poll.h>
 #include <sys/ioctl.h>
 #include <sys/mman.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -199,7 +200,30 @@ struct V4l2Camera::Impl {
     }
   }
 
+  // libv4l2 prints lines of its own on stderr when what it opens is not a V4L2 device (a regular
+  // file, /dev/null): the kernel is asked first, so that such a path is one line of procam's.
+  void CheckIsV4l2Device() const {
+    struct stat info {};
+    if (::stat(options.device.c_str(), &info) != 0) return;  // v4l2_open names the error
+    if (!S_ISCHR(info.st_mode)) {
+      throw IoError("camera '" + Uri() + "': " + options.device +
+                    " is not a device (a V4L2 camera is a character device such as /dev/video0; "
+                    "see `procam cameras`)");
+    }
+    const int probe = ::open(options.device.c_str(), O_RDWR | O_NONBLOCK);
+    if (probe < 0) return;  // v4l2_open names the error (permissions, ...)
+    v4l2_capability capability{};
+    const bool v4l2 = ::ioctl(probe, VIDIOC_QUERYCAP, &capability) == 0;
+    const int error = errno;
+    ::close(probe);
+    if (!v4l2) {
+      throw IoError("camera '" + Uri() + "': " + options.device + " is not a V4L2 device (" +
+                    std::strerror(error) + "; see `procam cameras`)");
+    }
+  }
+
   void Open() {
+    CheckIsV4l2Device();
     fd = v4l2_open(options.device.c_str(), O_RDWR | O_NONBLOCK);
     if (fd < 0) {
       const int error = errno;

@@ -144,6 +144,13 @@ void Controller::Handle(Node& node, const Message& message) {
       const std::string error = message.body.contains("error") && message.body["error"].is_string()
                                     ? message.body["error"].get<std::string>()
                                     : "failed";
+      // A node that serves another controller: Connect ends with its line.
+      const bool busy = message.body.is_object() && message.body.contains("busy") &&
+                        message.body["busy"] == true;
+      if (busy && node.state != Node::State::kLive) {
+        node.error = error;
+        break;
+      }
       Log(fmt::format("controller: node {} says: {}", node.address.name, error));
       break;
     }
@@ -157,7 +164,7 @@ void Controller::Pump(int timeout_ms) {
   std::vector<zmq::pollitem_t> items;
   for (const auto& node : nodes_)
     items.push_back({node->socket->socket().handle(), 0, ZMQ_POLLIN, 0});
-  zmq::poll(items.data(), items.size(), std::chrono::milliseconds(std::max(0, timeout_ms)));
+  PollOrInterrupted(items.data(), items.size(), std::chrono::milliseconds(std::max(0, timeout_ms)));
   for (size_t k = 0; k < nodes_.size(); ++k) {
     if (!(items[k].revents & ZMQ_POLLIN)) continue;
     // Everything that is there now, bounded: a flood cannot hold the controller.

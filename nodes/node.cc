@@ -117,7 +117,7 @@ class Node {
       }
       CheckOutputs();
       std::optional<Envelope> envelope = socket_->Receive(100);
-      if (!envelope) continue;
+      if (!envelope || !Admit(*envelope)) continue;
       peer_ = envelope->peer;
       try {
         Handle(envelope->message);
@@ -128,6 +128,46 @@ class Node {
   }
 
  private:
+  // One controller at a time. The first one heard is served until it ends the show (kStop) or
+  // its connection is gone; a message from another one meanwhile is refused: logged (at the rate
+  // of the socket's refusals) naming both, and answered with a kFailed marked "busy", which ends
+  // that controller's setup with one line. A node in the controller's process has one controller.
+  bool Admit(const Envelope& envelope) {
+    if (envelope.address.empty()) return true;  // in-process
+    if (!controller_.empty() && envelope.peer != controller_ && ControllerStillThere()) {
+      const std::string why =
+          fmt::format("serves the controller at {}, one controller at a time; the controller at "
+                      "{} is refused",
+                      controller_address_, envelope.address);
+      socket_->Refuse(envelope.address, fmt::format("node {}: refused a second controller at {}: "
+                                                    "it serves the controller at {}",
+                                                    options_.name, envelope.address,
+                                                    controller_address_));
+      Message refusal;
+      refusal.type = MessageType::kFailed;
+      refusal.sequence = envelope.message.sequence;
+      refusal.body = {{"node", options_.name}, {"error", why}, {"busy", true}};
+      socket_->Send(envelope.peer, refusal);
+      return false;
+    }
+    if (envelope.peer != controller_) controller_address_ = envelope.address;
+    controller_ = envelope.peer;
+    return true;
+  }
+
+  // Whether the controller served is still connected: ZeroMQ's router refuses a message to a
+  // routing id whose connection is gone (router_mandatory), once the messages it had received
+  // from it are read, so the node asks by sending it its status (a kPong, which a controller
+  // takes at any time). A controller reconnecting (its heartbeats timed out while the node was
+  // frozen) comes back under a new routing id: the old one is gone.
+  bool ControllerStillThere() {
+    Message status;
+    status.type = MessageType::kPong;
+    status.sequence = 0;
+    status.body = Status();
+    return socket_->Send(controller_, status);
+  }
+
   std::string Describe() const {
     std::string text;
     for (size_t k = 0; k < outputs_.size(); ++k)
@@ -151,6 +191,7 @@ class Node {
         break;
       case MessageType::kStop:
         rendered_.reset();
+        controller_.clear();  // another controller may be served now
         Log(fmt::format("node {}: stopped by the controller", options_.name));
         exit_ = message.body.is_object() && message.body.value("exit", false);
         break;
@@ -351,6 +392,10 @@ class Node {
   std::unique_ptr<NodeSetup> setup_;
   std::optional<uint64_t> rendered_;  // the frame in the back buffers
   std::string peer_;                  // the controller (the last peer heard)
+  // The controller served over the network (Admit): its routing id ("" while none is) and
+  // address.
+  std::string controller_;
+  std::string controller_address_;
   bool exit_ = false;
 };
 

@@ -50,14 +50,20 @@ class FrameSource {
     }
     if (!std::filesystem::exists(path))
       throw IoError(path.string() + ": no such file or directory");
-    if (!video_.open(path.string(), cv::CAP_ANY) || !video_.isOpened()) {
+    // GStreamer, FFmpeg and OpenCV print lines of their own for a file they cannot read: the
+    // failure is this line of procam's instead.
+    bool opened = false, read = false;
+    {
+      SilencedStderr silenced;
+      opened = video_.open(path.string(), cv::CAP_ANY) && video_.isOpened();
+      read = opened && video_.read(first_) && !first_.empty();
+    }
+    if (!opened) {
       throw IoError(path.string() + ": not a video OpenCV can read (nor a directory of images)");
     }
     count_ = static_cast<int>(video_.get(cv::CAP_PROP_FRAME_COUNT));  // may be an estimate
     // A video without a frame would show nothing and replace the last result: refused now.
-    if (!video_.read(first_) || first_.empty()) {
-      throw IoError(path.string() + ": the video has no frame that can be read");
-    }
+    if (!read) throw IoError(path.string() + ": the video has no frame that can be read");
     next_ = 1;
   }
   // Frames in the source (a video's may be an estimate; 0 if unknown).
@@ -77,6 +83,7 @@ class FrameSource {
       if (index == 0) return frame;
     }
     while (next_ <= index) {
+      SilencedStderr silenced;  // a damaged frame's decoder lines: it ends the source
       if (!video_.read(frame) || frame.empty()) return cv::Mat();
       ++next_;
     }
@@ -168,7 +175,8 @@ void WritePlayResult(const PlayOptions& options, const PlaySummary& summary,
                            {"frames_shown", summary.frames.size()},
                            {"frames_dropped", summary.dropped},
                            {"seconds", summary.seconds},
-                           {"setup_seconds", summary.setup_seconds}};
+                           {"setup_seconds", summary.setup_seconds},
+                           {"stopped", summary.stopped}};
   std::vector<double> solve, ready, skew, total;
   for (const PlayFrame& frame : summary.frames) {
     result["frames"].push_back(FrameJson(frame, nodes));
@@ -204,6 +212,10 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
   Clock::time_point t0;
   int index = 0;
   while (index < limit) {
+    if (options.stop != nullptr && options.stop->load()) {
+      summary.stopped = true;
+      break;
+    }
     const auto frame_start = Clock::now();
     PlayFrame frame;
     frame.source = index;
@@ -313,6 +325,7 @@ PlaySummary RunPlay(const PlayOptions& options) {
   PlaySummary summary;
   std::vector<NodeAddress> node_list = nodes;
   // The controller's part (on its own thread when the node runs on this one).
+  const auto stopping = [&] { return options.stop != nullptr && options.stop->load(); };
   auto control = [&] {
     try {
       PlayScene play = PreparePlay(options, rig);
@@ -321,15 +334,28 @@ PlaySummary RunPlay(const PlayOptions& options) {
       controller_options.frame_timeout_s = options.frame_timeout_s;
       controller_options.setup_timeout_s = options.setup_timeout_s;
       controller_options.log = options.progress;
-      controller_options.cancelled = [&] { return node_failed.load(); };
+      controller_options.cancelled = [&] { return node_failed.load() || stopping(); };
       Controller controller(context, nodes, keys ? &*keys : nullptr, controller_options);
-      Report(options.progress, fmt::format("play: setting up {} node(s)", nodes.size()));
-      controller.Connect();
-      const double setup_seconds = SecondsSince(start);
-      summary = PlayFrames(options, play, controller, source ? &*source : nullptr, start);
-      summary.setup_seconds = setup_seconds;
-      controller.Stop(/*exit=*/local);
-      WritePlayResult(options, summary, node_list, play);
+      if (!stopping()) {
+        Report(options.progress, fmt::format("play: setting up {} node(s)", nodes.size()));
+        try {
+          controller.Connect();
+        } catch (const IoError&) {
+          if (!stopping()) throw;  // cancelled by the stop: ended below
+        }
+      }
+      if (stopping()) {  // before the first frame: nothing shown, nothing written
+        summary.stopped = true;
+        summary.seconds = SecondsSince(start);
+        controller.Stop(/*exit=*/local);
+      } else {
+        const double setup_seconds = SecondsSince(start);
+        summary = PlayFrames(options, play, controller, source ? &*source : nullptr, start);
+        summary.setup_seconds = setup_seconds;
+        controller.Stop(/*exit=*/local);
+        if (!summary.frames.empty() || !summary.stopped)
+          WritePlayResult(options, summary, node_list, play);
+      }
     } catch (...) {
       failure = std::current_exception();
     }

@@ -63,6 +63,9 @@ struct PlayOptions {
   NodeOutputFactory local_outputs;
   bool local_gpu = true;  // the in-process node renders on the GPU (NodeOptions::gpu)
   ProgressCallback progress;
+  // Set (by a signal handler) to end the show cleanly: after the frame in hand, or during the
+  // setup; the nodes are told to stop. Null: the show runs to the end of its source.
+  const std::atomic<bool>* stop = nullptr;
 };
 
 struct PlayFrame {
@@ -78,6 +81,7 @@ struct PlaySummary {
   int dropped = 0;
   double seconds = 0.0;
   double setup_seconds = 0.0;  // geometry, form factors, camera rays, nodes set up
+  bool stopped = false;        // ended by options.stop before the source's end
 };
 
 // Desired linear colours (n,3) from an image as the camera sees the room: `image` any size
@@ -89,6 +93,8 @@ Eigen::MatrixX3d DesiredFromImage(const cv::Mat& image, const std::vector<int>& 
 
 // Plays the source (header comment). Throws IoError naming the file, node or key that stops it
 // before the first frame; a node failing during the show is reported and the show goes on.
+// Stopped by options.stop, OUT/result.json records the frames shown (with "stopped": true), and
+// a stop before the first frame writes nothing (an earlier result.json is kept).
 PlaySummary RunPlay(const PlayOptions& options);
 
 }  // namespace procam

@@ -2,23 +2,24 @@
 
 #include <cerrno>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstring>
+#include <cmath>
 #include <fstream>
+#include <map>
 #include <mutex>
 
 #include "base/io.h"
 
 namespace procam {
-namespace {
 
-// zmq::poll, with an interruption by a signal (EINTR) read as "nothing arrived", so that the
-// caller's loop sees its stop flag (a node stopped with SIGTERM stops cleanly) instead of an
-// "Interrupted system call" error.
 int PollOrInterrupted(zmq::pollitem_t* items, size_t count, std::chrono::milliseconds timeout) {
   try {
     return zmq::poll(items, count, timeout);
@@ -29,6 +30,7 @@ int PollOrInterrupted(zmq::pollitem_t* items, size_t count, std::chrono::millise
   }
 }
 
+namespace {
 
 constexpr int kHeartbeatMs = 200;
 constexpr int kHeartbeatTimeoutMs = 1000;
@@ -62,9 +64,11 @@ std::string ReadKey(const std::filesystem::path& path) {
   return text;
 }
 
-void CommonOptions(zmq::socket_t& socket) {
+// `curve`: the socket encrypts, and libzmq's limit applies to the encrypted frame.
+void CommonOptions(zmq::socket_t& socket, bool curve) {
   socket.set(zmq::sockopt::linger, 0);
-  socket.set(zmq::sockopt::maxmsgsize, kMaxMessageBytes);
+  socket.set(zmq::sockopt::maxmsgsize,
+             kMaxMessageBytes + (curve ? kCurveMessageOverheadBytes : int64_t{0}));
   socket.set(zmq::sockopt::heartbeat_ivl, kHeartbeatMs);
   socket.set(zmq::sockopt::heartbeat_timeout, kHeartbeatTimeoutMs);
   socket.set(zmq::sockopt::heartbeat_ttl, kHeartbeatTimeoutMs);
@@ -127,10 +131,94 @@ RigKeys ReadRigKeys(const std::filesystem::path& rig_dir, KeyRole role) {
   return keys;
 }
 
+namespace {
+
+// The peer's address of a connected TCP socket, "IP:PORT" ("" if it cannot be read: closed).
+std::string PeerAddress(int fd) {
+  sockaddr_storage address{};
+  socklen_t size = sizeof(address);
+  if (::getpeername(fd, reinterpret_cast<sockaddr*>(&address), &size) != 0) return "";
+  char host[INET6_ADDRSTRLEN] = {};
+  if (address.ss_family == AF_INET) {
+    const auto* in = reinterpret_cast<const sockaddr_in*>(&address);
+    ::inet_ntop(AF_INET, &in->sin_addr, host, sizeof(host));
+    return std::string(host) + ":" + std::to_string(ntohs(in->sin_port));
+  }
+  if (address.ss_family == AF_INET6) {
+    const auto* in6 = reinterpret_cast<const sockaddr_in6*>(&address);
+    ::inet_ntop(AF_INET6, &in6->sin6_addr, host, sizeof(host));
+    return "[" + std::string(host) + "]:" + std::to_string(ntohs(in6->sin6_port));
+  }
+  return "";
+}
+
+}  // namespace
+
+RefusalLog::RefusalLog(std::function<void(const std::string&)> log, double interval_s)
+    : log_(std::move(log)), interval_s_(interval_s) {}
+
+void RefusalLog::Refuse(const std::string& address, const std::string& line) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++total_;
+  const auto now = std::chrono::steady_clock::now();
+  if (!logged_ ||
+      (held_ == 0 && std::chrono::duration<double>(now - last_line_).count() >= interval_s_)) {
+    logged_ = true;
+    last_line_ = now;
+    if (log_) log_(line);
+    return;
+  }
+  ++held_;
+  last_held_ = line.starts_with("node: ") ? line.substr(6) : line;
+  if (address.empty()) {
+    ++unread_addresses_;
+  } else if (std::find(addresses_.begin(), addresses_.end(), address) == addresses_.end()) {
+    if (addresses_.size() < 3) {
+      addresses_.push_back(address);
+    } else {
+      ++other_addresses_;
+    }
+  }
+}
+
+void RefusalLog::Flush() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto now = std::chrono::steady_clock::now();
+  const double seconds = std::chrono::duration<double>(now - last_line_).count();
+  if (held_ == 0 || seconds < interval_s_) return;
+  std::string from;
+  for (size_t k = 0; k < addresses_.size(); ++k)
+    from += (k == 0 ? "" : ", ") + addresses_[k];
+  if (other_addresses_ > 0) from += " and " + std::to_string(other_addresses_) + " other addresses";
+  if (unread_addresses_ > 0) {
+    from += (from.empty() ? "" : "; ") + std::to_string(unread_addresses_) +
+            " closed before their address could be read";
+  }
+  if (log_) {
+    log_("node: refused " + std::to_string(held_) + " more connection" + (held_ == 1 ? "" : "s") +
+         " in the last " + std::to_string(static_cast<int>(std::lround(seconds))) + " s from " +
+         from + " (the last: " + last_held_ + ")");
+  }
+  last_line_ = now;
+  held_ = 0;
+  other_addresses_ = 0;
+  unread_addresses_ = 0;
+  addresses_.clear();
+}
+
+long long RefusalLog::total() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return total_;
+}
+
 // ZeroMQ's authentication protocol (ZAP, RFC 27) for one context: a thread that answers the
 // CURVE server's requests (admit only the controller's public key) and watches the node
-// socket's monitor for handshakes that fail before ZAP is asked (a client without CURVE, or one
-// that does not know the node's key).
+// socket's monitor: the connections it accepts (their peers' addresses, read when they are
+// accepted) and the handshakes that fail, before ZAP is asked
+// (a client without CURVE, or one that does not know the node's key) or by ZAP's refusal. libzmq's
+// monitor (version 1) names only the node's own endpoint in a failure; the connection's
+// descriptor comes with its acceptance and with its disconnection, which follows the failure at
+// once, so the refusal is logged then, with the peer's address.
 class NodeSocket::ZapHandler {
  public:
   ZapHandler(zmq::context_t& context, const std::string& allowed_key,
@@ -138,7 +226,8 @@ class NodeSocket::ZapHandler {
       : handler_(context, zmq::socket_type::rep),
         monitor_(context, zmq::socket_type::pair),
         allowed_(allowed_key),
-        log_(std::move(log)) {
+        log_(log),
+        refusals_(std::move(log), kRefusalLogIntervalS) {
     handler_.set(zmq::sockopt::linger, 0);
     handler_.bind("inproc://zeromq.zap.01");
   }
@@ -152,7 +241,16 @@ class NodeSocket::ZapHandler {
     monitor_.connect(monitor_endpoint);
     thread_ = std::thread([this] { Run(); });
   }
-  long long refused() const { return refused_; }
+  long long refused() const { return refusals_.total(); }
+  // The peer of the connection descriptor `fd` is now ("" if not known).
+  std::string Address(int fd) const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const auto found = accepted_.find(fd);
+    return found == accepted_.end() ? "" : found->second;
+  }
+  void Refuse(const std::string& address, const std::string& line) {
+    refusals_.Refuse(address, line);
+  }
 
  private:
   void Run() {
@@ -163,6 +261,7 @@ class NodeSocket::ZapHandler {
         PollOrInterrupted(items, 2, std::chrono::milliseconds(50));
         if (items[0].revents & ZMQ_POLLIN) Answer();
         if (items[1].revents & ZMQ_POLLIN) Watch();
+        refusals_.Flush();
       } catch (const zmq::error_t& e) {
         if (e.num() == ETERM) return;
         Log(std::string("node: authentication: ") + e.what());
@@ -180,7 +279,6 @@ class NodeSocket::ZapHandler {
     }
     // version, request id, domain, address, routing id, mechanism, credentials...
     if (request.size() < 6) return;
-    const std::string address = request[3].to_string();
     const std::string mechanism = request[5].to_string();
     bool admit = false;
     std::string text = "not the rig's controller";
@@ -189,12 +287,13 @@ class NodeSocket::ZapHandler {
       if (!admit) {
         char z85[41];
         zmq_z85_encode(z85, static_cast<const uint8_t*>(request[6].data()), 32);
-        Refuse("node: refused a controller at " + address + ": its key " + z85 +
-               " is not the rig's (keys/controller.pub)");
+        failure_ = {"a controller",
+                    std::string("its key ") + z85 + " is not the rig's (keys/controller.pub)",
+                    request[3].to_string()};
       }
     } else {
       text = "CURVE required";
-      Refuse("node: refused a peer at " + address + ": mechanism " + mechanism + ", not CURVE");
+      failure_ = {"a peer", "mechanism " + mechanism + ", not CURVE", request[3].to_string()};
     }
     const std::string version = "1.0", status = admit ? "200" : "400",
                       status_text = admit ? "OK" : text;
@@ -205,22 +304,56 @@ class NodeSocket::ZapHandler {
     handler_.send(zmq::buffer(std::string(admit ? "controller" : "")), zmq::send_flags::sndmore);
     handler_.send(zmq::str_buffer(""), zmq::send_flags::none);
   }
-  // Monitor events: two frames, (u16 event, u32 value) and the peer's endpoint.
+  // Monitor events: two frames, (u16 event, u32 value) and an endpoint (the node's own).
   void Watch() {
-    zmq::message_t event, address;
+    zmq::message_t event, endpoint;
     if (!monitor_.recv(event, zmq::recv_flags::none)) return;
-    if (event.more()) (void)monitor_.recv(address, zmq::recv_flags::none);
+    if (event.more()) (void)monitor_.recv(endpoint, zmq::recv_flags::none);
     if (event.size() < 6) return;
     uint16_t id;
+    uint32_t value;
     std::memcpy(&id, event.data(), 2);
-    if (id == ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL || id == ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL) {
-      Refuse("node: refused a peer (" + address.to_string() +
-             "): its security handshake failed (no CURVE, or not the rig's node key)");
+    std::memcpy(&value, static_cast<const char*>(event.data()) + 2, 4);
+    const int fd = static_cast<int>(value);
+    switch (id) {
+      case ZMQ_EVENT_ACCEPTED: {
+        std::lock_guard<std::mutex> lock(mutex_);
+        accepted_[fd] = PeerAddress(fd);  // "" when it closed before it could be read
+        break;
+      }
+      case ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL:
+      case ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL:
+        failed_ = {"a peer", "its security handshake failed (no CURVE, or not the rig's node key)",
+                   ""};
+        break;
+      case ZMQ_EVENT_HANDSHAKE_FAILED_AUTH:
+        failed_ = failure_.who.empty() ? Failure{"a peer", "refused by ZAP", ""} : failure_;
+        failure_ = {};
+        break;
+      case ZMQ_EVENT_DISCONNECTED: {
+        std::string address;
+        {
+          std::lock_guard<std::mutex> lock(mutex_);
+          const auto found = accepted_.find(fd);
+          if (found != accepted_.end()) {
+            address = found->second;
+            accepted_.erase(found);
+          }
+        }
+        if (!failed_.who.empty()) {
+          if (address.empty()) address = failed_.ip;  // ZAP's (the port not known)
+          const std::string from =
+              address.empty() ? "an address (its connection closed before it could be read)"
+                              : address;
+          refusals_.Refuse(address, "node: refused " + failed_.who + " at " + from + ": " +
+                                        failed_.why);
+          failed_ = {};
+        }
+        break;
+      }
+      default:
+        break;
     }
-  }
-  void Refuse(const std::string& line) {
-    ++refused_;
-    Log(line);
   }
   void Log(const std::string& line) {
     std::lock_guard<std::mutex> lock(log_mutex_);
@@ -231,8 +364,17 @@ class NodeSocket::ZapHandler {
   std::string allowed_;
   std::function<void(const std::string&)> log_;
   std::mutex log_mutex_;
+  RefusalLog refusals_;
+  struct Failure {
+    std::string who;  // "a peer", "a controller"
+    std::string why;
+    std::string ip;  // ZAP's record of the peer's address (no port), "" before ZAP
+  };
+  Failure failure_;  // ZAP's last refusal, until the failure's event
+  Failure failed_;   // a handshake failed: the refusal is logged at its disconnection
+  mutable std::mutex mutex_;
+  std::map<int, std::string> accepted_;  // open connections' peers by descriptor
   std::atomic<bool> stop_{false};
-  std::atomic<long long> refused_{0};
   std::thread thread_;
 };
 
@@ -259,7 +401,7 @@ NodeSocket::NodeSocket(zmq::context_t& context, const std::string& endpoint, con
         context, DecodeKey(keys->controller.public_key, "keys/controller.pub"), log_);
   }
   socket_ = zmq::socket_t(context, zmq::socket_type::router);
-  CommonOptions(socket_);
+  CommonOptions(socket_, keys != nullptr);
   socket_.set(zmq::sockopt::router_mandatory, 1);
   if (keys != nullptr) {
     socket_.set(zmq::sockopt::curve_server, 1);
@@ -268,7 +410,8 @@ NodeSocket::NodeSocket(zmq::context_t& context, const std::string& endpoint, con
         "inproc://procam-node-monitor-" + std::to_string(reinterpret_cast<uintptr_t>(this));
     if (zmq_socket_monitor(
             socket_.handle(), monitor.c_str(),
-            ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL | ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL) != 0) {
+            ZMQ_EVENT_ACCEPTED | ZMQ_EVENT_DISCONNECTED | ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL |
+                ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL | ZMQ_EVENT_HANDSHAKE_FAILED_AUTH) != 0) {
       throw IoError("node: cannot monitor the socket: " + std::string(zmq_strerror(zmq_errno())));
     }
     zap_->Start(monitor);
@@ -292,6 +435,14 @@ NodeSocket::~NodeSocket() {
 
 long long NodeSocket::refused() const { return zap_ ? zap_->refused() : 0; }
 
+void NodeSocket::Refuse(const std::string& address, const std::string& line) {
+  if (zap_) {
+    zap_->Refuse(address, line);
+  } else if (log_) {
+    log_(line);
+  }
+}
+
 std::optional<Envelope> NodeSocket::Receive(int timeout_ms) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   for (;;) {
@@ -312,6 +463,11 @@ std::optional<Envelope> NodeSocket::Receive(int timeout_ms) {
     Envelope envelope;
     if (parts.size() == 2) {
       envelope.peer = parts[0].to_string();
+      if (zap_) {  // the connection's descriptor (ZMQ_SRCFD, deprecated but kept by libzmq 4.3)
+        const int fd = zmq_msg_get(parts[1].handle(), ZMQ_SRCFD);
+        if (fd >= 0) envelope.address = zap_->Address(fd);
+        if (envelope.address.empty() && fd >= 0) envelope.address = PeerAddress(fd);
+      }
       if (ParseMessage(parts[1].data(), parts[1].size(), &envelope.message, &why)) return envelope;
     } else {
       why = "a message of " + std::to_string(parts.size() - 1) + " frames (one expected)";
@@ -335,7 +491,7 @@ bool NodeSocket::Send(const std::string& peer, const Message& message) {
 ControllerSocket::ControllerSocket(zmq::context_t& context, const std::string& endpoint,
                                    const RigKeys* keys)
     : socket_(context, zmq::socket_type::dealer), endpoint_(endpoint) {
-  CommonOptions(socket_);
+  CommonOptions(socket_, keys != nullptr);
   socket_.set(zmq::sockopt::immediate, 1);
   socket_.set(zmq::sockopt::reconnect_ivl, 100);
   socket_.set(zmq::sockopt::reconnect_ivl_max, 500);

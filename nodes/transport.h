@@ -19,12 +19,15 @@
 // no keys: nothing outside the process can reach it.
 //
 // Every socket has ZMQ_MAXMSGSIZE (a longer message drops the connection inside libzmq, before
-// procam sees a byte), linger 0, and ZeroMQ's own heartbeats (a peer silent for a second is
+// procam sees a byte): kMaxMessageBytes, the largest message of the protocol, plus CURVE's
+// overhead on an encrypting socket (libzmq compares the encrypted frame), linger 0, and ZeroMQ's own heartbeats (a peer silent for a second is
 // disconnected), so that no loop waits on a dead peer.
 
+#include <chrono>
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <thread>
@@ -53,10 +56,42 @@ RigKeys MakeRigKeys(const std::filesystem::path& rig_dir, bool replace);
 enum class KeyRole { kController, kNode };
 RigKeys ReadRigKeys(const std::filesystem::path& rig_dir, KeyRole role);
 
-// A message as it arrived at a node: who sent it (the ROUTER's routing id) and what.
+// A message as it arrived at a node: who sent it (the ROUTER's routing id) and what, and the
+// peer's address ("IP:PORT"; "" in-process).
 struct Envelope {
   std::string peer;
   Message message;
+  std::string address;
+};
+
+// What CURVE adds to each message frame, which libzmq's ZMQ_MAXMSGSIZE counts: the MESSAGE
+// command's name (8 bytes), its nonce (8), the flags (1) and the authenticator (16).
+constexpr int64_t kCurveMessageOverheadBytes = 33;
+
+// Seconds between the lines that count repeated refusals (RefusalLog).
+constexpr double kRefusalLogIntervalS = 5.0;
+
+// Refusals logged at a bounded rate, so that a client retrying (or a flood of connections) cannot
+// fill the log: the first refusal is logged in full; the ones within `interval_s` of the last
+// line are counted, and Flush (called often) logs one line with their count, up to three of
+// their addresses and the last one's reason, once `interval_s` has passed. Thread-safe.
+class RefusalLog {
+ public:
+  RefusalLog(std::function<void(const std::string&)> log, double interval_s);
+  // `line` names the refusal and `address`.
+  void Refuse(const std::string& address, const std::string& line);
+  void Flush();
+  long long total() const;  // every refusal, logged or counted
+
+ private:
+  std::function<void(const std::string&)> log_;
+  double interval_s_;
+  mutable std::mutex mutex_;
+  bool logged_ = false;
+  std::chrono::steady_clock::time_point last_line_;
+  long long total_ = 0, held_ = 0, other_addresses_ = 0, unread_addresses_ = 0;
+  std::vector<std::string> addresses_;
+  std::string last_held_;
 };
 
 // Throws IoError naming `what` (e.g. "--listen") and the endpoint when a tcp:// endpoint's port
@@ -65,7 +100,8 @@ void CheckTcpPort(const std::string& endpoint, bool bind, const std::string& wha
 
 // The node's end: a ROUTER bound to `endpoint` (tcp://ADDRESS:PORT, or inproc://NAME with no
 // keys). With keys, a CURVE server whose ZAP handler admits only `keys->controller.public_key`;
-// `log` gets one line per refused peer and per malformed message.
+// `log` gets a line per refused peer naming its address (IP:PORT), at a bounded rate
+// (RefusalLog), and one per malformed message.
 class NodeSocket {
  public:
   NodeSocket(zmq::context_t& context, const std::string& endpoint, const RigKeys* keys,
@@ -83,6 +119,8 @@ class NodeSocket {
   const std::string& endpoint() const { return endpoint_; }  // as bound (the port if it was 0)
   long long malformed() const { return malformed_; }
   long long refused() const;
+  // A refusal the node makes itself (e.g. a second controller), logged as the socket's are.
+  void Refuse(const std::string& address, const std::string& line);
 
  private:
   class ZapHandler;
@@ -111,6 +149,11 @@ class ControllerSocket {
   zmq::socket_t socket_;
   std::string endpoint_;
 };
+
+// zmq::poll, with an interruption by a signal (EINTR) read as "nothing arrived" (every revents
+// 0), so that the caller's loop sees its stop flag (a node or a show stopped with SIGTERM stops
+// cleanly) instead of an "Interrupted system call" error.
+int PollOrInterrupted(zmq::pollitem_t* items, size_t count, std::chrono::milliseconds timeout);
 
 // Steady-clock and system-clock "now" in nanoseconds.
 int64_t SystemNowNs();

@@ -325,5 +325,26 @@ TEST(BadInput, SecretKeysAreCreatedForTheirOwnerOnly) {
   EXPECT_EQ(info.st_mode & 0777, 0644u);
 }
 
+// What is not a V4L2 camera (/dev/null, /dev/zero, a regular file) is one line of procam's:
+// libv4l2 printed three lines of its own when it opened them.
+TEST(BadInput, WhatIsNotAV4l2CameraIsOneLine) {
+  if (testing::RunProcam("cameras --no-gige").output.find("(no V4L2") != std::string::npos)
+    GTEST_SKIP() << "a build without V4L2";
+  testing::TempDir dir;
+  const std::filesystem::path file = dir.Write("camera.txt", "not a camera\n");
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"/dev/null", "/dev/null is not a V4L2 device"},
+      {"/dev/zero", "/dev/zero is not a V4L2 device"},
+      {file.string(), file.string() + " is not a device"},
+  };
+  for (const auto& [device, expected] : cases) {
+    testing::ExpectOneErrorLine(
+        testing::RunProcamStderr("capture --camera v4l2:" + device + " --sequence graycode --out " +
+                                 (dir / "session").string()),
+        expected, device);
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "session"));
+}
+
 }  // namespace
 }  // namespace procam

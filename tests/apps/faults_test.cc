@@ -5,11 +5,15 @@
 // a command run again after a kill resumes or redoes and ends as an uninterrupted run would
 // (docs/faults.md, "Faults").
 #include <gtest/gtest.h>
+#include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <functional>
@@ -514,6 +518,12 @@ TEST_F(Faults, DesiredFramesThatCannotBeShownAreRefusedUpFront) {
     ASSERT_TRUE(writer.isOpened());
   }  // closed with no frame
   testing::ExpectOneErrorLine(testing::RunProcamStderr(play(video)), video.string(), "empty video");
+  // Junk named like a video: the decoders' own lines (GStreamer, FFmpeg) are not shown.
+  std::string junk(4096, '\0');
+  for (size_t k = 0; k < junk.size(); ++k) junk[k] = static_cast<char>((k * 2654435761u) >> 13);
+  const fs::path junk_video = dir.Write("junk.mp4", junk);
+  testing::ExpectOneErrorLine(testing::RunProcamStderr(play(junk_video)), junk_video.string(),
+                              "junk video");
   fs::create_directories(dir / "fifo");
   ASSERT_EQ(::mkfifo((dir / "fifo" / "a.png").c_str(), 0600), 0);
   testing::ExpectOneErrorLine(testing::RunProcamStderr(play(dir / "fifo")), "a.png", "FIFO");
@@ -539,6 +549,13 @@ TEST_F(Faults, InconsistentRigsAreRefusedInOneLine) {
       {[](nlohmann::json& rig) { rig["registration"]["camera_centre_m"][0] =
                                      rig["registration"]["camera_centre_m"][0].get<double>() + 0.5; },
        "registration.camera_centre_m"},
+      // Two projectors' models swapped: each file is its own, and not the camera's.
+      {[](nlohmann::json& rig) {
+         const nlohmann::json left = rig["projectors"][0]["model"];
+         rig["projectors"][0]["model"] = rig["projectors"][1]["model"];
+         rig["projectors"][1]["model"] = left;
+       },
+       "centre_m): the model of another projector"},
   };
   for (const auto& [edit, expected] : cases) {
     const fs::path rig = dir / "rig";
@@ -553,6 +570,165 @@ TEST_F(Faults, InconsistentRigsAreRefusedInOneLine) {
         expected, expected);
     EXPECT_FALSE(fs::exists(dir / "solution")) << expected;
   }
+}
+
+// The room the rig was registered in, changed since: a wall moved 0.5 m along its normal, or
+// flipped (its corners in the other order), is refused in one line naming the surface, before
+// the form factors; the room as it was is accepted.
+TEST_F(Faults, ARoomChangedSinceTheCalibrationIsRefusedInOneLine) {
+  const nlohmann::json rig = nlohmann::json::parse(Bytes(Rig() / "rig.json"));
+  ASSERT_TRUE(rig.at("registration").contains("room")) << rig.at("registration").dump();
+  ASSERT_EQ(testing::RunProcam("scene write tiny_box --out " + (dir / "room").string()).exit_code,
+            0);
+  const fs::path scene = dir / "room" / "tiny_box.json";
+  const nlohmann::json room = nlohmann::json::parse(Bytes(scene));
+  const auto compensate = [&] {
+    return "compensate " + scene.string() + " --patches 150 --rig " + Rig().string() +
+           " --out " + (dir / "solution").string();
+  };
+  const CommandRun same = testing::RunProcam(compensate());
+  ASSERT_EQ(same.exit_code, 0) << same.output;
+  fs::remove_all(dir / "solution");
+  int wall = -1;
+  for (size_t s = 0; s < room.at("surfaces").size() && wall < 0; ++s)
+    if (room["surfaces"][s].contains("quad")) wall = static_cast<int>(s);
+  ASSERT_GE(wall, 0);
+  const std::string name = room["surfaces"][wall]["name"];
+  const std::vector<std::pair<std::function<void(nlohmann::json&)>, std::string>> cases = {
+      {[&](nlohmann::json& quad) {  // moved 0.5 m along its normal
+         Eigen::Vector3d c[4];
+         for (int k = 0; k < 4; ++k)
+           for (int i = 0; i < 3; ++i) c[k][i] = quad[k][i].get<double>();
+         const Eigen::Vector3d shift = 0.5 * (c[1] - c[0]).cross(c[2] - c[0]).normalized();
+         for (int k = 0; k < 4; ++k)
+           for (int i = 0; i < 3; ++i) quad[k][i] = c[k][i] + shift[i];
+       },
+       "its centre is 0.500 m from where the rig was registered"},
+      {[](nlohmann::json& quad) {  // flipped
+         quad = nlohmann::json::array({quad[3], quad[2], quad[1], quad[0]});
+       },
+       "its lit side faces 180"},
+  };
+  for (const auto& [edit, expected] : cases) {
+    nlohmann::json changed = room;
+    edit(changed["surfaces"][wall]["quad"]);
+    WriteFileAtomically(scene, changed.dump(2));
+    const CommandRun run = testing::RunProcamStderr(compensate());
+    testing::ExpectOneErrorLine(run, expected, expected);
+    EXPECT_NE(run.output.find("'" + name + "'"), std::string::npos) << run.output;
+    EXPECT_NE(run.output.find("registration.room.surfaces"), std::string::npos) << run.output;
+    EXPECT_FALSE(fs::exists(dir / "solution")) << expected;
+  }
+}
+
+}  // namespace
+}  // namespace procam
+
+namespace procam {
+namespace {
+
+// The lines of `text` that contain `what`.
+int LinesWith(const std::string& text, const std::string& what) {
+  int count = 0;
+  size_t start = 0;
+  while (start < text.size()) {
+    size_t end = text.find('\n', start);
+    if (end == std::string::npos) end = text.size();
+    if (text.substr(start, end - start).find(what) != std::string::npos) ++count;
+    start = end + 1;
+  }
+  return count;
+}
+
+// capture stopped by SIGTERM or SIGINT (Ctrl+C) part-way: exit 0, one line saying so and how to
+// resume, result.json complete false, the stop recorded in session.json; run again, it captures
+// only what is missing and ends with the files of an uninterrupted session.
+TEST_F(Faults, ASignalStopsCaptureCleanlyAndItResumes) {
+  const auto command = [&](const std::string& out) {
+    return "capture --camera " + kCamera + "'" + kCapture +
+           "--projector 0 --sequence photometric --levels 0,128,255 --channels rgb --out " +
+           (dir / out).string();
+  };
+  ASSERT_GT(TimedRun(command("clean")), 0);
+  for (const int signal : {SIGTERM, SIGINT}) {
+    const std::string out = "stopped" + std::to_string(signal);
+    const fs::path log = dir / (out + ".log");
+    const testing::SignalledRun run = testing::SignalProcamWhen(
+        command(out), [&] { return CountFiles(dir / out / "frames") >= 2; }, signal, kMaxSeconds,
+        log);
+    const std::string output = Bytes(log);
+    ASSERT_TRUE(run.running) << "capture ended before the signal\n" << output;
+    EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
+    EXPECT_EQ(run.exit_code, 0) << output;
+    EXPECT_EQ(LinesWith(output, "stopped by a signal"), 1) << output;
+    EXPECT_EQ(LinesWith(output, "run the same command again to resume"), 1) << output;
+    EXPECT_EQ(output.find("error"), std::string::npos) << output;
+    const nlohmann::json result = nlohmann::json::parse(Bytes(dir / out / "result.json"));
+    EXPECT_EQ(result.at("complete"), false) << result.dump();
+    EXPECT_EQ(result.at("stopped"), true) << result.dump();
+    const nlohmann::json session = nlohmann::json::parse(Bytes(dir / out / "session.json"));
+    ASSERT_EQ(session.at("interruptions").size(), 1u) << session.dump();
+    EXPECT_EQ(session.at("interruptions").at(0).at("reason"), "stopped by a signal");
+    ExpectEveryFileReads(dir / out);
+    const CommandRun resumed = testing::RunProcam(command(out));
+    ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+    EXPECT_NE(resumed.output.find("7/7 patterns captured"), std::string::npos) << resumed.output;
+    EXPECT_EQ(resumed.output.find(" 0 already there"), std::string::npos) << resumed.output;
+    EXPECT_EQ(FilesUnder(dir / out), FilesUnder(dir / "clean"));
+  }
+}
+
+// play stopped by SIGTERM or SIGINT mid-show: exit 0, one line, a whole result.json of the
+// frames shown (stopped: true). Stopped before its first frame (waiting for a node that never
+// answers), it writes nothing: the earlier result.json is kept as it was.
+TEST_F(Faults, ASignalStopsPlayCleanly) {
+  const fs::path solution = dir / "solution";
+  Compensate(Rig(), solution);
+  const auto play = [&](const fs::path& out, const std::string& extra) {
+    return "play " + kScene + " --rig " + Rig().string() + " --solution " + solution.string() +
+           " --frames 100000 --fps 20 --out " + out.string() + extra;
+  };
+  for (const int signal : {SIGTERM, SIGINT}) {
+    const fs::path out = dir / ("show" + std::to_string(signal));
+    const fs::path log = dir / ("show" + std::to_string(signal) + ".log");
+    const testing::SignalledRun run = testing::SignalProcamWhen(
+        play(out, " --display memory,memory"),
+        [&] { return fs::exists(log) && Bytes(log).find("play: frame ") != std::string::npos; },
+        signal, kMaxSeconds, log);
+    const std::string output = Bytes(log);
+    ASSERT_TRUE(run.running) << "play ended before the signal\n" << output;
+    EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
+    EXPECT_EQ(run.exit_code, 0) << output;
+    EXPECT_EQ(LinesWith(output, "stopped by a signal"), 1) << output;
+    EXPECT_EQ(output.find("error"), std::string::npos) << output;
+    ASSERT_TRUE(fs::exists(out / "result.json")) << output;
+    const nlohmann::json result = nlohmann::json::parse(Bytes(out / "result.json"));
+    EXPECT_EQ(result.at("stopped"), true);
+    EXPECT_GE(result.at("frames_shown").get<int>(), 1);
+    EXPECT_LT(result.at("frames_shown").get<int>(), 100000);
+    EXPECT_EQ(result.at("frames").size(), result.at("frames_shown").get<size_t>());
+  }
+  // Before the first frame: a node at a port nobody listens at is waited for (setup timeout
+  // 120 s), then the signal.
+  const fs::path rig = CopyRig(dir / "keyed_rig");
+  ASSERT_EQ(testing::RunProcam("keys --rig " + rig.string()).exit_code, 0);
+  const fs::path out = dir / "earlier";
+  const std::string earlier = R"({"fps_target": 30, "frames_shown": 3})";
+  dir.Write("earlier/result.json", earlier);
+  const int port = 21000 + static_cast<int>(::getpid() % 4000);
+  const fs::path log = dir / "setup.log";
+  const testing::SignalledRun run = testing::SignalProcamWhen(
+      "play " + kScene + " --rig " + rig.string() + " --solution " + solution.string() +
+          " --nodes a=tcp://127.0.0.1:" + std::to_string(port) + " --out " + out.string(),
+      [&] { return fs::exists(log) && Bytes(log).find("setting up 1 node") != std::string::npos; },
+      SIGTERM, kMaxSeconds, log);
+  const std::string output = Bytes(log);
+  ASSERT_TRUE(run.running) << output;
+  EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
+  EXPECT_EQ(run.exit_code, 0) << output;
+  EXPECT_EQ(LinesWith(output, "stopped by a signal before the first frame"), 1) << output;
+  EXPECT_EQ(Bytes(out / "result.json"), earlier);
+  EXPECT_EQ(FilesUnder(out), std::set<std::string>{"result.json"});
 }
 
 }  // namespace

@@ -10,11 +10,13 @@
 #include <opencv2/videoio.hpp>
 #include <stdexcept>
 #include <thread>
+#include <chrono>
 
 #include "base/io.h"
 #include "datasets_synthetic/scene_files.h"
 #include "nodes/controller.h"
 #include "nodes/play.h"
+#include "nodes/transport.h"
 #include "tests/testing/testing.h"
 
 namespace procam {
@@ -161,6 +163,94 @@ TEST(Node, ASetupTheRoomDoesNotGiveIsRefusedNamingTheScene) {
               std::string::npos)
         << e.what();
   }
+  stop = true;
+  node.join();
+}
+
+// A node serves one controller at a time. A second one holding the rig's key is refused while the
+// first is served: one line at the node naming both, and the second's setup ends at once with
+// one line naming both too; the first's show goes on. Once the first ends its show, another is
+// served. Everything on 127.0.0.1; every wait bounded.
+TEST(Node, ASecondControllerIsRefusedWhileTheFirstIsServed) {
+  testing::TempDir dir;
+  const std::string scene = WriteRig(dir);
+  const RigKeys keys = MakeRigKeys(dir.path(), false);
+  std::mutex mutex;
+  std::string log;
+  const auto node_log = [&] {
+    std::lock_guard<std::mutex> lock(mutex);
+    return log;
+  };
+  NodeOptions options;
+  options.name = "n";
+  options.rig_dir = dir.path();
+  options.scene = scene;
+  options.projectors = {"left", "right"};
+  options.listen = "tcp://127.0.0.1:*";
+  options.gpu = false;
+  options.log = [&](const std::string& line) {
+    std::lock_guard<std::mutex> lock(mutex);
+    log += line + "\n";
+  };
+  zmq::context_t node_context, context;
+  std::atomic<bool> stop{false};
+  std::thread node([&] {
+    RunNode(
+        node_context, options,
+        [](const std::vector<Projector>&) {
+          std::vector<std::unique_ptr<NodeOutput>> outputs;
+          outputs.push_back(std::make_unique<RecordOutput>());
+          outputs.push_back(std::make_unique<RecordOutput>());
+          return outputs;
+        },
+        stop);
+  });
+  const auto wait_for = [&](const std::string& text) {
+    for (int k = 0; k < 500 && node_log().find(text) == std::string::npos; ++k)
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    return node_log().find(text) != std::string::npos;
+  };
+  ASSERT_TRUE(wait_for("listening at tcp://127.0.0.1:")) << node_log();
+  const std::string listening = node_log().substr(node_log().find("tcp://127.0.0.1:"));
+  const std::string endpoint = listening.substr(0, listening.find(','));
+  const auto controller_options = [](const std::string& id) {
+    ControllerOptions controller;
+    controller.setup = {{"setup", id}, {"target_patches", 80}, {"patches", 64}};
+    controller.setup_timeout_s = 30.0;
+    return controller;
+  };
+  const Eigen::MatrixX3d emittance = Eigen::MatrixX3d::Constant(64, 3, 0.5);
+  {
+    Controller first(context, {{"n", endpoint}}, &keys, controller_options("first"));
+    ASSERT_NO_THROW(first.Connect()) << node_log();
+    EXPECT_EQ(first.Show(0, emittance).shown, 1) << node_log();
+    const auto start = std::chrono::steady_clock::now();
+    try {
+      Controller second(context, {{"n", endpoint}}, &keys, controller_options("second"));
+      second.Connect();
+      ADD_FAILURE() << "a second controller was served\n" << node_log();
+    } catch (const IoError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("serves the controller at 127.0.0.1:"), std::string::npos) << what;
+      EXPECT_NE(what.find("the controller at 127.0.0.1:"), what.rfind("the controller at 127.0.0.1:"))
+          << what;  // both named
+      EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+    }
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 10.0);
+    const std::string refused = node_log();
+    size_t lines = 0;
+    for (size_t at = refused.find("refused a second controller at 127.0.0.1:");
+         at != std::string::npos; at = refused.find("refused a second controller", at + 1))
+      ++lines;
+    EXPECT_EQ(lines, 1u) << refused;
+    EXPECT_NE(refused.find("it serves the controller at 127.0.0.1:"), std::string::npos) << refused;
+    EXPECT_EQ(first.Show(1, emittance).shown, 1) << node_log();  // the first's show goes on
+    first.Stop();
+    ASSERT_TRUE(wait_for("stopped by the controller")) << node_log();
+  }
+  Controller third(context, {{"n", endpoint}}, &keys, controller_options("third"));
+  ASSERT_NO_THROW(third.Connect()) << node_log();
+  EXPECT_EQ(third.Show(0, emittance).shown, 1) << node_log();
   stop = true;
   node.join();
 }

@@ -4,9 +4,18 @@
 #include "nodes/transport.h"
 
 #include <gtest/gtest.h>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
+#include <chrono>
 #include <mutex>
+#include <thread>
+#include <functional>
+#include <string>
+#include <vector>
 
 #include "base/io.h"
 #include "tests/testing/testing.h"
@@ -133,11 +142,144 @@ TEST(NodeTransport, AnOversizedMessageIsDroppedAndTheNodeGoesOn) {
   zmq::context_t context;
   ControllerSocket controller(context, node.socket.endpoint(), &keys);
   ASSERT_TRUE(PingUntilReceived(controller, node));
-  const std::string huge(static_cast<size_t>(kMaxMessageBytes) + 1, 'x');
+  // Beyond the limit on the encrypted frame (kMaxMessageBytes + CURVE's 33 bytes).
+  const std::string huge(static_cast<size_t>(kMaxMessageBytes) + 34, 'x');
   ASSERT_TRUE(controller.socket().send(zmq::buffer(huge), zmq::send_flags::none));
   EXPECT_FALSE(node.socket.Receive(1000));
   EXPECT_TRUE(PingUntilReceived(controller, node)) << node.Log();
   EXPECT_EQ(node.socket.malformed(), 0);  // never reached the parser
+}
+
+// The largest frame the protocol accepts (kMaxFramePatches patches, kMaxMessageBytes) reaches
+// the node through CURVE, whose 33 bytes per message libzmq's size limit counts (it dropped the
+// connection, without a line, for the last 6 patch counts before the protocol's limit); a frame
+// beyond the protocol's limit is refused at the controller, by the encoder, in one line.
+TEST(NodeTransport, TheLargestFrameOfTheProtocolPassesCurve) {
+  testing::TempDir dir;
+  const RigKeys keys = MakeRigKeys(dir.path(), false);
+  TestNode node(keys);
+  zmq::context_t context;
+  ControllerSocket controller(context, node.socket.endpoint(), &keys);
+  ASSERT_TRUE(PingUntilReceived(controller, node));
+  Eigen::MatrixX3d emittance = Eigen::MatrixX3d::Constant(kMaxFramePatches, 3, 0.25);
+  emittance(kMaxFramePatches - 1, 2) = 0.5;
+  const std::string bytes = EncodeMessage(FrameMessage(7, emittance));
+  ASSERT_EQ(static_cast<int64_t>(bytes.size()), kMaxMessageBytes);
+  ASSERT_TRUE(controller.socket().send(zmq::buffer(bytes), zmq::send_flags::none));
+  std::optional<Envelope> envelope = node.socket.Receive(10000);
+  ASSERT_TRUE(envelope) << node.Log();
+  EXPECT_EQ(envelope->message.type, MessageType::kFrame);
+  EXPECT_EQ(envelope->message.sequence, 7u);
+  ASSERT_EQ(envelope->message.emittance.size(), 3u * kMaxFramePatches);
+  EXPECT_EQ(envelope->message.emittance.back(), 0.5);
+  emittance.resize(0, 3);
+  const Eigen::MatrixX3d beyond = Eigen::MatrixX3d::Constant(kMaxFramePatches + 1, 3, 0.25);
+  try {
+    EncodeMessage(FrameMessage(8, beyond));
+    ADD_FAILURE() << "a frame beyond the protocol's limit was encoded";
+  } catch (const std::invalid_argument& error) {
+    const std::string what = error.what();
+    EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+    EXPECT_NE(what.find(std::to_string(kMaxFramePatches)), std::string::npos) << what;
+  }
+}
+
+// Opens a TCP connection to the node's endpoint (tcp://127.0.0.1:PORT) and greets it as a
+// ZeroMQ peer without CURVE does (ZMTP 3.0, mechanism NULL): the signature, then, once the node
+// has sent its own and a moment later (a peer's round trip), the rest; closes once the node has
+// hung up. Returns the connection's own port (what the node must name).
+int ConnectWithoutCurve(const std::string& endpoint) {
+  const int port = std::stoi(endpoint.substr(endpoint.rfind(':') + 1));
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  EXPECT_GE(fd, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(static_cast<uint16_t>(port));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  EXPECT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address)), 0);
+  sockaddr_in own{};
+  socklen_t size = sizeof(own);
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&own), &size);
+  timeval timeout{2, 0};  // every read bounded
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
+  std::string greeting(64, '\0');
+  greeting[0] = '\xff';
+  greeting[9] = '\x7f';
+  greeting[10] = 3;  // version 3.0
+  greeting.replace(12, 4, "NULL");
+  (void)::send(fd, greeting.data(), 10, MSG_NOSIGNAL);
+  char buffer[256];
+  (void)::recv(fd, buffer, 10, MSG_WAITALL);  // the node's signature
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  (void)::send(fd, greeting.data() + 10, greeting.size() - 10, MSG_NOSIGNAL);
+  while (::recv(fd, buffer, sizeof(buffer), 0) > 0) {
+  }
+  ::close(fd);
+  return ntohs(own.sin_port);
+}
+
+std::vector<std::string> Lines(const std::string& text) {
+  std::vector<std::string> lines;
+  size_t start = 0;
+  for (size_t end = text.find('\n'); end != std::string::npos; end = text.find('\n', start)) {
+    lines.push_back(text.substr(start, end - start));
+    start = end + 1;
+  }
+  return lines;
+}
+
+// The refusals the count lines of `log` count ("refused N more connections ...").
+long long Counted(const std::string& log) {
+  long long counted = 0;
+  for (const std::string& line : Lines(log)) {
+    const size_t at = line.find("node: refused ");
+    if (at == std::string::npos || line.find(" more connection") == std::string::npos) continue;
+    counted += std::stoll(line.substr(at + 14));
+  }
+  return counted;
+}
+
+// Waits (at most `seconds`) until `done` holds.
+bool WaitFor(double seconds, const std::function<bool()>& done) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return true;
+}
+
+// A refused peer is named by its own address (IP:PORT), not the node's endpoint; a peer
+// retrying (here 20 connections in a row) adds no line per try: after the first, the refusals
+// are counted, in one line every kRefusalLogIntervalS.
+TEST(NodeTransport, RefusalsNameThePeerAndRepeatsAreCounted) {
+  testing::TempDir dir;
+  const RigKeys keys = MakeRigKeys(dir.path(), false);
+  TestNode node(keys);
+  const std::string own_port =
+      node.socket.endpoint().substr(node.socket.endpoint().rfind(':') + 1);
+  const int first = ConnectWithoutCurve(node.socket.endpoint());
+  ASSERT_TRUE(WaitFor(5, [&] { return node.socket.refused() >= 1; })) << node.Log();
+  EXPECT_NE(node.Log().find("node: refused a peer at 127.0.0.1:" + std::to_string(first) +
+                            ": its security handshake failed"),
+            std::string::npos)
+      << node.Log();
+  EXPECT_EQ(node.Log().find(":" + own_port), std::string::npos) << node.Log();
+  constexpr int kRetries = 20;
+  for (int k = 0; k < kRetries; ++k) ConnectWithoutCurve(node.socket.endpoint());
+  ASSERT_TRUE(WaitFor(5, [&] { return node.socket.refused() >= 1 + kRetries; })) << node.Log();
+  // Every refusal after the first is counted, within an interval and a little.
+  ASSERT_TRUE(WaitFor(kRefusalLogIntervalS + 3,
+                      [&] { return Counted(node.Log()) == node.socket.refused() - 1; }))
+      << node.Log();
+  EXPECT_EQ(node.socket.refused(), 1 + kRetries) << node.Log();
+  const std::vector<std::string> lines = Lines(node.Log());
+  EXPECT_GE(lines.size(), 2u) << node.Log();
+  EXPECT_LE(lines.size(), 3u) << node.Log();  // not one a try
+  for (size_t k = 1; k < lines.size(); ++k) {
+    EXPECT_NE(lines[k].find(" more connection"), std::string::npos) << lines[k];
+    EXPECT_NE(lines[k].find("from 127.0.0.1:"), std::string::npos) << lines[k];
+  }
 }
 
 TEST(NodeTransport, KeysAreMadeOnceAndReadWithErrorsNamingTheFile) {

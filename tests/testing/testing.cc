@@ -70,36 +70,50 @@ void ExpectOneErrorLine(const CommandRun& run, const std::string& expected,
   EXPECT_NE(run.output.find(expected), std::string::npos) << context << "\n" << run.output;
 }
 
-bool KillProcamWhen(const std::string& arguments, const std::function<bool()>& ready,
-                    double max_seconds, const std::filesystem::path& log) {
+SignalledRun SignalProcamWhen(const std::string& arguments, const std::function<bool()>& ready,
+                              int signal, double max_seconds, const std::filesystem::path& log) {
   const char* binary = std::getenv("PROCAM_BINARY");
   EXPECT_NE(binary, nullptr) << "PROCAM_BINARY is not set (run the test through CTest)";
   const std::string command = "exec " + std::string(binary ? binary : "procam") + " " +
                               arguments + " >'" + log.string() + "' 2>&1";
+  SignalledRun run;
   const pid_t pid = ::fork();
   if (pid == 0) {
     ::execl("/bin/sh", "sh", "-c", command.c_str(), static_cast<char*>(nullptr));
     ::_exit(127);
   }
   EXPECT_GT(pid, 0) << "fork failed";
-  if (pid <= 0) return false;
-  const auto deadline =
-      std::chrono::steady_clock::now() + std::chrono::duration<double>(max_seconds);
-  int status = 0;
-  bool running = true;
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (::waitpid(pid, &status, WNOHANG) == pid) {
-      running = false;
-      break;
+  if (pid <= 0) return run;
+  const auto wait_until = [&](std::chrono::steady_clock::time_point deadline,
+                              const std::function<bool()>& until, int* status) {
+    while (std::chrono::steady_clock::now() < deadline) {
+      if (::waitpid(pid, status, WNOHANG) == pid) return true;  // ended
+      if (until && until()) return false;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
-    if (ready()) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    return false;
+  };
+  const auto seconds = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(max_seconds));
+  int status = 0;
+  run.running = !wait_until(std::chrono::steady_clock::now() + seconds, ready, &status);
+  if (run.running) {
+    ::kill(pid, signal);
+    if (!wait_until(std::chrono::steady_clock::now() + seconds, nullptr, &status)) {
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, &status, 0);
+    }
   }
-  if (running) {
-    ::kill(pid, SIGKILL);
-    ::waitpid(pid, &status, 0);
-  }
-  return running && WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL;
+  run.exited = WIFEXITED(status);
+  run.exit_code = run.exited ? WEXITSTATUS(status) : -1;
+  run.died_of = WIFSIGNALED(status) ? WTERMSIG(status) : 0;
+  return run;
+}
+
+bool KillProcamWhen(const std::string& arguments, const std::function<bool()>& ready,
+                    double max_seconds, const std::filesystem::path& log) {
+  const SignalledRun run = SignalProcamWhen(arguments, ready, SIGKILL, max_seconds, log);
+  return run.running && run.died_of == SIGKILL;
 }
 
 std::filesystem::path SourceDir() {

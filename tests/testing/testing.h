@@ -52,6 +52,20 @@ void ExpectOneErrorLine(const CommandRun& run, const std::string& expected,
 bool KillProcamWhen(const std::string& arguments, const std::function<bool()>& ready,
                     double max_seconds, const std::filesystem::path& log);
 
+// How a process sent a signal ended.
+struct SignalledRun {
+  bool running = false;  // procam was still running when the signal was sent
+  bool exited = false;   // it then exited by itself (exit_code), rather than died of a signal
+  int exit_code = -1;
+  int died_of = 0;       // the signal that ended it, when !exited (SIGKILL: it did not end in time)
+};
+
+// Starts procam with `arguments` (its output to `log`), polls `ready` every 10 ms for at most
+// `max_seconds`, then sends `signal` (SIGTERM, SIGINT) and waits at most `max_seconds` for it to
+// end, then SIGKILLs it.
+SignalledRun SignalProcamWhen(const std::string& arguments, const std::function<bool()>& ready,
+                              int signal, double max_seconds, const std::filesystem::path& log);
+
 // Max-norm distance of two matrices, for EXPECT_LT(MaxAbsDifference(a, b), tol).
 template <typename A, typename B>
 double MaxAbsDifference(const Eigen::MatrixBase<A>& a, const Eigen::MatrixBase<B>& b) {

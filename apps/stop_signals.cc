@@ -1,0 +1,22 @@
+#include "apps/stop_signals.h"
+
+#include <csignal>
+
+namespace procam {
+namespace {
+
+std::atomic<bool> g_stop{false};
+
+// Only a lock-free atomic store: what a signal handler may do.
+void OnStopSignal(int) { g_stop.store(true); }
+
+}  // namespace
+
+std::atomic<bool>& StopOnSignals() {
+  static_assert(std::atomic<bool>::is_always_lock_free);
+  std::signal(SIGINT, OnStopSignal);
+  std::signal(SIGTERM, OnStopSignal);
+  return g_stop;
+}
+
+}  // namespace procam
