@@ -3,18 +3,18 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
-#include <optional>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
 #include "apps/stop_signals.h"
+#include "base/io.h"
 #include "base/output_directory.h"
 #include "calibration/capture_stage.h"
 #include "capture/camera.h"
 #include "capture/devices.h"
 #include "capture/simulated_camera.h"
-#include "base/io.h"
 #include "procam/config.h"
 
 namespace procam {

@@ -3,6 +3,8 @@
 // (MonitorWatcher) and is photographed by its camera, served as a GigE Vision camera
 // (GigeEmulator), so that procam — calibrate all, capture, verify, the demo — drives a real
 // display server and a real camera protocol with no hardware.
+#include <fmt/format.h>
+
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -12,8 +14,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <fmt/format.h>
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
@@ -41,7 +41,6 @@ struct EmulateArguments {
   double seconds = 0.0;  // 0: until interrupted
   double watch_hz = 200.0;
 };
-
 
 #if PROCAM_WITH_ARAVIS
 // The emulated camera's pixel format: the entry's where the GigE camera offers it, else RGB8

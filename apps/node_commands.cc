@@ -13,8 +13,8 @@
 #include "apps/command_line.h"
 #include "apps/commands.h"
 #include "apps/stop_signals.h"
-#include "geometry/stage.h"
 #include "base/output_directory.h"
+#include "geometry/stage.h"
 #include "nodes/node.h"
 #include "nodes/outputs.h"
 #include "nodes/play.h"
@@ -92,13 +92,15 @@ void RunPlayCommand(const PlayArguments& args) {
   options.stop = &StopOnSignals();
   const PlaySummary summary = RunPlay(options);
   if (summary.stopped && summary.frames.empty()) {
-    std::cout << fmt::format("play: stopped by a signal before the first frame; nothing written "
-                             "to {}\n",
-                             args.out);
+    std::cout << fmt::format(
+        "play: stopped by a signal before the first frame; nothing written "
+        "to {}\n",
+        args.out);
   } else {
-    std::cout << fmt::format("play: {}{} frames shown, {} dropped in {:.1f} s; wrote {}/result.json\n",
-                             summary.stopped ? "stopped by a signal: " : "", summary.frames.size(),
-                             summary.dropped, summary.seconds, args.out);
+    std::cout << fmt::format(
+        "play: {}{} frames shown, {} dropped in {:.1f} s; wrote {}/result.json\n",
+        summary.stopped ? "stopped by a signal: " : "", summary.frames.size(), summary.dropped,
+        summary.seconds, args.out);
   }
 }
 

@@ -371,21 +371,19 @@ nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const Camera
   nlohmann::json per_projector = nlohmann::json::array();
   for (size_t k = 0; k < calibration.projectors.size(); ++k) {
     const RoomProjectorSummary& s = summary.projectors[k];
-    per_projector.push_back({{"name", calibration.projectors[k].name},
-                             {"centre_m", JsonTriple(calibration.projectors[k]
-                                                         .proj_from_room.inverse()
-                                                         .translation())},
-                             {"imagersize",
-                              {calibration.projectors[k].width, calibration.projectors[k].height}},
-                             {"correspondences", s.correspondences},
-                             {"used", s.used},
-                             {"on_model", s.points},
-                             {"inliers", s.points - s.outliers},
-                             {"outliers", s.outliers},
-                             {"seed_rms_px", s.seed_rms},
-                             {"rms_px_per_coordinate", s.rms},
-                             {"max_norm_px", s.max_norm},
-                             {"projection_uncertainty", UncertaintyJson(s)}});
+    per_projector.push_back(
+        {{"name", calibration.projectors[k].name},
+         {"centre_m", JsonTriple(calibration.projectors[k].proj_from_room.inverse().translation())},
+         {"imagersize", {calibration.projectors[k].width, calibration.projectors[k].height}},
+         {"correspondences", s.correspondences},
+         {"used", s.used},
+         {"on_model", s.points},
+         {"inliers", s.points - s.outliers},
+         {"outliers", s.outliers},
+         {"seed_rms_px", s.seed_rms},
+         {"rms_px_per_coordinate", s.rms},
+         {"max_norm_px", s.max_norm},
+         {"projection_uncertainty", UncertaintyJson(s)}});
   }
   registration_json["projectors"] = per_projector;
   // The room it was registered in, as ReadRigDirectory's and the calibrated room's checks read it

@@ -5,9 +5,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <fstream>
 #include <numbers>
 #include <optional>
-#include <fstream>
 #include <sstream>
 
 #include "base/io.h"
@@ -326,13 +326,14 @@ void CheckRegisteredProjectors(const RigDirectory& rig, const std::string& file)
         continue;
       const std::string key = fmt::format("registration.projectors[{}]", j);
       if (const std::optional<std::array<int, 2>> size = RecordedSize(entry, "imagersize");
-          size && ((*size)[0] != projector.geometry.width() ||
-                   (*size)[1] != projector.geometry.height())) {
-        throw IoError(fmt::format(
-            "{}: projectors[{}].model: {} is {}x{}, projector '{}' was registered {}x{} ({}.imagersize): "
-            "the model of another device",
-            file, k, projector.model_path.string(), projector.geometry.width(),
-            projector.geometry.height(), projector.name, (*size)[0], (*size)[1], key));
+          size &&
+          ((*size)[0] != projector.geometry.width() || (*size)[1] != projector.geometry.height())) {
+        throw IoError(
+            fmt::format("{}: projectors[{}].model: {} is {}x{}, projector '{}' was registered "
+                        "{}x{} ({}.imagersize): "
+                        "the model of another device",
+                        file, k, projector.model_path.string(), projector.geometry.width(),
+                        projector.geometry.height(), projector.name, (*size)[0], (*size)[1], key));
       }
       if (const std::optional<Vec3> centre = RecordedTriple(entry, "centre_m")) {
         const Vec3 found = projector.geometry.CentreInWorld();
@@ -384,7 +385,8 @@ void CheckRigConsistency(const RigDirectory& rig) {
   }
   const nlohmann::json& registration = rig.file.registration;
   CheckRegisteredProjectors(rig, file);
-  if (const std::optional<std::array<int, 2>> size = RecordedSize(registration, "camera_imagersize");
+  if (const std::optional<std::array<int, 2>> size =
+          RecordedSize(registration, "camera_imagersize");
       size && ((*size)[0] != camera.width() || (*size)[1] != camera.height())) {
     throw IoError(fmt::format(
         "{}: camera.model: {} is {}x{}, the camera registered (registration.camera_imagersize) "
@@ -475,8 +477,7 @@ void CheckRegisteredRoom(const RigDirectory& rig, const Scene& scene) {
       if (!entry.is_object() || !entry.contains("name") || entry["name"] != surface.name) continue;
       const SurfaceShape shape = ShapeOf(surface);
       const std::string key = fmt::format("registration.room.surfaces[{}]", j);
-      const std::string intro =
-          fmt::format("{}: surfaces[{}] '{}': ", where, s, surface.name);
+      const std::string intro = fmt::format("{}: surfaces[{}] '{}': ", where, s, surface.name);
       const std::string outro = fmt::format(
           " ({} {}): not the room the rig was calibrated in (a wall moved or flipped since? "
           "calibrate projectors again, or give that room)",
@@ -484,9 +485,10 @@ void CheckRegisteredRoom(const RigDirectory& rig, const Scene& scene) {
       if (const std::optional<Vec3> centroid = RecordedTriple(entry, "centroid_m")) {
         const double moved = (shape.centroid - *centroid).norm();
         if (moved > kCentroidToleranceM) {
-          throw IoError(intro + fmt::format("its centre is {:.3f} m from where the rig was "
-                                            "registered",
-                                            moved) +
+          throw IoError(intro +
+                        fmt::format("its centre is {:.3f} m from where the rig was "
+                                    "registered",
+                                    moved) +
                         outro);
         }
       }
@@ -502,8 +504,8 @@ void CheckRegisteredRoom(const RigDirectory& rig, const Scene& scene) {
         const double cosine = std::clamp(shape.normal->dot(normal->normalized()), -1.0, 1.0);
         const double degrees = std::acos(cosine) * 180.0 / std::numbers::pi;
         if (degrees > kNormalToleranceDeg) {
-          throw IoError(intro + fmt::format("its lit side faces {:.0f}° from the registered one",
-                                            degrees) +
+          throw IoError(intro +
+                        fmt::format("its lit side faces {:.0f}° from the registered one", degrees) +
                         outro);
         }
       }

@@ -145,8 +145,8 @@ void Controller::Handle(Node& node, const Message& message) {
                                     ? message.body["error"].get<std::string>()
                                     : "failed";
       // A node that serves another controller: Connect ends with its line.
-      const bool busy = message.body.is_object() && message.body.contains("busy") &&
-                        message.body["busy"] == true;
+      const bool busy =
+          message.body.is_object() && message.body.contains("busy") && message.body["busy"] == true;
       if (busy && node.state != Node::State::kLive) {
         node.error = error;
         break;

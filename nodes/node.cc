@@ -135,14 +135,14 @@ class Node {
   bool Admit(const Envelope& envelope) {
     if (envelope.address.empty()) return true;  // in-process
     if (!controller_.empty() && envelope.peer != controller_ && ControllerStillThere()) {
-      const std::string why =
-          fmt::format("serves the controller at {}, one controller at a time; the controller at "
-                      "{} is refused",
-                      controller_address_, envelope.address);
-      socket_->Refuse(envelope.address, fmt::format("node {}: refused a second controller at {}: "
-                                                    "it serves the controller at {}",
-                                                    options_.name, envelope.address,
-                                                    controller_address_));
+      const std::string why = fmt::format(
+          "serves the controller at {}, one controller at a time; the controller at "
+          "{} is refused",
+          controller_address_, envelope.address);
+      socket_->Refuse(envelope.address,
+                      fmt::format("node {}: refused a second controller at {}: "
+                                  "it serves the controller at {}",
+                                  options_.name, envelope.address, controller_address_));
       Message refusal;
       refusal.type = MessageType::kFailed;
       refusal.sequence = envelope.message.sequence;

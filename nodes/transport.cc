@@ -1,7 +1,5 @@
 #include "nodes/transport.h"
 
-#include <cerrno>
-
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
@@ -9,9 +7,10 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
-#include <cstring>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <map>
 #include <mutex>
@@ -187,8 +186,7 @@ void RefusalLog::Flush() {
   const double seconds = std::chrono::duration<double>(now - last_line_).count();
   if (held_ == 0 || seconds < interval_s_) return;
   std::string from;
-  for (size_t k = 0; k < addresses_.size(); ++k)
-    from += (k == 0 ? "" : ", ") + addresses_[k];
+  for (size_t k = 0; k < addresses_.size(); ++k) from += (k == 0 ? "" : ", ") + addresses_[k];
   if (other_addresses_ > 0) from += " and " + std::to_string(other_addresses_) + " other addresses";
   if (unread_addresses_ > 0) {
     from += (from.empty() ? "" : "; ") + std::to_string(unread_addresses_) +
@@ -345,8 +343,8 @@ class NodeSocket::ZapHandler {
           const std::string from =
               address.empty() ? "an address (its connection closed before it could be read)"
                               : address;
-          refusals_.Refuse(address, "node: refused " + failed_.who + " at " + from + ": " +
-                                        failed_.why);
+          refusals_.Refuse(address,
+                           "node: refused " + failed_.who + " at " + from + ": " + failed_.why);
           failed_ = {};
         }
         break;

@@ -20,8 +20,9 @@
 //
 // Every socket has ZMQ_MAXMSGSIZE (a longer message drops the connection inside libzmq, before
 // procam sees a byte): kMaxMessageBytes, the largest message of the protocol, plus CURVE's
-// overhead on an encrypting socket (libzmq compares the encrypted frame), linger 0, and ZeroMQ's own heartbeats (a peer silent for a second is
-// disconnected), so that no loop waits on a dead peer.
+// overhead on an encrypting socket (libzmq compares the encrypted frame), linger 0, and ZeroMQ's
+// own heartbeats (a peer silent for a second is disconnected), so that no loop waits on a dead
+// peer.
 
 #include <chrono>
 #include <filesystem>

@@ -5,11 +5,11 @@
 // a command run again after a kill resumes or redoes and ends as an uninterrupted run would
 // (docs/faults.md, "Faults").
 #include <gtest/gtest.h>
-#include <Eigen/Core>
-#include <Eigen/Geometry>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -17,10 +17,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
-#include <map>
 #include <set>
 #include <string>
 
@@ -546,8 +546,10 @@ TEST_F(Faults, InconsistentRigsAreRefusedInOneLine) {
        "projectors[1].model: the same file as projectors[0].model"},
       {[](nlohmann::json& rig) { rig["projectors"][0]["model"] = rig["camera"]["model"]; },
        "is the camera's model"},
-      {[](nlohmann::json& rig) { rig["registration"]["camera_centre_m"][0] =
-                                     rig["registration"]["camera_centre_m"][0].get<double>() + 0.5; },
+      {[](nlohmann::json& rig) {
+         rig["registration"]["camera_centre_m"][0] =
+             rig["registration"]["camera_centre_m"][0].get<double>() + 0.5;
+       },
        "registration.camera_centre_m"},
       // Two projectors' models swapped: each file is its own, and not the camera's.
       {[](nlohmann::json& rig) {
@@ -583,8 +585,8 @@ TEST_F(Faults, ARoomChangedSinceTheCalibrationIsRefusedInOneLine) {
   const fs::path scene = dir / "room" / "tiny_box.json";
   const nlohmann::json room = nlohmann::json::parse(Bytes(scene));
   const auto compensate = [&] {
-    return "compensate " + scene.string() + " --patches 150 --rig " + Rig().string() +
-           " --out " + (dir / "solution").string();
+    return "compensate " + scene.string() + " --patches 150 --rig " + Rig().string() + " --out " +
+           (dir / "solution").string();
   };
   const CommandRun same = testing::RunProcam(compensate());
   ASSERT_EQ(same.exit_code, 0) << same.output;

@@ -5,12 +5,12 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <mutex>
 #include <opencv2/videoio.hpp>
 #include <stdexcept>
 #include <thread>
-#include <chrono>
 
 #include "base/io.h"
 #include "datasets_synthetic/scene_files.h"
@@ -232,11 +232,13 @@ TEST(Node, ASecondControllerIsRefusedWhileTheFirstIsServed) {
     } catch (const IoError& e) {
       const std::string what = e.what();
       EXPECT_NE(what.find("serves the controller at 127.0.0.1:"), std::string::npos) << what;
-      EXPECT_NE(what.find("the controller at 127.0.0.1:"), what.rfind("the controller at 127.0.0.1:"))
+      EXPECT_NE(what.find("the controller at 127.0.0.1:"),
+                what.rfind("the controller at 127.0.0.1:"))
           << what;  // both named
       EXPECT_EQ(what.find('\n'), std::string::npos) << what;
     }
-    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 10.0);
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(),
+              10.0);
     const std::string refused = node_log();
     size_t lines = 0;
     for (size_t at = refused.find("refused a second controller at 127.0.0.1:");

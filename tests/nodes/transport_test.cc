@@ -3,18 +3,18 @@
 // stopping the node, and the keys are made and read with errors naming the file.
 #include "nodes/transport.h"
 
-#include <gtest/gtest.h>
 #include <arpa/inet.h>
+#include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <chrono>
-#include <mutex>
-#include <thread>
 #include <functional>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "base/io.h"
@@ -256,8 +256,7 @@ TEST(NodeTransport, RefusalsNameThePeerAndRepeatsAreCounted) {
   testing::TempDir dir;
   const RigKeys keys = MakeRigKeys(dir.path(), false);
   TestNode node(keys);
-  const std::string own_port =
-      node.socket.endpoint().substr(node.socket.endpoint().rfind(':') + 1);
+  const std::string own_port = node.socket.endpoint().substr(node.socket.endpoint().rfind(':') + 1);
   const int first = ConnectWithoutCurve(node.socket.endpoint());
   ASSERT_TRUE(WaitFor(5, [&] { return node.socket.refused() >= 1; })) << node.Log();
   EXPECT_NE(node.Log().find("node: refused a peer at 127.0.0.1:" + std::to_string(first) +
@@ -269,9 +268,9 @@ TEST(NodeTransport, RefusalsNameThePeerAndRepeatsAreCounted) {
   for (int k = 0; k < kRetries; ++k) ConnectWithoutCurve(node.socket.endpoint());
   ASSERT_TRUE(WaitFor(5, [&] { return node.socket.refused() >= 1 + kRetries; })) << node.Log();
   // Every refusal after the first is counted, within an interval and a little.
-  ASSERT_TRUE(WaitFor(kRefusalLogIntervalS + 3,
-                      [&] { return Counted(node.Log()) == node.socket.refused() - 1; }))
-      << node.Log();
+  ASSERT_TRUE(WaitFor(kRefusalLogIntervalS + 3, [&] {
+    return Counted(node.Log()) == node.socket.refused() - 1;
+  })) << node.Log();
   EXPECT_EQ(node.socket.refused(), 1 + kRetries) << node.Log();
   const std::vector<std::string> lines = Lines(node.Log());
   EXPECT_GE(lines.size(), 2u) << node.Log();

@@ -57,7 +57,7 @@ struct SignalledRun {
   bool running = false;  // procam was still running when the signal was sent
   bool exited = false;   // it then exited by itself (exit_code), rather than died of a signal
   int exit_code = -1;
-  int died_of = 0;       // the signal that ended it, when !exited (SIGKILL: it did not end in time)
+  int died_of = 0;  // the signal that ended it, when !exited (SIGKILL: it did not end in time)
 };
 
 // Starts procam with `arguments` (its output to `log`), polls `ready` every 10 ms for at most
