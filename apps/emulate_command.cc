@@ -153,9 +153,10 @@ void AddEmulateCommand(CLI::App& app) {
       ->capture_default_str();
   emulate->add_option("--seconds", args->seconds, "Stop after this long (default: at Ctrl+C or SIGTERM)")
       ->check(FiniteRange(0.0, 1e7));
-  emulate->add_option("--board-pose", args->board_pose,
-                      "Photograph pose K of the scene's chessboard (its \"chessboard\" key) "
-                      "instead of the room: the board alone, lit by the monitors")
+  emulate
+      ->add_option("--board-pose", args->board_pose,
+                   "Photograph pose K of the scene's chessboard (its \"chessboard\" key) "
+                   "instead of the room: the board alone, lit by the monitors")
       ->check(CLI::NonNegativeNumber);
   emulate->add_option("--watch-hz", args->watch_hz, "Monitor captures per second at most")
       ->check(FiniteRange(1.0, 1000.0))

@@ -82,12 +82,13 @@ RigPlan Plan(const CalibrateAllOptions& args) {
   plan.scan = args.scan || (plan.scene.empty() && !simulated);
   for (const auto& [name, file] : args.held_lenses) {
     if (plan.scan)
-      throw std::invalid_argument("--hold-lens: only with a room model (the scan solves every "
-                                  "projector's lens)");
+      throw std::invalid_argument(
+          "--hold-lens: only with a room model (the scan solves every "
+          "projector's lens)");
     if (std::find(plan.names.begin(), plan.names.end(), name) == plan.names.end())
       throw std::invalid_argument("--hold-lens " + name + "=" + file.string() +
-                                  ": no projector is named '" + name + "' (projectors: " +
-                                  Join(plan.names, ", ") + ")");
+                                  ": no projector is named '" + name +
+                                  "' (projectors: " + Join(plan.names, ", ") + ")");
     if (!std::filesystem::is_regular_file(file))
       throw IoError(file.string() + ": file not found (--hold-lens " + name + ")");
   }

@@ -1,8 +1,9 @@
 #pragma once
 // Small pieces the calibration's Ceres problems share (internal to calibration/): the projector
 // lens model (fx, fy, cx, cy, radial k1, k2: OpenCV4 with
-// p1 = p2 = 0, or given p1, p2 for a held lens) applied to a point given in another frame, and the camera's OpenCV4 distortion
-// undone by Newton steps (differentiable, for a camera lens the solve refines).
+// p1 = p2 = 0, or given p1, p2 for a held lens) applied to a point given in another frame, and the
+// camera's OpenCV4 distortion undone by Newton steps (differentiable, for a camera lens the solve
+// refines).
 
 #include <Eigen/Geometry>
 #include <ceres/rotation.h>
@@ -11,7 +12,6 @@
 #include "base/vector.h"
 
 namespace procam {
-
 
 // The point `p` (3 values in the frame the pose starts from) moved by the pose (angle-axis
 // `rotation`, `translation`) into the projector frame and projected through `intrinsics`

@@ -223,7 +223,8 @@ bool ChessboardLensPrior(const std::filesystem::path& rig_dir, const CameraModel
 
 }  // namespace
 
-std::map<std::string, std::filesystem::path> ParseHeldLenses(const std::vector<std::string>& entries) {
+std::map<std::string, std::filesystem::path> ParseHeldLenses(
+    const std::vector<std::string>& entries) {
   std::map<std::string, std::filesystem::path> lenses;
   for (const std::string& entry : entries) {
     const size_t equals = entry.find('=');
@@ -447,18 +448,19 @@ nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const Camera
   for (size_t k = 0; k < calibration.projectors.size(); ++k) {
     const RoomProjectorSummary& s = summary.projectors[k];
     const RoomProjector& p = calibration.projectors[k];
-    per_projector.push_back({{"name", p.name},
-                             {"lens", p.lens_held ? "held from " + args.held_lenses.at(p.name).string()
-                                                  : std::string("solved")},
-                             {"correspondences", s.correspondences},
-                             {"used", s.used},
-                             {"on_model", s.points},
-                             {"inliers", s.points - s.outliers},
-                             {"outliers", s.outliers},
-                             {"seed_rms_px", s.seed_rms},
-                             {"rms_px_per_coordinate", s.rms},
-                             {"max_norm_px", s.max_norm},
-                             {"projection_uncertainty", UncertaintyJson(s)}});
+    per_projector.push_back(
+        {{"name", p.name},
+         {"lens", p.lens_held ? "held from " + args.held_lenses.at(p.name).string()
+                              : std::string("solved")},
+         {"correspondences", s.correspondences},
+         {"used", s.used},
+         {"on_model", s.points},
+         {"inliers", s.points - s.outliers},
+         {"outliers", s.outliers},
+         {"seed_rms_px", s.seed_rms},
+         {"rms_px_per_coordinate", s.rms},
+         {"max_norm_px", s.max_norm},
+         {"projection_uncertainty", UncertaintyJson(s)}});
   }
   registration_json["projectors"] = per_projector;
   nlohmann::json per_surface = nlohmann::json::array();

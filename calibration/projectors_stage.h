@@ -86,7 +86,8 @@ Eigen::Isometry3d RoomFromCameraGuess(const std::string& guess, const std::strin
 // The held lenses of `--hold-lens NAME=FILE` entries (ProjectorsStageOptions::held_lenses). Throws
 // std::invalid_argument naming an entry without '=', with an empty name or file, or a name given
 // twice.
-std::map<std::string, std::filesystem::path> ParseHeldLenses(const std::vector<std::string>& entries);
+std::map<std::string, std::filesystem::path> ParseHeldLenses(
+    const std::vector<std::string>& entries);
 
 // Throws IoError naming the session, camera.cameramodel or rig.json and the key;
 // std::invalid_argument for bad options or names; std::runtime_error when the solve fails.

@@ -258,15 +258,18 @@ void ReprojectThroughRoom(const T* ray, const T* camera_rotation, const T* camer
   const T s = -origin_height / along_normal;
   T p_in_room[3];
   for (int i = 0; i < 3; ++i) p_in_room[i] = camera_translation[i] + s * direction[i];
-  ProjectorPixelResidual(intrinsics, projector_rotation, projector_translation, p_in_room,
-                         observed, residual, tangential);
+  ProjectorPixelResidual(intrinsics, projector_rotation, projector_translation, p_in_room, observed,
+                         residual, tangential);
 }
 
 // The camera's lens fixed: the ray is a constant.
 struct RoomReprojection {
   RoomReprojection(const Vec3& ray_in_cam, const Vec3& normal, double offset, const Vec2& observed,
                    const double* tangential)
-      : ray_in_cam(ray_in_cam), normal(normal), offset(offset), observed(observed),
+      : ray_in_cam(ray_in_cam),
+        normal(normal),
+        offset(offset),
+        observed(observed),
         tangential{tangential[0], tangential[1]} {}
   template <typename T>
   bool operator()(const T* camera_rotation, const T* camera_translation, const T* intrinsics,
@@ -294,8 +297,13 @@ struct RoomReprojectionFreeCamera {
   RoomReprojectionFreeCamera(const Vec2& camera_pixel, const Vec3& ray0, const double* distortion,
                              bool distorted, double aspect, const Vec3& normal, double offset,
                              const Vec2& observed, const double* tangential)
-      : camera_pixel(camera_pixel), ray0(ray0.x(), ray0.y()), distorted(distorted),
-        aspect(aspect), normal(normal), offset(offset), observed(observed),
+      : camera_pixel(camera_pixel),
+        ray0(ray0.x(), ray0.y()),
+        distorted(distorted),
+        aspect(aspect),
+        normal(normal),
+        offset(offset),
+        observed(observed),
         tangential{tangential[0], tangential[1]} {
     for (int i = 0; i < 4; ++i) this->distortion[i] = distortion[i];
   }
@@ -332,7 +340,7 @@ struct RoomReprojectionFreeCamera {
 struct ProjectorState {
   double intrinsics[6] = {0, 0, 0, 0, 0, 0};  // fx, fy, cx, cy, k1, k2
   double tangential[2] = {0, 0};  // p1, p2: constants, non-zero for a held OpenCV4 lens only
-  bool held = false;  // the lens held (constant): the pose alone is solved
+  bool held = false;              // the lens held (constant): the pose alone is solved
   PoseBlock proj_from_room;
 };
 
@@ -397,17 +405,18 @@ void CheckRoomProblem(const RoomCalibrationOptions& options, const RoomCalibrati
   }
   if (!problem.held_projector_lenses.empty() &&
       problem.held_projector_lenses.size() != problem.projectors.size())
-    throw std::invalid_argument("CalibrateRoom: " +
-                                std::to_string(problem.held_projector_lenses.size()) +
-                                " held projector lenses for " +
-                                std::to_string(problem.projectors.size()) + " projectors");
+    throw std::invalid_argument(
+        "CalibrateRoom: " + std::to_string(problem.held_projector_lenses.size()) +
+        " held projector lenses for " + std::to_string(problem.projectors.size()) + " projectors");
   for (size_t k = 0; k < problem.held_projector_lenses.size(); ++k) {
     const HeldProjectorLens& lens = problem.held_projector_lenses[k];
     if (lens.lens_model.empty()) continue;
     const std::string name = "CalibrateRoom: projector '" + problem.projectors[k].name + "': ";
     if (!UnprojectCameraPixel(lens.lens_model, lens.intrinsics, Vec2::Zero(), &probe))
-      throw std::invalid_argument(name + "a held lens must be LENSMODEL_PINHOLE (4 intrinsics) "
-                                  "or LENSMODEL_OPENCV4 (8), got " + lens.lens_model + " with " +
+      throw std::invalid_argument(name +
+                                  "a held lens must be LENSMODEL_PINHOLE (4 intrinsics) "
+                                  "or LENSMODEL_OPENCV4 (8), got " +
+                                  lens.lens_model + " with " +
                                   std::to_string(lens.intrinsics.size()));
     for (const double value : lens.intrinsics)
       if (!std::isfinite(value))

@@ -175,7 +175,7 @@ struct RoomProjector {
   std::vector<double> intrinsics;  // mrcal order (a held lens's exactly as given)
   int width = 0, height = 0;
   Eigen::Isometry3d proj_from_room = Eigen::Isometry3d::Identity();
-  bool lens_held = false;          // the problem's held_projector_lenses held it
+  bool lens_held = false;  // the problem's held_projector_lenses held it
 };
 
 struct RoomCalibration {

@@ -177,11 +177,13 @@ BoardInRoom::BoardInRoom(const ProjectorGeometry& camera,
                          const std::vector<ProjectorGeometry>& projectors,
                          const ChessboardSpec& board, const Eigen::Isometry3d& cam_from_board,
                          double dark_reflectance, double light_reflectance, int supersample)
-    : width_(camera.width()), height_(camera.height()),
+    : width_(camera.width()),
+      height_(camera.height()),
       projector_count_(static_cast<int>(projectors.size())) {
   std::string why;
   if (!board.Check(&why)) throw std::invalid_argument(why);
-  if (!(dark_reflectance >= 0.0 && light_reflectance <= 1.0 && dark_reflectance <= light_reflectance))
+  if (!(dark_reflectance >= 0.0 && light_reflectance <= 1.0 &&
+        dark_reflectance <= light_reflectance))
     throw std::invalid_argument("board: reflectances must be 0 <= dark <= light <= 1");
   if (supersample < 1 || supersample > 8)
     throw std::invalid_argument("board: supersample must be in [1, 8]");

@@ -87,10 +87,10 @@ class BoardInRoom {
  private:
   int width_ = 0, height_ = 0, projector_count_ = 0;
   float per_ray_ = 1.0f;
-  std::vector<int> pixel_;           // per ray on the board: its camera pixel
-  std::vector<float> reflectance_;   // per ray
-  std::vector<int> lit_;             // per ray × projector: the projector pixel, −1 none
-  std::vector<float> gain_;          // per ray × projector
+  std::vector<int> pixel_;          // per ray on the board: its camera pixel
+  std::vector<float> reflectance_;  // per ray
+  std::vector<int> lit_;            // per ray × projector: the projector pixel, −1 none
+  std::vector<float> gain_;         // per ray × projector
 };
 
 }  // namespace procam

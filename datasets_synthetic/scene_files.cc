@@ -1,8 +1,9 @@
 #include "datasets_synthetic/scene_files.h"
 
 #include <fmt/format.h>
-#include <numbers>
+
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <utility>
@@ -190,8 +191,9 @@ std::optional<SceneChessboard> ReadSceneChessboard(const std::filesystem::path& 
     const std::vector<double> values = fields.Numbers("reflectance", fields.At("reflectance"));
     if (values.size() != 2 || !(values[0] >= 0.0) || !(values[1] <= 1.0) ||
         !(values[0] < values[1]))
-      throw fields.Error("reflectance",
-                         "must be [dark, light], 0 <= dark < light <= 1 (the squares' reflectance)");
+      throw fields.Error(
+          "reflectance",
+          "must be [dark, light], 0 <= dark < light <= 1 (the squares' reflectance)");
     out.dark_reflectance = values[0];
     out.light_reflectance = values[1];
   }
@@ -205,7 +207,8 @@ std::optional<SceneChessboard> ReadSceneChessboard(const std::filesystem::path& 
     entry.rotation_deg = pose.Triple("rotation_deg", pose.At("rotation_deg"));
     entry.translation_m = pose.Triple("translation_m", pose.At("translation_m"));
     if (!(entry.translation_m.z() > 0.0))
-      throw pose.Error("translation_m", "the board's centre must be in front of the camera (z > 0)");
+      throw pose.Error("translation_m",
+                       "the board's centre must be in front of the camera (z > 0)");
     out.poses.push_back(entry);
   }
   return out;

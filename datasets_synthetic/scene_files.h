@@ -27,9 +27,9 @@ namespace procam {
 // camera squarely with its rows along the image's rows (board frame as in camera_calibration.h:
 // origin at the first inner corner, x along a row, z into the board).
 struct SceneChessboard {
-  ChessboardSpec board;            // inner corners and square size, metres
-  double dark_reflectance = 0.1;   // the dark squares, [0, 1]
-  double light_reflectance = 0.85; // the light squares and a one-square margin, [0, 1]
+  ChessboardSpec board;             // inner corners and square size, metres
+  double dark_reflectance = 0.1;    // the dark squares, [0, 1]
+  double light_reflectance = 0.85;  // the light squares and a one-square margin, [0, 1]
   struct Pose {
     Vec3 rotation_deg = Vec3::Zero();
     Vec3 translation_m = Vec3(0.0, 0.0, 1.0);

@@ -1,27 +1,26 @@
 #include "datasets_synthetic/synthetic_camera.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <map>
 #include <mutex>
-#include <tuple>
+#include <opencv2/imgproc.hpp>
 #include <stdexcept>
+#include <tuple>
 #include <utility>
 
-#include <cmath>
-
-#include <fmt/format.h>
-#include <opencv2/imgproc.hpp>
-
 #include "base/image_io.h"
+#include "base/io.h"
+#include "capture/scene_cameras.h"
+#include "capture/simulated_camera.h"
 #include "datasets_synthetic/chessboard_views.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/scene_files.h"
-#include "base/io.h"
-#include "geometry/stage.h"
-#include "capture/scene_cameras.h"
-#include "capture/simulated_camera.h"
 #include "geometry/scene.h"
+#include "geometry/stage.h"
 #include "projection/projector.h"
 
 namespace procam {
@@ -92,7 +91,8 @@ SyntheticUri ParseSyntheticUri(const CameraUri& uri) {
     parsed.camera = uri.GetString("camera", "");
     parsed.board_pose = uri.GetInt("board_pose", -1);
     if (parsed.board_pose < -1)
-      throw IoError("camera '" + uri.text() + "': board_pose must be a pose of the scene file's "
+      throw IoError("camera '" + uri.text() +
+                    "': board_pose must be a pose of the scene file's "
                     "chessboard, from 0");
   } else if (!IsSceneName(uri.path())) {
     throw IoError("camera '" + uri.text() + "': unknown synthetic scene '" + uri.path() +
@@ -325,7 +325,8 @@ void PlaceSceneChessboard(SyntheticWorld* world, const std::filesystem::path& sc
   const std::string file = scene_file.string();
   const std::optional<SceneChessboard> chessboard = ReadSceneChessboard(scene_file);
   if (!chessboard)
-    throw IoError(file + ": chessboard: missing (board_pose needs the scene file's chessboard, "
+    throw IoError(file +
+                  ": chessboard: missing (board_pose needs the scene file's chessboard, "
                   "docs/scene_format.md)");
   if (pose < 0 || pose >= static_cast<int>(chessboard->poses.size()))
     throw IoError(file + ": chessboard.poses: no pose " + std::to_string(pose) + " (it has " +
@@ -414,7 +415,8 @@ SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world, double 
       for (size_t k = 0; k < shown.size(); ++k)
         images.push_back(DefocusProjectorCodes(CodesFromPattern(shown[k], rig.projectors()[k]),
                                                rig.projectors()[k], projector_blur_px));
-      const cv::Mat radiance = world->board ? RenderBoard(*world, images) : rig.RenderRadiance(images);
+      const cv::Mat radiance =
+          world->board ? RenderBoard(*world, images) : rig.RenderRadiance(images);
       cache->view = ViewFromRadiance(radiance, world->radiance_scale);
       cache->shown = std::move(shown);
       ++world->renders;

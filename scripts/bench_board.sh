@@ -5,7 +5,7 @@
 # `procam capture` through the synthetic camera, then `procam calibrate board` timed from start to
 # the files written. Prints the wall time of each step.
 #
-#   scripts/bench_board.sh PROCAM WORK_DIR [POSES]      (POSES: 3..8, default 5)
+#   scripts/bench_board.sh PROCAM WORK_DIR [POSES]      (POSES: 3..7, default 5)
 set -euo pipefail
 procam=$(realpath "$1")
 work=$2
@@ -54,8 +54,10 @@ open("projector.cameramodel", "w").write(model(
 axis = apply(cam_from_projector, [(511.5 - 509.6) / 1500.0, (383.5 - 700.4) / 1503.0, 1.0])
 along = (1.0 - centre[2]) / axis[2]
 middle = [centre[i] + along * axis[i] for i in range(3)]
+# The third placement (0.12, -0.06, 0.05, 35, -35, -10) is left out: OpenCV does not find the
+# board in that white photo, and its failed search alone takes about 40 s at 1280x800.
 placements = [(0.00, 0.00, 0.00, 30, 0, 0), (-0.12, -0.06, -0.03, -30, 40, 5),
-              (0.12, -0.06, 0.05, 35, -35, -10), (-0.12, 0.06, 0.10, -40, -25, 15),
+              (-0.12, 0.06, 0.10, -40, -25, 15),
               (0.12, 0.06, -0.03, 40, 30, -20), (0.00, 0.00, 0.15, 0, -45, 90),
               (0.00, 0.00, -0.10, 45, 10, 30), (0.00, 0.00, 0.05, -25, -40, -30)]
 scene = {
@@ -83,7 +85,10 @@ done
 echo "capture: $poses poses, $(echo "$(date +%s.%N) - $start" | bc) s wall"
 start=$(date +%s.%N)
 # shellcheck disable=SC2086
-"$procam" calibrate board $sessions --corners 11x8 --square 0.025 --name front --out rig \
-  > calibrate.log
+/usr/bin/time -f "calibrate board: %e s wall, %U s user, %S s system, %M KiB" \
+  "$procam" calibrate board $sessions --corners 11x8 --square 0.025 --name front --out rig \
+  2>&1 | while IFS= read -r line; do
+    printf '%6.2f s  %s\n' "$(echo "$(date +%s.%N) - $start" | bc)" "$line"
+  done > calibrate.log
 echo "procam calibrate board, $poses poses (1280x800 camera, 1024x768 projector): $(echo "$(date +%s.%N) - $start" | bc) s wall"
-grep -E "Board calibration|projector|camera" calibrate.log | head -5
+cut -c1-160 calibrate.log

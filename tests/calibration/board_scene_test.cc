@@ -1,7 +1,7 @@
 // A chessboard as a scene-file key, end to end: a scene file holds the rig of DefaultBoardRig()
 // (a 1280×800 camera, a 1024×768 projector 0.2 m to its right, both with OpenCV4 distortion), a
-// wall behind, and a "chessboard" with the eight poses of BoardRigPoses() about 1 m away; `procam
-// capture` records one structured-light session per pose through the synthetic camera
+// wall behind, and a "chessboard" with seven of the eight poses of BoardRigPoses() about 1 m away;
+// `procam capture` records one structured-light session per pose through the synthetic camera
 // (`synthetic:board.json?board_pose=K`: the board alone, lit by the projector, through the camera
 // entry's ambient light, defocus and read noise); `procam calibrate board` calibrates on them.
 // The result is held to the truth the scene file states, within the bounds of
@@ -89,16 +89,19 @@ std::filesystem::path WriteScene(const std::filesystem::path& dir, const BoardRi
 // What the camera entry adds to the photographs: the optics of board_projector_test (ambient
 // light 2% of the board's brightest white, defocus σ 0.8 px, read noise 0.004 of full scale), as
 // 16-bit grey frames.
-const nlohmann::json kCameraKeys = {{"format", "Mono16"},     {"exposure_us", 1000},
-                                    {"reference_exposure_us", 1000}, {"fps", 500},
-                                    {"ambient", 0.02},        {"camera_blur", 0.8},
-                                    {"noise", 0.004 * 65535}};
+const nlohmann::json kCameraKeys = {
+    {"format", "Mono16"}, {"exposure_us", 1000}, {"reference_exposure_us", 1000}, {"fps", 500},
+    {"ambient", 0.02},    {"camera_blur", 0.8},  {"noise", 0.004 * 65535}};
 
 TEST(BoardScene, CapturesOfTheSceneKeyCalibrateToTheTruth) {
   const testing::TempDir dir;
   const BoardRig rig = DefaultBoardRig();
   const ChessboardSpec board = Board();
-  const std::vector<Eigen::Isometry3d> poses = BoardRigPoses(rig, board, 8, 1.0);
+  // BoardRigPoses' third pose is left out: OpenCV's chessboard detector does not find the board
+  // in this world's white photo of it (board_projector_test's direct render finds it), and a
+  // failed search costs about 40 s at 1280×800; calibrate board skips such a session.
+  std::vector<Eigen::Isometry3d> poses = BoardRigPoses(rig, board, 8, 1.0);
+  poses.erase(poses.begin() + 2);
   const SceneChessboard key = ChessboardKey(board, poses);
   const std::filesystem::path scene = WriteScene(dir.path(), rig, key.Json(), kCameraKeys);
 
@@ -116,9 +119,10 @@ TEST(BoardScene, CapturesOfTheSceneKeyCalibrateToTheTruth) {
     const std::string session = (dir.path() / ("pose_" + std::to_string(k))).string();
     const testing::CommandRun capture = testing::RunProcam(
         "capture --camera 'synthetic:" + scene.string() + "?board_pose=" + std::to_string(k) +
-        "&patches=20&seed=" + std::to_string(20 + k) +
+        "&patches=20&seed=" + std::to_string(20 + k + (k >= 2)) +
         "' --projector 0 --sequence structured_light --pattern-gamma 2.2 --frames 1 "
-        "--settle-ms 1 --out " + session);
+        "--settle-ms 1 --out " +
+        session);
     ASSERT_EQ(capture.exit_code, 0) << capture.output;
     sessions += " " + session;
   }
@@ -126,23 +130,24 @@ TEST(BoardScene, CapturesOfTheSceneKeyCalibrateToTheTruth) {
 
   const std::filesystem::path out = dir.path() / "rig";
   const auto calibrate_start = Clock::now();
-  const testing::CommandRun calibrate = testing::RunProcam(
-      "calibrate board" + sessions + " --corners 11x8 --square 0.025 --name front --out " +
-      out.string());
+  const testing::CommandRun calibrate =
+      testing::RunProcam("calibrate board" + sessions +
+                         " --corners 11x8 --square 0.025 --name front --out " + out.string());
   std::printf("procam calibrate board, %zu poses: %.1f s\n%s", poses.size(),
               SecondsSince(calibrate_start), calibrate.output.c_str());
   ASSERT_EQ(calibrate.exit_code, 0) << calibrate.output;
+  EXPECT_EQ(calibrate.output.find("chessboard not found"), std::string::npos);
 
   // Against the truth the scene file states (the bounds of docs/chessboard.md).
   const CameraModel camera = ReadCameraModelFile(out / "camera.cameramodel");
   const CameraModel projector = ReadCameraModelFile(out / "front.cameramodel");
   const auto check_lens = [](const char* device, const std::vector<double>& estimate,
                              const std::vector<double>& truth) {
-    std::printf("%s: fx %.3f (%.1f, %+.4f%%) fy %.3f (%.1f, %+.4f%%) cx %.3f (%.1f) cy %.3f "
-                "(%.1f)\n",
-                device, estimate[0], truth[0], 100 * (estimate[0] / truth[0] - 1), estimate[1],
-                truth[1], 100 * (estimate[1] / truth[1] - 1), estimate[2], truth[2], estimate[3],
-                truth[3]);
+    std::printf(
+        "%s: fx %.3f (%.1f, %+.4f%%) fy %.3f (%.1f, %+.4f%%) cx %.3f (%.1f) cy %.3f "
+        "(%.1f)\n",
+        device, estimate[0], truth[0], 100 * (estimate[0] / truth[0] - 1), estimate[1], truth[1],
+        100 * (estimate[1] / truth[1] - 1), estimate[2], truth[2], estimate[3], truth[3]);
     EXPECT_LT(std::abs(estimate[0] / truth[0] - 1.0), 0.002) << device;
     EXPECT_LT(std::abs(estimate[1] / truth[1] - 1.0), 0.002) << device;
     EXPECT_LT(std::abs(estimate[2] - truth[2]), 1.0) << device;
@@ -167,12 +172,12 @@ TEST(BoardScene, BadKeysAreOneLineNamingTheFileAndKey) {
   const BoardRig rig = DefaultBoardRig();
   const std::vector<Eigen::Isometry3d> poses = BoardRigPoses(rig, Board(), 2, 1.0);
   const nlohmann::json good = ChessboardKey(Board(), poses).Json();
-  const auto refused = [&](const nlohmann::json& chessboard, int pose, const std::string& expected) {
+  const auto refused = [&](const nlohmann::json& chessboard, int pose,
+                           const std::string& expected) {
     const std::filesystem::path scene = WriteScene(dir.path(), rig, chessboard, kCameraKeys);
     testing::ExpectOneErrorLine(
-        testing::RunProcamStderr("capture --camera 'synthetic:" + scene.string() +
-                                 "?board_pose=" + std::to_string(pose) +
-                                 "' --sequence structured_light --out " +
+        testing::RunProcamStderr("capture --camera 'synthetic:" + scene.string() + "?board_pose=" +
+                                 std::to_string(pose) + "' --sequence structured_light --out " +
                                  (dir.path() / "session").string()),
         expected, chessboard.dump());
     EXPECT_FALSE(std::filesystem::exists(dir.path() / "session" / "session.json"));
@@ -182,8 +187,9 @@ TEST(BoardScene, BadKeysAreOneLineNamingTheFileAndKey) {
   refused(bad, 0, "board.json: chessboard.poses: must be a non-empty array");
   bad = good;
   bad["poses"][1]["translation_m"] = {0.0, 0.0, -1.0};
-  refused(bad, 0, "board.json: chessboard.poses[1].translation_m: the board's centre must be in "
-                  "front of the camera");
+  refused(bad, 0,
+          "board.json: chessboard.poses[1].translation_m: the board's centre must be in "
+          "front of the camera");
   bad = good;
   bad["corners"] = {9};
   refused(bad, 0, "board.json: chessboard.corners: must be [columns, rows]");

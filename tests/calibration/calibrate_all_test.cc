@@ -372,10 +372,9 @@ TEST(CalibrateAll, HeldLensRefusals) {
   testing::ExpectOneErrorLine(
       testing::RunProcamStderr(camera + "--hold-lens nobody=lens.cameramodel" + out),
       "no projector is named 'nobody' (projectors: a, b)", "unknown name");
-  testing::ExpectOneErrorLine(
-      testing::RunProcamStderr(camera + "--hold-lens a=" + (dir / "lens.cameramodel").string() +
-                               out),
-      "lens.cameramodel: file not found (--hold-lens a)", "missing file");
+  testing::ExpectOneErrorLine(testing::RunProcamStderr(camera + "--hold-lens a=" +
+                                                       (dir / "lens.cameramodel").string() + out),
+                              "lens.cameramodel: file not found (--hold-lens a)", "missing file");
   testing::ExpectOneErrorLine(testing::RunProcamStderr(camera + "--hold-lens a" + out),
                               "--hold-lens 'a': NAME=FILE", "no file");
   EXPECT_FALSE(std::filesystem::exists(dir / "rig"));

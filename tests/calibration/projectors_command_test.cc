@@ -163,8 +163,9 @@ TEST_F(CalibrateProjectorsCommand, RecoversTheSyntheticRig) {
 // A projector calibrated on a chessboard joins the rig: its lens held from its .cameramodel
 // (--hold-lens NAME=FILE), its pose alone solved. The held lens is the truth with a board
 // calibration's errors (docs/chessboard.md: focal lengths 0.02% off, the principal point 0.5 and
-// 0.7 px off); it is written unchanged into the rig, and the pose lands within the bounds of the
-// free solve above.
+// 0.7 px off at f = 1500 px; here the same angles, scaled to this 320-pixel projector's f of
+// 343 px: a principal point off by 0.7 px would turn it by 0.12° alone); it is written unchanged
+// into the rig, and the pose lands within the bounds of the free solve above.
 TEST_F(CalibrateProjectorsCommand, AHeldLensIsWrittenUnchangedAndThePoseSolved) {
   const std::filesystem::path rig = *dir_ / "held_rig";
   WriteTrueCamera(rig);
@@ -173,18 +174,18 @@ TEST_F(CalibrateProjectorsCommand, AHeldLensIsWrittenUnchangedAndThePoseSolved) 
   CameraModel lens = g.Model();
   lens.intrinsics[0] *= 1.0002;
   lens.intrinsics[1] *= 0.99985;
-  lens.intrinsics[2] += 0.5;
-  lens.intrinsics[3] -= 0.7;
+  lens.intrinsics[2] += 0.5 * lens.intrinsics[0] / 1500.0;
+  lens.intrinsics[3] -= 0.7 * lens.intrinsics[1] / 1500.0;
   lens.cam_from_ref = Eigen::Isometry3d::Identity();  // a board calibration's: camera-relative
   const std::filesystem::path lens_file = *dir_ / "board" / (truth.name + ".cameramodel");
   std::filesystem::create_directories(lens_file.parent_path());
   WriteCameraModelFile(lens_file, lens, "a board calibration's lens (test)");
   const CameraModel given = ReadCameraModelFile(lens_file);
 
-  const CommandRun run = RunProcam("calibrate projectors " + Session(0) + " " + Session(1) +
-                                   " --scene synthetic:tiny_box --out " + rig.string() +
-                                   " --camera-guess " + kGuess + " --hold-lens " + truth.name +
-                                   "=" + lens_file.string());
+  const CommandRun run =
+      RunProcam("calibrate projectors " + Session(0) + " " + Session(1) +
+                " --scene synthetic:tiny_box --out " + rig.string() + " --camera-guess " + kGuess +
+                " --hold-lens " + truth.name + "=" + lens_file.string());
   std::printf("%s", run.output.c_str());
   ASSERT_EQ(run.exit_code, 0) << run.output;
   EXPECT_NE(run.output.find("lens held from " + lens_file.string()), std::string::npos);
@@ -197,7 +198,8 @@ TEST_F(CalibrateProjectorsCommand, AHeldLensIsWrittenUnchangedAndThePoseSolved) 
                                        .norm();
   const double orientation_deg =
       Eigen::AngleAxisd(model.cam_from_ref.linear() * g.proj_from_world().linear().transpose())
-          .angle() * 180 / std::numbers::pi;
+          .angle() *
+      180 / std::numbers::pi;
   std::printf("%s, lens held: position %.3f mm, orientation %.4f deg\n", truth.name.c_str(),
               position_mm, orientation_deg);
   EXPECT_LT(position_mm, 5.0);
@@ -205,9 +207,9 @@ TEST_F(CalibrateProjectorsCommand, AHeldLensIsWrittenUnchangedAndThePoseSolved) 
   // The other projector's lens is solved as before.
   const CameraModel other =
       ReadCameraModelFile(rig / (world_->rig->projectors()[1].name + ".cameramodel"));
-  EXPECT_LT(std::abs(other.intrinsics[0] / world_->rig->projectors()[1].geometry.intrinsics()[0] -
-                     1.0),
-            0.005);
+  EXPECT_LT(
+      std::abs(other.intrinsics[0] / world_->rig->projectors()[1].geometry.intrinsics()[0] - 1.0),
+      0.005);
   const nlohmann::json result = ReadJson(rig / "result.json");
   for (const nlohmann::json& entry : result["projectors"]["projectors"])
     EXPECT_EQ(entry["lens_held"].get<bool>(), entry["name"] == truth.name) << entry.dump();
@@ -242,10 +244,9 @@ TEST_F(CalibrateProjectorsCommand, AHeldLensIsWrittenUnchangedAndThePoseSolved) 
                     lens_file.string(),
                 "--hold-lens: only with --scene"},
        }) {
-    testing::ExpectOneErrorLine(
-        testing::RunProcamStderr("calibrate projectors " + c.arguments + " --out " +
-                                 bad_rig.string()),
-        c.expected, c.arguments);
+    testing::ExpectOneErrorLine(testing::RunProcamStderr("calibrate projectors " + c.arguments +
+                                                         " --out " + bad_rig.string()),
+                                c.expected, c.arguments);
   }
   EXPECT_FALSE(std::filesystem::exists(bad_rig / "rig.json"));
 }

@@ -548,10 +548,11 @@ TEST(CalibrateRoom, AHeldProjectorLensLeavesThePoseAloneToSolve) {
     EXPECT_TRUE(CalibrateRoom(options, model, with, PerturbedGuess(truth), &calibration, &summary))
         << label << ": " << summary.BriefReport();
     const Errors e = Compare(calibration.projectors[0], projector);
-    std::printf("%s: projector 0 position %.4f mm, orientation %.5f deg, RMS %.4f px (fx %.4f%%, "
-                "cx %.3f px); camera position %.4f mm\n",
-                label, e.position_mm, e.orientation_deg, summary.projectors[0].rms, 100 * e.fx,
-                e.cx, CompareCamera(calibration.room_from_camera, truth).position_mm);
+    std::printf(
+        "%s: projector 0 position %.4f mm, orientation %.5f deg, RMS %.4f px (fx %.4f%%, "
+        "cx %.3f px); camera position %.4f mm\n",
+        label, e.position_mm, e.orientation_deg, summary.projectors[0].rms, 100 * e.fx, e.cx,
+        CompareCamera(calibration.room_from_camera, truth).position_mm);
     return std::make_pair(calibration, e);
   };
   RoomCalibrationOptions options;
