@@ -9,6 +9,7 @@
 #include "apps/commands.h"
 #include "base/output_directory.h"
 #include "calibration/calibrate_all_stage.h"
+#include "calibration/projectors_stage.h"
 #include "capture/devices.h"
 
 namespace procam {
@@ -25,6 +26,7 @@ struct CalibrateAllArguments {
   double square = 0.03;
   std::vector<std::string> displays;  // real rigs: one per projector (glfw:N|NAME)
   std::vector<std::string> names;     // projector names, one per projector
+  std::vector<std::string> held_lenses;  // NAME=FILE
   std::string camera_guess;
   std::string camera_scale;
   int frames = 4;
@@ -51,6 +53,7 @@ void CalibrateAll(const CalibrateAllArguments& args) {
   options.display_names = args.displays;
   options.open_display = OpenMonitorDisplay;
   options.names = args.names;
+  options.held_lenses = ParseHeldLenses(args.held_lenses);
   options.camera_guess = args.camera_guess;
   options.camera_scale = args.camera_scale;
   options.frames = args.frames;
@@ -110,6 +113,10 @@ void AddCalibrateAllCommand(CLI::App& calibrate) {
                   "Real rigs: each projector's monitor, in order (glfw:N|NAME, comma-separated)")
       ->delimiter(',');
   all->add_option("--names", args->names, "Projector names, comma-separated")->delimiter(',');
+  all->add_option("--hold-lens", args->held_lenses,
+                  "NAME=FILE: hold projector NAME's lens from FILE (a .cameramodel, e.g. `procam "
+                  "calibrate board`'s) and solve only its pose in the room; repeat per projector; "
+                  "not with --scan");
   all->add_option("--camera-guess", args->camera_guess,
                   "Camera position and a point it looks at, x,y,z,look_x,look_y,look_z (scene "
                   "frame, metres); a synthetic camera's is guessed from its placement");

@@ -21,6 +21,7 @@ struct CalibrateProjectorsArguments {
   std::string camera_guess;  // "x,y,z,look_x,look_y,look_z" in the room frame
   std::string camera_up = "0,0,1";
   std::vector<std::string> names;
+  std::vector<std::string> held_lenses;  // NAME=FILE
   bool refine_camera_aspect = false;
   RoomCalibrationOptions options;
   // Scanning (no --scene).
@@ -67,6 +68,7 @@ void RunCalibrateProjectors(const CalibrateProjectorsArguments& args) {
   options.out = args.out;
   if (!args.camera_guess.empty()) options.room_from_camera_guess = RoomFromCameraGuess(args.camera_guess, args.camera_up);
   options.names = args.names;
+  options.held_lenses = ParseHeldLenses(args.held_lenses);
   options.refine_camera_aspect = args.refine_camera_aspect;
   options.options = args.options;
   if (args.max_correspondences > 0) options.options.max_correspondences = args.max_correspondences;
@@ -120,6 +122,10 @@ void AddCalibrateProjectorsCommand(CLI::App& calibrate) {
   command->add_option("--names", args->names,
                       "Projector names, one per session (default: the session's display name)")
       ->delimiter(',');
+  command->add_option("--hold-lens", args->held_lenses,
+                      "NAME=FILE: hold projector NAME's lens (intrinsics and distortion) from "
+                      "FILE, a .cameramodel (e.g. `procam calibrate board`'s NAME.cameramodel), "
+                      "and solve only its pose in the room; repeat per projector; with --scene");
   command->add_flag("--refine-distortion", args->options.refine_distortion,
                     "Refine projector k1, k2 (LENSMODEL_OPENCV4); default pinhole");
   command->add_flag("--refine-camera", args->options.refine_camera_intrinsics,

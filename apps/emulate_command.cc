@@ -40,6 +40,7 @@ struct EmulateArguments {
   int patches = 300;
   double seconds = 0.0;  // 0: until interrupted
   double watch_hz = 200.0;
+  int board_pose = -1;  // ≥ 0: photograph this pose of the scene's chessboard instead of the room
 };
 
 #if PROCAM_WITH_ARAVIS
@@ -54,6 +55,7 @@ PixelFormat ServedFormat(PixelFormat wanted) {
 void RunEmulate(const EmulateArguments& args) {
   const std::shared_ptr<SyntheticWorld> world =
       MakeSceneFileWorld(args.room, args.camera, args.patches, 0.0, args.room);
+  if (args.board_pose >= 0) PlaceSceneChessboard(world.get(), args.room, args.board_pose);
   const std::vector<std::shared_ptr<MemoryDisplay>>& displays = world->displays;
   if (args.monitors.size() != displays.size()) {
     throw std::invalid_argument(fmt::format("--monitors: {} outputs for the {} projectors of {} (one per projector, in order)",
@@ -148,6 +150,11 @@ void AddEmulateCommand(CLI::App& app) {
       ->capture_default_str();
   emulate->add_option("--seconds", args->seconds, "Stop after this long (default: at Ctrl+C or SIGTERM)")
       ->check(FiniteRange(0.0, 1e7));
+  emulate
+      ->add_option("--board-pose", args->board_pose,
+                   "Photograph pose K of the scene's chessboard (its \"chessboard\" key) "
+                   "instead of the room: the board alone, lit by the monitors")
+      ->check(CLI::NonNegativeNumber);
   emulate->add_option("--watch-hz", args->watch_hz, "Monitor captures per second at most")
       ->check(FiniteRange(1.0, 1000.0))
       ->capture_default_str();

@@ -80,6 +80,18 @@ RigPlan Plan(const CalibrateAllOptions& args) {
   }
   plan.scene = args.scene;
   plan.scan = args.scan || (plan.scene.empty() && !simulated);
+  for (const auto& [name, file] : args.held_lenses) {
+    if (plan.scan)
+      throw std::invalid_argument(
+          "--hold-lens: only with a room model (the scan solves every "
+          "projector's lens)");
+    if (std::find(plan.names.begin(), plan.names.end(), name) == plan.names.end())
+      throw std::invalid_argument("--hold-lens " + name + "=" + file.string() +
+                                  ": no projector is named '" + name +
+                                  "' (projectors: " + Join(plan.names, ", ") + ")");
+    if (!std::filesystem::is_regular_file(file))
+      throw IoError(file.string() + ": file not found (--hold-lens " + name + ")");
+  }
   if (plan.scan) {
     if (!plan.scene.empty())
       throw std::invalid_argument("--scan: not with --scene (scan the room, or register a model)");
@@ -259,6 +271,9 @@ void ProjectorsStep(const CalibrateAllOptions& args, const RigPlan& plan,
   }
   projectors.scene = plan.scene;
   command.insert(command.end(), {"--scene", plan.scene});
+  projectors.held_lenses = args.held_lenses;
+  for (const auto& [name, file] : args.held_lenses)
+    command.insert(command.end(), {"--hold-lens", name + "=" + file.string()});
   std::string guess = args.camera_guess;
   if (guess.empty() && plan.simulated) guess = plan.simulated->camera_guess;
   if (!guess.empty()) {

@@ -116,6 +116,61 @@ RoomCalibrationProblem ReadProblem(const ProjectorsStageOptions& args, const Cam
 ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const CameraModel& camera,
                                  const RoomCalibrationProblem& problem);
 
+// The held lenses' files (options.held_lenses), read and checked before any session is decoded:
+// projector name → its lens. Throws IoError naming the file.
+std::map<std::string, HeldProjectorLens> ReadHeldLenses(const ProjectorsStageOptions& args) {
+  std::map<std::string, HeldProjectorLens> lenses;
+  for (const auto& [name, path] : args.held_lenses) {
+    if (!ValidProjectorName(name))
+      throw std::invalid_argument("--hold-lens: '" + name +
+                                  "': a projector's name takes letters, digits, '_', '-' and '.'");
+    const CameraModel model = ReadCameraModelFile(path);
+    if (model.lens_model != "LENSMODEL_PINHOLE" && model.lens_model != "LENSMODEL_OPENCV4")
+      throw IoError(path.string() + ": lensmodel " + model.lens_model +
+                    ": a held projector lens must be LENSMODEL_PINHOLE or LENSMODEL_OPENCV4 "
+                    "(calibrate board --lens-model LENSMODEL_OPENCV4, its default)");
+    HeldProjectorLens lens;
+    lens.lens_model = model.lens_model;
+    lens.intrinsics = model.intrinsics;
+    lens.source = path.string();
+    // The size, checked against the session once it is read.
+    lens.source_width = model.width;
+    lens.source_height = model.height;
+    lenses[name] = lens;
+  }
+  return lenses;
+}
+
+// Puts the held lenses into `problem` by projector name. Throws IoError naming the lens's file
+// when its image size is not the session's projector's, std::invalid_argument for a name that no
+// session has.
+void HoldLenses(const std::map<std::string, HeldProjectorLens>& lenses,
+                RoomCalibrationProblem* problem, const ProgressCallback& progress) {
+  if (lenses.empty()) return;
+  problem->held_projector_lenses.assign(problem->projectors.size(), HeldProjectorLens());
+  for (const auto& [name, lens] : lenses) {
+    std::string names;
+    size_t k = 0;
+    for (; k < problem->projectors.size() && problem->projectors[k].name != name; ++k)
+      names += (names.empty() ? "" : ", ") + problem->projectors[k].name;
+    if (k == problem->projectors.size())
+      throw std::invalid_argument("--hold-lens " + name + "=" + lens.source +
+                                  ": no session's projector is named '" + name +
+                                  "' (projectors: " + names + "; name them with --names)");
+    const ProjectorObservations& projector = problem->projectors[k];
+    if (lens.source_width != projector.width || lens.source_height != projector.height)
+      throw IoError(lens.source + ": imagersize " + std::to_string(lens.source_width) + "x" +
+                    std::to_string(lens.source_height) + ", but projector '" + name + "' shows " +
+                    std::to_string(projector.width) + "x" + std::to_string(projector.height) +
+                    " patterns");
+    problem->held_projector_lenses[k] = lens;
+    Report(progress, fmt::format("projector {}: lens held from {} ({}, fx {:.2f}, fy {:.2f}, cx "
+                                 "{:.2f}, cy {:.2f}); its pose alone is solved",
+                                 name, lens.source, lens.lens_model, lens.intrinsics[0],
+                                 lens.intrinsics[1], lens.intrinsics[2], lens.intrinsics[3]));
+  }
+}
+
 // Scanning: the lens and its covariance as `calibrate camera` recorded them in RIG_DIR/result.json
 // ("camera": intrinsics, intrinsics_covariance), the chessboard's even where camera.cameramodel
 // already holds an earlier scan's refined lens, so that running the scan again starts from the
@@ -168,6 +223,21 @@ bool ChessboardLensPrior(const std::filesystem::path& rig_dir, const CameraModel
 
 }  // namespace
 
+std::map<std::string, std::filesystem::path> ParseHeldLenses(
+    const std::vector<std::string>& entries) {
+  std::map<std::string, std::filesystem::path> lenses;
+  for (const std::string& entry : entries) {
+    const size_t equals = entry.find('=');
+    if (equals == std::string::npos || equals == 0 || equals + 1 == entry.size())
+      throw std::invalid_argument("--hold-lens '" + entry +
+                                  "': NAME=FILE, a projector's name and its .cameramodel");
+    const std::string name = entry.substr(0, equals);
+    if (!lenses.emplace(name, entry.substr(equals + 1)).second)
+      throw std::invalid_argument("--hold-lens: projector '" + name + "' given twice");
+  }
+  return lenses;
+}
+
 ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
   ProjectorsStageOptions args = input;
   if (args.refine_camera_aspect && !args.options.refine_camera_intrinsics)
@@ -192,6 +262,10 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
   if (args.scene.empty()) {
     // The scan fits pinhole projectors (self_calibration.h); --refine-camera refines the whole
     // camera lens with the chessboard's as the prior.
+    if (!args.held_lenses.empty())
+      throw std::invalid_argument(
+          "--hold-lens: only with --scene (the scan solves every projector's lens; register the "
+          "room to its model to hold a board-calibrated lens)");
     if (args.options.refine_distortion)
       throw std::invalid_argument(
           "--refine-distortion: only with --scene (a scan fits pinhole projectors)");
@@ -223,6 +297,7 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
         " has no pose in the room yet; give the camera's position and a point it looks at, "
         "x,y,z,look_x,look_y,look_z in the scene's frame (a few cm and degrees suffice)");
   }
+  const std::map<std::string, HeldProjectorLens> held_lenses = ReadHeldLenses(args);
   const Scene scene = LoadSceneArgument(args.scene);
   const RoomModel model(scene);
   const char* const intrinsics_treatment =
@@ -237,7 +312,8 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
                   args.scene, scene.surfaces.size(), model.facets().size(), camera.lens_model,
                   camera.width, camera.height, intrinsics_treatment, guess_source,
                   guess.translation().x(), guess.translation().y(), guess.translation().z()));
-  const RoomCalibrationProblem problem = ReadProblem(args, camera, camera_path);
+  RoomCalibrationProblem problem = ReadProblem(args, camera, camera_path);
+  HoldLenses(held_lenses, &problem, args.progress);
 
   ProjectorsStageSummary stage;
   RoomCalibration& calibration = stage.calibration;
@@ -371,10 +447,13 @@ nlohmann::json RegistrationJson(const ProjectorsStageOptions& args, const Camera
   nlohmann::json per_projector = nlohmann::json::array();
   for (size_t k = 0; k < calibration.projectors.size(); ++k) {
     const RoomProjectorSummary& s = summary.projectors[k];
+    const RoomProjector& p = calibration.projectors[k];
     per_projector.push_back(
-        {{"name", calibration.projectors[k].name},
-         {"centre_m", JsonTriple(calibration.projectors[k].proj_from_room.inverse().translation())},
-         {"imagersize", {calibration.projectors[k].width, calibration.projectors[k].height}},
+        {{"name", p.name},
+         {"centre_m", JsonTriple(p.proj_from_room.inverse().translation())},
+         {"imagersize", {p.width, p.height}},
+         {"lens", p.lens_held ? "held from " + args.held_lenses.at(p.name).string()
+                              : std::string("solved")},
          {"correspondences", s.correspondences},
          {"used", s.used},
          {"on_model", s.points},
@@ -421,6 +500,7 @@ nlohmann::json ProjectorsJson(const RoomCalibration& calibration) {
     projectors.push_back({{"name", p.name},
                           {"model", p.name + ".cameramodel"},
                           {"lens_model", p.lens_model},
+                          {"lens_held", p.lens_held},
                           {"intrinsics", p.intrinsics},
                           {"imagersize", {p.width, p.height}},
                           {"centre_room_m", JsonTriple(p.proj_from_room.inverse().translation())}});
@@ -475,8 +555,9 @@ void WriteDeviceModels(const std::filesystem::path& out, const CameraModel& came
     model_file.height = p.height;
     model_file.cam_from_ref = p.proj_from_room;
     WriteCameraModelFile(out / (p.name + ".cameramodel"), model_file,
-                         "procam projector model (procam calibrate projectors); extrinsics = "
-                         "rt_proj_room, the room = " + room);
+                         std::string("procam projector model (procam calibrate projectors") +
+                             (p.lens_held ? "; the lens held as given, the pose solved" : "") +
+                             "); extrinsics = rt_proj_room, the room = " + room);
   }
   CameraModel camera_out = camera;
   camera_out.cam_from_ref = calibration.room_from_camera.inverse();

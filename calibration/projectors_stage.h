@@ -8,6 +8,8 @@
 // ICP from the same guess, and RANSAC planes. Writes RIG_DIR/NAME.cameramodel per projector,
 // rewrites RIG_DIR/camera.cameramodel with its pose in the room (and refined intrinsics), and
 // updates RIG_DIR/rig.json and RIG_DIR/result.json. What `procam calibrate projectors` runs.
+// A projector calibrated on a chessboard (board_stage.h) joins the room with its lens held
+// (options.held_lenses): its pose in the room alone is solved, its lens written unchanged.
 //
 // Without a room model (`scene` empty) the room is scanned instead: the projectors' intrinsics and
 // poses and the camera's pose from the structured light alone (self_calibration.h), the metric
@@ -18,6 +20,7 @@
 
 #include <Eigen/Geometry>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -38,6 +41,11 @@ struct ProjectorsStageOptions {
   // the pose camera.cameramodel already holds (an error if it holds none).
   std::optional<Eigen::Isometry3d> room_from_camera_guess;
   std::vector<std::string> names;     // one per session; empty: each session's display name
+  // Projectors whose lens (intrinsics and distortion) is held from a .cameramodel — the board
+  // calibration's NAME.cameramodel (board_stage.h), LENSMODEL_PINHOLE or LENSMODEL_OPENCV4, its
+  // imagersize the session's projector size — so that only their pose in the room is solved:
+  // projector name → file. With a room model (`scene`) only; the others' lenses are solved.
+  std::map<std::string, std::filesystem::path> held_lenses;
   bool refine_camera_aspect = false;  // with options.refine_camera_intrinsics: fx, fy free
   RoomCalibrationOptions options;
   // Scanning (no scene). The metric scale: the camera centre's height above the floor, metres,
@@ -74,6 +82,12 @@ bool ValidProjectorName(const std::string& name);
 std::string ProjectorNameFrom(const std::string& name);
 
 Eigen::Isometry3d RoomFromCameraGuess(const std::string& guess, const std::string& up = "0,0,1");
+
+// The held lenses of `--hold-lens NAME=FILE` entries (ProjectorsStageOptions::held_lenses). Throws
+// std::invalid_argument naming an entry without '=', with an empty name or file, or a name given
+// twice.
+std::map<std::string, std::filesystem::path> ParseHeldLenses(
+    const std::vector<std::string>& entries);
 
 // Throws IoError naming the session, camera.cameramodel or rig.json and the key;
 // std::invalid_argument for bad options or names; std::runtime_error when the solve fails.

@@ -247,7 +247,7 @@ template <typename T>
 void ReprojectThroughRoom(const T* ray, const T* camera_rotation, const T* camera_translation,
                           const T* intrinsics, const T* projector_rotation,
                           const T* projector_translation, const Vec3& normal, double offset,
-                          const Vec2& observed, T* residual) {
+                          const Vec2& observed, const double* tangential, T* residual) {
   T direction[3];
   ceres::AngleAxisRotatePoint(camera_rotation, ray, direction);
   const T along_normal =
@@ -258,27 +258,33 @@ void ReprojectThroughRoom(const T* ray, const T* camera_rotation, const T* camer
   const T s = -origin_height / along_normal;
   T p_in_room[3];
   for (int i = 0; i < 3; ++i) p_in_room[i] = camera_translation[i] + s * direction[i];
-  ProjectorPixelResidual(intrinsics, projector_rotation, projector_translation, p_in_room,
-                         observed, residual);
+  ProjectorPixelResidual(intrinsics, projector_rotation, projector_translation, p_in_room, observed,
+                         residual, tangential);
 }
 
 // The camera's lens fixed: the ray is a constant.
 struct RoomReprojection {
-  RoomReprojection(const Vec3& ray_in_cam, const Vec3& normal, double offset, const Vec2& observed)
-      : ray_in_cam(ray_in_cam), normal(normal), offset(offset), observed(observed) {}
+  RoomReprojection(const Vec3& ray_in_cam, const Vec3& normal, double offset, const Vec2& observed,
+                   const double* tangential)
+      : ray_in_cam(ray_in_cam),
+        normal(normal),
+        offset(offset),
+        observed(observed),
+        tangential{tangential[0], tangential[1]} {}
   template <typename T>
   bool operator()(const T* camera_rotation, const T* camera_translation, const T* intrinsics,
                   const T* projector_rotation, const T* projector_translation,
                   T* residual) const {
     const T ray[3] = {T(ray_in_cam.x()), T(ray_in_cam.y()), T(ray_in_cam.z())};
     ReprojectThroughRoom(ray, camera_rotation, camera_translation, intrinsics, projector_rotation,
-                         projector_translation, normal, offset, observed, residual);
+                         projector_translation, normal, offset, observed, tangential, residual);
     return true;
   }
   Vec3 ray_in_cam;
   Vec3 normal;
   double offset;
   Vec2 observed;
+  double tangential[2];  // the projector's p1, p2 (non-zero for a held OpenCV4 lens only)
 };
 
 // The camera's fx, fy, cx, cy free (distortion k1 k2 p1 p2 fixed, all zero for a pinhole): the
@@ -290,9 +296,15 @@ struct RoomReprojection {
 struct RoomReprojectionFreeCamera {
   RoomReprojectionFreeCamera(const Vec2& camera_pixel, const Vec3& ray0, const double* distortion,
                              bool distorted, double aspect, const Vec3& normal, double offset,
-                             const Vec2& observed)
-      : camera_pixel(camera_pixel), ray0(ray0.x(), ray0.y()), distorted(distorted),
-        aspect(aspect), normal(normal), offset(offset), observed(observed) {
+                             const Vec2& observed, const double* tangential)
+      : camera_pixel(camera_pixel),
+        ray0(ray0.x(), ray0.y()),
+        distorted(distorted),
+        aspect(aspect),
+        normal(normal),
+        offset(offset),
+        observed(observed),
+        tangential{tangential[0], tangential[1]} {
     for (int i = 0; i < 4; ++i) this->distortion[i] = distortion[i];
   }
   template <typename T>
@@ -311,7 +323,7 @@ struct RoomReprojectionFreeCamera {
       ray[1] = y;
     }
     ReprojectThroughRoom(ray, camera_rotation, camera_translation, intrinsics, projector_rotation,
-                         projector_translation, normal, offset, observed, residual);
+                         projector_translation, normal, offset, observed, tangential, residual);
     return true;
   }
   Vec2 camera_pixel;
@@ -322,10 +334,13 @@ struct RoomReprojectionFreeCamera {
   Vec3 normal;
   double offset;
   Vec2 observed;
+  double tangential[2];
 };
 
 struct ProjectorState {
-  double intrinsics[6] = {0, 0, 0, 0, 0, 0};
+  double intrinsics[6] = {0, 0, 0, 0, 0, 0};  // fx, fy, cx, cy, k1, k2
+  double tangential[2] = {0, 0};  // p1, p2: constants, non-zero for a held OpenCV4 lens only
+  bool held = false;              // the lens held (constant): the pose alone is solved
   PoseBlock proj_from_room;
 };
 
@@ -342,7 +357,7 @@ struct Correspondence {
 Vec2 Residual(const Correspondence& c, const ModelFacet& facet, const PoseBlock& camera,
               const ProjectorState& projector) {
   Vec2 r;
-  RoomReprojection(c.ray_in_cam, facet.normal, facet.offset, c.observed)(
+  RoomReprojection(c.ray_in_cam, facet.normal, facet.offset, c.observed, projector.tangential)(
       camera.rotation, camera.translation, projector.intrinsics, projector.proj_from_room.rotation,
       projector.proj_from_room.translation, r.data());
   return r;
@@ -388,6 +403,35 @@ void CheckRoomProblem(const RoomCalibrationOptions& options, const RoomCalibrati
       throw std::invalid_argument("CalibrateRoom: projector '" + p.name +
                                   "': camera and projector pixel counts differ");
   }
+  if (!problem.held_projector_lenses.empty() &&
+      problem.held_projector_lenses.size() != problem.projectors.size())
+    throw std::invalid_argument(
+        "CalibrateRoom: " + std::to_string(problem.held_projector_lenses.size()) +
+        " held projector lenses for " + std::to_string(problem.projectors.size()) + " projectors");
+  for (size_t k = 0; k < problem.held_projector_lenses.size(); ++k) {
+    const HeldProjectorLens& lens = problem.held_projector_lenses[k];
+    if (lens.lens_model.empty()) continue;
+    const std::string name = "CalibrateRoom: projector '" + problem.projectors[k].name + "': ";
+    if (!UnprojectCameraPixel(lens.lens_model, lens.intrinsics, Vec2::Zero(), &probe))
+      throw std::invalid_argument(name +
+                                  "a held lens must be LENSMODEL_PINHOLE (4 intrinsics) "
+                                  "or LENSMODEL_OPENCV4 (8), got " +
+                                  lens.lens_model + " with " +
+                                  std::to_string(lens.intrinsics.size()));
+    for (const double value : lens.intrinsics)
+      if (!std::isfinite(value))
+        throw std::invalid_argument(name + "the held lens has a non-finite intrinsic");
+    if (!(lens.intrinsics[0] > 0.0) || !(lens.intrinsics[1] > 0.0))
+      throw std::invalid_argument(name + "the held lens's focal lengths must be positive");
+  }
+}
+
+// Projector k's held lens, or null when the solve finds its lens.
+const HeldProjectorLens* HeldLens(const RoomCalibrationProblem& problem, size_t k) {
+  if (k >= problem.held_projector_lenses.size() ||
+      problem.held_projector_lenses[k].lens_model.empty())
+    return nullptr;
+  return &problem.held_projector_lenses[k];
 }
 
 // Every projector's correspondences, thinned evenly to options.max_correspondences, with the
@@ -471,16 +515,19 @@ void CameraSigma(const Eigen::MatrixXd& covariance, double camera_aspect, double
   camera_sigma[3] = std::sqrt(covariance(cy, cy));
 }
 
-// A point fixed in the room as projector (intrinsics, proj_from_room) shows it.
+// A point fixed in the room as projector (intrinsics, tangential p1 p2, proj_from_room) shows it.
 struct ProjectRoomPoint {
-  explicit ProjectRoomPoint(const Vec3& p_in_room) : p_in_room(p_in_room) {}
+  ProjectRoomPoint(const Vec3& p_in_room, const double* tangential)
+      : p_in_room(p_in_room), tangential{tangential[0], tangential[1]} {}
   template <typename T>
   bool operator()(const T* intrinsics, const T* rotation, const T* translation, T* pixel) const {
     const T p[3] = {T(p_in_room.x()), T(p_in_room.y()), T(p_in_room.z())};
-    ProjectorPixelResidual(intrinsics, rotation, translation, p, Vec2::Zero().eval(), pixel);
+    ProjectorPixelResidual(intrinsics, rotation, translation, p, Vec2::Zero().eval(), pixel,
+                           tangential);
     return true;
   }
   Vec3 p_in_room;
+  double tangential[2];
 };
 
 // Projector k alone against the model's planes as the guess puts them in the camera: the seed of
@@ -523,6 +570,41 @@ bool SeedProjector(const RoomCalibrationOptions& options, const RoomModel& model
     projector->intrinsics[5] = seed.intrinsics[5];
   }
   projector->proj_from_room = PoseBlock(seed.proj_from_cam * cam_from_room_guess);
+  const HeldProjectorLens* held = HeldLens(problem, k);
+  if (!held) return true;
+  // A held lens: its values replace the seed's, and the pose alone is refined against the planes
+  // as the guess places them (robustly: the guess's planes are a few cm off), so that the joint
+  // solve starts from a pose that fits this lens rather than the seed's own.
+  projector->held = true;
+  for (int i = 0; i < 6; ++i) projector->intrinsics[i] = 0.0;
+  for (int i = 0; i < 4; ++i) projector->intrinsics[i] = held->intrinsics[i];
+  if (held->intrinsics.size() == 8) {
+    projector->intrinsics[4] = held->intrinsics[4];
+    projector->intrinsics[5] = held->intrinsics[5];
+    projector->tangential[0] = held->intrinsics[6];
+    projector->tangential[1] = held->intrinsics[7];
+  }
+  PoseBlock guess(room_from_camera_guess);
+  ceres::Problem pose_problem;
+  for (const Correspondence& c : correspondences) {
+    if (c.facet < 0) continue;
+    const ModelFacet& facet = model.facets()[c.facet];
+    pose_problem.AddResidualBlock(
+        new ceres::AutoDiffCostFunction<RoomReprojection, 2, 3, 3, 6, 3, 3>(new RoomReprojection(
+            c.ray_in_cam, facet.normal, facet.offset, c.observed, projector->tangential)),
+        new ceres::CauchyLoss(options.loss_scale), guess.rotation, guess.translation,
+        projector->intrinsics, projector->proj_from_room.rotation,
+        projector->proj_from_room.translation);
+  }
+  if (pose_problem.NumResidualBlocks() == 0) return true;
+  for (double* block : {guess.rotation, guess.translation, projector->intrinsics})
+    pose_problem.SetParameterBlockConstant(block);
+  ceres::Solver::Summary pose_summary;
+  ceres::Solve(SolverOptions(options.max_iterations), &pose_problem, &pose_summary);
+  if (!pose_summary.IsSolutionUsable() || !projector->proj_from_room.Finite()) {
+    *failure = "projector '" + p.name + "': the pose with the held lens: " + pose_summary.message;
+    return false;
+  }
   return true;
 }
 
@@ -542,17 +624,20 @@ void ProjectorUncertainties(const RoomCalibrationOptions& options, const RoomMod
                             const std::vector<ProjectorState>& projectors,
                             const std::vector<std::vector<Correspondence>>& correspondences,
                             const Eigen::MatrixXd& covariance, RoomCalibrationSummary* summary) {
-  const int intrinsics_free = options.refine_distortion ? 6 : 4;
   const int camera_free = !options.refine_camera_intrinsics ? 0
                           : options.keep_camera_aspect_ratio ? 3
                                                              : 4;
   int offset = 6 + camera_free;
   const Eigen::Isometry3d room_from_camera = camera.Pose();
-  for (size_t k = 0; k < projectors.size(); ++k, offset += intrinsics_free + 6) {
+  for (size_t k = 0; k < projectors.size(); ++k) {
     const ProjectorState& p = projectors[k];
-    if (offset + intrinsics_free + 6 > covariance.rows()) return;
+    // A held lens is not in the covariance: the pose's uncertainty alone.
+    const int intrinsics_free = p.held ? 0 : options.refine_distortion ? 6 : 4;
+    const int block_offset = offset;
+    offset += intrinsics_free + 6;
+    if (block_offset + intrinsics_free + 6 > covariance.rows()) return;
     const Eigen::MatrixXd block =
-        covariance.block(offset, offset, intrinsics_free + 6, intrinsics_free + 6);
+        covariance.block(block_offset, block_offset, intrinsics_free + 6, intrinsics_free + 6);
     const Eigen::Isometry3d proj_from_room = p.proj_from_room.Pose();
     const Vec3 centre = proj_from_room.inverse().translation();
     std::vector<double> distances;
@@ -574,7 +659,7 @@ void ProjectorUncertainties(const RoomCalibrationOptions& options, const RoomMod
                                   (pixel.y() - p.intrinsics[3]) / p.intrinsics[1], 1.0)
                                  .normalized();
       const ceres::AutoDiffCostFunction<ProjectRoomPoint, 2, 6, 3, 3> project(
-          new ProjectRoomPoint(proj_from_room.inverse() * (distance * direction)));
+          new ProjectRoomPoint(proj_from_room.inverse() * (distance * direction), p.tangential));
       const double* parameters[] = {p.intrinsics, p.proj_from_room.rotation,
                                     p.proj_from_room.translation};
       Eigen::Matrix<double, 2, 6, Eigen::RowMajor> j_intrinsics;
@@ -584,7 +669,9 @@ void ProjectorUncertainties(const RoomCalibrationOptions& options, const RoomMod
       if (!project.Evaluate(parameters, projected.data(), jacobians))
         return std::numeric_limits<double>::quiet_NaN();
       Eigen::MatrixXd j(2, intrinsics_free + 6);
-      j << j_intrinsics.leftCols(intrinsics_free), j_rotation, j_translation;
+      j.leftCols(intrinsics_free) = j_intrinsics.leftCols(intrinsics_free);
+      j.middleCols(intrinsics_free, 3) = j_rotation;
+      j.rightCols(3) = j_translation;
       const Eigen::Matrix2d var = j * block * j.transpose();
       return std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(var).eigenvalues()[1]));
     };
@@ -616,7 +703,11 @@ bool CollectRoomResults(const RoomCalibrationOptions& options, const RoomModel& 
     out.width = problem.projectors[k].width;
     out.height = problem.projectors[k].height;
     out.intrinsics.assign(state.intrinsics, state.intrinsics + 4);
-    if (options.refine_distortion) {
+    if (const HeldProjectorLens* held = HeldLens(problem, k)) {
+      out.lens_model = held->lens_model;
+      out.intrinsics = held->intrinsics;  // exactly as given
+      out.lens_held = true;
+    } else if (options.refine_distortion) {
       out.lens_model = "LENSMODEL_OPENCV4";
       out.intrinsics.insert(out.intrinsics.end(),
                             {state.intrinsics[4], state.intrinsics[5], 0.0, 0.0});
@@ -730,17 +821,26 @@ bool CalibrateRoom(const RoomCalibrationOptions& options, const RoomModel& model
               new ceres::AutoDiffCostFunction<RoomReprojectionFreeCamera, 2, 3, 3, 4, 6, 3, 3>(
                   new RoomReprojectionFreeCamera(c.camera_pixel, c.ray_in_cam, camera_distortion,
                                                  camera_distorted, camera_aspect, facet.normal,
-                                                 facet.offset, c.observed)),
+                                                 facet.offset, c.observed, state.tangential)),
               loss, camera.rotation, camera.translation, camera_k, state.intrinsics,
               state.proj_from_room.rotation, state.proj_from_room.translation);
         else
           ceres_problem.AddResidualBlock(
               new ceres::AutoDiffCostFunction<RoomReprojection, 2, 3, 3, 6, 3, 3>(
-                  new RoomReprojection(c.ray_in_cam, facet.normal, facet.offset, c.observed)),
+                  new RoomReprojection(c.ray_in_cam, facet.normal, facet.offset, c.observed,
+                                       state.tangential)),
               loss, camera.rotation, camera.translation, state.intrinsics,
               state.proj_from_room.rotation, state.proj_from_room.translation);
       }
       if (!ceres_problem.HasParameterBlock(state.intrinsics)) continue;
+      if (state.held) {
+        // Its lens is given: constant, and out of the covariance (a zero column would read as a
+        // direction the solve cannot see).
+        ceres_problem.SetParameterBlockConstant(state.intrinsics);
+        blocks.insert(blocks.end(),
+                      {state.proj_from_room.rotation, state.proj_from_room.translation});
+        continue;
+      }
       if (!options.refine_distortion)
         ceres_problem.SetManifold(state.intrinsics, new ceres::SubsetManifold(6, {4, 5}));
       blocks.insert(blocks.end(), {state.intrinsics, state.proj_from_room.rotation,

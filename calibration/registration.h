@@ -8,7 +8,9 @@
 //     unknowns  room_from_camera (6 dof) and, per projector, fx, fy, cx, cy (optionally k1, k2)
 //               and proj_from_room (6 dof); optionally (refine_camera_intrinsics) the camera's
 //               fx, fy, cx, cy too, its distortion held at the chessboard calibration's values.
-//               By default the camera's lens is held FIXED (from `procam calibrate camera`)
+//               By default the camera's lens is held FIXED (from `procam calibrate camera`).
+//               A projector whose lens is held (held_projector_lenses: a board calibration's
+//               lens, calibration/board_projector.h) has its pose alone free.
 //     data      per projector, camera pixel ↔ projector pixel (decoded structured light)
 //     camera    each camera pixel's ray is its undistorted normalised coordinate x(d), d =
 //               ((u − cx)/fx, (v − cy)/fy); with free intrinsics x is computed inside the cost
@@ -23,7 +25,8 @@
 //     robust    a Cauchy pass on everything, then least squares on the inliers (residual ≤
 //               outlier_threshold), as CalibrateProjector does
 //     seed      a rough room_from_camera (a guess a few cm and degrees off) → the model's planes
-//               in the camera frame → CalibrateProjector per projector (DLT + Ceres)
+//               in the camera frame → CalibrateProjector per projector (DLT + Ceres); a held
+//               lens replaces the seed's, and the pose alone is refined against those planes
 //   The camera pose is observable when the projectors light three or more surfaces with
 //   linearly independent normals (e.g. floor and two walls); with two walls, sliding along their
 //   common line is not. The camera's fx, fy, cx, cy are observable in addition when the points
@@ -115,6 +118,15 @@ struct ProjectorObservations {
 // with its neighbours), for a `width` × `height` projector named `name`.
 ProjectorObservations ObservationsFromMap(const StructuredLightMap& map, std::string name, int width, int height);
 
+// A projector's lens held fixed in the room's solve: its pose alone is found. What a board
+// calibration (calibration/board_projector.h) gives of a projector, read from its .cameramodel.
+struct HeldProjectorLens {
+  std::string lens_model;          // "LENSMODEL_PINHOLE" (4 intrinsics) or "LENSMODEL_OPENCV4" (8)
+  std::vector<double> intrinsics;  // mrcal order: fx, fy, cx, cy[, k1, k2, p1, p2]
+  std::string source;              // where it came from, for reports (a file name)
+  int source_width = 0, source_height = 0;  // the file's imagersize (checked by its reader)
+};
+
 struct RoomCalibrationProblem {
   // The camera's lens: "LENSMODEL_PINHOLE" (4 intrinsics) or "LENSMODEL_OPENCV4" (8). Held fixed,
   // or the start of fx, fy, cx, cy with RoomCalibrationOptions::refine_camera_intrinsics.
@@ -126,6 +138,10 @@ struct RoomCalibrationProblem {
   // projectors' (SelfCalibrationProjectorSummary::uncertainty). CalibrateRoom does not use it.
   Eigen::MatrixXd camera_intrinsics_covariance;
   std::vector<ProjectorObservations> projectors;
+  // Empty, or one per projector (same order): an entry with a lens_model holds that projector's
+  // lens (intrinsics and distortion) fixed at its values, so the solve finds its pose alone (6
+  // unknowns instead of 10 or 12); an entry with an empty lens_model leaves the lens to the solve.
+  std::vector<HeldProjectorLens> held_projector_lenses;
 };
 
 struct RoomCalibrationOptions {
@@ -156,9 +172,10 @@ struct RoomCalibrationOptions {
 struct RoomProjector {
   std::string name;
   std::string lens_model;          // "LENSMODEL_PINHOLE" or "LENSMODEL_OPENCV4"
-  std::vector<double> intrinsics;  // mrcal order
+  std::vector<double> intrinsics;  // mrcal order (a held lens's exactly as given)
   int width = 0, height = 0;
   Eigen::Isometry3d proj_from_room = Eigen::Isometry3d::Identity();
+  bool lens_held = false;  // the problem's held_projector_lenses held it
 };
 
 struct RoomCalibration {

@@ -173,4 +173,91 @@ std::vector<cv::Mat> RenderBoardUnderPatterns(const BoardRig& rig, const Chessbo
   return images;
 }
 
+BoardInRoom::BoardInRoom(const ProjectorGeometry& camera,
+                         const std::vector<ProjectorGeometry>& projectors,
+                         const ChessboardSpec& board, const Eigen::Isometry3d& cam_from_board,
+                         double dark_reflectance, double light_reflectance, int supersample)
+    : width_(camera.width()),
+      height_(camera.height()),
+      projector_count_(static_cast<int>(projectors.size())) {
+  std::string why;
+  if (!board.Check(&why)) throw std::invalid_argument(why);
+  if (!(dark_reflectance >= 0.0 && light_reflectance <= 1.0 &&
+        dark_reflectance <= light_reflectance))
+    throw std::invalid_argument("board: reflectances must be 0 <= dark <= light <= 1");
+  if (supersample < 1 || supersample > 8)
+    throw std::invalid_argument("board: supersample must be in [1, 8]");
+  const int s = supersample;
+  per_ray_ = 1.0f / static_cast<float>(s * s);
+  std::vector<double> fine = camera.intrinsics();
+  for (int k = 0; k < 2; ++k) fine[k] *= s;
+  for (int k = 2; k < 4; ++k) fine[k] = s * fine[k] + (s - 1) / 2.0;
+  const ProjectorGeometry fine_camera(camera.lens_model(), fine, camera.width() * s,
+                                      camera.height() * s, Eigen::Isometry3d::Identity());
+  std::vector<Vec3> rays;
+  std::vector<double> densities;
+  fine_camera.UnprojectImage(&rays, &densities);
+  const Eigen::Isometry3d board_from_cam = cam_from_board.inverse();
+  const Eigen::Isometry3d world_from_cam = camera.proj_from_world().inverse();
+  const Vec3 origin = board_from_cam.translation();
+  const Vec3 normal_in_world = -(world_from_cam.linear() * cam_from_board.linear().col(2));
+  const double square = board.square_size;
+  for (int row = 0; row < fine_camera.height(); ++row) {
+    for (int col = 0; col < fine_camera.width(); ++col) {
+      const Vec3& ray_in_cam = rays[static_cast<size_t>(row) * fine_camera.width() + col];
+      const Vec3 ray = board_from_cam.linear() * ray_in_cam;
+      const double t = -origin.z() / ray.z();
+      if (!(t > 0.0)) continue;
+      const Vec3 p = origin + t * ray;
+      const double u = p.x() / square + 1.0, v = p.y() / square + 1.0;  // from the board's edge
+      if (!(u >= -1.0 && u < board.corners_x + 2.0 && v >= -1.0 && v < board.corners_y + 2.0))
+        continue;
+      const bool inside = u >= 0 && u < board.corners_x + 1 && v >= 0 && v < board.corners_y + 1;
+      const bool dark = inside && ((static_cast<int>(u) + static_cast<int>(v)) % 2 == 0);
+      pixel_.push_back((row / s) * width_ + col / s);
+      reflectance_.push_back(static_cast<float>(dark ? dark_reflectance : light_reflectance));
+      // The side facing the camera is lit; a projector behind the board gets gain 0.
+      const Vec3 p_in_world = world_from_cam * (t * ray_in_cam);
+      const Vec3 facing = normal_in_world.dot(world_from_cam.translation() - p_in_world) > 0.0
+                              ? normal_in_world
+                              : Vec3(-normal_in_world);
+      for (const ProjectorGeometry& projector : projectors) {
+        Vec2 pixel;
+        const double gain = projector.Gain(p_in_world, facing, &pixel);
+        int lit = -1;
+        if (gain > 0.0) {
+          const int x = static_cast<int>(std::lround(pixel.x()));
+          const int y = static_cast<int>(std::lround(pixel.y()));
+          if (x >= 0 && y >= 0 && x < projector.width() && y < projector.height())
+            lit = y * projector.width() + x;
+        }
+        lit_.push_back(lit);
+        gain_.push_back(lit < 0 ? 0.0f : static_cast<float>(gain));
+      }
+    }
+  }
+}
+
+cv::Mat BoardInRoom::RenderRadiance(const std::vector<cv::Mat>& outputs) const {
+  if (static_cast<int>(outputs.size()) != projector_count_)
+    throw std::invalid_argument("board: " + std::to_string(outputs.size()) + " outputs for " +
+                                std::to_string(projector_count_) + " projectors");
+  cv::Mat radiance = cv::Mat::zeros(height_, width_, CV_32FC3);
+  cv::Vec3f* values = radiance.ptr<cv::Vec3f>(0);
+  for (int k = 0; k < projector_count_; ++k) {
+    if (outputs[k].empty()) continue;
+    if (outputs[k].type() != CV_32FC3 || !outputs[k].isContinuous())
+      throw std::invalid_argument("board: a projector's output must be continuous CV_32FC3");
+    const cv::Vec3f* light = outputs[k].ptr<cv::Vec3f>(0);
+    const size_t total = outputs[k].total();
+    for (size_t ray = 0; ray < pixel_.size(); ++ray) {
+      const size_t at = ray * projector_count_ + k;
+      const int lit = lit_[at];
+      if (lit < 0 || static_cast<size_t>(lit) >= total) continue;
+      values[pixel_[ray]] += (per_ray_ * reflectance_[ray] * gain_[at]) * light[lit];
+    }
+  }
+  return radiance;
+}
+
 }  // namespace procam

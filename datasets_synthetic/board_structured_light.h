@@ -61,4 +61,36 @@ std::vector<cv::Mat> RenderBoardUnderPatterns(const BoardRig& rig, const Chessbo
                                               const CaptureSequence& sequence,
                                               const BoardRenderOptions& options);
 
+// A chessboard at a pose in a room of projectors, as a camera sees it (the synthetic camera's
+// `board_pose`, synthetic_camera.h): the board the only surface in view (nothing else returns
+// light). Built once per pose: every ray of a camera `supersample` times finer (same lens) that
+// meets the board, its camera pixel, the board's reflectance there and, per projector, the
+// projector pixel that lights it and the geometric gain (ProjectorGeometry::Gain: distance
+// falloff, incidence, the lens's pixel density; 0 where the projector is behind the board or
+// misses it). Rendering adds, per ray, reflectance × gain × the projector's output at that pixel.
+class BoardInRoom {
+ public:
+  // `camera` and `projectors` with their poses in the world (the room); `cam_from_board` the
+  // board's pose in the camera frame. Throws std::invalid_argument when the board or the
+  // reflectances are invalid, or supersample is outside [1, 8].
+  BoardInRoom(const ProjectorGeometry& camera, const std::vector<ProjectorGeometry>& projectors,
+              const ChessboardSpec& board, const Eigen::Isometry3d& cam_from_board,
+              double dark_reflectance, double light_reflectance, int supersample = 2);
+
+  // The radiance at the camera (CV_32FC3, R, G, B, the camera's size): `outputs[k]` is projector
+  // k's output per pixel (CV_32FC3, R, G, B, ProjectorPhotometry::Output's units), or empty for
+  // a dark projector.
+  cv::Mat RenderRadiance(const std::vector<cv::Mat>& outputs) const;
+
+  int rays_on_board() const { return static_cast<int>(pixel_.size()); }
+
+ private:
+  int width_ = 0, height_ = 0, projector_count_ = 0;
+  float per_ray_ = 1.0f;
+  std::vector<int> pixel_;          // per ray on the board: its camera pixel
+  std::vector<float> reflectance_;  // per ray
+  std::vector<int> lit_;            // per ray × projector: the projector pixel, −1 none
+  std::vector<float> gain_;         // per ray × projector
+};
+
 }  // namespace procam

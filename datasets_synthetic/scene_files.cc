@@ -1,7 +1,9 @@
 #include "datasets_synthetic/scene_files.h"
 
 #include <fmt/format.h>
+
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <utility>
@@ -10,6 +12,7 @@
 #include "base/camera_model.h"
 #include "base/image_io.h"
 #include "base/io.h"
+#include "base/json_fields.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "geometry/srgb.h"
@@ -136,6 +139,79 @@ std::filesystem::path WriteSyntheticSceneFile(const SyntheticScene& synthetic,
   if (error) throw IoError(dir.string() + ": cannot create directory: " + error.message());
   for (const auto& [file_name, bytes] : files) WriteFileAtomically(dir / file_name, bytes);
   return dir / (name + ".json");
+}
+
+}  // namespace procam
+
+namespace procam {
+
+Eigen::Isometry3d SceneChessboard::CamFromBoard(size_t k) const {
+  const Pose& pose = poses.at(k);
+  const double deg = std::numbers::pi / 180.0;
+  Eigen::Isometry3d cam_from_board = Eigen::Isometry3d::Identity();
+  cam_from_board.linear() = (Eigen::AngleAxisd(pose.rotation_deg.x() * deg, Vec3::UnitX()) *
+                             Eigen::AngleAxisd(pose.rotation_deg.y() * deg, Vec3::UnitY()) *
+                             Eigen::AngleAxisd(pose.rotation_deg.z() * deg, Vec3::UnitZ()))
+                                .toRotationMatrix();
+  const Vec3 centre_in_board((board.corners_x - 1) * board.square_size / 2.0,
+                             (board.corners_y - 1) * board.square_size / 2.0, 0.0);
+  cam_from_board.translation() = pose.translation_m - cam_from_board.linear() * centre_in_board;
+  return cam_from_board;
+}
+
+nlohmann::json SceneChessboard::Json() const {
+  nlohmann::json out = {{"corners", {board.corners_x, board.corners_y}},
+                        {"square_m", board.square_size},
+                        {"reflectance", {dark_reflectance, light_reflectance}}};
+  nlohmann::json list = nlohmann::json::array();
+  for (const Pose& pose : poses)
+    list.push_back({{"rotation_deg", JsonTriple(pose.rotation_deg)},
+                    {"translation_m", JsonTriple(pose.translation_m)}});
+  out["poses"] = list;
+  return out;
+}
+
+std::optional<SceneChessboard> ReadSceneChessboard(const std::filesystem::path& scene_file) {
+  const std::string file = scene_file.string();
+  const nlohmann::json root = ReadJsonFile(scene_file);
+  if (!root.is_object() || !root.contains("chessboard")) return std::nullopt;
+  JsonFields fields(root.at("chessboard"), file, "chessboard");
+  fields.RejectUnknown({"corners", "square_m", "reflectance", "poses"});
+  SceneChessboard out;
+  const nlohmann::json& corners = fields.At("corners");
+  if (!corners.is_array() || corners.size() != 2 || !corners[0].is_number_integer() ||
+      !corners[1].is_number_integer())
+    throw fields.Error("corners", "must be [columns, rows], two integers (inner corners)");
+  out.board.corners_x = corners[0].get<int>();
+  out.board.corners_y = corners[1].get<int>();
+  out.board.square_size = fields.Number("square_m");
+  std::string why;
+  if (!out.board.Check(&why)) throw fields.Error("", why);
+  if (fields.Has("reflectance")) {
+    const std::vector<double> values = fields.Numbers("reflectance", fields.At("reflectance"));
+    if (values.size() != 2 || !(values[0] >= 0.0) || !(values[1] <= 1.0) ||
+        !(values[0] < values[1]))
+      throw fields.Error(
+          "reflectance",
+          "must be [dark, light], 0 <= dark < light <= 1 (the squares' reflectance)");
+    out.dark_reflectance = values[0];
+    out.light_reflectance = values[1];
+  }
+  const nlohmann::json& poses = fields.At("poses");
+  if (!poses.is_array() || poses.empty())
+    throw fields.Error("poses", "must be a non-empty array of {rotation_deg, translation_m}");
+  for (size_t k = 0; k < poses.size(); ++k) {
+    JsonFields pose(poses[k], file, "chessboard.poses[" + std::to_string(k) + "]");
+    pose.RejectUnknown({"rotation_deg", "translation_m"});
+    SceneChessboard::Pose entry;
+    entry.rotation_deg = pose.Triple("rotation_deg", pose.At("rotation_deg"));
+    entry.translation_m = pose.Triple("translation_m", pose.At("translation_m"));
+    if (!(entry.translation_m.z() > 0.0))
+      throw pose.Error("translation_m",
+                       "the board's centre must be in front of the camera (z > 0)");
+    out.poses.push_back(entry);
+  }
+  return out;
 }
 
 }  // namespace procam

@@ -1,26 +1,26 @@
 #include "datasets_synthetic/synthetic_camera.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <map>
 #include <mutex>
-#include <tuple>
+#include <opencv2/imgproc.hpp>
 #include <stdexcept>
+#include <tuple>
 #include <utility>
 
-#include <cmath>
-
-#include <fmt/format.h>
-#include <opencv2/imgproc.hpp>
-
 #include "base/image_io.h"
-#include "datasets_synthetic/chessboard_views.h"
-#include "datasets_synthetic/paper_scenes.h"
 #include "base/io.h"
-#include "geometry/stage.h"
 #include "capture/scene_cameras.h"
 #include "capture/simulated_camera.h"
+#include "datasets_synthetic/chessboard_views.h"
+#include "datasets_synthetic/paper_scenes.h"
+#include "datasets_synthetic/scene_files.h"
 #include "geometry/scene.h"
+#include "geometry/stage.h"
 #include "projection/projector.h"
 
 namespace procam {
@@ -69,9 +69,11 @@ struct SyntheticUri {
   std::string camera;  // the scene file's camera ("" = its first)
   int patches = 0;
   double albedo_variation = 0.0;
+  int board_pose = -1;  // the scene file's chessboard pose photographed; −1: the room
   bool operator<(const SyntheticUri& other) const {
-    return std::tie(scene, file, camera, patches, albedo_variation) <
-           std::tie(other.scene, other.file, other.camera, other.patches, other.albedo_variation);
+    return std::tie(scene, file, camera, patches, albedo_variation, board_pose) <
+           std::tie(other.scene, other.file, other.camera, other.patches, other.albedo_variation,
+                    other.board_pose);
   }
 };
 
@@ -87,6 +89,11 @@ SyntheticUri ParseSyntheticUri(const CameraUri& uri) {
   if (IsSceneFile(uri.path())) {
     parsed.file = std::filesystem::absolute(uri.path()).lexically_normal();
     parsed.camera = uri.GetString("camera", "");
+    parsed.board_pose = uri.GetInt("board_pose", -1);
+    if (parsed.board_pose < -1)
+      throw IoError("camera '" + uri.text() +
+                    "': board_pose must be a pose of the scene file's "
+                    "chessboard, from 0");
   } else if (!IsSceneName(uri.path())) {
     throw IoError("camera '" + uri.text() + "': unknown synthetic scene '" + uri.path() +
                   "' (scenes: " + SceneList() + ", or a scene file ROOM.json)");
@@ -147,6 +154,47 @@ std::shared_ptr<SyntheticWorld> BuildWorld(std::shared_ptr<SyntheticWorld> world
   world->radiance_scale = brightest > 0.0 ? 1.0 / brightest : 1.0;
   world->rig = std::move(rig);
   return world;
+}
+
+// What projector `projector` emits for `image` per pixel (ProjectorPhotometry::Output of the
+// codes: CV_32FC3, R, G, B); empty for an image that is black everywhere and a projector without
+// black level (it adds nothing).
+cv::Mat ProjectorOutput(const ProjectorImage& image, const Projector& projector) {
+  const ProjectorPhotometry& photometry = projector.photometry;
+  if (photometry.black.isZero() && cv::countNonZero(image.codes.reshape(1)) == 0) return cv::Mat();
+  const int max_code = photometry.MaxCode();
+  std::array<std::vector<float>, 3> light_of_code;  // per channel, code → relative light
+  for (int c = 0; c < 3; ++c) {
+    light_of_code[c].resize(max_code + 1);
+    for (int code = 0; code <= max_code; ++code)
+      light_of_code[c][code] =
+          static_cast<float>(photometry.response[c].Light(static_cast<double>(code) / max_code));
+  }
+  const Eigen::Matrix3d to_output_d =
+      (photometry.max - photometry.black).asDiagonal() * photometry.mixing;
+  const Eigen::Matrix3f to_output = to_output_d.cast<float>();
+  const Eigen::Vector3f black = photometry.black.cast<float>();
+  cv::Mat output(image.codes.size(), CV_32FC3);
+  for (int row = 0; row < output.rows; ++row) {
+    const cv::Vec3w* in = image.codes.ptr<cv::Vec3w>(row);
+    cv::Vec3f* out = output.ptr<cv::Vec3f>(row);
+    for (int col = 0; col < output.cols; ++col) {
+      const Eigen::Vector3f light(light_of_code[0][std::min<int>(in[col][0], max_code)],
+                                  light_of_code[1][std::min<int>(in[col][1], max_code)],
+                                  light_of_code[2][std::min<int>(in[col][2], max_code)]);
+      const Eigen::Vector3f value = black + to_output * light;
+      out[col] = cv::Vec3f(value.x(), value.y(), value.z());
+    }
+  }
+  return output;
+}
+
+// The world's board (PlaceSceneChessboard) lit by `images`: radiance R, G, B.
+cv::Mat RenderBoard(const SyntheticWorld& world, const std::vector<ProjectorImage>& images) {
+  std::vector<cv::Mat> outputs;
+  for (size_t k = 0; k < images.size(); ++k)
+    outputs.push_back(ProjectorOutput(images[k], world.rig->projectors()[k]));
+  return world.board->RenderRadiance(outputs);
 }
 
 // A built-in scene's rig: its projectors and camera (with distortion) from their placements.
@@ -224,6 +272,7 @@ SyntheticRigSource LoadSceneFileRig(const std::filesystem::path& scene_file,
   source.scene = LoadScene(scene_file);
   source.scene.target_patches = patches;
   source.projectors = ReadProjectors(source.scene);
+  ReadSceneChessboard(scene_file);  // its errors whether or not a board pose is photographed
   if (source.projectors.empty())
     throw IoError(file + ": projectors: a synthetic rig needs at least one projector");
   const std::vector<SceneCamera> cameras =
@@ -269,6 +318,42 @@ std::shared_ptr<SyntheticWorld> MakeSceneFileWorld(const std::filesystem::path& 
   world->camera_guess = CameraGuess(centre, centre + 3.0 * world_from_camera.linear().col(2));
   return BuildWorld(world, source.scene, std::move(source.projectors), std::move(source.camera),
                     albedo_variation);
+}
+
+void PlaceSceneChessboard(SyntheticWorld* world, const std::filesystem::path& scene_file,
+                          int pose) {
+  const std::string file = scene_file.string();
+  const std::optional<SceneChessboard> chessboard = ReadSceneChessboard(scene_file);
+  if (!chessboard)
+    throw IoError(file +
+                  ": chessboard: missing (board_pose needs the scene file's chessboard, "
+                  "docs/scene_format.md)");
+  if (pose < 0 || pose >= static_cast<int>(chessboard->poses.size()))
+    throw IoError(file + ": chessboard.poses: no pose " + std::to_string(pose) + " (it has " +
+                  std::to_string(chessboard->poses.size()) + ")");
+  const SimulatedRig& rig = *world->rig;
+  std::vector<ProjectorGeometry> projectors;
+  for (const Projector& projector : rig.projectors()) projectors.push_back(projector.geometry);
+  auto board = std::make_shared<BoardInRoom>(
+      rig.camera(), projectors, chessboard->board, chessboard->CamFromBoard(pose),
+      chessboard->dark_reflectance, chessboard->light_reflectance);
+  if (board->rays_on_board() == 0)
+    throw IoError(file + ": chessboard.poses[" + std::to_string(pose) +
+                  "]: the board is not in the camera's view");
+  world->board = board;
+  world->board_pose = pose;
+  // Radiance 1: the board's brightest pixel with every projector at full white.
+  std::vector<ProjectorImage> white;
+  for (const Projector& projector : rig.projectors()) {
+    ProjectorImage image;
+    image.bits = projector.photometry.bits;
+    image.codes = cv::Mat(projector.geometry.height(), projector.geometry.width(), CV_16UC3,
+                          cv::Scalar::all(projector.photometry.MaxCode()));
+    white.push_back(std::move(image));
+  }
+  double brightest = 0.0;
+  cv::minMaxLoc(RenderBoard(*world, white).reshape(1), nullptr, &brightest);
+  world->radiance_scale = brightest > 0.0 ? 1.0 / brightest : 1.0;
 }
 
 ProjectorImage DefocusProjectorCodes(const ProjectorImage& codes, const Projector& projector,
@@ -330,7 +415,9 @@ SceneView MakeSyntheticView(std::shared_ptr<const SyntheticWorld> world, double 
       for (size_t k = 0; k < shown.size(); ++k)
         images.push_back(DefocusProjectorCodes(CodesFromPattern(shown[k], rig.projectors()[k]),
                                                rig.projectors()[k], projector_blur_px));
-      cache->view = ViewFromRadiance(rig.RenderRadiance(images), world->radiance_scale);
+      const cv::Mat radiance =
+          world->board ? RenderBoard(*world, images) : rig.RenderRadiance(images);
+      cache->view = ViewFromRadiance(radiance, world->radiance_scale);
       cache->shown = std::move(shown);
       ++world->renders;
     }
@@ -359,6 +446,7 @@ std::shared_ptr<SyntheticWorld> OpenSyntheticWorld(const CameraUri& uri) {
   } else {
     try {  // the file as the URI names it, so that errors name it so too
       world = MakeSceneFileWorld(key.scene, key.camera, key.patches, key.albedo_variation, key.scene);
+      if (key.board_pose >= 0) PlaceSceneChessboard(world.get(), key.scene, key.board_pose);
     } catch (const IoError& error) {
       throw IoError("camera '" + uri.text() + "': " + error.what());
     }

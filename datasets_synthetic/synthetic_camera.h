@@ -11,6 +11,12 @@
 // DefocusProjectorCodes), camera defocus (`camera_blur`), ambient light (`ambient`, a fraction of
 // radiance 1), a non-linear response (`response_gamma`) and JPEG compression (`jpeg_quality`).
 //
+// A scene file with a "chessboard" (docs/scene_format.md) also holds a board in front of the
+// camera: `board_pose=K` photographs the board at its pose K instead of the room — the board the
+// only surface in view (BoardInRoom, board_structured_light.h), lit by the same projectors'
+// displays — so that `procam capture` records the structured-light sessions of a board
+// calibration (docs/chessboard.md).
+//
 // Keys: `patches` (the solver patch count the scene and the rig's world mesh are built for,
 // [20, 5000], default 300; the world mesh is SimulatedRigOptions::world_factor = 4 times finer),
 // `albedo` (SimulatedRigOptions::albedo_variation: the room's uneven paint, [0, 0.5), default 0)
@@ -39,6 +45,7 @@
 #include "capture/display.h"
 #include "capture/scene_cameras.h"
 #include "capture/test_camera.h"
+#include "datasets_synthetic/board_structured_light.h"
 #include "datasets_synthetic/simulated_rig.h"
 
 namespace procam {
@@ -72,7 +79,17 @@ struct SyntheticWorld {
   // RenderRadiance calls made by the SceneViews of this world (frames of one pattern share one
   // render; see MakeSyntheticView).
   mutable std::atomic<int> renders{0};
+  // With a board pose (PlaceSceneChessboard): the board the camera photographs instead of the
+  // room, and which pose of the scene file's chessboard it is (−1: none, the room).
+  std::shared_ptr<const BoardInRoom> board;
+  int board_pose = -1;
 };
+
+// Puts pose `pose` of the scene file's "chessboard" (scene_files.h) in front of the world's
+// camera: from then on its SceneViews photograph that board, alone, lit by the displays, and
+// radiance_scale is the board's (1: its brightest pixel with every projector at full white).
+// Throws IoError naming the file and key: no chessboard key, a pose out of range.
+void PlaceSceneChessboard(SyntheticWorld* world, const std::filesystem::path& scene_file, int pose);
 
 // Builds the world of a synthetic scene: MakeSyntheticScene(scene, patches), projectors and
 // camera from its placements (ProjectorFromPlacement, CameraFromPlacement with distortion), the
@@ -142,7 +159,8 @@ double CameraValuePerExitance(const SyntheticWorld& world, const TestCameraOptio
 
 // The world a "synthetic:" URI names: its path is a built-in scene's name or a scene file
 // (ending in .json, relative to the working directory); its keys `patches`, `albedo` and, for a
-// scene file, `camera` (which of its cameras) are read, other keys are left unread.
+// scene file, `camera` (which of its cameras) and `board_pose` (PlaceSceneChessboard) are read,
+// other keys are left unread.
 // Worlds are shared while alive: opening the same scene and patch count again, while a camera
 // or caller still holds the world, returns the same world — so the capture command shows its
 // patterns on the displays the camera looks at. Throws IoError naming the URI: not a synthetic

@@ -154,7 +154,7 @@ Scene LoadScene(const std::filesystem::path& path) {
   const std::filesystem::path base = path.parent_path();
   JsonFields top(root, file, "");
   top.RejectUnknown({"name", "description", "patches", "white", "bounds", "surfaces",
-                     "weld_tolerance", "projectors", "cameras"});
+                     "weld_tolerance", "projectors", "cameras", "chessboard"});
   Scene scene;
   scene.path = path;
   scene.name = top.Has("name") ? top.String("name") : path.stem().string();
@@ -185,6 +185,10 @@ Scene LoadScene(const std::filesystem::path& path) {
       }
     }
   }
+  // A chessboard held in front of the rig's camera: the synthetic world's alone (it reads the key
+  // itself, datasets_synthetic/scene_files.h); the room's model has no use for it.
+  if (top.Has("chessboard") && !top.At("chessboard").is_object())
+    throw top.Error("chessboard", "must be an object");
   for (const char* key : {"projectors", "cameras"}) {
     if (!top.Has(key)) continue;
     if (!top.At(key).is_array()) throw top.Error(key, "must be an array");

@@ -360,6 +360,26 @@ TEST(CalibrateAll, ProjectorNamesAreValidFileNames) {
   EXPECT_FALSE(ValidProjectorName(""));
 }
 
+// --hold-lens (a board-calibrated projector joining the rig) is checked before anything is
+// captured: a room model is needed, the name must be a projector's, the file must exist.
+TEST(CalibrateAll, HeldLensRefusals) {
+  testing::TempDir dir;
+  const std::string camera = "calibrate all --camera synthetic:tiny_box?patches=20 --names a,b ";
+  const std::string out = " --out " + (dir / "rig").string();
+  testing::ExpectOneErrorLine(
+      testing::RunProcamStderr(camera + "--scan --hold-lens a=lens.cameramodel" + out),
+      "--hold-lens: only with a room model", "scan");
+  testing::ExpectOneErrorLine(
+      testing::RunProcamStderr(camera + "--hold-lens nobody=lens.cameramodel" + out),
+      "no projector is named 'nobody' (projectors: a, b)", "unknown name");
+  testing::ExpectOneErrorLine(testing::RunProcamStderr(camera + "--hold-lens a=" +
+                                                       (dir / "lens.cameramodel").string() + out),
+                              "lens.cameramodel: file not found (--hold-lens a)", "missing file");
+  testing::ExpectOneErrorLine(testing::RunProcamStderr(camera + "--hold-lens a" + out),
+                              "--hold-lens 'a': NAME=FILE", "no file");
+  EXPECT_FALSE(std::filesystem::exists(dir / "rig"));
+}
+
 TEST(CalibrateAll, RefusesWhatItCannotDo) {
   testing::TempDir dir;
   // A real camera needs chessboard photos or a model, and one display per projector.

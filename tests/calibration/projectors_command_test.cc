@@ -160,6 +160,97 @@ TEST_F(CalibrateProjectorsCommand, RecoversTheSyntheticRig) {
   EXPECT_GE(result["projectors"]["planes_from_scan"]["planes"].size(), 3u);
 }
 
+// A projector calibrated on a chessboard joins the rig: its lens held from its .cameramodel
+// (--hold-lens NAME=FILE), its pose alone solved. The held lens is the truth with a board
+// calibration's errors (docs/chessboard.md: focal lengths 0.02% off, the principal point 0.5 and
+// 0.7 px off at f = 1500 px; here the same angles, scaled to this 320-pixel projector's f of
+// 343 px: a principal point off by 0.7 px would turn it by 0.12° alone); it is written unchanged
+// into the rig, and the pose lands within the bounds of the free solve above.
+TEST_F(CalibrateProjectorsCommand, AHeldLensIsWrittenUnchangedAndThePoseSolved) {
+  const std::filesystem::path rig = *dir_ / "held_rig";
+  WriteTrueCamera(rig);
+  const Projector& truth = world_->rig->projectors()[0];
+  const ProjectorGeometry& g = truth.geometry;
+  CameraModel lens = g.Model();
+  lens.intrinsics[0] *= 1.0002;
+  lens.intrinsics[1] *= 0.99985;
+  lens.intrinsics[2] += 0.5 * lens.intrinsics[0] / 1500.0;
+  lens.intrinsics[3] -= 0.7 * lens.intrinsics[1] / 1500.0;
+  lens.cam_from_ref = Eigen::Isometry3d::Identity();  // a board calibration's: camera-relative
+  const std::filesystem::path lens_file = *dir_ / "board" / (truth.name + ".cameramodel");
+  std::filesystem::create_directories(lens_file.parent_path());
+  WriteCameraModelFile(lens_file, lens, "a board calibration's lens (test)");
+  const CameraModel given = ReadCameraModelFile(lens_file);
+
+  const CommandRun run =
+      RunProcam("calibrate projectors " + Session(0) + " " + Session(1) +
+                " --scene synthetic:tiny_box --out " + rig.string() + " --camera-guess " + kGuess +
+                " --hold-lens " + truth.name + "=" + lens_file.string());
+  std::printf("%s", run.output.c_str());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  EXPECT_NE(run.output.find("lens held from " + lens_file.string()), std::string::npos);
+
+  const CameraModel model = ReadCameraModelFile(rig / (truth.name + ".cameramodel"));
+  EXPECT_EQ(model.lens_model, given.lens_model);
+  EXPECT_EQ(model.intrinsics, given.intrinsics);  // unchanged, to the last bit
+  const double position_mm = 1e3 * (model.cam_from_ref.inverse().translation() -
+                                    g.proj_from_world().inverse().translation())
+                                       .norm();
+  const double orientation_deg =
+      Eigen::AngleAxisd(model.cam_from_ref.linear() * g.proj_from_world().linear().transpose())
+          .angle() *
+      180 / std::numbers::pi;
+  std::printf("%s, lens held: position %.3f mm, orientation %.4f deg\n", truth.name.c_str(),
+              position_mm, orientation_deg);
+  EXPECT_LT(position_mm, 5.0);
+  EXPECT_LT(orientation_deg, 0.2);
+  // The other projector's lens is solved as before.
+  const CameraModel other =
+      ReadCameraModelFile(rig / (world_->rig->projectors()[1].name + ".cameramodel"));
+  EXPECT_LT(
+      std::abs(other.intrinsics[0] / world_->rig->projectors()[1].geometry.intrinsics()[0] - 1.0),
+      0.005);
+  const nlohmann::json result = ReadJson(rig / "result.json");
+  for (const nlohmann::json& entry : result["projectors"]["projectors"])
+    EXPECT_EQ(entry["lens_held"].get<bool>(), entry["name"] == truth.name) << entry.dump();
+  const nlohmann::json rig_json = ReadJson(rig / "rig.json");
+  EXPECT_EQ(rig_json["registration"]["projectors"][0]["lens"].get<std::string>(),
+            truth.name == rig_json["registration"]["projectors"][0]["name"]
+                ? "held from " + lens_file.string()
+                : "solved");
+
+  // Refusals, one line each naming the file or the option, nothing written.
+  const std::filesystem::path bad_rig = *dir_ / "held_bad_rig";
+  WriteTrueCamera(bad_rig);
+  CameraModel wrong_size = lens;
+  wrong_size.width = 640;
+  WriteCameraModelFile(*dir_ / "board" / "wrong_size.cameramodel", wrong_size, "wrong size");
+  const std::string sessions = Session(0) + " " + Session(1);
+  const std::string room = " --scene synthetic:tiny_box --camera-guess " + kGuess;
+  struct Case {
+    std::string arguments, expected;
+  };
+  for (const Case& c : {
+           Case{sessions + room + " --hold-lens " + truth.name + "=" +
+                    (*dir_ / "board" / "wrong_size.cameramodel").string(),
+                "wrong_size.cameramodel: imagersize 640x"},
+           Case{sessions + room + " --hold-lens nobody=" + lens_file.string(),
+                "no session's projector is named 'nobody'"},
+           Case{sessions + room + " --hold-lens " + truth.name, "NAME=FILE"},
+           Case{sessions + room + " --hold-lens " + truth.name + "=" +
+                    (*dir_ / "board" / "missing.cameramodel").string(),
+                "missing.cameramodel"},
+           Case{sessions + " --camera-height 1.5 --hold-lens " + truth.name + "=" +
+                    lens_file.string(),
+                "--hold-lens: only with --scene"},
+       }) {
+    testing::ExpectOneErrorLine(testing::RunProcamStderr("calibrate projectors " + c.arguments +
+                                                         " --out " + bad_rig.string()),
+                                c.expected, c.arguments);
+  }
+  EXPECT_FALSE(std::filesystem::exists(bad_rig / "rig.json"));
+}
+
 // Bad input: one line naming the file or option, exit code 1, nothing written.
 TEST_F(CalibrateProjectorsCommand, BadInputIsRefusedAndNothingIsWritten) {
   const std::filesystem::path rig = *dir_ / "bad_rig";
