@@ -13,10 +13,12 @@
 #include <stdexcept>
 #include <vector>
 
+#include "base/html_report.h"
 #include "base/io.h"
 #include "base/json_fields.h"
 #include "base/parse.h"
 #include "calibration/photometric_transfer.h"
+#include "calibration/reflectance_map.h"
 #include "calibration/rig_directory.h"
 #include "capture/camera.h"
 #include "capture/session.h"
@@ -51,8 +53,11 @@ class PhotometricRigStage {
   // `photometric` and `result` (the command's JSON) get the units and the numbers.
   void Prepare(const PhotometricModel& model, const std::vector<FlatField>& fields,
                const cv::Mat& mask, nlohmann::json* photometric, nlohmann::json* result);
-  // Writes RIG_DIR/reflectance.npy (scene units) and rig.json, each atomically.
+  // Writes RIG_DIR/reflectance.npy and the projector's reflectance map with its report page
+  // (scene units) and rig.json, each atomically.
   void Commit() const;
+  // RIG_DIR/NAME.photometric_report.html: the reflectance map and its numbers.
+  void WriteReflectanceReport(const std::filesystem::path& path) const;
 
  private:
   struct State;
@@ -66,6 +71,7 @@ struct PhotometricRigStage::State {
   // Scene units only:
   std::optional<GeometryStage> stage;
   Projector projector;
+  ProjectorGeometry camera_geometry;
   CameraPixelLighting lighting;
   UnitLightModel model;
   Eigen::Vector3d camera_scale = Eigen::Vector3d::Ones();
@@ -73,6 +79,7 @@ struct PhotometricRigStage::State {
   cv::Mat transfer;
   // Prepared by Prepare():
   ReflectanceEstimate reflectance;
+  ReflectanceMap reflectance_map;
   RigPhotometry photometric_entry;
   RigProjector rig_projector;  // its photometry (black, max, response, mixing)
 };
@@ -147,7 +154,7 @@ PhotometricRigStage::PhotometricRigStage(const PhotometricStageOptions& args,
     throw IoError(s.rig_file + ": projectors: no entry named '" + args.projector +
                   "' with a model (procam calibrate projectors), needed for --scene");
   }
-  ProjectorGeometry camera_geometry;
+  ProjectorGeometry& camera_geometry = s.camera_geometry;
   try {
     camera_geometry = ReadCameraModel(rig_dir / rig.camera.model);
     s.projector.geometry = ReadCameraModel(rig_dir / entry->model);
@@ -242,6 +249,19 @@ void PhotometricRigStage::Prepare(const PhotometricModel& model,
     Report(s.args.progress,
            fmt::format("reflectance: {} of {} patches seen by the camera (≥ {} pixels)",
                        s.reflectance.patches_seen, level.size(), s.args.min_patch_pixels));
+    ReflectanceMapOptions map_options;
+    map_options.min_patch_pixels = s.args.min_patch_pixels;
+    s.reflectance_map = EstimateReflectanceMap(level, s.projector.geometry, s.camera_geometry,
+                                               s.lighting, s.reflectance, difference, mask,
+                                               model.max - model.black, s.camera_scale,
+                                               map_options);
+    Report(s.args.progress,
+           fmt::format("reflectance map: {} of the projector's {} lit pixels measured",
+                       s.reflectance_map.measured_pixels, s.reflectance_map.lit_pixels));
+    (*result)["reflectance_map"] = {{"file", ReflectanceMapFile(s.args.projector)},
+                                    {"lit_pixels", s.reflectance_map.lit_pixels},
+                                    {"measured_pixels", s.reflectance_map.measured_pixels},
+                                    {"report", s.args.projector + ".photometric_report.html"}};
     (*result)["reflectance"] = {{"file", "reflectance.npy"},
                                 {"patches", level.size()},
                                 {"patches_seen", s.reflectance.patches_seen},
@@ -269,8 +289,12 @@ void PhotometricRigStage::Prepare(const PhotometricModel& model,
 void PhotometricRigStage::Commit() const {
   const State& s = *state_;
   if (s.args.projector.empty()) return;
+  RigReflectanceMap map_entry;
   if (scene_units()) {
     WriteNpy(s.rig_dir / "reflectance.npy", RowMatrixXd(s.reflectance.reflectance));
+    WriteReflectanceMap(s.rig_dir, s.args.projector, s.reflectance_map, &map_entry);
+    map_entry.target_patches = s.stage->scene.target_patches;
+    WriteReflectanceReport(s.rig_dir / (s.args.projector + ".photometric_report.html"));
   }
   UpdateRigFile(s.rig_dir, [&](RigFile& rig) {
     RigProjector& entry = rig.Projector(s.args.projector);
@@ -288,8 +312,30 @@ void PhotometricRigStage::Commit() const {
       reflectance.patches = s.stage->patches.fine.size();
       reflectance.patches_seen = s.reflectance.patches_seen;
       rig.reflectance = reflectance;
+      rig.reflectance_maps[s.args.projector] = map_entry;
     }
   });
+}
+
+void PhotometricRigStage::WriteReflectanceReport(const std::filesystem::path& path) const {
+  const State& s = *state_;
+  const ReflectanceMap& map = s.reflectance_map;
+  HtmlReport report("procam: reflectance of the room as projector " + s.args.projector + " lights it");
+  report.Paragraph(
+      "From the white-minus-black flat field of session " + s.session_dir.string() +
+      ", each camera pixel's measured exitance over the model's irradiance there, carried to "
+      "the projector pixel that lights its point and scaled so that every patch's mean is its "
+      "estimated reflectance (docs/calibration.md#reflectance-per-pixel).");
+  report.Table({"patches", "seen by the camera", "projector pixels lighting a patch", "measured"},
+               {{std::to_string(s.stage->patches.fine.size()),
+                 std::to_string(s.reflectance.patches_seen), std::to_string(map.lit_pixels),
+                 std::to_string(map.measured_pixels)}});
+  constexpr double kRelativeRange = 0.2;
+  report.Figures(
+      {{"reflectance per projector pixel (sRGB)", DrawReflectanceMap(map)},
+       {"relative to its patch's (green): blue 0.8, white 1, red 1.2; grey: not measured",
+        DrawRelativeReflectance(map, s.reflectance.reflectance, kRelativeRange)}});
+  report.Write(path);
 }
 
 namespace {

@@ -5,7 +5,9 @@
 // projector's model) and a scene — in the scene's units, with the room's per-patch reflectance
 // (photometric_transfer.h). Writes RIG_DIR/NAME.photometric.json (photometric.json without a
 // projector name), the "photometric" → NAME section of RIG_DIR/result.json and, for a named
-// projector, its rig.json entry (and RIG_DIR/reflectance.npy in scene units). What `procam
+// projector, its rig.json entry (and, in scene units, RIG_DIR/reflectance.npy, the projector's
+// per-pixel reflectance map NAME.reflectance_map.png (calibration/reflectance_map.h) and its
+// report page NAME.photometric_report.html). What `procam
 // calibrate photometric` runs; docs/calibration.md.
 
 #include <filesystem>

@@ -86,6 +86,7 @@ ReflectanceEstimate EstimatePatchReflectance(const CameraPixelLighting& lighting
     }
   }
   const Eigen::MatrixX3d bounce = form_factors * radiosity;
+  estimate.bounce_irradiance = bounce;
 
   estimate.reflectance = level.reflectance;
   for (const int i : seen) {

@@ -44,6 +44,9 @@ struct ReflectanceEstimate {
   Eigen::MatrixX3d reflectance;  // (n,3): estimated where seen, the level's nominal elsewhere
   std::vector<int> pixels;       // camera pixels used per patch
   int patches_seen = 0;          // with at least min_pixels pixels
+  // (n,3) the bounce irradiance H = F·B the estimate divided by (per unit of `output`'s field,
+  // scene units), for the per-pixel reflectance map (calibration/reflectance_map.h).
+  Eigen::MatrixX3d bounce_irradiance;
 };
 
 // Per-patch reflectance from a white-minus-black field `difference` (camera B, G, R, camera

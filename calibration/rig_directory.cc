@@ -162,6 +162,30 @@ json ReflectanceJson(const RigReflectance& reflectance) {
           {"patches", reflectance.patches},     {"patches_seen", reflectance.patches_seen}};
 }
 
+RigReflectanceMap ReadReflectanceMapEntry(const json& object, const std::string& file,
+                                          const std::string& name) {
+  const JsonFields fields(object, file, "reflectance_maps." + name);
+  fields.RejectUnknown({"file", "width", "height", "target_patches", "lit_pixels", "measured_pixels"});
+  RigReflectanceMap entry;
+  entry.file = fields.String("file");
+  entry.width = Integer(fields, "width");
+  entry.height = Integer(fields, "height");
+  if (entry.width < 1 || entry.height < 1) throw fields.Error("width", "width and height must be >= 1");
+  entry.target_patches = Integer(fields, "target_patches");
+  if (fields.Has("lit_pixels")) entry.lit_pixels = Integer(fields, "lit_pixels");
+  if (fields.Has("measured_pixels")) entry.measured_pixels = Integer(fields, "measured_pixels");
+  return entry;
+}
+
+json ReflectanceMapJson(const RigReflectanceMap& entry) {
+  return {{"file", entry.file},
+          {"width", entry.width},
+          {"height", entry.height},
+          {"target_patches", entry.target_patches},
+          {"lit_pixels", entry.lit_pixels},
+          {"measured_pixels", entry.measured_pixels}};
+}
+
 }  // namespace
 
 RigProjector& RigFile::Projector(const std::string& name) {
@@ -188,7 +212,7 @@ RigFile ReadRigFile(const std::filesystem::path& rig_dir) {
   const json object = ReadJsonFile(path);
   const JsonFields fields(object, file, "");
   fields.RejectUnknown({"format_version", "camera", "projectors", "registration", "photometric",
-                        "reflectance"});
+                        "reflectance", "reflectance_maps"});
   if (!fields.Has("format_version") || !object["format_version"].is_number_integer()) {
     throw fields.Error("format_version",
                        "required key is missing (an integer; written by an older procam? "
@@ -222,6 +246,12 @@ RigFile ReadRigFile(const std::filesystem::path& rig_dir) {
       rig.photometric[item.key()] = ReadPhotometry(item.value(), file, item.key());
   }
   if (fields.Has("reflectance")) rig.reflectance = ReadReflectance(object["reflectance"], file);
+  if (fields.Has("reflectance_maps")) {
+    const JsonFields maps(object["reflectance_maps"], file, "reflectance_maps");
+    for (const auto& item : object["reflectance_maps"].items()) {
+      rig.reflectance_maps[item.key()] = ReadReflectanceMapEntry(item.value(), file, item.key());
+    }
+  }
   return rig;
 }
 
@@ -235,6 +265,11 @@ void WriteRigFile(const std::filesystem::path& rig_dir, const RigFile& rig) {
     object["photometric"] = photometric;
   }
   if (rig.reflectance) object["reflectance"] = ReflectanceJson(*rig.reflectance);
+  if (!rig.reflectance_maps.empty()) {
+    json maps = json::object();
+    for (const auto& [name, entry] : rig.reflectance_maps) maps[name] = ReflectanceMapJson(entry);
+    object["reflectance_maps"] = maps;
+  }
   std::filesystem::create_directories(rig_dir);
   WriteFileAtomically(rig_dir / "rig.json", object.dump(2) + "\n");
 }

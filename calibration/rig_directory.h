@@ -68,6 +68,15 @@ struct RigReflectance {
   int patches = 0, patches_seen = 0;
 };
 
+// rig.json's reflectance_maps.NAME: projector NAME's per-pixel reflectance, measured by
+// calibrate photometric --scene (calibration/reflectance_map.h, which owns the file).
+struct RigReflectanceMap {
+  std::string file;  // 16-bit PNG, relative to the rig directory
+  int width = 0, height = 0;  // the projector's image size
+  int target_patches = 0;     // the patch target of the estimate it is normalised to
+  int lit_pixels = 0, measured_pixels = 0;
+};
+
 // RIG_DIR/rig.json (docs/rig_format.md).
 struct RigFile {
   RigCamera camera;
@@ -77,6 +86,7 @@ struct RigFile {
   nlohmann::json registration;
   std::map<std::string, RigPhotometry> photometric;
   std::optional<RigReflectance> reflectance;
+  std::map<std::string, RigReflectanceMap> reflectance_maps;  // by projector name
 
   // The entry named `name`, added at the end when missing.
   RigProjector& Projector(const std::string& name);

@@ -88,6 +88,12 @@ std::filesystem::path WriteSyntheticSceneFile(const SyntheticScene& synthetic,
       files.emplace_back(stem + ".obj", ObjMeshText(surface, "written by procam scene write"));
       entry["mesh"] = stem + ".obj";
     }
+    if (surface.reflectance_texture.HasTexture()) {
+      const ReflectanceTexture& texture = surface.reflectance_texture;
+      files.emplace_back(stem + "_reflectance.png",
+                         TexturePng(dir / (stem + "_reflectance.png"), texture.texture_linear));
+      entry["reflectance"] = {{"texture", stem + "_reflectance.png"}, {"scale", texture.scale}};
+    }
     if (surface.desired.HasTexture()) {
       files.emplace_back(stem + ".png", TexturePng(dir / (stem + ".png"), surface.desired.texture_linear));
       entry["desired"] = {{"texture", stem + ".png"}};

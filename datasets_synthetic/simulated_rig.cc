@@ -63,7 +63,8 @@ SimulatedRig::SimulatedRig(const Scene& scene, std::vector<Projector> projectors
   SubdivisionOptions subdivision;
   subdivision.target_patches = options.solver_patches * options.world_factor;
   world_ = SubdividePatches(scene_, subdivision);
-  // Textured albedo: each world patch reflects with the albedo at its centre.
+  // Textured albedo: each world patch reflects with the albedo at its centre (times its
+  // reflectance texture's mean over it, SubdividePatches's, on a printed surface).
   for (int i = 0; i < world_.fine.size(); ++i) {
     const Patch& patch = world_.fine.patches[i];
     const double factor = AlbedoFactor(patch.surface, PatchTextureCoordinate(patch, patch.centroid));
@@ -116,8 +117,9 @@ SimulatedRig::SimulatedRig(const Scene& scene, std::vector<Projector> projectors
       const Vec3 point = origin + t * direction;
       if (world_.fine.patches[patch].normal.dot(origin - point) <= 0.0) continue;  // the unlit side
       const Patch& seen = world_.fine.patches[patch];
+      const Vec2 uv = PatchTextureCoordinate(seen, point);
       const Vec3 reflectance =
-          (AlbedoFactor(seen.surface, PatchTextureCoordinate(seen, point)) * scene_.surfaces[seen.surface].reflectance).cwiseMin(0.99);
+          (AlbedoFactor(seen.surface, uv) * scene_.surfaces[seen.surface].ReflectanceAt(uv)).cwiseMin(0.99);
       hits_[index] = {patch, point, reflectance};
       coverage_.at<uchar>(row, col) = 255;
     }
@@ -192,8 +194,13 @@ cv::Mat SimulatedRig::RenderRadiance(const std::vector<ProjectorImage>& images) 
         const double scale = 1.0 / projector.photometry.MaxCode();
         irradiance += gain * projector.photometry.Output(Vec3(code[0], code[1], code[2]) * scale);
       }
-      const Vec3 bounce = options_.smooth_bounce ? SmoothBounce(hit, indirect_irradiance)
-                                                 : Vec3(indirect.row(hit.world_patch).transpose());
+      // On a printed surface the world patch's mean reflectance is not the point's: the bounce
+      // light it reflects is its own reflectance times the patch's indirect irradiance.
+      const bool printed = scene_.surfaces[patch.surface].reflectance_texture.HasTexture();
+      const Vec3 bounce =
+          options_.smooth_bounce ? SmoothBounce(hit, indirect_irradiance)
+          : printed ? Vec3(hit.reflectance.cwiseProduct(indirect_irradiance.row(hit.world_patch).transpose()))
+                    : Vec3(indirect.row(hit.world_patch).transpose());
       const Vec3 exitance = hit.reflectance.cwiseProduct(irradiance) + bounce;
       radiance.at<cv::Vec3f>(row, col) = cv::Vec3f(exitance[0], exitance[1], exitance[2]);
     }

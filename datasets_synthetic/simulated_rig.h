@@ -6,10 +6,12 @@
 //                  projected into every projector; if x is inside the image and nothing occludes
 //                  it, the pixel it falls in lights it with output(drive) · Gain(x) (projector.h:
 //                  response, colour mixing, black level, distance and incidence falloff), times
-//                  the reflectance at x;
+//                  the reflectance at x (the surface's reflectance texture at x's UV
+//                  coordinate on a printed surface, Surface::ReflectanceAt, times AlbedoFactor);
 //   indirect light a radiosity solution on a "world" mesh `world_factor` times finer than the
 //                  solver's, driven by the direct light the images deliver to each world patch;
-//                  the bounce light B − E of the world patch x lies on is added;
+//                  the bounce light B − E of the world patch x lies on is added (on a
+//                  printed surface: x's reflectance times the patch's indirect irradiance);
 //   camera         a lens model with distortion (the projector geometry class, used as a camera:
 //                  `proj_from_world` is then cam_from_world), exposure, vignetting
 //                  (1 − v·r², r = distance from the image centre / half diagonal), shot noise
@@ -97,8 +99,15 @@ class SimulatedRig {
   // linear × white (CV_32FC3, RGB); 0 where the pixel sees nothing.
   cv::Mat RenderDesired() const;
   // The world's albedo relative to the surface's nominal reflectance at a texture coordinate
-  // (1 + albedo_variation · pattern(uv), pattern in [−1, 1]).
+  // (1 + albedo_variation · pattern(uv), pattern in [−1, 1]); on a printed surface it multiplies
+  // the reflectance texture's value there (the world reflects min(0.99, factor · ρ(uv))).
+  // The world's reflectance at a pixel's point: ReflectanceSeenByPixel.
   double AlbedoFactor(int surface, const Vec2& uv) const;
+  // The world's reflectance (R, G, B) at the point camera pixel (row, col) sees: the truth a
+  // measured reflectance map is judged against. Zero where the pixel sees nothing.
+  Vec3 ReflectanceSeenByPixel(int row, int col) const {
+    return hits_[static_cast<size_t>(row) * camera_.width() + col].reflectance;
+  }
   // Mask (CV_8UC1, 255) of pixels that see a surface.
   const cv::Mat& coverage() const { return coverage_; }
   // The surface point (world, metres) camera pixel (row, col) sees and the unit normal of its

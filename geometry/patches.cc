@@ -72,7 +72,16 @@ void FillAttributes(const Scene& scene, int texture_samples, PatchLevel* level) 
   for (int i = 0; i < n; ++i) {
     const Patch& patch = level->patches[i];
     const Surface& surface = scene.surfaces[patch.surface];
-    level->reflectance.row(i) = surface.reflectance.transpose();
+    if (surface.reflectance_texture.HasTexture()) {
+      // A printed surface: the patch's reflectance is the texture's area-weighted mean over the
+      // patch, by the same quadrature as the desired texture's.
+      SamplePatch(patch, texture_samples, &samples);
+      Vec3 reflectance = Vec3::Zero();
+      for (const PatchSample& sample : samples) reflectance += sample.weight * surface.reflectance_texture.At(sample.uv);
+      level->reflectance.row(i) = (reflectance / patch.area).transpose();
+    } else {
+      level->reflectance.row(i) = surface.reflectance.transpose();
+    }
     Vec3 desired = Vec3::Zero();
     if (surface.desired.HasTexture()) {
       SamplePatch(patch, texture_samples, &samples);

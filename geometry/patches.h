@@ -48,7 +48,8 @@ struct SubdivisionOptions {
   // Fine patches wanted in total (≥ 4); each surface gets a share proportional to its area,
   // at least 4 (one coarse patch).
   int target_patches = 1000;
-  // Sub-cells per patch side used to average a texture over a patch (≥ 1).
+  // Gauss–Legendre points per patch side used to average a texture (desired or reflectance)
+  // over a patch (SamplePatch), in [1, 64].
   int texture_samples = 4;
   bool Check(std::string* why) const;
 };

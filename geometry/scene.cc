@@ -59,18 +59,9 @@ DesiredAppearance ReadDesired(const JsonFields& fields, const std::filesystem::p
   return desired;
 }
 
-void CheckQuad(const std::array<Vec3, 4>& quad, double tolerance, const std::string& file,
-               const std::string& key) {
-  std::string why;
-  if (!CheckPlanarConvexPolygon(quad.data(), 4, tolerance, &why)) {
-    throw IoError(file + ": " + key + ": " + why);
-  }
-}
-
-}  // namespace
-
-Vec3 DesiredAppearance::LinearAt(const Vec2& uv) const {
-  if (!HasTexture()) return Vec3(SrgbToLinear(srgb[0]), SrgbToLinear(srgb[1]), SrgbToLinear(srgb[2]));
+// Bilinear lookup of a CV_32FC3 texture at UV (UV (0,0) = the image's bottom-left corner),
+// clamped at the borders.
+Vec3 TextureAt(const cv::Mat& texture_linear, const Vec2& uv) {
   const int width = texture_linear.cols, height = texture_linear.rows;
   const double x = std::clamp(uv[0] * width - 0.5, 0.0, width - 1.0);
   const double y = std::clamp((1.0 - uv[1]) * height - 0.5, 0.0, height - 1.0);
@@ -83,6 +74,79 @@ Vec3 DesiredAppearance::LinearAt(const Vec2& uv) const {
   };
   return (1 - fy) * ((1 - fx) * texel(y0, x0) + fx * texel(y0, x1)) +
          fy * ((1 - fx) * texel(y1, x0) + fx * texel(y1, x1));
+}
+
+// Why a reflectance texture cannot be a surface's reflectance, as "KEY: why" ("" when it can).
+std::string ReflectanceTextureProblem(const ReflectanceTexture& texture) {
+  if (!(texture.scale > 0.0 && texture.scale <= 1.0)) {
+    std::ostringstream why;
+    why << "scale: must be in (0, 1], got " << texture.scale;
+    return why.str();
+  }
+  const double brightest = texture.Max();
+  if (!(brightest < 1.0)) {
+    std::ostringstream why;
+    why << "texture: " << texture.texture_path << ": its brightest texel times scale is "
+        << brightest << ", a reflectance must be < 1 (give a scale below "
+        << texture.scale / brightest << ")";
+    return why.str();
+  }
+  return "";
+}
+
+// "reflectance": a number, [r, g, b], or {"texture": PATH, "scale": S} (ReflectanceTexture).
+void ReadReflectance(const JsonFields& fields, const std::string& file,
+                     const std::filesystem::path& base, Surface* surface) {
+  const json& value = fields.At("reflectance");
+  if (!value.is_object()) {
+    surface->reflectance = fields.NumberOrRgb("reflectance");
+    CheckReflectance(fields, "reflectance", surface->reflectance);
+    return;
+  }
+  JsonFields reflectance(value, file, fields.Path("reflectance"));
+  reflectance.RejectUnknown({"texture", "scale"});
+  ReflectanceTexture& texture = surface->reflectance_texture;
+  texture.texture_path = reflectance.String("texture");
+  if (reflectance.Has("scale")) texture.scale = reflectance.Number("scale");
+  if (!(texture.scale > 0.0 && texture.scale <= 1.0)) {
+    throw reflectance.Error("scale", "must be in (0, 1]");
+  }
+  try {
+    texture.texture_linear = LoadSrgbTextureAsLinear(base / texture.texture_path);
+  } catch (const IoError& error) {
+    throw reflectance.Error("texture", error.what());
+  }
+  const std::string problem = ReflectanceTextureProblem(texture);
+  if (!problem.empty()) throw IoError(file + ": " + reflectance.prefix() + "." + problem);
+  surface->reflectance = texture.Mean();
+}
+
+void CheckQuad(const std::array<Vec3, 4>& quad, double tolerance, const std::string& file,
+               const std::string& key) {
+  std::string why;
+  if (!CheckPlanarConvexPolygon(quad.data(), 4, tolerance, &why)) {
+    throw IoError(file + ": " + key + ": " + why);
+  }
+}
+
+}  // namespace
+
+Vec3 DesiredAppearance::LinearAt(const Vec2& uv) const {
+  if (!HasTexture()) return Vec3(SrgbToLinear(srgb[0]), SrgbToLinear(srgb[1]), SrgbToLinear(srgb[2]));
+  return TextureAt(texture_linear, uv);
+}
+
+Vec3 ReflectanceTexture::At(const Vec2& uv) const { return scale * TextureAt(texture_linear, uv); }
+
+Vec3 ReflectanceTexture::Mean() const {
+  const cv::Scalar mean = cv::mean(texture_linear);
+  return scale * Vec3(mean[0], mean[1], mean[2]);
+}
+
+double ReflectanceTexture::Max() const {
+  double brightest = 0.0;
+  cv::minMaxLoc(texture_linear.reshape(1), nullptr, &brightest);
+  return scale * brightest;
 }
 
 double Surface::Area() const {
@@ -139,6 +203,10 @@ void ValidateScene(const Scene& scene) {
       if (!(surface.reflectance[c] >= 0.0 && surface.reflectance[c] < 1.0)) {
         throw IoError(file + ": " + key + ".reflectance: each value must be in [0,1)");
       }
+    }
+    if (surface.reflectance_texture.HasTexture()) {
+      const std::string problem = ReflectanceTextureProblem(surface.reflectance_texture);
+      if (!problem.empty()) throw IoError(file + ": " + key + ".reflectance." + problem);
     }
     if (surface.kind == Surface::Kind::kQuad) CheckQuad(surface.quad, scene.weld_tolerance, file, key + ".quad");
     if (surface.kind == Surface::Kind::kMesh && surface.mesh_triangles.empty()) {
@@ -226,8 +294,7 @@ Scene LoadScene(const std::filesystem::path& path) {
         throw fields.Error("mesh", error.what());
       }
     }
-    surface.reflectance = fields.NumberOrRgb("reflectance");
-    CheckReflectance(fields, "reflectance", surface.reflectance);
+    ReadReflectance(fields, file, base, &surface);
     surface.desired = ReadDesired(fields, base);
     scene.surfaces.push_back(std::move(surface));
   }

@@ -30,6 +30,25 @@ struct DesiredAppearance {
   Vec3 LinearAt(const Vec2& uv) const;
 };
 
+// A surface that is not evenly painted (a printed poster, stains): its diffuse reflectance per
+// point is `scale` × the texture's linear RGB at the point's UV coordinate, mapped as the desired
+// texture is (bilinear, clamped at the borders). Every value it gives is in [0,1): LoadScene and
+// ValidateScene refuse a brightest texel × scale ≥ 1.
+struct ReflectanceTexture {
+  std::string texture_path;  // as written in the scene, resolved against the scene file
+  cv::Mat texture_linear;    // CV_32FC3, linear RGB in [0,1], row 0 = top of the image
+  double scale = 1.0;        // multiplies every texel, in (0, 1]
+
+  bool HasTexture() const { return !texture_linear.empty(); }
+  // scale × the texture at `uv` (bilinear, clamped at the borders). Needs HasTexture().
+  Vec3 At(const Vec2& uv) const;
+  // scale × the texture's mean over its texels (the surface's mean reflectance when the surface
+  // maps its UV square evenly, as a parallelogram does).
+  Vec3 Mean() const;
+  // scale × the brightest texel value over all channels.
+  double Max() const;
+};
+
 // One triangle of a mesh surface: vertex indices and per-corner UV coordinates.
 struct MeshTriangle {
   std::array<int, 3> vertex;
@@ -44,10 +63,16 @@ struct Surface {
   std::vector<Vec3> mesh_vertices;         // kMesh: welded vertex positions
   std::vector<MeshTriangle> mesh_triangles;  // kMesh: each counter-clockwise from the lit side
   std::string mesh_path;                   // kMesh: as written in the scene
-  Vec3 reflectance = Vec3::Constant(0.9);  // diffuse reflectance per channel, each in [0,1)
+  // Diffuse reflectance per channel, each in [0,1); with a reflectance texture, its Mean().
+  Vec3 reflectance = Vec3::Constant(0.9);
+  ReflectanceTexture reflectance_texture;  // empty: `reflectance` everywhere on the surface
   DesiredAppearance desired;
 
   double Area() const;
+  // The reflectance at a UV coordinate: the texture's when there is one, else `reflectance`.
+  Vec3 ReflectanceAt(const Vec2& uv) const {
+    return reflectance_texture.HasTexture() ? reflectance_texture.At(uv) : reflectance;
+  }
 };
 
 // Direct-light exitance limits per channel (linear, same units as the white radiosity) used

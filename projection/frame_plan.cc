@@ -57,6 +57,11 @@ FramePlanner::FramePlanner(const ProjectionRig& rig, const RenderOptions& option
         "RenderOptions::detail: frame plans carry no per-pixel texture detail (render it with "
         "RenderProjectorImages and the scene)");
   }
+  if (options.reflectance) {
+    throw std::invalid_argument(
+        "RenderOptions::reflectance: frame plans carry no per-pixel reflectance (render it with "
+        "RenderProjectorImages)");
+  }
   if (options.light == LightField::kSmooth)
     field_ = std::make_unique<SeamlessField>(rig, options.seamless);
   tables_->reserve(rig.projectors.size());

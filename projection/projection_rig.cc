@@ -420,6 +420,39 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
   return rig;
 }
 
+void AttachReflectanceMaps(const std::vector<cv::Mat>& maps, ProjectionRig* rig) {
+  if (maps.size() != rig->maps.size()) {
+    throw std::invalid_argument(std::to_string(maps.size()) + " reflectance maps for " +
+                                std::to_string(rig->maps.size()) + " projectors");
+  }
+  for (size_t k = 0; k < maps.size(); ++k) {
+    ProjectorMap& map = rig->maps[k];
+    map.reflectance.clear();
+    if (maps[k].empty()) continue;
+    const std::string name = "projector '" + rig->projectors[k].name + "'";
+    if (maps[k].type() != CV_32FC3 || maps[k].cols != map.width || maps[k].rows != map.height) {
+      throw std::invalid_argument(name + ": its reflectance map is not " + std::to_string(map.width) +
+                                  "x" + std::to_string(map.height) + " linear RGB (CV_32FC3)");
+    }
+    map.reflectance.resize(static_cast<size_t>(map.width) * map.height);
+    for (int row = 0; row < map.height; ++row) {
+      const cv::Vec3f* values = maps[k].ptr<cv::Vec3f>(row);
+      for (int col = 0; col < map.width; ++col) {
+        const cv::Vec3f& value = values[col];
+        for (int c = 0; c < 3; ++c) {
+          if (!(std::isfinite(value[c]) && value[c] >= 0.0f)) {
+            throw std::invalid_argument(name + ": its reflectance map has a value that is not "
+                                        "finite and >= 0 at pixel (" + std::to_string(col) + ", " +
+                                        std::to_string(row) + ")");
+          }
+        }
+        map.reflectance[static_cast<size_t>(row) * map.width + col] =
+            Eigen::Vector3f(value[0], value[1], value[2]);
+      }
+    }
+  }
+}
+
 bool SetBoundsFromProjectors(const Scene& scene, const PatchLevel& level, Eigen::MatrixX3d* lower,
                              Eigen::MatrixX3d* upper, const ProjectionRigOptions& options) {
   std::vector<Projector> projectors = ReadProjectors(scene);

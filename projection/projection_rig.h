@@ -48,6 +48,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <opencv2/core/mat.hpp>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -86,6 +87,10 @@ struct ProjectorMap {
   // Texture coordinate (Patch::uv interpolated, PatchTextureCoordinate) of the point the pixel
   // lights; (0, 0) where patch is −1. Empty unless ProjectionRigOptions::texture_coordinates.
   std::vector<Eigen::Vector2f> uv;
+  // Measured reflectance (linear R, G, B) of the point each pixel lights, row-major, from the
+  // rig's reflectance map (calibration/reflectance_map.h) through AttachReflectanceMaps; empty
+  // unless attached. What RenderOptions::reflectance divides each pixel's light by.
+  std::vector<Eigen::Vector3f> reflectance;
   double pixel_solid_angle = 0.0;  // Ω_k = 1 / axis pixel density (sr; flux per unit output, m²)
   // The lit pixels grouped by patch: those of patch i are pixels_by_patch[patch_begin[i] ..
   // patch_begin[i + 1]), ascending.
@@ -144,6 +149,12 @@ struct ProjectionRigSummary {
 ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector> projectors,
                                  const ProjectionRigOptions& options,
                                  ProjectionRigSummary* summary = nullptr);
+
+// Attaches one reflectance map per projector (CV_32FC3, linear R, G, B, the projector's size;
+// ProjectorMap::reflectance); an empty map leaves that projector's unattached. Throws
+// std::invalid_argument naming the projector when the count or a size differs, or a value is
+// not finite and ≥ 0.
+void AttachReflectanceMaps(const std::vector<cv::Mat>& maps, ProjectionRig* rig);
 
 // Direct-light exitance bounds of every patch of `level` from the scene's projectors, for
 // CompensationProblem::lower/upper. Returns false (outputs untouched) if the scene lists no

@@ -116,6 +116,59 @@ std::vector<std::vector<Eigen::Vector3f>> DetailFactors(const ProjectionRig& rig
   return detail;
 }
 
+// Reflectance factor q per lit pixel and channel (header comment, "Reflectance"), in the order
+// of each map's pixels_by_patch, each patch's renormalised to a weighted mean of 1 (weights w a).
+std::vector<std::vector<Eigen::Vector3f>> ReflectanceFactors(const ProjectionRig& rig,
+                                                             const RenderOptions& options) {
+  const int n = rig.size();
+  const int projector_count = static_cast<int>(rig.maps.size());
+  std::vector<std::vector<Eigen::Vector3f>> factors(projector_count);
+  for (int k = 0; k < projector_count; ++k)
+    factors[k].assign(rig.maps[k].lit_pixels, Eigen::Vector3f::Ones());
+  const double low = 1.0 / options.reflectance_ratio_max, high = options.reflectance_ratio_max;
+#pragma omp parallel for schedule(dynamic, 16)
+  for (int i = 0; i < n; ++i) {
+    // The patch's mean reflectance as its pixels light it.
+    Vec3 reflectance_sum = Vec3::Zero();
+    double weight_sum = 0.0;
+    for (int k = 0; k < projector_count; ++k) {
+      const ProjectorMap& map = rig.maps[k];
+      const double scale = rig.coverage_scale(i, k) * map.pixel_solid_angle;
+      for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+        const int32_t index = map.pixels_by_patch[position];
+        const double weight = scale * map.share[index];
+        reflectance_sum += weight * map.reflectance[index].cast<double>();
+        weight_sum += weight;
+      }
+    }
+    if (!(weight_sum > 0.0)) continue;
+    const Vec3 mean = reflectance_sum / weight_sum;
+    Vec3 factor_sum = Vec3::Zero();
+    for (int k = 0; k < projector_count; ++k) {
+      const ProjectorMap& map = rig.maps[k];
+      const double scale = rig.coverage_scale(i, k) * map.pixel_solid_angle;
+      for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+        const int32_t index = map.pixels_by_patch[position];
+        Eigen::Vector3f& q = factors[k][position];
+        for (int c = 0; c < 3; ++c) {
+          const double rho = map.reflectance[index][c];
+          // A channel measured black over the whole patch has nothing to even out.
+          q[c] = mean[c] > 0.0 ? static_cast<float>(std::clamp(rho > 0.0 ? mean[c] / rho : high, low, high))
+                               : 1.0f;
+        }
+        factor_sum += scale * map.share[index] * q.cast<double>();
+      }
+    }
+    const Eigen::Vector3f normaliser = (weight_sum * factor_sum.cwiseInverse()).cast<float>();
+    for (int k = 0; k < projector_count; ++k) {
+      for (int position = rig.maps[k].patch_begin[i]; position < rig.maps[k].patch_begin[i + 1];
+           ++position)
+        factors[k][position] = factors[k][position].cwiseProduct(normaliser);
+    }
+  }
+  return factors;
+}
+
 // The detail's and the seamless light's factors multiplied into *combined (the detail), then
 // renormalised to a weighted mean of 1 per patch and channel (weights w a), so the flux is kept.
 // A patch whose detail is 1 everywhere (untextured) keeps the seamless factors as they are: they
@@ -156,13 +209,22 @@ void CombineFactors(const ProjectionRig& rig,
 }
 
 // The factor on τ per lit pixel (in pixels_by_patch order) and channel: the detail d, the
-// seamless light's m, or both (header comment); none with neither (1). `flux` is step 1's.
+// reflectance's q, the seamless light's m, or their product renormalised (header comment); none
+// with none of them (1). `flux` is step 1's.
 std::vector<std::vector<Eigen::Vector3f>> PixelFactors(const ProjectionRig& rig, const Scene& scene,
                                                        const Eigen::MatrixX3d& flux,
                                                        const RenderOptions& options,
                                                        long long* textured_pixels) {
   std::vector<std::vector<Eigen::Vector3f>> detail;
   if (options.detail) detail = DetailFactors(rig, scene, options, textured_pixels);
+  if (options.reflectance) {
+    const std::vector<std::vector<Eigen::Vector3f>> reflectance = ReflectanceFactors(rig, options);
+    if (detail.empty()) {
+      detail = reflectance;
+    } else {
+      CombineFactors(rig, reflectance, &detail);
+    }
+  }
   if (options.light != LightField::kSmooth) return detail;
   const int n = rig.size();
   Eigen::MatrixX3d exitance = Eigen::MatrixX3d::Zero(n, 3);  // ρ τ, above black
@@ -236,6 +298,10 @@ bool RenderOptions::Check(std::string* why) const {
     *why = "detail_max must be in [1, 1000]";
     return false;
   }
+  if (!(reflectance_ratio_max >= 1.0 && reflectance_ratio_max <= 1000.0)) {
+    *why = "reflectance_ratio_max must be in [1, 1000]";
+    return false;
+  }
   return true;
 }
 
@@ -265,6 +331,15 @@ void CheckRenderInputs(const ProjectionRig& rig, const Scene& scene,
                                 " rows, the rig " + std::to_string(n) + " patches");
   }
   if (!emittance.allFinite()) throw std::invalid_argument("emittance has non-finite values");
+  if (options.reflectance) {
+    for (size_t k = 0; k < rig.maps.size(); ++k) {
+      if (rig.maps[k].reflectance.size() != rig.maps[k].patch.size()) {
+        throw std::invalid_argument("RenderOptions::reflectance: projector '" +
+                                    rig.projectors[k].name +
+                                    "' has no reflectance map (AttachReflectanceMaps)");
+      }
+    }
+  }
   if (options.detail) {
     for (const ProjectorMap& map : rig.maps) {
       if (map.uv.size() != map.patch.size()) {
@@ -738,7 +813,7 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
   const auto start = Clock::now();
   RenderSummary local;
   RenderSummary& s = summary ? *summary : local;
-  if (!options.detail) {
+  if (!options.detail && !options.reflectance) {
     // A frame plan (levels per patch, the seamless field's node values) shaded on the CPU.
     const FramePlanner planner(rig, options);
     const FramePlan plan = planner.Plan(emittance);

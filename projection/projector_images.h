@@ -40,6 +40,19 @@
 // for them (step 2 with w a d in place of w a); the summary counts them. Surfaces without a
 // texture get d = 1: the same images as without detail.
 //
+// Reflectance (RenderOptions::reflectance): a patch has one reflectance ρ_i in the model, while
+// the surface under it may be printed or unevenly painted. With the measured reflectance ρ_p of
+// the point each pixel lights (ProjectorMap::reflectance), τ becomes τ · q_p per pixel and
+// channel with q_p = ρ̄_i / ρ_p, ρ̄_i the patch's mean of ρ_p as its pixels light it (weights
+// w a), clamped to [1/reflectance_ratio_max, reflectance_ratio_max] and divided by its own
+// weighted mean: the patch keeps its flux Φ, and the exitance ρ_p · τ q_p is the same at every
+// pixel of the patch (where no pixel saturates), so a poster or a stain fades. Where the
+// projector's range runs out (dark points asking for more than full drive) those pixels saturate
+// and the rest of the patch makes up the flux (step 2). Keeping the flux while moving light from
+// bright to dark points lowers the patch's mean exitance by the factor 1 / mean(ρ̄/ρ) (≤ 1, to
+// second order in ρ's spread: 0.1% for ±5% paint). With detail or the seamless light, the
+// factors multiply and are renormalised to mean 1.
+//
 // Light (RenderOptions::light): with kFlat, step 2's level is uniform over each patch, so the
 // light steps at every patch border and the patch grid shows on surfaces meant to look even. With
 // kSmooth (the default), τ becomes τ · m_p per pixel and channel, m the seamless light's factor
@@ -92,6 +105,14 @@ struct RenderOptions {
   // detail_max ≤ 1000. Bounds the contrast one patch's light may take on (dark texels still get
   // detail_min of the patch's mean level, bright ones at most detail_max).
   double detail_min = 0.2, detail_max = 5.0;
+  // Divide each pixel's light by the measured reflectance of the point it lights relative to
+  // its patch's (header comment, "Reflectance"). Needs every projector's map to carry
+  // ProjectorMap::reflectance (AttachReflectanceMaps).
+  bool reflectance = false;
+  // The factor ρ̄ / ρ per channel is clamped to [1 / reflectance_ratio_max,
+  // reflectance_ratio_max] before it is renormalised, in [1, 1000]: a point measured nearly
+  // black is not asked for unbounded light.
+  double reflectance_ratio_max = 5.0;
   bool Check(std::string* why) const;
 };
 
@@ -110,9 +131,9 @@ struct RenderSummary {
   int patches_unreached = 0;    // patches no projector lights
   std::vector<long long> saturated_pixels;  // per projector: some channel at full drive
   std::vector<long long> clipped_pixels;    // per projector: outside the gamut (mixing)
-  // Per projector: pixels at full drive on a channel the detail or the seamless light raises
-  // (factor > 1): where the texture's highlights or the field's peaks are clipped (included in
-  // saturated_pixels). Zeros with neither.
+  // Per projector: pixels at full drive on a channel the detail, the reflectance or the seamless
+  // light raises (factor > 1): where the texture's highlights, the darkest printed points or the
+  // field's peaks are clipped (included in saturated_pixels). Zeros with none of them.
   std::vector<long long> detail_saturated_pixels;
   // Lit pixels whose patch's surface has a texture (all projectors); 0 without detail.
   long long detail_pixels = 0;

@@ -17,10 +17,12 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "base/html_report.h"
 #include "base/io.h"
 #include "base/json_fields.h"
 #include "calibration/photometric.h"
 #include "calibration/photometric_transfer.h"
+#include "calibration/reflectance_map.h"
 #include "calibration/rig_directory.h"
 #include "compensation/unit_light.h"
 #include "datasets_synthetic/paper_scenes.h"
@@ -505,6 +507,18 @@ TEST(ScenePhotometryCommand, FillsTheRigInSceneUnits) {
   }
   EXPECT_TRUE(std::filesystem::exists(rig / "reflectance.npy"));
   EXPECT_EQ(filled["reflectance"]["target_patches"], kPatches);
+  // The projector's reflectance map, its rig.json entry (read back through its owner) and its
+  // report page.
+  const RigFile rig_file = ReadRigFile(rig);
+  ASSERT_EQ(rig_file.reflectance_maps.count("left"), 1u);
+  const RigReflectanceMap& map_entry = rig_file.reflectance_maps.at("left");
+  EXPECT_EQ(map_entry.width, truth.geometry.width());
+  EXPECT_EQ(map_entry.height, truth.geometry.height());
+  EXPECT_GT(map_entry.measured_pixels, map_entry.lit_pixels / 4);
+  const cv::Mat map = ReadReflectanceMap(rig, "left", map_entry);
+  EXPECT_EQ(map.size(), cv::Size(truth.geometry.width(), truth.geometry.height()));
+  const std::string report = ReadFile(rig / "left.photometric_report.html");
+  EXPECT_TRUE(CheckReportStructure(report).empty());
 
   // compensate consumes it (projector "left" alone; reflectance from the rig).
   const CommandRun compensate = RunProcam("compensate " + scene.string() + " --rig " +

@@ -176,5 +176,35 @@ TEST(SubdividePatches, TextureIsAveragedInLinearLight) {
   }
 }
 
+// A printed surface's patches reflect with the texture's mean over each: a texture dark on its
+// left half (0.2) and light on its right (0.8), scaled by 0.9, gives the fine patches of either
+// half 0.18 or 0.72 and the coarse patch over both their mean, 0.45.
+TEST(SubdividePatches, ReflectanceTextureIsAveragedOverEachPatch) {
+  Scene scene;
+  Surface surface = MakeRectangle(Vec3::Zero(), Vec3(1, 0, 0), Vec3(0, 1, 0), 0.5, Vec3::Zero());
+  surface.reflectance_texture.texture_linear = cv::Mat(1, 64, CV_32FC3, cv::Scalar(0.2, 0.2, 0.2));
+  for (int col = 32; col < 64; ++col) {
+    surface.reflectance_texture.texture_linear.at<cv::Vec3f>(0, col) = cv::Vec3f(0.8, 0.8, 0.8);
+  }
+  surface.reflectance_texture.scale = 0.9;
+  scene.surfaces.push_back(surface);
+  SubdivisionOptions subdivision;
+  subdivision.target_patches = 4;  // 2×2 fine patches
+  subdivision.texture_samples = 8;
+  const PatchHierarchy h = SubdividePatches(scene, subdivision);
+  ASSERT_EQ(h.coarse.size(), 1);
+  ASSERT_EQ(h.fine.size(), 4);
+  // The bilinear lookup blurs the step over one texel (1/64 of the width): within 0.01.
+  EXPECT_NEAR(h.coarse.reflectance(0, 0), 0.45, 0.01);
+  for (int i = 0; i < h.fine.size(); ++i) {
+    const double expected = h.fine.patches[i].centroid.x() > 0.5 ? 0.72 : 0.18;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(h.fine.reflectance(i, c), expected, 0.01) << i;
+  }
+  // A surface without a texture keeps its one reflectance on every patch.
+  scene.surfaces[0].reflectance_texture = ReflectanceTexture();
+  const PatchHierarchy plain = SubdividePatches(scene, subdivision);
+  for (int i = 0; i < plain.fine.size(); ++i) EXPECT_EQ(plain.fine.reflectance(i, 0), 0.5);
+}
+
 }  // namespace
 }  // namespace procam

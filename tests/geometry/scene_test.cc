@@ -200,6 +200,74 @@ TEST(LoadScene, TexturesAreDecodedToLinear) {
   EXPECT_NEAR(desired.LinearAt(Vec2(1.0, 0.0))[2], 0.5029, 1e-3);  // sRGB 188/255 → 0.5029
 }
 
+// A printed surface: reflectance = scale × the texture (sRGB-decoded) at the point's UV.
+TEST(LoadScene, ReadsReflectanceTextures) {
+  testing::TempDir dir;
+  cv::Mat image(2, 2, CV_8UC3, cv::Scalar(0, 0, 0));
+  image.at<cv::Vec3b>(0, 0) = cv::Vec3b(255, 255, 255);  // top-left white
+  image.at<cv::Vec3b>(1, 1) = cv::Vec3b(188, 188, 188);  // bottom-right sRGB 188 → 0.5029
+  cv::imwrite((dir / "poster.png").string(), image);
+  const Scene scene = LoadScene(dir.Write(
+      "scene.json", SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], )"
+                              R"("reflectance": {"texture": "poster.png", "scale": 0.8}, "desired": [1,1,1]})")));
+  const Surface& surface = scene.surfaces[0];
+  ASSERT_TRUE(surface.reflectance_texture.HasTexture());
+  EXPECT_EQ(surface.reflectance_texture.texture_path, "poster.png");
+  EXPECT_NEAR(surface.ReflectanceAt(Vec2(0.0, 1.0))[1], 0.8, 1e-6);
+  EXPECT_NEAR(surface.ReflectanceAt(Vec2(1.0, 0.0))[1], 0.8 * 0.5029, 1e-3);
+  EXPECT_NEAR(surface.ReflectanceAt(Vec2(1.0, 1.0))[1], 0.0, 1e-6);
+  // Halfway between the white and the black texel of the top row (bilinear between centres).
+  EXPECT_NEAR(surface.ReflectanceAt(Vec2(0.5, 0.75))[0], 0.4, 1e-6);
+  // The nominal reflectance is the texels' mean × scale.
+  EXPECT_NEAR(surface.reflectance[2], 0.8 * (1.0 + 0.5029) / 4, 1e-3);
+  EXPECT_NEAR(surface.reflectance_texture.Max(), 0.8, 1e-6);
+  // Without a scale the texture's values are the reflectance, which a white texel makes 1.
+  const std::string white = LoadError(
+      dir, SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], )"
+                     R"("reflectance": {"texture": "poster.png"}, "desired": [1,1,1]})"));
+  EXPECT_NE(white.find("surfaces[0].reflectance.texture: poster.png: its brightest texel times scale is 1"),
+            std::string::npos)
+      << white;
+}
+
+TEST(LoadScene, ReportsReflectanceTextureProblemsWithFileAndKey) {
+  testing::TempDir dir;
+  cv::imwrite((dir / "grey.png").string(), cv::Mat(2, 2, CV_8UC3, cv::Scalar(100, 100, 100)));
+  ASSERT_EQ(::mkfifo((dir / "fifo").c_str(), 0600), 0);
+  struct Case {
+    std::string reflectance, expected;
+  };
+  const std::vector<Case> cases = {
+      {R"({"texture": "none.png"})",
+       "surfaces[0].reflectance.texture: " + (dir / "none.png").string() + ": file not found"},
+      {R"({"texture": "fifo"})", "surfaces[0].reflectance.texture: " + (dir / "fifo").string() + ": not a regular file"},
+      {R"({"scale": 0.5})", "surfaces[0].reflectance.texture: required key is missing"},
+      {R"({"texture": "grey.png", "scale": 0})", "surfaces[0].reflectance.scale: must be in (0, 1]"},
+      {R"({"texture": "grey.png", "scale": 1.5})", "surfaces[0].reflectance.scale: must be in (0, 1]"},
+      {R"({"texture": 3})", "surfaces[0].reflectance.texture: must be a string"},
+      {R"({"texture": "grey.png", "gain": 1})", "surfaces[0].reflectance.gain: unknown key"},
+  };
+  for (const Case& c : cases) {
+    const std::string message = LoadError(
+        dir, SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": )" +
+                       c.reflectance + R"(, "desired": [1,1,1]})"));
+    EXPECT_NE(message.find((dir / "scene.json").string() + ": " + c.expected), std::string::npos)
+        << message << "\nexpected: " << c.expected;
+  }
+}
+
+TEST(ValidateScene, RejectsReflectanceTexturesReachingOne) {
+  Scene scene;
+  Surface surface;
+  surface.quad = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)};
+  surface.reflectance = Vec3::Constant(0.5);
+  surface.reflectance_texture.texture_linear = cv::Mat(2, 2, CV_32FC3, cv::Scalar(0.2, 0.5, 1.0));
+  scene.surfaces.push_back(surface);
+  EXPECT_THROW(ValidateScene(scene), IoError);
+  scene.surfaces[0].reflectance_texture.scale = 0.9;
+  EXPECT_NO_THROW(ValidateScene(scene));
+}
+
 TEST(ValidateScene, RejectsReflectanceOfOne) {
   Scene scene;
   Surface surface;
