@@ -251,10 +251,9 @@ void PhotometricRigStage::Prepare(const PhotometricModel& model,
                        s.reflectance.patches_seen, level.size(), s.args.min_patch_pixels));
     ReflectanceMapOptions map_options;
     map_options.min_patch_pixels = s.args.min_patch_pixels;
-    s.reflectance_map = EstimateReflectanceMap(level, s.projector.geometry, s.camera_geometry,
-                                               s.lighting, s.reflectance, difference, mask,
-                                               model.max - model.black, s.camera_scale,
-                                               map_options);
+    s.reflectance_map = EstimateReflectanceMap(
+        level, s.projector.geometry, s.camera_geometry, s.lighting, s.reflectance, difference, mask,
+        model.max - model.black, s.camera_scale, map_options);
     Report(s.args.progress,
            fmt::format("reflectance map: {} of the projector's {} lit pixels measured",
                        s.reflectance_map.measured_pixels, s.reflectance_map.lit_pixels));
@@ -320,16 +319,17 @@ void PhotometricRigStage::Commit() const {
 void PhotometricRigStage::WriteReflectanceReport(const std::filesystem::path& path) const {
   const State& s = *state_;
   const ReflectanceMap& map = s.reflectance_map;
-  HtmlReport report("procam: reflectance of the room as projector " + s.args.projector + " lights it");
+  HtmlReport report("procam: reflectance of the room as projector " + s.args.projector +
+                    " lights it");
   report.Paragraph(
       "From the white-minus-black flat field of session " + s.session_dir.string() +
       ", each camera pixel's measured exitance over the model's irradiance there, carried to "
       "the projector pixel that lights its point and scaled so that every patch's mean is its "
       "estimated reflectance (docs/calibration.md#reflectance-per-pixel).");
-  report.Table({"patches", "seen by the camera", "projector pixels lighting a patch", "measured"},
-               {{std::to_string(s.stage->patches.fine.size()),
-                 std::to_string(s.reflectance.patches_seen), std::to_string(map.lit_pixels),
-                 std::to_string(map.measured_pixels)}});
+  report.Table(
+      {"patches", "seen by the camera", "projector pixels lighting a patch", "measured"},
+      {{std::to_string(s.stage->patches.fine.size()), std::to_string(s.reflectance.patches_seen),
+        std::to_string(map.lit_pixels), std::to_string(map.measured_pixels)}});
   constexpr double kRelativeRange = 0.2;
   report.Figures(
       {{"reflectance per projector pixel (sRGB)", DrawReflectanceMap(map)},

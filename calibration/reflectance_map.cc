@@ -3,10 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
 #include <vector>
-
-#include <opencv2/imgcodecs.hpp>
 
 #include "base/image_io.h"
 #include "base/io.h"
@@ -32,25 +31,22 @@ bool ReflectanceMapOptions::Check(std::string* why) const {
   return true;
 }
 
-ReflectanceMap EstimateReflectanceMap(const PatchLevel& level, const ProjectorGeometry& projector,
-                                      const ProjectorGeometry& camera,
-                                      const CameraPixelLighting& lighting,
-                                      const ReflectanceEstimate& estimate,
-                                      const cv::Mat& difference, const cv::Mat& mask,
-                                      const Eigen::Vector3d& output,
-                                      const Eigen::Vector3d& camera_scale,
-                                      const ReflectanceMapOptions& options) {
+ReflectanceMap EstimateReflectanceMap(
+    const PatchLevel& level, const ProjectorGeometry& projector, const ProjectorGeometry& camera,
+    const CameraPixelLighting& lighting, const ReflectanceEstimate& estimate,
+    const cv::Mat& difference, const cv::Mat& mask, const Eigen::Vector3d& output,
+    const Eigen::Vector3d& camera_scale, const ReflectanceMapOptions& options) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("reflectance map: " + why);
   const int n = level.size();
   const int cw = lighting.width, ch = lighting.height;
   if (difference.type() != CV_32FC3 || difference.cols != cw || difference.rows != ch ||
       (!mask.empty() && mask.size() != difference.size()) ||
-      lighting.patch.size() != static_cast<size_t>(cw) * ch ||
-      estimate.reflectance.rows() != n || estimate.bounce_irradiance.rows() != n ||
-      estimate.pixels.size() != static_cast<size_t>(n) || camera.width() != cw ||
-      camera.height() != ch) {
-    throw std::invalid_argument("reflectance map: the camera's image, lighting and estimate differ in size");
+      lighting.patch.size() != static_cast<size_t>(cw) * ch || estimate.reflectance.rows() != n ||
+      estimate.bounce_irradiance.rows() != n || estimate.pixels.size() != static_cast<size_t>(n) ||
+      camera.width() != cw || camera.height() != ch) {
+    throw std::invalid_argument(
+        "reflectance map: the camera's image, lighting and estimate differ in size");
   }
   const auto seen = [&](int i) { return estimate.pixels[i] >= options.min_patch_pixels; };
 
@@ -66,7 +62,8 @@ ReflectanceMap EstimateReflectanceMap(const PatchLevel& level, const ProjectorGe
       const cv::Vec3f& value = difference.at<cv::Vec3f>(row, col);
       bool ok = true;
       for (int c = 0; c < 3; ++c) {
-        const double irradiance = lighting.gain[index] * output[c] + estimate.bounce_irradiance(i, c);
+        const double irradiance =
+            lighting.gain[index] * output[c] + estimate.bounce_irradiance(i, c);
         if (!(irradiance > 0.0)) ok = false;
         ratio[index][c] = value[2 - c] / camera_scale[c] / irradiance;
       }
@@ -93,14 +90,17 @@ ReflectanceMap EstimateReflectanceMap(const PatchLevel& level, const ProjectorGe
       const Vec3 direction = world_from_proj.linear() * directions[index];
       double t = 0.0;
       int i = -1;
-      if (!patches.Intersect(origin, direction, 0.0, std::numeric_limits<double>::infinity(), &t, &i)) continue;
+      if (!patches.Intersect(origin, direction, 0.0, std::numeric_limits<double>::infinity(), &t,
+                             &i))
+        continue;
       const Vec3 point = origin + t * direction;
       if (level.patches[i].normal.dot(origin - point) <= 0.0) continue;  // its unlit side
       map.patch.at<int32_t>(row, col) = i;
       if (!seen(i)) continue;
       Vec2 pixel;
       if (!camera.Project(point, &pixel) || !camera.InImage(pixel)) continue;
-      const int x0 = static_cast<int>(std::floor(pixel.x())), y0 = static_cast<int>(std::floor(pixel.y()));
+      const int x0 = static_cast<int>(std::floor(pixel.x())),
+                y0 = static_cast<int>(std::floor(pixel.y()));
       const double fx = pixel.x() - x0, fy = pixel.y() - y0;
       Vec3 sum = Vec3::Zero();
       double weight_sum = 0.0;
@@ -111,7 +111,8 @@ ReflectanceMap EstimateReflectanceMap(const PatchLevel& level, const ProjectorGe
           const size_t camera_index = static_cast<size_t>(y) * cw + x;
           if (!usable[camera_index]) continue;
           // A camera pixel on another surface sees an occluder or the far side of an edge.
-          if (level.patches[lighting.patch[camera_index]].surface != level.patches[i].surface) continue;
+          if (level.patches[lighting.patch[camera_index]].surface != level.patches[i].surface)
+            continue;
           const double weight = (dx ? fx : 1.0 - fx) * (dy ? fy : 1.0 - fy);
           sum += weight * ratio[camera_index];
           weight_sum += weight;
@@ -142,7 +143,8 @@ ReflectanceMap EstimateReflectanceMap(const PatchLevel& level, const ProjectorGe
     for (int c = 0; c < 3; ++c) {
       const auto clamped_sum = [&](double s) {
         double sum = 0.0;
-        for (const size_t index : pixels) sum += std::clamp(s * raw[index][c], 0.0, kMaxReflectance);
+        for (const size_t index : pixels)
+          sum += std::clamp(s * raw[index][c], 0.0, kMaxReflectance);
         return sum;
       };
       const double target = estimate.reflectance(i, c) * pixels.size();
@@ -190,7 +192,8 @@ void WriteReflectanceMap(const std::filesystem::path& rig_dir, const std::string
     cv::Vec3w* out = bgr.ptr<cv::Vec3w>(row);
     for (int col = 0; col < bgr.cols; ++col) {
       for (int c = 0; c < 3; ++c) {
-        out[col][2 - c] = cv::saturate_cast<ushort>(std::lround(65535.0 * std::clamp<double>(in[col][c], 0.0, 1.0)));
+        out[col][2 - c] = cv::saturate_cast<ushort>(
+            std::lround(65535.0 * std::clamp<double>(in[col][c], 0.0, 1.0)));
       }
     }
   }
@@ -217,9 +220,9 @@ cv::Mat ReadReflectanceMap(const std::filesystem::path& rig_dir, const std::stri
     throw IoError(path.string() + ": a reflectance map must be a 16-bit RGB PNG");
   }
   if (image.cols != entry.width || image.rows != entry.height) {
-    throw IoError(path.string() + ": " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +
-                  ", rig.json's reflectance_maps." + projector + " says " +
-                  std::to_string(entry.width) + "x" + std::to_string(entry.height));
+    throw IoError(path.string() + ": " + std::to_string(image.cols) + "x" +
+                  std::to_string(image.rows) + ", rig.json's reflectance_maps." + projector +
+                  " says " + std::to_string(entry.width) + "x" + std::to_string(entry.height));
   }
   cv::Mat rgb(image.size(), CV_32FC3);
   for (int row = 0; row < image.rows; ++row) {
@@ -239,15 +242,16 @@ cv::Mat DrawReflectanceMap(const ReflectanceMap& map) {
       const cv::Vec3f& value = map.reflectance.at<cv::Vec3f>(row, col);
       cv::Vec3b& out = picture.at<cv::Vec3b>(row, col);
       for (int c = 0; c < 3; ++c) {
-        out[2 - c] = cv::saturate_cast<uchar>(std::lround(255.0 * LinearToSrgb(std::clamp<double>(value[c], 0.0, 1.0))));
+        out[2 - c] = cv::saturate_cast<uchar>(
+            std::lround(255.0 * LinearToSrgb(std::clamp<double>(value[c], 0.0, 1.0))));
       }
     }
   }
   return picture;
 }
 
-cv::Mat DrawRelativeReflectance(const ReflectanceMap& map, const Eigen::MatrixX3d& patch_reflectance,
-                                double relative_range) {
+cv::Mat DrawRelativeReflectance(const ReflectanceMap& map,
+                                const Eigen::MatrixX3d& patch_reflectance, double relative_range) {
   cv::Mat picture(map.reflectance.size(), CV_8UC3, cv::Scalar::all(0));
   for (int row = 0; row < picture.rows; ++row) {
     for (int col = 0; col < picture.cols; ++col) {

@@ -30,11 +30,10 @@
 // once, unweighted) is ρ_i. On patches it does not see, every pixel gets the patch's reflectance
 // (the nominal one). Pixels that light no patch are 0.
 
-#include <filesystem>
-#include <string>
-
 #include <Eigen/Core>
+#include <filesystem>
 #include <opencv2/core/mat.hpp>
+#include <string>
 
 #include "calibration/photometric_transfer.h"
 #include "calibration/rig_directory.h"
@@ -58,10 +57,10 @@ struct ReflectanceMapOptions {
 
 // One projector's reflectance map.
 struct ReflectanceMap {
-  cv::Mat reflectance;  // CV_32FC3, linear R, G, B (not OpenCV's BGR), the projector's size,
-                        // row 0 = top; 0 where the pixel lights no patch
-  cv::Mat measured;     // CV_8UC1, 255 where the camera measured the pixel's point
-  cv::Mat patch;        // CV_32SC1, the fine patch each pixel lights, −1 for none
+  cv::Mat reflectance;      // CV_32FC3, linear R, G, B (not OpenCV's BGR), the projector's size,
+                            // row 0 = top; 0 where the pixel lights no patch
+  cv::Mat measured;         // CV_8UC1, 255 where the camera measured the pixel's point
+  cv::Mat patch;            // CV_32SC1, the fine patch each pixel lights, −1 for none
   int lit_pixels = 0;       // pixels that light a patch
   int measured_pixels = 0;  // of those, measured
 };
@@ -71,14 +70,11 @@ struct ReflectanceMap {
 // B, G, R, CV_32FC3, white minus black in camera values), `mask` (CV_8UC1, empty = all) the
 // usable camera pixels, `output` = max − black (R, G, B, scene units) and `camera_scale` k
 // (R, G, B). Throws std::invalid_argument for options that fail Check() or sizes that differ.
-ReflectanceMap EstimateReflectanceMap(const PatchLevel& level, const ProjectorGeometry& projector,
-                                      const ProjectorGeometry& camera,
-                                      const CameraPixelLighting& lighting,
-                                      const ReflectanceEstimate& estimate,
-                                      const cv::Mat& difference, const cv::Mat& mask,
-                                      const Eigen::Vector3d& output,
-                                      const Eigen::Vector3d& camera_scale,
-                                      const ReflectanceMapOptions& options = {});
+ReflectanceMap EstimateReflectanceMap(
+    const PatchLevel& level, const ProjectorGeometry& projector, const ProjectorGeometry& camera,
+    const CameraPixelLighting& lighting, const ReflectanceEstimate& estimate,
+    const cv::Mat& difference, const cv::Mat& mask, const Eigen::Vector3d& output,
+    const Eigen::Vector3d& camera_scale, const ReflectanceMapOptions& options = {});
 
 // The file a projector's map is stored in, relative to the rig directory:
 // NAME.reflectance_map.png.
@@ -102,7 +98,7 @@ cv::Mat ReadReflectanceMap(const std::filesystem::path& rig_dir, const std::stri
 // 1 ± `relative_range` from blue through white to red; unmeasured pixels grey, pixels that light
 // nothing black.
 cv::Mat DrawReflectanceMap(const ReflectanceMap& map);
-cv::Mat DrawRelativeReflectance(const ReflectanceMap& map, const Eigen::MatrixX3d& patch_reflectance,
-                                double relative_range);
+cv::Mat DrawRelativeReflectance(const ReflectanceMap& map,
+                                const Eigen::MatrixX3d& patch_reflectance, double relative_range);
 
 }  // namespace procam

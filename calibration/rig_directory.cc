@@ -165,12 +165,14 @@ json ReflectanceJson(const RigReflectance& reflectance) {
 RigReflectanceMap ReadReflectanceMapEntry(const json& object, const std::string& file,
                                           const std::string& name) {
   const JsonFields fields(object, file, "reflectance_maps." + name);
-  fields.RejectUnknown({"file", "width", "height", "target_patches", "lit_pixels", "measured_pixels"});
+  fields.RejectUnknown(
+      {"file", "width", "height", "target_patches", "lit_pixels", "measured_pixels"});
   RigReflectanceMap entry;
   entry.file = fields.String("file");
   entry.width = Integer(fields, "width");
   entry.height = Integer(fields, "height");
-  if (entry.width < 1 || entry.height < 1) throw fields.Error("width", "width and height must be >= 1");
+  if (entry.width < 1 || entry.height < 1)
+    throw fields.Error("width", "width and height must be >= 1");
   entry.target_patches = Integer(fields, "target_patches");
   if (fields.Has("lit_pixels")) entry.lit_pixels = Integer(fields, "lit_pixels");
   if (fields.Has("measured_pixels")) entry.measured_pixels = Integer(fields, "measured_pixels");

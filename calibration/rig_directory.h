@@ -71,7 +71,7 @@ struct RigReflectance {
 // rig.json's reflectance_maps.NAME: projector NAME's per-pixel reflectance, measured by
 // calibrate photometric --scene (calibration/reflectance_map.h, which owns the file).
 struct RigReflectanceMap {
-  std::string file;  // 16-bit PNG, relative to the rig directory
+  std::string file;           // 16-bit PNG, relative to the rig directory
   int width = 0, height = 0;  // the projector's image size
   int target_patches = 0;     // the patch target of the estimate it is normalised to
   int lit_pixels = 0, measured_pixels = 0;

@@ -48,10 +48,10 @@ std::optional<SceneChessboard> ReadSceneChessboard(const std::filesystem::path& 
 // `dir`: NAME.json with its surfaces, projectors and camera; a .cameramodel per projector and
 // for the camera (NAME_camera.cameramodel); an OBJ per mesh surface; a 16-bit sRGB PNG per
 // textured surface and a `NAME_SURFACE_reflectance.png` (with its scale) per printed surface
-// (Surface::reflectance_texture). The projectors' photometry is ProjectorFromPlacement's, the camera entry
-// the synthetic camera's (BGR8, the test camera's defaults), so `synthetic:DIR/NAME.json`
-// photographs what `synthetic:NAME` does. Returns the scene file's path. Throws
-// std::invalid_argument for an unknown scene, IoError naming a file that cannot be written.
+// (Surface::reflectance_texture). The projectors' photometry is ProjectorFromPlacement's, the
+// camera entry the synthetic camera's (BGR8, the test camera's defaults), so
+// `synthetic:DIR/NAME.json` photographs what `synthetic:NAME` does. Returns the scene file's path.
+// Throws std::invalid_argument for an unknown scene, IoError naming a file that cannot be written.
 std::filesystem::path WriteSyntheticSceneFile(const std::string& name, int patches,
                                               const std::filesystem::path& dir);
 

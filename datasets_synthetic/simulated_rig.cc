@@ -119,7 +119,8 @@ SimulatedRig::SimulatedRig(const Scene& scene, std::vector<Projector> projectors
       const Patch& seen = world_.fine.patches[patch];
       const Vec2 uv = PatchTextureCoordinate(seen, point);
       const Vec3 reflectance =
-          (AlbedoFactor(seen.surface, uv) * scene_.surfaces[seen.surface].ReflectanceAt(uv)).cwiseMin(0.99);
+          (AlbedoFactor(seen.surface, uv) * scene_.surfaces[seen.surface].ReflectanceAt(uv))
+              .cwiseMin(0.99);
       hits_[index] = {patch, point, reflectance};
       coverage_.at<uchar>(row, col) = 255;
     }
@@ -197,10 +198,10 @@ cv::Mat SimulatedRig::RenderRadiance(const std::vector<ProjectorImage>& images) 
       // On a printed surface the world patch's mean reflectance is not the point's: the bounce
       // light it reflects is its own reflectance times the patch's indirect irradiance.
       const bool printed = scene_.surfaces[patch.surface].reflectance_texture.HasTexture();
-      const Vec3 bounce =
-          options_.smooth_bounce ? SmoothBounce(hit, indirect_irradiance)
-          : printed ? Vec3(hit.reflectance.cwiseProduct(indirect_irradiance.row(hit.world_patch).transpose()))
-                    : Vec3(indirect.row(hit.world_patch).transpose());
+      const Vec3 bounce = options_.smooth_bounce ? SmoothBounce(hit, indirect_irradiance)
+                          : printed              ? Vec3(hit.reflectance.cwiseProduct(
+                                                       indirect_irradiance.row(hit.world_patch).transpose()))
+                                                 : Vec3(indirect.row(hit.world_patch).transpose());
       const Vec3 exitance = hit.reflectance.cwiseProduct(irradiance) + bounce;
       radiance.at<cv::Vec3f>(row, col) = cv::Vec3f(exitance[0], exitance[1], exitance[2]);
     }

@@ -77,7 +77,8 @@ void FillAttributes(const Scene& scene, int texture_samples, PatchLevel* level) 
       // patch, by the same quadrature as the desired texture's.
       SamplePatch(patch, texture_samples, &samples);
       Vec3 reflectance = Vec3::Zero();
-      for (const PatchSample& sample : samples) reflectance += sample.weight * surface.reflectance_texture.At(sample.uv);
+      for (const PatchSample& sample : samples)
+        reflectance += sample.weight * surface.reflectance_texture.At(sample.uv);
       level->reflectance.row(i) = (reflectance / patch.area).transpose();
     } else {
       level->reflectance.row(i) = surface.reflectance.transpose();

@@ -132,7 +132,8 @@ void CheckQuad(const std::array<Vec3, 4>& quad, double tolerance, const std::str
 }  // namespace
 
 Vec3 DesiredAppearance::LinearAt(const Vec2& uv) const {
-  if (!HasTexture()) return Vec3(SrgbToLinear(srgb[0]), SrgbToLinear(srgb[1]), SrgbToLinear(srgb[2]));
+  if (!HasTexture())
+    return Vec3(SrgbToLinear(srgb[0]), SrgbToLinear(srgb[1]), SrgbToLinear(srgb[2]));
   return TextureAt(texture_linear, uv);
 }
 

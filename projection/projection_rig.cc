@@ -431,8 +431,9 @@ void AttachReflectanceMaps(const std::vector<cv::Mat>& maps, ProjectionRig* rig)
     if (maps[k].empty()) continue;
     const std::string name = "projector '" + rig->projectors[k].name + "'";
     if (maps[k].type() != CV_32FC3 || maps[k].cols != map.width || maps[k].rows != map.height) {
-      throw std::invalid_argument(name + ": its reflectance map is not " + std::to_string(map.width) +
-                                  "x" + std::to_string(map.height) + " linear RGB (CV_32FC3)");
+      throw std::invalid_argument(name + ": its reflectance map is not " +
+                                  std::to_string(map.width) + "x" + std::to_string(map.height) +
+                                  " linear RGB (CV_32FC3)");
     }
     map.reflectance.resize(static_cast<size_t>(map.width) * map.height);
     for (int row = 0; row < map.height; ++row) {
@@ -441,9 +442,10 @@ void AttachReflectanceMaps(const std::vector<cv::Mat>& maps, ProjectionRig* rig)
         const cv::Vec3f& value = values[col];
         for (int c = 0; c < 3; ++c) {
           if (!(std::isfinite(value[c]) && value[c] >= 0.0f)) {
-            throw std::invalid_argument(name + ": its reflectance map has a value that is not "
-                                        "finite and >= 0 at pixel (" + std::to_string(col) + ", " +
-                                        std::to_string(row) + ")");
+            throw std::invalid_argument(name +
+                                        ": its reflectance map has a value that is not "
+                                        "finite and >= 0 at pixel (" +
+                                        std::to_string(col) + ", " + std::to_string(row) + ")");
           }
         }
         map.reflectance[static_cast<size_t>(row) * map.width + col] =

@@ -48,8 +48,8 @@
 
 #include <Eigen/Core>
 #include <array>
-#include <opencv2/core/mat.hpp>
 #include <cstdint>
+#include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
 

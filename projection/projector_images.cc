@@ -153,8 +153,9 @@ std::vector<std::vector<Eigen::Vector3f>> ReflectanceFactors(const ProjectionRig
         for (int c = 0; c < 3; ++c) {
           const double rho = map.reflectance[index][c];
           // A channel measured black over the whole patch has nothing to even out.
-          q[c] = mean[c] > 0.0 ? static_cast<float>(std::clamp(rho > 0.0 ? mean[c] / rho : high, low, high))
-                               : 1.0f;
+          q[c] = mean[c] > 0.0
+                     ? static_cast<float>(std::clamp(rho > 0.0 ? mean[c] / rho : high, low, high))
+                     : 1.0f;
         }
         factor_sum += scale * map.share[index] * q.cast<double>();
       }

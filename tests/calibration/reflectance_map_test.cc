@@ -9,7 +9,6 @@
 #include <cmath>
 #include <cstdio>
 #include <numbers>
-
 #include <opencv2/imgproc.hpp>
 
 #include "base/io.h"
@@ -41,9 +40,9 @@ ReflectanceTexture SmoothPoster() {
       const double u = (col + 0.5) / 128, v = 1.0 - (row + 0.5) / 128;
       cv::Vec3f& texel = poster.texture_linear.at<cv::Vec3f>(row, col);
       for (int c = 0; c < 3; ++c) {
-        texel[c] = static_cast<float>(
-            0.55 + 0.35 * std::sin(2 * std::numbers::pi * (1.5 * u + 0.2 * c)) *
-                       std::cos(2 * std::numbers::pi * (v + 0.15 * c)));
+        texel[c] =
+            static_cast<float>(0.55 + 0.35 * std::sin(2 * std::numbers::pi * (1.5 * u + 0.2 * c)) *
+                                          std::cos(2 * std::numbers::pi * (v + 0.15 * c)));
       }
     }
   }
@@ -120,8 +119,9 @@ class ReflectanceMapTest : public ::testing::Test {
     // The projector's photometry is known here (its fit is photometric_test's and rig_test's).
     const Eigen::Vector3d output = projector_->photometry.max - projector_->photometry.black;
     Measured measured;
-    measured.estimate = EstimatePatchReflectance(lighting, *level_, *form_factors_, model, difference,
-                                                 cv::Mat(), output, Eigen::Vector3d::Ones(), 4);
+    measured.estimate =
+        EstimatePatchReflectance(lighting, *level_, *form_factors_, model, difference, cv::Mat(),
+                                 output, Eigen::Vector3d::Ones(), 4);
     measured.map = EstimateReflectanceMap(*level_, projector_->geometry, rig_->camera(), lighting,
                                           measured.estimate, difference, cv::Mat(), output,
                                           Eigen::Vector3d::Ones());
@@ -144,7 +144,8 @@ class ReflectanceMapTest : public ::testing::Test {
         const Vec3 direction = world_from_proj.linear() * directions[row * geometry.width() + col];
         double t;
         int s;
-        if (!surfaces.Intersect(world_from_proj.translation(), direction, 0.0, 1e9, &t, &s)) continue;
+        if (!surfaces.Intersect(world_from_proj.translation(), direction, 0.0, 1e9, &t, &s))
+          continue;
         const Surface& surface = scene_->surfaces[s];
         const Vec2 uv = RectangleUv(surface, world_from_proj.translation() + t * direction);
         const Vec3 rho = (rig_->AlbedoFactor(s, uv) * surface.ReflectanceAt(uv)).cwiseMin(0.99);
@@ -238,7 +239,8 @@ TEST_F(ReflectanceMapTest, MatchesTheWorldsReflectance) {
   const Measured measured = Measure(difference);
   const cv::Mat truth = Truth();
   // The camera's predicted relative noise on white − black over the pixels that see a lit patch.
-  const cv::Mat white = rig_->RenderRadiance({Flat(1.0)}), black = rig_->RenderRadiance({Flat(0.0)});
+  const cv::Mat white = rig_->RenderRadiance({Flat(1.0)}),
+                black = rig_->RenderRadiance({Flat(0.0)});
   const double shot = 0.01, read = 0.002;
   double noise_squares = 0.0;
   int noise_pixels = 0;
@@ -295,8 +297,9 @@ TEST_F(ReflectanceMapTest, RoundTripsThroughTheRigDirectory) {
   for (int row = 0; row < map.rows; ++row) {
     for (int col = 0; col < map.cols; ++col) {
       for (int c = 0; c < 3; ++c) {
-        worst = std::max<double>(worst, std::abs(map.at<cv::Vec3f>(row, col)[c] -
-                                                 measured.map.reflectance.at<cv::Vec3f>(row, col)[c]));
+        worst =
+            std::max<double>(worst, std::abs(map.at<cv::Vec3f>(row, col)[c] -
+                                             measured.map.reflectance.at<cv::Vec3f>(row, col)[c]));
       }
     }
   }
@@ -308,8 +311,9 @@ TEST_F(ReflectanceMapTest, RoundTripsThroughTheRigDirectory) {
     ReadReflectanceMap(dir.path(), "left", wrong_size);
     ADD_FAILURE() << "a map of another size was read";
   } catch (const IoError& error) {
-    EXPECT_NE(std::string(error.what()).find("left.reflectance_map.png: 320x200, rig.json's "
-                                             "reflectance_maps.left says 321x200"),
+    EXPECT_NE(std::string(error.what())
+                  .find("left.reflectance_map.png: 320x200, rig.json's "
+                        "reflectance_maps.left says 321x200"),
               std::string::npos)
         << error.what();
   }

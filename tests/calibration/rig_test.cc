@@ -31,7 +31,6 @@
 #include "geometry/form_factors.h"
 #include "projection/camera_rays.h"
 #include "projection/projection_rig.h"
-#include "projection/projection_rig.h"
 #include "tests/testing/testing.h"
 
 namespace procam {

@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
-
 #include <opencv2/core.hpp>
 
 #include "compensation/colour.h"
@@ -251,7 +250,8 @@ double CheckerAt(const Vec2& uv, bool* inside_cell) {
   const double x = uv.x() * 64.0, y = (1.0 - uv.y()) * 64.0;
   const double fx = std::fmod(x, 16.0), fy = std::fmod(y, 16.0);
   *inside_cell = fx > 1.0 && fx < 15.0 && fy > 1.0 && fy < 15.0;
-  const int col = std::clamp(static_cast<int>(x), 0, 63), row = std::clamp(static_cast<int>(y), 0, 63);
+  const int col = std::clamp(static_cast<int>(x), 0, 63),
+            row = std::clamp(static_cast<int>(y), 0, 63);
   return 0.9 * (((row / 16 + col / 16) % 2 == 0) ? 0.8 : 0.2);
 }
 
@@ -264,12 +264,14 @@ TEST(SimulatedRig, PrintedSurfaceReflectsItsTextureAtEachPoint) {
   for (int row = 0; row < printed.rig->camera().height(); ++row) {
     for (int col = 0; col < printed.rig->camera().width(); ++col) {
       Vec3 point;
-      if (!printed.rig->PointSeenByPixel(row, col, &point) || std::abs(point.y() - 1.0) > 1e-6) continue;
+      if (!printed.rig->PointSeenByPixel(row, col, &point) || std::abs(point.y() - 1.0) > 1e-6)
+        continue;
       const Vec2 uv(point.z(), 1.0 - point.x());
       bool inside = false;
       const double truth = CheckerAt(uv, &inside) * printed.rig->AlbedoFactor(1, uv);
       if (!inside) continue;
-      ASSERT_NEAR(printed.rig->ReflectanceSeenByPixel(row, col)[1], truth, 1e-5) << row << "," << col;
+      ASSERT_NEAR(printed.rig->ReflectanceSeenByPixel(row, col)[1], truth, 1e-5)
+          << row << "," << col;
       ++count;
     }
   }
@@ -306,7 +308,8 @@ TEST(SimulatedRig, PrintedSurfaceModulatesWhatTheCameraSees) {
   for (int row = 0; row < a.rows; ++row) {
     for (int col = 0; col < a.cols; ++col) {
       Vec3 point;
-      if (!plain.rig->PointSeenByPixel(row, col, &point) || std::abs(point.y() - 1.0) > 1e-6) continue;
+      if (!plain.rig->PointSeenByPixel(row, col, &point) || std::abs(point.y() - 1.0) > 1e-6)
+        continue;
       bool inside = false;
       const double rho = CheckerAt(Vec2(point.z(), 1.0 - point.x()), &inside);
       if (!inside || a.at<cv::Vec3f>(row, col)[1] <= 0.0f) continue;
@@ -361,7 +364,8 @@ cv::Mat TrueReflectanceMap(const Scene& scene, const ProjectorGeometry& geometry
       const Surface& surface = scene.surfaces[s];
       const Vec3 d = world_from_proj.translation() + t * direction - surface.quad[0];
       const Vec3 e1 = surface.quad[1] - surface.quad[0], e3 = surface.quad[3] - surface.quad[0];
-      const Vec3 rho = surface.ReflectanceAt(Vec2(d.dot(e1) / e1.squaredNorm(), d.dot(e3) / e3.squaredNorm()));
+      const Vec3 rho =
+          surface.ReflectanceAt(Vec2(d.dot(e1) / e1.squaredNorm(), d.dot(e3) / e3.squaredNorm()));
       map.at<cv::Vec3f>(row, col) = cv::Vec3f(rho[0], rho[1], rho[2]);
     }
   }
@@ -404,7 +408,8 @@ struct Evenness {
 };
 // `edge_margin` (metres): leave out the points nearer a cell edge than this.
 Evenness EvenOutPrintedWall(const World& world, double edge_margin = 0.0) {
-  ProjectionRig rig = BuildProjectionRig(world.patches.fine, world.projectors, ProjectionRigOptions());
+  ProjectionRig rig =
+      BuildProjectionRig(world.patches.fine, world.projectors, ProjectionRigOptions());
   std::vector<cv::Mat> maps;
   for (const Projector& projector : world.projectors) {
     maps.push_back(TrueReflectanceMap(world.synthetic.scene, projector.geometry));
@@ -490,10 +495,11 @@ TEST(SimulatedRig, ReflectanceMapEvensOutAPrintedWall) {
        {std::pair<const char*, Evenness>("dark room, away from cell edges", interior),
         std::pair<const char*, Evenness>("dark room", dark),
         std::pair<const char*, Evenness>("tiny box", bright)}) {
-    std::printf("printed back wall, %s, %d patches, %d pixels: radiance within a patch varies by "
-                "%.1f%% (one level per patch), %.1f%% (per pixel with the reflectance map); "
-                "saturated pixels %lld\n",
-                name, e.patches, e.pixels, 100 * e.before, 100 * e.after, e.saturated);
+    std::printf(
+        "printed back wall, %s, %d patches, %d pixels: radiance within a patch varies by "
+        "%.1f%% (one level per patch), %.1f%% (per pixel with the reflectance map); "
+        "saturated pixels %lld\n",
+        name, e.patches, e.pixels, 100 * e.before, 100 * e.after, e.saturated);
     ASSERT_GT(e.patches, 8);
     // 4:1 cells in about equal parts vary by 0.6: the print shows.
     EXPECT_GT(e.before, 0.4);

@@ -208,8 +208,9 @@ TEST(LoadScene, ReadsReflectanceTextures) {
   image.at<cv::Vec3b>(1, 1) = cv::Vec3b(188, 188, 188);  // bottom-right sRGB 188 → 0.5029
   cv::imwrite((dir / "poster.png").string(), image);
   const Scene scene = LoadScene(dir.Write(
-      "scene.json", SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], )"
-                              R"("reflectance": {"texture": "poster.png", "scale": 0.8}, "desired": [1,1,1]})")));
+      "scene.json",
+      SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], )"
+                R"("reflectance": {"texture": "poster.png", "scale": 0.8}, "desired": [1,1,1]})")));
   const Surface& surface = scene.surfaces[0];
   ASSERT_TRUE(surface.reflectance_texture.HasTexture());
   EXPECT_EQ(surface.reflectance_texture.texture_path, "poster.png");
@@ -222,11 +223,13 @@ TEST(LoadScene, ReadsReflectanceTextures) {
   EXPECT_NEAR(surface.reflectance[2], 0.8 * (1.0 + 0.5029) / 4, 1e-3);
   EXPECT_NEAR(surface.reflectance_texture.Max(), 0.8, 1e-6);
   // Without a scale the texture's values are the reflectance, which a white texel makes 1.
-  const std::string white = LoadError(
-      dir, SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], )"
-                     R"("reflectance": {"texture": "poster.png"}, "desired": [1,1,1]})"));
-  EXPECT_NE(white.find("surfaces[0].reflectance.texture: poster.png: its brightest texel times scale is 1"),
-            std::string::npos)
+  const std::string white =
+      LoadError(dir, SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], )"
+                               R"("reflectance": {"texture": "poster.png"}, "desired": [1,1,1]})"));
+  EXPECT_NE(
+      white.find(
+          "surfaces[0].reflectance.texture: poster.png: its brightest texel times scale is 1"),
+      std::string::npos)
       << white;
 }
 
@@ -240,17 +243,20 @@ TEST(LoadScene, ReportsReflectanceTextureProblemsWithFileAndKey) {
   const std::vector<Case> cases = {
       {R"({"texture": "none.png"})",
        "surfaces[0].reflectance.texture: " + (dir / "none.png").string() + ": file not found"},
-      {R"({"texture": "fifo"})", "surfaces[0].reflectance.texture: " + (dir / "fifo").string() + ": not a regular file"},
+      {R"({"texture": "fifo"})",
+       "surfaces[0].reflectance.texture: " + (dir / "fifo").string() + ": not a regular file"},
       {R"({"scale": 0.5})", "surfaces[0].reflectance.texture: required key is missing"},
-      {R"({"texture": "grey.png", "scale": 0})", "surfaces[0].reflectance.scale: must be in (0, 1]"},
-      {R"({"texture": "grey.png", "scale": 1.5})", "surfaces[0].reflectance.scale: must be in (0, 1]"},
+      {R"({"texture": "grey.png", "scale": 0})",
+       "surfaces[0].reflectance.scale: must be in (0, 1]"},
+      {R"({"texture": "grey.png", "scale": 1.5})",
+       "surfaces[0].reflectance.scale: must be in (0, 1]"},
       {R"({"texture": 3})", "surfaces[0].reflectance.texture: must be a string"},
       {R"({"texture": "grey.png", "gain": 1})", "surfaces[0].reflectance.gain: unknown key"},
   };
   for (const Case& c : cases) {
-    const std::string message = LoadError(
-        dir, SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": )" +
-                       c.reflectance + R"(, "desired": [1,1,1]})"));
+    const std::string message =
+        LoadError(dir, SceneText(R"({"quad": [[0,0,0],[1,0,0],[1,1,0],[0,1,0]], "reflectance": )" +
+                                 c.reflectance + R"(, "desired": [1,1,1]})"));
     EXPECT_NE(message.find((dir / "scene.json").string() + ": " + c.expected), std::string::npos)
         << message << "\nexpected: " << c.expected;
   }
