@@ -25,6 +25,7 @@ struct EvaluateArguments {
   int world_factor = 4;
   double alpha = 0.5, loss_scale = SolverOptions().robust_scale;
   std::string loss = "soft_l1";
+  std::string metric_update = MetricUpdateName(SolverOptions().metric_update);
   std::vector<std::string> methods;
   LightField light = LightField::kSmooth;
   std::string bounce = "smooth";
@@ -98,6 +99,11 @@ void AddEvaluationCommands(CLI::App& app) {
   cmd->add_option("--loss-scale", args->loss_scale, "perceptual2000's loss scale, ΔE00 units")
       ->check(FiniteRange(1e-6, 1e6))
       ->capture_default_str();
+  cmd->add_option("--metric-update", args->metric_update,
+                  "perceptual2000's metric measured again: rounds (each a whole solve) | every_iteration "
+                  "(inside one Gauss-Newton run)")
+      ->check(CLI::IsMember({"rounds", "every_iteration"}))
+      ->capture_default_str();
   cmd->add_option("--out", args->out, "Output directory")->capture_default_str();
   AddLightOption(cmd, &args->light);
   cmd->add_option("--bounce", args->bounce,
@@ -121,6 +127,7 @@ void AddEvaluationCommands(CLI::App& app) {
     options.alpha = args->alpha;
     ParseRobustLoss(args->loss, &options.loss);
     options.loss_scale = args->loss_scale;
+    ParseMetricUpdate(args->metric_update, &options.metric_update);
     if (!args->methods.empty()) {
       options.methods.clear();
       for (const std::string& name : args->methods) {

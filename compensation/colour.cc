@@ -1,6 +1,8 @@
 #include "compensation/colour.h"
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <numbers>
 #include <vector>
 
@@ -98,34 +100,106 @@ double DeltaE2000(const Eigen::Vector3d& lab1, const Eigen::Vector3d& lab2) {
   return std::sqrt(term_l * term_l + term_c * term_c + term_h * term_h + r_t * term_c * term_h);
 }
 
+namespace {
+
+// The fit's fixed part: the 18 unit directions (the three axes, the diagonals of each pair, both
+// signs) and the least-squares solution operator of its design at step 1 (the design scales by
+// step², so the solution by 1/step²). Formed once: a QR per call was most of the metric's cost.
+struct MetricFit {
+  std::array<Eigen::Vector3d, 18> directions;
+  Eigen::Matrix<double, 6, 18> solve;
+};
+
+const MetricFit& Ciede2000MetricFit() {
+  static const MetricFit fit = [] {
+    MetricFit f;
+    std::vector<Eigen::Vector3d> axes;
+    for (int a = 0; a < 3; ++a) axes.push_back(Eigen::Vector3d::Unit(a));
+    for (int a = 0; a < 3; ++a) {
+      for (int b = a + 1; b < 3; ++b) {
+        axes.push_back((Eigen::Vector3d::Unit(a) + Eigen::Vector3d::Unit(b)) / std::sqrt(2.0));
+        axes.push_back((Eigen::Vector3d::Unit(a) - Eigen::Vector3d::Unit(b)) / std::sqrt(2.0));
+      }
+    }
+    // Unknowns m = (M00, M11, M22, M01, M02, M12): δᵀMδ = Σ δa² Maa + 2 Σ δa δb Mab.
+    Eigen::Matrix<double, 18, 6> design;
+    int row = 0;
+    for (const Eigen::Vector3d& axis : axes) {
+      for (const double sign : {1.0, -1.0}) {
+        const Eigen::Vector3d d = sign * axis;
+        f.directions[row] = d;
+        design.row(row) << d[0] * d[0], d[1] * d[1], d[2] * d[2], 2 * d[0] * d[1], 2 * d[0] * d[2], 2 * d[1] * d[2];
+        ++row;
+      }
+    }
+    f.solve = design.colPivHouseholderQr().solve(Eigen::Matrix<double, 18, 18>::Identity());
+    return f;
+  }();
+  return fit;
+}
+
+}  // namespace
+
 Eigen::Matrix3d DeltaE2000Metric(const Eigen::Vector3d& lab, double step) {
-  // Unknowns m = (M00, M11, M22, M01, M02, M12): δᵀMδ = Σ δa² Maa + 2 Σ δa δb Mab.
-  std::vector<Eigen::Vector3d> directions;
-  for (int a = 0; a < 3; ++a) directions.push_back(Eigen::Vector3d::Unit(a));
-  for (int a = 0; a < 3; ++a) {
-    for (int b = a + 1; b < 3; ++b) {
-      directions.push_back((Eigen::Vector3d::Unit(a) + Eigen::Vector3d::Unit(b)) / std::sqrt(2.0));
-      directions.push_back((Eigen::Vector3d::Unit(a) - Eigen::Vector3d::Unit(b)) / std::sqrt(2.0));
-    }
+  const MetricFit& fit = Ciede2000MetricFit();
+  Eigen::Matrix<double, 18, 1> squared;
+  for (int row = 0; row < 18; ++row) {
+    const double distance = DeltaE2000(lab + step * fit.directions[row], lab);
+    squared[row] = distance * distance;
   }
-  Eigen::MatrixXd design(2 * directions.size(), 6);
-  Eigen::VectorXd squared(2 * directions.size());
-  int row = 0;
-  for (const Eigen::Vector3d& direction : directions) {
-    for (const double sign : {1.0, -1.0}) {
-      const Eigen::Vector3d delta = sign * step * direction;
-      design.row(row) << delta[0] * delta[0], delta[1] * delta[1], delta[2] * delta[2],
-          2 * delta[0] * delta[1], 2 * delta[0] * delta[2], 2 * delta[1] * delta[2];
-      const double distance = DeltaE2000(lab + delta, lab);
-      squared[row] = distance * distance;
-      ++row;
-    }
-  }
-  const Eigen::VectorXd m = design.colPivHouseholderQr().solve(squared);
+  const Eigen::Matrix<double, 6, 1> m = fit.solve * squared / (step * step);
   Eigen::Matrix3d metric;
   metric << m[0], m[3], m[4], m[3], m[1], m[5], m[4], m[5], m[2];
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(metric);
   const double largest = std::max(eigen.eigenvalues().maxCoeff(), 1e-12);
+  const Eigen::Vector3d values = eigen.eigenvalues().cwiseMax(1e-3 * largest);
+  return eigen.eigenvectors() * values.asDiagonal() * eigen.eigenvectors().transpose();
+}
+
+Eigen::Matrix3d DeltaE2000MetricClosedForm(const Eigen::Vector3d& lab) {
+  // As δ → 0 both colours share G, C̄′ and h̄′, so ΔL′ = δL, ΔC′ = ∇C′·δ and ΔH′ = C′ ∇h′·δ (h′ in
+  // radians) with a′ = (1 + G) a, and ΔE00² = uᵀQu for u = (ΔL′, ΔC′, ΔH′): M = JᵀQJ.
+  const double c = std::hypot(lab[1], lab[2]);
+  const double c7 = std::pow(c, 7.0);
+  const double g = 0.5 * (1.0 - std::sqrt(c7 / (c7 + std::pow(25.0, 7.0))));
+  const double ap = (1.0 + g) * lab[1], b = lab[2];
+  const double cp = std::hypot(ap, b);
+  const double l50 = (lab[0] - 50.0) * (lab[0] - 50.0);
+  const double s_l = 1.0 + 0.015 * l50 / std::sqrt(20.0 + l50);
+  const double s_c = 1.0 + 0.045 * cp;
+  Eigen::Matrix3d metric = Eigen::Matrix3d::Zero();
+  metric(0, 0) = 1.0 / (s_l * s_l);
+  if (cp == 0.0) {
+    // Neutral: ΔH′ = 0 and ΔC′ = ‖((1 + G) δa, δb)‖, a quadratic form of its own (G = ½ at C̄ = 0).
+    metric(1, 1) = (1.0 + g) * (1.0 + g) / (s_c * s_c);
+    metric(2, 2) = 1.0 / (s_c * s_c);
+    return metric;
+  }
+  double h = Degrees(std::atan2(b, ap));
+  if (h < 0.0) h += 360.0;
+  const double t = 1.0 - 0.17 * std::cos(Radians(h - 30.0)) + 0.24 * std::cos(Radians(2.0 * h)) +
+                   0.32 * std::cos(Radians(3.0 * h + 6.0)) - 0.20 * std::cos(Radians(4.0 * h - 63.0));
+  const double s_h = 1.0 + 0.015 * cp * t;
+  const double cp7 = std::pow(cp, 7.0);
+  const double r_c = 2.0 * std::sqrt(cp7 / (cp7 + std::pow(25.0, 7.0)));
+  const double delta_theta = 30.0 * std::exp(-std::pow((h - 275.0) / 25.0, 2.0));
+  const double r_t = -std::sin(Radians(2.0 * delta_theta)) * r_c;
+  Eigen::Matrix3d j = Eigen::Matrix3d::Zero();  // rows ΔL′, ΔC′, ΔH′; columns δL, δa, δb
+  j(0, 0) = 1.0;
+  j(1, 1) = (1.0 + g) * ap / cp;
+  j(1, 2) = b / cp;
+  j(2, 1) = -(1.0 + g) * b / cp;
+  j(2, 2) = ap / cp;
+  Eigen::Matrix3d q = Eigen::Matrix3d::Zero();
+  q(0, 0) = 1.0 / (s_l * s_l);
+  q(1, 1) = 1.0 / (s_c * s_c);
+  q(2, 2) = 1.0 / (s_h * s_h);
+  q(1, 2) = q(2, 1) = 0.5 * r_t / (s_c * s_h);
+  metric = j.transpose() * q * j;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen;
+  eigen.computeDirect(metric);
+  const double largest = std::max(eigen.eigenvalues().maxCoeff(), 1e-12);
+  if (eigen.eigenvalues().minCoeff() >= 1e-3 * largest) return metric;
   const Eigen::Vector3d values = eigen.eigenvalues().cwiseMax(1e-3 * largest);
   return eigen.eigenvectors() * values.asDiagonal() * eigen.eigenvectors().transpose();
 }

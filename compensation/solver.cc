@@ -66,17 +66,20 @@ std::shared_ptr<const RadiositySystem> MakeRadiositySystem(const SolverOptions& 
 // Alg. 1 where options say: on the device (cuda_solver.h) for kCuda unless device_host_loop, else
 // MinimiseBounded (whose K⁻¹ applications run on the objective's RadiositySystem backend).
 // `radiosity` (if not null) gets the result's K⁻¹E where the device formed it, else stays empty.
+Eigen::MatrixX3d MinimiseOnCpu(const SolverOptions& options, const CompensationObjective& objective,
+                               const Eigen::MatrixX3d& initial, SolverSummary* summary,
+                               Eigen::MatrixX3d* radiosity, const Eigen::MatrixX3d* start_radiosity);
+
 Eigen::MatrixX3d Minimise(const SolverOptions& options, const CompensationObjective& objective,
                           const Eigen::MatrixX3d& initial, SolverSummary* summary,
-                          Eigen::MatrixX3d* radiosity = nullptr) {
+                          Eigen::MatrixX3d* radiosity = nullptr,
+                          const Eigen::MatrixX3d* start_radiosity = nullptr) {
 #if PROCAM_WITH_CUDA
   if (options.device == Device::kCuda && !options.device_host_loop) {
     return MinimiseBoundedOnGpu(options, objective, initial, summary, radiosity);
   }
-#else
-  (void)radiosity;
 #endif
-  return MinimiseBounded(options, objective, initial, summary);
+  return MinimiseOnCpu(options, objective, initial, summary, radiosity, start_radiosity);
 }
 
 // M_FF's sparse factorisation, kept across outer iterations: once the active set settles the
@@ -228,17 +231,34 @@ class NewtonSystem {
 // with the sparse preconditioner of NewtonSystem.
 class CpuExecutor {
  public:
+  // `start_radiosity` (optional): K⁻¹ start, already known; the first evaluation then needs no
+  // solve with K.
   CpuExecutor(const SolverOptions& options, const CompensationObjective& objective, const Eigen::MatrixX3d& start,
-              SolverSummary* summary)
+              SolverSummary* summary, const Eigen::MatrixX3d* start_radiosity = nullptr)
       : options_(options), objective_(objective), lower_(objective.problem().lower),
         upper_(objective.problem().upper), n_(objective.patches()), x_(start), summary_(summary),
-        start_time_(Clock::now()) {}
+        start_time_(Clock::now()), start_radiosity_(start_radiosity) {}
 
   const Eigen::MatrixX3d& x() const { return x_; }
+  // K⁻¹x of the current iterate (after Evaluate).
+  const Eigen::MatrixX3d& radiosity() const { return point_.radiosity; }
 
   int Variables() const { return 3 * n_; }
 
-  double Evaluate() { return objective_.Evaluate(x_, &point_); }
+  double Evaluate() {
+    if (start_radiosity_ == nullptr) return objective_.Evaluate(x_, &point_);
+    point_.emittance = x_;
+    point_.radiosity = *start_radiosity_;
+    point_.residual.resize(n_, 3);
+    point_.colour_jacobian.resize(n_);
+    for (int i = 0; i < n_; ++i) {
+      const Eigen::Vector3d rgb = point_.radiosity.row(i).transpose();
+      point_.residual.row(i) = objective_.Residual(i, rgb).transpose();
+      point_.colour_jacobian[i] = objective_.PatchJacobian(i, rgb);
+    }
+    point_.value = point_.residual.cwiseProduct(objective_.weights() * point_.residual).sum();
+    return point_.value;
+  }
 
   GradientCheck Gradient() {
     gradient_ = objective_.Gradient(point_);
@@ -347,6 +367,7 @@ class CpuExecutor {
   Eigen::MatrixX3d x_;
   SolverSummary* summary_;
   const Clock::time_point start_time_;
+  const Eigen::MatrixX3d* start_radiosity_;
   ObjectivePoint point_, trial_;
   Eigen::MatrixX3d gradient_, fixed_, direction_;
   // Alg. 2's state within one outer iteration.
@@ -401,42 +422,84 @@ double RobustLossWeight(SolverOptions::RobustLoss loss, double scale, double s) 
   return 1.0;
 }
 
-ColourMetric Ciede2000Metric(const SolverOptions& options, const CompensationProblem& problem,
-                             const Eigen::MatrixX3d& radiosity) {
+namespace {
+
+// ρ(s) of `loss` with scale c (RobustLossWeight is its derivative).
+double RobustLossValue(SolverOptions::RobustLoss loss, double scale, double s) {
+  const double c2 = scale * scale;
+  switch (loss) {
+    case SolverOptions::RobustLoss::kSquared: return s;
+    case SolverOptions::RobustLoss::kSoftL1: return 2.0 * c2 * (std::sqrt(1.0 + s / c2) - 1.0);
+    case SolverOptions::RobustLoss::kHuber: return s <= c2 ? s : 2.0 * scale * std::sqrt(s) - c2;
+    case SolverOptions::RobustLoss::kCauchy: return c2 * std::log1p(s / c2);
+  }
+  return s;
+}
+
+// Ciede2000Metric into `metric_out`; returns Ciede2000RobustObjective at `radiosity` (0 for the
+// first round's metric, at the desired colours).
+double MeasureCiede2000(const SolverOptions& options, const CompensationProblem& problem,
+                        const Eigen::MatrixX3d& radiosity, ColourMetric* metric_out) {
   const int n = problem.size();
-  ColourMetric metric;
+  ColourMetric& metric = *metric_out;
+  metric = ColourMetric();
   metric.factor.resize(n);
   metric.weight = Eigen::VectorXd::Ones(n);
   const bool measured = radiosity.rows() == n;  // else the first round's: at the desired colours
   std::vector<Eigen::Vector3d> residual(n);     // L_i r_i
+  Eigen::VectorXd data_loss = Eigen::VectorXd::Zero(n);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     const Eigen::Vector3d desired =
         XyzToLab(problem.rgb_to_xyz * problem.desired.row(i).transpose(), problem.white_xyz);
     Eigen::Vector3d lab = desired;
     if (measured) lab = XyzToLab(problem.rgb_to_xyz * radiosity.row(i).transpose(), problem.white_xyz);
-    Eigen::Matrix3d m = DeltaE2000Metric(0.5 * (lab + desired));
+    Eigen::Matrix3d m = DeltaE2000MetricClosedForm(0.5 * (lab + desired));
     const Eigen::Vector3d r = lab - desired;
     const double quadratic = r.dot(m * r);
     const double distance = DeltaE2000(lab, desired);
     if (quadratic > 1e-12 && std::isfinite(distance)) m *= distance * distance / quadratic;
     metric.factor[i] = Eigen::LLT<Eigen::Matrix3d>(m).matrixU();
     residual[i] = metric.factor[i] * r;
-    if (measured) metric.weight[i] = RobustLossWeight(options.robust_loss, options.robust_scale, distance * distance);
+    if (measured) {
+      metric.weight[i] = RobustLossWeight(options.robust_loss, options.robust_scale, distance * distance);
+      data_loss[i] = RobustLossValue(options.robust_loss, options.robust_scale, distance * distance);
+    }
   }
   metric.weight /= metric.weight.mean();
-  if (measured && !problem.adjacency.empty()) {
+  if (!measured) return 0.0;
+  if (problem.patch_weight.size() == n) data_loss = data_loss.cwiseProduct(problem.patch_weight);
+  double value = problem.alpha * (problem.area / problem.area.mean()).dot(data_loss);
+  if (!problem.adjacency.empty()) {
     // The spatial term's pairs under the same loss, at the difference of their metric residuals.
     const Eigen::Index pairs = static_cast<Eigen::Index>(problem.adjacency.size());
     metric.pair_weight.resize(pairs);
+    double pair_loss = 0.0;
     for (Eigen::Index k = 0; k < pairs; ++k) {
       const auto& pair = problem.adjacency[k];
-      metric.pair_weight[k] = RobustLossWeight(options.robust_loss, options.robust_scale,
-                                               (residual[pair[0]] - residual[pair[1]]).squaredNorm());
+      const double s = (residual[pair[0]] - residual[pair[1]]).squaredNorm();
+      metric.pair_weight[k] = RobustLossWeight(options.robust_loss, options.robust_scale, s);
+      pair_loss += RobustLossValue(options.robust_loss, options.robust_scale, s);
     }
     metric.pair_weight /= metric.pair_weight.mean();
+    value += (1.0 - problem.alpha) * pair_loss;
   }
+  return value;
+}
+
+}  // namespace
+
+ColourMetric Ciede2000Metric(const SolverOptions& options, const CompensationProblem& problem,
+                             const Eigen::MatrixX3d& radiosity) {
+  ColourMetric metric;
+  MeasureCiede2000(options, problem, radiosity, &metric);
   return metric;
+}
+
+double Ciede2000RobustObjective(const SolverOptions& options, const CompensationProblem& problem,
+                          const Eigen::MatrixX3d& radiosity) {
+  ColourMetric metric;
+  return MeasureCiede2000(options, problem, radiosity, &metric);
 }
 
 bool ParseMethod(const std::string& name, CompensationMethod* method) {
@@ -511,6 +574,10 @@ bool SolverOptions::Check(std::string* why) const {
     *why = "metric_round_tolerance must be in [0, 1)";
     return false;
   }
+  if (!(metric_update_tolerance >= 0.0 && metric_update_tolerance < 1.0)) {
+    *why = "metric_update_tolerance must be in [0, 1)";
+    return false;
+  }
   if (!(gradient_tolerance >= 0.0) || !(function_tolerance >= 0.0)) {
     *why = "tolerances must be >= 0";
     return false;
@@ -529,6 +596,24 @@ bool SolverOptions::Check(std::string* why) const {
     return false;
   }
   return true;
+}
+
+const char* MetricUpdateName(SolverOptions::MetricUpdate update) {
+  switch (update) {
+    case SolverOptions::MetricUpdate::kRounds: return "rounds";
+    case SolverOptions::MetricUpdate::kEveryIteration: return "every_iteration";
+  }
+  return "?";
+}
+
+bool ParseMetricUpdate(const std::string& name, SolverOptions::MetricUpdate* update) {
+  for (SolverOptions::MetricUpdate u : {SolverOptions::MetricUpdate::kRounds, SolverOptions::MetricUpdate::kEveryIteration}) {
+    if (name == MetricUpdateName(u)) {
+      *update = u;
+      return true;
+    }
+  }
+  return false;
 }
 
 const char* DevicePreconditionerName(SolverOptions::DevicePreconditioner preconditioner) {
@@ -593,14 +678,29 @@ void AddDriverRecords(const DriverRecords& records, SolverSummary* summary) {
   AddWorkCounters(records, summary);
 }
 
-Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const CompensationObjective& objective,
-                                 const Eigen::MatrixX3d& initial, SolverSummary* summary) {
+namespace {
+
+// MinimiseBounded, with the result's radiosity (where `radiosity` is not null) and, where
+// `start_radiosity` is not null, the start's K⁻¹ initial known (initial must then lie within the
+// bounds).
+Eigen::MatrixX3d MinimiseOnCpu(const SolverOptions& options, const CompensationObjective& objective,
+                               const Eigen::MatrixX3d& initial, SolverSummary* summary,
+                               Eigen::MatrixX3d* radiosity, const Eigen::MatrixX3d* start_radiosity) {
   const CompensationProblem& problem = objective.problem();
-  CpuExecutor executor(options, objective, Clamp(initial, problem.lower, problem.upper), summary);
+  CpuExecutor executor(options, objective, Clamp(initial, problem.lower, problem.upper), summary,
+                       start_radiosity);
   DriverRecords records;
   MinimiseBoundedDriver(options, executor, &records);
   AddDriverRecords(records, summary);
+  if (radiosity != nullptr) *radiosity = executor.radiosity();
   return executor.x();
+}
+
+}  // namespace
+
+Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const CompensationObjective& objective,
+                                 const Eigen::MatrixX3d& initial, SolverSummary* summary) {
+  return MinimiseOnCpu(options, objective, initial, summary, nullptr, nullptr);
 }
 
 namespace {
@@ -673,6 +773,85 @@ void SolveCiede2000Rounds(const SolverOptions& options, const CompensationProble
   solution->radiosity = current_radiosity;
 }
 
+// kPerceptual2000 with MetricUpdate::kEveryIteration (solver.h), from `initial`: one Gauss–Newton
+// run whose every iteration is one step of Alg. 1 (its Armijo search included) on the objective
+// with the metric and weights measured at the iteration's start point. The costs are that
+// objective's at the start and at the result (CompensationSolution::metric, measured there); the
+// trace's costs are the robust objective's.
+void SolveCiede2000EveryIteration(const SolverOptions& options, const CompensationProblem& problem,
+                                  const RadiositySystem& radiosity, const Eigen::MatrixX3d& initial,
+                                  SolverSummary* summary, CompensationSolution* solution) {
+  const auto start_time = Clock::now();
+  Eigen::MatrixX3d emittance = initial;
+  Eigen::MatrixX3d current_radiosity = radiosity.Solve(emittance);
+  ColourMetric metric;
+  double robust = MeasureCiede2000(options, problem, current_radiosity, &metric);
+  ++summary->metric_measurements;
+  SolverOptions step_options = options;
+  step_options.max_iterations = 1;
+  step_options.progress = nullptr;
+  summary->termination = TerminationType::kMaxIterations;
+  bool first = true;
+  for (int iteration = 1; iteration <= options.max_iterations; ++iteration) {
+    const CompensationObjective objective(problem, radiosity, ColourModel::kLab, metric);
+    SolverSummary step_summary;
+    Eigen::MatrixX3d step_radiosity;
+    const Eigen::MatrixX3d step_emittance =
+        Minimise(step_options, objective, emittance, &step_summary, &step_radiosity, &current_radiosity);
+    AddWorkCounters(step_summary, summary);
+    if (first) {
+      summary->initial_cost = step_summary.initial_cost;
+      summary->trace.push_back({0, robust, 0.0, 0.0, 3 * problem.size(), 0, 0.0});
+      first = false;
+    }
+    summary->final_cost = step_summary.initial_cost;
+    // At the fixed point: first-order optimal for the objective measured where it stands.
+    if (step_summary.termination == TerminationType::kGradientTolerance) {
+      summary->termination = TerminationType::kGradientTolerance;
+      break;
+    }
+    if (step_summary.iterations == 0 || step_summary.termination == TerminationType::kLineSearchFailure ||
+        step_summary.termination == TerminationType::kNumericalFailure) {
+      summary->termination = step_summary.termination;
+      summary->message = step_summary.message;
+      break;
+    }
+    if (step_radiosity.rows() != problem.size()) step_radiosity = radiosity.Solve(step_emittance);
+    emittance = step_emittance;
+    current_radiosity = std::move(step_radiosity);
+    robust = MeasureCiede2000(options, problem, current_radiosity, &metric);
+    ++summary->metric_measurements;
+    summary->iterations = iteration;
+    if (!step_summary.trace.empty()) {
+      IterationRecord record = step_summary.trace.back();
+      record.iteration = iteration;
+      record.cost = robust;
+      record.seconds = SecondsSince(start_time);
+      summary->trace.push_back(record);
+    }
+    if (options.progress) options.progress(iteration, robust, SecondsSince(start_time));
+    // The step's decrease of its own objective: zero at the fixed point.
+    const double decrease = step_summary.initial_cost - step_summary.final_cost;
+    if (decrease <= options.metric_update_tolerance * step_summary.initial_cost) {
+      summary->termination = TerminationType::kFunctionTolerance;
+      break;
+    }
+  }
+  // The costs: the objective with the metric measured at the result.
+  const CompensationObjective objective(problem, radiosity, ColourModel::kLab, metric);
+  double value = 0.0;
+  {
+    Eigen::MatrixX3d residual(problem.size(), 3);
+    for (int i = 0; i < problem.size(); ++i)
+      residual.row(i) = objective.Residual(i, current_radiosity.row(i).transpose()).transpose();
+    value = residual.cwiseProduct(objective.weights() * residual).sum();
+  }
+  summary->final_cost = value;
+  solution->metric = std::move(metric);
+  solution->emittance = emittance;
+  solution->radiosity = current_radiosity;
+}
+
 }  // namespace
 
 CompensationSolution Solve(const SolverOptions& options, const CompensationProblem& problem,
@@ -729,7 +908,11 @@ CompensationSolution Solve(const SolverOptions& options, const CompensationProbl
                : options.multires ? MultiresStart(options, problem, coarse, ColourModel::kLab, reverse,
                                                   summary, &coarse_setup_seconds)
                                   : reverse;
-      SolveCiede2000Rounds(options, problem, radiosity, initial, summary, &solution);
+      if (options.metric_update == SolverOptions::MetricUpdate::kEveryIteration) {
+        SolveCiede2000EveryIteration(options, problem, radiosity, initial, summary, &solution);
+      } else {
+        SolveCiede2000Rounds(options, problem, radiosity, initial, summary, &solution);
+      }
       break;
     }
   }

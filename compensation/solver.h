@@ -124,6 +124,18 @@ struct SolverOptions : AlgorithmSettings {
   // then end 0.1–2% apart in objective depending on where they started (a warm start no longer
   // returns to the same solution), so it is not the default.
   double metric_round_tolerance = 0.0;
+  // kPerceptual2000: when the metric and the robust weights are measured again.
+  //   kRounds          metric_rounds rounds, each a whole solve with them fixed (above).
+  //   kEveryIteration  one Gauss–Newton run that measures them again at every iterate: each
+  //                    iteration is one step of Alg. 1 (its Armijo search included) on the objective
+  //                    with the metric and weights measured at its start point. It stops at the
+  //                    fixed point of the reweighting: where the projected gradient test of
+  //                    AlgorithmSettings holds for the objective measured at the iterate itself, or
+  //                    once a step lowers its objective by less than metric_update_tolerance of it.
+  enum class MetricUpdate { kRounds, kEveryIteration };
+  MetricUpdate metric_update = MetricUpdate::kRounds;
+  // kEveryIteration: the relative decrease of a step's objective below which it stops, in [0, 1).
+  double metric_update_tolerance = 1e-4;
   // Preconditioner of the free-variable Newton systems H_FF d = −g_F (H = K⁻ᵀ M K⁻¹):
   //   kInverseHessian   (K M⁻¹ Kᵀ)_FF: the exact inverse when no bound is active; two products
   //                     with F per application.
@@ -147,6 +159,14 @@ double RobustLossWeight(SolverOptions::RobustLoss loss, double scale, double s);
 // the first round's: the metric at the desired colour, weights 1.
 ColourMetric Ciede2000Metric(const SolverOptions& options, const CompensationProblem& problem,
                              const Eigen::MatrixX3d& radiosity);
+// The robust objective that kPerceptual2000 approaches, at radiosity B (n×3): α Σ A_i/Ā w_i
+// ρ(ΔE00_i²) + (1 − α) Σ_pairs ρ(‖L_i r_i − L_j r_j‖²), L_i the metric of Ciede2000Metric measured at
+// B itself, w the problem's patch_weight (1 without one), ρ the options' loss.
+double Ciede2000RobustObjective(const SolverOptions& options, const CompensationProblem& problem,
+                          const Eigen::MatrixX3d& radiosity);
+// "rounds", "every_iteration".
+const char* MetricUpdateName(SolverOptions::MetricUpdate update);
+bool ParseMetricUpdate(const std::string& name, SolverOptions::MetricUpdate* update);
 // "block_jacobi_neumann", "block_jacobi"; "float16", "float32".
 const char* DevicePreconditionerName(SolverOptions::DevicePreconditioner preconditioner);
 const char* DeviceCgMatrixName(SolverOptions::DeviceCgMatrix matrix);
@@ -167,6 +187,8 @@ struct SolverSummary {
   int gradients = 0;
   int hessian_products = 0;
   int preconditioner_applications = 0;
+  // kPerceptual2000: measurements of CIEDE2000's metric at every patch (Ciede2000Metric).
+  int metric_measurements = 0;
   double setup_seconds = 0.0;     // factorising K (and the coarse level's K with multires)
   double solve_seconds = 0.0;     // everything after the setup
   double coarse_seconds = 0.0;    // part of solve_seconds spent on the coarse level

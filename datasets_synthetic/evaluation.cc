@@ -83,6 +83,7 @@ SceneEvaluation EvaluateSyntheticScene(const std::string& name, const Evaluation
                                                         method == CompensationMethod::kPerceptual2000);
     compensation.solver.robust_loss = options.loss;
     compensation.solver.robust_scale = options.loss_scale;
+    compensation.solver.metric_update = options.metric_update;
     compensation.alpha = options.alpha;
     compensation.lower = evaluation.rig->lower;
     compensation.upper = evaluation.rig->upper;

@@ -60,6 +60,8 @@ struct EvaluationOptions {
   bool multires = true;  // for the perceptual methods
   SolverOptions::RobustLoss loss = SolverOptions::RobustLoss::kSoftL1;  // perceptual2000's
   double loss_scale = SolverOptions().robust_scale;
+  // perceptual2000's schedule of metric measurements (SolverOptions::metric_update).
+  SolverOptions::MetricUpdate metric_update = SolverOptions().metric_update;
   int world_factor = 4;  // world mesh patches per solver patch
   double albedo_variation = 0.05;  // the simulated room's uneven paint (SimulatedRigOptions)
   RenderOptions render;            // projector images (seamless light by default)

@@ -135,6 +135,13 @@ void BindCompensation(py::module_& m) {
                     "cuda, dense F: the copy of K^-1 CG's products read, float16 | float32")
       .def_readwrite("metric_round_tolerance", &SolverOptions::metric_round_tolerance,
                      "perceptual2000: relative decrease at which every round but the last stops (0: the full tolerances)")
+      .def_property("metric_update", [](const SolverOptions& o) { return MetricUpdateName(o.metric_update); },
+                    [](SolverOptions& o, const std::string& name) {
+                      CheckedParse(&ParseMetricUpdate, "metric_update", name, &o.metric_update);
+                    },
+                    "perceptual2000: rounds (each a whole solve) | every_iteration (inside one Gauss-Newton run)")
+      .def_readwrite("metric_update_tolerance", &SolverOptions::metric_update_tolerance,
+                     "perceptual2000, every_iteration: relative decrease of the robust objective at which it stops")
       .def_readwrite("armijo", &SolverOptions::armijo, "the line search's sufficient-decrease constant")
       .def_readwrite("second_order", &SolverOptions::second_order, "Gauss-Newton's second-order term")
       .def("check", [](const SolverOptions& o) { CheckOptions(o); }, "Raises ValueError naming the first bad option.");
