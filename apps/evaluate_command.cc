@@ -99,9 +99,10 @@ void AddEvaluationCommands(CLI::App& app) {
   cmd->add_option("--loss-scale", args->loss_scale, "perceptual2000's loss scale, ΔE00 units")
       ->check(FiniteRange(1e-6, 1e6))
       ->capture_default_str();
-  cmd->add_option("--metric-update", args->metric_update,
-                  "perceptual2000's metric measured again: rounds (each a whole solve) | every_iteration "
-                  "(inside one Gauss-Newton run)")
+  cmd->add_option(
+         "--metric-update", args->metric_update,
+         "perceptual2000's metric measured again: rounds (each a whole solve) | every_iteration "
+         "(inside one Gauss-Newton run)")
       ->check(CLI::IsMember({"rounds", "every_iteration"}))
       ->capture_default_str();
   cmd->add_option("--out", args->out, "Output directory")->capture_default_str();

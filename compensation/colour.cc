@@ -1,13 +1,12 @@
 #include "compensation/colour.h"
 
+#include <Eigen/Dense>
+#include <Eigen/LU>
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <numbers>
 #include <vector>
-
-#include <Eigen/Dense>
-#include <Eigen/LU>
 
 namespace procam {
 namespace {
@@ -128,7 +127,8 @@ const MetricFit& Ciede2000MetricFit() {
       for (const double sign : {1.0, -1.0}) {
         const Eigen::Vector3d d = sign * axis;
         f.directions[row] = d;
-        design.row(row) << d[0] * d[0], d[1] * d[1], d[2] * d[2], 2 * d[0] * d[1], 2 * d[0] * d[2], 2 * d[1] * d[2];
+        design.row(row) << d[0] * d[0], d[1] * d[1], d[2] * d[2], 2 * d[0] * d[1], 2 * d[0] * d[2],
+            2 * d[1] * d[2];
         ++row;
       }
     }
@@ -178,7 +178,8 @@ Eigen::Matrix3d DeltaE2000MetricClosedForm(const Eigen::Vector3d& lab) {
   double h = Degrees(std::atan2(b, ap));
   if (h < 0.0) h += 360.0;
   const double t = 1.0 - 0.17 * std::cos(Radians(h - 30.0)) + 0.24 * std::cos(Radians(2.0 * h)) +
-                   0.32 * std::cos(Radians(3.0 * h + 6.0)) - 0.20 * std::cos(Radians(4.0 * h - 63.0));
+                   0.32 * std::cos(Radians(3.0 * h + 6.0)) -
+                   0.20 * std::cos(Radians(4.0 * h - 63.0));
   const double s_h = 1.0 + 0.015 * cp * t;
   const double cp7 = std::pow(cp, 7.0);
   const double r_c = 2.0 * std::sqrt(cp7 / (cp7 + std::pow(25.0, 7.0)));

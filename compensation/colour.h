@@ -96,8 +96,8 @@ Eigen::Matrix3d DeltaE2000Metric(const Eigen::Vector3d& lab, double step = 0.05)
 // The same metric in closed form: the limit of the fit as the step goes to 0, M = JᵀQJ with J the
 // derivative of (ΔL′, ΔC′, ΔH′) of Sharma et al.'s Eqs. 1–20 at δ = 0 and Q the quadratic form of
 // Eq. 20 (1/S_L², 1/S_C², 1/S_H², the rotation term R_T/(2 S_C S_H)), all at `lab`; at zero chroma
-// (no hue) diag(1/S_L², (1 + G)²/S_C², 1/S_C²). Eigenvalues clamped as the fit's. One ΔE00's worth of
-// arithmetic instead of eighteen.
+// (no hue) diag(1/S_L², (1 + G)²/S_C², 1/S_C²). Eigenvalues clamped as the fit's. One ΔE00's worth
+// of arithmetic instead of eighteen.
 Eigen::Matrix3d DeltaE2000MetricClosedForm(const Eigen::Vector3d& lab);
 
 // Linear RGB → L*a*b*, given T and the XYZ of the reference white.

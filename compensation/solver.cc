@@ -68,7 +68,8 @@ std::shared_ptr<const RadiositySystem> MakeRadiositySystem(const SolverOptions& 
 // `radiosity` (if not null) gets the result's K⁻¹E where the device formed it, else stays empty.
 Eigen::MatrixX3d MinimiseOnCpu(const SolverOptions& options, const CompensationObjective& objective,
                                const Eigen::MatrixX3d& initial, SolverSummary* summary,
-                               Eigen::MatrixX3d* radiosity, const Eigen::MatrixX3d* start_radiosity);
+                               Eigen::MatrixX3d* radiosity,
+                               const Eigen::MatrixX3d* start_radiosity);
 
 Eigen::MatrixX3d Minimise(const SolverOptions& options, const CompensationObjective& objective,
                           const Eigen::MatrixX3d& initial, SolverSummary* summary,
@@ -233,11 +234,18 @@ class CpuExecutor {
  public:
   // `start_radiosity` (optional): K⁻¹ start, already known; the first evaluation then needs no
   // solve with K.
-  CpuExecutor(const SolverOptions& options, const CompensationObjective& objective, const Eigen::MatrixX3d& start,
-              SolverSummary* summary, const Eigen::MatrixX3d* start_radiosity = nullptr)
-      : options_(options), objective_(objective), lower_(objective.problem().lower),
-        upper_(objective.problem().upper), n_(objective.patches()), x_(start), summary_(summary),
-        start_time_(Clock::now()), start_radiosity_(start_radiosity) {}
+  CpuExecutor(const SolverOptions& options, const CompensationObjective& objective,
+              const Eigen::MatrixX3d& start, SolverSummary* summary,
+              const Eigen::MatrixX3d* start_radiosity = nullptr)
+      : options_(options),
+        objective_(objective),
+        lower_(objective.problem().lower),
+        upper_(objective.problem().upper),
+        n_(objective.patches()),
+        x_(start),
+        summary_(summary),
+        start_time_(Clock::now()),
+        start_radiosity_(start_radiosity) {}
 
   const Eigen::MatrixX3d& x() const { return x_; }
   // K⁻¹x of the current iterate (after Evaluate).
@@ -428,10 +436,14 @@ namespace {
 double RobustLossValue(SolverOptions::RobustLoss loss, double scale, double s) {
   const double c2 = scale * scale;
   switch (loss) {
-    case SolverOptions::RobustLoss::kSquared: return s;
-    case SolverOptions::RobustLoss::kSoftL1: return 2.0 * c2 * (std::sqrt(1.0 + s / c2) - 1.0);
-    case SolverOptions::RobustLoss::kHuber: return s <= c2 ? s : 2.0 * scale * std::sqrt(s) - c2;
-    case SolverOptions::RobustLoss::kCauchy: return c2 * std::log1p(s / c2);
+    case SolverOptions::RobustLoss::kSquared:
+      return s;
+    case SolverOptions::RobustLoss::kSoftL1:
+      return 2.0 * c2 * (std::sqrt(1.0 + s / c2) - 1.0);
+    case SolverOptions::RobustLoss::kHuber:
+      return s <= c2 ? s : 2.0 * scale * std::sqrt(s) - c2;
+    case SolverOptions::RobustLoss::kCauchy:
+      return c2 * std::log1p(s / c2);
   }
   return s;
 }
@@ -462,8 +474,10 @@ double MeasureCiede2000(const SolverOptions& options, const CompensationProblem&
     metric.factor[i] = Eigen::LLT<Eigen::Matrix3d>(m).matrixU();
     residual[i] = metric.factor[i] * r;
     if (measured) {
-      metric.weight[i] = RobustLossWeight(options.robust_loss, options.robust_scale, distance * distance);
-      data_loss[i] = RobustLossValue(options.robust_loss, options.robust_scale, distance * distance);
+      metric.weight[i] =
+          RobustLossWeight(options.robust_loss, options.robust_scale, distance * distance);
+      data_loss[i] =
+          RobustLossValue(options.robust_loss, options.robust_scale, distance * distance);
     }
   }
   metric.weight /= metric.weight.mean();
@@ -497,7 +511,7 @@ ColourMetric Ciede2000Metric(const SolverOptions& options, const CompensationPro
 }
 
 double Ciede2000RobustObjective(const SolverOptions& options, const CompensationProblem& problem,
-                          const Eigen::MatrixX3d& radiosity) {
+                                const Eigen::MatrixX3d& radiosity) {
   ColourMetric metric;
   return MeasureCiede2000(options, problem, radiosity, &metric);
 }
@@ -600,14 +614,17 @@ bool SolverOptions::Check(std::string* why) const {
 
 const char* MetricUpdateName(SolverOptions::MetricUpdate update) {
   switch (update) {
-    case SolverOptions::MetricUpdate::kRounds: return "rounds";
-    case SolverOptions::MetricUpdate::kEveryIteration: return "every_iteration";
+    case SolverOptions::MetricUpdate::kRounds:
+      return "rounds";
+    case SolverOptions::MetricUpdate::kEveryIteration:
+      return "every_iteration";
   }
   return "?";
 }
 
 bool ParseMetricUpdate(const std::string& name, SolverOptions::MetricUpdate* update) {
-  for (SolverOptions::MetricUpdate u : {SolverOptions::MetricUpdate::kRounds, SolverOptions::MetricUpdate::kEveryIteration}) {
+  for (SolverOptions::MetricUpdate u :
+       {SolverOptions::MetricUpdate::kRounds, SolverOptions::MetricUpdate::kEveryIteration}) {
     if (name == MetricUpdateName(u)) {
       *update = u;
       return true;
@@ -685,7 +702,8 @@ namespace {
 // bounds).
 Eigen::MatrixX3d MinimiseOnCpu(const SolverOptions& options, const CompensationObjective& objective,
                                const Eigen::MatrixX3d& initial, SolverSummary* summary,
-                               Eigen::MatrixX3d* radiosity, const Eigen::MatrixX3d* start_radiosity) {
+                               Eigen::MatrixX3d* radiosity,
+                               const Eigen::MatrixX3d* start_radiosity) {
   const CompensationProblem& problem = objective.problem();
   CpuExecutor executor(options, objective, Clamp(initial, problem.lower, problem.upper), summary,
                        start_radiosity);
@@ -698,7 +716,8 @@ Eigen::MatrixX3d MinimiseOnCpu(const SolverOptions& options, const CompensationO
 
 }  // namespace
 
-Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options, const CompensationObjective& objective,
+Eigen::MatrixX3d MinimiseBounded(const SolverOptions& options,
+                                 const CompensationObjective& objective,
                                  const Eigen::MatrixX3d& initial, SolverSummary* summary) {
   return MinimiseOnCpu(options, objective, initial, summary, nullptr, nullptr);
 }
@@ -796,8 +815,8 @@ void SolveCiede2000EveryIteration(const SolverOptions& options, const Compensati
     const CompensationObjective objective(problem, radiosity, ColourModel::kLab, metric);
     SolverSummary step_summary;
     Eigen::MatrixX3d step_radiosity;
-    const Eigen::MatrixX3d step_emittance =
-        Minimise(step_options, objective, emittance, &step_summary, &step_radiosity, &current_radiosity);
+    const Eigen::MatrixX3d step_emittance = Minimise(
+        step_options, objective, emittance, &step_summary, &step_radiosity, &current_radiosity);
     AddWorkCounters(step_summary, summary);
     if (first) {
       summary->initial_cost = step_summary.initial_cost;
@@ -810,7 +829,8 @@ void SolveCiede2000EveryIteration(const SolverOptions& options, const Compensati
       summary->termination = TerminationType::kGradientTolerance;
       break;
     }
-    if (step_summary.iterations == 0 || step_summary.termination == TerminationType::kLineSearchFailure ||
+    if (step_summary.iterations == 0 ||
+        step_summary.termination == TerminationType::kLineSearchFailure ||
         step_summary.termination == TerminationType::kNumericalFailure) {
       summary->termination = step_summary.termination;
       summary->message = step_summary.message;

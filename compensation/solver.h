@@ -127,9 +127,9 @@ struct SolverOptions : AlgorithmSettings {
   // kPerceptual2000: when the metric and the robust weights are measured again.
   //   kRounds          metric_rounds rounds, each a whole solve with them fixed (above).
   //   kEveryIteration  one Gauss–Newton run that measures them again at every iterate: each
-  //                    iteration is one step of Alg. 1 (its Armijo search included) on the objective
-  //                    with the metric and weights measured at its start point. It stops at the
-  //                    fixed point of the reweighting: where the projected gradient test of
+  //                    iteration is one step of Alg. 1 (its Armijo search included) on the
+  //                    objective with the metric and weights measured at its start point. It stops
+  //                    at the fixed point of the reweighting: where the projected gradient test of
   //                    AlgorithmSettings holds for the objective measured at the iterate itself, or
   //                    once a step lowers its objective by less than metric_update_tolerance of it.
   enum class MetricUpdate { kRounds, kEveryIteration };
@@ -160,10 +160,10 @@ double RobustLossWeight(SolverOptions::RobustLoss loss, double scale, double s);
 ColourMetric Ciede2000Metric(const SolverOptions& options, const CompensationProblem& problem,
                              const Eigen::MatrixX3d& radiosity);
 // The robust objective that kPerceptual2000 approaches, at radiosity B (n×3): α Σ A_i/Ā w_i
-// ρ(ΔE00_i²) + (1 − α) Σ_pairs ρ(‖L_i r_i − L_j r_j‖²), L_i the metric of Ciede2000Metric measured at
-// B itself, w the problem's patch_weight (1 without one), ρ the options' loss.
+// ρ(ΔE00_i²) + (1 − α) Σ_pairs ρ(‖L_i r_i − L_j r_j‖²), L_i the metric of Ciede2000Metric measured
+// at B itself, w the problem's patch_weight (1 without one), ρ the options' loss.
 double Ciede2000RobustObjective(const SolverOptions& options, const CompensationProblem& problem,
-                          const Eigen::MatrixX3d& radiosity);
+                                const Eigen::MatrixX3d& radiosity);
 // "rounds", "every_iteration".
 const char* MetricUpdateName(SolverOptions::MetricUpdate update);
 bool ParseMetricUpdate(const std::string& name, SolverOptions::MetricUpdate* update);

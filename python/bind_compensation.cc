@@ -78,73 +78,113 @@ void BindCompensation(py::module_& m) {
                             "The solver's options (compensation/solver.h documents each); check() "
                             "raises ValueError naming the first bad one.")
       .def(py::init<>())
-      .def_property("method", [](const SolverOptions& o) { return MethodName(o.method); },
-                    [](SolverOptions& o, const std::string& name) { CheckedParse(&ParseMethod, "method", name, &o.method); },
-                    "naive | reverse | linear | perceptual (Sheng et al. 2011, CIE76) | perceptual2000 "
-                    "(the objective in CIEDE2000 under a robust loss)")
-      .def_property("device", [](const SolverOptions& o) { return DeviceName(o.device); },
-                    [](SolverOptions& o, const std::string& name) { CheckedParse(&ParseDevice, "device", name, &o.device); },
-                    "cpu | cuda: where K^-1 is applied (cuda needs a CUDA build and a GPU)")
-      .def_property("robust_loss", [](const SolverOptions& o) { return RobustLossName(o.robust_loss); },
-                    [](SolverOptions& o, const std::string& name) {
-                      CheckedParse(&ParseRobustLoss, "robust_loss", name, &o.robust_loss);
-                    },
-                    "perceptual2000: squared | soft_l1 | huber | cauchy, on each patch's ΔE00²")
-      .def_property("preconditioner", [](const SolverOptions& o) { return PreconditionerName(o.preconditioner); },
-                    [](SolverOptions& o, const std::string& name) {
-                      CheckedParse(&ParsePreconditioner, "preconditioner", name, &o.preconditioner);
-                    },
-                    "CG's preconditioner on the CPU: free_colour_hessian | inverse_hessian")
-      .def_readwrite("robust_scale", &SolverOptions::robust_scale, "perceptual2000: the loss's scale c, ΔE00 units, > 0")
-      .def_readwrite("metric_rounds", &SolverOptions::metric_rounds, "perceptual2000: reweighting rounds, >= 1")
-      .def_readwrite("multires", &SolverOptions::multires, "solve the coarse level first (solve() needs one)")
-      .def_readwrite("max_iterations", &SolverOptions::max_iterations, "outer (Gauss-Newton) iterations, >= 1")
-      .def_readwrite("max_inner_iterations", &SolverOptions::max_inner_iterations, "projected-Newton steps per outer iteration")
-      .def_readwrite("max_cg_iterations", &SolverOptions::max_cg_iterations, "CG iterations per Newton system")
-      .def_readwrite("cg_tolerance", &SolverOptions::cg_tolerance, "CG's relative residual tolerance (forcing term)")
+      .def_property(
+          "method", [](const SolverOptions& o) { return MethodName(o.method); },
+          [](SolverOptions& o, const std::string& name) {
+            CheckedParse(&ParseMethod, "method", name, &o.method);
+          },
+          "naive | reverse | linear | perceptual (Sheng et al. 2011, CIE76) | perceptual2000 "
+          "(the objective in CIEDE2000 under a robust loss)")
+      .def_property(
+          "device", [](const SolverOptions& o) { return DeviceName(o.device); },
+          [](SolverOptions& o, const std::string& name) {
+            CheckedParse(&ParseDevice, "device", name, &o.device);
+          },
+          "cpu | cuda: where K^-1 is applied (cuda needs a CUDA build and a GPU)")
+      .def_property(
+          "robust_loss", [](const SolverOptions& o) { return RobustLossName(o.robust_loss); },
+          [](SolverOptions& o, const std::string& name) {
+            CheckedParse(&ParseRobustLoss, "robust_loss", name, &o.robust_loss);
+          },
+          "perceptual2000: squared | soft_l1 | huber | cauchy, on each patch's ΔE00²")
+      .def_property(
+          "preconditioner",
+          [](const SolverOptions& o) { return PreconditionerName(o.preconditioner); },
+          [](SolverOptions& o, const std::string& name) {
+            CheckedParse(&ParsePreconditioner, "preconditioner", name, &o.preconditioner);
+          },
+          "CG's preconditioner on the CPU: free_colour_hessian | inverse_hessian")
+      .def_readwrite("robust_scale", &SolverOptions::robust_scale,
+                     "perceptual2000: the loss's scale c, ΔE00 units, > 0")
+      .def_readwrite("metric_rounds", &SolverOptions::metric_rounds,
+                     "perceptual2000: reweighting rounds, >= 1")
+      .def_readwrite("multires", &SolverOptions::multires,
+                     "solve the coarse level first (solve() needs one)")
+      .def_readwrite("max_iterations", &SolverOptions::max_iterations,
+                     "outer (Gauss-Newton) iterations, >= 1")
+      .def_readwrite("max_inner_iterations", &SolverOptions::max_inner_iterations,
+                     "projected-Newton steps per outer iteration")
+      .def_readwrite("max_cg_iterations", &SolverOptions::max_cg_iterations,
+                     "CG iterations per Newton system")
+      .def_readwrite("cg_tolerance", &SolverOptions::cg_tolerance,
+                     "CG's relative residual tolerance (forcing term)")
       .def_readwrite("gradient_tolerance", &SolverOptions::gradient_tolerance,
                      "stop when the projected gradient's max norm <= this (1 + f)")
       .def_readwrite("function_tolerance", &SolverOptions::function_tolerance,
                      "stop when an iteration lowers f by <= this times f")
-      .def_readwrite("device_float32", &SolverOptions::device_float32,
-                     "cuda: objective values, gradients and line searches with the float32 K^-1 too")
+      .def_readwrite(
+          "device_float32", &SolverOptions::device_float32,
+          "cuda: objective values, gradients and line searches with the float32 K^-1 too")
       .def_readwrite("device_host_loop", &SolverOptions::device_host_loop,
                      "cuda: Alg. 1 on the host, only K^-1 products on the device (for comparison)")
-      .def_readwrite("device_fused", &SolverOptions::device_fused,
-                     "cuda: problems under 4096 patches run the whole loop in one cooperative kernel")
+      .def_readwrite(
+          "device_fused", &SolverOptions::device_fused,
+          "cuda: problems under 4096 patches run the whole loop in one cooperative kernel")
       .def_readwrite("device_product_rows", &SolverOptions::device_product_rows,
-                     "cuda, dense F: outputs per block of the K^-1 product kernel (1, 2, 4, 8; 0 cuBLAS; -1 best)")
-      .def_readwrite("device_graphs", &SolverOptions::device_graphs, "cuda: replay fixed kernel sequences as CUDA graphs")
+                     "cuda, dense F: outputs per block of the K^-1 product kernel (1, 2, 4, 8; 0 "
+                     "cuBLAS; -1 best)")
+      .def_readwrite("device_graphs", &SolverOptions::device_graphs,
+                     "cuda: replay fixed kernel sequences as CUDA graphs")
       .def_readwrite("device_fused_blocks", &SolverOptions::device_fused_blocks,
                      "cuda, fused loop: blocks of the cooperative grid (0: one per multiprocessor)")
-      .def_readwrite("device_profile", &SolverOptions::device_profile, "cuda: print where each solve's time went (stderr)")
-      .def_property("device_preconditioner",
-                    [](const SolverOptions& o) { return DevicePreconditionerName(o.device_preconditioner); },
-                    [](SolverOptions& o, const std::string& name) {
-                      if (name == "block_jacobi_neumann") o.device_preconditioner = SolverOptions::DevicePreconditioner::kBlockJacobiNeumann;
-                      else if (name == "block_jacobi") o.device_preconditioner = SolverOptions::DevicePreconditioner::kBlockJacobi;
-                      else throw std::invalid_argument("SolverOptions.device_preconditioner: unknown value '" + name + "'");
-                    },
-                    "cuda: CG's preconditioner, block_jacobi_neumann | block_jacobi")
-      .def_property("device_cg_matrix", [](const SolverOptions& o) { return DeviceCgMatrixName(o.device_cg_matrix); },
-                    [](SolverOptions& o, const std::string& name) {
-                      if (name == "float16") o.device_cg_matrix = SolverOptions::DeviceCgMatrix::kFloat16;
-                      else if (name == "float32") o.device_cg_matrix = SolverOptions::DeviceCgMatrix::kFloat32;
-                      else throw std::invalid_argument("SolverOptions.device_cg_matrix: unknown value '" + name + "'");
-                    },
-                    "cuda, dense F: the copy of K^-1 CG's products read, float16 | float32")
+      .def_readwrite("device_profile", &SolverOptions::device_profile,
+                     "cuda: print where each solve's time went (stderr)")
+      .def_property(
+          "device_preconditioner",
+          [](const SolverOptions& o) { return DevicePreconditionerName(o.device_preconditioner); },
+          [](SolverOptions& o, const std::string& name) {
+            if (name == "block_jacobi_neumann")
+              o.device_preconditioner = SolverOptions::DevicePreconditioner::kBlockJacobiNeumann;
+            else if (name == "block_jacobi")
+              o.device_preconditioner = SolverOptions::DevicePreconditioner::kBlockJacobi;
+            else
+              throw std::invalid_argument("SolverOptions.device_preconditioner: unknown value '" +
+                                          name + "'");
+          },
+          "cuda: CG's preconditioner, block_jacobi_neumann | block_jacobi")
+      .def_property(
+          "device_cg_matrix",
+          [](const SolverOptions& o) { return DeviceCgMatrixName(o.device_cg_matrix); },
+          [](SolverOptions& o, const std::string& name) {
+            if (name == "float16")
+              o.device_cg_matrix = SolverOptions::DeviceCgMatrix::kFloat16;
+            else if (name == "float32")
+              o.device_cg_matrix = SolverOptions::DeviceCgMatrix::kFloat32;
+            else
+              throw std::invalid_argument("SolverOptions.device_cg_matrix: unknown value '" + name +
+                                          "'");
+          },
+          "cuda, dense F: the copy of K^-1 CG's products read, float16 | float32")
       .def_readwrite("metric_round_tolerance", &SolverOptions::metric_round_tolerance,
-                     "perceptual2000: relative decrease at which every round but the last stops (0: the full tolerances)")
-      .def_property("metric_update", [](const SolverOptions& o) { return MetricUpdateName(o.metric_update); },
-                    [](SolverOptions& o, const std::string& name) {
-                      CheckedParse(&ParseMetricUpdate, "metric_update", name, &o.metric_update);
-                    },
-                    "perceptual2000: rounds (each a whole solve) | every_iteration (inside one Gauss-Newton run)")
+                     "perceptual2000: relative decrease at which every round but the last stops "
+                     "(0: the full tolerances)")
+      .def_property(
+          "metric_update", [](const SolverOptions& o) { return MetricUpdateName(o.metric_update); },
+          [](SolverOptions& o, const std::string& name) {
+            CheckedParse(&ParseMetricUpdate, "metric_update", name, &o.metric_update);
+          },
+          "perceptual2000: rounds (each a whole solve) | every_iteration (inside one Gauss-Newton "
+          "run)")
       .def_readwrite("metric_update_tolerance", &SolverOptions::metric_update_tolerance,
-                     "perceptual2000, every_iteration: relative decrease of the robust objective at which it stops")
-      .def_readwrite("armijo", &SolverOptions::armijo, "the line search's sufficient-decrease constant")
-      .def_readwrite("second_order", &SolverOptions::second_order, "Gauss-Newton's second-order term")
-      .def("check", [](const SolverOptions& o) { CheckOptions(o); }, "Raises ValueError naming the first bad option.");
+                     "perceptual2000, every_iteration: relative decrease of the robust objective "
+                     "at which it stops")
+      .def_readwrite("armijo", &SolverOptions::armijo,
+                     "the line search's sufficient-decrease constant")
+      .def_readwrite("second_order", &SolverOptions::second_order,
+                     "Gauss-Newton's second-order term")
+      .def(
+          "check", [](const SolverOptions& o) { CheckOptions(o); },
+          "Raises ValueError naming the first bad option.");
 
   py::class_<SolverSummary>(m, "SolverSummary", "What a solve did (compensation/solver.h).")
       .def_property_readonly("method", [](const SolverSummary& s) { return MethodName(s.method); })

@@ -129,7 +129,8 @@ TEST(DeltaE2000Metric, ClosedFormMatchesDeltaE2000AndTheFit) {
     const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(m);
     EXPECT_GT(eigen.eigenvalues().minCoeff(), 0.0);
     for (int k = 0; k < 3; ++k) {
-      const Eigen::Vector3d delta = 0.002 * Eigen::Vector3d(unit(random), unit(random), unit(random));
+      const Eigen::Vector3d delta =
+          0.002 * Eigen::Vector3d(unit(random), unit(random), unit(random));
       const double distance = DeltaE2000(lab + delta, lab);
       EXPECT_NEAR(delta.dot(m * delta), distance * distance, 0.01 * distance * distance)
           << "Lab " << lab.transpose() << ", δ " << delta.transpose();
@@ -139,14 +140,17 @@ TEST(DeltaE2000Metric, ClosedFormMatchesDeltaE2000AndTheFit) {
       EXPECT_LT((m - fit).norm(), 1e-3 * m.norm()) << "Lab " << lab.transpose();
     }
   }
-  // Neutral colours: the cone of ΔC′ at zero chroma is the quadratic form diag(.., (1 + G)², 1)/S_C².
+  // Neutral colours: the cone of ΔC′ at zero chroma is the quadratic form diag(.., (1 + G)²,
+  // 1)/S_C².
   for (const double lightness : {20.0, 50.0, 80.0}) {
     const Eigen::Vector3d grey(lightness, 0.0, 0.0);
     const Eigen::Matrix3d m = DeltaE2000MetricClosedForm(grey);
-    for (const Eigen::Vector3d& delta : {Eigen::Vector3d(0.0, 1e-3, 0.0), Eigen::Vector3d(0.0, 0.0, 1e-3),
-                                         Eigen::Vector3d(1e-3, -1e-3, 2e-3)}) {
+    for (const Eigen::Vector3d& delta :
+         {Eigen::Vector3d(0.0, 1e-3, 0.0), Eigen::Vector3d(0.0, 0.0, 1e-3),
+          Eigen::Vector3d(1e-3, -1e-3, 2e-3)}) {
       const double distance = DeltaE2000(grey + delta, grey);
-      EXPECT_NEAR(delta.dot(m * delta), distance * distance, 1e-3 * distance * distance) << delta.transpose();
+      EXPECT_NEAR(delta.dot(m * delta), distance * distance, 1e-3 * distance * distance)
+          << delta.transpose();
     }
   }
 }
@@ -387,8 +391,8 @@ class FrozenMetricObjective {
       : problem_(problem), metric_(metric), desired_(LabOf(problem, problem.desired)) {
     const int n = problem.size();
     for (int c = 0; c < 3; ++c) {
-      const Eigen::MatrixXd k =
-          Eigen::MatrixXd::Identity(n, n) - problem.reflectance.col(c).asDiagonal() * problem.form_factors;
+      const Eigen::MatrixXd k = Eigen::MatrixXd::Identity(n, n) -
+                                problem.reflectance.col(c).asDiagonal() * problem.form_factors;
       inverse_[c] = k.fullPivLu().inverse();
     }
   }
@@ -404,7 +408,8 @@ class FrozenMetricObjective {
     for (int i = 0; i < n; ++i) r.row(i) = (metric_.factor[i] * r0.row(i).transpose()).transpose();
     double f = 0.0;
     for (int i = 0; i < n; ++i)
-      f += problem_.alpha * problem_.area[i] / problem_.area.mean() * metric_.weight[i] * r.row(i).squaredNorm();
+      f += problem_.alpha * problem_.area[i] / problem_.area.mean() * metric_.weight[i] *
+           r.row(i).squaredNorm();
     for (std::size_t k = 0; k < problem_.adjacency.size(); ++k) {
       const auto& pair = problem_.adjacency[k];
       f += (1 - problem_.alpha) * metric_.pair_weight[static_cast<Eigen::Index>(k)] *
@@ -471,22 +476,28 @@ TEST(SolvePerceptual2000, EveryIterationEndsAtTheFixedPointNoWorseThanTheRounds)
   const double cost = frozen.Value(fixed_b);
   EXPECT_NEAR(tight_summary.final_cost, cost, 1e-8 * cost) << tight_summary.BriefReport();
   const double projected = ProjectedGradientNorm(
-      fixed_point.emittance, frozen.NumericGradient(fixed_point.emittance, 1e-6), problem.lower, problem.upper);
+      fixed_point.emittance, frozen.NumericGradient(fixed_point.emittance, 1e-6), problem.lower,
+      problem.upper);
   const Eigen::MatrixX3d rounds_b = RadiosityByLu(problem, by_rounds.emittance);
-  const double value = RobustObjective(options, problem, b), rounds_value = RobustObjective(options, problem, rounds_b),
+  const double value = RobustObjective(options, problem, b),
+               rounds_value = RobustObjective(options, problem, rounds_b),
                fixed_value = RobustObjective(options, problem, fixed_b);
-  std::printf("every iteration: %d iterations, %d CG, %d metric measurements; robust objective %.10g (fixed point "
-              "%.10g after %d iterations, %s, projected gradient %.3g; rounds %.10g after %d, %d CG); per patch ΔE00 "
-              "%.4f (fixed point %.4f, rounds %.4f)\n",
-              summary.iterations, summary.cg_iterations, summary.metric_measurements, value, fixed_value,
-              tight_summary.iterations, TerminationName(tight_summary.termination), projected, rounds_value,
-              rounds_summary.iterations, rounds_summary.cg_iterations, AreaMeanDeltaE2000(problem, b),
-              AreaMeanDeltaE2000(problem, fixed_b), AreaMeanDeltaE2000(problem, rounds_b));
+  std::printf(
+      "every iteration: %d iterations, %d CG, %d metric measurements; robust objective %.10g "
+      "(fixed point "
+      "%.10g after %d iterations, %s, projected gradient %.3g; rounds %.10g after %d, %d CG); per "
+      "patch ΔE00 "
+      "%.4f (fixed point %.4f, rounds %.4f)\n",
+      summary.iterations, summary.cg_iterations, summary.metric_measurements, value, fixed_value,
+      tight_summary.iterations, TerminationName(tight_summary.termination), projected, rounds_value,
+      rounds_summary.iterations, rounds_summary.cg_iterations, AreaMeanDeltaE2000(problem, b),
+      AreaMeanDeltaE2000(problem, fixed_b), AreaMeanDeltaE2000(problem, rounds_b));
   EXPECT_LT(projected, 1e-6 * (1.0 + cost)) << tight_summary.BriefReport();
   EXPECT_NEAR(value, fixed_value, 1e-3 * fixed_value);  // 2.6e-4 measured
   for (const Eigen::MatrixX3d* radiosity : {&b, &fixed_b}) {
     EXPECT_LE(RobustObjective(options, problem, *radiosity), (1.0 + 1e-3) * rounds_value);
-    EXPECT_LE(AreaMeanDeltaE2000(problem, *radiosity), AreaMeanDeltaE2000(problem, rounds_b) + 0.01);
+    EXPECT_LE(AreaMeanDeltaE2000(problem, *radiosity),
+              AreaMeanDeltaE2000(problem, rounds_b) + 0.01);
   }
   EXPECT_LT(summary.iterations, rounds_summary.iterations);
   // The robust objective the solver reports is the one written out here.
@@ -523,16 +534,19 @@ TEST(SolvePerceptual2000, DISABLED_Timings) {
       problems.emplace_back(directory.filename().string(), testing::ReadExportedProblem(directory));
   }
   const int repeats = list("PROCAM_BENCH_REPEATS", {3})[0];
-  std::printf("| problem | variables | method | solve s | GN iterations | CG iterations | evaluations | metric "
-              "measurements | per round (GN/CG) | objective | robust objective | per patch ΔE00 |\n"
-              "|---|---:|---|---:|---:|---:|---:|---:|---|---:|---:|---:|\n");
+  std::printf(
+      "| problem | variables | method | solve s | GN iterations | CG iterations | evaluations | "
+      "metric "
+      "measurements | per round (GN/CG) | objective | robust objective | per patch ΔE00 |\n"
+      "|---|---:|---|---:|---:|---:|---:|---:|---|---:|---:|---:|\n");
   for (const auto& [name, problem] : problems) {
     ASSERT_EQ(problem.Validate(), "") << name;
     // perceptual, then perceptual2000 with each schedule of metric measurements that
     // PROCAM_BENCH_METRIC_UPDATE names ("rounds", "every_iteration"; default both).
     std::vector<std::pair<CompensationMethod, SolverOptions::MetricUpdate>> runs = {
         {CompensationMethod::kPerceptual, SolverOptions::MetricUpdate::kRounds}};
-    for (const auto update : {SolverOptions::MetricUpdate::kRounds, SolverOptions::MetricUpdate::kEveryIteration}) {
+    for (const auto update :
+         {SolverOptions::MetricUpdate::kRounds, SolverOptions::MetricUpdate::kEveryIteration}) {
       const char* only = std::getenv("PROCAM_BENCH_METRIC_UPDATE");
       if (only == nullptr || std::string(only) == MetricUpdateName(update))
         runs.emplace_back(CompensationMethod::kPerceptual2000, update);
@@ -545,7 +559,8 @@ TEST(SolvePerceptual2000, DISABLED_Timings) {
       // solved tightly, the schedule before it), PROCAM_BENCH_ROUNDS (metric_rounds).
       if (const char* v = std::getenv("PROCAM_BENCH_ROUND_TOLERANCE")) options.metric_round_tolerance = std::atof(v);
       if (const char* v = std::getenv("PROCAM_BENCH_ROUNDS")) options.metric_rounds = std::atoi(v);
-      if (const char* v = std::getenv("PROCAM_BENCH_UPDATE_TOLERANCE")) options.metric_update_tolerance = std::atof(v);
+      if (const char* v = std::getenv("PROCAM_BENCH_UPDATE_TOLERANCE"))
+        options.metric_update_tolerance = std::atof(v);
       std::vector<double> seconds;
       SolverSummary summary;
       CompensationSolution solution;
@@ -571,13 +586,15 @@ TEST(SolvePerceptual2000, DISABLED_Timings) {
           std::printf("    %2d cost %.12g step %.3g free %d CG %d\n", record.iteration, record.cost, record.step,
                       record.free_variables, record.cg_iterations);
       }
-      const std::string label = method == CompensationMethod::kPerceptual2000
-                                    ? std::string(MethodName(method)) + " " + MetricUpdateName(update)
-                                    : MethodName(method);
-      std::printf("| %s | %d | %s | %.4f | %d | %d | %d | %d | %s | %.10g | %.10g | %.4f |\n", name.c_str(),
-                  3 * problem.size(), label.c_str(), seconds[seconds.size() / 2], summary.iterations,
-                  summary.cg_iterations, summary.evaluations, summary.metric_measurements, rounds.c_str(),
-                  summary.final_cost, RobustObjective(options, problem, solution.radiosity),
+      const std::string label =
+          method == CompensationMethod::kPerceptual2000
+              ? std::string(MethodName(method)) + " " + MetricUpdateName(update)
+              : MethodName(method);
+      std::printf("| %s | %d | %s | %.4f | %d | %d | %d | %d | %s | %.10g | %.10g | %.4f |\n",
+                  name.c_str(), 3 * problem.size(), label.c_str(), seconds[seconds.size() / 2],
+                  summary.iterations, summary.cg_iterations, summary.evaluations,
+                  summary.metric_measurements, rounds.c_str(), summary.final_cost,
+                  RobustObjective(options, problem, solution.radiosity),
                   AreaMeanDeltaE2000(problem, solution.radiosity));
       std::fflush(stdout);
     }
