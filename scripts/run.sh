@@ -54,13 +54,13 @@ case "$command" in
     # Left out here to keep CI short, all run by the test command: apps/faults kills, fills and
     # stalls whole commands, apps/nodes starts, kills and restarts node processes against
     # wall-clock deadlines (process and timing behaviour, not memory); the end-to-end command
-    # tests (apps/cli, apps/emulated_room, calibrate_all, the *_command tests, capture/cli,
+    # tests (apps/cli, apps/emulated_room, calibrate_all, the *_command tests, board_scene, capture/cli,
     # projection/multi_monitor, verification/verify, and datasets_synthetic/scan_random: whole
     # scans of random rooms) run whole pipelines whose code runs under the sanitizers in the unit
     # tests of each library; package/install, layering/* and format/* check files, not code.
     # apps/bad_input (every command on malformed input) stays.
     ctest --preset asan --parallel 2 \
-      -E '^(apps/(faults|nodes|cli|emulated_room)|calibration/(calibrate_all|projectors_command|photometric_command|board_command)|projection/(project_command|multi_monitor)|capture/cli|verification/verify|datasets_synthetic/scan_random|package/install|layering/.*|format/.*)$' \
+      -E '^(apps/(faults|nodes|cli|emulated_room)|calibration/(calibrate_all|projectors_command|photometric_command|board_command|board_scene)|projection/(project_command|multi_monitor)|capture/cli|verification/verify|datasets_synthetic/scan_random|package/install|layering/.*|format/.*)$' \
       "$@"
     ;;
   build)
