@@ -29,6 +29,20 @@ bool InRange(const OptionTable::Interval& range, double value, std::string* why)
   return false;
 }
 
+// A flag's written value ("", "true", "1", "false", "0") into `field`, inverted for a negated
+// flag (--no-NAME given clears it).
+bool ParseFlag(const std::string& text, bool negated, bool* field, std::string* why) {
+  bool given = false;
+  if (text == "true" || text == "1" || text.empty()) {
+    given = true;
+  } else if (!(text == "false" || text == "0")) {
+    *why = "expected true or false, got '" + text + "'";
+    return false;
+  }
+  *field = given != negated;
+  return true;
+}
+
 }  // namespace
 
 bool OptionTable::Interval::Contains(double value) const {
@@ -67,15 +81,7 @@ OptionTable& OptionTable::Flag(const std::string& name, bool* field, const std::
   Option& option = Add(name, Kind::kFlag, help);
   option.get = [field] { return std::string(*field ? "true" : "false"); };
   option.set = [field](const std::string& text, std::string* why) {
-    if (text == "true" || text == "1" || text.empty()) {
-      *field = true;
-    } else if (text == "false" || text == "0") {
-      *field = false;
-    } else {
-      *why = "expected true or false, got '" + text + "'";
-      return false;
-    }
-    return true;
+    return ParseFlag(text, /*negated=*/false, field, why);
   };
   option.default_text = option.get();
   return *this;
@@ -86,15 +92,7 @@ OptionTable& OptionTable::NegatedFlag(const std::string& name, bool* field,
   Option& option = Add(name, Kind::kFlag, help);
   option.get = [field] { return std::string(*field ? "false" : "true"); };
   option.set = [field](const std::string& text, std::string* why) {
-    if (text == "true" || text == "1" || text.empty()) {
-      *field = false;
-    } else if (text == "false" || text == "0") {
-      *field = true;
-    } else {
-      *why = "expected true or false, got '" + text + "'";
-      return false;
-    }
-    return true;
+    return ParseFlag(text, /*negated=*/true, field, why);
   };
   option.default_text = option.get();
   return *this;
