@@ -8,6 +8,36 @@
 #include <opencv2/imgproc.hpp>
 
 namespace procam {
+namespace {
+
+// Where a camera ray (in the camera's frame) meets the board's plane within one square around its
+// printed area: the distance `t` along the ray and whether it lands on a dark square. False when
+// it misses that area or meets the plane behind the camera.
+bool HitBoard(const ChessboardSpec& board, const Eigen::Isometry3d& board_from_cam,
+              const Vec3& ray_in_cam, double* t, bool* dark) {
+  const Vec3 origin = board_from_cam.translation();
+  const Vec3 ray = board_from_cam.linear() * ray_in_cam;
+  *t = -origin.z() / ray.z();
+  if (!(*t > 0.0)) return false;
+  const Vec3 p = origin + *t * ray;
+  const double square = board.square_size;
+  const double u = p.x() / square + 1.0, v = p.y() / square + 1.0;  // from the board's edge
+  if (!(u >= -1.0 && u < board.corners_x + 2.0 && v >= -1.0 && v < board.corners_y + 2.0))
+    return false;
+  const bool inside = u >= 0 && u < board.corners_x + 1 && v >= 0 && v < board.corners_y + 1;
+  *dark = inside && ((static_cast<int>(u) + static_cast<int>(v)) % 2 == 0);
+  return true;
+}
+
+// The projector pixel nearest `pixel` as an index into its image, or -1 outside the image.
+int PixelIndex(const ProjectorGeometry& projector, const Vec2& pixel) {
+  const int x = static_cast<int>(std::lround(pixel.x()));
+  const int y = static_cast<int>(std::lround(pixel.y()));
+  if (x < 0 || y < 0 || x >= projector.width() || y >= projector.height()) return -1;
+  return y * projector.width() + x;
+}
+
+}  // namespace
 
 BoardRig DefaultBoardRig() {
   BoardRig rig;
@@ -120,28 +150,16 @@ std::vector<cv::Mat> RenderBoardUnderPatterns(const BoardRig& rig, const Chessbo
   };
   std::vector<Hit> hits;
   const Eigen::Isometry3d board_from_cam = cam_from_board.inverse();
-  const Vec3 origin = board_from_cam.translation();
-  const double square = board.square_size;
   for (int row = 0; row < fine_camera.height(); ++row) {
     for (int col = 0; col < fine_camera.width(); ++col) {
       const Vec3& ray_in_cam = rays[static_cast<size_t>(row) * fine_camera.width() + col];
-      const Vec3 ray = board_from_cam.linear() * ray_in_cam;
-      const double t = -origin.z() / ray.z();
-      if (!(t > 0.0)) continue;
-      const Vec3 p = origin + t * ray;
-      const double u = p.x() / square + 1.0, v = p.y() / square + 1.0;  // from the board's edge
-      if (!(u >= -1.0 && u < board.corners_x + 2.0 && v >= -1.0 && v < board.corners_y + 2.0))
-        continue;
-      const bool inside = u >= 0 && u < board.corners_x + 1 && v >= 0 && v < board.corners_y + 1;
-      const bool dark = inside && ((static_cast<int>(u) + static_cast<int>(v)) % 2 == 0);
+      double t = 0.0;
+      bool dark = false;
+      if (!HitBoard(board, board_from_cam, ray_in_cam, &t, &dark)) continue;
       Vec2 projector_pixel;
       int lit = -1;
-      if (projector.ProjectFromProj(rig.projector_from_camera * (t * ray_in_cam), &projector_pixel)) {
-        const int x = static_cast<int>(std::lround(projector_pixel.x()));
-        const int y = static_cast<int>(std::lround(projector_pixel.y()));
-        if (x >= 0 && y >= 0 && x < projector.width() && y < projector.height())
-          lit = y * projector.width() + x;
-      }
+      if (projector.ProjectFromProj(rig.projector_from_camera * (t * ray_in_cam), &projector_pixel))
+        lit = PixelIndex(projector, projector_pixel);
       hits.push_back({(row / s) * camera.width() + col / s, lit,
                       static_cast<float>(dark ? options.dark_reflectance
                                               : options.light_reflectance)});
@@ -199,21 +217,13 @@ BoardInRoom::BoardInRoom(const ProjectorGeometry& camera,
   fine_camera.UnprojectImage(&rays, &densities);
   const Eigen::Isometry3d board_from_cam = cam_from_board.inverse();
   const Eigen::Isometry3d world_from_cam = camera.proj_from_world().inverse();
-  const Vec3 origin = board_from_cam.translation();
   const Vec3 normal_in_world = -(world_from_cam.linear() * cam_from_board.linear().col(2));
-  const double square = board.square_size;
   for (int row = 0; row < fine_camera.height(); ++row) {
     for (int col = 0; col < fine_camera.width(); ++col) {
       const Vec3& ray_in_cam = rays[static_cast<size_t>(row) * fine_camera.width() + col];
-      const Vec3 ray = board_from_cam.linear() * ray_in_cam;
-      const double t = -origin.z() / ray.z();
-      if (!(t > 0.0)) continue;
-      const Vec3 p = origin + t * ray;
-      const double u = p.x() / square + 1.0, v = p.y() / square + 1.0;  // from the board's edge
-      if (!(u >= -1.0 && u < board.corners_x + 2.0 && v >= -1.0 && v < board.corners_y + 2.0))
-        continue;
-      const bool inside = u >= 0 && u < board.corners_x + 1 && v >= 0 && v < board.corners_y + 1;
-      const bool dark = inside && ((static_cast<int>(u) + static_cast<int>(v)) % 2 == 0);
+      double t = 0.0;
+      bool dark = false;
+      if (!HitBoard(board, board_from_cam, ray_in_cam, &t, &dark)) continue;
       pixel_.push_back((row / s) * width_ + col / s);
       reflectance_.push_back(static_cast<float>(dark ? dark_reflectance : light_reflectance));
       // The side facing the camera is lit; a projector behind the board gets gain 0.
@@ -225,12 +235,7 @@ BoardInRoom::BoardInRoom(const ProjectorGeometry& camera,
         Vec2 pixel;
         const double gain = projector.Gain(p_in_world, facing, &pixel);
         int lit = -1;
-        if (gain > 0.0) {
-          const int x = static_cast<int>(std::lround(pixel.x()));
-          const int y = static_cast<int>(std::lround(pixel.y()));
-          if (x >= 0 && y >= 0 && x < projector.width() && y < projector.height())
-            lit = y * projector.width() + x;
-        }
+        if (gain > 0.0) lit = PixelIndex(projector, pixel);
         lit_.push_back(lit);
         gain_.push_back(lit < 0 ? 0.0f : static_cast<float>(gain));
       }
