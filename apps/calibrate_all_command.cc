@@ -7,6 +7,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "apps/stop_signals.h"
 #include "base/output_directory.h"
 #include "calibration/calibrate_all_stage.h"
 #include "calibration/projectors_stage.h"
@@ -67,6 +68,8 @@ void CalibrateAll(const CalibrateAllArguments& args) {
   options.camera_height = args.camera_height;
   options.board_thickness = args.board_thickness;
   options.progress = PrintProgress();
+  // A signal stops it cleanly (apps/stop_signals.h): main says where, exit kStoppedExitCode.
+  options.stop = &StopOnSignals();
   RunCalibrateAll(options);
 }
 

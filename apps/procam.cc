@@ -1,13 +1,14 @@
 // procam: one binary, one subcommand per pipeline stage. Errors from files and devices are
 // caught here once and turned into one line on stderr and a non-zero exit.
 
+#include <CLI/CLI.hpp>
 #include <cstdio>
 #include <exception>
 #include <string>
 
-#include <CLI/CLI.hpp>
-
 #include "apps/commands.h"
+#include "apps/stop_signals.h"
+#include "base/stop.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "procam/config.h"
 
@@ -52,6 +53,11 @@ int main(int argc, char** argv) {
     // --help and --version print and succeed; a bad option is an error like any other: one line.
     if (error.get_exit_code() == 0) return app.exit(error);
     return PrintError(error.what());
+  } catch (const procam::Stopped& stopped) {
+    // A command stopped by a signal before its work was done: one line, where it stopped and how
+    // to go on (the message's), and its own exit status.
+    std::fprintf(stderr, "procam: stopped: %s\n", stopped.what());
+    return procam::kStoppedExitCode;
   } catch (const std::exception& error) {
     return PrintError(error.what());
   }

@@ -2,13 +2,13 @@
 
 #include <csignal>
 
+#include "base/stop.h"
+
 namespace procam {
 namespace {
 
-std::atomic<bool> g_stop{false};
-
 // Only a lock-free atomic store: what a signal handler may do.
-void OnStopSignal(int) { g_stop.store(true); }
+void OnStopSignal(int) { g_stop_requested.store(true); }
 
 }  // namespace
 
@@ -16,7 +16,7 @@ std::atomic<bool>& StopOnSignals() {
   static_assert(std::atomic<bool>::is_always_lock_free);
   std::signal(SIGINT, OnStopSignal);
   std::signal(SIGTERM, OnStopSignal);
-  return g_stop;
+  return g_stop_requested;
 }
 
 }  // namespace procam

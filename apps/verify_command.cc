@@ -5,12 +5,13 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "apps/stop_signals.h"
+#include "base/io.h"
 #include "base/output_directory.h"
-#include "verification/verification.h"
 #include "capture/camera.h"
 #include "capture/devices.h"
-#include "base/io.h"
 #include "procam/config.h"
+#include "verification/verification.h"
 #if PROCAM_WITH_GLFW
 #include "projection/glfw_display.h"
 #endif
@@ -38,6 +39,8 @@ void RunVerify(VerifyArguments& args) {
   options.measure_latency = args.settle.measure;
   if (!args.camera_scale.empty()) options.camera_scale = ParsePositiveRgb("--camera-scale", args.camera_scale);
   options.progress = LogProgress();
+  // A signal stops it cleanly (apps/stop_signals.h): main says where, exit kStoppedExitCode.
+  options.stop = &StopOnSignals();
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("verify: " + why);
   if (!args.displays.empty() && CameraUri::Parse(options.camera).scheme() == "synthetic") {

@@ -10,6 +10,7 @@
 
 #include "base/io.h"
 #include "base/json_fields.h"
+#include "base/stop.h"
 #include "calibration/camera_stage.h"
 #include "calibration/capture_stage.h"
 #include "calibration/photometric_stage.h"
@@ -36,6 +37,27 @@ std::string Join(const std::vector<std::string>& items, const char* separator) {
 // A step as the command a user would type for it.
 void ShowCommand(const ProgressCallback& progress, const std::vector<std::string>& arguments) {
   Report(progress, "\n$ procam " + Join(arguments, " "));
+}
+
+// Where a stop leaves the rig, and how to go on.
+constexpr const char* kKeptAndResume =
+    "every file written so far is kept; run the same command again to resume (complete captures "
+    "are kept, the fits are redone)";
+
+// Throws Stopped naming `where` when args.stop is set.
+void ThrowIfStopped(const CalibrateAllOptions& args, const std::string& where) {
+  if (args.stop != nullptr && args.stop->load())
+    throw Stopped("calibrate all: stopped by a signal " + where + "; " + kKeptAndResume);
+}
+
+// A capture that ended at a stop: where, and the patterns its session keeps.
+void ThrowIfCaptureStopped(const CaptureStageOptions& capture, const CaptureSummary& summary,
+                           const std::string& what) {
+  if (!summary.stopped) return;
+  throw Stopped(fmt::format(
+      "calibrate all: stopped by a signal in step 2/4, the {} ({} of {} patterns kept in {}); {}",
+      what, summary.patterns_before + summary.patterns_captured, summary.patterns_total,
+      capture.out.string(), kKeptAndResume));
 }
 
 // What the steps share, resolved from the options and the simulated world (if any).
@@ -198,8 +220,12 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args,
     std::vector<std::string> command = {"capture", "--sequence", "structured_light", "--out",
                                         capture.out.string()};
     command.insert(command.end(), common.begin(), common.end());
+    capture.stop = args.stop;
+    ThrowIfStopped(args, "before the structured light of projector '" + plan.names[k] + "'");
     ShowCommand(args.progress, command);
     const CaptureSummary structured = RunCaptureStage(capture);
+    ThrowIfCaptureStopped(capture, structured,
+                          "structured light of projector '" + plan.names[k] + "'");
     Report(args.progress, CaptureLine(capture, structured));
     sessions.push_back(capture.out);
 
@@ -217,8 +243,11 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args,
     command = {"capture",    "--sequence", "photometric", "--levels",          Join(levels, ","),
                "--channels", "rgb",        "--out",       capture.out.string()};
     command.insert(command.end(), common.begin(), common.end());
+    ThrowIfStopped(args, "before the flat fields of projector '" + plan.names[k] + "'");
     ShowCommand(args.progress, command);
-    Report(args.progress, CaptureLine(capture, RunCaptureStage(capture)));
+    const CaptureSummary flat = RunCaptureStage(capture);
+    ThrowIfCaptureStopped(capture, flat, "flat fields of projector '" + plan.names[k] + "'");
+    Report(args.progress, CaptureLine(capture, flat));
     // The projector goes dark again, so its last flat field does not light the next one's
     // captures (on a real rig: every projector but the one being captured must show black).
     const std::shared_ptr<PatternDisplay>& display = plan.displays[k];
@@ -470,13 +499,33 @@ void RunCalibrateAll(const CalibrateAllOptions& args) {
   Report(args.progress,
          fmt::format("calibrating {} projector(s) ({}) with camera {} into {}", plan.names.size(),
                      Join(plan.names, ", "), args.camera, args.out.string()));
-  CalibrateCameraStep(args, plan);
-  const std::vector<std::filesystem::path> sessions = CaptureStep(args, plan);
-  ProjectorsStep(args, plan, sessions);
-  PhotometryStep(args, plan);
-  SeparateProjectorBlacks(args.out, plan.names, plan.captures, plan.scene, plan.patches,
-                          args.progress);
-  if (plan.scan) ReflectanceIntoScannedRoom(args.out, plan.scene, plan.patches, args.progress);
+  // Each step runs whole or is abandoned at a stop: a computation inside it cut short (Stopped)
+  // is said with the step's name; a stop between steps begins no further one.
+  const auto step = [&](const std::string& name, const std::function<void()>& run) {
+    ThrowIfStopped(args, "before " + name);
+    try {
+      run();
+    } catch (const Stopped& stopped) {
+      const std::string what = stopped.what();
+      if (what.starts_with("calibrate all: ")) throw;
+      throw Stopped("calibrate all: stopped by a signal in " + name + " (" + what + "); " +
+                    kKeptAndResume);
+    }
+  };
+  step("step 1/4, the camera intrinsics", [&] { CalibrateCameraStep(args, plan); });
+  std::vector<std::filesystem::path> sessions;
+  step("step 2/4, the captures", [&] { sessions = CaptureStep(args, plan); });
+  step("step 3/4, the projectors and the registration",
+       [&] { ProjectorsStep(args, plan, sessions); });
+  step("step 4/4, the photometry", [&] { PhotometryStep(args, plan); });
+  step("the black levels", [&] {
+    SeparateProjectorBlacks(args.out, plan.names, plan.captures, plan.scene, plan.patches,
+                            args.progress);
+  });
+  if (plan.scan) {
+    step("the scanned room's reflectance",
+         [&] { ReflectanceIntoScannedRoom(args.out, plan.scene, plan.patches, args.progress); });
+  }
   Report(args.progress,
          fmt::format(
              "\nrig calibrated: {} (rig.json, camera.cameramodel, {}, reflectance.npy{}); use "

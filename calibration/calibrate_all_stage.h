@@ -16,6 +16,7 @@
 //      projectors at black).
 // What `procam calibrate all` and the demo run.
 
+#include <atomic>
 #include <filesystem>
 #include <functional>
 #include <map>
@@ -71,10 +72,18 @@ struct CalibrateAllOptions {
   std::vector<double> exposures_us;  // several: bracketed and merged to HDR
   std::vector<int> levels = {0, 32, 64, 96, 128, 160, 192, 224, 255};  // photometric drives
   ProgressCallback progress;  // each step's command line and its report
+  // Set (by a signal handler) to stop cleanly: a capture ends after the pattern in hand, a fit
+  // or a computation inside a step (form factors) is abandoned, and no further step begins.
+  // Null: run to the end.
+  const std::atomic<bool>* stop = nullptr;
 };
 
 // Runs the five steps. Checks what the later steps need before anything is captured or written.
 // Throws IoError naming the option, file or device, std::invalid_argument for bad options.
+// Stopped by options.stop, throws Stopped (base/stop.h) saying in which step and what is kept:
+// every file written until then is whole (each is written atomically), the captures keep their
+// patterns and record the stop, and the same call again resumes (complete captures are kept,
+// the fits redone).
 void RunCalibrateAll(const CalibrateAllOptions& options);
 
 }  // namespace procam

@@ -117,6 +117,11 @@ CalibratedRoom BuildCalibratedRoom(const CalibratedRoomOptions& options, RoomSou
     throw std::invalid_argument("room: the rig was not read (ReadRoomSources)");
   CalibratedRoom room;
   room.rig = std::move(sources.rig);
+  // A rig without the records its checks read is used as before, but not silently.
+  if (room.rig) {
+    if (const std::string warning = MissingRegistrationWarning(*room.rig); !warning.empty())
+      Report(options.progress, warning);
+  }
   room.solution = std::move(sources.solution);
   room.camera_model_path = sources.camera_model_path;
   room.camera = sources.camera;

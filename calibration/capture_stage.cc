@@ -6,6 +6,7 @@
 
 #include "base/check.h"
 #include "base/io.h"
+#include "base/stop.h"
 #include "calibration/camera_response.h"
 #include "calibration/structured_light.h"
 #include "capture/camera.h"
@@ -157,9 +158,17 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
   }
   std::optional<LatencyMeasurement> latency;
   if (args.measure_latency) {
-    latency = MeasureDisplayLatency(camera.get(), output.get(), args.latency);
-    options.sequencer.settle_ms = latency->SettleMs();
-    Report(args.progress, latency->Summary());
+    Report(args.progress, "measuring the display-to-camera latency (" +
+                              std::to_string(args.latency.edges) + " changes of " + output->Name() +
+                              ")");
+    try {
+      latency = MeasureDisplayLatency(camera.get(), output.get(), args.latency);
+      options.sequencer.settle_ms = latency->SettleMs();
+      Report(args.progress, latency->Summary());
+    } catch (const Stopped&) {
+      // Stopped while measuring: the session below records the stop before its first pattern.
+      if (args.stop == nullptr) throw;
+    }
   }
   const auto latency_json = [&latency]() -> nlohmann::json {
     if (!latency) return nullptr;

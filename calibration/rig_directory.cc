@@ -550,6 +550,54 @@ void CheckRegisteredRoom(const RigDirectory& rig, const Scene& scene) {
   }
 }
 
+std::vector<std::string> MissingRegistrationRecords(const RigDirectory& rig) {
+  const nlohmann::json& registration = rig.file.registration;
+  if (!registration.is_object()) return {"registration"};
+  std::vector<std::string> missing;
+  if (!RecordedTriple(registration, "camera_centre_m"))
+    missing.push_back("registration.camera_centre_m");
+  if (!RecordedSize(registration, "camera_imagersize"))
+    missing.push_back("registration.camera_imagersize");
+  const nlohmann::json none = nlohmann::json::array();
+  const nlohmann::json& recorded =
+      registration.contains("projectors") && registration["projectors"].is_array()
+          ? registration["projectors"]
+          : none;
+  for (const Projector& projector : rig.projectors) {
+    bool found = false;
+    for (size_t j = 0; j < recorded.size() && !found; ++j) {
+      const nlohmann::json& entry = recorded[j];
+      if (!entry.is_object() || !entry.contains("name") || entry["name"] != projector.name)
+        continue;
+      found = true;
+      if (!RecordedTriple(entry, "centre_m"))
+        missing.push_back(fmt::format("registration.projectors[{}].centre_m", j));
+      if (!RecordedSize(entry, "imagersize"))
+        missing.push_back(fmt::format("registration.projectors[{}].imagersize", j));
+    }
+    if (!found) missing.push_back("registration.projectors: '" + projector.name + "'");
+  }
+  if (!registration.contains("room") || !registration["room"].is_object() ||
+      !registration["room"].contains("surfaces") || !registration["room"]["surfaces"].is_array())
+    missing.push_back("registration.room");
+  return missing;
+}
+
+std::string MissingRegistrationWarning(const RigDirectory& rig) {
+  const std::vector<std::string> missing = MissingRegistrationRecords(rig);
+  if (missing.empty()) return "";
+  std::string keys;
+  for (size_t k = 0; k < missing.size(); ++k) keys += (k == 0 ? "" : ", ") + missing[k];
+  const std::string dir = rig.dir.string();
+  return fmt::format(
+      "warning: {}: no {} (a rig registered before procam recorded them): its models and the room "
+      "given with it are not checked against its registration, so two projectors' models swapped "
+      "or a wall moved since would go unnoticed; to record them, register the rig again: procam "
+      "calibrate projectors {}/captures/structured_light_* --scene SCENE --out {} (or the same "
+      "procam calibrate all, which keeps its captures and redoes the fits)",
+      (rig.dir / "rig.json").string(), keys, dir, dir);
+}
+
 RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir) {
   const std::filesystem::path path = rig_dir / "rig.json";
   const std::string file = path.string();

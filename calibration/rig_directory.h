@@ -152,6 +152,16 @@ nlohmann::json RegisteredRoomJson(const Scene& scene);
 // only one of the two are not compared; rigs without the record (older ones) pass.
 void CheckRegisteredRoom(const RigDirectory& rig, const Scene& scene);
 
+// The registration records the checks above read (registration.camera_centre_m,
+// camera_imagersize, each projector's centre_m and imagersize, room) that `rig` lacks, by key;
+// empty when it has them all. Rigs registered before procam recorded them lack some, and are read
+// without those checks.
+std::vector<std::string> MissingRegistrationRecords(const RigDirectory& rig);
+
+// One line for a rig that lacks some of them (empty when it lacks none): what is missing, what
+// goes unchecked, and the command that records them (registering the rig again).
+std::string MissingRegistrationWarning(const RigDirectory& rig);
+
 // Replaces the fine level's reflectance by the rig's (and the coarse level's by the area-weighted
 // mean of its children). Throws IoError naming RIG_DIR/rig.json when the rig's reflectance was
 // estimated for another patch count. Does nothing when the rig has none.

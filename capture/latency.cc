@@ -1,19 +1,20 @@
 #include "capture/latency.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <random>
 #include <stdexcept>
 #include <thread>
 #include <vector>
 
-#include <fmt/format.h>
-#include <opencv2/core.hpp>
-#include <opencv2/imgproc.hpp>
-
 #include "base/io.h"
+#include "base/stop.h"
 
 namespace procam {
 namespace {
@@ -78,6 +79,7 @@ class Flasher {
       result.lower_ms = std::min(result.lower_ms, lower);
       result.upper_ms = std::max(result.upper_ms, upper);
       middles.push_back(0.5 * (lower + upper));
+      ++edges_done_;
     }
     std::nth_element(middles.begin(), middles.begin() + middles.size() / 2, middles.end());
     result.estimate_ms = middles[middles.size() / 2];
@@ -108,9 +110,20 @@ class Flasher {
   }
 
   Frame Next() {
+    // A signal (base/stop.h) ends the measurement between frames, however long it has to go.
+    if (StopRequested()) {
+      throw Stopped(fmt::format("display latency of '{}': stopped after {} of {} changes",
+                                display_->Name(), edges_done_, options_.edges));
+    }
     const auto timeout = std::chrono::milliseconds(static_cast<int64_t>(
         std::ceil(options_.grab_timeout_ms + exposure_ms_)));
-    Frame frame = camera_->Grab(timeout);
+    Frame frame;
+    try {
+      frame = camera_->Grab(timeout);
+    } catch (const IoError&) {
+      if (StopRequested()) return Next();  // a grab the signal cut short: the stop, no fault
+      throw;
+    }
     exposure_ms_ = frame.exposure_us * 1e-3;
     if (last_start_ns_ != 0 && frame.exposure_start_ns > last_start_ns_)
       intervals_ms_.push_back(NsToMs(frame.exposure_start_ns - last_start_ns_));
@@ -172,6 +185,7 @@ class Flasher {
   int64_t last_start_ns_ = 0;
   std::vector<double> intervals_ms_;
   int frames_ = 0;
+  int edges_done_ = 0;
 };
 
 }  // namespace

@@ -57,6 +57,7 @@ struct LatencyMeasurement {
 // what the display lights. Leaves the display black. Throws std::invalid_argument for options
 // that fail Check(), IoError naming the display and camera when the display lights nothing the
 // camera sees, or when a change is not seen within max_latency_ms; camera errors pass through.
+// Throws Stopped (base/stop.h) when a stop is requested part-way (read before every frame).
 LatencyMeasurement MeasureDisplayLatency(Camera* camera, PatternDisplay* display,
                                          const LatencyOptions& options = {});
 

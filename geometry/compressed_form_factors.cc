@@ -1,18 +1,18 @@
 #include "geometry/compressed_form_factors.h"
 
-#include <numbers>
 #include <omp.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <numbers>
 #include <numeric>
-
-#include <Eigen/Geometry>
 #include <stdexcept>
 
+#include "base/stop.h"
 #include "base/timing.h"
 
 namespace procam {
@@ -266,6 +266,7 @@ CompressedFormFactors::SparseRows NearBlocks(const std::vector<ClusterPatch>& pa
     std::vector<Eigen::Triplet<double, int>>& mine = near_triplets[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 4)
     for (int64_t block = 0; block < static_cast<int64_t>(near_pairs.size()); ++block) {
+      if (StopRequested()) continue;  // a signal: the blocks left are skipped, Stopped below
       const auto [a, b] = near_pairs[block];
       int64_t local = 0;
       for (int p = nodes[a].begin; p < nodes[a].end; ++p) {
@@ -282,6 +283,11 @@ CompressedFormFactors::SparseRows NearBlocks(const std::vector<ClusterPatch>& pa
       const int64_t done = pairs_done += local;
       if (progress && omp_get_thread_num() == 0) progress(static_cast<double>(done) / std::max<int64_t>(1, total_pairs));
     }
+  }
+  if (StopRequested()) {
+    throw Stopped("compressed form factors: stopped at " +
+                  std::to_string(100 * pairs_done / std::max<int64_t>(1, total_pairs)) +
+                  "% of the near pairs");
   }
   if (progress) progress(1.0);
   size_t near_count = 0;

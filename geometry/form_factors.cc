@@ -1,15 +1,16 @@
 #include "geometry/form_factors.h"
 
-#include <numbers>
+#include <fmt/format.h>
 #include <omp.h>
 
 #include <Eigen/Geometry>
-
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <numbers>
 
+#include "base/stop.h"
 #include "base/timing.h"
 #include "geometry/ray_scene.h"
 
@@ -174,6 +175,7 @@ Eigen::MatrixXd ComputeFormFactors(const Scene& scene, const PatchLevel& level,
     PairIntegrator::Scratch scratch;
 #pragma omp for schedule(dynamic, 8)
     for (int i = 0; i < n; ++i) {
+      if (StopRequested()) continue;  // a signal: the rows left are skipped, Stopped below
       for (int j = i + 1; j < n; ++j) {
         const double exchange = integrator.Exchange(i, j, &scratch);
         if (exchange == 0.0) continue;
@@ -189,6 +191,11 @@ Eigen::MatrixXd ComputeFormFactors(const Scene& scene, const PatchLevel& level,
     }
     pairs += scratch.pairs;
     shadow_rays += scratch.rays;
+  }
+  if (StopRequested()) {
+    const double remaining = static_cast<double>(n - rows_done) / std::max(n, 1);
+    throw Stopped(fmt::format("form factors of {} patches: stopped at {:.0f}%", n,
+                              100.0 * (1.0 - remaining * remaining)));
   }
   if (options.progress) options.progress(1.0);
   const double correction = LimitRowSums(&f);

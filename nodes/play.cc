@@ -13,6 +13,7 @@
 
 #include "base/image_io.h"
 #include "base/io.h"
+#include "base/stop.h"
 #include "base/timing.h"
 #include "calibration/calibrated_room.h"
 #include "calibration/rig_directory.h"
@@ -147,6 +148,7 @@ PlayScene PreparePlay(const PlayOptions& options, RigDirectory rig) {
   room.patches = options.patches;
   room.alpha = options.alpha;
   room.projection.feather = options.feather;
+  room.progress = options.progress;  // the form factors' progress: minutes for a large room
   // The solution's emittance needs no camera; desired images are mapped through it.
   room.camera_rays = options.solution.empty();
   RoomSources sources;
@@ -356,6 +358,12 @@ PlaySummary RunPlay(const PlayOptions& options) {
         if (!summary.frames.empty() || !summary.stopped)
           WritePlayResult(options, summary, node_list, play);
       }
+    } catch (const Stopped&) {
+      // The form factors cut short by the stop (base/stop.h), before any node was set up: as a
+      // stop before the first frame, nothing written.
+      if (!stopping()) failure = std::current_exception();
+      summary.stopped = true;
+      summary.seconds = SecondsSince(start);
     } catch (...) {
       failure = std::current_exception();
     }

@@ -33,6 +33,9 @@ namespace {
 
 constexpr int kHeartbeatMs = 200;
 constexpr int kHeartbeatTimeoutMs = 1000;
+// A node drops a connection whose handshake is not complete within this (libzmq's default is
+// 30 s): a peer that sends a few bytes and holds its connection open keeps nothing for long.
+constexpr int kNodeHandshakeMs = 5000;
 
 std::filesystem::path KeyFile(const std::filesystem::path& rig_dir, const std::string& name) {
   return rig_dir / "keys" / name;
@@ -217,6 +220,12 @@ long long RefusalLog::total() const {
 // monitor (version 1) names only the node's own endpoint in a failure; the connection's
 // descriptor comes with its acceptance and with its disconnection, which follows the failure at
 // once, so the refusal is logged then, with the peer's address.
+// A connection whose bytes are not ZeroMQ's greeting at all (a port scanner, a web browser, junk)
+// is dropped by libzmq with no failure event: only its disconnection, before any handshake
+// succeeded. The monitor's events come in the order libzmq's I/O thread made them, a handshake's
+// success after its connection's acceptance, but a success names no descriptor: it settles the
+// one connection still handshaking, or, when several are, all of them (a junk connection among
+// them then goes unlogged rather than a controller's logged as junk).
 class NodeSocket::ZapHandler {
  public:
   ZapHandler(zmq::context_t& context, const std::string& allowed_key,
@@ -244,7 +253,7 @@ class NodeSocket::ZapHandler {
   std::string Address(int fd) const {
     std::lock_guard<std::mutex> lock(mutex_);
     const auto found = accepted_.find(fd);
-    return found == accepted_.end() ? "" : found->second;
+    return found == accepted_.end() ? "" : found->second.address;
   }
   void Refuse(const std::string& address, const std::string& line) {
     refusals_.Refuse(address, line);
@@ -316,7 +325,12 @@ class NodeSocket::ZapHandler {
     switch (id) {
       case ZMQ_EVENT_ACCEPTED: {
         std::lock_guard<std::mutex> lock(mutex_);
-        accepted_[fd] = PeerAddress(fd);  // "" when it closed before it could be read
+        accepted_[fd] = {PeerAddress(fd), false};  // "" when it closed before it could be read
+        break;
+      }
+      case ZMQ_EVENT_HANDSHAKE_SUCCEEDED: {
+        std::lock_guard<std::mutex> lock(mutex_);
+        for (auto& [descriptor, connection] : accepted_) connection.handshaken = true;
         break;
       }
       case ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL:
@@ -330,13 +344,22 @@ class NodeSocket::ZapHandler {
         break;
       case ZMQ_EVENT_DISCONNECTED: {
         std::string address;
+        bool known = false, handshaken = false;
         {
           std::lock_guard<std::mutex> lock(mutex_);
           const auto found = accepted_.find(fd);
           if (found != accepted_.end()) {
-            address = found->second;
+            known = true;
+            address = found->second.address;
+            handshaken = found->second.handshaken;
             accepted_.erase(found);
           }
+        }
+        if (failed_.who.empty() && known && !handshaken) {
+          failed_ = {"a peer",
+                     "it closed or was dropped before a ZeroMQ handshake (what it sent, if "
+                     "anything, was not ZeroMQ's greeting)",
+                     ""};
         }
         if (!failed_.who.empty()) {
           if (address.empty()) address = failed_.ip;  // ZAP's (the port not known)
@@ -371,7 +394,13 @@ class NodeSocket::ZapHandler {
   Failure failure_;  // ZAP's last refusal, until the failure's event
   Failure failed_;   // a handshake failed: the refusal is logged at its disconnection
   mutable std::mutex mutex_;
-  std::map<int, std::string> accepted_;  // open connections' peers by descriptor
+  struct Connection {
+    std::string address;  // the peer's, "" if it could not be read
+    // A handshake succeeded since it was accepted: its own, or one the monitor could not tell
+    // from its own (see the class comment).
+    bool handshaken = false;
+  };
+  std::map<int, Connection> accepted_;  // open connections by descriptor
   std::atomic<bool> stop_{false};
   std::thread thread_;
 };
@@ -402,14 +431,16 @@ NodeSocket::NodeSocket(zmq::context_t& context, const std::string& endpoint, con
   CommonOptions(socket_, keys != nullptr);
   socket_.set(zmq::sockopt::router_mandatory, 1);
   if (keys != nullptr) {
+    socket_.set(zmq::sockopt::handshake_ivl, kNodeHandshakeMs);
     socket_.set(zmq::sockopt::curve_server, 1);
     socket_.set(zmq::sockopt::curve_secretkey, DecodeKey(keys->node.secret_key, "keys/node.key"));
     const std::string monitor =
         "inproc://procam-node-monitor-" + std::to_string(reinterpret_cast<uintptr_t>(this));
     if (zmq_socket_monitor(
             socket_.handle(), monitor.c_str(),
-            ZMQ_EVENT_ACCEPTED | ZMQ_EVENT_DISCONNECTED | ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL |
-                ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL | ZMQ_EVENT_HANDSHAKE_FAILED_AUTH) != 0) {
+            ZMQ_EVENT_ACCEPTED | ZMQ_EVENT_DISCONNECTED | ZMQ_EVENT_HANDSHAKE_SUCCEEDED |
+                ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL | ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL |
+                ZMQ_EVENT_HANDSHAKE_FAILED_AUTH) != 0) {
       throw IoError("node: cannot monitor the socket: " + std::string(zmq_strerror(zmq_errno())));
     }
     zap_->Start(monitor);

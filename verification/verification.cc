@@ -13,6 +13,7 @@
 #include "base/io.h"
 #include "base/json_fields.h"
 #include "base/option_table.h"
+#include "base/stop.h"
 #include "base/timing.h"
 #include "calibration/calibrated_room.h"
 #include "calibration/camera_response.h"
@@ -685,6 +686,7 @@ CaptureSessionOptions VerificationLoop::SessionOptions(int k) const {
   CaptureSessionOptions session_options;
   session_options.directory = options_.out / "iterations" / std::to_string(k) / "session";
   session_options.sequencer = sequencer_;
+  session_options.stop = options_.stop;
   return session_options;
 }
 
@@ -721,11 +723,13 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   // Show and photograph: the session keeps the photo the moment it is taken.
   const CaptureSessionOptions session_options = SessionOptions(k);
   const auto capture_start = Clock::now();
+  CaptureSummary captured;
   try {
-    RunCaptureSession(session_options, sequence_, *camera_, wall_);
+    captured = RunCaptureSession(session_options, sequence_, *camera_, wall_);
   } catch (const std::exception& error) {
     throw PhotoFault(error.what());
   }
+  if (captured.stopped) throw Stopped("before its photo, which its session records");
   it.capture_seconds = SecondsSince(capture_start);
   const CaptureSessionData session = CaptureSessionData::Load(session_options.directory);
   const cv::Mat photo = hdr_ ? session.Hdr(0) : session.Mean(0);
@@ -835,7 +839,9 @@ nlohmann::json ProjectorResponses(const ProjectionRig& rig, const std::vector<st
 
 }  // namespace
 
-VerificationSummary RunVerification(const VerificationOptions& options) {
+namespace {
+
+VerificationSummary RunVerificationLoop(const VerificationOptions& options) {
   const auto start = Clock::now();
   std::string why;
   if (!options.Check(&why)) throw IoError("verify: " + why);
@@ -863,13 +869,30 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
   summary.desired = DesiredPicture(model);
   WritePng(options.out / "desired.png", summary.desired);
 
+  const auto stopping = [&] { return options.stop != nullptr && options.stop->load(); };
+  // A stop: the run so far is written (termination "stopped") and the stop said.
+  const auto stop_here = [&](const std::string& where) {
+    summary.complete = false;
+    summary.termination = "stopped";
+    summary.error = "stopped by a signal " + where;
+    summary.seconds = SecondsSince(start);
+    write_summary();
+    throw Stopped(fmt::format(
+        "verify: stopped by a signal {} (kept {} complete iteration(s) and the photos taken in "
+        "{}, see result.json); run the same command again to resume",
+        where, summary.iterations.size(), options.out.string()));
+  };
+
   double best_mean = std::numeric_limits<double>::infinity();
   for (int k = 0; k < options.iterations; ++k) {
+    if (stopping()) stop_here(fmt::format("before iteration {}", k));
     const auto iteration_start = Clock::now();
     VerificationIteration it;
     nlohmann::json extra;
     try {
       it = loop.Photograph(k, &extra);
+    } catch (const Stopped& stopped) {
+      stop_here(fmt::format("in iteration {}, {}", k, stopped.what()));
     } catch (const PhotoFault& error) {
       summary.complete = false;
       summary.termination = "fault";
@@ -886,7 +909,15 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
       summary.best = k;
     }
     const bool last = k + 1 == options.iterations || (k > 0 && !improved);
-    if (!last) loop.UpdateAndSolve(&it);  // update the model from this photo and solve again
+    // Stopped once the photo is compared: the update and its solve are not begun.
+    bool stopped = !last && stopping();
+    if (!last && !stopped) {
+      try {
+        loop.UpdateAndSolve(&it);  // update the model from this photo and solve again
+      } catch (const Stopped&) {
+        stopped = true;  // a computation of the solve cut short: as a stop before it
+      }
+    }
     it.seconds = SecondsSince(iteration_start);
     nlohmann::json json = IterationJson(it);
     json.update(extra);
@@ -895,6 +926,8 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
     summary.iterations.push_back(std::move(it));
     summary.seconds = SecondsSince(start);
     write_summary();
+    if (stopped)
+      stop_here(fmt::format("after iteration {}'s photo (its model update not made)", k));
     if (last) {
       if (k + 1 < options.iterations) summary.termination = "converged";
       break;
@@ -904,6 +937,20 @@ VerificationSummary RunVerification(const VerificationOptions& options) {
   summary.seconds = SecondsSince(start);
   write_summary();
   return summary;
+}
+
+}  // namespace
+
+VerificationSummary RunVerification(const VerificationOptions& options) {
+  try {
+    return RunVerificationLoop(options);
+  } catch (const Stopped& stopped) {
+    const std::string what = stopped.what();
+    if (what.starts_with("verify: ")) throw;
+    // A computation before the first photo cut short (the form factors, the latency).
+    throw Stopped("verify: stopped by a signal before its first photo (" + what +
+                  "); nothing written; run the same command again");
+  }
 }
 
 void AddVerificationReport(const VerificationSummary& summary, HtmlReport* report) {
@@ -938,7 +985,10 @@ void AddVerificationReport(const VerificationSummary& summary, HtmlReport* repor
                  "seam (CIEDE2000)", "model error ΔE76 mean", "predicted ΔE76 mean", "patches seen",
                  "model update after it", "seconds"},
                 rows);
-  if (!summary.complete) report->Paragraph("Stopped by a fault: " + summary.error);
+  if (!summary.complete) {
+    report->Paragraph((summary.termination == "stopped" ? "Stopped: " : "Stopped by a fault: ") +
+                      summary.error);
+  }
   if (!summary.iterations.empty()) {
     report->Plot("Convergence", "iteration", "mean ΔE76",
                  {{"measured (photo vs desired)", measured},

@@ -37,6 +37,7 @@
 // Everything is written atomically as it is produced, so a fault keeps what was done.
 
 #include <Eigen/Core>
+#include <atomic>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -92,6 +93,9 @@ struct VerificationOptions {
   int min_patch_pixels = 4;       // camera pixels a patch needs to count as seen, ≥ 1
   LightField light = LightField::kSmooth;  // how the projector images shape the light in a patch
   ProgressCallback progress;      // a line per stage and iteration (ΔE, the model update)
+  // Set (by a signal handler) to stop cleanly: the photo in hand is finished (its session
+  // records the stop), no further photo or solve begins. Null: run to the end.
+  const std::atomic<bool>* stop = nullptr;
   // Declares the closed loop's options (--iterations, --min-improvement, --reflectance-step,
   // --no-response-fit, --no-reflectance-fit, --min-patch-pixels, --light) and the sequencer's
   // (SequencerOptions::Declare) in `table`, bound to these fields (base/option_table.h).
@@ -133,9 +137,9 @@ constexpr int kVerificationFormatVersion = 1;
 struct VerificationSummary {
   std::vector<VerificationIteration> iterations;
   int best = -1;            // index of the iteration with the lowest measured mean ΔE76
-  bool complete = false;    // false when a camera or projector fault stopped the loop
-  std::string termination;  // "converged", "max_iterations" or "fault"
-  std::string error;        // the fault, when not complete
+  bool complete = false;    // false when a fault or a stop ended the loop early
+  std::string termination;  // "converged", "max_iterations", "fault" or "stopped" (a signal)
+  std::string error;        // the fault or the stop, when not complete
   cv::Mat desired;          // 8-bit BGR, the desired appearance as the camera sees it
   double seconds = 0;
   // What the run used.
@@ -164,7 +168,9 @@ VerificationSummary ReadVerificationRun(const std::filesystem::path& dir);
 // simulated-camera source below, through RegisterSyntheticWorld of datasets_synthetic). Throws
 // IoError (naming the file, key, camera or projector) for bad input before anything is captured; a
 // camera or projector lost mid-run writes result.json and report.html with the iterations done
-// (complete = false) and then throws IoError saying so.
+// (complete = false) and then throws IoError saying so. Stopped by options.stop, it writes them
+// the same way (termination "stopped") and throws Stopped (base/stop.h) saying where it stopped;
+// the same call again resumes (the photos taken are kept).
 VerificationSummary RunVerification(const VerificationOptions& options);
 
 // Appends the verification's sections (table, convergence plot, per-iteration pictures) to a

@@ -22,8 +22,10 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 #include <set>
+#include <sstream>
 #include <string>
 
+#include "apps/stop_signals.h"
 #include "base/image_io.h"
 #include "base/io.h"
 #include "tests/testing/testing.h"
@@ -731,6 +733,219 @@ TEST_F(Faults, ASignalStopsPlayCleanly) {
   EXPECT_EQ(LinesWith(output, "stopped by a signal before the first frame"), 1) << output;
   EXPECT_EQ(Bytes(out / "result.json"), earlier);
   EXPECT_EQ(FilesUnder(out), std::set<std::string>{"result.json"});
+}
+
+// calibrate all stopped by SIGTERM during its first capture: exit kStoppedExitCode (not 0: the
+// rig is not made; not 1: nothing failed), one line saying where it stopped and how to resume,
+// the capture's session records the stop, every file written reads whole. Run again, it resumes
+// the capture (its patterns kept) and ends with a whole rig.
+TEST_F(Faults, ASignalStopsCalibrateAllCleanlyAndItResumes) {
+  const fs::path rig = dir / "rig";
+  const std::string calibrate =
+      "calibrate all --camera " + kCamera + "'" + kCapture + "--out " + rig.string();
+  const fs::path session = rig / "captures" / "structured_light_left";
+  const fs::path log = dir / "stopped.log";
+  const testing::SignalledRun run = testing::SignalProcamWhen(
+      calibrate, [&] { return CountFiles(session / "frames") >= 2; }, SIGTERM, kMaxSeconds, log);
+  const std::string output = Bytes(log);
+  ASSERT_TRUE(run.running) << "calibrate all ended before the signal\n" << output;
+  EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
+  EXPECT_EQ(run.exit_code, kStoppedExitCode) << output;
+  EXPECT_EQ(LinesWith(output, "stopped by a signal"), 1) << output;
+  EXPECT_EQ(LinesWith(output,
+                      "procam: stopped: calibrate all: stopped by a signal in step 2/4, "
+                      "the structured light of projector 'left' ("),
+            1)
+      << output;
+  EXPECT_EQ(LinesWith(output, "run the same command again to resume"), 1) << output;
+  EXPECT_EQ(output.find("procam: error"), std::string::npos) << output;
+  EXPECT_FALSE(fs::exists(rig / "captures" / "photometric_left")) << "a step begun after the stop";
+  const nlohmann::json manifest = nlohmann::json::parse(Bytes(session / "session.json"));
+  ASSERT_EQ(manifest.at("interruptions").size(), 1u) << manifest.dump();
+  EXPECT_EQ(manifest.at("interruptions").at(0).at("reason"), "stopped by a signal");
+  ExpectEveryFileReads(rig);
+  const std::set<std::string> kept = FilesUnder(rig);
+  const CommandRun resumed = testing::RunProcam(calibrate);
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  // The stopped capture resumes with the patterns it kept.
+  std::string resumed_line;
+  std::istringstream lines(resumed.output);
+  for (std::string line; std::getline(lines, line);)
+    if (line.find("into " + session.string() + ": ") != std::string::npos) resumed_line = line;
+  EXPECT_NE(resumed_line.find(" already there)"), std::string::npos) << resumed.output;
+  EXPECT_EQ(resumed_line.find(" 0 already there)"), std::string::npos) << resumed_line;
+  const std::set<std::string> now = FilesUnder(rig);
+  EXPECT_TRUE(std::includes(now.begin(), now.end(), kept.begin(), kept.end()));
+  for (const char* name : {"rig.json", "camera.cameramodel", "left.cameramodel",
+                           "right.cameramodel", "reflectance.npy", "result.json"}) {
+    EXPECT_TRUE(fs::exists(rig / name)) << name;
+  }
+  ExpectEveryFileReads(rig);
+}
+
+// calibrate all over a rig whose captures are complete, stopped by SIGINT once its fits have
+// begun: it ends before the next step with the same exit status and one line, and every file of
+// the rig still reads whole.
+TEST_F(Faults, ASignalDuringTheFitsStopsCalibrateAllBeforeTheNextStep) {
+  const fs::path rig = dir / "fits";
+  fs::copy(Rig(), rig, fs::copy_options::recursive);
+  const fs::path log = dir / "fits.log";
+  const testing::SignalledRun run = testing::SignalProcamWhen(
+      "calibrate all --camera " + kCamera + "'" + kCapture + "--out " + rig.string(),
+      [&] { return fs::exists(log) && Bytes(log).find("== 3/4") != std::string::npos; }, SIGINT,
+      kMaxSeconds, log);
+  const std::string output = Bytes(log);
+  ASSERT_TRUE(run.running) << output;
+  EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
+  EXPECT_EQ(run.exit_code, kStoppedExitCode) << output;
+  EXPECT_EQ(LinesWith(output, "procam: stopped: calibrate all: stopped by a signal"), 1) << output;
+  EXPECT_EQ(output.find("== 4/4"), std::string::npos) << output;
+  EXPECT_EQ(output.find("procam: error"), std::string::npos) << output;
+  EXPECT_EQ(FilesUnder(rig), FilesUnder(Rig()));
+  ExpectEveryFileReads(rig);
+}
+
+// verify stopped by SIGTERM during its first photo: the photo in hand is finished, the model
+// update is not begun; exit kStoppedExitCode, one line, result.json complete false with
+// termination "stopped" and the one iteration. Run again, it resumes (the photo is kept) and
+// ends with the files of an uninterrupted run.
+TEST_F(Faults, ASignalStopsVerifyCleanlyAndItResumes) {
+  const std::string solution = (dir / "solution").string();
+  Compensate(Rig(), solution);
+  const auto command = [&](const std::string& out) {
+    return "verify " + Rig().string() + " " + solution + " --camera " + kCamera + "'" + kCapture +
+           "--iterations 2 --out " + (dir / out).string();
+  };
+  ASSERT_GT(TimedRun(command("clean")), 0);
+  const fs::path first = dir / "verify" / "iterations" / "0" / "session" / "frames";
+  const fs::path log = dir / "verify.log";
+  const testing::SignalledRun run = testing::SignalProcamWhen(
+      command("verify"), [&] { return CountFiles(first) >= 1; }, SIGTERM, kMaxSeconds, log);
+  const std::string output = Bytes(log);
+  ASSERT_TRUE(run.running) << output;
+  EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
+  EXPECT_EQ(run.exit_code, kStoppedExitCode) << output;
+  EXPECT_EQ(LinesWith(output, "procam: stopped: verify: stopped by a signal"), 1) << output;
+  EXPECT_EQ(LinesWith(output, "run the same command again to resume"), 1) << output;
+  EXPECT_EQ(output.find("procam: error"), std::string::npos) << output;
+  const nlohmann::json stopped = nlohmann::json::parse(Bytes(dir / "verify" / "result.json"));
+  EXPECT_FALSE(stopped.at("complete").get<bool>()) << stopped.dump(2);
+  EXPECT_EQ(stopped.at("termination"), "stopped") << stopped.dump(2);
+  EXPECT_EQ(stopped.at("iterations").size(), 1u) << stopped.dump(2);
+  EXPECT_FALSE(fs::exists(dir / "verify" / "iterations" / "1")) << output;
+  ExpectEveryFileReads(dir / "verify");
+  const std::set<std::string> kept = FilesUnder(dir / "verify" / "iterations" / "0" / "session");
+  const CommandRun again = testing::RunProcam(command("verify"));
+  ASSERT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_EQ(FilesUnder(dir / "verify"), FilesUnder(dir / "clean"));
+  EXPECT_EQ(FilesUnder(dir / "verify" / "iterations" / "0" / "session"), kept);
+  ExpectEveryFileReads(dir / "verify");
+  const nlohmann::json result = nlohmann::json::parse(Bytes(dir / "verify" / "result.json"));
+  EXPECT_TRUE(result.at("complete").get<bool>()) << result.dump(2);
+}
+
+// capture --settle-ms auto stopped by SIGINT while it measures the display's latency (seconds:
+// each of its two reference fields waits a second before it is photographed): the measurement
+// is cut short (no latency line), the session records the stop before its first pattern,
+// result.json says stopped, exit 0 as any stopped capture.
+TEST_F(Faults, ASignalDuringTheLatencyMeasurementStopsCaptureCleanly) {
+  const fs::path out = dir / "latency";
+  const fs::path log = dir / "latency.log";
+  const testing::SignalledRun run = testing::SignalProcamWhen(
+      "capture --camera " + kCamera + "' --frames 2 --settle-ms auto --projector 0 --sequence " +
+          "photometric --levels 0,255 --channels w --out " + out.string(),
+      [&] {
+        return fs::exists(log) &&
+               Bytes(log).find("measuring the display-to-camera latency") != std::string::npos;
+      },
+      SIGINT, kMaxSeconds, log);
+  const std::string output = Bytes(log);
+  ASSERT_TRUE(run.running) << output;
+  EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
+  EXPECT_EQ(run.exit_code, 0) << output;
+  EXPECT_EQ(LinesWith(output, "stopped by a signal"), 1) << output;
+  EXPECT_EQ(output.find("every change seen between"), std::string::npos) << output;
+  EXPECT_EQ(output.find("procam: error"), std::string::npos) << output;
+  const nlohmann::json result = nlohmann::json::parse(Bytes(out / "result.json"));
+  EXPECT_EQ(result.at("stopped"), true) << result.dump();
+  EXPECT_TRUE(result.at("latency").is_null()) << result.dump();
+  EXPECT_EQ(result.at("patterns_captured"), 0) << result.dump();
+  const nlohmann::json session = nlohmann::json::parse(Bytes(out / "session.json"));
+  ASSERT_EQ(session.at("interruptions").size(), 1u) << session.dump();
+  EXPECT_EQ(session.at("interruptions").at(0).at("pattern"), 0);
+  ExpectEveryFileReads(out);
+}
+
+// play stopped by SIGTERM while it computes the form factors of a finer room (seconds): the
+// computation is cut short (no "form factors: 100%"), play ends as stopped before its first
+// frame: exit 0, one line, nothing written.
+TEST_F(Faults, ASignalDuringTheFormFactorsStopsPlayCleanly) {
+  // The rig without its per-patch reflectance, which is of the suite's 150 patches.
+  const fs::path rig = CopyRig(dir / "rig");
+  nlohmann::json file = nlohmann::json::parse(Bytes(rig / "rig.json"));
+  file.erase("reflectance");
+  dir.Write("rig/rig.json", file.dump(2));
+  fs::create_directories(dir / "desired");
+  ASSERT_TRUE(cv::imwrite((dir / "desired" / "a.png").string(),
+                          cv::Mat(48, 64, CV_8UC3, cv::Scalar(40, 120, 200))));
+  const fs::path out = dir / "show";
+  const fs::path log = dir / "show.log";
+  const testing::SignalledRun run = testing::SignalProcamWhen(
+      "play synthetic:tiny_box --patches 2500 --rig " + rig.string() + " --desired " +
+          (dir / "desired").string() + " --display memory,memory --out " + out.string(),
+      [&] { return fs::exists(log) && Bytes(log).find("form factors: ") != std::string::npos; },
+      SIGTERM, kMaxSeconds, log);
+  const std::string output = Bytes(log);
+  ASSERT_TRUE(run.running) << output;
+  EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
+  EXPECT_EQ(run.exit_code, 0) << output;
+  EXPECT_EQ(LinesWith(output, "stopped by a signal before the first frame"), 1) << output;
+  EXPECT_EQ(output.find("form factors: 100%"), std::string::npos) << output;
+  EXPECT_EQ(output.find("procam: error"), std::string::npos) << output;
+  EXPECT_FALSE(fs::exists(out / "result.json")) << output;
+}
+
+// A rig registered before procam recorded what its checks read (the camera's and the
+// projectors' centres and image sizes, the room): compensate says in one warning line which keys
+// are missing and which command records them, and goes on; the rig registered again by that
+// command (calibrate all over its captures) has them all, and no line is said. A whole rig says
+// nothing.
+TEST_F(Faults, ARigWithoutTheRegistrationRecordsSaysWhatIsMissingAndHowToAddIt) {
+  const auto compensate = [&](const fs::path& rig) {
+    return testing::RunProcam("compensate " + kScene + " --rig " + rig.string() + " --out " +
+                              (dir / "solution").string());
+  };
+  const CommandRun whole = compensate(Rig());
+  ASSERT_EQ(whole.exit_code, 0) << whole.output;
+  EXPECT_EQ(whole.output.find("warning: "), std::string::npos) << whole.output;
+
+  const fs::path rig = dir / "old_rig";
+  fs::copy(Rig(), rig, fs::copy_options::recursive);
+  nlohmann::json file = nlohmann::json::parse(Bytes(rig / "rig.json"));
+  nlohmann::json& registration = file.at("registration");
+  registration.erase("room");
+  registration.erase("camera_imagersize");
+  for (nlohmann::json& projector : registration.at("projectors")) projector.erase("centre_m");
+  dir.Write("old_rig/rig.json", file.dump(2));
+  const CommandRun old = compensate(rig);
+  ASSERT_EQ(old.exit_code, 0) << old.output;
+  EXPECT_EQ(LinesWith(old.output, "warning: "), 1) << old.output;
+  const std::string expected = "warning: " + (rig / "rig.json").string() +
+                               ": no registration.camera_imagersize, "
+                               "registration.projectors[0].centre_m, "
+                               "registration.projectors[1].centre_m, registration.room (";
+  EXPECT_EQ(LinesWith(old.output, expected), 1) << old.output;
+  EXPECT_EQ(LinesWith(old.output, "register the rig again: procam calibrate projectors " +
+                                      rig.string() + "/captures/structured_light_* --scene"),
+            1)
+      << old.output;
+
+  const CommandRun registered = testing::RunProcam("calibrate all --camera " + kCamera + "'" +
+                                                   kCapture + "--out " + rig.string());
+  ASSERT_EQ(registered.exit_code, 0) << registered.output;
+  const CommandRun again = compensate(rig);
+  ASSERT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_EQ(again.output.find("warning: "), std::string::npos) << again.output;
 }
 
 }  // namespace
