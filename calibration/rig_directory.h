@@ -15,6 +15,7 @@
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
+#include <opencv2/core/mat.hpp>
 
 #include "compensation/stage.h"
 #include "geometry/patches.h"
@@ -160,10 +161,14 @@ void ApplyRigReflectance(const RigDirectory& rig, PatchHierarchy* patches);
 // The projectors that show a solution, and what result files record about their rig: `rig_dir`
 // when given, else the rig the solution was computed with (its result.json "rig"), else the
 // scene's own projectors (rig_description null). A rig's per-patch reflectance replaces the
-// patches' (ApplyRigReflectance). Throws IoError like ReadRigDirectory and ReadProjectors.
+// patches' (ApplyRigReflectance), and its per-pixel reflectance maps, where every projector has
+// one, are read (ReadRigReflectanceMaps, calibration/reflectance_map.h). Throws IoError like
+// ReadRigDirectory, ReadProjectors and ReadRigReflectanceMaps.
 struct SolutionProjectors {
   std::vector<Projector> projectors;
   nlohmann::json rig_description;  // RigDirectory::Describe(), or null
+  // One per projector (CV_32FC3 linear R, G, B, for AttachReflectanceMaps), or none.
+  std::vector<cv::Mat> reflectance_maps;
 };
 SolutionProjectors ProjectorsForSolution(const SolutionDirectory& solution, const std::filesystem::path& rig_dir,
                                          const Scene& scene, PatchHierarchy* patches);

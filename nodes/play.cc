@@ -147,6 +147,8 @@ PlayScene PreparePlay(const PlayOptions& options, RigDirectory rig) {
   room.patches = options.patches;
   room.alpha = options.alpha;
   room.projection.feather = options.feather;
+  // Frames are planned per patch (frame_plan.h), which carries no per-pixel reflectance.
+  room.reflectance_maps = false;
   // The solution's emittance needs no camera; desired images are mapped through it.
   room.camera_rays = options.solution.empty();
   RoomSources sources;
