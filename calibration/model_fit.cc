@@ -256,8 +256,7 @@ ReflectanceMapUpdate FitReflectanceMaps(const ReflectanceMapFitOptions& options,
         for (int c = 0; c < 3; ++c) {
           const double gain =
               std::pow(std::clamp(double(sum[c]) / samples, low, options.max_gain), options.step);
-          map.reflectance[q][c] =
-              static_cast<float>(std::min(0.99, map.reflectance[q][c] * gain));
+          map.reflectance[q][c] = static_cast<float>(std::min(0.99, map.reflectance[q][c] * gain));
           log_squares += std::log(gain) * std::log(gain);
         }
         ++update.updated_pixels;

@@ -6,16 +6,15 @@
 //   RIG_DIR/camera.cameramodel  mrcal; extrinsics = rt_cam_room once registered (zero before)
 //   RIG_DIR/NAME.cameramodel    mrcal; extrinsics = rt_proj_room (ref = the scene's frame)
 
+#include <Eigen/Core>
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <nlohmann/json.hpp>
+#include <opencv2/core/mat.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <nlohmann/json.hpp>
-#include <opencv2/core/mat.hpp>
 
 #include "compensation/stage.h"
 #include "geometry/patches.h"

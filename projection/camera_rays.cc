@@ -166,7 +166,8 @@ cv::Mat PredictPixels(const CameraPixelRays& rays, const ProjectionRig& rig,
       Eigen::Vector3d reflectance = rig.reflectance.row(i).transpose();
       if (mapped > 0) {
         for (int c = 0; c < 3; ++c) {
-          if (map_means(i, c) > 0.0) reflectance[c] *= map_reflectance[c] / mapped / map_means(i, c);
+          if (map_means(i, c) > 0.0)
+            reflectance[c] *= map_reflectance[c] / mapped / map_means(i, c);
         }
       }
       const Eigen::Vector3d exitance = reflectance.cwiseProduct(irradiance);

@@ -226,11 +226,10 @@ void CombineFactors(const ProjectionRig& rig,
 // reflectance's q, the seamless light's m, or their product renormalised (header comment); none
 // with none of them (1). `flux` is step 1's. With the reflectance, *reflectance_factors gets q
 // alone (for the count of the pixels it saturates).
-std::vector<std::vector<Eigen::Vector3f>> PixelFactors(const ProjectionRig& rig, const Scene& scene,
-                                                       const Eigen::MatrixX3d& flux,
-                                                       const RenderOptions& options,
-                                                       long long* textured_pixels,
-                                                       std::vector<std::vector<Eigen::Vector3f>>* reflectance_factors) {
+std::vector<std::vector<Eigen::Vector3f>> PixelFactors(
+    const ProjectionRig& rig, const Scene& scene, const Eigen::MatrixX3d& flux,
+    const RenderOptions& options, long long* textured_pixels,
+    std::vector<std::vector<Eigen::Vector3f>>* reflectance_factors) {
   std::vector<std::vector<Eigen::Vector3f>> detail;
   if (options.detail) detail = DetailFactors(rig, scene, options, textured_pixels);
   if (options.reflectance) {

@@ -821,9 +821,10 @@ void VerificationLoop::UpdateAndSolve(VerificationIteration* it) {
     const ReflectanceMapUpdate map_update =
         FitReflectanceMaps(ReflectanceMapFitOptions(), model_.room.camera_rays, exitance_,
                            comparison_.predicted, model_.interior, &model_.room.projection);
-    Report(options_.progress,
-           fmt::format("verify: reflectance maps: {} projector pixels refitted, rms gain {:.2f}%",
-                       map_update.updated_pixels, 100.0 * (std::exp(map_update.rms_log_gain) - 1.0)));
+    Report(
+        options_.progress,
+        fmt::format("verify: reflectance maps: {} projector pixels refitted, rms gain {:.2f}%",
+                    map_update.updated_pixels, 100.0 * (std::exp(map_update.rms_log_gain) - 1.0)));
   }
   CompensationOptions compensation;
   compensation.solver.method = in_.solution.method;

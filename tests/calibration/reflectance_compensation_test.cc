@@ -174,8 +174,8 @@ Shot Photograph(const World& world, const CalibratedRoom& room) {
   shot.images = RenderProjectorImages(room.projection, room.geometry.scene, solution.emittance,
                                       render, &shot.render);
   shot.radiance = world.rig->RenderRadiance(shot.images);
-  shot.predicted = PredictPixels(room.camera_rays, room.projection, shot.images,
-                                 room.geometry.form_factors);
+  shot.predicted =
+      PredictPixels(room.camera_rays, room.projection, shot.images, room.geometry.form_factors);
   const cv::Mat desired = world.rig->RenderDesired();
   const LabConverter lab{room.problem.rgb_to_xyz, room.problem.white_xyz};
   const auto lab_at = [&](const cv::Mat& image, size_t index) {
