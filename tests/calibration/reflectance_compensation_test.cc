@@ -231,9 +231,18 @@ TEST(ReflectanceCompensation, PrintedWallFadesWithTheMaps) {
       after.render.reflectance_pixels);
   EXPECT_GT(after.render.reflectance_pixels, 0);
   EXPECT_EQ(before.render.reflectance_pixels, 0);
-  // Bounds measured (see the printed line) with margin: TODO
-  EXPECT_LT(after.mean2000, before.mean2000);
-  EXPECT_LT(after.print2000, before.print2000);
+  // Measured (2026-11-28): model error 3.52 -> 1.25, print 4.87 -> 3.75, photo vs desired
+  // 9.87 -> 9.32, 101 of 103 348 pixels saturated. The prediction knows the print with the maps:
+  // its error at least halves. The images even out only the direct light: the bounce (a large
+  // part of the light in the closed box) reflects with the print, and the pixels straddling a
+  // cell edge light both cells with one level (docs/projection.md), so the print's visibility
+  // falls by at least 15% (23% measured), and the error against the desired picture, most of
+  // which is the patches' own (the solver's bounds), by at least 3% (5.6% measured).
+  EXPECT_LT(after.model2000, 0.5 * before.model2000);
+  EXPECT_LT(after.print2000, 0.85 * before.print2000);
+  EXPECT_LT(after.mean2000, 0.97 * before.mean2000);
+  // Within the projectors' range: few pixels saturate (0.1% measured).
+  EXPECT_LT(after.render.reflectance_saturated_pixels, after.render.reflectance_pixels / 100);
 }
 
 // The closed loop per pixel (FitReflectanceMaps): maps that know nothing of the print (each
@@ -273,7 +282,14 @@ TEST(ReflectanceCompensation, ClosedLoopLearnsThePrintPerPixel) {
   std::printf("start (no print known): %.3f / %.3f / %.3f; true maps: %.3f / %.3f / %.3f\n",
               shots.front().mean2000, shots.front().print2000, shots.front().model2000,
               truth.mean2000, truth.print2000, truth.model2000);
-  EXPECT_LT(shots.back().print2000, shots.front().print2000);
+  // Measured (2026-11-28): print 4.87 -> 3.83, 3.78, 3.79 against 3.75 with the true maps;
+  // model error 3.52 -> 1.01, 0.99, 1.05 (1.25 with the true maps: the refit also absorbs the
+  // model's bounce error). One update reaches the true maps' evenness within 5%, and later ones
+  // stay there.
+  for (size_t k = 1; k < shots.size(); ++k) {
+    EXPECT_LT(shots[k].print2000, 1.05 * truth.print2000) << "iteration " << k;
+    EXPECT_LT(shots[k].model2000, truth.model2000 + 0.1) << "iteration " << k;
+  }
 }
 
 TEST(ReflectanceCompensation, UnprintedWallsAreUnchangedAndOldRigsAsBefore) {
@@ -299,9 +315,14 @@ TEST(ReflectanceCompensation, UnprintedWallsAreUnchangedAndOldRigsAsBefore) {
     EXPECT_EQ(cv::norm(plain.images[k].codes, per_patch[k].codes, cv::NORM_INF), 0.0);
     EXPECT_EQ(cv::norm(unused.images[k].codes, per_patch[k].codes, cv::NORM_INF), 0.0);
   }
-  std::printf("unprinted back wall: photo vs desired CIEDE2000 %.4f (no maps), %.4f (maps)\n",
-              plain.mean2000, mapped.mean2000);
-  EXPECT_NEAR(mapped.mean2000, plain.mean2000, 0.05);
+  std::printf(
+      "unprinted back wall: photo vs desired CIEDE2000 %.4f (no maps), %.4f (maps); "
+      "within-patch %.4f / %.4f\n",
+      plain.mean2000, mapped.mean2000, plain.print2000, mapped.print2000);
+  // Maps constant over each wall ask every pixel for the patch's level (q = 1): the photo is the
+  // per-patch one up to the renderer's other path (identical to 4 decimals, measured).
+  EXPECT_NEAR(mapped.mean2000, plain.mean2000, 0.01);
+  EXPECT_NEAR(mapped.print2000, plain.print2000, 0.01);
 }
 
 }  // namespace
