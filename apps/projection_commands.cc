@@ -43,7 +43,8 @@ void RunProject(const ProjectArguments& args) {
       ProjectorsForSolution(solution, args.rig, geometry.scene, &geometry.patches);
   options.load_seconds = SecondsSince(start);
   options.progress = PrintProgress();
-  RunProjectionStage(solution, geometry, std::move(projectors.projectors), projectors.rig_description, options);
+  RunProjectionStage(solution, geometry, std::move(projectors.projectors),
+                     projectors.rig_description, options, projectors.reflectance_maps);
 }
 
 struct ShowArguments {

@@ -139,8 +139,8 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
   projection.out = images;
   projection.progress = PrintProgress();
   projection.light = rig.light;
-  RunProjectionStage(solution, solution_geometry, std::move(projectors.projectors), projectors.rig_description,
-                     projection);
+  RunProjectionStage(solution, solution_geometry, std::move(projectors.projectors),
+                     projectors.rig_description, projection, projectors.reflectance_maps);
 
   spdlog::info("stage 4/4 photographs, verification and the closed loop");
   std::printf("\n$ procam verify %s %s --camera %s --out %s --iterations %d --frames %d --settle-ms %s\n",

@@ -7,6 +7,7 @@
 
 #include "base/io.h"
 #include "base/option_table.h"
+#include "calibration/reflectance_map.h"
 
 namespace procam {
 
@@ -171,6 +172,18 @@ CalibratedRoom BuildCalibratedRoom(const CalibratedRoomOptions& options, RoomSou
   }
   if (!room.projectors.empty()) {
     room.projection = BuildProjectionRig(room.fine(), room.projectors, options.projection);
+    if (room.rig && options.reflectance_maps && !room.rig->file.reflectance_maps.empty()) {
+      const std::vector<cv::Mat> maps = ReadRigReflectanceMaps(*room.rig);
+      if (maps.empty()) {
+        Report(options.progress,
+               fmt::format("room: rig.json has reflectance maps for {} of {} projectors: one "
+                           "reflectance per patch",
+                           room.rig->file.reflectance_maps.size(), room.projectors.size()));
+      } else {
+        AttachReflectanceMaps(maps, &room.projection);
+        Report(options.progress, "room: each projector pixel's reflectance from the rig's maps");
+      }
+    }
   }
   if (options.problem) {
     room.problem = MakeProblem(room.geometry.scene, room.fine(), room.geometry.form_factors,

@@ -61,6 +61,10 @@ struct CalibratedRoomOptions {
   double alpha = 0.5;  // the problem's weight of the absolute term, (0, 1]
   // The projection rig's options (feather, texture coordinates, ...).
   ProjectionRigOptions projection;
+  // Attach the rig's per-pixel reflectance maps (rig.json's reflectance_maps, where every
+  // projector has one) to the projection rig, so that rendering (RenderOptions::reflectance) and
+  // the per-pixel prediction use them (HasReflectanceMaps); false: one reflectance per patch.
+  bool reflectance_maps = true;
   // Projectors whose photometry says another bit depth are rendered at this one (the displays'),
   // with a progress line each; 0: as the rig says. 0, 8 or 10.
   int display_bits = 0;
@@ -101,7 +105,8 @@ struct CalibratedRoom {
   // The rig's projectors (the scene's without a rig), at options.display_bits where given.
   std::vector<Projector> projectors;
   // Maps, blending weights and direct-light bounds (lower, upper) of `projectors` on the fine
-  // patches; empty (size() 0) when there are no projectors.
+  // patches, with the rig's reflectance maps attached (options.reflectance_maps); empty (size()
+  // 0) when there are no projectors.
   ProjectionRig projection;
   // The fine level's problem with the projection rig's bounds (the scene's "bounds" without
   // projectors); empty unless options.problem.
@@ -125,7 +130,8 @@ RoomSources ReadRoomSources(const CalibratedRoomOptions& options, RoomSources gi
 // Builds the room from its sources. Throws IoError: a solution whose patch count is not the
 // room's (one wording, PatchCountMismatch), a count other than options.expected_patches (the
 // same wording), the rig's reflectance estimated for another patch count
-// (ApplyRigReflectance), every error of the geometry stage, the projection rig and the camera.
+// (ApplyRigReflectance), every error of the geometry stage, the projection rig and the camera,
+// and of the rig's reflectance maps (ReadRigReflectanceMaps).
 CalibratedRoom BuildCalibratedRoom(const CalibratedRoomOptions& options, RoomSources sources);
 
 // ReadRoomSources, then BuildCalibratedRoom.

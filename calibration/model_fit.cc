@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
 
 #include "projection/direct_light.h"
 
@@ -164,6 +166,106 @@ void ApplyModelUpdate(const ModelUpdate& update, ProjectionRig* rig, PatchHierar
   patches->fine.reflectance = update.reflectance;
   patches->coarse.reflectance = CoarsenPatchValues(update.reflectance, patches->fine.Areas(),
                                                    patches->coarse_of_fine, patches->coarse.size());
+}
+
+bool ReflectanceMapFitOptions::Check(std::string* why) const {
+  if (!(step > 0.0 && step <= 1.0)) {
+    *why = "step must be in (0, 1]";
+    return false;
+  }
+  if (!(max_gain > 1.0 && std::isfinite(max_gain))) {
+    *why = "max_gain must be > 1";
+    return false;
+  }
+  if (radius < 0 || radius > 50) {
+    *why = "radius must be in [0, 50]";
+    return false;
+  }
+  return true;
+}
+
+ReflectanceMapUpdate FitReflectanceMaps(const ReflectanceMapFitOptions& options,
+                                        const CameraPixelRays& rays, const cv::Mat& measured,
+                                        const cv::Mat& predicted, const std::vector<bool>& mask,
+                                        ProjectionRig* rig) {
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument("ReflectanceMapFitOptions: " + why);
+  if (!HasReflectanceMaps(*rig))
+    throw std::invalid_argument("FitReflectanceMaps: the rig has no reflectance maps");
+  const size_t count = static_cast<size_t>(rays.width) * rays.height;
+  const auto fits = [&](const cv::Mat& image) {
+    return image.type() == CV_32FC3 && image.cols == rays.width && image.rows == rays.height &&
+           image.isContinuous();
+  };
+  if (!fits(measured) || !fits(predicted) || mask.size() != count ||
+      rays.projectors != static_cast<int>(rig->maps.size())) {
+    throw std::invalid_argument(
+        "FitReflectanceMaps: photo, prediction, mask and rays must be of the camera's size and "
+        "the rays cast with the rig's projectors");
+  }
+  const auto* photo = reinterpret_cast<const cv::Vec3f*>(measured.data);
+  const auto* model = reinterpret_cast<const cv::Vec3f*>(predicted.data);
+  // The ratio per camera pixel (0 where not used), and each patch's mean ratio.
+  const int n = rig->size();
+  std::vector<Eigen::Vector3d> ratio(count, Eigen::Vector3d::Zero());
+  std::vector<char> used(count, 0);
+  Eigen::MatrixX3d patch_sum = Eigen::MatrixX3d::Zero(n, 3);
+  Eigen::VectorXd patch_count = Eigen::VectorXd::Zero(n);
+  for (size_t p = 0; p < count; ++p) {
+    const int i = rays.patch[p];
+    if (!mask[p] || i < 0 || i >= n) continue;
+    bool ok = true;
+    for (int c = 0; c < 3; ++c) {
+      ok &= model[p][c] > 0.0f && photo[p][c] > 0.0f;
+      if (ok) ratio[p][c] = double(photo[p][c]) / model[p][c];
+    }
+    if (!ok) continue;
+    used[p] = 1;
+    patch_sum.row(i) += ratio[p].transpose();
+    patch_count[i] += 1.0;
+  }
+  ReflectanceMapUpdate update;
+  double log_squares = 0.0;
+  for (int k = 0; k < rays.projectors; ++k) {
+    ProjectorMap& map = rig->maps[k];
+    cv::Mat sums(map.height, map.width, CV_32FC3, cv::Scalar::all(0));
+    cv::Mat counts(map.height, map.width, CV_32FC1, cv::Scalar::all(0));
+    for (size_t p = 0; p < count; ++p) {
+      if (!used[p]) continue;
+      const int32_t q = rays.projector_pixel[p * rays.projectors + k];
+      if (q < 0) continue;
+      const int i = rays.patch[p];
+      const Eigen::Vector3d relative =
+          ratio[p].cwiseQuotient(patch_sum.row(i).transpose() / patch_count[i]);
+      cv::Vec3f& sum = sums.at<cv::Vec3f>(q / map.width, q % map.width);
+      for (int c = 0; c < 3; ++c) sum[c] += static_cast<float>(relative[c]);
+      counts.at<float>(q / map.width, q % map.width) += 1.0f;
+    }
+    if (options.radius > 0) {
+      const cv::Size box(2 * options.radius + 1, 2 * options.radius + 1);
+      cv::boxFilter(sums, sums, -1, box, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+      cv::boxFilter(counts, counts, -1, box, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    }
+    const double low = 1.0 / options.max_gain;
+    for (int row = 0; row < map.height; ++row) {
+      for (int col = 0; col < map.width; ++col) {
+        const size_t q = static_cast<size_t>(row) * map.width + col;
+        const float samples = counts.at<float>(row, col);
+        if (map.patch[q] < 0 || !(samples > 0.5f)) continue;
+        const cv::Vec3f& sum = sums.at<cv::Vec3f>(row, col);
+        for (int c = 0; c < 3; ++c) {
+          const double gain =
+              std::pow(std::clamp(double(sum[c]) / samples, low, options.max_gain), options.step);
+          map.reflectance[q][c] = static_cast<float>(std::min(0.99, map.reflectance[q][c] * gain));
+          log_squares += std::log(gain) * std::log(gain);
+        }
+        ++update.updated_pixels;
+      }
+    }
+  }
+  if (update.updated_pixels > 0)
+    update.rms_log_gain = std::sqrt(log_squares / (3.0 * update.updated_pixels));
+  return update;
 }
 
 }  // namespace procam

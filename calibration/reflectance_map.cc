@@ -235,6 +235,25 @@ cv::Mat ReadReflectanceMap(const std::filesystem::path& rig_dir, const std::stri
   return rgb;
 }
 
+std::vector<cv::Mat> ReadRigReflectanceMaps(const RigDirectory& rig) {
+  std::vector<cv::Mat> maps;
+  for (const Projector& projector : rig.projectors) {
+    const auto entry = rig.file.reflectance_maps.find(projector.name);
+    if (entry == rig.file.reflectance_maps.end()) return {};
+  }
+  for (const Projector& projector : rig.projectors) {
+    const RigReflectanceMap& entry = rig.file.reflectance_maps.at(projector.name);
+    if (entry.width != projector.geometry.width() || entry.height != projector.geometry.height()) {
+      throw IoError((rig.dir / "rig.json").string() + ": reflectance_maps." + projector.name +
+                    ": " + std::to_string(entry.width) + "x" + std::to_string(entry.height) +
+                    " but the projector's model is " + std::to_string(projector.geometry.width()) +
+                    "x" + std::to_string(projector.geometry.height()));
+    }
+    maps.push_back(ReadReflectanceMap(rig.dir, projector.name, entry));
+  }
+  return maps;
+}
+
 cv::Mat DrawReflectanceMap(const ReflectanceMap& map) {
   cv::Mat picture(map.reflectance.size(), CV_8UC3, cv::Scalar::all(0));
   for (int row = 0; row < picture.rows; ++row) {

@@ -34,6 +34,7 @@
 #include <filesystem>
 #include <opencv2/core/mat.hpp>
 #include <string>
+#include <vector>
 
 #include "calibration/photometric_transfer.h"
 #include "calibration/rig_directory.h"
@@ -92,6 +93,13 @@ void WriteReflectanceMap(const std::filesystem::path& rig_dir, const std::string
 // or naming the file when it is not a 16-bit 3-channel PNG of the recorded size.
 cv::Mat ReadReflectanceMap(const std::filesystem::path& rig_dir, const std::string& projector,
                            const RigReflectanceMap& entry);
+
+// The maps of every projector of `rig` (rig.json's reflectance_maps, each read by
+// ReadReflectanceMap), in rig.projectors' order, for AttachReflectanceMaps; an empty vector
+// unless every projector has one (the per-pixel rendering needs them all). Throws IoError like
+// ReadReflectanceMap, and naming RIG_DIR/rig.json's reflectance_maps.NAME when a map's size is
+// not its projector's.
+std::vector<cv::Mat> ReadRigReflectanceMaps(const RigDirectory& rig);
 
 // Pictures of a map for the calibration report (8-bit BGR): the reflectance as sRGB, and each
 // pixel's reflectance relative to its patch's (green luminance ratio) on a diverging scale,

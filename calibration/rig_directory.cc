@@ -12,6 +12,7 @@
 
 #include "base/io.h"
 #include "base/json_fields.h"
+#include "calibration/reflectance_map.h"
 
 namespace procam {
 
@@ -685,6 +686,7 @@ SolutionProjectors ProjectorsForSolution(const SolutionDirectory& solution, cons
   ApplyRigReflectance(rig, patches);
   result.projectors = rig.projectors;
   result.rig_description = rig.Describe();
+  result.reflectance_maps = ReadRigReflectanceMaps(rig);
   return result;
 }
 

@@ -6,15 +6,15 @@
 //   RIG_DIR/camera.cameramodel  mrcal; extrinsics = rt_cam_room once registered (zero before)
 //   RIG_DIR/NAME.cameramodel    mrcal; extrinsics = rt_proj_room (ref = the scene's frame)
 
+#include <Eigen/Core>
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <nlohmann/json.hpp>
+#include <opencv2/core/mat.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <nlohmann/json.hpp>
 
 #include "compensation/stage.h"
 #include "geometry/patches.h"
@@ -170,10 +170,14 @@ void ApplyRigReflectance(const RigDirectory& rig, PatchHierarchy* patches);
 // The projectors that show a solution, and what result files record about their rig: `rig_dir`
 // when given, else the rig the solution was computed with (its result.json "rig"), else the
 // scene's own projectors (rig_description null). A rig's per-patch reflectance replaces the
-// patches' (ApplyRigReflectance). Throws IoError like ReadRigDirectory and ReadProjectors.
+// patches' (ApplyRigReflectance), and its per-pixel reflectance maps, where every projector has
+// one, are read (ReadRigReflectanceMaps, calibration/reflectance_map.h). Throws IoError like
+// ReadRigDirectory, ReadProjectors and ReadRigReflectanceMaps.
 struct SolutionProjectors {
   std::vector<Projector> projectors;
   nlohmann::json rig_description;  // RigDirectory::Describe(), or null
+  // One per projector (CV_32FC3 linear R, G, B, for AttachReflectanceMaps), or none.
+  std::vector<cv::Mat> reflectance_maps;
 };
 SolutionProjectors ProjectorsForSolution(const SolutionDirectory& solution, const std::filesystem::path& rig_dir,
                                          const Scene& scene, PatchHierarchy* patches);

@@ -233,6 +233,7 @@ class Node {
       room_options.form_factors = false;               // a node renders, it does not solve
       room_options.problem = false;
       room_options.projection.feather = setup->feather;
+      room_options.reflectance_maps = false;  // as the controller's frames (play.cc)
       RoomSources sources;
       sources.rig = rig_dir_;
       setup->rig = BuildCalibratedRoom(room_options, std::move(sources)).projection;

@@ -149,6 +149,8 @@ PlayScene PreparePlay(const PlayOptions& options, RigDirectory rig) {
   room.alpha = options.alpha;
   room.projection.feather = options.feather;
   room.progress = options.progress;  // the form factors' progress: minutes for a large room
+  // Frames are planned per patch (frame_plan.h), which carries no per-pixel reflectance.
+  room.reflectance_maps = false;
   // The solution's emittance needs no camera; desired images are mapped through it.
   room.camera_rays = options.solution.empty();
   RoomSources sources;

@@ -132,16 +132,27 @@ cv::Mat PredictPixels(const CameraPixelRays& rays, const ProjectionRig& rig,
                           photometry.response[2].Light(drive));
     }
   }
+  // With every projector's reflectance map, the point's reflectance relative to its patch's.
+  const bool per_pixel_reflectance = HasReflectanceMaps(rig);
+  const Eigen::MatrixX3d map_means =
+      per_pixel_reflectance ? MapReflectanceMeans(rig) : Eigen::MatrixX3d();
   cv::Mat predicted(rays.height, rays.width, CV_32FC3, cv::Scalar::all(0));
+#pragma omp parallel for schedule(dynamic, 8)
   for (int row = 0; row < rays.height; ++row) {
     for (int col = 0; col < rays.width; ++col) {
       const size_t index = static_cast<size_t>(row) * rays.width + col;
       const int i = rays.patch[index];
       if (i < 0) continue;
       Eigen::Vector3d irradiance = bounce.row(i).transpose();
+      Eigen::Vector3d map_reflectance = Eigen::Vector3d::Zero();
+      int mapped = 0;
       for (int k = 0; k < rays.projectors; ++k) {
         const int32_t pixel = rays.projector_pixel[index * rays.projectors + k];
         if (pixel < 0) continue;
+        if (per_pixel_reflectance) {
+          map_reflectance += rig.maps[k].reflectance[pixel].cast<double>();
+          ++mapped;
+        }
         const ProjectorPhotometry& p = rig.projectors[k].photometry;
         const cv::Vec3w& code = reinterpret_cast<const cv::Vec3w*>(images[k].codes.data)[pixel];
         const int max_code = static_cast<int>(light[k].size()) - 1;
@@ -152,7 +163,14 @@ cv::Mat PredictPixels(const CameraPixelRays& rays, const ProjectionRig& rig,
             p.black + (p.max - p.black).cwiseProduct(p.mixing * relative);
         irradiance += double(rays.gain[index * rays.projectors + k]) * output;
       }
-      const Eigen::Vector3d exitance = rig.reflectance.row(i).transpose().cwiseProduct(irradiance);
+      Eigen::Vector3d reflectance = rig.reflectance.row(i).transpose();
+      if (mapped > 0) {
+        for (int c = 0; c < 3; ++c) {
+          if (map_means(i, c) > 0.0)
+            reflectance[c] *= map_reflectance[c] / mapped / map_means(i, c);
+        }
+      }
+      const Eigen::Vector3d exitance = reflectance.cwiseProduct(irradiance);
       predicted.at<cv::Vec3f>(row, col) =
           cv::Vec3f(float(exitance[0]), float(exitance[1]), float(exitance[2]));
     }

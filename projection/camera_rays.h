@@ -91,7 +91,12 @@ CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& leve
 // code_k the code of the projector pixel that lights x, output_k the projector's photometry as
 // the model knows it, and B = K⁻¹(ρ ⊙ D) the radiosity of the direct irradiance D the shown
 // images deliver to each patch (the renderer's flux bookkeeping), so the bounce term is the one
-// of the light actually shown. `shown_radiosity` (optional) receives that B.
+// of the light actually shown. `shown_radiosity` (optional) receives that B. With every
+// projector's reflectance map attached (HasReflectanceMaps), ρ_i becomes the point's own
+// reflectance relative to its patch's, ρ_i ⊙ ρ_x / ρ̄_i (ρ_x the mean of the maps' values at the
+// projector pixels that light x, ρ̄_i their patch mean, MapReflectanceMeans): the model's
+// per-patch ρ_i (which the closed loop refits) keeps its scale, the map adds the variation within
+// the patch. Points no projector lights keep ρ_i.
 cv::Mat PredictPixels(const CameraPixelRays& rays, const ProjectionRig& rig,
                       const std::vector<ProjectorImage>& images,
                       const Eigen::MatrixXd& form_factors,

@@ -455,6 +455,38 @@ void AttachReflectanceMaps(const std::vector<cv::Mat>& maps, ProjectionRig* rig)
   }
 }
 
+bool HasReflectanceMaps(const ProjectionRig& rig) {
+  if (rig.maps.empty()) return false;
+  for (const ProjectorMap& map : rig.maps) {
+    if (map.reflectance.size() != map.patch.size()) return false;
+  }
+  return true;
+}
+
+Eigen::MatrixX3d MapReflectanceMeans(const ProjectionRig& rig) {
+  if (!HasReflectanceMaps(rig))
+    throw std::invalid_argument("MapReflectanceMeans: not every projector has a reflectance map");
+  const int n = rig.size();
+  Eigen::MatrixX3d means = Eigen::MatrixX3d::Zero(n, 3);
+#pragma omp parallel for schedule(dynamic, 16)
+  for (int i = 0; i < n; ++i) {
+    Vec3 sum = Vec3::Zero();
+    double weight_sum = 0.0;
+    for (size_t k = 0; k < rig.maps.size(); ++k) {
+      const ProjectorMap& map = rig.maps[k];
+      const double scale = rig.coverage_scale(i, static_cast<int>(k)) * map.pixel_solid_angle;
+      for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
+        const int32_t index = map.pixels_by_patch[position];
+        const double weight = scale * map.share[index];
+        sum += weight * map.reflectance[index].cast<double>();
+        weight_sum += weight;
+      }
+    }
+    if (weight_sum > 0.0) means.row(i) = (sum / weight_sum).transpose();
+  }
+  return means;
+}
+
 bool SetBoundsFromProjectors(const Scene& scene, const PatchLevel& level, Eigen::MatrixX3d* lower,
                              Eigen::MatrixX3d* upper, const ProjectionRigOptions& options) {
   std::vector<Projector> projectors = ReadProjectors(scene);

@@ -156,6 +156,18 @@ ProjectionRig BuildProjectionRig(const PatchLevel& level, std::vector<Projector>
 // not finite and ≥ 0.
 void AttachReflectanceMaps(const std::vector<cv::Mat>& maps, ProjectionRig* rig);
 
+// Whether every projector of the rig (at least one) carries a reflectance map: what the renderer
+// (RenderOptions::reflectance) and the per-pixel prediction (PredictPixels, camera_rays.h) need
+// to shape and predict each pixel's light by its point's reflectance.
+bool HasReflectanceMaps(const ProjectionRig& rig);
+
+// (n,3) each patch's mean of the attached maps' reflectance ρ_p over the pixels that light it,
+// weighted as the flux bookkeeping weights them (w a: coverage_scale · Ω · share); 0 for a patch
+// no pixel lights. A pixel's reflectance relative to its patch's is ρ_p / ρ̄_i: the renderer
+// divides its light by it, the prediction multiplies the model's ρ_i by it. Needs
+// HasReflectanceMaps (std::invalid_argument otherwise).
+Eigen::MatrixX3d MapReflectanceMeans(const ProjectionRig& rig);
+
 // Direct-light exitance bounds of every patch of `level` from the scene's projectors, for
 // CompensationProblem::lower/upper. Returns false (outputs untouched) if the scene lists no
 // projectors. Throws like ReadProjectors and BuildProjectionRig.

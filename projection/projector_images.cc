@@ -126,23 +126,13 @@ std::vector<std::vector<Eigen::Vector3f>> ReflectanceFactors(const ProjectionRig
   for (int k = 0; k < projector_count; ++k)
     factors[k].assign(rig.maps[k].lit_pixels, Eigen::Vector3f::Ones());
   const double low = 1.0 / options.reflectance_ratio_max, high = options.reflectance_ratio_max;
+  // The patch's mean reflectance as its pixels light it (weights w a).
+  const Eigen::MatrixX3d means = MapReflectanceMeans(rig);
 #pragma omp parallel for schedule(dynamic, 16)
   for (int i = 0; i < n; ++i) {
-    // The patch's mean reflectance as its pixels light it.
-    Vec3 reflectance_sum = Vec3::Zero();
+    if (!(rig.blended_area[i] > 0.0)) continue;
+    const Vec3 mean = means.row(i).transpose();
     double weight_sum = 0.0;
-    for (int k = 0; k < projector_count; ++k) {
-      const ProjectorMap& map = rig.maps[k];
-      const double scale = rig.coverage_scale(i, k) * map.pixel_solid_angle;
-      for (int position = map.patch_begin[i]; position < map.patch_begin[i + 1]; ++position) {
-        const int32_t index = map.pixels_by_patch[position];
-        const double weight = scale * map.share[index];
-        reflectance_sum += weight * map.reflectance[index].cast<double>();
-        weight_sum += weight;
-      }
-    }
-    if (!(weight_sum > 0.0)) continue;
-    const Vec3 mean = reflectance_sum / weight_sum;
     Vec3 factor_sum = Vec3::Zero();
     for (int k = 0; k < projector_count; ++k) {
       const ProjectorMap& map = rig.maps[k];
@@ -158,8 +148,10 @@ std::vector<std::vector<Eigen::Vector3f>> ReflectanceFactors(const ProjectionRig
                      : 1.0f;
         }
         factor_sum += scale * map.share[index] * q.cast<double>();
+        weight_sum += scale * map.share[index];
       }
     }
+    if (!(weight_sum > 0.0)) continue;
     const Eigen::Vector3f normaliser = (weight_sum * factor_sum.cwiseInverse()).cast<float>();
     for (int k = 0; k < projector_count; ++k) {
       for (int position = rig.maps[k].patch_begin[i]; position < rig.maps[k].patch_begin[i + 1];
@@ -168,6 +160,27 @@ std::vector<std::vector<Eigen::Vector3f>> ReflectanceFactors(const ProjectionRig
     }
   }
   return factors;
+}
+
+// The lit pixels at full drive on a channel whose reflectance factor q raises them (q > 1):
+// where a dark point asks for more light than the projector has.
+long long ReflectanceSaturatedPixels(const ProjectionRig& rig,
+                                     const std::vector<std::vector<Eigen::Vector3f>>& factors,
+                                     const std::vector<ProjectorImage>& images) {
+  long long saturated = 0;
+  for (size_t k = 0; k < rig.maps.size(); ++k) {
+    const ProjectorMap& map = rig.maps[k];
+    const int max_code = (1 << images[k].bits) - 1;
+    const auto* codes = reinterpret_cast<const cv::Vec3w*>(images[k].codes.data);
+    for (int position = 0; position < map.lit_pixels; ++position) {
+      const cv::Vec3w& code = codes[map.pixels_by_patch[position]];
+      const Eigen::Vector3f& q = factors[k][position];
+      bool at_full = false;
+      for (int c = 0; c < 3; ++c) at_full |= q[c] > 1.0f && code[c] == max_code;
+      saturated += at_full;
+    }
+  }
+  return saturated;
 }
 
 // The detail's and the seamless light's factors multiplied into *combined (the detail), then
@@ -211,15 +224,17 @@ void CombineFactors(const ProjectionRig& rig,
 
 // The factor on τ per lit pixel (in pixels_by_patch order) and channel: the detail d, the
 // reflectance's q, the seamless light's m, or their product renormalised (header comment); none
-// with none of them (1). `flux` is step 1's.
-std::vector<std::vector<Eigen::Vector3f>> PixelFactors(const ProjectionRig& rig, const Scene& scene,
-                                                       const Eigen::MatrixX3d& flux,
-                                                       const RenderOptions& options,
-                                                       long long* textured_pixels) {
+// with none of them (1). `flux` is step 1's. With the reflectance, *reflectance_factors gets q
+// alone (for the count of the pixels it saturates).
+std::vector<std::vector<Eigen::Vector3f>> PixelFactors(
+    const ProjectionRig& rig, const Scene& scene, const Eigen::MatrixX3d& flux,
+    const RenderOptions& options, long long* textured_pixels,
+    std::vector<std::vector<Eigen::Vector3f>>* reflectance_factors) {
   std::vector<std::vector<Eigen::Vector3f>> detail;
   if (options.detail) detail = DetailFactors(rig, scene, options, textured_pixels);
   if (options.reflectance) {
     const std::vector<std::vector<Eigen::Vector3f>> reflectance = ReflectanceFactors(rig, options);
+    *reflectance_factors = reflectance;
     if (detail.empty()) {
       detail = reflectance;
     } else {
@@ -831,14 +846,19 @@ std::vector<ProjectorImage> RenderProjectorImages(const ProjectionRig& rig, cons
   s.patches_below_lower = first.patches_below_lower;
   s.patches_above_upper = first.patches_above_upper;
   s.patches_unreached = first.patches_unreached;
+  std::vector<std::vector<Eigen::Vector3f>> reflectance_factors;
   const std::vector<std::vector<Eigen::Vector3f>> factors =
-      PixelFactors(rig, scene, first.flux, options, &s.detail_pixels);
+      PixelFactors(rig, scene, first.flux, options, &s.detail_pixels, &reflectance_factors);
   // Step 2, per patch: Newton from below on Σ_p min(w a τ, Ω Δ) = Φ.
   s.level_passes = internal::RefineLevels(rig, tables, factors, first.flux,
                                           options.max_level_passes, nullptr, &first.level);
   // Step 3: per pixel relative output → light → dithered codes; the flux they deliver.
   std::vector<ProjectorImage> images =
       internal::ShadeImages(rig, tables, first.level, factors, options.dither, first.target, &s);
+  if (options.reflectance) {
+    for (const ProjectorMap& map : rig.maps) s.reflectance_pixels += map.lit_pixels;
+    s.reflectance_saturated_pixels = ReflectanceSaturatedPixels(rig, reflectance_factors, images);
+  }
   s.seconds = SecondsSince(start);
   return images;
 }

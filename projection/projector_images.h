@@ -137,6 +137,10 @@ struct RenderSummary {
   std::vector<long long> detail_saturated_pixels;
   // Lit pixels whose patch's surface has a texture (all projectors); 0 without detail.
   long long detail_pixels = 0;
+  // With RenderOptions::reflectance: the lit pixels shaped by their measured reflectance (all
+  // projectors), and of those the ones at full drive on a channel their reflectance factor raises
+  // (ρ̄/ρ > 1): the points too dark for the projectors' range to even out. 0 without.
+  long long reflectance_pixels = 0, reflectance_saturated_pixels = 0;
   // (n,3) exitance the quantised images deliver, by the rig's flux bookkeeping.
   Eigen::MatrixX3d delivered;
   // Largest |delivered − clip(E)| relative to max(upper), over patches and channels.

@@ -33,7 +33,11 @@ void ProjectionStageOptions::Declare(OptionTable* table) {
               "level per patch")
       .Flag("detail", &detail,
             "modulate the light within each patch by the desired texture's detail (patch totals "
-            "unchanged; untextured surfaces as without)");
+            "unchanged; untextured surfaces as without)")
+      .NegatedFlag("no-reflectance-maps", &reflectance_maps,
+                   "leave the rig's per-pixel reflectance maps unused: one level per patch as "
+                   "without maps, instead of each pixel's light divided by its point's "
+                   "reflectance relative to its patch's");
 }
 bool ProjectionStageOptions::Check(std::string* why) const {
   if (out.empty()) {
@@ -87,7 +91,8 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
                                           const SolutionGeometry& geometry,
                                           std::vector<Projector> projectors,
                                           const nlohmann::json& rig_description,
-                                          const ProjectionStageOptions& args) {
+                                          const ProjectionStageOptions& args,
+                                          const std::vector<cv::Mat>& reflectance_maps) {
   const auto start = Clock::now();
   std::string why;
   if (!args.Check(&why)) throw std::invalid_argument("project: " + why);
@@ -103,12 +108,15 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
   ProjectionRigSummary& rig_summary = result_summary.rig;
   Report(args.progress, fmt::format("project: casting rays for {} projector(s) over {} patches",
                                     projectors.size(), geometry.patches.fine.size()));
-  const ProjectionRig rig =
+  ProjectionRig rig =
       BuildProjectionRig(geometry.patches.fine, std::move(projectors), rig_options, &rig_summary);
+  if (args.reflectance_maps && !reflectance_maps.empty())
+    AttachReflectanceMaps(reflectance_maps, &rig);
   RenderOptions render_options;
   render_options.dither = args.dither;
   render_options.detail = args.detail;
   render_options.light = args.light;
+  render_options.reflectance = HasReflectanceMaps(rig);
   RenderSummary& summary = result_summary.render;
   const std::vector<ProjectorImage> images =
       RenderProjectorImages(rig, geometry.scene, solution.emittance, render_options, &summary);
@@ -152,6 +160,9 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
                              {"feather", args.feather},
                              {"detail", args.detail},
                              {"light", LightFieldName(args.light)},
+                             {"reflectance_maps", render_options.reflectance},
+                             {"reflectance_pixels", summary.reflectance_pixels},
+                             {"reflectance_saturated_pixels", summary.reflectance_saturated_pixels},
                              {"detail_pixels", summary.detail_pixels},
                              {"patches_reached", rig_summary.patches_reached},
                              {"patches_unreached", summary.patches_unreached},
@@ -201,6 +212,15 @@ ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
                summary.detail_pixels, clipped));
     if (summary.detail_pixels == 0)
       Report(args.progress, "  (no surface the projectors light has a texture)");
+  }
+  if (render_options.reflectance) {
+    Report(args.progress,
+           fmt::format("reflectance: {} lit pixels shaped by their point's measured reflectance, "
+                       "{} ({:.2f}%) at full drive where their point is too dark for the "
+                       "projectors' range",
+                       summary.reflectance_pixels, summary.reflectance_saturated_pixels,
+                       100.0 * summary.reflectance_saturated_pixels /
+                           std::max<long long>(1, summary.reflectance_pixels)));
   }
   Report(
       args.progress,

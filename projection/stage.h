@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
 
@@ -37,9 +38,13 @@ struct ProjectionStageOptions {
   double feather = 0.1;  // blending ramp at the edge of each projector's image, (0, 1]
   bool detail = false;   // the desired texture's detail within patches (projector_images.h)
   LightField light = LightField::kSmooth;  // seamless light, or flat per patch (projector_images.h)
+  // Divide each pixel's light by its point's measured reflectance relative to its patch's when
+  // the rig has reflectance maps (RenderOptions::reflectance); false: per patch, as without maps.
+  bool reflectance_maps = true;
   double load_seconds = 0.0;               // what reading the inputs took, for result.json
   ProgressCallback progress;  // per projector: pixels lit, patches, saturation; bounds; times
-  // Declares --dither, --feather, --light and --detail in `table`, bound to these fields
+  // Declares --dither, --feather, --light, --detail and --no-reflectance-maps in `table`, bound
+  // to these fields
   // (base/option_table.h).
   void Declare(OptionTable* table);
   // The declared options within their ranges and choices, and an output directory given.
@@ -54,11 +59,15 @@ struct ProjectionStageSummary {
 
 // Renders `solution.emittance` with `projectors` on `geometry` (whose fine reflectance the
 // projectors' bounds use) and writes the images directory. `rig_description` (may be null) is
-// recorded in result.json as "rig". Throws IoError naming the projector or the file.
+// recorded in result.json as "rig". `reflectance_maps`: one per projector (the rig's,
+// SolutionProjectors::reflectance_maps) or none; with them (and options.reflectance_maps) each
+// pixel's light is divided by its point's reflectance relative to its patch's. Throws IoError
+// naming the projector or the file.
 ProjectionStageSummary RunProjectionStage(const SolutionDirectory& solution,
                                           const SolutionGeometry& geometry,
                                           std::vector<Projector> projectors,
                                           const nlohmann::json& rig_description,
-                                          const ProjectionStageOptions& options);
+                                          const ProjectionStageOptions& options,
+                                          const std::vector<cv::Mat>& reflectance_maps = {});
 
 }  // namespace procam

@@ -120,6 +120,7 @@ void BindRoom(py::module_& m) {
         RenderOptions options;
         if (!ParseDither(dither, &options.dither)) throw std::invalid_argument("dither: unknown '" + dither + "'");
         if (!ParseLightField(light, &options.light)) throw std::invalid_argument("light: unknown '" + light + "'");
+        options.reflectance = HasReflectanceMaps(room.projection);  // as procam project
         std::vector<ProjectorImage> images;
         {
           py::gil_scoped_release release;

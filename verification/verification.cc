@@ -290,7 +290,13 @@ void VerificationOptions::Declare(OptionTable* table) {
               {{LightFieldName(LightField::kSmooth), LightField::kSmooth},
                {LightFieldName(LightField::kFlat), LightField::kFlat}},
               "how the projector images shape the light within each patch: smooth (seamless) or "
-              "flat");
+              "flat")
+      .NegatedFlag("no-reflectance-maps", &reflectance_maps,
+                   "leave the rig's per-pixel reflectance maps unused: images and prediction "
+                   "with one reflectance per patch")
+      .NegatedFlag("no-reflectance-map-fit", &fit_reflectance_map,
+                   "leave the reflectance maps as the rig has them (else each photo refits a "
+                   "gain per projector pixel)");
   sequencer.Declare(table);
 }
 
@@ -498,6 +504,7 @@ CalibratedRoomOptions RoomOptions(const VerificationOptions& options) {
   room.rig_dir = options.rig_dir;
   room.solution_dir = options.solution_dir;
   room.display_bits = 8;
+  room.reflectance_maps = options.reflectance_maps;
   room.camera_rays = true;
   room.camera_lighting = true;
   room.progress = options.progress;
@@ -666,6 +673,7 @@ class VerificationLoop {
   RenderSummary render_;
   // What the last photo said, for the update.
   std::vector<ProjectorImage> images_;
+  cv::Mat exitance_;  // the photo's exitance per camera pixel (CV_32FC3 R, G, B)
   Comparison comparison_;
 };
 
@@ -693,6 +701,7 @@ CaptureSessionOptions VerificationLoop::SessionOptions(int k) const {
 void VerificationLoop::Prepare(int k) {
   RenderOptions render_options;
   render_options.light = options_.light;
+  render_options.reflectance = HasReflectanceMaps(model_.room.projection);
   images_ = RenderProjectorImages(model_.room.projection, model_.room.geometry.scene, emittance_, render_options,
                                   &render_);
   std::vector<cv::Mat> patterns;
@@ -745,6 +754,7 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
   cv::Mat photo32;
   photo.convertTo(photo32, CV_32FC3);
   const cv::Mat exitance = PhotoToExitance(photo32, colour);
+  exitance_ = exitance;
   const cv::Mat predicted = PredictPixels(rays, model_.room.projection, images_, model_.room.geometry.form_factors);
   comparison_ = Compare(exitance, rays.patch, model_.room.projection.surface, model_.interior, model_.room.problem,
                         radiosity_, predicted, options_.min_patch_pixels);
@@ -783,7 +793,9 @@ VerificationIteration VerificationLoop::Photograph(int k, nlohmann::json* json) 
            {"render",
             {{"patches_below_lower", render_.patches_below_lower},
              {"patches_above_upper", render_.patches_above_upper},
-             {"max_relative_error", render_.max_relative_error}}}};
+             {"max_relative_error", render_.max_relative_error},
+             {"reflectance_pixels", render_.reflectance_pixels},
+             {"reflectance_saturated_pixels", render_.reflectance_saturated_pixels}}}};
   return it;
 }
 
@@ -809,6 +821,15 @@ void VerificationLoop::UpdateAndSolve(VerificationIteration* it) {
                        update.exponent[p][2]));
   }
   ApplyModelUpdate(update, &model_.room.projection, &model_.room.geometry.patches);
+  if (options_.fit_reflectance_map && HasReflectanceMaps(model_.room.projection)) {
+    const ReflectanceMapUpdate map_update =
+        FitReflectanceMaps(ReflectanceMapFitOptions(), model_.room.camera_rays, exitance_,
+                           comparison_.predicted, model_.interior, &model_.room.projection);
+    Report(
+        options_.progress,
+        fmt::format("verify: reflectance maps: {} projector pixels refitted, rms gain {:.2f}%",
+                    map_update.updated_pixels, 100.0 * (std::exp(map_update.rms_log_gain) - 1.0)));
+  }
   CompensationOptions compensation;
   compensation.solver.method = in_.solution.method;
   compensation.solver.multires = in_.solution.multires;

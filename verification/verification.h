@@ -92,12 +92,20 @@ struct VerificationOptions {
   bool fit_reflectance = true;    // update the per-patch reflectance
   int min_patch_pixels = 4;       // camera pixels a patch needs to count as seen, ≥ 1
   LightField light = LightField::kSmooth;  // how the projector images shape the light in a patch
+  // Use the rig's per-pixel reflectance maps where every projector has one: each pixel's light
+  // divided by its point's reflectance relative to its patch's, and the per-pixel prediction
+  // with the point's reflectance (CalibratedRoomOptions::reflectance_maps); false: per patch.
+  bool reflectance_maps = true;
+  // With reflectance maps in use: refit them per projector pixel from each photo against its
+  // per-pixel prediction (FitReflectanceMaps, calibration/model_fit.h), after the per-patch update.
+  bool fit_reflectance_map = true;
   ProgressCallback progress;      // a line per stage and iteration (ΔE, the model update)
   // Set (by a signal handler) to stop cleanly: the photo in hand is finished (its session
   // records the stop), no further photo or solve begins. Null: run to the end.
   const std::atomic<bool>* stop = nullptr;
   // Declares the closed loop's options (--iterations, --min-improvement, --reflectance-step,
-  // --no-response-fit, --no-reflectance-fit, --min-patch-pixels, --light) and the sequencer's
+  // --no-response-fit, --no-reflectance-fit, --min-patch-pixels, --light,
+  // --no-reflectance-maps, --no-reflectance-map-fit) and the sequencer's
   // (SequencerOptions::Declare) in `table`, bound to these fields (base/option_table.h).
   void Declare(OptionTable* table);
   bool Check(std::string* why) const;
