@@ -1,6 +1,5 @@
 #include "geometry/form_factors.h"
 
-#include <fmt/format.h>
 #include <omp.h>
 
 #include <Eigen/Geometry>
@@ -9,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <numbers>
+#include <string>
 
 #include "base/stop.h"
 #include "base/timing.h"
@@ -194,8 +194,9 @@ Eigen::MatrixXd ComputeFormFactors(const Scene& scene, const PatchLevel& level,
   }
   if (StopRequested()) {
     const double remaining = static_cast<double>(n - rows_done) / std::max(n, 1);
-    throw Stopped(fmt::format("form factors of {} patches: stopped at {:.0f}%", n,
-                              100.0 * (1.0 - remaining * remaining)));
+    // std::to_string, not fmt: procam-form-factor-bench builds this file without fmt.
+    throw Stopped("form factors of " + std::to_string(n) + " patches: stopped at " +
+                  std::to_string(static_cast<int>(std::lround(100.0 * (1.0 - remaining * remaining)))) + "%");
   }
   if (options.progress) options.progress(1.0);
   const double correction = LimitRowSums(&f);
