@@ -564,7 +564,8 @@ TEST(SolvePerceptual2000, DISABLED_Timings) {
       if (const char* v = std::getenv("PROCAM_BENCH_ROUNDS")) options.metric_rounds = std::atoi(v);
       if (const char* v = std::getenv("PROCAM_BENCH_UPDATE_TOLERANCE"))
         options.metric_update_tolerance = std::atof(v);
-      if (const char* v = std::getenv("PROCAM_BENCH_CG_TOLERANCE")) options.cg_tolerance = std::atof(v);
+      if (const char* v = std::getenv("PROCAM_BENCH_CG_TOLERANCE"))
+        options.cg_tolerance = std::atof(v);
       std::vector<double> seconds;
       SolverSummary summary;
       CompensationSolution solution;
