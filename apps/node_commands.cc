@@ -30,8 +30,10 @@ struct NodeArguments {
 };
 
 struct PlayArguments {
-  std::string scene, rig, desired, solution, out, method = "perceptual", device = "cpu",
-                                                  dither = "ordered", render = "gpu";
+  std::string scene, rig, desired, solution, out, method = MethodName(PlaySolverOptions().method),
+                                                  device = "cpu", dither = "ordered",
+                                                  render = "gpu";
+  std::string metric_update = MetricUpdateName(PlaySolverOptions().metric_update);
   std::vector<std::string> nodes, display = {"memory"};
   LightField light = LightField::kSmooth;
   double fps = 30.0, alpha = 0.5, frame_timeout_ms = 500.0, setup_timeout = 120.0;
@@ -71,6 +73,7 @@ void RunPlayCommand(const PlayArguments& args) {
   options.patches = args.patches;
   options.alpha = args.alpha;
   ParseMethod(args.method, &options.solver.method);
+  ParseMetricUpdate(args.metric_update, &options.solver.metric_update);
   options.solver.function_tolerance = args.tolerance;
   ParseDevice(args.device, &options.solver.device);
   if (!ParseDither(args.dither, &options.dither))
@@ -210,6 +213,11 @@ void AddNodeCommands(CLI::App& app) {
   play->add_option("--method", play_args->method,
                    "naive | reverse | linear | perceptual | perceptual2000")
       ->check(CLI::IsMember({"naive", "reverse", "linear", "perceptual", "perceptual2000"}))
+      ->capture_default_str();
+  play->add_option("--metric-update", play_args->metric_update,
+                   "perceptual2000: CIEDE2000's metric measured again at every_iteration | rounds "
+                   "(docs/solver.md)")
+      ->check(CLI::IsMember({"every_iteration", "rounds"}))
       ->capture_default_str();
   play->add_option("--device", play_args->device, "cpu | cuda")
       ->check(CLI::IsMember({"cpu", "cuda"}))

@@ -197,6 +197,11 @@ Eigen::Matrix3d DeltaE2000MetricClosedForm(const Eigen::Vector3d& lab) {
   q(2, 2) = 1.0 / (s_h * s_h);
   q(1, 2) = q(2, 1) = 0.5 * r_t / (s_c * s_h);
   metric = j.transpose() * q * j;
+  // Its eigenvalues λ1 ≤ λ2 ≤ λ3 floored at 10⁻³ λ3 below. M is SPD (J is invertible, |R_T| ≤ √3
+  // keeps Q's 2×2 block definite), and λ1 ≥ det/λ3² with λ3 ≤ trace: det ≥ 10⁻³ trace³ proves the
+  // floor inactive without the eigendecomposition (most colours).
+  const double trace = metric.trace();
+  if (metric.determinant() >= 1e-3 * trace * trace * trace) return metric;
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen;
   eigen.computeDirect(metric);
   const double largest = std::max(eigen.eigenvalues().maxCoeff(), 1e-12);

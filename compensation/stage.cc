@@ -24,6 +24,11 @@ void CompensationOptions::Declare(OptionTable* table) {
         SolverOptions::RobustLoss::kHuber, SolverOptions::RobustLoss::kCauchy}) {
     losses.emplace_back(RobustLossName(loss), loss);
   }
+  std::vector<std::pair<std::string, SolverOptions::MetricUpdate>> updates;
+  for (SolverOptions::MetricUpdate update :
+       {SolverOptions::MetricUpdate::kEveryIteration, SolverOptions::MetricUpdate::kRounds}) {
+    updates.emplace_back(MetricUpdateName(update), update);
+  }
   std::vector<std::pair<std::string, Device>> devices;
   for (Device device : {Device::kCpu, Device::kCuda})
     devices.emplace_back(DeviceName(device), device);
@@ -34,9 +39,13 @@ void CompensationOptions::Declare(OptionTable* table) {
       .Choice("loss", &solver.robust_loss, losses, "perceptual2000: the loss on each patch's ΔE00²")
       .Number("loss-scale", &solver.robust_scale, 1e-6, 1e6, "ΔE00",
               "perceptual2000: the loss's scale")
+      .Choice("metric-update", &solver.metric_update, updates,
+              "perceptual2000: when CIEDE2000's metric and the loss's weights are measured again: "
+              "every_iteration (at every iterate of one Gauss-Newton run, to the reweighting's "
+              "fixed point) or rounds (--metric-rounds whole solves; docs/solver.md)")
       .Integer("metric-rounds", &solver.metric_rounds, 1, 100, "",
-               "perceptual2000: reweighting rounds (CIEDE2000's metric and the loss's weights "
-               "re-evaluated at the last round's result)")
+               "perceptual2000 with --metric-update rounds: reweighting rounds (CIEDE2000's metric "
+               "and the loss's weights re-evaluated at the last round's result)")
       .Number("alpha", &alpha, OptionTable::Interval::AboveMin(0.0, 1.0), "",
               "weight of the absolute term against the spatial term")
       .Flag("multires", &solver.multires, "solve the coarse patch level first and start from it")

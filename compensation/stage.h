@@ -26,16 +26,19 @@ struct CompensationRun {
 };
 
 struct CompensationOptions {
-  SolverOptions solver;  // method, multires, device, tolerances (solver.h)
+  // Method (perceptual2000 with the metric measured at every iterate: RecommendedSolverOptions),
+  // multires, device, tolerances (solver.h).
+  SolverOptions solver = RecommendedSolverOptions();
   double alpha = 0.5;    // weight of the absolute term of the objective, (0, 1]
   // The fine patches' direct-light limits (n,3), e.g. a projection rig's lower and upper
   // (projection/projection_rig.h); empty: the scene's "bounds".
   Eigen::MatrixX3d lower, upper;
   // A line per solver iteration and the solver's brief report (when solver.progress is unset).
   ProgressCallback progress;
-  // Declares the options a person sets — --method, --loss, --loss-scale, --metric-rounds,
-  // --alpha, --multires, --device — in `table`, bound to this struct's fields, with their ranges
-  // and choices (base/option_table.h; the command line and docs/options.md come from it).
+  // Declares the options a person sets — --method, --loss, --loss-scale, --metric-update,
+  // --metric-rounds, --alpha, --multires, --device — in `table`, bound to this struct's fields,
+  // with their ranges and choices (base/option_table.h; the command line and docs/options.md come
+  // from it).
   void Declare(OptionTable* table);
   // The declared options within their ranges, the bounds' shapes, and solver.Check().
   bool Check(std::string* why) const;

@@ -29,9 +29,10 @@
 
 namespace procam {
 
-// The solver's options for play: each frame's solve stops at kPlayFunctionTolerance (solver.h).
+// The solver's options for play: the recommended ones (RecommendedSolverOptions), each frame's
+// solve stopping at kPlayFunctionTolerance (solver.h).
 inline SolverOptions PlaySolverOptions() {
-  SolverOptions options;
+  SolverOptions options = RecommendedSolverOptions();
   options.function_tolerance = kPlayFunctionTolerance;
   return options;
 }
@@ -49,7 +50,7 @@ struct PlayOptions {
   int frames = 0;             // frames to play (0: the whole source)
   int patches = 0;            // target patch count (0: the room's)
   double alpha = 0.5;
-  // Method (default perceptual), device, and each frame's stopping rule (function_tolerance,
+  // Method (default perceptual2000), device, and each frame's stopping rule (function_tolerance,
   // kPlayFunctionTolerance by default).
   SolverOptions solver = PlaySolverOptions();
   DitherMethod dither = DitherMethod::kOrdered;

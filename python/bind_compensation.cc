@@ -268,8 +268,8 @@ void BindCompensation(py::module_& m) {
 
   m.def(
       "compensate_geometry",
-      [](const GeometryStage& geometry, const SolverOptions& options, double alpha, const Eigen::MatrixX3d& lower,
-         const Eigen::MatrixX3d& upper, const py::object& progress) {
+      [](const GeometryStage& geometry, const SolverOptions& options, double alpha,
+         const Eigen::MatrixX3d& lower, const Eigen::MatrixX3d& upper, const py::object& progress) {
         CompensationOptions run;
         run.solver = options;
         run.alpha = alpha;
@@ -281,9 +281,11 @@ void BindCompensation(py::module_& m) {
         py::gil_scoped_release release;
         return RunCompensation(geometry, run);
       },
-      py::arg("geometry"), py::arg("options") = SolverOptions(), py::arg("alpha") = 0.5,
-      py::arg("lower") = Eigen::MatrixX3d(), py::arg("upper") = Eigen::MatrixX3d(), py::arg("progress") = py::none(),
-      "Compensates `geometry`'s fine patches (with the coarse level for multires) within `lower` and "
+      py::arg("geometry"), py::arg("options") = RecommendedSolverOptions(), py::arg("alpha") = 0.5,
+      py::arg("lower") = Eigen::MatrixX3d(), py::arg("upper") = Eigen::MatrixX3d(),
+      py::arg("progress") = py::none(),
+      "Compensates `geometry`'s fine patches (with the coarse level for multires) within `lower` "
+      "and "
       "`upper` (n,3) (empty: the scene's bounds). Releases the GIL while it runs.");
 }
 

@@ -80,7 +80,8 @@ void BindRoom(py::module_& m) {
 
   m.def(
       "compensate",
-      [](const CalibratedRoom& room, const SolverOptions& solver, double alpha, const py::object& progress) {
+      [](const CalibratedRoom& room, const SolverOptions& solver, double alpha,
+         const py::object& progress) {
         CompensationOptions options;
         options.solver = solver;
         options.alpha = alpha;
@@ -96,7 +97,8 @@ void BindRoom(py::module_& m) {
         py::gil_scoped_release release;
         return RunCompensation(room.geometry, options);
       },
-      py::arg("room"), py::arg("options") = SolverOptions(), py::arg("alpha") = 0.5, py::arg("progress") = py::none(),
+      py::arg("room"), py::arg("options") = RecommendedSolverOptions(), py::arg("alpha") = 0.5,
+      py::arg("progress") = py::none(),
       "Compensates `room` as `procam compensate` does (within its projectors' bounds): returns a "
       "Compensation. Releases the GIL while it solves.");
 

@@ -307,6 +307,7 @@ TEST(SolvePerceptual2000, OptimalWithinTheBoundsAndLowerInCiede2000ThanPerceptua
                           SolverOptions::RobustLoss::kHuber, SolverOptions::RobustLoss::kCauchy}) {
     SolverOptions options = perceptual;
     options.method = CompensationMethod::kPerceptual2000;
+    options.metric_update = SolverOptions::MetricUpdate::kRounds;  // the last round's optimum
     options.robust_loss = loss;
     SolverSummary summary;
     const CompensationSolution solution = Solve(options, problem, &summary, coarse);
@@ -346,6 +347,7 @@ TEST(SolvePerceptual2000, LooseEarlyRoundsReachTheTightSchedulesOptimum) {
   const CompensationProblem& problem = test.fine;
   SolverOptions tight;
   tight.method = CompensationMethod::kPerceptual2000;
+  tight.metric_update = SolverOptions::MetricUpdate::kRounds;
   tight.cg_tolerance = 1e-3;
   tight.function_tolerance = 0.0;
   tight.gradient_tolerance = 1e-12;
@@ -355,6 +357,7 @@ TEST(SolvePerceptual2000, LooseEarlyRoundsReachTheTightSchedulesOptimum) {
   const CompensationSolution reference = Solve(tight, problem, &reference_summary);
   SolverOptions options;
   options.method = CompensationMethod::kPerceptual2000;
+  options.metric_update = SolverOptions::MetricUpdate::kRounds;
   options.metric_round_tolerance = 1e-3;
   SolverSummary summary;
   const CompensationSolution solution = Solve(options, problem, &summary);
@@ -561,6 +564,8 @@ TEST(SolvePerceptual2000, DISABLED_Timings) {
       if (const char* v = std::getenv("PROCAM_BENCH_ROUNDS")) options.metric_rounds = std::atoi(v);
       if (const char* v = std::getenv("PROCAM_BENCH_UPDATE_TOLERANCE"))
         options.metric_update_tolerance = std::atof(v);
+      if (const char* v = std::getenv("PROCAM_BENCH_CG_TOLERANCE"))
+        options.cg_tolerance = std::atof(v);
       std::vector<double> seconds;
       SolverSummary summary;
       CompensationSolution solution;

@@ -81,6 +81,8 @@ TEST(SolveCudaExported, ResidentAndHostLoopMatchTheCpuOnRealRooms) {
                                             CompensationMethod::kPerceptual2000}) {
       SolverOptions cpu;
       cpu.method = method;
+      cpu.metric_update =
+          SolverOptions::MetricUpdate::kRounds;  // the rounds, as the tolerance says
       SolverSummary reference;
       Solve(cpu, p, &reference);
       const auto row = [&](const char* solver, const SolverSummary& summary, double seconds) {

@@ -405,14 +405,23 @@ TEST_F(SolveBounded, AWarmStartReachesTheColdSolvesObjectiveSooner) {
     SolverSummary again;
     const CompensationSolution same =
         Solve(options, problem, &again, {}, WarmStart{previous.radiosity_system, previous.emittance});
-    // perceptual2000's rounds start again from the metric at the desired colours, so it moves
-    // off the optimum and back; fewer steps all the same.
+    // perceptual2000 (the metric measured at every iterate) stops once a step lowers its
+    // objective by less than metric_update_tolerance (1e-4) of it, on a reweighting that converges
+    // linearly: a restart from its result goes on towards the fixed point (measured 1.9e-4 lower)
+    // and a warm and a cold solve of the next frame end apart by up to ~10× the tolerance
+    // (measured: the warm one 1.1e-3 lower). So for it: never worse than the cold solve by more
+    // than 1e-3 (relative); for perceptual, the same optimum to 1e-6 / 1e-5.
+    const bool reweighted = method == CompensationMethod::kPerceptual2000;
     if (method == CompensationMethod::kPerceptual) {
       EXPECT_LE(again.iterations, 1) << again.BriefReport();
     } else {
       EXPECT_LT(again.iterations, first.iterations) << again.BriefReport();
     }
-    EXPECT_NEAR(again.final_cost, first.final_cost, 1e-6 * first.final_cost);
+    if (reweighted) {
+      EXPECT_LE(again.final_cost, (1.0 + 1e-3) * first.final_cost);
+    } else {
+      EXPECT_NEAR(again.final_cost, first.final_cost, 1e-6 * first.final_cost);
+    }
     EXPECT_EQ(same.radiosity_system, previous.radiosity_system);  // K not factorised again
     // The next frame: every desired colour 5% brighter, clipped to [0, 1].
     CompensationProblem next = problem;
@@ -420,8 +429,15 @@ TEST_F(SolveBounded, AWarmStartReachesTheColdSolvesObjectiveSooner) {
     SolverSummary cold, warm;
     Solve(options, next, &cold);
     Solve(options, next, &warm, {}, WarmStart{previous.radiosity_system, previous.emittance});
-    EXPECT_NEAR(warm.final_cost, cold.final_cost, 1e-5 * cold.final_cost)
-        << MethodName(method) << "\n" << cold.BriefReport() << "\n" << warm.BriefReport();
+    if (reweighted) {
+      EXPECT_LE(warm.final_cost, (1.0 + 1e-3) * cold.final_cost) << cold.BriefReport() << "\n"
+                                                                 << warm.BriefReport();
+    } else {
+      EXPECT_NEAR(warm.final_cost, cold.final_cost, 1e-5 * cold.final_cost)
+          << MethodName(method) << "\n"
+          << cold.BriefReport() << "\n"
+          << warm.BriefReport();
+    }
     EXPECT_LT(warm.iterations, cold.iterations) << MethodName(method);
   }
   SolverSummary summary;
