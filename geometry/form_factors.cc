@@ -195,8 +195,9 @@ Eigen::MatrixXd ComputeFormFactors(const Scene& scene, const PatchLevel& level,
   if (StopRequested()) {
     const double remaining = static_cast<double>(n - rows_done) / std::max(n, 1);
     // std::to_string, not fmt: procam-form-factor-bench builds this file without fmt.
-    throw Stopped("form factors of " + std::to_string(n) + " patches: stopped at " +
-                  std::to_string(static_cast<int>(std::lround(100.0 * (1.0 - remaining * remaining)))) + "%");
+    throw Stopped(
+        "form factors of " + std::to_string(n) + " patches: stopped at " +
+        std::to_string(static_cast<int>(std::lround(100.0 * (1.0 - remaining * remaining)))) + "%");
   }
   if (options.progress) options.progress(1.0);
   const double correction = LimitRowSums(&f);
