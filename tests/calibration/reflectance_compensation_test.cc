@@ -24,6 +24,7 @@
 #include "compensation/solver.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/simulated_rig.h"
+#include "datasets_synthetic/true_reflectance.h"
 #include "geometry/ray_scene.h"
 #include "projection/camera_rays.h"
 #include "projection/projector_images.h"
@@ -53,33 +54,6 @@ ReflectanceTexture Poster() {
   }
   poster.scale = 1.0;
   return poster;
-}
-
-// The reflectance of the point each projector pixel lights (CV_32FC3, R, G, B), cast against the
-// scene's surfaces (rectangles here: UV from the corners): the map calibration measures, without
-// its errors.
-cv::Mat TrueReflectanceMap(const Scene& scene, const ProjectorGeometry& geometry) {
-  const RayScene surfaces(scene);
-  std::vector<Vec3> directions;
-  std::vector<double> densities;
-  geometry.UnprojectImage(&directions, &densities);
-  const Eigen::Isometry3d world_from_proj = geometry.proj_from_world().inverse();
-  cv::Mat map(geometry.height(), geometry.width(), CV_32FC3, cv::Scalar::all(0));
-  for (int row = 0; row < geometry.height(); ++row) {
-    for (int col = 0; col < geometry.width(); ++col) {
-      const Vec3 direction = world_from_proj.linear() * directions[row * geometry.width() + col];
-      double t;
-      int s;
-      if (!surfaces.Intersect(world_from_proj.translation(), direction, 0.0, 1e9, &t, &s)) continue;
-      const Surface& surface = scene.surfaces[s];
-      const Vec3 d = world_from_proj.translation() + t * direction - surface.quad[0];
-      const Vec3 e1 = surface.quad[1] - surface.quad[0], e3 = surface.quad[3] - surface.quad[0];
-      const Vec3 rho =
-          surface.ReflectanceAt(Vec2(d.dot(e1) / e1.squaredNorm(), d.dot(e3) / e3.squaredNorm()));
-      map.at<cv::Vec3f>(row, col) = cv::Vec3f(rho[0], rho[1], rho[2]);
-    }
-  }
-  return map;
 }
 
 // The tiny box (its back wall printed with the poster when `printed`) and the simulated world
