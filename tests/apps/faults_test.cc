@@ -145,6 +145,12 @@ class Faults : public ::testing::Test {
   }
   static fs::path Rig() { return *dir_ / "rig"; }
 
+  // verify of the rig and `solution` through the synthetic camera, two iterations, into dir/`out`.
+  std::string VerifyCommand(const std::string& solution, const std::string& out) const {
+    return "verify " + Rig().string() + " " + solution + " --camera " + kCamera + "'" + kCapture +
+           "--iterations 2 --out " + (dir / out).string();
+  }
+
   // A copy of the rig's files (not its captures) in `to`.
   static fs::path CopyRig(const fs::path& to) {
     fs::create_directories(to);
@@ -237,14 +243,10 @@ TEST_F(Faults, KillNineDuringProjectThenRunAgain) {
 TEST_F(Faults, KillNineDuringVerifyThenRunAgain) {
   const std::string solution = (dir / "solution").string();
   Compensate(Rig(), solution);
-  const auto command = [&](const std::string& out) {
-    return "verify " + Rig().string() + " " + solution + " --camera " + kCamera + "'" + kCapture +
-           "--iterations 2 --out " + (dir / out).string();
-  };
-  ASSERT_GT(TimedRun(command("clean")), 0);
+  ASSERT_GT(TimedRun(VerifyCommand(solution, "clean")), 0);
   const fs::path second = dir / "verify" / "iterations" / "1" / "session" / "frames";
   const CommandRun again = KillThenRunAgain(
-      command("verify"), [&] { return CountFiles(second) >= 1; }, dir);
+      VerifyCommand(solution, "verify"), [&] { return CountFiles(second) >= 1; }, dir);
   ASSERT_EQ(again.exit_code, 0) << again.output;
   EXPECT_EQ(FilesUnder(dir / "verify"), FilesUnder(dir / "clean"));
   ExpectEveryFileReads(dir / "verify");
@@ -812,15 +814,12 @@ TEST_F(Faults, ASignalDuringTheFitsStopsCalibrateAllBeforeTheNextStep) {
 TEST_F(Faults, ASignalStopsVerifyCleanlyAndItResumes) {
   const std::string solution = (dir / "solution").string();
   Compensate(Rig(), solution);
-  const auto command = [&](const std::string& out) {
-    return "verify " + Rig().string() + " " + solution + " --camera " + kCamera + "'" + kCapture +
-           "--iterations 2 --out " + (dir / out).string();
-  };
-  ASSERT_GT(TimedRun(command("clean")), 0);
+  ASSERT_GT(TimedRun(VerifyCommand(solution, "clean")), 0);
   const fs::path first = dir / "verify" / "iterations" / "0" / "session" / "frames";
   const fs::path log = dir / "verify.log";
   const testing::SignalledRun run = testing::SignalProcamWhen(
-      command("verify"), [&] { return CountFiles(first) >= 1; }, SIGTERM, kMaxSeconds, log);
+      VerifyCommand(solution, "verify"), [&] { return CountFiles(first) >= 1; }, SIGTERM,
+      kMaxSeconds, log);
   const std::string output = Bytes(log);
   ASSERT_TRUE(run.running) << output;
   EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
@@ -835,7 +834,7 @@ TEST_F(Faults, ASignalStopsVerifyCleanlyAndItResumes) {
   EXPECT_FALSE(fs::exists(dir / "verify" / "iterations" / "1")) << output;
   ExpectEveryFileReads(dir / "verify");
   const std::set<std::string> kept = FilesUnder(dir / "verify" / "iterations" / "0" / "session");
-  const CommandRun again = testing::RunProcam(command("verify"));
+  const CommandRun again = testing::RunProcam(VerifyCommand(solution, "verify"));
   ASSERT_EQ(again.exit_code, 0) << again.output;
   EXPECT_EQ(FilesUnder(dir / "verify"), FilesUnder(dir / "clean"));
   EXPECT_EQ(FilesUnder(dir / "verify" / "iterations" / "0" / "session"), kept);
