@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <fstream>
 #include <limits>
 #include <mutex>
 
@@ -37,6 +38,14 @@ std::string RoutedSourceAddress(const std::string& address) {
   }
   close(fd);
   return local_text;
+}
+
+// The largest receive buffer an unprivileged process may give a socket (net.core.rmem_max), in
+// bytes; 0 when it cannot be read.
+int64_t ReceiveBufferLimit() {
+  std::ifstream file("/proc/sys/net/core/rmem_max");
+  int64_t bytes = 0;
+  return file >> bytes ? bytes : 0;
 }
 
 }  // namespace
@@ -191,6 +200,9 @@ struct AravisCamera::Impl {
   int64_t clock_offset_at_ns = 0;  // steady time of the frame that set it
   int64_t last_device_ns = 0;      // a device clock that goes back (a restarted camera) starts over
   PixelFormat format = PixelFormat::kMono8;
+  // Set when a GigE Vision stream's frame is larger than net.core.rmem_max lets its UDP socket
+  // buffer: what to raise, said with every timeout of incomplete frames.
+  std::string receive_buffer_advice;
 
   std::string Uri() const {
     return "aravis:" + (options.gige_address.empty() ? options.device_id
@@ -346,6 +358,23 @@ struct AravisCamera::Impl {
     Check(error, "creating the stream");
     const guint payload = arv_camera_get_payload(camera, &error);
     Check(error, "reading the payload size");
+    if (ARV_IS_GV_STREAM(stream)) {
+      // Without CAP_NET_RAW Aravis receives through a UDP socket, whose default buffer
+      // (net.core.rmem_default, about 208 KiB) holds a fraction of a megabyte frame sent in one
+      // burst: the rest is dropped. AUTO sizes it to one frame; the kernel caps that silently at
+      // net.core.rmem_max, so the cap is checked here and named when frames come incomplete.
+      g_object_set(stream, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_AUTO, "socket-buffer-size",
+                   0, nullptr);
+      const int64_t limit = ReceiveBufferLimit();
+      receive_buffer_advice.clear();
+      if (limit > 0 && limit < static_cast<int64_t>(payload)) {
+        receive_buffer_advice = "a frame is " + std::to_string(payload) +
+                                " bytes, over the receive buffer net.core.rmem_max allows (" +
+                                std::to_string(limit) +
+                                " bytes): raise it, e.g. sudo sysctl -w net.core.rmem_max=" +
+                                std::to_string(2 * static_cast<int64_t>(payload));
+      }
+    }
     for (int i = 0; i < options.buffers; ++i)
       arv_stream_push_buffer(stream, arv_buffer_new_allocate(payload));
     arv_camera_start_acquisition(camera, &error);
@@ -546,12 +575,15 @@ Frame AravisCamera::Grab(std::chrono::milliseconds timeout) {
                                     : nullptr;
     if (buffer == nullptr) {
       impl_->CheckConnected();
+      std::string why;
+      if (bad_buffers > 0) {
+        why = " (" + std::to_string(bad_buffers) +
+              " frames arrived incomplete, last: " + StatusName(last_bad) +
+              (impl_->receive_buffer_advice.empty() ? "" : "; " + impl_->receive_buffer_advice) +
+              ")";
+      }
       throw CameraTimeout("camera '" + impl_->Uri() + "': no frame within " +
-                          std::to_string(timeout.count()) + " ms" +
-                          (bad_buffers
-                               ? " (" + std::to_string(bad_buffers) +
-                                     " incomplete buffers, last: " + StatusName(last_bad) + ")"
-                               : ""));
+                          std::to_string(timeout.count()) + " ms" + why);
     }
     const ArvBufferStatus status = arv_buffer_get_status(buffer);
     if (status != ARV_BUFFER_STATUS_SUCCESS) {
