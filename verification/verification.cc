@@ -264,6 +264,10 @@ nlohmann::json IterationJson(const VerificationIteration& it) {
   if (!it.response_exponent.empty()) {
     json["update"] = {{"response_exponent", exponents},
                       {"reflectance_scale", JsonTriple(it.reflectance_scale)}};
+    if (it.map_refitted_pixels > 0) {
+      json["update"]["reflectance_maps"] = {{"refitted_pixels", it.map_refitted_pixels},
+                                            {"rms_gain", it.map_rms_gain}};
+    }
   }
   return json;
 }
@@ -416,6 +420,11 @@ VerificationIteration ReadIteration(const nlohmann::json& object, const std::str
           update.Triple("response_exponent[" + std::to_string(j) + "]", exponents[j]));
     }
     it.reflectance_scale = update.Triple("reflectance_scale", update.At("reflectance_scale"));
+    if (update.Has("reflectance_maps")) {
+      const JsonFields maps(update.At("reflectance_maps"), file, update.Path("reflectance_maps"));
+      it.map_refitted_pixels = static_cast<long long>(maps.Number("refitted_pixels"));
+      it.map_rms_gain = maps.Number("rms_gain");
+    }
   }
   return it;
 }
@@ -579,6 +588,41 @@ VerificationModel BuildModel(const VerificationInputs& in) {
     }
   }
   return model;
+}
+
+// A projector's per-pixel reflectance (ProjectorMap::reflectance) as a picture (8-bit BGR, its
+// pixels; black where it lights nothing).
+cv::Mat ReflectanceMapPicture(const ProjectorMap& map,
+                              const std::vector<Eigen::Vector3f>& reflectance) {
+  cv::Mat linear(map.height, map.width, CV_32FC3, cv::Scalar::all(0));
+  for (int y = 0; y < map.height; ++y) {
+    for (int x = 0; x < map.width; ++x) {
+      const size_t k = static_cast<size_t>(y) * map.width + x;
+      if (map.patch[k] < 0) continue;
+      linear.at<cv::Vec3f>(y, x) =
+          cv::Vec3f(reflectance[k][0], reflectance[k][1], reflectance[k][2]);
+    }
+  }
+  return LinearToDisplay(linear);
+}
+
+// How far a refit moved each pixel's reflectance: |after / before − 1| in percent (the largest of
+// the three channels) as a heat map up to 50% (the refit's clamp, ReflectanceMapFitOptions).
+cv::Mat ReflectanceGainPicture(const ProjectorMap& map, const std::vector<Eigen::Vector3f>& before,
+                               const std::vector<Eigen::Vector3f>& after) {
+  cv::Mat percent(map.height, map.width, CV_32FC1, cv::Scalar::all(0));
+  for (int y = 0; y < map.height; ++y) {
+    for (int x = 0; x < map.width; ++x) {
+      const size_t k = static_cast<size_t>(y) * map.width + x;
+      if (map.patch[k] < 0) continue;
+      float change = 0;
+      for (int c = 0; c < 3; ++c) {
+        if (before[k][c] > 0) change = std::max(change, std::abs(after[k][c] / before[k][c] - 1));
+      }
+      percent.at<float>(y, x) = 100 * change;
+    }
+  }
+  return HeatMapWithColourBar(percent, 50, "% change");
 }
 
 // The desired appearance as the camera sees it (8-bit BGR): each pixel its patch's desired colour.
@@ -825,10 +869,11 @@ void VerificationLoop::UpdateAndSolve(VerificationIteration* it) {
     const ReflectanceMapUpdate map_update =
         FitReflectanceMaps(ReflectanceMapFitOptions(), model_.room.camera_rays, exitance_,
                            comparison_.predicted, model_.interior, &model_.room.projection);
-    Report(
-        options_.progress,
-        fmt::format("verify: reflectance maps: {} projector pixels refitted, rms gain {:.2f}%",
-                    map_update.updated_pixels, 100.0 * (std::exp(map_update.rms_log_gain) - 1.0)));
+    it->map_refitted_pixels = map_update.updated_pixels;
+    it->map_rms_gain = std::exp(map_update.rms_log_gain) - 1.0;
+    Report(options_.progress,
+           fmt::format("verify: reflectance maps: {} projector pixels refitted, rms gain {:.2f}%",
+                       map_update.updated_pixels, 100.0 * it->map_rms_gain));
   }
   CompensationOptions compensation;
   compensation.solver.method = in_.solution.method;
@@ -881,7 +926,21 @@ VerificationSummary RunVerificationLoop(const VerificationOptions& options) {
   summary.hdr = loop.hdr();
   summary.exposures_us = loop.sequencer().exposures_us;
   summary.settle_ms = loop.sequencer().settle_ms;
+  // The rig's reflectance maps as read, for the report's pictures of what the runs refit.
+  std::vector<std::vector<Eigen::Vector3f>> maps_before;
+  if (HasReflectanceMaps(model.room.projection)) {
+    for (const ProjectorMap& map : model.room.projection.maps)
+      maps_before.push_back(map.reflectance);
+  }
   auto write_summary = [&] {
+    summary.reflectance_maps.clear();
+    for (size_t p = 0; p < maps_before.size(); ++p) {
+      const ProjectorMap& map = model.room.projection.maps[p];
+      summary.reflectance_maps.push_back(
+          {in.names[p], ReflectanceMapPicture(map, maps_before[p]),
+           ReflectanceMapPicture(map, map.reflectance),
+           ReflectanceGainPicture(map, maps_before[p], map.reflectance)});
+    }
     WriteVerificationRun(options.out, summary);
     HtmlReport report("procam verify");
     AddVerificationReport(summary, &report);
@@ -997,7 +1056,11 @@ void AddVerificationReport(const VerificationSummary& summary, HtmlReport* repor
                     fmt::format("{:.2f}", it.measured.mean2000),
                     fmt::format("{:.2f}", it.seams.seam), fmt::format("{:.2f}", it.model.mean76),
                     fmt::format("{:.2f}", it.predicted_mean76), std::to_string(it.seen_patches),
-                    update, fmt::format("{:.1f}", it.seconds)});
+                    update + (it.map_refitted_pixels > 0
+                                  ? fmt::format("; maps: {} pixels, rms {:.1f}%",
+                                                it.map_refitted_pixels, 100 * it.map_rms_gain)
+                                  : ""),
+                    fmt::format("{:.1f}", it.seconds)});
     measured.emplace_back(it.index, std::max(1e-3, it.measured.mean76));
     model.emplace_back(it.index, std::max(1e-3, it.model.mean76));
     predicted.emplace_back(it.index, std::max(1e-3, it.predicted_mean76));
@@ -1018,6 +1081,21 @@ void AddVerificationReport(const VerificationSummary& summary, HtmlReport* repor
   }
   if (!summary.desired.empty())
     report->Figures({{"desired (per patch, as the camera sees it)", summary.desired}});
+  if (!summary.reflectance_maps.empty()) {
+    report->Heading("Reflectance maps", 3);
+    report->Paragraph(
+        "Each projector's per-pixel reflectance (the rig's map, in projector pixels): as the rig "
+        "gave it, as the photos refitted it (each camera pixel's photo over prediction, relative "
+        "to its patch's), and how much each pixel changed. The refit is kept for this run only; "
+        "the rig's files are not changed.");
+    std::vector<std::pair<std::string, cv::Mat>> figures;
+    for (const VerificationSummary::MapPictures& maps : summary.reflectance_maps) {
+      figures.push_back({maps.projector + ": from the rig", maps.before});
+      figures.push_back({maps.projector + ": refitted", maps.after});
+      figures.push_back({maps.projector + ": change", maps.gain});
+    }
+    report->Figures(figures);
+  }
   for (const VerificationIteration& it : summary.iterations) {
     report->Heading(fmt::format("Iteration {}", it.index), 3);
     report->Figures({{"photo", it.photo},

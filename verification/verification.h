@@ -132,6 +132,11 @@ struct VerificationIteration {
   // exponent per primary and the reflectance scale s per channel.
   std::vector<Eigen::Vector3d> response_exponent;
   Eigen::Vector3d reflectance_scale = Eigen::Vector3d::Ones();
+  // The per-pixel reflectance maps refitted after this photo (FitReflectanceMaps; both 0 when
+  // the rig has no maps, the refit is off, or it is the last photo): the projector pixels whose
+  // reflectance changed, and the RMS over them of the gain (after / before) − 1, e.g. 0.02 = 2%.
+  long long map_refitted_pixels = 0;
+  double map_rms_gain = 0.0;
   double capture_seconds = 0, solve_seconds = 0, seconds = 0;
   std::filesystem::path directory;
   // Pictures for the report (8-bit BGR): photo, prediction, ΔE76 heat maps.
@@ -149,6 +154,13 @@ struct VerificationSummary {
   std::string termination;  // "converged", "max_iterations", "fault" or "stopped" (a signal)
   std::string error;        // the fault or the stop, when not complete
   cv::Mat desired;          // 8-bit BGR, the desired appearance as the camera sees it
+  // Pictures of each projector's reflectance map (8-bit BGR, projector pixels), when the rig has
+  // maps: as read from the rig, as refitted by the run's last update, and the gain between them.
+  struct MapPictures {
+    std::string projector;
+    cv::Mat before, after, gain;
+  };
+  std::vector<MapPictures> reflectance_maps;
   double seconds = 0;
   // What the run used.
   nlohmann::json rig;          // RigDirectory::Describe()
