@@ -148,8 +148,8 @@ TEST(Cli, DemoOnASceneFileRunsGeometryAndCompensation) {
 
 // A scene file with projectors and a camera is a synthetic rig: the demo runs every stage on it,
 // the scan measured against the file's own surfaces (tiny_box written as a file; measured: every
-// scanned surface on one of the four true ones, CIEDE2000 10.23–10.28 on the scan against 10.02 on the
-// model with the demo's default method, perceptual2000; 12.08 against 11.94 with perceptual).
+// scanned surface on one of the four true ones, CIEDE2000 10.23–10.28 on the scan against 10.02 on
+// the model with the demo's default method, perceptual2000; 12.08 against 11.94 with perceptual).
 TEST(Cli, DemoOnASceneFileWithProjectorsAndACameraRunsEveryStage) {
   testing::TempDir dir;
   const CommandRun write = Procam("scene write tiny_box --out " + (dir / "room").string());
