@@ -166,7 +166,7 @@ void AddProjectionCommands(CLI::App& app) {
 
   auto play_args = std::make_shared<PlayBenchmarkOptions>();
   auto play_strings = std::make_shared<std::array<std::string, 4>>(
-      std::array<std::string, 4>{"perceptual", "cpu", "ordered", "cpu"});
+      std::array<std::string, 4>{MethodName(play_args->method), "cpu", "ordered", "cpu"});
   CLI::App* bench_play = bench->add_subcommand(
       "play", "One frame of procam play: new desired colours -> warm-started solve -> images of 3 projectors");
   bench_play->add_option("--width", play_args->width, "Projector width, pixels")->capture_default_str();

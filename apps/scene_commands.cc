@@ -84,8 +84,8 @@ struct RigDemoArguments {
 
 // calibrate → compensate → project → photograph → verify → refine, each stage a library call
 // printed as the command a user would run (`$ procam ...`), on whatever the camera URI names.
-void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& rig,
-                const std::filesystem::path& out) {
+void RunRigDemo(const std::string& scene, int patches, CompensationMethod method,
+                const RigDemoArguments& rig, const std::filesystem::path& out) {
   RegisterDeviceBackends();
   const std::filesystem::path rig_dir = out / "rig", solution_dir = out / "solution", images = out / "images";
   spdlog::info("demo on a rig: stage 1/4 calibration");
@@ -111,8 +111,8 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
   RunCalibrateAll(calibrate);
 
   spdlog::info("stage 2/4 compensation with the calibrated rig");
-  std::printf("\n$ procam compensate %s --method perceptual --multires --patches %d --rig %s --out %s\n",
-              scene.c_str(), patches, rig_dir.c_str(), solution_dir.c_str());
+  std::printf("\n$ procam compensate %s --method %s --multires --patches %d --rig %s --out %s\n",
+              scene.c_str(), MethodName(method), patches, rig_dir.c_str(), solution_dir.c_str());
   CalibratedRoomOptions room_options;
   room_options.scene = scene;
   room_options.rig_dir = rig_dir;
@@ -121,7 +121,7 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
   room_options.progress = LogProgress();
   const CalibratedRoom room = LoadCalibratedRoom(room_options);
   CompensationOptions compensation;
-  compensation.solver.method = CompensationMethod::kPerceptual;
+  compensation.solver.method = method;
   compensation.solver.multires = true;
   compensation.lower = room.projection.lower;
   compensation.upper = room.projection.upper;
@@ -300,6 +300,12 @@ void AddDemoCommand(CLI::App& app) {
       ->capture_default_str();
   demo->add_option("--patches", args->patches, "Solver patches")->capture_default_str();
   demo->add_option("--out", args->out, "Output directory")->capture_default_str();
+  // --method: the compensation of the calibrated (and scanned) stages, declared by the demo's
+  // options (base/option_table.h).
+  auto synthetic = std::make_shared<SyntheticDemoOptions>();
+  auto synthetic_table = std::make_shared<OptionTable>("demo");
+  synthetic->Declare(synthetic_table.get());
+  AddOptions(demo, *synthetic_table);
   auto rig = std::make_shared<RigDemoArguments>();
   demo->add_option("--camera", rig->camera,
                    "Run the pipeline on a rig instead: the camera URI (v4l2:..., aravis:..., or synthetic:SCENE?...); "
@@ -322,13 +328,14 @@ void AddDemoCommand(CLI::App& app) {
   demo->add_flag("--no-scan", args->no_scan,
                  "Synthetic rig: skip the scan stage (the rig calibrated and the room scanned "
                  "without the model, compensated on the scan)");
-  demo->callback([args, rig] {
+  demo->callback([args, rig, demo_options = synthetic, synthetic_table] {
     const std::filesystem::path out = args->out;
     std::filesystem::create_directories(out);
     if (!rig->camera.empty()) {
       const std::vector<std::string> synthetic = SyntheticSceneNames();
       const bool named = std::find(synthetic.begin(), synthetic.end(), args->scene) != synthetic.end();
-      RunRigDemo(named ? "synthetic:" + args->scene : args->scene, args->patches, *rig, out);
+      RunRigDemo(named ? "synthetic:" + args->scene : args->scene, args->patches,
+                 demo_options->method, *rig, out);
       return;
     }
     // A scene file without projectors and a camera: geometry and compensation only. With them it
@@ -340,7 +347,7 @@ void AddDemoCommand(CLI::App& app) {
         return;
       }
     }
-    SyntheticDemoOptions demo;
+    SyntheticDemoOptions demo = *demo_options;
     demo.scene = args->scene;
     demo.patches = args->patches;
     demo.light = rig->light;
@@ -355,8 +362,9 @@ void AddDemoCommand(CLI::App& app) {
                                m.max_delta_e76, m.mean_delta_e2000, m.max_delta_e2000, m.seams.seam, note);
     };
     for (const MethodEvaluation& m : summary.methods) row(MethodName(m.method), m, "");
-    row("perceptual", summary.calibrated, "   (calibrated rig)");
-    if (summary.scanned) row("perceptual", *summary.scanned, "   (scanned room, no model)");
+    row(MethodName(summary.calibrated.method), summary.calibrated, "   (calibrated rig)");
+    if (summary.scanned)
+      row(MethodName(summary.scanned->method), *summary.scanned, "   (scanned room, no model)");
     std::cout << "\nverification (closed loop, calibrated rig): " << summary.verification << "\n";
     std::cout << "\nwrote " << (out / "report.html").string() << " (open it in a browser), pictures, result.json, "
               << "problem/ and per method E.npy, B.npy and projector images\n";

@@ -805,6 +805,35 @@ void SolveCiede2000Rounds(const SolverOptions& options, const CompensationProble
 // SolveCiede2000EveryIteration).
 constexpr double kEveryIterationCgTolerance = 0.5;
 
+// The every-iteration path's preconditioner, chosen by what its Newton systems cost. It starts
+// with (M_FF)⁻¹ (options.preconditioner's default) and changes to (K M⁻¹ Kᵀ)_FF for the rest of
+// the run once the last kPreconditionerWindow systems took more than kInverseHessianSwitchCg CG
+// iterations on average. Why:
+//   (M_FF)⁻¹ ignores K. Writing K⁻¹ = I + R, the preconditioned matrix is I + R + M⁻¹RᵀM + ...:
+//   the patches' coupling R scaled by the ratio of neighbouring colour matrices. Under CIE76 that
+//   ratio is modest; CIEDE2000's metric (chroma weighted down by up to ~25× on saturated colours)
+//   and the robust weights (1 down to ~1/30) make it large where saturated and grey, or well and
+//   badly matched, patches meet, which is a property of the room's desired picture, not of the
+//   active set: measured per Newton system (docs/solver.md) 1.3–4.5 CG iterations on average on
+//   the box room and five of the six scenes, 7.8 on interior_partitions.
+//   (K M⁻¹ Kᵀ)_FF is H⁻¹ restricted to the free set: exact for any M when no bound is active,
+//   its error (the Schur complement's correction) of rank at most the number of bound variables.
+//   It took 1.6–4.6 CG iterations per system on the same problems, but each application costs
+//   two products with K, as much again as the Hessian product CG does anyway: a CG iteration
+//   costs about twice the (M_FF)⁻¹ one.
+// So (K M⁻¹ Kᵀ)_FF pays only where (M_FF)⁻¹ needs more than twice its ~3 iterations: 6. The
+// average is over four systems, since single systems take 8–9 even where the average is 3 (the
+// box room: at most 5.5 over any four); once changed it stays, since the (M_FF)⁻¹ count is not
+// observed any more, until the run would stop: it stops only on a step with (M_FF)⁻¹ (a small
+// decrease or a failed step with (K M⁻¹ Kᵀ)_FF returns to (M_FF)⁻¹ for the rest of the run: used
+// throughout, (K M⁻¹ Kᵀ)_FF stopped short of the fixed point on ciede2000_test's 200-patch box
+// room with metric_update_tolerance 0: a step without decrease where the projected gradient was
+// 1). The share of variables on a bound was measured as the rule first and does
+// not separate the cases: the box room's systems with 10–20% on a bound took 1–3 iterations with
+// (M_FF)⁻¹ and 6–9 with (K M⁻¹ Kᵀ)_FF, interior_partitions' with 35% on a bound 3–12 and 1–4.
+constexpr int kPreconditionerWindow = 4;
+constexpr double kInverseHessianSwitchCg = 6.0;
+
 // kPerceptual2000 with MetricUpdate::kEveryIteration (solver.h), from `initial`: one Gauss–Newton
 // run whose every iteration is one step of Alg. 1 (its Armijo search included) on the objective
 // with the metric and weights measured at the iteration's start point. The costs are that
@@ -833,6 +862,10 @@ void SolveCiede2000EveryIteration(const SolverOptions& options, const Compensati
   summary->termination = TerminationType::kMaxIterations;
   bool first = true;
   FreeColourHessian free_colour_hessian;  // its ordering reused while the free set repeats
+  // The CG iterations of the last kPreconditionerWindow steps under (M_FF)⁻¹, while it is used
+  // (options.preconditioner kFreeColourHessian): the preconditioner's rule above.
+  std::vector<int> recent_cg;
+  bool may_change = true;  // cleared once the run went back to the asked-for preconditioner
   for (int iteration = 1; iteration <= options.max_iterations; ++iteration) {
     const CompensationObjective objective(problem, radiosity, ColourModel::kLab, metric);
     SolverSummary step_summary;
@@ -852,12 +885,31 @@ void SolveCiede2000EveryIteration(const SolverOptions& options, const Compensati
       summary->termination = TerminationType::kGradientTolerance;
       break;
     }
+    const bool changed = step_options.preconditioner != options.preconditioner;
     if (step_summary.iterations == 0 ||
         step_summary.termination == TerminationType::kLineSearchFailure ||
         step_summary.termination == TerminationType::kNumericalFailure) {
+      if (changed && step_summary.termination != TerminationType::kNumericalFailure) {
+        // No step with the changed preconditioner: the run goes on with the asked-for one.
+        step_options.preconditioner = options.preconditioner;
+        may_change = false;
+        continue;
+      }
       summary->termination = step_summary.termination;
       summary->message = step_summary.message;
       break;
+    }
+    if (may_change &&
+        step_options.preconditioner == SolverOptions::Preconditioner::kFreeColourHessian) {
+      recent_cg.push_back(step_summary.cg_iterations);
+      if (static_cast<int>(recent_cg.size()) > kPreconditionerWindow)
+        recent_cg.erase(recent_cg.begin());
+      double sum = 0.0;
+      for (int count : recent_cg) sum += count;
+      if (static_cast<int>(recent_cg.size()) == kPreconditionerWindow &&
+          sum > kInverseHessianSwitchCg * kPreconditionerWindow) {
+        step_options.preconditioner = SolverOptions::Preconditioner::kInverseHessian;
+      }
     }
     if (step_radiosity.rows() != problem.size()) step_radiosity = radiosity.Solve(step_emittance);
     emittance = step_emittance;
@@ -876,11 +928,15 @@ void SolveCiede2000EveryIteration(const SolverOptions& options, const Compensati
     // The step's decrease of its own objective: zero at the fixed point.
     const double decrease = step_summary.initial_cost - step_summary.final_cost;
     if (decrease <= options.metric_update_tolerance * step_summary.initial_cost) {
-      if (step_options.cg_tolerance <= options.cg_tolerance) {
+      if (step_options.cg_tolerance <= options.cg_tolerance && !changed) {
         summary->termination = TerminationType::kFunctionTolerance;
         break;
       }
-      step_options.cg_tolerance = options.cg_tolerance;  // confirm with a tight step
+      step_options.cg_tolerance = options.cg_tolerance;  // confirm with a tight step ...
+      if (changed) {  // ... and with the asked-for preconditioner, for the rest of the run
+        step_options.preconditioner = options.preconditioner;
+        may_change = false;
+      }
     } else {
       step_options.cg_tolerance = loose_cg_tolerance;
     }

@@ -3,16 +3,17 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <filesystem>
 #include <cmath>
+#include <filesystem>
 #include <numbers>
-#include <optional>
 #include <opencv2/imgcodecs.hpp>
+#include <optional>
 
 #include "base/camera_model.h"
 #include "base/html_report.h"
 #include "base/image_io.h"
 #include "base/io.h"
+#include "base/option_table.h"
 #include "calibration/calibrate_all_stage.h"
 #include "calibration/calibrated_room.h"
 #include "calibration/camera_report.h"
@@ -30,8 +31,8 @@ namespace procam {
 namespace {
 
 // The demo's calibration stage: the synthetic rig calibrated from its own simulated captures
-// (`procam calibrate all`), its accuracy against the ground truth, and the perceptual
-// compensation redone with the recovered rig, photographed in the true world.
+// (`procam calibrate all`), its accuracy against the ground truth, and the compensation (the
+// demo's method) redone with the recovered rig, photographed in the true world.
 struct CalibrationStage {
   std::string camera;                              // the synthetic camera's URI
   std::vector<std::vector<std::string>> accuracy;  // table rows
@@ -68,17 +69,19 @@ RigDirectory CalibrateSyntheticRig(const std::string& camera, bool scan,
   return ReadRigDirectory(rig_dir);
 }
 
-// Perceptual compensation of `room` (the patches the rig's projectors light, with the rig's
+// Compensation by `method` of `room` (the patches the rig's projectors light, with the rig's
 // reflectance, within its projection rig's bounds), its images shown by the world's true
 // projectors and photographed in the true world; ΔE against the true desired appearance.
 MethodEvaluation CompensateAndPhotograph(const CalibratedRoom& room,
                                          const SceneEvaluation& evaluation,
                                          const EvaluationOptions& options,
+                                         CompensationMethod method,
                                          const ProgressCallback& progress) {
   const ProjectionRig& recovered = room.projection;
   MethodEvaluation result;
-  CompensationOptions compensation;
-  compensation.solver.method = CompensationMethod::kPerceptual;
+  result.method = method;
+  CompensationOptions compensation;  // perceptual2000's loss and schedule: the recommended ones
+  compensation.solver.method = method;
   compensation.solver.multires = options.multires;
   compensation.alpha = options.alpha;
   compensation.lower = recovered.lower;
@@ -111,15 +114,14 @@ CalibratedRoom RecoveredRoom(const RigDirectory& rig, std::optional<GeometryStag
 }
 
 nlohmann::json DeltaEJson(const MethodEvaluation& result) {
-  return {{"mean_delta_e76", result.mean_delta_e76},
-          {"max_delta_e76", result.max_delta_e76},
-          {"mean_delta_e2000", result.mean_delta_e2000},
-          {"max_delta_e2000", result.max_delta_e2000},
-          {"seam", result.seams.Json()}};
+  return {
+      {"method", MethodName(result.method)},       {"mean_delta_e76", result.mean_delta_e76},
+      {"max_delta_e76", result.max_delta_e76},     {"mean_delta_e2000", result.mean_delta_e2000},
+      {"max_delta_e2000", result.max_delta_e2000}, {"seam", result.seams.Json()}};
 }
 
 CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
-                                     const EvaluationOptions& options,
+                                     const EvaluationOptions& options, CompensationMethod method,
                                      const std::filesystem::path& rig_dir,
                                      const ProgressCallback& progress,
                                      const ProgressCallback& steps) {
@@ -180,10 +182,10 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
                   {"position_error_mm", camera_position},
                   {"orientation_error_deg", camera_orientation}}}};
 
-  // Perceptual compensation with the recovered rig (projectors, photometry, reflectance), shown
+  // The compensation with the recovered rig (projectors, photometry, reflectance), shown
   // by the true projectors in the true world.
   stage.room = RecoveredRoom(rig, evaluation.geometry, "", options.patches);
-  stage.perceptual = CompensateAndPhotograph(stage.room, evaluation, options, progress);
+  stage.perceptual = CompensateAndPhotograph(stage.room, evaluation, options, method, progress);
   stage.json["perceptual_with_calibrated_rig"] = DeltaEJson(stage.perceptual);
   return stage;
 }
@@ -191,7 +193,7 @@ CalibrationStage RunCalibrationStage(const SceneEvaluation& evaluation,
 // The demo's scan stage: the rig calibrated without the room model (`calibrate all --scan`),
 // the room from its own scan (RIG_DIR/room.json), the desired appearance carried onto the
 // scanned patches through the camera's view (each patch takes the mean of the true desired
-// picture over the camera pixels that see it), the perceptual compensation computed on the
+// picture over the camera pixels that see it), the compensation computed on the
 // scanned room and shown by the true projectors in the true world.
 struct ScanStage {
   std::vector<std::vector<std::string>> surfaces;  // table rows, one per scanned surface
@@ -212,8 +214,8 @@ cv::Vec3b SurfaceColour(int index) {
 }
 
 ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOptions& options,
-                       const std::filesystem::path& rig_dir, const ProgressCallback& progress,
-                       const ProgressCallback& steps) {
+                       CompensationMethod method, const std::filesystem::path& rig_dir,
+                       const ProgressCallback& progress, const ProgressCallback& steps) {
   ScanStage stage;
   const RigDirectory rig =
       CalibrateSyntheticRig(SyntheticCameraUri(evaluation, options), true, rig_dir, steps);
@@ -249,7 +251,7 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
       CoarsenPatchValues(fine.desired_linear, fine.Areas(), geometry.patches.coarse_of_fine,
                          geometry.patches.coarse.size());
   room.projection.desired = fine.desired_linear;  // the projection rig's copy (seamless light)
-  stage.perceptual = CompensateAndPhotograph(room, evaluation, options, progress);
+  stage.perceptual = CompensateAndPhotograph(room, evaluation, options, method, progress);
 
   // The scanned surfaces against the true ones: the frames differ by the camera's pose (true
   // in the world, calibrated in the scanned room).
@@ -343,6 +345,18 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
 
 }  // namespace
 
+void SyntheticDemoOptions::Declare(OptionTable* table) {
+  std::vector<std::pair<std::string, CompensationMethod>> methods;
+  for (CompensationMethod m :
+       {CompensationMethod::kNaive, CompensationMethod::kReverse, CompensationMethod::kLinear,
+        CompensationMethod::kPerceptual, CompensationMethod::kPerceptual2000}) {
+    methods.emplace_back(MethodName(m), m);
+  }
+  table->Choice("method", &method, methods,
+                "the compensation of the calibrated and scanned stages and of the closed loop "
+                "(the true rig's table compares every method)");
+}
+
 SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
   const std::string& scene = demo.scene;
   const std::filesystem::path& out = demo.out;
@@ -366,13 +380,14 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
          "demo: calibration stage — the rig calibrated from its own simulated captures (procam "
          "calibrate all)");
   const CalibrationStage calibration =
-      RunCalibrationStage(evaluation, options, out / "rig", demo.progress, demo.steps);
+      RunCalibrationStage(evaluation, options, demo.method, out / "rig", demo.progress, demo.steps);
   std::optional<ScanStage> scan;
   if (demo.scan) {
     Report(demo.progress,
            "demo: scan stage — the rig calibrated without the room model, the room from its own "
            "scan (procam calibrate all --scan), compensation on the scanned room");
-    scan = RunScanStage(evaluation, options, out / "rig_scan", demo.progress, demo.steps);
+    scan =
+        RunScanStage(evaluation, options, demo.method, out / "rig_scan", demo.progress, demo.steps);
     WritePng(out / "scanned_surfaces.png", scan->surfaces_picture);
     WritePng(out / "perceptual_scanned.png", LinearToDisplay(scan->perceptual.radiance));
   }
@@ -451,18 +466,23 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
   report.Table({"device", "focal length", "position", "orientation", "max (R / G / B)",
                 "drive for half light"},
                calibration.accuracy);
+  // The same method's result with the true rig, where the evaluation ran it.
+  const MethodEvaluation* true_rig = &evaluation.methods.back();
+  for (const MethodEvaluation& m : evaluation.methods)
+    if (m.method == demo.method) true_rig = &m;
   report.Paragraph(fmt::format(
-      "Perceptual compensation computed with the calibrated rig instead of the ground truth, shown "
+      "Compensation ({}) computed with the calibrated rig instead of the ground truth, shown "
       "by the true "
-      "projectors: mean ΔE76 {:.2f} (max {:.1f}), mean ΔE2000 {:.2f}, seam {:.2f}; with the true "
-      "rig: mean ΔE76 {:.2f}.",
-      calibration.perceptual.mean_delta_e76, calibration.perceptual.max_delta_e76,
-      calibration.perceptual.mean_delta_e2000, calibration.perceptual.seams.seam,
-      evaluation.methods.back().mean_delta_e76));
-  report.Figures(
-      {{"perceptual, calibrated rig", cv::imread((out / "perceptual_calibrated.png").string())},
-       {"ΔE76, calibrated rig",
-        cv::imread((out / "perceptual_calibrated_delta_e76.png").string())}});
+      "projectors: mean ΔE76 {:.2f} (max {:.1f}), mean ΔE2000 {:.2f}, seam {:.2f}; {} with the "
+      "true rig: mean ΔE76 {:.2f}, mean ΔE2000 {:.2f}.",
+      MethodName(demo.method), calibration.perceptual.mean_delta_e76,
+      calibration.perceptual.max_delta_e76, calibration.perceptual.mean_delta_e2000,
+      calibration.perceptual.seams.seam, MethodName(true_rig->method), true_rig->mean_delta_e76,
+      true_rig->mean_delta_e2000));
+  report.Figures({{std::string(MethodName(demo.method)) + ", calibrated rig",
+                   cv::imread((out / "perceptual_calibrated.png").string())},
+                  {"ΔE76, calibrated rig",
+                   cv::imread((out / "perceptual_calibrated_delta_e76.png").string())}});
   if (scan) {
     report.Heading("The room from its own scan");
     const MethodEvaluation& on_model = calibration.perceptual;
@@ -470,11 +490,11 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
         "procam calibrate all --scan: no room model and no guess; the projectors' lenses and "
         "poses from the structured light alone, the scale from a photo of the chessboard on the "
         "floor, the room's surfaces from the triangulated points (RIG_DIR/room.json), the "
-        "desired appearance carried onto them through the camera's view. Perceptual "
-        "compensation computed on the scanned room, shown by the true projectors in the true "
+        "desired appearance carried onto them through the camera's view. Compensation ({}) "
+        "computed on the scanned room, shown by the true projectors in the true "
         "room: mean ΔE2000 {:.2f} (ΔE76 {:.2f}, seam {:.2f}); computed on the true model with "
         "the calibrated rig: mean ΔE2000 {:.2f} (ΔE76 {:.2f}): {:+.2f} ΔE2000 from the scan.",
-        scan->perceptual.mean_delta_e2000, scan->perceptual.mean_delta_e76,
+        MethodName(demo.method), scan->perceptual.mean_delta_e2000, scan->perceptual.mean_delta_e76,
         scan->perceptual.seams.seam, on_model.mean_delta_e2000, on_model.mean_delta_e76,
         scan->perceptual.mean_delta_e2000 - on_model.mean_delta_e2000));
     report.Table({"scanned surface", "kind", "lies on (true)", "corners and centroids from the "
@@ -489,7 +509,7 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
         {{"camera view: the true surfaces (left) and the scanned ones (right), a scanned "
           "surface in the colour of the true one it lies on",
           scan->surfaces_picture},
-         {"perceptual, computed on the scanned room",
+         {std::string(MethodName(demo.method)) + ", computed on the scanned room",
           cv::imread((out / "perceptual_scanned.png").string())}});
     // Where the self-calibration is sure of each projector (rig_scan/projectors_report.html).
     std::vector<std::pair<std::string, cv::Mat>> uncertainty;

@@ -119,7 +119,7 @@ void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
   problem.lower = rig.lower;
   problem.upper = rig.upper;
   const Eigen::MatrixX3d base = problem.desired;
-  SolverOptions solver;
+  SolverOptions solver = RecommendedSolverOptions();  // as procam play's (PlaySolverOptions)
   solver.method = args.method;
   solver.device = args.device;
   solver.function_tolerance = args.tolerance;

@@ -29,7 +29,9 @@ struct PlayBenchmarkOptions {
   int width = 1920, height = 1080;
   int patches = 1000;  // about 3 000 variables
   int frames = 20;
-  CompensationMethod method = CompensationMethod::kPerceptual;
+  // The method, as procam play's (RecommendedSolverOptions: perceptual2000 with the metric measured
+  // at every iterate; linear and perceptual for comparison).
+  CompensationMethod method = RecommendedSolverOptions().method;
   Device device = Device::kCpu;
   LightField light = LightField::kSmooth;
   DitherMethod dither = DitherMethod::kOrdered;

@@ -3,7 +3,7 @@
 // machine without procam's other libraries (docs/nodes.md: the H100 numbers).
 //   procam-play-bench [--render cpu|gpu] [--shader auto|fragment|compute] [--device cpu|cuda]
 //                     [--light smooth|flat]
-//                     [--method perceptual] [--dither ordered] [--patches 1000] [--frames 20]
+//                     [--method perceptual2000] [--dither ordered] [--patches 1000] [--frames 20]
 //                     [--width 1920] [--height 1080] [--json FILE]
 #include <CLI/CLI.hpp>
 #include <cstdio>
@@ -15,8 +15,8 @@
 int main(int argc, char** argv) {
   using namespace procam;
   PlayBenchmarkOptions options;
-  std::string method = "perceptual", device = "cpu", light = "smooth", dither = "ordered",
-              render = "cpu";
+  std::string method = MethodName(options.method), device = "cpu", light = "smooth",
+              dither = "ordered", render = "cpu";
   CLI::App app("procam bench play, alone: new desired colours -> warm-started solve -> images");
   app.add_option("--width", options.width, "Projector width, pixels")->capture_default_str();
   app.add_option("--height", options.height, "Projector height, pixels")->capture_default_str();
