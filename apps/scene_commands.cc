@@ -105,9 +105,8 @@ void RunRigDemo(const std::string& scene, int patches, const RigDemoArguments& r
   calibrate.display_names = rig.displays;
   calibrate.open_display = OpenMonitorDisplay;
   calibrate.progress = PrintProgress();
-  std::printf("\n$ procam calibrate all --camera %s --scene %s --out %s --patches %d --frames %d --settle-ms %s%s\n",
-              rig.camera.c_str(), scene.c_str(), rig_dir.c_str(), patches, rig.frames, rig.settle.Text().c_str(),
-              rig.displays.empty() ? "" : (" --display " + fmt::format("{}", fmt::join(rig.displays, ","))).c_str());
+  std::printf("\n$ procam calibrate all %s\n",
+              fmt::format("{}", fmt::join(ChangedArgumentsOf(calibrate), " ")).c_str());
   RunCalibrateAll(calibrate);
 
   spdlog::info("stage 2/4 compensation with the calibrated rig");
