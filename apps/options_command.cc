@@ -13,10 +13,13 @@
 #include "calibration/capture_stage.h"
 #include "calibration/photometric_stage.h"
 #include "calibration/projectors_stage.h"
+#include "calibration/response_stage.h"
 #include "compensation/stage.h"
 #include "datasets_synthetic/benchmarks.h"
 #include "datasets_synthetic/emulated_room.h"
 #include "datasets_synthetic/evaluation.h"
+#include "datasets_synthetic/random_rooms.h"
+#include "datasets_synthetic/scan_judge.h"
 #include "nodes/node.h"
 #include "projection/stage.h"
 #include "verification/verification.h"
@@ -69,11 +72,18 @@ struct DeclaredOptions {
                                  "calibrate photometric");
     Add<BoardStageOptions>("Camera and projector on a chessboard",
                            "BoardStageOptions (calibration/board_stage.h)", "calibrate board");
+    Add<ResponseStageOptions>("Camera linearity",
+                              "ResponseStageOptions (calibration/response_stage.h)",
+                              "calibrate response");
     Add<CalibrateAllOptions>(
         "A whole rig", "CalibrateAllOptions (calibration/calibrate_all_stage.h)", "calibrate all");
     Add<NodeOptions>("A display node", "NodeOptions (nodes/node.h)", "node");
     Add<EmulatedRoomOptions>("The room as a device",
                              "EmulatedRoomOptions (datasets_synthetic/emulated_room.h)", "emulate");
+    Add<RandomRoomOptions>("A room made at random",
+                           "RandomRoomOptions (datasets_synthetic/random_rooms.h)", "scene random");
+    Add<ScanJudgeOptions>("A scan judged", "ScanJudgeOptions (datasets_synthetic/scan_judge.h)",
+                          "scene judge-scan");
     Add<EvaluationOptions>("The evaluation", "EvaluationOptions (datasets_synthetic/evaluation.h)",
                            "evaluate");
     Add<BenchmarkOptions>("Form-factor benchmark",

@@ -56,7 +56,10 @@ template <typename Options>
 void ShowCommand(const ProgressCallback& progress, const std::string& command,
                  const Options& options) {
   std::string line = "\n$ procam " + command;
-  for (const std::string& argument : ChangedArgumentsOf(options)) line += " " + ShellWord(argument);
+  for (const std::string& argument : ChangedArgumentsOf(options)) {
+    line += ' ';
+    line += ShellWord(argument);
+  }
   Report(progress, line);
 }
 

@@ -34,8 +34,7 @@ void EmulatedRoomOptions::Declare(OptionTable* table) {
                       "frame rate (default: the camera entry's fps)")
       .Integer("patches", &patches, 20, 5000, "",
                "solver patches the simulated room is built for (its mesh is 4x finer)")
-      .Number("seconds", &seconds, 0.0, 1e7, "s",
-              "stop after this long (0: at Ctrl+C or SIGTERM)")
+      .Number("seconds", &seconds, 0.0, 1e7, "s", "stop after this long (0: at Ctrl+C or SIGTERM)")
       .Integer("board-pose", &board_pose, -1, std::numeric_limits<int>::max(), "",
                "photograph pose K of the scene's chessboard (its \"chessboard\" key) instead of "
                "the room: the board alone, lit by the monitors (-1: the room)")
@@ -47,7 +46,8 @@ bool EmulatedRoomOptions::Check(std::string* why) const {
   for (size_t k = 0; k < monitors.size(); ++k) {
     for (size_t j = 0; j < k; ++j) {
       if (monitors[j] == monitors[k]) {
-        *why = "--monitors: '" + monitors[k] + "' is given twice: each projector has its own output";
+        *why =
+            "--monitors: '" + monitors[k] + "' is given twice: each projector has its own output";
         return false;
       }
     }

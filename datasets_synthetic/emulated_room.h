@@ -16,13 +16,13 @@ struct EmulatedRoomOptions {
   // The compositor's output showing each projector, in the scene's order (e.g. HEADLESS-1); each
   // once.
   std::vector<std::string> monitors;
-  std::string camera;                  // the scene's camera entry by name; empty: the first
+  std::string camera;                 // the scene's camera entry by name; empty: the first
   std::string address = "127.0.0.1";  // local IPv4 address the camera is served on
-  std::optional<double> latency_ms;    // display to camera, ms, [0, 10000]; unset: the entry's
-  std::optional<double> fps;           // frame rate, [0.1, 1000]; unset: the entry's
-  int patches = 300;     // solver patches the simulated room is built for, [20, 5000]
-  double seconds = 0.0;  // stop after this long, s, [0, 1e7]; 0: at a signal
-  int board_pose = -1;   // >= 0: photograph this pose of the scene's chessboard, not the room
+  std::optional<double> latency_ms;   // display to camera, ms, [0, 10000]; unset: the entry's
+  std::optional<double> fps;          // frame rate, [0.1, 1000]; unset: the entry's
+  int patches = 300;                  // solver patches the simulated room is built for, [20, 5000]
+  double seconds = 0.0;               // stop after this long, s, [0, 1e7]; 0: at a signal
+  int board_pose = -1;      // >= 0: photograph this pose of the scene's chessboard, not the room
   double watch_hz = 200.0;  // monitor captures per second at most, [1, 1000]
 
   // Declares the room (positional), --monitors, --camera, --address, --latency-ms, --fps,
