@@ -39,7 +39,7 @@ CLI::Validator FiniteValidator(double min, double max, bool open_min, const std:
 
 void AddOptions(CLI::App* command, const OptionTable& table) {
   for (const OptionTable::Option& option : table.options()) {
-    const std::string flag = "--" + option.name;
+    const std::string flag = option.positional ? option.name : "--" + option.name;
     std::string help = option.help;
     if (!option.unit.empty()) help += " (" + option.unit + ")";
     const auto set = option.set;
@@ -54,14 +54,30 @@ void AddOptions(CLI::App* command, const OptionTable& table) {
           help);
       continue;
     }
-    CLI::Option* added = command->add_option_function<std::string>(
-        flag,
-        [set, flag](const std::string& text) {
-          std::string why;
-          if (!set(text, &why)) throw CLI::ValidationError(flag, why);
-        },
-        help);
-    added->default_str(option.default_text);
+    CLI::Option* added = nullptr;
+    if (option.kind == OptionTable::Kind::kList) {
+      // Every occurrence's items together; one value split at commas unless one item per flag.
+      const auto set_items = option.set_items;
+      added = command->add_option_function<std::vector<std::string>>(
+          flag,
+          [set_items, flag](const std::vector<std::string>& items) {
+            std::string why;
+            if (!set_items(items, &why)) throw CLI::ValidationError(flag, why);
+          },
+          help);
+      if (!option.repeated && !option.positional) added->delimiter(',');
+      added->type_name(option.values);
+    } else {
+      added = command->add_option_function<std::string>(
+          flag,
+          [set, flag](const std::string& text) {
+            std::string why;
+            if (!set(text, &why)) throw CLI::ValidationError(flag, why);
+          },
+          help);
+    }
+    if (option.required) added->required();
+    if (!option.default_text.empty()) added->default_str(option.default_text);
     switch (option.kind) {
       case OptionTable::Kind::kInteger:
         added->type_name("INT in " + option.range->Text());
@@ -78,6 +94,11 @@ void AddOptions(CLI::App* command, const OptionTable& table) {
       }
       case OptionTable::Kind::kPath:
         added->type_name("PATH");
+        break;
+      case OptionTable::Kind::kCustom:
+        added->type_name(option.values);
+        break;
+      case OptionTable::Kind::kList:
         break;
       default:
         added->type_name("TEXT");

@@ -20,6 +20,7 @@
 #include "apps/stop_signals.h"
 #include "base/io.h"
 #include "capture/pixel_format.h"
+#include "datasets_synthetic/emulated_room.h"
 #include "datasets_synthetic/monitor_watcher.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "procam/config.h"
@@ -30,19 +31,6 @@
 namespace procam {
 namespace {
 
-struct EmulateArguments {
-  std::string room;
-  std::vector<std::string> monitors;
-  std::string camera;  // the scene's camera entry ("" = the first)
-  std::string address = "127.0.0.1";
-  double latency_ms = -1.0;  // < 0: the camera entry's latency_ms
-  double fps = 0.0;          // 0: the camera entry's fps
-  int patches = 300;
-  double seconds = 0.0;  // 0: until interrupted
-  double watch_hz = 200.0;
-  int board_pose = -1;  // ≥ 0: photograph this pose of the scene's chessboard instead of the room
-};
-
 #if PROCAM_WITH_ARAVIS
 // The emulated camera's pixel format: the entry's where the GigE camera offers it, else RGB8
 // for colour (Aravis's fake camera has no BGR8) and Mono8 for grey.
@@ -52,7 +40,7 @@ PixelFormat ServedFormat(PixelFormat wanted) {
   return IsColour(wanted) ? PixelFormat::kRGB8 : PixelFormat::kMono8;
 }
 
-void RunEmulate(const EmulateArguments& args) {
+void RunEmulate(const EmulatedRoomOptions& args) {
   const std::shared_ptr<SyntheticWorld> world =
       MakeSceneFileWorld(args.room, args.camera, args.patches, 0.0, args.room);
   if (args.board_pose >= 0) PlaceSceneChessboard(world.get(), args.room, args.board_pose);
@@ -67,8 +55,8 @@ void RunEmulate(const EmulateArguments& args) {
   options.width = camera.width;
   options.height = camera.height;
   options.pixel_format = ServedFormat(camera.pixel_format);
-  options.frame_rate = args.fps > 0 ? args.fps : camera.frame_rate;
-  options.latency_ms = args.latency_ms >= 0 ? args.latency_ms : camera.display_latency_ms;
+  options.frame_rate = args.fps.value_or(camera.frame_rate);
+  options.latency_ms = args.latency_ms.value_or(camera.display_latency_ms);
   options.exposure_us = std::round(camera.exposure_us);
   options.gain_db = std::round(std::min(camera.gain_db, 10.0));
   std::string why;
@@ -126,49 +114,17 @@ void RunEmulate(const EmulateArguments& args) {
 }  // namespace
 
 void AddEmulateCommand(CLI::App& app) {
-  auto args = std::make_shared<EmulateArguments>();
   CLI::App* emulate = app.add_subcommand(
       "emulate",
       "Play the room of a scene file as a device: watch what each projector's monitor shows (a wlroots compositor "
       "such as sway, through grim) and serve what the scene's camera photographs as a GigE Vision camera "
       "(aravis:gv:ADDRESS)");
-  emulate->add_option("room", args->room, "Scene file with projectors and cameras (docs/scene_format.md)")->required();
-  emulate->add_option("--monitors", args->monitors,
-                      "The compositor's output showing each projector, in the scene's order (e.g. HEADLESS-1,HEADLESS-2)")
-      ->delimiter(',')
-      ->required();
-  emulate->add_option("--camera", args->camera, "The scene's camera entry by name (default: the first)");
-  emulate->add_option("--address", args->address, "Local IPv4 address to serve the camera on")
-      ->check(CLI::ValidIPV4)
-      ->capture_default_str();
-  emulate->add_option("--latency-ms", args->latency_ms,
-                      "Display-to-camera latency, milliseconds (default: the camera entry's latency_ms)")
-      ->check(FiniteRange(0.0, 10000.0));
-  emulate->add_option("--fps", args->fps, "Frame rate (default: the camera entry's fps)")->check(FiniteRange(0.1, 1000.0));
-  emulate->add_option("--patches", args->patches, "Solver patches the simulated room is built for (its mesh is 4x finer)")
-      ->check(FiniteRange(20, 5000))
-      ->capture_default_str();
-  emulate->add_option("--seconds", args->seconds, "Stop after this long (default: at Ctrl+C or SIGTERM)")
-      ->check(FiniteRange(0.0, 1e7));
-  emulate
-      ->add_option("--board-pose", args->board_pose,
-                   "Photograph pose K of the scene's chessboard (its \"chessboard\" key) "
-                   "instead of the room: the board alone, lit by the monitors")
-      ->check(CLI::NonNegativeNumber);
-  emulate->add_option("--watch-hz", args->watch_hz, "Monitor captures per second at most")
-      ->check(FiniteRange(1.0, 1000.0))
-      ->capture_default_str();
-  emulate->callback([args] {
-    for (size_t k = 0; k < args->monitors.size(); ++k) {
-      for (size_t j = 0; j < k; ++j) {
-        if (args->monitors[j] == args->monitors[k]) {
-          throw std::invalid_argument("--monitors: '" + args->monitors[k] +
-                                      "' is given twice: each projector has its own output");
-        }
-      }
-    }
+  const auto options = AddDeclaredOptions<EmulatedRoomOptions>(emulate);
+  emulate->callback([options] {
+    std::string why;
+    if (!options->Check(&why)) throw std::invalid_argument(why);
 #if PROCAM_WITH_ARAVIS
-    RunEmulate(*args);
+    RunEmulate(*options);
 #else
     throw IoError("emulate: this procam was built without Aravis (apt-get install libaravis-dev libusb-1.0-0-dev, reconfigure)");
 #endif

@@ -18,17 +18,11 @@
 namespace procam {
 namespace {
 
-struct EvaluateArguments {
+// The command's own: what to evaluate and where the reports go (the evaluation's options are
+// EvaluationOptions', declared by it).
+struct EvaluateTargets {
   std::vector<std::string> scenes;
   std::string out = "out/evaluate";
-  int patches = 600;
-  int world_factor = 4;
-  double alpha = 0.5, loss_scale = SolverOptions().robust_scale;
-  std::string loss = "soft_l1";
-  std::string metric_update = MetricUpdateName(SolverOptions().metric_update);
-  std::vector<std::string> methods;
-  LightField light = LightField::kSmooth;
-  std::string bounce = "smooth";
 };
 
 std::vector<std::pair<std::string, cv::Mat>> ReadFigures(const std::filesystem::path& directory,
@@ -79,41 +73,15 @@ std::pair<std::vector<std::string>, std::vector<std::vector<std::string>>> Scene
 }  // namespace
 
 void AddEvaluationCommands(CLI::App& app) {
-  auto args = std::make_shared<EvaluateArguments>();
+  auto args = std::make_shared<EvaluateTargets>();
   CLI::App* cmd = app.add_subcommand(
       "evaluate", "Table 1 of the paper on synthetic scenes: per-pixel ΔE of naive, reverse, linear, perceptual, perceptual2000");
   std::string names;
   for (const std::string& name : SyntheticSceneNames()) names += (names.empty() ? "" : ", ") + name;
   cmd->add_option("scenes", args->scenes, "Synthetic scenes (" + names + ") or 'all'")->required();
-  cmd->add_option("--patches", args->patches, "Solver patches per scene")->capture_default_str();
-  cmd->add_option("--world-factor", args->world_factor, "World mesh patches per solver patch (the simulated room)")
-      ->capture_default_str();
-  cmd->add_option("--alpha", args->alpha, "Weight of the absolute term, in (0,1]")->check(FiniteRange(1e-9, 1.0))
-      ->capture_default_str();
-  cmd->add_option("--methods", args->methods,
-                  "Methods to compare (default: naive reverse linear perceptual perceptual2000)")
-      ->check(CLI::IsMember({"naive", "reverse", "linear", "perceptual", "perceptual2000"}));
-  cmd->add_option("--loss", args->loss, "perceptual2000's loss: squared | soft_l1 | huber | cauchy")
-      ->check(CLI::IsMember({"squared", "soft_l1", "huber", "cauchy"}))
-      ->capture_default_str();
-  cmd->add_option("--loss-scale", args->loss_scale, "perceptual2000's loss scale, ΔE00 units")
-      ->check(FiniteRange(1e-6, 1e6))
-      ->capture_default_str();
-  cmd->add_option(
-         "--metric-update", args->metric_update,
-         "perceptual2000's metric measured again: rounds (each a whole solve) | every_iteration "
-         "(inside one Gauss-Newton run)")
-      ->check(CLI::IsMember({"rounds", "every_iteration"}))
-      ->capture_default_str();
   cmd->add_option("--out", args->out, "Output directory")->capture_default_str();
-  AddLightOption(cmd, &args->light);
-  cmd->add_option("--bounce", args->bounce,
-                  "The simulated room's bounce light: smooth (continuous over each surface, as in "
-                  "a real room) | patch (constant over each world-mesh patch, whose borders then "
-                  "show as steps)")
-      ->check(CLI::IsMember({"smooth", "patch"}))
-      ->capture_default_str();
-  cmd->callback([args] {
+  const auto evaluation = AddDeclaredOptions<EvaluationOptions>(cmd);
+  cmd->callback([args, evaluation] {
     std::vector<std::string> scenes = args->scenes;
     if (scenes.size() == 1 && scenes.front() == "all") {
       scenes = SyntheticSceneNames();
@@ -122,23 +90,7 @@ void AddEvaluationCommands(CLI::App& app) {
     const std::filesystem::path out = args->out;
     CheckNotProcamDirectory(out, "evaluate");
     std::filesystem::create_directories(out);
-    EvaluationOptions options;
-    options.patches = args->patches;
-    options.world_factor = args->world_factor;
-    options.alpha = args->alpha;
-    ParseRobustLoss(args->loss, &options.loss);
-    options.loss_scale = args->loss_scale;
-    ParseMetricUpdate(args->metric_update, &options.metric_update);
-    if (!args->methods.empty()) {
-      options.methods.clear();
-      for (const std::string& name : args->methods) {
-        CompensationMethod method;
-        ParseMethod(name, &method);  // CLI11 checked the name
-        options.methods.push_back(method);
-      }
-    }
-    options.render.light = args->light;
-    options.smooth_bounce = args->bounce == "smooth";
+    const EvaluationOptions& options = *evaluation;
     std::vector<std::unique_ptr<SceneEvaluation>> evaluations;
     nlohmann::json all = nlohmann::json::array();
     std::vector<std::vector<std::pair<std::string, cv::Mat>>> figures;  // per scene
@@ -158,12 +110,15 @@ void AddEvaluationCommands(CLI::App& app) {
     WriteFileAtomically(out / "result.json", nlohmann::json{{"scenes", all}}.dump(2) + "\n");
     const std::vector<std::string> missed = ScenesMissingTheTarget(pointers);
     HtmlReport page("procam evaluate: compensation methods on synthetic scenes (Sheng et al. 2011, Table 1)");
-    page.Paragraph(fmt::format(
-        "{} solver patches per scene, world mesh {}× finer. Per pixel: ΔE between the desired appearance and "
-        "the simulated camera's view of each method's result, mean (max); seam: how visible the patch grid "
-        "is (mean CIEDE2000 across patch borders minus within patches, on surfaces whose desired appearance "
-        "is flat). Per patch: area-weighted mean CIEDE2000 in the solver's model.",
-        args->patches, args->world_factor));
+    page.Paragraph(
+        fmt::format("{} solver patches per scene, world mesh {}× finer. Per pixel: ΔE between the "
+                    "desired appearance and "
+                    "the simulated camera's view of each method's result, mean (max); seam: how "
+                    "visible the patch grid "
+                    "is (mean CIEDE2000 across patch borders minus within patches, on surfaces "
+                    "whose desired appearance "
+                    "is flat). Per patch: area-weighted mean CIEDE2000 in the solver's model.",
+                    options.patches, options.world_factor));
     for (size_t k = 0; k < scenes.size(); ++k) {
       page.Heading(scenes[k]);
       const auto [header, rows] = SceneTable(*pointers[k]);

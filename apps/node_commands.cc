@@ -23,12 +23,6 @@
 namespace procam {
 namespace {
 
-struct NodeArguments {
-  std::string rig, scene, listen = "tcp://*:5600", name = "node", render = "gpu";
-  double seconds = 0.0;
-  std::vector<std::string> projectors, display = {"memory"};
-};
-
 struct PlayArguments {
   std::string scene, rig, desired, solution, out, method = MethodName(PlaySolverOptions().method),
                                                   device = "cpu", dither = "ordered",
@@ -126,57 +120,28 @@ void AddNodeCommands(CLI::App& app) {
            "controller.pub, node.pub\n";
   });
 
-  auto node_args = std::make_shared<NodeArguments>();
   CLI::App* node = app.add_subcommand(
       "node", "Run a display node: show the frames a controller sends on this PC's projectors");
-  node->add_option("--rig", node_args->rig,
-                   "Rig directory (rig.json, the projectors' models, keys/)")
-      ->required();
-  node->add_option("--scene", node_args->scene, "The room (scene file), as the controller's")
-      ->required();
-  node->add_option("--projectors", node_args->projectors,
-                   "Projectors of the rig this node shows, in --display's order")
-      ->delimiter(',')
-      ->required();
-  node->add_option("--display", node_args->display,
-                   "Per projector: glfw:MONITOR, record:DIR (DIR/NAME.png every frame) or memory")
-      ->delimiter(',')
-      ->capture_default_str();
-  node->add_option("--listen", node_args->listen, "Endpoint to listen at (tcp://ADDRESS:PORT)")
-      ->capture_default_str();
-  node->add_option("--name", node_args->name, "The node's name in logs")->capture_default_str();
-  node->add_option(
-          "--render", node_args->render,
-          "gpu: each output's images rendered on the GPU (OpenGL) | cpu: the reference renderer")
-      ->check(CLI::IsMember({"gpu", "cpu"}))
-      ->capture_default_str();
-  node->add_option("--seconds", node_args->seconds, "Run at most this long (0: until interrupted)")
-      ->check(FiniteNonNegative());
-  node->callback([node_args] {
-    CheckUnique(node_args->projectors, "--projectors");
-    CheckUnique(node_args->display, "--display", IsMonitor);
+  const auto node_options = AddDeclaredOptions<NodeOptions>(node);
+  node->callback([node_options] {
+    NodeOptions& options = *node_options;
+    CheckUnique(options.projectors, "--projectors");
+    CheckUnique(options.display, "--display", IsMonitor);
     // inproc:// endpoints are for nodes run inside the controller's process (tests); another
     // process could never reach this one.
-    if (!node_args->listen.starts_with("tcp://")) {
-      throw std::invalid_argument("--listen: " + node_args->listen +
-                                  ": a node listens at tcp://ADDRESS:PORT (another process cannot reach any other endpoint)");
+    if (!options.listen.starts_with("tcp://")) {
+      throw std::invalid_argument("--listen: " + options.listen +
+                                  ": a node listens at tcp://ADDRESS:PORT (another process cannot "
+                                  "reach any other endpoint)");
     }
-    CheckTcpPort(node_args->listen, /*bind=*/true, "--listen");
+    CheckTcpPort(options.listen, /*bind=*/true, "--listen");
     // The room is read when the controller's setup arrives; a file that cannot be read is said
     // now, not minutes later on the controller.
-    LoadSceneArgument(node_args->scene);
-    NodeOptions options;
-    options.name = node_args->name;
-    options.rig_dir = node_args->rig;
-    options.scene = node_args->scene;
-    options.projectors = node_args->projectors;
-    options.listen = node_args->listen;
-    options.max_seconds = node_args->seconds;
-    options.gpu = node_args->render == "gpu";
+    LoadSceneArgument(options.scene);
     options.log = [](const std::string& line) { std::cout << line << std::endl; };
     std::atomic<bool>& stop = StopOnSignals();
     zmq::context_t context;
-    RunNode(context, options, MakeNodeOutputs(node_args->display), stop);
+    RunNode(context, options, MakeNodeOutputs(options.display), stop);
     if (stop) std::cout << "node " << options.name << ": stopped by a signal" << std::endl;
   });
 

@@ -6,8 +6,21 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
+#include "calibration/board_stage.h"
+#include "calibration/calibrate_all_stage.h"
 #include "calibration/calibrated_room.h"
+#include "calibration/camera_stage.h"
+#include "calibration/capture_stage.h"
+#include "calibration/photometric_stage.h"
+#include "calibration/projectors_stage.h"
+#include "calibration/response_stage.h"
 #include "compensation/stage.h"
+#include "datasets_synthetic/benchmarks.h"
+#include "datasets_synthetic/emulated_room.h"
+#include "datasets_synthetic/evaluation.h"
+#include "datasets_synthetic/random_rooms.h"
+#include "datasets_synthetic/scan_judge.h"
+#include "nodes/node.h"
 #include "projection/stage.h"
 #include "verification/verification.h"
 
@@ -16,31 +29,73 @@ namespace {
 
 // The declared option groups at their defaults, in the order docs/options.md lists them.
 struct DeclaredOptions {
-  CompensationOptions compensation;
-  CalibratedRoomOptions room;
-  ProjectionStageOptions projection;
-  VerificationOptions verification;
   struct Group {
     std::string title, struct_name, commands;
+    std::shared_ptr<void> options;  // the struct the table is bound to
     OptionTable table;
   };
   std::vector<Group> groups;
 
+  template <typename Options>
+  void Add(const std::string& title, const std::string& struct_name, const std::string& commands,
+           void (Options::*declare)(OptionTable*) = &Options::Declare) {
+    auto options = std::make_shared<Options>();
+    Group& group = groups.emplace_back();
+    group.title = title;
+    group.struct_name = struct_name;
+    group.commands = commands;
+    group.table = OptionTable(commands);
+    ((*options).*declare)(&group.table);
+    group.options = options;
+  }
+
   DeclaredOptions() {
-    groups.push_back({"The solve", "CompensationOptions (compensation/stage.h)", "compensate",
-                      OptionTable("compensate")});
-    compensation.Declare(&groups.back().table);
-    groups.push_back({"The room", "CalibratedRoomOptions (calibration/calibrated_room.h)",
-                      "compensate", OptionTable("room")});
-    room.Declare(&groups.back().table);
-    groups.push_back({"Projector images", "ProjectionStageOptions (projection/stage.h)", "project",
-                      OptionTable("project")});
-    projection.Declare(&groups.back().table);
-    groups.push_back({"The closed loop and its photos",
-                      "VerificationOptions (verification/verification.h), SequencerOptions "
-                      "(capture/sequencer.h)",
-                      "verify", OptionTable("verify")});
-    verification.Declare(&groups.back().table);
+    Add<CompensationOptions>("The solve", "CompensationOptions (compensation/stage.h)",
+                             "compensate");
+    Add<CalibratedRoomOptions>("The room", "CalibratedRoomOptions (calibration/calibrated_room.h)",
+                               "compensate");
+    Add<ProjectionStageOptions>("Projector images", "ProjectionStageOptions (projection/stage.h)",
+                                "project");
+    Add<VerificationOptions>("The closed loop and its photos",
+                             "VerificationOptions (verification/verification.h), SequencerOptions "
+                             "(capture/sequencer.h)",
+                             "verify");
+    Add<CaptureStageOptions>("Captures", "CaptureStageOptions (calibration/capture_stage.h)",
+                             "capture");
+    Add<CameraStageOptions>("Camera intrinsics", "CameraStageOptions (calibration/camera_stage.h)",
+                            "calibrate camera");
+    Add<ProjectorsStageOptions>("Projectors and registration",
+                                "ProjectorsStageOptions (calibration/projectors_stage.h)",
+                                "calibrate projectors");
+    Add<PhotometricStageOptions>("Photometry",
+                                 "PhotometricStageOptions (calibration/photometric_stage.h)",
+                                 "calibrate photometric");
+    Add<BoardStageOptions>("Camera and projector on a chessboard",
+                           "BoardStageOptions (calibration/board_stage.h)", "calibrate board");
+    Add<ResponseStageOptions>("Camera linearity",
+                              "ResponseStageOptions (calibration/response_stage.h)",
+                              "calibrate response");
+    Add<CalibrateAllOptions>(
+        "A whole rig", "CalibrateAllOptions (calibration/calibrate_all_stage.h)", "calibrate all");
+    Add<NodeOptions>("A display node", "NodeOptions (nodes/node.h)", "node");
+    Add<EmulatedRoomOptions>("The room as a device",
+                             "EmulatedRoomOptions (datasets_synthetic/emulated_room.h)", "emulate");
+    Add<RandomRoomOptions>("A room made at random",
+                           "RandomRoomOptions (datasets_synthetic/random_rooms.h)", "scene random");
+    Add<ScanJudgeOptions>("A scan judged", "ScanJudgeOptions (datasets_synthetic/scan_judge.h)",
+                          "scene judge-scan");
+    Add<EvaluationOptions>("The evaluation", "EvaluationOptions (datasets_synthetic/evaluation.h)",
+                           "evaluate");
+    Add<BenchmarkOptions>("Form-factor benchmark",
+                          "BenchmarkOptions (datasets_synthetic/benchmarks.h)", "bench formfactors",
+                          &BenchmarkOptions::DeclareFormFactors);
+    Add<BenchmarkOptions>("Solver benchmark", "BenchmarkOptions (datasets_synthetic/benchmarks.h)",
+                          "bench solver", &BenchmarkOptions::DeclareSolver);
+    Add<BenchmarkOptions>("Scale benchmark", "BenchmarkOptions (datasets_synthetic/benchmarks.h)",
+                          "bench scale", &BenchmarkOptions::DeclareScale);
+    Add<DecodeBenchmarkOptions>("Decode benchmark",
+                                "DecodeBenchmarkOptions (datasets_synthetic/benchmarks.h)",
+                                "bench decode");
   }
 };
 
@@ -70,7 +125,8 @@ void AddOptionsCommand(CLI::App& app) {
     for (const DeclaredOptions::Group& group : declared.groups) {
       std::cout << group.title << " (" << group.struct_name << "; " << group.commands << ")\n";
       for (const OptionTable::Option& option : group.table.options()) {
-        std::cout << "  --" << option.name << " [" << option.default_text << "]  " << option.help
+        std::cout << "  " << (option.positional ? "" : "--") << option.name << " ["
+                  << option.default_text << "]  " << option.help
                   << (option.unit.empty() ? "" : " (" + option.unit + ")") << "\n";
       }
     }

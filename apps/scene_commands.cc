@@ -105,9 +105,8 @@ void RunRigDemo(const std::string& scene, int patches, CompensationMethod method
   calibrate.display_names = rig.displays;
   calibrate.open_display = OpenMonitorDisplay;
   calibrate.progress = PrintProgress();
-  std::printf("\n$ procam calibrate all --camera %s --scene %s --out %s --patches %d --frames %d --settle-ms %s%s\n",
-              rig.camera.c_str(), scene.c_str(), rig_dir.c_str(), patches, rig.frames, rig.settle.Text().c_str(),
-              rig.displays.empty() ? "" : (" --display " + fmt::format("{}", fmt::join(rig.displays, ","))).c_str());
+  std::printf("\n$ procam calibrate all %s\n",
+              fmt::format("{}", fmt::join(ChangedArgumentsOf(calibrate), " ")).c_str());
   RunCalibrateAll(calibrate);
 
   spdlog::info("stage 2/4 compensation with the calibrated rig");
@@ -228,32 +227,23 @@ void AddSceneCommands(CLI::App& app) {
               << "--camera synthetic:" << path.string() << "\n";
   });
 
-  auto random = std::make_shared<RandomRoomOptions>();
   CLI::App* random_cmd = scene->add_subcommand(
       "random", "Write a room made at random from a seed as a scene file with its projectors and camera "
                 "(docs/synthetic.md#rooms-made-at-random)");
-  random_cmd->add_option("--seed", random->seed, "The seed: the same seed gives the same room")->required();
+  const auto random = AddDeclaredOptions<RandomRoomOptions>(random_cmd);
   random_cmd->add_option("--out", args->out, "Output directory")->required();
-  random_cmd->add_option("--patches", random->patches, "The scene file's patch target")->capture_default_str();
   random_cmd->callback([random, args] {
     const std::filesystem::path path = WriteRandomRoom(*random, args->out);
     std::cout << "wrote " << path.string() << "; open it as a rig with --camera synthetic:" << path.string()
               << "\n";
   });
 
-  auto judge = std::make_shared<ScanJudgeOptions>();
   auto judge_json = std::make_shared<std::string>();
   CLI::App* judge_cmd = scene->add_subcommand(
       "judge-scan", "Scan a scene file's rig without its model (exact correspondences plus decoding noise) and "
                     "judge the scanned room against the file (docs/scan.md#rooms-made-at-random)");
   judge_cmd->add_option("scene", args->scene, "Scene JSON with projectors and a camera")->required();
-  judge_cmd->add_option("--camera-scale", judge->camera_scale, "The camera's image scaled, (0, 1]")
-      ->capture_default_str();
-  judge_cmd->add_option("--noise-seed", judge->noise_seed, "The decoding noise's seed")->capture_default_str();
-  judge_cmd->add_flag("--compensate", judge->compensate,
-                      "Also compensate on the true model and on the scan and compare their photographs");
-  judge_cmd->add_option("--patches", judge->patches, "Solver patches with --compensate, [20, 5000]")
-      ->capture_default_str();
+  const auto judge = AddDeclaredOptions<ScanJudgeOptions>(judge_cmd);
   judge_cmd->add_option("--json", *judge_json, "Also write the judgement as JSON to this file");
   judge_cmd->callback([judge, judge_json, args] {
     const ScanJudgement judgement = ScanAndJudge(args->scene, *judge);

@@ -30,7 +30,7 @@ namespace procam {
 
 class OptionTable {
  public:
-  enum class Kind { kFlag, kInteger, kNumber, kText, kPath, kChoice };
+  enum class Kind { kFlag, kInteger, kNumber, kText, kPath, kChoice, kList, kCustom };
 
   // The values a number takes: [min, max], with either end open ("(0, 1]").
   struct Interval {
@@ -58,6 +58,13 @@ class OptionTable {
     std::function<bool(const std::string& text, std::string* why)> set;
     // The field's value is within the declared range or choices; `*why` as for set.
     std::function<bool(std::string* why)> check;
+    bool required = false;    // must be given (Required())
+    bool positional = false;  // given without its flag, in the order declared (Positional())
+    // kList: the items, each as written; get() and set() take them joined by ','.
+    std::function<std::vector<std::string>()> items;
+    std::function<bool(const std::vector<std::string>& items, std::string* why)> set_items;
+    bool repeated = false;  // kList: one item per flag ("--hold-lens a=x --hold-lens b=y")
+    std::string values;     // kList, kCustom: what it takes, e.g. "auto or ms in [0, 60000]"
   };
 
   // `owner` names the table in docs/options.md and in messages, e.g. "compensate".
@@ -78,6 +85,36 @@ class OptionTable {
   OptionTable& NegatedFlag(const std::string& name, bool* field, const std::string& help);
   OptionTable& Text(const std::string& name, std::string* field, const std::string& help);
   OptionTable& Path(const std::string& name, std::filesystem::path* field, const std::string& help);
+  // A number that may be unset (empty when written).
+  OptionTable& OptionalNumber(const std::string& name, std::optional<double>* field, Interval range,
+                              const std::string& unit, const std::string& help);
+  // Lists, given as one comma-separated value or by repeating the flag ("--names a,b" or
+  // "--names a --names b"); written as one comma-separated value.
+  OptionTable& Texts(const std::string& name, std::vector<std::string>* field,
+                     const std::string& help);
+  OptionTable& Paths(const std::string& name, std::vector<std::filesystem::path>* field,
+                     const std::string& help);
+  OptionTable& Numbers(const std::string& name, std::vector<double>* field, Interval range,
+                       const std::string& unit, const std::string& help);
+  OptionTable& Integers(const std::string& name, std::vector<int>* field, int min, int max,
+                        const std::string& unit, const std::string& help);
+  // A list of any items: `items` writes them, `set_items` parses them into the field. `values`
+  // says what an item is.
+  OptionTable& List(const std::string& name, std::function<std::vector<std::string>()> items,
+                    std::function<bool(const std::vector<std::string>&, std::string*)> set_items,
+                    const std::string& values, const std::string& help);
+  // A value of its own syntax (e.g. "auto" or milliseconds; "9x6"), possibly spread over several
+  // fields: `get` writes it, `set` parses it (false and `*why` if it is not a value of it), and
+  // `values` says what it takes.
+  OptionTable& Custom(const std::string& name, std::function<std::string()> get,
+                      std::function<bool(const std::string&, std::string*)> set,
+                      const std::string& values, const std::string& help);
+  // Modify the option declared last: it must be given (the command line requires it; Check()
+  // refuses it empty); it is given without its flag, in the order declared (a list takes every
+  // such value left); a list given one item per flag, its items not split at commas.
+  OptionTable& Required();
+  OptionTable& Positional();
+  OptionTable& Repeated();
   // An enumeration by name: `names` pairs each accepted name with its value.
   template <typename Enum>
   OptionTable& Choice(const std::string& name, Enum* field,
@@ -93,7 +130,7 @@ class OptionTable {
   // flag: "--alpha: must be in [1e-09, 1], got 2".
   bool Check(std::string* why) const;
   // The options whose value differs from their default, as a command line writes them, in the
-  // order declared: {"--alpha", "0.3", "--multires"}.
+  // order declared: {"--alpha", "0.3", "--multires"}; a positional option as its value(s) alone.
   std::vector<std::string> ChangedArguments() const;
   // Sets an option from its written value (as the command line does). Throws
   // std::invalid_argument naming the flag: no such option, or a value it does not take.
@@ -107,9 +144,32 @@ class OptionTable {
                  std::function<int()> get_index, std::function<void(int)> set_index,
                  const std::string& help);
 
+  Option& Last(const char* what);
+
   std::string owner_;
   std::vector<Option> options_;
 };
+
+// The command line equivalent to `options`: what differs from a default-constructed Options, as
+// its Declare(OptionTable*) declares it (OptionTable::ChangedArguments). E.g. the command a stage
+// prints for a step it runs.
+template <typename Options>
+std::vector<std::string> ChangedArgumentsOf(const Options& options) {
+  Options copy;  // the table's defaults: the struct's own
+  OptionTable table;
+  copy.Declare(&table);
+  copy = options;  // the fields the table points to now hold `options`' values
+  return table.ChangedArguments();
+}
+
+// OptionTable::Check of `options`' declared options (on a copy: the table binds its fields).
+template <typename Options>
+bool CheckDeclared(const Options& options, std::string* why) {
+  Options copy = options;
+  OptionTable table;
+  copy.Declare(&table);
+  return table.Check(why);
+}
 
 // Writes a number as options are written: the shortest text that reads back to the same double.
 std::string OptionNumberText(double value);

@@ -4,11 +4,11 @@
 
 #include <algorithm>
 #include <array>
-#include <numbers>
+#include <limits>
 #include <nlohmann/json.hpp>
-#include <stdexcept>
-
+#include <numbers>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 
 #include "base/html_report.h"
 #include "base/io.h"
@@ -19,6 +19,38 @@
 #include "capture/session.h"
 
 namespace procam {
+
+void BoardStageOptions::Declare(OptionTable* table) {
+  table
+      ->Paths("sessions", &sessions,
+              "structured-light sessions of `procam capture --sequence structured_light`, one per "
+              "board pose")
+      .Positional()
+      .Required()
+      .Path("out", &out, "the rig directory: camera.cameramodel, NAME.cameramodel, result.json")
+      .Required()
+      .Text("name", &projector, "the projector's name");
+  board.Declare(table);
+  table
+      ->Choice<std::string>("lens-model", &options.lens_model,
+                            {{"LENSMODEL_OPENCV4", "LENSMODEL_OPENCV4"},
+                             {"LENSMODEL_OPENCV5", "LENSMODEL_OPENCV5"},
+                             {"LENSMODEL_OPENCV8", "LENSMODEL_OPENCV8"}},
+                            "both lenses' distortion model (mrcal)")
+      .Integer("window", &options.homography_half_window, 3, 200, "camera pixels",
+               "half side of the window around a corner for its local homography")
+      .Integer("min-window-pixels", &options.min_window_pixels, 8, std::numeric_limits<int>::max(),
+               "", "fewest decoded pixels in a corner's window")
+      .Number("homography-reject", &options.homography_reject_px,
+              OptionTable::Interval::AboveMin(0.0, 1e6), "projector pixels",
+              "decoded pixels farther than this from a corner's homography are dropped")
+      .Integer("min-poses", &options.min_poses, 2, std::numeric_limits<int>::max(), "",
+               "fewest board poses")
+      .Number("min-tilt-spread", &options.min_tilt_spread_deg,
+              OptionTable::Interval::BelowMax(0.0, 90.0), "degrees",
+              "least angle between two poses' board normals")
+      .NegatedFlag("no-outlier-rejection", &options.reject_outliers, "keep every corner");
+}
 
 bool BoardStageOptions::Check(std::string* why) const {
   if (sessions.empty()) {
@@ -33,7 +65,7 @@ bool BoardStageOptions::Check(std::string* why) const {
     *why = "board: projector name '" + projector + "' takes letters, digits, '_', '-' and '.'";
     return false;
   }
-  return board.Check(why) && options.Check(why) && decode.Check(why);
+  return CheckDeclared(*this, why) && board.Check(why) && options.Check(why) && decode.Check(why);
 }
 
 namespace {

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "base/option_table.h"
 #include "base/progress.h"
 #include "calibration/board_projector.h"
 
@@ -26,6 +27,9 @@ struct BoardStageOptions {
   BoardProjectorOptions options;
   StructuredLightDecodeOptions decode;
   ProgressCallback progress;         // per pose: corners found; the brief report; files written
+  // Declares the sessions (positional), --out, --name, --corners, --square and the board
+  // calibration's options (--lens-model, --window, ...) in `table`, bound to these fields.
+  void Declare(OptionTable* table);
   bool Check(std::string* why) const;
 };
 

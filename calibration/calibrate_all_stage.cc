@@ -3,7 +3,10 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <stdexcept>
@@ -34,9 +37,30 @@ std::string Join(const std::vector<std::string>& items, const char* separator) {
   return text;
 }
 
-// A step as the command a user would type for it.
-void ShowCommand(const ProgressCallback& progress, const std::vector<std::string>& arguments) {
-  Report(progress, "\n$ procam " + Join(arguments, " "));
+// `argument` as a shell reads it back: in single quotes when it holds anything but letters,
+// digits and _ . / : = , @ % + - (a camera URI's ? and &).
+std::string ShellWord(const std::string& argument) {
+  const bool plain = !argument.empty() && std::all_of(argument.begin(), argument.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) ||
+           (c != '\0' && std::strchr("_./:=,@%+-", c) != nullptr);
+  });
+  if (plain) return argument;
+  std::string quoted = "'";
+  for (char c : argument) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return quoted + "'";
+}
+
+// A step as the command a user would type for it: `command` and the step's options as they
+// differ from the defaults (each stage's option table, ChangedArgumentsOf).
+template <typename Options>
+void ShowCommand(const ProgressCallback& progress, const std::string& command,
+                 const Options& options) {
+  std::string line = "\n$ procam " + command;
+  for (const std::string& argument : ChangedArgumentsOf(options)) {
+    line += ' ';
+    line += ShellWord(argument);
+  }
+  Report(progress, line);
 }
 
 // Where a stop leaves the rig, and how to go on.
@@ -177,10 +201,7 @@ void CalibrateCameraStep(const CalibrateAllOptions& args, const RigPlan& plan) {
            fmt::format("rendered {} chessboard photos of the synthetic camera into {}", photos,
                        camera.images.string()));
   }
-  ShowCommand(args.progress,
-              {"calibrate", "camera", camera.images.string(), "--out", args.out.string(),
-               "--corners", fmt::format("{}x{}", camera.board.corners_x, camera.board.corners_y),
-               "--square", fmt::format("{}", camera.board.square_size)});
+  ShowCommand(args.progress, "calibrate camera", camera);
   RunCameraStage(camera);
 }
 
@@ -199,30 +220,17 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args,
     capture.latency.grab_timeout_ms = args.grab_timeout_ms;
     capture.sequencer.exposures_us = args.exposures_us;
     capture.progress = args.progress;
-    std::vector<std::string> common = {
-        "--camera", args.camera, "--frames", std::to_string(args.frames), "--settle-ms",
-        args.measure_settle ? std::string("auto") : fmt::format("{}", args.settle_ms),
-        "--timeout-ms", fmt::format("{}", args.grab_timeout_ms)};
     if (plan.simulated) {
       capture.projector = static_cast<int>(k);
-      common.insert(common.end(), {"--projector", std::to_string(k)});
     } else {
       capture.display = plan.displays[k];
-      common.insert(common.end(), {"--display", args.display_names[k]});
-    }
-    if (!args.exposures_us.empty()) {
-      std::vector<std::string> exposures;
-      for (double e : args.exposures_us) exposures.push_back(fmt::format("{}", e));
-      common.insert(common.end(), {"--exposure-us", Join(exposures, ",")});
+      capture.display_name = args.display_names[k];
     }
     capture.sequence = "structured_light";
     capture.out = plan.captures / ("structured_light_" + plan.names[k]);
-    std::vector<std::string> command = {"capture", "--sequence", "structured_light", "--out",
-                                        capture.out.string()};
-    command.insert(command.end(), common.begin(), common.end());
     capture.stop = args.stop;
     ThrowIfStopped(args, "before the structured light of projector '" + plan.names[k] + "'");
-    ShowCommand(args.progress, command);
+    ShowCommand(args.progress, "capture", capture);
     const CaptureSummary structured = RunCaptureStage(capture);
     ThrowIfCaptureStopped(capture, structured,
                           "structured light of projector '" + plan.names[k] + "'");
@@ -232,19 +240,12 @@ std::vector<std::filesystem::path> CaptureStep(const CalibrateAllOptions& args,
     // The flat fields settle as the structured light did (measured once per projector).
     capture.measure_latency = false;
     capture.sequencer.settle_ms = structured.settle_ms;
-    for (size_t i = 0; i + 1 < common.size(); ++i)
-      if (common[i] == "--settle-ms") common[i + 1] = fmt::format("{}", structured.settle_ms);
     capture.sequence = "photometric";
     capture.levels = args.levels;
     capture.channels = "rgb";
     capture.out = plan.captures / ("photometric_" + plan.names[k]);
-    std::vector<std::string> levels;
-    for (int level : args.levels) levels.push_back(std::to_string(level));
-    command = {"capture",    "--sequence", "photometric", "--levels",          Join(levels, ","),
-               "--channels", "rgb",        "--out",       capture.out.string()};
-    command.insert(command.end(), common.begin(), common.end());
     ThrowIfStopped(args, "before the flat fields of projector '" + plan.names[k] + "'");
-    ShowCommand(args.progress, command);
+    ShowCommand(args.progress, "capture", capture);
     const CaptureSummary flat = RunCaptureStage(capture);
     ThrowIfCaptureStopped(capture, flat, "flat fields of projector '" + plan.names[k] + "'");
     Report(args.progress, CaptureLine(capture, flat));
@@ -265,9 +266,6 @@ void ProjectorsStep(const CalibrateAllOptions& args, const RigPlan& plan,
   projectors.out = args.out;
   projectors.names = plan.names;
   projectors.progress = args.progress;
-  std::vector<std::string> command = {"calibrate", "projectors"};
-  for (const std::filesystem::path& session : sessions) command.push_back(session.string());
-  command.insert(command.end(), {"--out", args.out.string(), "--names", Join(plan.names, ",")});
   if (plan.scan) {
     projectors.board = args.board;
     projectors.board_thickness = args.board_thickness;
@@ -275,41 +273,23 @@ void ProjectorsStep(const CalibrateAllOptions& args, const RigPlan& plan,
     projectors.floor_chessboard = args.floor_chessboard;
     if (args.camera_height > 0.0 && args.floor_chessboard.empty()) {
       projectors.camera_height = args.camera_height;
-      command.insert(command.end(), {"--camera-height", fmt::format("{}", args.camera_height)});
-    } else {
-      if (projectors.floor_chessboard.empty()) {  // a simulated camera photographs its floor
-        projectors.floor_chessboard = plan.captures / "floor_chessboard.png";
-        projectors.board.square_size = plan.simulated->render_floor_chessboard(
-            projectors.board.corners_x, projectors.board.corners_y, projectors.floor_chessboard);
-        Report(args.progress, "rendered the synthetic camera's photo of a chessboard on the floor: " +
-                                  projectors.floor_chessboard.string());
-      }
-      command.insert(command.end(),
-                     {"--floor-chessboard", projectors.floor_chessboard.string(), "--corners",
-                      fmt::format("{}x{}", projectors.board.corners_x, projectors.board.corners_y),
-                      "--square", fmt::format("{}", projectors.board.square_size)});
-      if (args.board_thickness > 0.0)
-        command.insert(command.end(),
-                       {"--board-thickness", fmt::format("{}", args.board_thickness)});
+    } else if (projectors.floor_chessboard.empty()) {  // a simulated camera photographs its floor
+      projectors.floor_chessboard = plan.captures / "floor_chessboard.png";
+      projectors.board.square_size = plan.simulated->render_floor_chessboard(
+          projectors.board.corners_x, projectors.board.corners_y, projectors.floor_chessboard);
+      Report(args.progress, "rendered the synthetic camera's photo of a chessboard on the floor: " +
+                                projectors.floor_chessboard.string());
     }
-    if (plan.patches > 0)
-      command.insert(command.end(), {"--patches", std::to_string(plan.patches)});
-    ShowCommand(args.progress, command);
+    ShowCommand(args.progress, "calibrate projectors", projectors);
     RunProjectorsStage(projectors);
     return;
   }
   projectors.scene = plan.scene;
-  command.insert(command.end(), {"--scene", plan.scene});
   projectors.held_lenses = args.held_lenses;
-  for (const auto& [name, file] : args.held_lenses)
-    command.insert(command.end(), {"--hold-lens", name + "=" + file.string()});
-  std::string guess = args.camera_guess;
-  if (guess.empty() && plan.simulated) guess = plan.simulated->camera_guess;
-  if (!guess.empty()) {
-    command.insert(command.end(), {"--camera-guess", guess});
-    projectors.room_from_camera_guess = RoomFromCameraGuess(guess);
-  }
-  ShowCommand(args.progress, command);
+  projectors.camera_guess = args.camera_guess;
+  if (projectors.camera_guess.empty() && plan.simulated)
+    projectors.camera_guess = plan.simulated->camera_guess;
+  ShowCommand(args.progress, "calibrate projectors", projectors);
   RunProjectorsStage(projectors);
 }
 
@@ -326,20 +306,7 @@ void PhotometryStep(const CalibrateAllOptions& args, const RigPlan& plan) {
     photometric.camera_scale = camera_scale;
     photometric.patches = plan.patches;
     photometric.progress = args.progress;
-    std::vector<std::string> command = {"calibrate",
-                                        "photometric",
-                                        photometric.session.string(),
-                                        "--out",
-                                        args.out.string(),
-                                        "--projector",
-                                        name,
-                                        "--scene",
-                                        plan.scene,
-                                        "--camera-scale",
-                                        camera_scale};
-    if (plan.patches > 0)
-      command.insert(command.end(), {"--patches", std::to_string(plan.patches)});
-    ShowCommand(args.progress, command);
+    ShowCommand(args.progress, "calibrate photometric", photometric);
     RunPhotometricStage(photometric);
   }
 }
@@ -493,7 +460,66 @@ void SeparateProjectorBlacks(const std::filesystem::path& out,
 
 }  // namespace
 
+void CalibrateAllOptions::Declare(OptionTable* table) {
+  table
+      ->Text("camera", &camera,
+             "camera URI (v4l2:..., aravis:..., synthetic:SCENE for the simulated rig)")
+      .Required()
+      .Text("scene", &scene,
+            "the room model (scene JSON, or synthetic:NAME); without it a real camera scans the "
+            "room into RIG_DIR/room.json; a synthetic camera uses its own scene unless --scan")
+      .Flag("scan", &scan,
+            "scan the room (no room model, no camera guess): poses and projector lenses from the "
+            "structured light, the room written as RIG_DIR/room.json")
+      .Path("floor-chessboard", &floor_chessboard,
+            "scanning: a photo of the chessboard lying flat on the floor, taken by the camera "
+            "from where it stands: the scan's metric scale (a synthetic camera takes its own)")
+      .Number("camera-height", &camera_height, 0.0, 1e3, "m",
+              "scanning: the camera's height above the floor, instead of a floor chessboard (0: "
+              "none)")
+      .Number("board-thickness", &board_thickness, 0.0, 1.0, "m",
+              "scanning: height of the floor chessboard's printed face above the floor")
+      .Path("out", &out, "the rig directory")
+      .Required()
+      .Integer("patches", &patches, 0, std::numeric_limits<int>::max(), "",
+               "patch target the per-patch reflectance is estimated for (0: the scene's; "
+               "synthetic: the camera's patches)")
+      .Path("chessboard", &chessboard,
+            "chessboard photos of the camera (a folder or a capture session)")
+      .Path("camera-model", &camera_model, "a calibrated camera.cameramodel instead of photos");
+  board.Declare(table);
+  table
+      ->Texts("display", &display_names,
+              "real rigs: each projector's monitor, in order (glfw:N|NAME)")
+      .Texts("names", &names, "projector names");
+  DeclareHeldLenses(table, &held_lenses,
+                    "hold projector NAME's lens from FILE (a .cameramodel, e.g. `procam calibrate "
+                    "board`'s) and solve only its pose in the room; not when scanning");
+  table
+      ->Text("camera-guess", &camera_guess,
+             "camera position and a point it looks at, x,y,z,look_x,look_y,look_z (scene frame, "
+             "metres); a synthetic camera's is guessed from its placement")
+      .Text("camera-scale", &camera_scale,
+            "camera value per unit exitance (number or R,G,B; default for a synthetic camera: "
+            "from its URI)")
+      .Integer("frames", &frames, 1, 1000, "", "frames averaged per pattern");
+  DeclareSettleOption(table, &settle_ms, &measure_settle);
+  table
+      ->Number("timeout-ms", &grab_timeout_ms, 1.0, 600000.0, "ms",
+               "grab timeout per frame (a camera that delivers nothing for this long is retried, "
+               "then the capture stops with one line; run the same command again to resume)")
+      .Numbers("exposure-us", &exposures_us, OptionTable::Interval::AboveMin(0.0, 1e8), "µs",
+               "exposure(s); several bracket and merge to HDR")
+      .Integers("levels", &levels, 0, 255, "", "photometric drive levels");
+}
+
+bool CalibrateAllOptions::Check(std::string* why) const {
+  return CheckDeclared(*this, why) && board.Check(why);
+}
+
 void RunCalibrateAll(const CalibrateAllOptions& args) {
+  std::string why;
+  if (!args.Check(&why)) throw std::invalid_argument(why);
   const RigPlan plan = Plan(args);
   std::filesystem::create_directories(plan.captures);
   Report(args.progress,

@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "base/option_table.h"
 #include "base/progress.h"
 #include "calibration/camera_calibration.h"
 #include "capture/display.h"
@@ -65,9 +66,9 @@ struct CalibrateAllOptions {
   std::string camera_scale;
   int frames = 4;                    // averaged per pattern
   double settle_ms = 150.0;          // wait after each pattern ...
-  // ... unless measured: the display-to-camera latency of each projector, measured before its
-  // structured light (capture/latency.h), sets the settle time of its captures.
-  bool measure_settle = false;
+  // ... unless measured (the default): the display-to-camera latency of each projector, measured
+  // before its structured light (capture/latency.h), sets the settle time of its captures.
+  bool measure_settle = true;
   double grab_timeout_ms = SequencerOptions().grab_timeout_ms;  // per frame, before a retry
   std::vector<double> exposures_us;  // several: bracketed and merged to HDR
   std::vector<int> levels = {0, 32, 64, 96, 128, 160, 192, 224, 255};  // photometric drives
@@ -76,6 +77,13 @@ struct CalibrateAllOptions {
   // or a computation inside a step (form factors) is abandoned, and no further step begins.
   // Null: run to the end.
   const std::atomic<bool>* stop = nullptr;
+
+  // Declares every option above but the callbacks (--camera, --scene, --scan, ..., --levels) in
+  // `table`, bound to these fields (base/option_table.h).
+  void Declare(OptionTable* table);
+  // The declared values and the board; `*why` names the option. What needs the camera (a
+  // simulated camera's world) is checked when the run begins.
+  bool Check(std::string* why) const;
 };
 
 // Runs the five steps. Checks what the later steps need before anything is captured or written.

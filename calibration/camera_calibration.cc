@@ -1,24 +1,48 @@
 #include "calibration/camera_calibration.h"
 
-#include "base/timing.h"
-#include "calibration/pose_math.h"
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
 #include <optional>
 #include <stdexcept>
 
-#include <opencv2/calib3d.hpp>
-#include <opencv2/imgproc.hpp>
-
 #include "base/camera_model.h"
 #include "base/io.h"
+#include "base/option_table.h"
+#include "base/parse.h"
+#include "base/timing.h"
 #include "calibration/mrcal_chessboard.h"
+#include "calibration/pose_math.h"
 
 namespace procam {
+
+void ChessboardSpec::Declare(OptionTable* table, const std::string& what) {
+  int* columns = &corners_x;
+  int* rows = &corners_y;
+  table
+      ->Custom(
+          "corners",
+          [columns, rows] { return std::to_string(*columns) + "x" + std::to_string(*rows); },
+          [columns, rows](const std::string& text, std::string* why) {
+            try {
+              const std::array<int, 2> sides =
+                  ParseSize("corners", text, "COLUMNSxROWS of inner corners, e.g. 9x6", 2, 100);
+              *columns = sides[0];
+              *rows = sides[1];
+              return true;
+            } catch (const IoError& error) {
+              *why = std::string(error.what()).substr(std::string("corners: ").size());
+              return false;
+            }
+          },
+          "COLUMNSxROWS, each in [2, 100]", what + " inner corners")
+      .Number("square", &square_size, OptionTable::Interval::AboveMin(0.0, 10.0), "m",
+              what + " square size");
+}
 
 bool ChessboardSpec::Check(std::string* why) const {
   // The detector's time grows with the grid: a board beyond 100 corners a side is a typing
@@ -108,6 +132,16 @@ bool DetectChessboard(const cv::Mat& image, const ChessboardSpec& board,
   corners->resize(found.size());
   for (size_t k = 0; k < found.size(); ++k) (*corners)[k] = Vec2(found[k].x, found[k].y);
   return true;
+}
+
+void CameraCalibrationOptions::Declare(OptionTable* table) {
+  table
+      ->Choice<std::string>("lens-model", &lens_model,
+                            {{"LENSMODEL_OPENCV4", "LENSMODEL_OPENCV4"},
+                             {"LENSMODEL_OPENCV5", "LENSMODEL_OPENCV5"},
+                             {"LENSMODEL_OPENCV8", "LENSMODEL_OPENCV8"}},
+                            "the lens's distortion model (mrcal)")
+      .NegatedFlag("no-outlier-rejection", &reject_outliers, "keep every corner");
 }
 
 bool CameraCalibrationOptions::Check(std::string* why) const {

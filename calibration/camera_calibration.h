@@ -24,11 +24,16 @@
 
 namespace procam {
 
+class OptionTable;
+
 // A planar chessboard: its inner-corner grid and square size.
 struct ChessboardSpec {
   int corners_x = 9;          // inner corners along a row (OpenCV's pattern width), [2, 100]
   int corners_y = 6;          // inner corners along a column (pattern height), [2, 100]
   double square_size = 0.03;  // side of one square, metres, > 0
+  // Declares --corners COLUMNSxROWS and --square (metres) in `table`, bound to these fields;
+  // `what` begins their help (e.g. "scanning: the floor chessboard's").
+  void Declare(OptionTable* table, const std::string& what = "the chessboard's");
   bool Check(std::string* why) const;
   int CornerCount() const { return corners_x * corners_y; }
   // Corner k (row-major: k = row · corners_x + column) in the board frame, metres.
@@ -59,6 +64,8 @@ struct CameraCalibrationOptions {
   bool regularization = true;   // mrcal's light regularisation of distortion and the centre
   int min_views = 3;            // fewest views with a detected board, ≥ 3
   bool verbose = false;         // mrcal prints its solver's progress to stderr
+  // Declares --lens-model and --no-outlier-rejection in `table`, bound to these fields.
+  void Declare(OptionTable* table);
   bool Check(std::string* why) const;
 };
 

@@ -42,11 +42,25 @@ std::vector<std::filesystem::path> ChessboardImages(const std::filesystem::path&
 
 }  // namespace
 
+void CameraStageOptions::Declare(OptionTable* table) {
+  table
+      ->Path("session", &images, "a capture session (its frames/) or a folder of chessboard photos")
+      .Positional()
+      .Required()
+      .Path("out", &out, "the rig directory: camera.cameramodel, result.json")
+      .Required();
+  board.Declare(table);
+  options.Declare(table);
+}
+
+bool CameraStageOptions::Check(std::string* why) const {
+  return CheckDeclared(*this, why) && board.Check(why) && options.Check(why);
+}
+
 CameraStageSummary RunCameraStage(const CameraStageOptions& args) {
   const ChessboardSpec& board = args.board;
   std::string why;
-  if (!board.Check(&why)) throw std::invalid_argument(why);
-  if (!args.options.Check(&why)) throw std::invalid_argument(why);
+  if (!args.Check(&why)) throw std::invalid_argument(why);
 
   std::vector<ChessboardView> views;
   std::vector<std::string> skipped;

@@ -5,6 +5,7 @@
 
 #include <filesystem>
 
+#include "base/option_table.h"
 #include "base/progress.h"
 #include "calibration/camera_calibration.h"
 #include "calibration/projection_uncertainty.h"
@@ -19,6 +20,12 @@ struct CameraStageOptions {
   ChessboardSpec board;       // inner corners and square size
   CameraCalibrationOptions options;
   ProgressCallback progress;  // boards found, the calibration's brief report, files written
+
+  // Declares the session (positional), --out, --corners, --square, --lens-model and
+  // --no-outlier-rejection in `table`, bound to these fields (base/option_table.h).
+  void Declare(OptionTable* table);
+  // The declared options, the board and the calibration's options; `*why` names the option.
+  bool Check(std::string* why) const;
 };
 
 struct CameraStageSummary {

@@ -1,11 +1,14 @@
 #include "calibration/capture_stage.h"
 
+#include <array>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <set>
 
 #include "base/check.h"
 #include "base/io.h"
+#include "base/parse.h"
 #include "base/stop.h"
 #include "calibration/camera_response.h"
 #include "calibration/structured_light.h"
@@ -92,9 +95,63 @@ nlohmann::json CaptureResult(const CaptureSequence& sequence, const Camera& came
   return {{"command", "capture"}, {"sequence", sequence.kind}, {"camera", camera.Info().uri}};
 }
 
-bool InGammaRange(double gamma) { return gamma > 0.0 && gamma <= 10.0; }  // false for NaN
-
 }  // namespace
+
+void CaptureStageOptions::Declare(OptionTable* table) {
+  std::optional<cv::Size>* size = &projector_size;
+  table
+      ->Text("camera", &camera,
+             "camera URI: v4l2:/dev/video0, aravis:<id>, test:loopback?noise=2, "
+             "synthetic:c_shaped ...")
+      .Required()
+      .Text("sequence", &sequence, "graycode, structured_light, photometric or verify")
+      .Required()
+      .Path("out", &out, "the session directory (created, or resumed when it holds session.json)")
+      .Required()
+      .Text("display", &display_name,
+            "where patterns are shown: memory (seen only by test and synthetic cameras) or "
+            "glfw:N|NAME, a fullscreen window on a projector's monitor (procam show --list)")
+      .Custom(
+          "projector-size", [size] { return *size ? SizeText(**size) : std::string(); },
+          [size](const std::string& text, std::string* why) {
+            try {
+              const std::array<int, 2> sides =
+                  ParseSize("projector-size", text, "WIDTHxHEIGHT, e.g. 1920x1080", 1, 16384);
+              *size = cv::Size(sides[0], sides[1]);
+              return true;
+            } catch (const IoError& error) {
+              *why = std::string(error.what()).substr(std::string("projector-size: ").size());
+              return false;
+            }
+          },
+          "WIDTHxHEIGHT",
+          "the projector's resolution (default 1024x768; synthetic cameras: the projector's own)")
+      .Integer("projector", &projector, 0, std::numeric_limits<int>::max(), "",
+               "synthetic cameras: the rig projector (0-based) that shows the patterns");
+  sequencer.Declare(table);
+  DeclareSettleOption(table, &sequencer.settle_ms, &measure_latency);
+  table
+      ->Integer("discard", &sequencer.discard_frames, 0, 1000, "",
+                "fresh frames discarded before averaging")
+      .Numbers("exposure-us", &sequencer.exposures_us, OptionTable::Interval::AboveMin(0.0, 1e8),
+               "µs", "exposure(s); several bracket and merge to HDR")
+      .Path("camera-response", &camera_response,
+            "camera_response.json (procam calibrate response): linearise a camera that is not "
+            "linear before the HDR merge")
+      .OptionalNumber("gain", &gain, OptionTable::Interval::Closed(0.0, 1e6), "",
+                      "camera gain to set (dB for Aravis/test cameras, driver units for V4L2)")
+      .Number("pattern-gamma", &pattern_gamma, OptionTable::Interval::AboveMin(0.0, 10.0), "",
+              "structured_light: the projector's gamma, so its sinusoids are sinusoids in light")
+      .Choice<std::string>("axes", &axes,
+                           {{"both", "both"}, {"columns", "columns"}, {"rows", "rows"}},
+                           "graycode, structured_light: the stripes' axes")
+      .Integers("levels", &levels, 0, 255, "", "photometric: 8-bit levels")
+      .Text("channels", &channels, "photometric: any of r, g, b, w")
+      .Number("projector-gamma", &projector_gamma, OptionTable::Interval::AboveMin(0.0, 10.0), "",
+              "memory display: the response exponent the test camera sees")
+      .Paths("images", &images, "verify: the images to show, each at projector resolution")
+      .Positional();
+}
 
 bool CaptureStageOptions::Check(std::string* why) const {
   const std::set<std::string> sequences = {"graycode", "structured_light", "photometric", "verify"};
@@ -102,14 +159,7 @@ bool CaptureStageOptions::Check(std::string* why) const {
     return Fail(
         why, "--sequence: '" + sequence + "': graycode, structured_light, photometric or verify");
   }
-  if (axes != "both" && axes != "columns" && axes != "rows") {
-    return Fail(why, "--axes: '" + axes + "': both, columns or rows");
-  }
-  if (projector < 0)
-    return Fail(why, "--projector: must be >= 0, got " + std::to_string(projector));
-  if (gain && !(*gain >= 0.0 && *gain <= 1e6)) return Fail(why, "--gain: must be in [0, 1e6]");
-  if (!InGammaRange(pattern_gamma)) return Fail(why, "--pattern-gamma: must be in (0, 10]");
-  if (!InGammaRange(projector_gamma)) return Fail(why, "--projector-gamma: must be in (0, 10]");
+  if (!CheckDeclared(*this, why)) return false;
   PhotometricOptions photometric;
   photometric.levels = levels;
   photometric.channels = channels;

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "base/option_table.h"
 #include "base/progress.h"
 #include "capture/display.h"
 #include "capture/latency.h"
@@ -29,6 +30,9 @@ struct CaptureStageOptions {
   // simulated camera's projector `projector` (capture/simulated_camera.h), else the memory
   // display, which only test cameras see.
   std::shared_ptr<PatternDisplay> display;
+  // `display` as the command line names it: memory, or glfw:N|NAME, a projector's monitor
+  // (procam show --list); the caller opens it (the equivalent command shows it).
+  std::string display_name = "memory";
   int projector = 0;  // simulated cameras: which of their world's projectors shows the patterns
   // The projector's resolution with the memory display (unset: 1024x768); a display's own
   // resolution wins; given with a simulated projector, it must match the projector's.
@@ -51,9 +55,16 @@ struct CaptureStageOptions {
   // result.json then says complete false, stopped true; the same call again resumes.
   const std::atomic<bool>* stop = nullptr;
 
+  // Declares --camera, --sequence, --out, --display, --projector-size, --projector, the
+  // sequencer's (--frames, --settle-ms, --discard, --exposure-us, --timeout-ms, --retries,
+  // --retry-delay-ms), --camera-response, --gain, --pattern-gamma, --axes, --levels,
+  // --channels, --projector-gamma and the images (positional) in `table`, bound to these fields
+  // (base/option_table.h).
+  void Declare(OptionTable* table);
   // Checks every value, whichever sequence uses it, so that a typing error is refused before
-  // anything is shown or written: the sequence, the projector (>= 0), the gain, the gammas
-  // (finite, in (0, 10]), levels and channels (PhotometricOptions), axes and the sequencer's.
+  // anything is shown or written: the sequence, the declared values (the projector >= 0, the
+  // gain, the gammas in (0, 10], ...), levels and channels (PhotometricOptions) and the
+  // sequencer's.
   bool Check(std::string* why) const;
 };
 

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
@@ -427,19 +428,41 @@ PhotometricSession ReadPhotometricSession(const std::filesystem::path& directory
 
 }  // namespace
 
+void PhotometricStageOptions::Declare(OptionTable* table) {
+  table
+      ->Path("session", &session,
+             "a capture session of `procam capture --sequence photometric --channels rgb`")
+      .Positional()
+      .Required()
+      .Path("out", &out, "the rig directory: photometric.json, result.json")
+      .Required()
+      .Number("min-contrast", &options.min_contrast, OptionTable::Interval::BelowMax(0.0, 1.0), "",
+              "pixels used: brightening from black by at least this fraction of the largest")
+      .Integer("table-size", &options.table_size, 2, 4096, "",
+               "entries of the response table (lut)")
+      .Text("projector", &projector, "merge the fit into RIG_DIR/rig.json's projector of this name")
+      .Text("scene", &scene,
+            "scene file: black and max in the scene's units and per-patch reflectance (needs the "
+            "rig's camera registration and the projector's model)")
+      .Integer("patches", &patches, 0, std::numeric_limits<int>::max(), "",
+               "patch target for the scene (0: the scene's)")
+      .Text("camera-scale", &camera_scale,
+            "camera value per unit exitance in the scene's units: a number, R,G,B, or the "
+            "synthetic camera's URI (its exposure and gain from session.json)")
+      .OptionalNumber("camera-black", &camera_black, OptionTable::Interval::Closed(0.0, 1e9), "DN",
+                      "camera black level, subtracted before the fit (default 0, or the synthetic "
+                      "URI's black)")
+      .Choice<std::string>("response", &response, {{"gamma", "gamma"}, {"lut", "lut"}},
+                           "what rig.json gets: a gamma or the response table");
+}
+
 bool PhotometricStageOptions::Check(std::string* why) const {
   auto fail = [&](const std::string& message) {
     *why = message;
     return false;
   };
+  if (!CheckDeclared(*this, why)) return false;
   if (!(clip > 0.0 && clip <= 1.0)) return fail("clip: must be in (0, 1]");
-  if (camera_black && !(*camera_black >= 0.0 && *camera_black <= 1e9)) {
-    return fail("--camera-black: must be a number of digital numbers in [0, 1e9]");
-  }
-  if (response != "gamma" && response != "lut") {
-    return fail("--response: '" + response + "': gamma or lut");
-  }
-  if (patches < 0) return fail("--patches: must be >= 0");
   if (min_patch_pixels < 1) return fail("min_patch_pixels: must be >= 1");
   return options.Check(why);
 }

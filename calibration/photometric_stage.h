@@ -14,6 +14,7 @@
 #include <optional>
 #include <string>
 
+#include "base/option_table.h"
 #include "base/progress.h"
 #include "calibration/photometric.h"
 
@@ -36,8 +37,12 @@ struct PhotometricStageOptions {
   int min_patch_pixels = 4;        // camera pixels a patch needs for its reflectance
   ProgressCallback progress;       // pixels used, the fit's brief report, files written
 
-  // Checks every value (clip in (0, 1], camera_black, response, patches >= 0,
-  // min_patch_pixels >= 1, options); why names the option.
+  // Declares the session (positional), --out, --min-contrast, --table-size, --projector,
+  // --scene, --patches, --camera-scale, --camera-black and --response in `table`, bound to these
+  // fields (base/option_table.h).
+  void Declare(OptionTable* table);
+  // Checks every value (the declared ones, clip in (0, 1], min_patch_pixels >= 1, options); why
+  // names the option.
   bool Check(std::string* why) const;
 };
 

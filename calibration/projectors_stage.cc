@@ -2,9 +2,10 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
-#include <algorithm>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <set>
@@ -223,23 +224,115 @@ bool ChessboardLensPrior(const std::filesystem::path& rig_dir, const CameraModel
 
 }  // namespace
 
-std::map<std::string, std::filesystem::path> ParseHeldLenses(
-    const std::vector<std::string>& entries) {
-  std::map<std::string, std::filesystem::path> lenses;
-  for (const std::string& entry : entries) {
-    const size_t equals = entry.find('=');
-    if (equals == std::string::npos || equals == 0 || equals + 1 == entry.size())
-      throw std::invalid_argument("--hold-lens '" + entry +
-                                  "': NAME=FILE, a projector's name and its .cameramodel");
-    const std::string name = entry.substr(0, equals);
-    if (!lenses.emplace(name, entry.substr(equals + 1)).second)
-      throw std::invalid_argument("--hold-lens: projector '" + name + "' given twice");
+void DeclareHeldLenses(OptionTable* table,
+                       std::map<std::string, std::filesystem::path>* held_lenses,
+                       const std::string& help) {
+  table
+      ->List(
+          "hold-lens",
+          [held_lenses] {
+            std::vector<std::string> items;
+            for (const auto& [name, file] : *held_lenses)
+              items.push_back(name + "=" + file.string());
+            return items;
+          },
+          [held_lenses](const std::vector<std::string>& entries, std::string* why) {
+            std::map<std::string, std::filesystem::path> lenses;
+            for (const std::string& entry : entries) {
+              const size_t equals = entry.find('=');
+              if (equals == std::string::npos || equals == 0 || equals + 1 == entry.size()) {
+                *why = "'" + entry + "': NAME=FILE, a projector's name and its .cameramodel";
+                return false;
+              }
+              const std::string name = entry.substr(0, equals);
+              if (!lenses.emplace(name, entry.substr(equals + 1)).second) {
+                *why = "projector '" + name + "' given twice";
+                return false;
+              }
+            }
+            *held_lenses = std::move(lenses);
+            return true;
+          },
+          "NAME=FILE, one per flag", help)
+      .Repeated();
+}
+
+void ProjectorsStageOptions::Declare(OptionTable* table) {
+  table
+      ->Paths("sessions", &sessions,
+              "structured-light sessions of `procam capture --sequence structured_light`, one "
+              "per projector")
+      .Positional()
+      .Required()
+      .Text("scene", &scene,
+            "scene JSON, or a synthetic scene name; without it the room is scanned")
+      .Path("floor-chessboard", &floor_chessboard,
+            "scanning: a photo of the chessboard lying flat on the floor, taken by the camera from "
+            "where it stands (the scan's metric scale)")
+      .OptionalNumber(
+          "camera-height", &camera_height, OptionTable::Interval::AboveMin(0.0, 1e3), "m",
+          "scanning: the camera's height above the floor, instead of a floor chessboard");
+  board.Declare(table, "scanning: the floor chessboard's");
+  table
+      ->Number("board-thickness", &board_thickness, 0.0, 1.0, "m",
+               "scanning: height of the board's printed face above the floor")
+      .Integer("patches", &scan.target_patches, 1, std::numeric_limits<int>::max(), "",
+               "scanning: patch target written into room.json")
+      .Path("out", &out,
+            "the rig directory holding camera.cameramodel; gets NAME.cameramodel, rig.json, "
+            "result.json")
+      .Required()
+      .Text("camera-guess", &camera_guess,
+            "camera position and a point it looks at, x,y,z,look_x,look_y,look_z (metres, scene "
+            "frame; a few cm and degrees off is fine); default: camera.cameramodel's pose")
+      .Text("camera-up", &camera_up, "the scene's up direction, x,y,z")
+      .Texts("names", &names,
+             "projector names, one per session (default: the session's display name)");
+  DeclareHeldLenses(table, &held_lenses,
+                    "hold projector NAME's lens (intrinsics and distortion) from FILE, a "
+                    ".cameramodel (e.g. `procam calibrate board`'s NAME.cameramodel), and solve "
+                    "only its pose in the room; with a scene");
+  table
+      ->Flag("refine-distortion", &options.refine_distortion,
+             "refine projector k1, k2 (LENSMODEL_OPENCV4); default pinhole")
+      .Flag("refine-camera", &options.refine_camera_intrinsics,
+            "refine the camera's focal length (fy / fx kept), cx, cy jointly (distortion kept); "
+            "scanning: the whole lens, with the chessboard's covariance as the prior")
+      .Flag("refine-camera-aspect", &refine_camera_aspect,
+            "with --refine-camera: fx and fy free independently (weakly pinned by walls and a "
+            "floor)")
+      .Integer(
+          "max-correspondences", &max_correspondences, 0, std::numeric_limits<int>::max(), "",
+          "per projector, decoded pixels used (thinned evenly); 0: " +
+              std::to_string(RoomCalibrationOptions().max_correspondences) + " with a scene, " +
+              std::to_string(SelfCalibrationOptions().max_correspondences) + " scanning the room");
+}
+
+bool ProjectorsStageOptions::Check(std::string* why) const {
+  if (!CheckDeclared(*this, why)) return false;
+  if (!scene.empty() && (!floor_chessboard.empty() || camera_height)) {
+    *why = "--floor-chessboard, --camera-height: only without --scene (scanning the room)";
+    return false;
   }
-  return lenses;
+  if (scene.empty() && !camera_guess.empty()) {
+    *why = "--camera-guess: only with --scene (a scan needs no guess)";
+    return false;
+  }
+  return true;
 }
 
 ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
   ProjectorsStageOptions args = input;
+  {
+    std::string why;
+    if (!args.Check(&why)) throw std::invalid_argument(why);
+  }
+  if (args.max_correspondences > 0) {
+    args.options.max_correspondences = args.max_correspondences;
+    args.self_calibration.max_correspondences = args.max_correspondences;
+  }
+  if (!args.room_from_camera_guess && !args.camera_guess.empty())
+    args.room_from_camera_guess = RoomFromCameraGuess(args.camera_guess, args.camera_up);
   if (args.refine_camera_aspect && !args.options.refine_camera_intrinsics)
     throw std::invalid_argument("--refine-camera-aspect: needs --refine-camera");
   args.options.keep_camera_aspect_ratio = !args.refine_camera_aspect;

@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "base/option_table.h"
 #include "base/progress.h"
 #include "calibration/camera_calibration.h"
 #include "calibration/registration.h"
@@ -38,8 +39,13 @@ struct ProjectorsStageOptions {
   std::string scene;  // the room model: a scene file or PREFIX:NAME; empty: scan the room
   std::filesystem::path out;                    // the rig directory holding camera.cameramodel
   // The camera's pose in the room to start from (a few cm and degrees off is fine); unset:
-  // the pose camera.cameramodel already holds (an error if it holds none).
+  // `camera_guess`, else the pose camera.cameramodel already holds (an error if it holds none).
   std::optional<Eigen::Isometry3d> room_from_camera_guess;
+  // The guess as written: the camera's position and a point it looks at,
+  // "x,y,z,look_x,look_y,look_z" (metres, the scene's frame), image up as close to `camera_up`
+  // ("x,y,z") as possible (RoomFromCameraGuess). Empty: none.
+  std::string camera_guess;
+  std::string camera_up = "0,0,1";
   std::vector<std::string> names;     // one per session; empty: each session's display name
   // Projectors whose lens (intrinsics and distortion) is held from a .cameramodel — the board
   // calibration's NAME.cameramodel (board_stage.h), LENSMODEL_PINHOLE or LENSMODEL_OPENCV4, its
@@ -61,7 +67,19 @@ struct ProjectorsStageOptions {
   double max_board_floor_angle_deg = 3.0;
   SelfCalibrationOptions self_calibration;  // its camera_height is set from the above
   SceneFromPointsOptions scan;  // the written room: reflectance, desired colour, patch target
+  // Per projector, decoded pixels used (thinned evenly), >= 0; 0: each path's own default
+  // (options.max_correspondences with a scene, self_calibration.max_correspondences scanning).
+  int max_correspondences = 0;
   ProgressCallback progress;  // decoding per session, the solve, the scan check, files written
+
+  // Declares the sessions (positional), --scene, the scan's --floor-chessboard, --camera-height,
+  // --corners, --square, --board-thickness and --patches, --out, --camera-guess, --camera-up,
+  // --names, --hold-lens, --refine-distortion, --refine-camera, --refine-camera-aspect and
+  // --max-correspondences in `table`, bound to these fields (base/option_table.h).
+  void Declare(OptionTable* table);
+  // The declared values, and the options of one path not given with the other (the scan's
+  // without a scene, --camera-guess with one); `*why` names the option.
+  bool Check(std::string* why) const;
 };
 
 struct ProjectorsStageSummary {
@@ -83,11 +101,12 @@ std::string ProjectorNameFrom(const std::string& name);
 
 Eigen::Isometry3d RoomFromCameraGuess(const std::string& guess, const std::string& up = "0,0,1");
 
-// The held lenses of `--hold-lens NAME=FILE` entries (ProjectorsStageOptions::held_lenses). Throws
-// std::invalid_argument naming an entry without '=', with an empty name or file, or a name given
-// twice.
-std::map<std::string, std::filesystem::path> ParseHeldLenses(
-    const std::vector<std::string>& entries);
+// Declares --hold-lens NAME=FILE (one per flag) in `table`, bound to `held_lenses`
+// (ProjectorsStageOptions::held_lenses): an entry without '=', with an empty name or file, or a
+// name given twice is refused.
+void DeclareHeldLenses(OptionTable* table,
+                       std::map<std::string, std::filesystem::path>* held_lenses,
+                       const std::string& help);
 
 // Throws IoError naming the session, camera.cameramodel or rig.json and the key;
 // std::invalid_argument for bad options or names; std::runtime_error when the solve fails.

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <stdexcept>
 #include <thread>
 
@@ -113,6 +114,29 @@ void SequencerOptions::Declare(OptionTable* table) {
       .Number("retry-delay-ms", &retry_delay_ms, 0.0, 60000.0, "ms", "pause before a retry")
       .Number("timeout-ms", &grab_timeout_ms, OptionTable::Interval::AboveMin(0.0, 600000.0), "ms",
               "grab timeout per frame (the exposure is added)");
+}
+
+void DeclareSettleOption(OptionTable* table, double* ms, bool* measure) {
+  table->Custom(
+      "settle-ms", [ms, measure] { return *measure ? std::string("auto") : OptionNumberText(*ms); },
+      [ms, measure](const std::string& text, std::string* why) {
+        if (text == "auto") {
+          *measure = true;
+          return true;
+        }
+        char* end = nullptr;
+        const double value = std::strtod(text.c_str(), &end);
+        if (text.empty() || *end != '\0' || !(value >= 0.0 && value <= 60000.0)) {
+          *why = "'" + text + "': auto, or milliseconds in [0, 60000]";
+          return false;
+        }
+        *measure = false;
+        *ms = value;
+        return true;
+      },
+      "auto, or ms in [0, 60000]",
+      "wait after each pattern before frames count: auto measures the display-to-camera latency "
+      "first with a flash sequence");
 }
 
 bool SequencerOptions::Check(std::string* why) const {

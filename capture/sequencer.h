@@ -75,6 +75,11 @@ struct SequencerOptions {
   bool Check(std::string* why) const;
 };
 
+// Declares --settle-ms auto|MS in `table`, bound to `*settle_ms` (SequencerOptions::settle_ms)
+// and `*measure`: "auto" sets *measure (the display-to-camera latency measured first,
+// capture/latency.h, gives the settle time), a number of milliseconds in [0, 60000] clears it.
+void DeclareSettleOption(OptionTable* table, double* settle_ms, bool* measure);
+
 struct ExposureCapture {
   double exposure_us = 0.0;         // as the frames report it, microseconds
   double gain = 0.0;                // as the frames report it, camera units

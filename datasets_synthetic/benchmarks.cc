@@ -4,9 +4,10 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cstdarg>
 #include <cmath>
+#include <cstdarg>
 #include <cstdio>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <sstream>
@@ -125,6 +126,50 @@ cv::Mat BenchTexture() {
 }
 
 }  // namespace
+
+namespace {
+
+const std::vector<std::pair<std::string, std::string>> kDevices = {
+    {"cpu", "cpu"}, {"cuda", "cuda"}, {"both", "both"}};
+constexpr int kMostPatches = 10'000'000;
+
+}  // namespace
+
+void BenchmarkOptions::DeclareFormFactors(OptionTable* table) {
+  table->Integer("patches", &patches, 1, kMostPatches, "", "target patch count")
+      .Integer("threads", &threads, 0, 1024, "", "worker threads (0: all cores)")
+      .Text("json", &json, "also write the result as JSON here");
+}
+
+void BenchmarkOptions::DeclareSolver(OptionTable* table) {
+  table->Integers("sizes", &sizes, 1, kMostPatches, "", "target patch counts (3 variables each)")
+      .Integer("ceres-max-variables", &ceres_max_variables, 0, std::numeric_limits<int>::max(), "",
+               "skip Ceres above this many variables")
+      .Number("alpha", &alpha, 1e-9, 1.0, "", "weight of the absolute term")
+      .Text("json", &json, "also write the results as JSON here")
+      .Choice<std::string>("device", &device, kDevices,
+                           "rows to run: cpu, cuda (the GPU solver) or both")
+      .Integer("cpu-max-variables", &cpu_max_variables, 0, std::numeric_limits<int>::max(), "",
+               "skip the CPU rows (own solvers and peers) above this many variables");
+}
+
+void BenchmarkOptions::DeclareScale(OptionTable* table) {
+  table
+      ->Integers("sizes", &scale_sizes, 1, kMostPatches, "",
+                 "target patch counts (3 variables each)")
+      .Integer("dense-max-patches", &dense_max_patches, 0, kMostPatches, "",
+               "also compute the dense F (time, product error) up to this many patches")
+      .Integer("leaf-size", &clusters.leaf_size, 1, std::numeric_limits<int>::max(), "",
+               "most patches per leaf cluster")
+      .Number("admissibility", &clusters.admissibility, 1e-6, 1.0, "",
+              "far when diameters <= this x distance")
+      .Integer("threads", &threads, 0, 1024, "", "form-factor threads (0: all cores)")
+      .Number("alpha", &alpha, 1e-9, 1.0, "", "weight of the absolute term")
+      .Choice<std::string>("device", &device, kDevices, "solves to run: cpu, cuda or both")
+      .Integer("cpu-max-variables", &cpu_max_variables, 0, std::numeric_limits<int>::max(), "",
+               "skip the CPU solves above this many variables")
+      .Text("json", &json, "also write the results as JSON here");
+}
 
 void RunFormFactorBenchmark(const BenchmarkOptions& args) {
   const SubdividedRoom room = MakeSubdividedBoxRoom(args.patches);  // closed, with an occluder

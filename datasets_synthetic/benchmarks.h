@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "base/option_table.h"
 #include "base/progress.h"
 #include "compensation/solver.h"
 #include "geometry/compressed_form_factors.h"
@@ -28,6 +29,12 @@ struct BenchmarkOptions {
   int dense_max_patches = 5000;  // also the dense F (and its error) up to here
   ClusterOptions clusters;
   ProgressCallback progress;  // the table, a line per size as it finishes
+
+  // Each benchmark's options (bench formfactors, bench solver, bench scale) in `table`, bound to
+  // these fields (base/option_table.h).
+  void DeclareFormFactors(OptionTable* table);
+  void DeclareSolver(OptionTable* table);
+  void DeclareScale(OptionTable* table);
 };
 
 // The form factors of one room: time, pairs, shadow rays, row sums.
@@ -60,6 +67,8 @@ struct DecodeBenchmarkOptions {
   int repeat = 3;                                    // timed runs (median reported)
   std::string out;  // where the photos and the session go (default: a temporary folder, removed)
   ProgressCallback progress;
+  // Declares --camera-width, --camera-height, --repeat and --out in `table`, bound to these fields.
+  void Declare(OptionTable* table);
 };
 
 // Photos of procam's structured light on a plane (8-bit PNG, ambient light, read noise), then

@@ -16,6 +16,13 @@
 
 namespace procam {
 
+void DecodeBenchmarkOptions::Declare(OptionTable* table) {
+  table->Integer("camera-width", &camera_width, 1, 16384, "pixels", "photo width")
+      .Integer("camera-height", &camera_height, 1, 16384, "pixels", "photo height")
+      .Integer("repeat", &repeat, 1, 100, "", "timed runs")
+      .Text("out", &out, "keep the photos and the session here");
+}
+
 void RunDecodeBenchmark(const DecodeBenchmarkOptions& options) {
   namespace fs = std::filesystem;
   StructuredLightOptions sequence_options;

@@ -54,17 +54,17 @@ std::string SyntheticCameraUri(const SceneEvaluation& evaluation, const Evaluati
 RigDirectory CalibrateSyntheticRig(const std::string& camera, bool scan,
                                    const std::filesystem::path& rig_dir,
                                    const ProgressCallback& steps) {
-  Report(steps, fmt::format("\n$ procam calibrate all --camera {}{} --out {} --frames 2 "
-                            "--settle-ms 1 --levels 0,32,64,128,192,255",
-                            camera, scan ? " --scan" : "", rig_dir.string()));
   CalibrateAllOptions calibrate;
   calibrate.camera = camera;
   calibrate.scan = scan;
   calibrate.out = rig_dir;
   calibrate.frames = 2;
   calibrate.settle_ms = 1;
+  calibrate.measure_settle = false;
   calibrate.levels = {0, 32, 64, 128, 192, 255};
   calibrate.progress = steps;
+  Report(steps,
+         fmt::format("\n$ procam calibrate all {}", fmt::join(ChangedArgumentsOf(calibrate), " ")));
   RunCalibrateAll(calibrate);
   return ReadRigDirectory(rig_dir);
 }

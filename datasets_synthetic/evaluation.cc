@@ -1,10 +1,11 @@
 #include "datasets_synthetic/evaluation.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <stdexcept>
-
-#include <fmt/format.h>
 
 #include "base/image_io.h"
 #include "base/io.h"
@@ -18,7 +19,64 @@
 
 namespace procam {
 
+void EvaluationOptions::Declare(OptionTable* table) {
+  std::vector<std::pair<std::string, SolverOptions::RobustLoss>> losses;
+  for (SolverOptions::RobustLoss loss :
+       {SolverOptions::RobustLoss::kSquared, SolverOptions::RobustLoss::kSoftL1,
+        SolverOptions::RobustLoss::kHuber, SolverOptions::RobustLoss::kCauchy}) {
+    losses.emplace_back(RobustLossName(loss), loss);
+  }
+  std::vector<std::pair<std::string, SolverOptions::MetricUpdate>> updates;
+  for (SolverOptions::MetricUpdate update :
+       {SolverOptions::MetricUpdate::kRounds, SolverOptions::MetricUpdate::kEveryIteration}) {
+    updates.emplace_back(MetricUpdateName(update), update);
+  }
+  std::vector<CompensationMethod>* compared = &methods;
+  table
+      ->Integer("patches", &patches, 4, std::numeric_limits<int>::max(), "",
+                "solver patches per scene")
+      .Integer("world-factor", &world_factor, 1, 1000, "",
+               "world mesh patches per solver patch (the simulated room)")
+      .Number("alpha", &alpha, 1e-9, 1.0, "", "weight of the absolute term")
+      .List(
+          "methods",
+          [compared] {
+            std::vector<std::string> names;
+            for (CompensationMethod method : *compared) names.push_back(MethodName(method));
+            return names;
+          },
+          [compared](const std::vector<std::string>& names, std::string* why) {
+            std::vector<CompensationMethod> parsed;
+            for (const std::string& name : names) {
+              CompensationMethod method;
+              if (!ParseMethod(name, &method)) {
+                *why = "'" + name + "': naive, reverse, linear, perceptual or perceptual2000";
+                return false;
+              }
+              parsed.push_back(method);
+            }
+            *compared = std::move(parsed);
+            return true;
+          },
+          "methods of naive, reverse, linear, perceptual, perceptual2000", "methods to compare")
+      .Choice("loss", &loss, losses, "perceptual2000's loss")
+      .Number("loss-scale", &loss_scale, 1e-6, 1e6, "ΔE00", "perceptual2000's loss scale")
+      .Choice("metric-update", &metric_update, updates,
+              "perceptual2000's metric measured again: rounds (each a whole solve) or "
+              "every_iteration (inside one Gauss-Newton run)")
+      .Choice("light", &render.light,
+              {{LightFieldName(LightField::kSmooth), LightField::kSmooth},
+               {LightFieldName(LightField::kFlat), LightField::kFlat}},
+              "smooth: the light varies smoothly over each surface, stepping only where the "
+              "desired appearance does (seamless); flat: one uniform level per patch")
+      .Choice<bool>("bounce", &smooth_bounce, {{"smooth", true}, {"patch", false}},
+                    "the simulated room's bounce light: smooth (continuous over each surface, as "
+                    "in a real room) or patch (constant over each world-mesh patch, whose borders "
+                    "then show as steps)");
+}
+
 bool EvaluationOptions::Check(std::string* why) const {
+  if (!CheckDeclared(*this, why)) return false;
   if (patches < 4 || world_factor < 1 || methods.empty() || !(alpha > 0.0 && alpha <= 1.0)) {
     *why = "need patches >= 4, world_factor >= 1, at least one method, alpha in (0,1]";
     return false;

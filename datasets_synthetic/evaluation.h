@@ -5,17 +5,17 @@
 
 #include <filesystem>
 #include <functional>
+#include <nlohmann/json.hpp>
+#include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
 
-#include <nlohmann/json.hpp>
-#include <opencv2/core/mat.hpp>
-
+#include "base/option_table.h"
 #include "base/progress.h"
 #include "compensation/colour_image.h"
 #include "compensation/stage.h"
-#include "geometry/stage.h"
 #include "datasets_synthetic/simulated_rig.h"
+#include "geometry/stage.h"
 #include "projection/projector_images.h"
 
 namespace procam {
@@ -69,6 +69,10 @@ struct EvaluationOptions {
   // a real room; false: constant per world patch, which adds steps at the patch borders.
   bool smooth_bounce = true;
   ProgressCallback progress;       // what is being evaluated, ΔE per method
+  // Declares --patches, --world-factor, --alpha, --methods, --loss, --loss-scale,
+  // --metric-update, --light and --bounce in `table`, bound to these fields
+  // (base/option_table.h).
+  void Declare(OptionTable* table);
   bool Check(std::string* why) const;
 };
 

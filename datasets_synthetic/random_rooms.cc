@@ -4,7 +4,9 @@
 #include <fmt/ranges.h>
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <random>
 #include <stdexcept>
@@ -408,6 +410,31 @@ double Coverage(const SyntheticScene& synthetic) {
 }
 
 }  // namespace
+
+OptionTable& DeclareSeedOption(OptionTable* table, const std::string& name, uint64_t* seed,
+                               const std::string& help) {
+  return table->Custom(
+      name, [seed] { return std::to_string(*seed); },
+      [seed](const std::string& text, std::string* why) {
+        uint64_t value = 0;
+        const char* end = text.data() + text.size();
+        const auto [last, error] = std::from_chars(text.data(), end, value);
+        if (error != std::errc() || last != end) {
+          *why = "expected a whole number in [0, 2^64), got '" + text + "'";
+          return false;
+        }
+        *seed = value;
+        return true;
+      },
+      "whole number in [0, 2^64)", help);
+}
+
+void RandomRoomOptions::Declare(OptionTable* table) {
+  DeclareSeedOption(table, "seed", &seed, "the seed: the same seed gives the same room")
+      .Required()
+      .Integer("patches", &patches, 1, std::numeric_limits<int>::max(), "",
+               "the scene file's patch target");
+}
 
 bool RandomRoomOptions::Check(std::string* why) const {
   if (patches < 1) {

@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <string>
 
+#include "base/option_table.h"
 #include "datasets_synthetic/paper_scenes.h"
 
 namespace procam {
@@ -24,8 +25,14 @@ struct RandomRoomOptions {
   // Placements of the projectors and the camera drawn; the one under which the largest share of
   // the room's area is seen by the camera and lit by a projector is kept, ≥ 1.
   int placement_candidates = 6;
+  // Declares --seed and --patches in `table`, bound to these fields (base/option_table.h).
+  void Declare(OptionTable* table);
   bool Check(std::string* why) const;
 };
+
+// Declares a 64-bit seed `name` (a whole number) in `table`, bound to `*seed`.
+OptionTable& DeclareSeedOption(OptionTable* table, const std::string& name, uint64_t* seed,
+                               const std::string& help);
 
 struct RandomRoom {
   SyntheticScene synthetic;  // surfaces (named after what they are), projector and camera placements

@@ -2,25 +2,25 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <numeric>
 #include <random>
 
-#include <Eigen/Geometry>
-
 #include "calibration/registration.h"
 #include "calibration/self_calibration.h"
 #include "compensation/stage.h"
 #include "datasets_synthetic/evaluation.h"
+#include "datasets_synthetic/random_rooms.h"
 #include "datasets_synthetic/scan_accuracy.h"
-#include "geometry/stage.h"
-#include "projection/camera_rays.h"
-#include "projection/projection_rig.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "geometry/ray_scene.h"
 #include "geometry/scene_from_points.h"
+#include "geometry/stage.h"
+#include "projection/camera_rays.h"
+#include "projection/projection_rig.h"
 
 namespace procam {
 namespace {
@@ -73,6 +73,15 @@ CameraGeometry ScaledCamera(const CameraGeometry& camera, double scale) {
 }
 
 }  // namespace
+
+void ScanJudgeOptions::Declare(OptionTable* table) {
+  table->Number("camera-scale", &camera_scale, OptionTable::Interval::AboveMin(0.0, 1.0), "",
+                "the camera's image scaled (same field of view)");
+  DeclareSeedOption(table, "noise-seed", &noise_seed, "the decoding noise's seed")
+      .Flag("compensate", &compensate,
+            "also compensate on the true model and on the scan and compare their photographs")
+      .Integer("patches", &patches, 20, 5000, "", "solver patches with --compensate");
+}
 
 bool ScanJudgeOptions::Check(std::string* why) const {
   const auto fail = [&](const std::string& text) {

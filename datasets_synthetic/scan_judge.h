@@ -22,11 +22,11 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
-#include <nlohmann/json.hpp>
-
+#include "base/option_table.h"
 #include "datasets_synthetic/synthetic_camera.h"
 
 namespace procam {
@@ -60,6 +60,9 @@ struct ScanJudgeOptions {
   double spurious_percent = 1.0;
   double delta_e2000 = 0.5;  // on the scan minus on the model
   double seam = 0.5;         // on the scan
+  // Declares --camera-scale, --noise-seed, --compensate and --patches in `table`, bound to these
+  // fields (base/option_table.h).
+  void Declare(OptionTable* table);
   bool Check(std::string* why) const;
 };
 

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <optional>
 
 #include "base/io.h"
@@ -410,6 +411,26 @@ void RecordOutput::Present(uint64_t) {
   presented_ = drawn_;
   ++frames_;
   if (!path_.empty() && !presented_.codes.empty()) WriteProjectorImage(path_, presented_);
+}
+
+void NodeOptions::Declare(OptionTable* table) {
+  table->Path("rig", &rig_dir, "the rig directory (rig.json, the projectors' models, keys/)")
+      .Required()
+      .Text("scene", &scene, "the room (scene file), as the controller's")
+      .Required()
+      .Texts("projectors", &projectors,
+             "projectors of the rig this node shows, in the displays' order")
+      .Required()
+      .Texts("display", &display,
+             "per projector: glfw:MONITOR, record:DIR (DIR/NAME.png every frame) or memory")
+      .Text("listen", &listen, "endpoint to listen at (tcp://ADDRESS:PORT)")
+      .Text("name", &name, "the node's name in logs")
+      .Choice<bool>("render", &gpu, {{"gpu", true}, {"cpu", false}},
+                    "gpu: each output's images rendered on the GPU (OpenGL); cpu: the reference "
+                    "renderer")
+      .Number("seconds", &max_seconds,
+              OptionTable::Interval::Closed(0.0, std::numeric_limits<double>::max()), "s",
+              "run at most this long (0: until interrupted)");
 }
 
 void RunNode(zmq::context_t& context, const NodeOptions& options, const NodeOutputFactory& outputs,

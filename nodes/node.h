@@ -23,6 +23,7 @@
 #include <vector>
 #include <zmq.hpp>
 
+#include "base/option_table.h"
 #include "projection/frame_plan.h"
 #include "projection/projector.h"
 #include "projection/projector_images.h"
@@ -73,12 +74,19 @@ struct NodeOptions {
   std::filesystem::path rig_dir;
   std::string scene;                    // the room (LoadSceneArgument), as the controller's
   std::vector<std::string> projectors;  // names in rig.json this node shows, in output order
-  std::string listen;                   // tcp://ADDRESS:PORT, or inproc://NAME (no keys)
-  double max_seconds = 0.0;             // > 0: return after this long (tests, timed shows)
+  // Per projector, the output it is shown on: glfw:MONITOR, record:DIR or memory
+  // (MakeNodeOutputs, nodes/outputs.h); the caller makes RunNode's outputs from it.
+  std::vector<std::string> display = {"memory"};
+  std::string listen = "tcp://*:5600";  // tcp://ADDRESS:PORT, or inproc://NAME (no keys)
+  double max_seconds = 0.0;             // > 0: return after this long (tests, timed shows), >= 0
   std::function<void(const std::string&)> log;  // a line per event (setup, faults, refusals)
   // Render on the GPU where the outputs can (PrepareGpu) and the render options allow (not
   // detail or error diffusion: then the CPU renderer); false: the CPU renderer everywhere.
   bool gpu = true;
+
+  // Declares --rig, --scene, --projectors, --display, --listen, --name, --render and --seconds
+  // in `table`, bound to these fields (base/option_table.h).
+  void Declare(OptionTable* table);
 };
 
 // Makes the outputs, one per projector of `projectors` (the node's, in order).

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 
 namespace procam {
@@ -179,6 +180,122 @@ TEST(OptionTable, MarkdownHasARowPerOptionWithItsDefaultAndValues) {
       << markdown;
   EXPECT_NE(markdown.find("| `--fast` | `false` | flag |"), std::string::npos) << markdown;
   EXPECT_EQ(std::count(markdown.begin(), markdown.end(), '\n'), 2 + 7);
+}
+
+// Lists, positional and required options, unset numbers and values of their own syntax: what a
+// stage's printed command needs (sessions, --out, --names a,b, --hold-lens x=1 --hold-lens y=2).
+struct Step {
+  std::vector<std::filesystem::path> sessions;
+  std::filesystem::path out;
+  std::vector<std::string> names;
+  std::vector<std::string> entries;
+  std::vector<int> levels = {0, 255};
+  std::vector<double> exposures;
+  std::optional<double> gain;
+  double settle = 150.0;
+  bool measure = false;
+
+  void Declare(OptionTable* table) {
+    bool* measured = &measure;
+    double* ms = &settle;
+    table->Paths("sessions", &sessions, "sessions")
+        .Positional()
+        .Required()
+        .Path("out", &out, "output")
+        .Required()
+        .Texts("names", &names, "names")
+        .Texts("entry", &entries, "entries")
+        .Repeated()
+        .Integers("levels", &levels, 0, 255, "", "levels")
+        .Numbers("exposure", &exposures, OptionTable::Interval::AboveMin(0.0, 1e8), "us",
+                 "exposures")
+        .OptionalNumber("gain", &gain, OptionTable::Interval::Closed(0.0, 10.0), "dB", "gain")
+        .Integer("count", &unbounded, 0, std::numeric_limits<int>::max(), "", "at least none")
+        .Custom(
+            "settle", [=] { return *measured ? std::string("auto") : OptionNumberText(*ms); },
+            [=](const std::string& text, std::string* why) {
+              if (text == "auto") return *measured = true;
+              *measured = false;
+              if (text != "0" && text != "5") {
+                *why = "auto, 0 or 5";
+                return false;
+              }
+              *ms = std::stod(text);
+              return true;
+            },
+            "auto, 0 or 5", "settle");
+  }
+  int unbounded = 0;
+};
+
+TEST(OptionTable, ListsPositionalsRequiredUnsetAndCustomOptions) {
+  Step step;
+  OptionTable table("step");
+  step.Declare(&table);
+  std::string why;
+  EXPECT_FALSE(table.Check(&why));  // the sessions are required
+  EXPECT_EQ(why, "sessions is required");
+  table.Set("sessions", "a,b");
+  EXPECT_FALSE(table.Check(&why));
+  EXPECT_EQ(why, "--out is required");
+  table.Set("out", "rig");
+  EXPECT_TRUE(table.Check(&why)) << why;
+  EXPECT_EQ(step.sessions, (std::vector<std::filesystem::path>{"a", "b"}));
+  EXPECT_EQ(table.Find("levels")->default_text, "0,255");
+  EXPECT_EQ(table.Find("gain")->default_text, "");
+  EXPECT_EQ(table.Find("settle")->default_text, "150");
+
+  table.Set("names", "left,right");
+  table.Set("entry", "x=1,2");  // one item per flag: commas kept
+  step.entries.push_back("y=3");
+  table.Set("levels", "0,128,255");
+  table.Set("gain", "2.5");
+  table.Set("settle", "auto");
+  EXPECT_EQ(step.names, (std::vector<std::string>{"left", "right"}));
+  EXPECT_EQ(step.levels, (std::vector<int>{0, 128, 255}));
+  ASSERT_TRUE(step.gain.has_value());
+  EXPECT_EQ(*step.gain, 2.5);
+  EXPECT_TRUE(step.measure);
+  EXPECT_EQ(table.ChangedArguments(),
+            (std::vector<std::string>{"a", "b", "--out", "rig", "--names", "left,right", "--entry",
+                                      "x=1,2", "--entry", "y=3", "--levels", "0,128,255", "--gain",
+                                      "2.5", "--settle", "auto"}));
+
+  // The same from a copy of the struct, as a stage prints the command for a step it runs.
+  EXPECT_EQ(ChangedArgumentsOf(step), table.ChangedArguments());
+
+  // Refusals name the flag (Set) and leave the field.
+  EXPECT_THROW(table.Set("levels", "0,300"), std::invalid_argument);
+  EXPECT_EQ(step.levels, (std::vector<int>{0, 128, 255}));
+  try {
+    table.Set("exposure", "100,-1");
+    ADD_FAILURE() << "a negative exposure was accepted";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_EQ(std::string(error.what()), "--exposure: must be in (0, 100000000], got -1");
+  }
+  try {
+    table.Set("count", "-1");
+    ADD_FAILURE() << "a negative count was accepted";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_EQ(std::string(error.what()), "--count: must be >= 0, got -1");
+  }
+  EXPECT_THROW(table.Set("settle", "7"), std::invalid_argument);
+  EXPECT_THROW(table.Set("gain", "11"), std::invalid_argument);
+  table.Set("gain", "");  // unset again
+  EXPECT_FALSE(step.gain.has_value());
+  step.exposures = {std::nan("")};
+  EXPECT_FALSE(table.Check(&why));
+  EXPECT_NE(why.find("--exposure: must be finite"), std::string::npos) << why;
+
+  const std::string markdown = table.Markdown();
+  EXPECT_NE(markdown.find("| `sessions` |  | list of paths, required | sessions |"),
+            std::string::npos)
+      << markdown;
+  EXPECT_NE(markdown.find("| `--count` | `0` | whole number in [0, ∞) | at least none |"),
+            std::string::npos)
+      << markdown;
+  EXPECT_NE(markdown.find("| `--settle` | `150` | auto, 0 or 5 | settle |"), std::string::npos)
+      << markdown;
 }
 
 }  // namespace

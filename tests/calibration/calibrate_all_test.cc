@@ -376,7 +376,7 @@ TEST(CalibrateAll, HeldLensRefusals) {
                                                        (dir / "lens.cameramodel").string() + out),
                               "lens.cameramodel: file not found (--hold-lens a)", "missing file");
   testing::ExpectOneErrorLine(testing::RunProcamStderr(camera + "--hold-lens a" + out),
-                              "--hold-lens 'a': NAME=FILE", "no file");
+                              "--hold-lens: 'a': NAME=FILE", "no file");
   EXPECT_FALSE(std::filesystem::exists(dir / "rig"));
 }
 
