@@ -70,6 +70,57 @@ cv::Mat ToGrey(const cv::Mat& image) {
   return grey;
 }
 
+// The photos as the decoder reads them, one value per pixel as a float. A camera's own frames
+// (one channel, all of one depth: 8- or 16-bit or float) are read where they are: converting 42
+// photos of a megapixel to floats cost more than the decoding itself (allocating and touching
+// 4 bytes per pixel of each); other images (colour, other depths) are converted to one float
+// channel each, colour averaged.
+class Photos {
+ public:
+  explicit Photos(const std::vector<cv::Mat>& captured) : images_(captured) {
+    const int depth = captured.empty() ? CV_32F : captured[0].depth();
+    const bool direct = (depth == CV_8U || depth == CV_16U || depth == CV_32F) &&
+                        std::all_of(captured.begin(), captured.end(), [&](const cv::Mat& image) {
+                          return image.channels() == 1 && image.depth() == depth;
+                        });
+    depth_ = direct ? depth : CV_32F;
+    if (!direct) {
+      cv::parallel_for_(cv::Range(0, static_cast<int>(captured.size())),
+                        [&](const cv::Range& range) {
+                          for (int i = range.start; i < range.end; ++i)
+                            images_[i] = ToGrey(captured[i]);
+                        });
+    }
+    for (const cv::Mat& image : images_) {
+      data_.push_back(image.data);
+      step_.push_back(image.step[0]);
+    }
+  }
+  float at(int image, int y, int x) const {
+    const uchar* row = data_[image] + static_cast<size_t>(y) * step_[image];
+    switch (depth_) {
+      case CV_8U:
+        return row[x];
+      case CV_16U:
+        return reinterpret_cast<const uint16_t*>(row)[x];
+      default:
+        return reinterpret_cast<const float*>(row)[x];
+    }
+  }
+  // One image as CV_32FC1.
+  cv::Mat Float(int image) const {
+    cv::Mat value;
+    images_[image].convertTo(value, CV_32F);
+    return value;
+  }
+
+ private:
+  std::vector<cv::Mat> images_;
+  std::vector<const uchar*> data_;
+  std::vector<size_t> step_;
+  int depth_ = CV_32F;
+};
+
 struct AxisLayout {
   bool is_column = true;
   int size = 0;
@@ -348,21 +399,18 @@ double RobustSigma(std::vector<float> values) {
 
 // One standard deviation of one image's noise (see StructuredLightMap::noise_sigma), from every
 // fourth pixel of every fourth row that passes the shadow floor.
-double EstimateNoise(const StructuredLightLayout& layout, const std::vector<cv::Mat>& grey,
-                     const cv::Mat& lit) {
+double EstimateNoise(const StructuredLightLayout& layout, const Photos& photos,
+                     const cv::Mat& white, const cv::Mat& black, const cv::Mat& lit) {
   constexpr int kStride = 4;
   std::vector<float> residuals;
-  const cv::Mat& white = grey[layout.white];
-  const cv::Mat& black = grey[layout.black];
   for (const StructuredLightLayout::Gray& code : layout.gray) {
     for (size_t b = 0; b < code.images.size(); ++b) {
       if (code.inverse[b] < 0) continue;
-      const cv::Mat& pattern = grey[code.images[b]];
-      const cv::Mat& inverse = grey[code.inverse[b]];
+      const int pattern = code.images[b], inverse = code.inverse[b];
       for (int y = 0; y < lit.rows; y += kStride) {
         for (int x = 0; x < lit.cols; x += kStride) {
           if (!lit.at<uint8_t>(y, x)) continue;
-          residuals.push_back(pattern.at<float>(y, x) + inverse.at<float>(y, x) -
+          residuals.push_back(photos.at(pattern, y, x) + photos.at(inverse, y, x) -
                               white.at<float>(y, x) - black.at<float>(y, x));
         }
       }
@@ -415,17 +463,14 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
                                 " images for a sequence of " + std::to_string(layout.image_count));
   }
   const cv::Size size = captured[0].size();
-  std::vector<cv::Mat> grey(captured.size());
   for (size_t i = 0; i < captured.size(); ++i) {
     if (captured[i].size() != size)
       throw std::invalid_argument("structured light: image " + std::to_string(i) +
                                   " differs in size from image 0");
   }
-  cv::parallel_for_(cv::Range(0, static_cast<int>(captured.size())), [&](const cv::Range& range) {
-    for (int i = range.start; i < range.end; ++i) grey[i] = ToGrey(captured[i]);
-  });
-  const cv::Mat& white = grey[layout.white];
-  const cv::Mat& black = grey[layout.black];
+  const Photos photos(captured);
+  const cv::Mat white = photos.Float(layout.white);
+  const cv::Mat black = photos.Float(layout.black);
   const cv::Mat range = white - black;
 
   // Shadow test against a robust maximum of the contrast, then against the noise.
@@ -435,7 +480,8 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
   const float relative_floor =
       static_cast<float>(decode_options.min_contrast) * std::max(ranges[percentile], 0.0f);
   StructuredLightMap map;
-  map.noise_sigma = EstimateNoise(layout, grey, (range > relative_floor) & (range > 0.0f));
+  map.noise_sigma =
+      EstimateNoise(layout, photos, white, black, (range > relative_floor) & (range > 0.0f));
   const double sigmas = decode_options.noise_sigmas;
   const float difference_floor = static_cast<float>(sigmas * std::sqrt(2.0) * map.noise_sigma);
   const float contrast_floor = std::max(relative_floor, difference_floor);
@@ -501,7 +547,7 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
             bool ok = true;
             for (size_t b = 0; b < code.images.size() && ok; ++b) {
               const int bit = code.bits - 1 - static_cast<int>(b);
-              const float value = grey[code.images[b]].at<float>(y, x);
+              const float value = photos.at(code.images[b], y, x);
               const bool complementary =
                   decode_options.binarization == Binarization::kComplementary && code.inverse[b] >= 0;
               const float threshold_here =
@@ -509,9 +555,8 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
                   : decode_options.binarization == Binarization::kComplementary
                       ? 0.5f * (white.at<float>(y, x) + black.at<float>(y, x))
                       : threshold;
-              const float difference = complementary
-                                           ? value - grey[code.inverse[b]].at<float>(y, x)
-                                           : 2.0f * (value - threshold_here);
+              const float difference = complementary ? value - photos.at(code.inverse[b], y, x)
+                                                     : 2.0f * (value - threshold_here);
               ok = std::abs(difference) >= bit_floor;
               shown[bit] = difference > 0.0f;
             }
@@ -547,7 +592,7 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
             const StructuredLightLayout::Phase& phase = *fit.phase;
             double abc[3] = {0.0, 0.0, 0.0};  // fit.solve · values, without allocating
             for (size_t i = 0; i < phase.images.size(); ++i) {
-              const double value = grey[phase.images[i]].at<float>(y, x);
+              const double value = photos.at(phase.images[i], y, x);
               for (int r = 0; r < 3; ++r) abc[r] += fit.solve(r, i) * value;
             }
             const double amplitude = std::hypot(abc[1], abc[2]);
