@@ -14,6 +14,12 @@
 namespace procam {
 namespace {
 
+// At most this many Gray bits too faint to read are tried at both values (faint_bits): blur leaves
+// a pixel unclear only in the planes with a stripe edge near it, one or two of a plain Gray code's;
+// where more are unclear (every XOR-coded plane beside an edge of the finest plane, a dark pixel)
+// no single coordinate is left to find, and each bit doubles the decodes tried.
+constexpr int kMaxFaintBits = 4;
+
 bool IsPowerOfTwo(int value) { return value > 0 && (value & (value - 1)) == 0; }
 
 int Log2(int power_of_two) {
@@ -185,6 +191,10 @@ bool StructuredLightDecodeOptions::Check(std::string* why) const {
   }
   if (!(noise_sigmas >= 0.0 && noise_sigmas <= 100.0)) {
     if (why) *why = "noise_sigmas must be in [0, 100]";
+    return false;
+  }
+  if (faint_bits < 0 || faint_bits > kMaxFaintBits) {
+    if (why) *why = "faint_bits must be in [0, " + std::to_string(kMaxFaintBits) + "]";
     return false;
   }
   return true;
@@ -459,12 +469,6 @@ struct Axis {
   std::vector<PhaseFit> phases;
 };
 
-// At most this many Gray bits too faint to read are tried at both values (DecodeStructuredLight):
-// blur leaves a pixel unclear only in the planes with a stripe edge near it, one or two of a plain
-// Gray code's; where more are unclear (every XOR-coded plane beside an edge of the finest plane,
-// a dark pixel) no single coordinate is left to find, and each bit doubles the decodes tried.
-constexpr int kMaxUnclearBits = 4;
-
 // One pixel's decode along one axis from the shown Gray bits `shown` (indexed by bit, before any
 // XOR is undone) and the phases' positions within their periods `within` (coarsest first).
 struct AxisDecode {
@@ -645,7 +649,8 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
           }
           // Without phases every Gray bit is needed; with them, only the bits that change the
           // decode (below).
-          if (unclear_count > 0 && (axis.phases.empty() || unclear_count > kMaxUnclearBits)) {
+          if (unclear_count > 0 &&
+              (axis.phases.empty() || unclear_count > decode_options.faint_bits)) {
             refuse(DecodeRefusal::kAmbiguous);
             continue;
           }

@@ -95,6 +95,12 @@ struct StructuredLightDecodeOptions {
   double min_modulation = 0.2;
   // How many noise standard deviations each difference must exceed, [0, 100]; 0 = no noise floor.
   double noise_sigmas = 4.0;
+  // Gray bits per axis that may fail the bit test and still decode, [0, 4]: they are tried at both
+  // values, and the pixel decodes where the phase unwraps to the same coordinate either way
+  // (beside a blurred stripe edge; DecodeStructuredLight). 0 = every bit must pass. Off by
+  // default: it also decodes pixels that mix two surfaces at a depth edge, to a coordinate between
+  // theirs (docs/synthetic.md); for a defocused projector or camera, 4 with plain Gray codes.
+  int faint_bits = 0;
   bool Check(std::string* why) const;
 };
 
@@ -191,10 +197,10 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightOptions& options,
 // of periods P1 > P2 are first combined into their beat, of period P1 P2 / (P1 − P2) (temporal
 // heterodyne unwrapping). Without phases a coordinate is its Gray cell's centre. Gray bits too
 // faint to read (under the bit-contrast floor: beside a blurred stripe edge) are tried at both
-// values, up to four per axis: the pixel decodes where every value that leads to a coordinate
-// leads to the same one (the phases unwrap the same from the cells on either side of the edge),
-// and is refused as ambiguous where they differ. Throws std::invalid_argument when the layout
-// fails Check() or the count or sizes do not match.
+// values, up to decode_options.faint_bits per axis: the pixel decodes where every value that leads
+// to a coordinate leads to the same one (the phases unwrap the same from the cells on either side
+// of the edge), and is refused as ambiguous where they differ. Throws std::invalid_argument when
+// the layout fails Check() or the count or sizes do not match.
 StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
                                          const std::vector<cv::Mat>& captured,
                                          const StructuredLightDecodeOptions& decode_options = {});
