@@ -30,6 +30,11 @@ void AddDecodeOptions(CLI::App* command, StructuredLightDecodeOptions* options) 
                       "Every difference at least this many standard deviations of the photos' "
                       "noise (estimated from them)")
       ->capture_default_str();
+  command
+      ->add_option("--faint-bits", options->faint_bits,
+                   "Gray bits per axis that may fail the bit test: tried at both values, the "
+                   "pixel decoded where the phase unwraps the same either way (defocus), [0, 4]")
+      ->capture_default_str();
 }
 
 void CheckDecodeOptions(const StructuredLightDecodeOptions& options) {

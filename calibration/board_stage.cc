@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <future>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <numbers>
@@ -194,9 +195,27 @@ BoardStageSummary RunBoardStage(const BoardStageOptions& args) {
   if (!args.Check(&why)) throw std::invalid_argument(why);
   BoardStageSummary stage;
   int camera_width = 0, camera_height = 0, projector_width = 0, projector_height = 0;
-  for (const std::filesystem::path& session : args.sessions) {
+  // The next session is read and decoded while the chessboard is searched in this one: OpenCV's
+  // search runs on one core, reading and decoding on all, so on two cores the two overlap.
+  struct Read {
+    BoardPoseCapture capture;
     int width = 0, height = 0;
-    const BoardPoseCapture capture = ReadBoardSession(session, args.decode, &width, &height);
+  };
+  const auto read = [&](size_t k) {
+    return std::async(std::launch::async, [&args, k] {
+      Read read;
+      read.capture = ReadBoardSession(args.sessions[k], args.decode, &read.width, &read.height);
+      return read;
+    });
+  };
+  std::future<Read> next;
+  if (!args.sessions.empty()) next = read(0);
+  for (size_t k = 0; k < args.sessions.size(); ++k) {
+    const std::filesystem::path& session = args.sessions[k];
+    Read current = next.get();
+    if (k + 1 < args.sessions.size()) next = read(k + 1);
+    const BoardPoseCapture& capture = current.capture;
+    const int width = current.width, height = current.height;
     if (projector_width == 0) {
       projector_width = width;
       projector_height = height;

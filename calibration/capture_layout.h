@@ -88,7 +88,9 @@ struct DecodeSummary {
 };
 
 // A structured-light session read back: procam's own (its sequence's options) or imported (its
-// layout), the photos in layout order, linear digital numbers (CV_32F).
+// layout), the photos in layout order, linear digital numbers: 8- or 16-bit as the files hold
+// them where they store digital numbers as they are (imported photos, a 16-bit camera's frames),
+// CV_32F otherwise (frames scaled to 16 bits, HDR merges).
 struct StructuredLightSession {
   StructuredLightLayout layout;
   std::vector<cv::Mat> images;

@@ -1,9 +1,10 @@
 #include "calibration/structured_light.h"
 
-#include <algorithm>
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <iterator>
 #include <limits>
 #include <numbers>
 #include <opencv2/core/utility.hpp>
@@ -12,6 +13,12 @@
 
 namespace procam {
 namespace {
+
+// At most this many Gray bits too faint to read are tried at both values (faint_bits): blur leaves
+// a pixel unclear only in the planes with a stripe edge near it, one or two of a plain Gray code's;
+// where more are unclear (every XOR-coded plane beside an edge of the finest plane, a dark pixel)
+// no single coordinate is left to find, and each bit doubles the decodes tried.
+constexpr int kMaxFaintBits = 4;
 
 bool IsPowerOfTwo(int value) { return value > 0 && (value & (value - 1)) == 0; }
 
@@ -69,6 +76,57 @@ cv::Mat ToGrey(const cv::Mat& image) {
   }
   return grey;
 }
+
+// The photos as the decoder reads them, one value per pixel as a float. A camera's own frames
+// (one channel, all of one depth: 8- or 16-bit or float) are read where they are: converting 42
+// photos of a megapixel to floats cost more than the decoding itself (allocating and touching
+// 4 bytes per pixel of each); other images (colour, other depths) are converted to one float
+// channel each, colour averaged.
+class Photos {
+ public:
+  explicit Photos(const std::vector<cv::Mat>& captured) : images_(captured) {
+    const int depth = captured.empty() ? CV_32F : captured[0].depth();
+    const bool direct = (depth == CV_8U || depth == CV_16U || depth == CV_32F) &&
+                        std::all_of(captured.begin(), captured.end(), [&](const cv::Mat& image) {
+                          return image.channels() == 1 && image.depth() == depth;
+                        });
+    depth_ = direct ? depth : CV_32F;
+    if (!direct) {
+      cv::parallel_for_(cv::Range(0, static_cast<int>(captured.size())),
+                        [&](const cv::Range& range) {
+                          for (int i = range.start; i < range.end; ++i)
+                            images_[i] = ToGrey(captured[i]);
+                        });
+    }
+    for (const cv::Mat& image : images_) {
+      data_.push_back(image.data);
+      step_.push_back(image.step[0]);
+    }
+  }
+  float at(int image, int y, int x) const {
+    const uchar* row = data_[image] + static_cast<size_t>(y) * step_[image];
+    switch (depth_) {
+      case CV_8U:
+        return row[x];
+      case CV_16U:
+        return reinterpret_cast<const uint16_t*>(row)[x];
+      default:
+        return reinterpret_cast<const float*>(row)[x];
+    }
+  }
+  // One image as CV_32FC1.
+  cv::Mat Float(int image) const {
+    cv::Mat value;
+    images_[image].convertTo(value, CV_32F);
+    return value;
+  }
+
+ private:
+  std::vector<cv::Mat> images_;
+  std::vector<const uchar*> data_;
+  std::vector<size_t> step_;
+  int depth_ = CV_32F;
+};
 
 struct AxisLayout {
   bool is_column = true;
@@ -133,6 +191,10 @@ bool StructuredLightDecodeOptions::Check(std::string* why) const {
   }
   if (!(noise_sigmas >= 0.0 && noise_sigmas <= 100.0)) {
     if (why) *why = "noise_sigmas must be in [0, 100]";
+    return false;
+  }
+  if (faint_bits < 0 || faint_bits > kMaxFaintBits) {
+    if (why) *why = "faint_bits must be in [0, " + std::to_string(kMaxFaintBits) + "]";
     return false;
   }
   return true;
@@ -348,21 +410,18 @@ double RobustSigma(std::vector<float> values) {
 
 // One standard deviation of one image's noise (see StructuredLightMap::noise_sigma), from every
 // fourth pixel of every fourth row that passes the shadow floor.
-double EstimateNoise(const StructuredLightLayout& layout, const std::vector<cv::Mat>& grey,
-                     const cv::Mat& lit) {
+double EstimateNoise(const StructuredLightLayout& layout, const Photos& photos,
+                     const cv::Mat& white, const cv::Mat& black, const cv::Mat& lit) {
   constexpr int kStride = 4;
   std::vector<float> residuals;
-  const cv::Mat& white = grey[layout.white];
-  const cv::Mat& black = grey[layout.black];
   for (const StructuredLightLayout::Gray& code : layout.gray) {
     for (size_t b = 0; b < code.images.size(); ++b) {
       if (code.inverse[b] < 0) continue;
-      const cv::Mat& pattern = grey[code.images[b]];
-      const cv::Mat& inverse = grey[code.inverse[b]];
+      const int pattern = code.images[b], inverse = code.inverse[b];
       for (int y = 0; y < lit.rows; y += kStride) {
         for (int x = 0; x < lit.cols; x += kStride) {
           if (!lit.at<uint8_t>(y, x)) continue;
-          residuals.push_back(pattern.at<float>(y, x) + inverse.at<float>(y, x) -
+          residuals.push_back(photos.at(pattern, y, x) + photos.at(inverse, y, x) -
                               white.at<float>(y, x) - black.at<float>(y, x));
         }
       }
@@ -402,6 +461,89 @@ double Unwrap(double within, double period, double estimate) {
   return within + period * std::round((estimate - within) / period);
 }
 
+// Per axis: its Gray code (at most one) and its phase sets, coarsest period first.
+struct Axis {
+  bool column = true;
+  int size = 0;
+  const StructuredLightLayout::Gray* gray = nullptr;
+  std::vector<PhaseFit> phases;
+};
+
+// One pixel's decode along one axis from the shown Gray bits `shown` (indexed by bit, before any
+// XOR is undone) and the phases' positions within their periods `within` (coarsest first).
+struct AxisDecode {
+  DecodeRefusal refusal = DecodeRefusal::kDecoded;
+  double coordinate = 0.0;  // projector pixels (kDecoded, or kOutOfRange after unwrapping)
+  double gray_low = 0.0, gray_high = 0.0;  // the Gray cell's first and last pixel
+  bool compared = false;                   // a Gray cell and unwrapped phases, to compare
+};
+
+AxisDecode DecodeAxis(const Axis& axis, const int* shown, const double* within) {
+  AxisDecode result;
+  double estimate = std::numeric_limits<double>::quiet_NaN();
+  double bound = std::numeric_limits<double>::infinity();  // |estimate − truth| below this
+  if (axis.gray) {
+    const StructuredLightLayout::Gray& code = *axis.gray;
+    // Undo the XOR, then Gray → binary on the code truncated to the shown bits.
+    int binary = 0, previous = 0;
+    for (int bit = code.bits - 1; bit >= code.finest_bit; --bit) {
+      int gray = shown[bit];
+      if (code.xor_codes && bit > code.finest_bit) gray ^= shown[code.finest_bit];
+      previous ^= gray;
+      binary |= previous << (bit - code.finest_bit);
+    }
+    const int cell = code.cell << code.finest_bit;
+    result.gray_low = static_cast<double>(binary) * cell;
+    if (result.gray_low >= axis.size) {
+      result.refusal = DecodeRefusal::kOutOfRange;
+      return result;
+    }
+    result.gray_high = std::min<double>(result.gray_low + cell, axis.size) - 1.0;
+    estimate = 0.5 * (result.gray_low + result.gray_high);
+    bound = 0.5 * cell;
+  }
+  // The phases, coarsest first; a set whose period the estimate cannot unwrap is first combined
+  // with the next finer set into their beat.
+  double phase_estimate = estimate;
+  bool unwrapped = true;
+  for (size_t k = 0; k < axis.phases.size() && unwrapped; ++k) {
+    const double period = axis.phases[k].phase->period;
+    if (bound < 0.5 * period) {
+      phase_estimate = Unwrap(within[k], period, phase_estimate);
+    } else if (std::isinf(bound) && period >= axis.size - 0.5) {
+      phase_estimate = within[k];  // one period spans the axis
+    } else if (k + 1 < axis.phases.size() &&
+               period > axis.phases[k + 1].phase->period * (1.0 + 1e-9)) {
+      // The beat of this set and the next finer one.
+      const double finer = axis.phases[k + 1].phase->period;
+      const double beat = period * finer / (period - finer);
+      double w = within[k + 1] / finer - within[k] / period;
+      w = (w - std::floor(w)) * beat;
+      if (bound < 0.5 * beat) {
+        phase_estimate = Unwrap(w, beat, phase_estimate);
+      } else if (std::isinf(bound) && beat >= axis.size - 0.5) {
+        phase_estimate = w;
+      } else {
+        unwrapped = false;
+      }
+      unwrapped = unwrapped && beat / 8.0 < 0.5 * period;
+      if (unwrapped) phase_estimate = Unwrap(within[k], period, phase_estimate);
+    } else {
+      unwrapped = false;
+    }
+    bound = period / 8.0;
+  }
+  if (!unwrapped) {
+    result.refusal = DecodeRefusal::kUnwrap;
+    return result;
+  }
+  if (!axis.phases.empty()) estimate = phase_estimate;
+  result.compared = axis.gray && !axis.phases.empty();
+  result.coordinate = estimate;
+  if (estimate < -0.5 || estimate >= axis.size - 0.5) result.refusal = DecodeRefusal::kOutOfRange;
+  return result;
+}
+
 }  // namespace
 
 StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
@@ -415,17 +557,14 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
                                 " images for a sequence of " + std::to_string(layout.image_count));
   }
   const cv::Size size = captured[0].size();
-  std::vector<cv::Mat> grey(captured.size());
   for (size_t i = 0; i < captured.size(); ++i) {
     if (captured[i].size() != size)
       throw std::invalid_argument("structured light: image " + std::to_string(i) +
                                   " differs in size from image 0");
   }
-  cv::parallel_for_(cv::Range(0, static_cast<int>(captured.size())), [&](const cv::Range& range) {
-    for (int i = range.start; i < range.end; ++i) grey[i] = ToGrey(captured[i]);
-  });
-  const cv::Mat& white = grey[layout.white];
-  const cv::Mat& black = grey[layout.black];
+  const Photos photos(captured);
+  const cv::Mat white = photos.Float(layout.white);
+  const cv::Mat black = photos.Float(layout.black);
   const cv::Mat range = white - black;
 
   // Shadow test against a robust maximum of the contrast, then against the noise.
@@ -435,7 +574,8 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
   const float relative_floor =
       static_cast<float>(decode_options.min_contrast) * std::max(ranges[percentile], 0.0f);
   StructuredLightMap map;
-  map.noise_sigma = EstimateNoise(layout, grey, (range > relative_floor) & (range > 0.0f));
+  map.noise_sigma =
+      EstimateNoise(layout, photos, white, black, (range > relative_floor) & (range > 0.0f));
   const double sigmas = decode_options.noise_sigmas;
   const float difference_floor = static_cast<float>(sigmas * std::sqrt(2.0) * map.noise_sigma);
   const float contrast_floor = std::max(relative_floor, difference_floor);
@@ -453,13 +593,6 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
   map.mask = cv::Mat(size, CV_8UC1, cv::Scalar(0));
   map.refused = cv::Mat(size, CV_8UC1, cv::Scalar(static_cast<int>(DecodeRefusal::kShadowed)));
 
-  // Per axis: its Gray code (at most one) and its phase sets, coarsest period first.
-  struct Axis {
-    bool column = true;
-    int size = 0;
-    const StructuredLightLayout::Gray* gray = nullptr;
-    std::vector<PhaseFit> phases;
-  };
   std::vector<Axis> axes;
   for (bool column : {true, false}) {
     Axis axis;
@@ -492,16 +625,15 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
           if (refusal == DecodeRefusal::kDecoded) refusal = why_refused;
         };
         for (const Axis& axis : axes) {
-          double estimate = std::numeric_limits<double>::quiet_NaN();
-          double bound = std::numeric_limits<double>::infinity();  // |estimate − truth| below this
-          double gray_low = 0.0, gray_high = 0.0;                    // the Gray cell's pixels
+          // The Gray bits as shown (before any XOR is undone), and those too faint to read.
+          int shown[32] = {0};
+          int unclear[32];
+          int unclear_count = 0;
           if (axis.gray) {
             const StructuredLightLayout::Gray& code = *axis.gray;
-            int shown[32] = {0};
-            bool ok = true;
-            for (size_t b = 0; b < code.images.size() && ok; ++b) {
+            for (size_t b = 0; b < code.images.size(); ++b) {
               const int bit = code.bits - 1 - static_cast<int>(b);
-              const float value = grey[code.images[b]].at<float>(y, x);
+              const float value = photos.at(code.images[b], y, x);
               const bool complementary =
                   decode_options.binarization == Binarization::kComplementary && code.inverse[b] >= 0;
               const float threshold_here =
@@ -509,52 +641,33 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
                   : decode_options.binarization == Binarization::kComplementary
                       ? 0.5f * (white.at<float>(y, x) + black.at<float>(y, x))
                       : threshold;
-              const float difference = complementary
-                                           ? value - grey[code.inverse[b]].at<float>(y, x)
-                                           : 2.0f * (value - threshold_here);
-              ok = std::abs(difference) >= bit_floor;
+              const float difference = complementary ? value - photos.at(code.inverse[b], y, x)
+                                                     : 2.0f * (value - threshold_here);
               shown[bit] = difference > 0.0f;
+              if (std::abs(difference) < bit_floor) unclear[unclear_count++] = bit;
             }
-            if (!ok) {
-              refuse(DecodeRefusal::kAmbiguous);
-              continue;
-            }
-            // Undo the XOR, then Gray → binary on the code truncated to the shown bits.
-            int binary = 0, previous = 0;
-            for (int bit = code.bits - 1; bit >= code.finest_bit; --bit) {
-              int gray = shown[bit];
-              if (code.xor_codes && bit > code.finest_bit) gray ^= shown[code.finest_bit];
-              previous ^= gray;
-              binary |= previous << (bit - code.finest_bit);
-            }
-            const int cell = code.cell << code.finest_bit;
-            gray_low = static_cast<double>(binary) * cell;
-            if (gray_low >= axis.size) {
-              refuse(DecodeRefusal::kOutOfRange);
-              continue;
-            }
-            gray_high = std::min<double>(gray_low + cell, axis.size) - 1.0;
-            estimate = 0.5 * (gray_low + gray_high);
-            bound = 0.5 * cell;
           }
-          // The phases, coarsest first; a set whose period the estimate cannot unwrap is first
-          // combined with the next finer set into their beat.
+          // Without phases every Gray bit is needed; with them, only the bits that change the
+          // decode (below).
+          if (unclear_count > 0 &&
+              (axis.phases.empty() || unclear_count > decode_options.faint_bits)) {
+            refuse(DecodeRefusal::kAmbiguous);
+            continue;
+          }
           bool phase_ok = true;
-          double phase_estimate = estimate;
           double within[StructuredLightLayout::kMaxPhasesPerAxis];
           for (size_t k = 0; k < axis.phases.size() && phase_ok; ++k) {
             const PhaseFit& fit = axis.phases[k];
             const StructuredLightLayout::Phase& phase = *fit.phase;
             double abc[3] = {0.0, 0.0, 0.0};  // fit.solve · values, without allocating
             for (size_t i = 0; i < phase.images.size(); ++i) {
-              const double value = grey[phase.images[i]].at<float>(y, x);
+              const double value = photos.at(phase.images[i], y, x);
               for (int r = 0; r < 3; ++r) abc[r] += fit.solve(r, i) * value;
             }
             const double amplitude = std::hypot(abc[1], abc[2]);
             if (amplitude < decode_options.min_modulation * 0.5 * pixel_range ||
                 amplitude < sigmas * fit.amplitude_noise * map.noise_sigma) {
               phase_ok = false;
-              refuse(DecodeRefusal::kWeakPhase);
               break;
             }
             const double turns = std::atan2(abc[2], abc[1]) / (2.0 * std::numbers::pi);
@@ -562,48 +675,52 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
             w -= phase.period * std::floor(w / phase.period);
             within[k] = w;
           }
-          if (!phase_ok) continue;
-          bool unwrapped = true;
-          for (size_t k = 0; k < axis.phases.size() && unwrapped; ++k) {
-            const double period = axis.phases[k].phase->period;
-            if (bound < 0.5 * period) {
-              phase_estimate = Unwrap(within[k], period, phase_estimate);
-            } else if (std::isinf(bound) && period >= axis.size - 0.5) {
-              phase_estimate = within[k];  // one period spans the axis
-            } else if (k + 1 < axis.phases.size() &&
-                       period > axis.phases[k + 1].phase->period * (1.0 + 1e-9)) {
-              // The beat of this set and the next finer one.
-              const double finer = axis.phases[k + 1].phase->period;
-              const double beat = period * finer / (period - finer);
-              double w = within[k + 1] / finer - within[k] / period;
-              w = (w - std::floor(w)) * beat;
-              if (bound < 0.5 * beat) {
-                phase_estimate = Unwrap(w, beat, phase_estimate);
-              } else if (std::isinf(bound) && beat >= axis.size - 0.5) {
-                phase_estimate = w;
-              } else {
-                unwrapped = false;
-              }
-              unwrapped = unwrapped && beat / 8.0 < 0.5 * period;
-              if (unwrapped) phase_estimate = Unwrap(within[k], period, phase_estimate);
-            } else {
-              unwrapped = false;
+          if (!phase_ok) {
+            // The Gray test comes first: a pixel with unclear bits is refused for them.
+            refuse(unclear_count > 0 ? DecodeRefusal::kAmbiguous : DecodeRefusal::kWeakPhase);
+            continue;
+          }
+          AxisDecode decoded = DecodeAxis(axis, shown, within);
+          if (unclear_count == 0) {
+            if (decoded.compared) {
+              ++((decoded.coordinate >= decoded.gray_low - 1.5 &&
+                  decoded.coordinate <= decoded.gray_high + 1.5)
+                     ? agree
+                     : disagree)[y];
             }
-            bound = period / 8.0;
+          } else {
+            // Unclear bits are tried at both values: the pixel decodes where every value that
+            // leads to a coordinate at all leads to the same one, which is then the coordinate
+            // the bits read right would give (the phases unwrap the same from either side of a
+            // blurred stripe edge: the cells on its two sides are within half a period of the
+            // pixel). Values that lead nowhere (a cell beyond the projector, a coordinate outside
+            // it) cannot be the pixel's; where none is left, or two lead to different
+            // coordinates, the bits matter and the pixel is refused as ambiguous.
+            int tried[32];
+            std::copy(std::begin(shown), std::end(shown), std::begin(tried));
+            bool found = false, conflict = false;
+            for (int values = 0; values < (1 << unclear_count) && !conflict; ++values) {
+              for (int j = 0; j < unclear_count; ++j) tried[unclear[j]] = (values >> j) & 1;
+              const AxisDecode candidate = DecodeAxis(axis, tried, within);
+              if (candidate.refusal != DecodeRefusal::kDecoded) continue;
+              if (!found) {
+                decoded = candidate;
+                found = true;
+              } else if (std::abs(candidate.coordinate - decoded.coordinate) > 0.5) {
+                conflict = true;  // distinct coordinates differ by a multiple of a period > 1
+              }
+            }
+            if (!found || conflict) {
+              refuse(DecodeRefusal::kAmbiguous);
+              continue;
+            }
           }
-          if (!unwrapped) {
-            refuse(DecodeRefusal::kUnwrap);
+          if (decoded.refusal != DecodeRefusal::kDecoded) {
+            refuse(decoded.refusal);
             continue;
           }
-          if (!axis.phases.empty()) estimate = phase_estimate;
-          if (axis.gray && !axis.phases.empty()) {
-            ++((estimate >= gray_low - 1.5 && estimate <= gray_high + 1.5) ? agree : disagree)[y];
-          }
-          if (estimate < -0.5 || estimate >= axis.size - 0.5) {
-            refuse(DecodeRefusal::kOutOfRange);
-            continue;
-          }
-          (axis.column ? map.column : map.row).at<float>(y, x) = static_cast<float>(estimate);
+          (axis.column ? map.column : map.row).at<float>(y, x) =
+              static_cast<float>(decoded.coordinate);
         }
         map.refused.at<uint8_t>(y, x) = static_cast<uint8_t>(refusal);
         if (refusal == DecodeRefusal::kDecoded) map.mask.at<uint8_t>(y, x) = 255;

@@ -95,6 +95,12 @@ struct StructuredLightDecodeOptions {
   double min_modulation = 0.2;
   // How many noise standard deviations each difference must exceed, [0, 100]; 0 = no noise floor.
   double noise_sigmas = 4.0;
+  // Gray bits per axis that may fail the bit test and still decode, [0, 4]: they are tried at both
+  // values, and the pixel decodes where the phase unwraps to the same coordinate either way
+  // (beside a blurred stripe edge; DecodeStructuredLight). 0 = every bit must pass. Off by
+  // default: it also decodes pixels that mix two surfaces at a depth edge, to a coordinate between
+  // theirs (docs/synthetic.md); for a defocused projector or camera, 4 with plain Gray codes.
+  int faint_bits = 0;
   bool Check(std::string* why) const;
 };
 
@@ -102,7 +108,7 @@ struct StructuredLightDecodeOptions {
 enum class DecodeRefusal : uint8_t {
   kDecoded = 0,     // every encoded axis decoded
   kShadowed = 1,    // white − black under the contrast threshold
-  kAmbiguous = 2,   // some Gray bit under the bit-contrast threshold
+  kAmbiguous = 2,   // Gray bits under the bit-contrast threshold that change the decode
   kWeakPhase = 3,   // sinusoid amplitude under the modulation threshold
   kOutOfRange = 4,  // decoded coordinate outside the projector image
   kUnwrap = 5,      // the phases could not be unwrapped (no coarser code resolves their period)
@@ -120,12 +126,13 @@ struct StructuredLightMap {
   // pixel while its rows stay resolved).
   // Why pixels were refused on some axis (a pixel counts once, for the first test it fails).
   long long shadowed = 0;      // white − black under the contrast threshold
-  long long ambiguous = 0;     // some bit under the bit-contrast threshold
+  long long ambiguous = 0;     // bits under the bit-contrast threshold that change the decode
   long long weak_phase = 0;    // sinusoid amplitude under the modulation threshold
   long long out_of_range = 0;  // decoded coordinate outside the projector image
   long long unwrap = 0;        // phases no coarser code could unwrap
-  // Where an axis has both a Gray code and phases: pixels whose unwrapped phase lies within its
-  // Gray cell (widened by one projector pixel each side), and those where it does not.
+  // Where an axis has both a Gray code and phases and every Gray bit reads clearly: pixels whose
+  // unwrapped phase lies within its Gray cell (widened by one projector pixel each side), and
+  // those where it does not.
   long long gray_phase_agree = 0;
   long long gray_phase_disagree = 0;
   // The photos' noise, one standard deviation in the images' units, estimated from pattern and
@@ -188,8 +195,12 @@ StructuredLightMap DecodeStructuredLight(const StructuredLightOptions& options,
 // before it (x = w + P round((estimate − w) / P), which needs the estimate within P/2); where
 // the estimate is too coarse for a period (OpenCV's cells as wide as the period), two phase sets
 // of periods P1 > P2 are first combined into their beat, of period P1 P2 / (P1 − P2) (temporal
-// heterodyne unwrapping). Without phases a coordinate is its Gray cell's centre. Throws
-// std::invalid_argument when the layout fails Check() or the count or sizes do not match.
+// heterodyne unwrapping). Without phases a coordinate is its Gray cell's centre. Gray bits too
+// faint to read (under the bit-contrast floor: beside a blurred stripe edge) are tried at both
+// values, up to decode_options.faint_bits per axis: the pixel decodes where every value that leads
+// to a coordinate leads to the same one (the phases unwrap the same from the cells on either side
+// of the edge), and is refused as ambiguous where they differ. Throws std::invalid_argument when
+// the layout fails Check() or the count or sizes do not match.
 StructuredLightMap DecodeStructuredLight(const StructuredLightLayout& layout,
                                          const std::vector<cv::Mat>& captured,
                                          const StructuredLightDecodeOptions& decode_options = {});

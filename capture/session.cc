@@ -479,6 +479,14 @@ std::string CaptureSessionData::pattern_name(int pattern) const {
 }
 
 cv::Mat CaptureSessionData::Mean(int pattern, int exposure) const {
+  double scale = 1.0;
+  const cv::Mat png = Stored(pattern, exposure, &scale);
+  cv::Mat mean;
+  png.convertTo(mean, CV_32F, 1.0 / scale);
+  return mean;
+}
+
+cv::Mat CaptureSessionData::Stored(int pattern, int exposure, double* scale) const {
   if (!captured(pattern)) {
     throw IoError((directory_ / kManifestName).string() + ": pattern " + std::to_string(pattern) +
                   " is not captured");
@@ -490,9 +498,8 @@ cv::Mat CaptureSessionData::Mean(int pattern, int exposure) const {
   // procam's own frames are 16-bit PNGs; an imported session's photos 8- or 16-bit.
   if (png.depth() != CV_16U && png.depth() != CV_8U)
     throw IoError(file.string() + ": not an 8- or 16-bit image");
-  cv::Mat mean;
-  png.convertTo(mean, CV_32F, 1.0 / entry.at("png_scale").get<double>());
-  return mean;
+  *scale = entry.at("png_scale").get<double>();
+  return png;
 }
 
 cv::Mat CaptureSessionData::Hdr(int pattern) const {

@@ -119,6 +119,10 @@ class CaptureSessionData {
   // Mean digital numbers (CV_32FC1 or CV_32FC3) of `pattern` at its `exposure`-th exposure.
   // Throws IoError when the pattern is not captured or its file is unreadable.
   cv::Mat Mean(int pattern, int exposure = 0) const;
+  // The same frame as stored (CV_8U or CV_16U, one or three channels) and, in `scale`, stored
+  // values per digital number (Mean = stored / scale): readers that take any depth (the
+  // structured-light decoder) need not convert it. Throws as Mean does.
+  cv::Mat Stored(int pattern, int exposure, double* scale) const;
   // The HDR merge (full scale per second), or an empty matrix without bracketing.
   cv::Mat Hdr(int pattern) const;
 

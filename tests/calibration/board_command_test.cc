@@ -6,6 +6,7 @@
 // python3-mrcal); and the one-line refusals.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <memory>
@@ -184,6 +185,42 @@ TEST(CalibrateBoardCommand, OnePoseAndParallelPosesAreOneLine) {
                                " --window 8 --min-poses 2 --out " + out.string()),
       "all parallel", "parallel poses");
   EXPECT_FALSE(std::filesystem::exists(out / "projector.cameramodel"));
+}
+
+// A pose where OpenCV finds no chessboard in the white photo (the board moved 3 m aside, out of the
+// camera's view) is reported in one line naming its session and left out; the calibration goes on
+// with the others, and is refused in one line when too few are left.
+TEST(CalibrateBoardCommand, APoseWithoutABoardIsReportedAndLeftOut) {
+  const testing::TempDir dir;
+  const BoardRig rig = SmallRig();
+  std::vector<Eigen::Isometry3d> poses = BoardRigPoses(rig, Board(), 5, 1.0);
+  Eigen::Isometry3d aside = poses[0];
+  aside.translation() += Vec3(3.0, 0.0, 0.0);
+  poses.insert(poses.begin(), aside);
+  const std::vector<std::string> sessions = CaptureSessions(dir, poses);
+  const std::string missing = sessions[0] + ": chessboard not found in the white photo";
+  const std::filesystem::path out = dir.path() / "rig";
+  const testing::CommandRun run = testing::RunProcam(
+      "calibrate board" + Join(sessions, sessions.size()) +
+      " --corners 9x6 --square 0.03 --window 8 --min-window-pixels 30 --name left --out " +
+      out.string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  size_t lines = 0;
+  for (size_t at = run.output.find(missing); at != std::string::npos;
+       at = run.output.find(missing, at + 1))
+    ++lines;
+  EXPECT_EQ(lines, 1u) << run.output;
+  const nlohmann::json result = nlohmann::json::parse(ReadFile(out / "result.json"));
+  const nlohmann::json& skipped = result.at("board").at("left").at("skipped_sessions");
+  EXPECT_NE(std::find(skipped.begin(), skipped.end(), "pose_0"), skipped.end()) << skipped.dump();
+
+  // The pose without a board and two others: fewer than the three poses needed.
+  const std::filesystem::path refused = dir.path() / "refused";
+  const testing::CommandRun few = testing::RunProcamStderr(
+      "calibrate board" + Join(sessions, 3) +
+      " --corners 9x6 --square 0.03 --window 8 --min-window-pixels 30 --out " + refused.string());
+  testing::ExpectOneErrorLine(few, "need at least 3", "too few poses left");
+  EXPECT_FALSE(std::filesystem::exists(refused / "projector.cameramodel"));
 }
 
 }  // namespace
