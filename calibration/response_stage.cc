@@ -49,8 +49,8 @@ CameraResponse RunResponseStage(const ResponseStageOptions& args) {
   // The pattern: as asked, else the captured one brightest at its first exposure.
   int pattern = args.pattern;
   if (pattern >= data.pattern_count()) {
-    throw std::invalid_argument(fmt::format("pattern {}: the session has {} patterns", pattern,
-                                            data.pattern_count()));
+    throw std::invalid_argument(
+        fmt::format("pattern {}: the session has {} patterns", pattern, data.pattern_count()));
   }
   if (pattern < 0) {
     double brightest = -1.0;
@@ -76,8 +76,9 @@ CameraResponse RunResponseStage(const ResponseStageOptions& args) {
   for (size_t e = 0; e < exposures.size(); ++e) {
     cv::Mat mean = data.Mean(pattern, static_cast<int>(e));
     if (mean.channels() != 3) {
-      throw IoError(manifest + ": a monochrome camera; the response is calibrated per colour "
-                               "channel (capture with a colour format)");
+      throw IoError(manifest +
+                    ": a monochrome camera; the response is calibrated per colour "
+                    "channel (capture with a colour format)");
     }
     cv::Mat codes;
     mean.convertTo(codes, CV_8U);  // rounds the mean of the frames to the nearest code
@@ -85,22 +86,24 @@ CameraResponse RunResponseStage(const ResponseStageOptions& args) {
     exposures_us.push_back(exposures[e].value("exposure_us", 0.0));
   }
   if (images.size() < 3) {
-    throw IoError(manifest + ": pattern " + data.pattern_name(pattern) + " has " +
-                  std::to_string(images.size()) +
-                  " exposures; bracket at least 3 (e.g. --exposure-us 2500,5000,10000,20000,40000)");
+    throw IoError(
+        manifest + ": pattern " + data.pattern_name(pattern) + " has " +
+        std::to_string(images.size()) +
+        " exposures; bracket at least 3 (e.g. --exposure-us 2500,5000,10000,20000,40000)");
   }
-  Report(args.progress, fmt::format("pattern {}, {} exposures, {}x{} pixels",
-                                    data.pattern_name(pattern), images.size(), images[0].cols,
-                                    images[0].rows));
+  Report(args.progress,
+         fmt::format("pattern {}, {} exposures, {}x{} pixels", data.pattern_name(pattern),
+                     images.size(), images[0].cols, images[0].rows));
 
   CameraResponse response;
   if (!CalibrateCameraResponse(images, exposures_us, args.options, &response, &why)) {
     throw std::runtime_error(manifest + ": " + why);
   }
   Report(args.progress,
-         fmt::format("gamma R {:.4f} G {:.4f} B {:.4f} (power-law fit RMS in ln: {:.4f} {:.4f} {:.4f})",
-                     response.gamma[0], response.gamma[1], response.gamma[2],
-                     response.gamma_rms[0], response.gamma_rms[1], response.gamma_rms[2]));
+         fmt::format(
+             "gamma R {:.4f} G {:.4f} B {:.4f} (power-law fit RMS in ln: {:.4f} {:.4f} {:.4f})",
+             response.gamma[0], response.gamma[1], response.gamma[2], response.gamma_rms[0],
+             response.gamma_rms[1], response.gamma_rms[2]));
 
   nlohmann::json file = CameraResponseJson(response);
   file["session"] = std::filesystem::absolute(directory).string();

@@ -49,7 +49,8 @@ Options ReadBack(const std::vector<std::string>& arguments) {
     EXPECT_LT(i + 1, arguments.size()) << argument << " has no value";
     const std::string value = arguments[++i];
     if (option->repeated) {
-      auto found = std::find_if(lists.begin(), lists.end(), [&](const auto& l) { return l.first == name; });
+      auto found =
+          std::find_if(lists.begin(), lists.end(), [&](const auto& l) { return l.first == name; });
       if (found == lists.end()) found = lists.insert(lists.end(), {name, {}});
       found->second.push_back(value);
     } else {
@@ -89,9 +90,9 @@ TEST(StageOptions, TheCameraStepReadsBack) {
   camera.board.square_size = 0.06;
   camera.options.reject_outliers = false;
   const std::vector<std::string> arguments = ChangedArgumentsOf(camera);
-  EXPECT_EQ(arguments, (std::vector<std::string>{"rig/captures/chessboard", "--out", "rig",
-                                                 "--corners", "7x6", "--square", "0.06",
-                                                 "--no-outlier-rejection"}));
+  EXPECT_EQ(arguments,
+            (std::vector<std::string>{"rig/captures/chessboard", "--out", "rig", "--corners", "7x6",
+                                      "--square", "0.06", "--no-outlier-rejection"}));
   ExpectSameDeclared(camera, ReadBack<CameraStageOptions>(arguments));
   std::string why;
   EXPECT_TRUE(camera.Check(&why)) << why;
@@ -129,10 +130,12 @@ TEST(StageOptions, TheCapturesReadBack) {
 
 TEST(StageOptions, TheProjectorsStepReadsBack) {
   ProjectorsStageOptions projectors;
-  projectors.sessions = {"rig/captures/structured_light_left", "rig/captures/structured_light_right"};
+  projectors.sessions = {"rig/captures/structured_light_left",
+                         "rig/captures/structured_light_right"};
   projectors.out = "rig";
   projectors.names = {"left", "right"};
-  projectors.held_lenses = {{"left", "board/left.cameramodel"}, {"right", "board/right,2.cameramodel"}};
+  projectors.held_lenses = {{"left", "board/left.cameramodel"},
+                            {"right", "board/right,2.cameramodel"}};
   projectors.scene = "synthetic:tiny_box";
   projectors.camera_guess = "0.5,-1.4,0.8,0.5,0.5,0.5";
   projectors.options.refine_camera_intrinsics = true;
@@ -164,7 +167,8 @@ TEST(StageOptions, ThePhotometryBoardResponseAndWholeRigReadBack) {
   photometric.camera_scale = "0.5,0.6,0.7";
   photometric.camera_black = 8;
   photometric.response = "lut";
-  ExpectSameDeclared(photometric, ReadBack<PhotometricStageOptions>(ChangedArgumentsOf(photometric)));
+  ExpectSameDeclared(photometric,
+                     ReadBack<PhotometricStageOptions>(ChangedArgumentsOf(photometric)));
 
   BoardStageOptions board;
   board.sessions = {"a", "b", "c"};
