@@ -41,6 +41,16 @@ bool InRange(const OptionTable::Interval& range, double value, std::string* why)
   return false;
 }
 
+// A number's written value: finite and within `range`, else false with why.
+bool ParseNumberInRange(const std::string& text, const OptionTable::Interval& range, double* value,
+                        std::string* why) {
+  if (!ParseFinite(text, value)) {
+    *why = "expected a finite number, got '" + text + "'";
+    return false;
+  }
+  return InRange(range, *value, why);
+}
+
 // A flag's written value ("", "true", "1", "false", "0") into `field`, inverted for a negated
 // flag (--no-NAME given clears it).
 bool ParseFlag(const std::string& text, bool negated, bool* field, std::string* why) {
@@ -159,11 +169,7 @@ OptionTable& OptionTable::Number(const std::string& name, double* field, Interva
   option.get = [field] { return OptionNumberText(*field); };
   option.set = [field, range](const std::string& text, std::string* why) {
     double value = 0.0;
-    if (!ParseFinite(text, &value)) {
-      *why = "expected a finite number, got '" + text + "'";
-      return false;
-    }
-    if (!InRange(range, value, why)) return false;
+    if (!ParseNumberInRange(text, range, &value, why)) return false;
     *field = value;
     return true;
   };
@@ -243,11 +249,7 @@ OptionTable& OptionTable::OptionalNumber(const std::string& name, std::optional<
       return true;
     }
     double value = 0.0;
-    if (!ParseFinite(text, &value)) {
-      *why = "expected a finite number, got '" + text + "'";
-      return false;
-    }
-    if (!InRange(range, value, why)) return false;
+    if (!ParseNumberInRange(text, range, &value, why)) return false;
     *field = value;
     return true;
   };
