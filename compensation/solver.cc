@@ -833,6 +833,12 @@ constexpr double kEveryIterationCgTolerance = 0.5;
 // (M_FF)⁻¹ and 6–9 with (K M⁻¹ Kᵀ)_FF, interior_partitions' with 35% on a bound 3–12 and 1–4.
 constexpr int kPreconditionerWindow = 4;
 constexpr double kInverseHessianSwitchCg = 6.0;
+// The every-iteration path's safeguard (SolveCiede2000EveryIteration): halvings of a step it
+// tries (each costs one measurement of the metric, O(n)), and its window: a step must end below
+// the highest measured objective of the last kSafeguardWindow kept points, and the run stops
+// after kSafeguardWindow steps without a new best.
+constexpr int kSafeguardHalvings = 3;
+constexpr int kSafeguardWindow = 5;
 
 // kPerceptual2000 with MetricUpdate::kEveryIteration (solver.h), from `initial`: one Gauss–Newton
 // run whose every iteration is one step of Alg. 1 (its Armijo search included) on the objective
@@ -866,14 +872,27 @@ void SolveCiede2000EveryIteration(const SolverOptions& options, const Compensati
   // (options.preconditioner kFreeColourHessian): the preconditioner's rule above.
   std::vector<int> recent_cg;
   bool may_change = true;  // cleared once the run went back to the asked-for preconditioner
+  // The safeguard's state (below): the measured objective at the last kept points, the best.
+  std::vector<double> recent_robust = {robust};
+  struct Point {
+    Eigen::MatrixX3d emittance, radiosity;
+    ColourMetric metric;
+    double robust = 0.0;
+    int iteration = 0;
+  } best{emittance, current_radiosity, metric, robust, 0};
   for (int iteration = 1; iteration <= options.max_iterations; ++iteration) {
     const CompensationObjective objective(problem, radiosity, ColourModel::kLab, metric);
     SolverSummary step_summary;
     Eigen::MatrixX3d step_radiosity;
-    const Eigen::MatrixX3d step_emittance =
+    Eigen::MatrixX3d step_emittance =
         Minimise(step_options, objective, emittance, &step_summary, &step_radiosity,
                  &current_radiosity, &free_colour_hessian);
     AddWorkCounters(step_summary, summary);
+    summary->device_loop = step_summary.device_loop;  // how the steps ran on a device
+    summary->device_fused = step_summary.device_fused;
+    summary->device_fused_blocks = step_summary.device_fused_blocks;
+    summary->device_preconditioner = step_summary.device_preconditioner;
+    summary->device_cg_matrix = step_summary.device_cg_matrix;
     if (first) {
       summary->initial_cost = step_summary.initial_cost;
       summary->trace.push_back({0, robust, 0.0, 0.0, 3 * problem.size(), 0, 0.0});
@@ -912,10 +931,51 @@ void SolveCiede2000EveryIteration(const SolverOptions& options, const Compensati
       }
     }
     if (step_radiosity.rows() != problem.size()) step_radiosity = radiosity.Solve(step_emittance);
+    // The safeguard: the step lowered the objective measured at its start, not necessarily the
+    // one measured where it lands (the metric and the robust weights move with the iterate).
+    // Unguarded, the run can cycle: on data/scenes/room.json the measured objective went round
+    // 7 720–7 800 for 95 iterations after reaching 7 640. Requiring every step to lower it stops
+    // too early instead: on the box room it rises and falls on its way down (27 517 → 27 676 →
+    // 27 168 → … → 26 105). So the rule is non-monotone (Grippo, Lampariello and Lucidi 1986):
+    // a step is kept if the measured objective ends below the highest of the last
+    // kSafeguardWindow kept ones, else shorter steps along it (B is linear in E, so each costs
+    // one measurement); the run ends when kSafeguardWindow steps in a row found nothing lower
+    // than the best, or no step is kept, and returns the best point it measured.
+    ColourMetric step_metric;
+    double step_robust = MeasureCiede2000(options, problem, step_radiosity, &step_metric);
+    ++summary->metric_measurements;
+    const double reference = *std::max_element(recent_robust.begin(), recent_robust.end());
+    double fraction = 1.0;
+    for (int halving = 0; !(step_robust < reference) && halving < kSafeguardHalvings; ++halving) {
+      fraction *= 0.5;
+      Eigen::MatrixX3d shorter =
+          current_radiosity + fraction * (step_radiosity - current_radiosity);
+      step_robust = MeasureCiede2000(options, problem, shorter, &step_metric);
+      ++summary->metric_measurements;
+      if (step_robust < reference) {
+        step_radiosity = std::move(shorter);
+        step_emittance = emittance + fraction * (step_emittance - emittance);
+      }
+    }
+    if (!(step_robust < reference)) {
+      if (step_options.cg_tolerance > options.cg_tolerance || changed) {
+        step_options.cg_tolerance = options.cg_tolerance;  // confirm with a tight step first
+        step_options.preconditioner = options.preconditioner;
+        may_change = false;
+        continue;
+      }
+      summary->termination = TerminationType::kFunctionTolerance;
+      summary->message = "no step lowers the measured objective";
+      break;
+    }
     emittance = step_emittance;
     current_radiosity = std::move(step_radiosity);
-    robust = MeasureCiede2000(options, problem, current_radiosity, &metric);
-    ++summary->metric_measurements;
+    metric = std::move(step_metric);
+    robust = step_robust;
+    recent_robust.push_back(robust);
+    if (static_cast<int>(recent_robust.size()) > kSafeguardWindow)
+      recent_robust.erase(recent_robust.begin());
+    if (robust < best.robust) best = {emittance, current_radiosity, metric, robust, iteration};
     summary->iterations = iteration;
     if (!step_summary.trace.empty()) {
       IterationRecord record = step_summary.trace.back();
@@ -925,6 +985,11 @@ void SolveCiede2000EveryIteration(const SolverOptions& options, const Compensati
       summary->trace.push_back(record);
     }
     if (options.progress) options.progress(iteration, robust, SecondsSince(start_time));
+    if (iteration - best.iteration >= kSafeguardWindow) {
+      summary->termination = TerminationType::kFunctionTolerance;
+      summary->message = "the measured objective stopped falling";
+      break;
+    }
     // The step's decrease of its own objective: zero at the fixed point.
     const double decrease = step_summary.initial_cost - step_summary.final_cost;
     if (decrease <= options.metric_update_tolerance * step_summary.initial_cost) {
@@ -940,6 +1005,11 @@ void SolveCiede2000EveryIteration(const SolverOptions& options, const Compensati
     } else {
       step_options.cg_tolerance = loose_cg_tolerance;
     }
+  }
+  if (best.robust < robust) {  // the safeguard's best point, where the run ended above it
+    emittance = std::move(best.emittance);
+    current_radiosity = std::move(best.radiosity);
+    metric = std::move(best.metric);
   }
   // The costs: the objective with the metric measured at the result.
   const CompensationObjective objective(problem, radiosity, ColourModel::kLab, metric);

@@ -209,6 +209,7 @@ double LowestMeanDeltaE2000(const CompensationProblem& problem, int rounds) {
   options.method = CompensationMethod::kPerceptual2000;
   options.robust_loss = SolverOptions::RobustLoss::kSoftL1;
   options.robust_scale = 0.25;
+  options.metric_update = SolverOptions::MetricUpdate::kRounds;  // `rounds` reweightings
   options.metric_rounds = rounds;
   SolverSummary summary;
   const CompensationSolution solution = Solve(options, unsmoothed, &summary);

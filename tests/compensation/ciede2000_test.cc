@@ -2,26 +2,29 @@
 // the reweighted objective against its definition and finite differences, the robust losses'
 // weights against finite differences of ρ, and the solver's result against the bounds, first-order
 // optimality of its last round and the published perceptual method's ΔE00.
+#include <gtest/gtest.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <random>
 #include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
 
-#include <Eigen/Cholesky>
-#include <Eigen/Eigenvalues>
-#include <Eigen/LU>
-#include <gtest/gtest.h>
-
 #include "compensation/colour.h"
+#include "compensation/problem.h"
 #include "compensation/solver.h"
 #include "datasets_synthetic/rooms.h"
 #include "geometry/form_factors.h"
+#include "geometry/stage.h"
 #include "tests/compensation/analytic_problem.h"
 #include "tests/compensation/exported_problem.h"
 
@@ -385,71 +388,17 @@ TEST(SolvePerceptual2000, LooseEarlyRoundsReachTheTightSchedulesOptimum) {
   EXPECT_LT(summary.iterations, reference_summary.iterations);
 }
 
-// Patch i's L*a*b* residual's metric form under a frozen metric, f(E) written out as
-// ObjectiveByDefinition does, with K⁻¹ formed once (dense LU per channel) so that finite
-// differences of f along each variable cost O(n).
-class FrozenMetricObjective {
- public:
-  FrozenMetricObjective(const CompensationProblem& problem, const ColourMetric& metric)
-      : problem_(problem), metric_(metric), desired_(LabOf(problem, problem.desired)) {
-    const int n = problem.size();
-    for (int c = 0; c < 3; ++c) {
-      const Eigen::MatrixXd k = Eigen::MatrixXd::Identity(n, n) -
-                                problem.reflectance.col(c).asDiagonal() * problem.form_factors;
-      inverse_[c] = k.fullPivLu().inverse();
-    }
-  }
-  Eigen::MatrixX3d Radiosity(const Eigen::MatrixX3d& e) const {
-    Eigen::MatrixX3d b(e.rows(), 3);
-    for (int c = 0; c < 3; ++c) b.col(c) = inverse_[c] * e.col(c);
-    return b;
-  }
-  double Value(const Eigen::MatrixX3d& b) const {
-    const int n = problem_.size();
-    const Eigen::MatrixX3d r0 = LabOf(problem_, b) - desired_;
-    Eigen::MatrixX3d r(n, 3);
-    for (int i = 0; i < n; ++i) r.row(i) = (metric_.factor[i] * r0.row(i).transpose()).transpose();
-    double f = 0.0;
-    for (int i = 0; i < n; ++i)
-      f += problem_.alpha * problem_.area[i] / problem_.area.mean() * metric_.weight[i] *
-           r.row(i).squaredNorm();
-    for (std::size_t k = 0; k < problem_.adjacency.size(); ++k) {
-      const auto& pair = problem_.adjacency[k];
-      f += (1 - problem_.alpha) * metric_.pair_weight[static_cast<Eigen::Index>(k)] *
-           (r.row(pair[0]) - r.row(pair[1])).squaredNorm();
-    }
-    return f;
-  }
-  // ∂f/∂E by central differences (step h in E; B moves along a column of K⁻¹).
-  Eigen::MatrixX3d NumericGradient(const Eigen::MatrixX3d& e, double h) const {
-    const Eigen::MatrixX3d b = Radiosity(e);
-    Eigen::MatrixX3d g(e.rows(), 3);
-    for (int i = 0; i < e.rows(); ++i) {
-      for (int c = 0; c < 3; ++c) {
-        Eigen::MatrixX3d plus = b, minus = b;
-        plus.col(c) += h * inverse_[c].col(i);
-        minus.col(c) -= h * inverse_[c].col(i);
-        g(i, c) = (Value(plus) - Value(minus)) / (2 * h);
-      }
-    }
-    return g;
-  }
-
- private:
-  const CompensationProblem& problem_;
-  const ColourMetric& metric_;
-  const Eigen::MatrixX3d desired_;
-  Eigen::MatrixXd inverse_[3];
-};
-
-// The metric measured again at every iterate (MetricUpdate::kEveryIteration). Run to the fixed
-// point of the reweighting (no decrease tolerance), it ends first-order optimal, by finite
-// differences, for the objective whose metric and weights are measured (independently, from a dense
-// LU's radiosity) at the result itself; with the default tolerance it ends within 0.1% of that
-// fixed point's robust objective; and both are no worse than the default rounds' robust objective
-// (within 0.1%: a fifth round moves the rounds' robust objective by −0.3% to +0.05%) and per-patch
-// ΔE00 (within 0.01).
-TEST(SolvePerceptual2000, EveryIterationEndsAtTheFixedPointNoWorseThanTheRounds) {
+// The metric measured again at every iterate (MetricUpdate::kEveryIteration). Each step lowers
+// the objective measured at its start; the run keeps a step only where the robust objective
+// itself (measured again where the step lands) ends below the highest of its last few points,
+// and returns the best point it measured. So: the result's robust objective, computed here
+// independently from a dense LU's radiosity, is the lowest of the run's trace; run with no
+// decrease tolerance and 400 iterations allowed it still ends by its own rule, within 0.1% of
+// the default run; and both are no worse than the default rounds' robust objective (within
+// 0.1%: a fifth round moves the rounds' robust objective by −0.3% to +0.05%) and per-patch ΔE00
+// (within 0.01). Before the safeguard the run without tolerance went on for 124 iterations to
+// the reweighting's fixed point, 7 032.8, above the 7 022.1 the safeguarded run reaches.
+TEST(SolvePerceptual2000, EveryIterationKeepsItsBestPointNoWorseThanTheRounds) {
   const TestProblem test = MakeProblem(200, 0.5);
   const CompensationProblem& problem = test.fine;
   SolverOptions rounds;
@@ -472,31 +421,29 @@ TEST(SolvePerceptual2000, EveryIterationEndsAtTheFixedPointNoWorseThanTheRounds)
   }
   const Eigen::MatrixX3d b = RadiosityByLu(problem, solution.emittance);
   EXPECT_LT((solution.radiosity - b).cwiseAbs().maxCoeff(), 1e-8 * (1.0 + b.cwiseAbs().maxCoeff()));
-  // The fixed point: the metric measured at the result, the objective's projected gradient there.
   const Eigen::MatrixX3d fixed_b = RadiosityByLu(problem, fixed_point.emittance);
-  const ColourMetric metric = Ciede2000Metric(options, problem, fixed_b);
-  const FrozenMetricObjective frozen(problem, metric);
-  const double cost = frozen.Value(fixed_b);
-  EXPECT_NEAR(tight_summary.final_cost, cost, 1e-8 * cost) << tight_summary.BriefReport();
-  const double projected = ProjectedGradientNorm(
-      fixed_point.emittance, frozen.NumericGradient(fixed_point.emittance, 1e-6), problem.lower,
-      problem.upper);
   const Eigen::MatrixX3d rounds_b = RadiosityByLu(problem, by_rounds.emittance);
   const double value = RobustObjective(options, problem, b),
                rounds_value = RobustObjective(options, problem, rounds_b),
                fixed_value = RobustObjective(options, problem, fixed_b);
+  // The trace's costs are the robust objective at every point the run kept.
+  for (const auto& [run, result] :
+       {std::pair{&summary, value}, std::pair{&tight_summary, fixed_value}}) {
+    double lowest = std::numeric_limits<double>::infinity();
+    for (const IterationRecord& record : run->trace) lowest = std::min(lowest, record.cost);
+    EXPECT_NEAR(result, lowest, 1e-9 * lowest) << run->BriefReport();
+  }
+  EXPECT_NE(tight_summary.termination, TerminationType::kMaxIterations)
+      << tight_summary.BriefReport();
   std::printf(
       "every iteration: %d iterations, %d CG, %d metric measurements; robust objective %.10g "
-      "(fixed point "
-      "%.10g after %d iterations, %s, projected gradient %.3g; rounds %.10g after %d, %d CG); per "
-      "patch ΔE00 "
-      "%.4f (fixed point %.4f, rounds %.4f)\n",
+      "(no tolerance: %.10g after %d iterations, %s; rounds %.10g after %d, %d CG); per patch "
+      "ΔE00 %.4f (no tolerance %.4f, rounds %.4f)\n",
       summary.iterations, summary.cg_iterations, summary.metric_measurements, value, fixed_value,
-      tight_summary.iterations, TerminationName(tight_summary.termination), projected, rounds_value,
+      tight_summary.iterations, TerminationName(tight_summary.termination), rounds_value,
       rounds_summary.iterations, rounds_summary.cg_iterations, AreaMeanDeltaE2000(problem, b),
       AreaMeanDeltaE2000(problem, fixed_b), AreaMeanDeltaE2000(problem, rounds_b));
-  EXPECT_LT(projected, 1e-6 * (1.0 + cost)) << tight_summary.BriefReport();
-  EXPECT_NEAR(value, fixed_value, 1e-3 * fixed_value);  // 2.6e-4 measured
+  EXPECT_NEAR(value, fixed_value, 1e-3 * fixed_value);
   for (const Eigen::MatrixX3d* radiosity : {&b, &fixed_b}) {
     EXPECT_LE(RobustObjective(options, problem, *radiosity), (1.0 + 1e-3) * rounds_value);
     EXPECT_LE(AreaMeanDeltaE2000(problem, *radiosity),
@@ -604,6 +551,42 @@ TEST(SolvePerceptual2000, DISABLED_Timings) {
       std::fflush(stdout);
     }
   }
+}
+
+// A room no schedule was tuned on (data/scenes/room.json, the scene file the README starts
+// from, at its own 920 patches and bounds, F from Embree): the reweighting without a safeguard
+// went round for all 100 iterations there (the robust objective 7 720–7 800 after reaching
+// 7 640 at the fifth). With it the run ends by its own rule, at its best point, no worse than
+// the rounds by the robust objective and per-patch ΔE00.
+TEST(SolvePerceptual2000, EveryIterationEndsOnARoomItWasNotTunedOn) {
+  const GeometryStage geometry = RunGeometryStage(
+      std::string(PROCAM_SOURCE_DIR) + "/data/scenes/room.json", GeometryOptions());
+  const CompensationProblem problem =
+      MakeProblem(geometry.scene, geometry.patches.fine, geometry.form_factors, 0.5);
+  SolverOptions rounds;
+  rounds.method = CompensationMethod::kPerceptual2000;
+  rounds.metric_update = SolverOptions::MetricUpdate::kRounds;
+  SolverOptions options = rounds;
+  options.metric_update = SolverOptions::MetricUpdate::kEveryIteration;
+  SolverSummary rounds_summary, summary;
+  const CompensationSolution by_rounds = Solve(rounds, problem, &rounds_summary);
+  const CompensationSolution solution = Solve(options, problem, &summary);
+  const double value = Ciede2000RobustObjective(options, problem, solution.radiosity);
+  const double rounds_value = Ciede2000RobustObjective(options, problem, by_rounds.radiosity);
+  double lowest = std::numeric_limits<double>::infinity();
+  for (const IterationRecord& record : summary.trace) lowest = std::min(lowest, record.cost);
+  std::printf(
+      "room.json, %d patches: every iteration %d iterations, %d CG, robust %.6g, ΔE00 %.4f "
+      "(%s); rounds %d iterations, robust %.6g, ΔE00 %.4f\n",
+      problem.size(), summary.iterations, summary.cg_iterations, value,
+      AreaMeanDeltaE2000(problem, solution.radiosity), summary.message.c_str(),
+      rounds_summary.iterations, rounds_value, AreaMeanDeltaE2000(problem, by_rounds.radiosity));
+  EXPECT_NE(summary.termination, TerminationType::kMaxIterations) << summary.BriefReport();
+  EXPECT_LT(summary.iterations, rounds_summary.iterations);
+  EXPECT_NEAR(value, lowest, 1e-9 * lowest);
+  EXPECT_LE(value, (1.0 + 1e-3) * rounds_value);
+  EXPECT_LE(AreaMeanDeltaE2000(problem, solution.radiosity),
+            AreaMeanDeltaE2000(problem, by_rounds.radiosity) + 0.01);
 }
 
 TEST(SolvePerceptual2000, BadOptionsAreRefused) {
