@@ -1,10 +1,12 @@
 #include "datasets_synthetic/demo.h"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <numbers>
 #include <opencv2/imgcodecs.hpp>
 #include <optional>
@@ -20,11 +22,14 @@
 #include "calibration/projectors_stage.h"
 #include "calibration/registration.h"
 #include "calibration/rig_directory.h"
+#include "capture/sequencer.h"
 #include "compensation/colour_image.h"
 #include "compensation/stage.h"
+#include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/scan_accuracy.h"
 #include "geometry/stage.h"
 #include "projection/camera_rays.h"
+#include "projection/stage.h"
 #include "verification/verification.h"
 
 namespace procam {
@@ -346,15 +351,40 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
 }  // namespace
 
 void SyntheticDemoOptions::Declare(OptionTable* table) {
-  std::vector<std::pair<std::string, CompensationMethod>> methods;
-  for (CompensationMethod m :
-       {CompensationMethod::kNaive, CompensationMethod::kReverse, CompensationMethod::kLinear,
-        CompensationMethod::kPerceptual, CompensationMethod::kPerceptual2000}) {
-    methods.emplace_back(MethodName(m), m);
-  }
-  table->Choice("method", &method, methods,
-                "the compensation of the calibrated and scanned stages and of the closed loop "
-                "(the true rig's table compares every method)");
+  table
+      ->Text("scene", &scene,
+             "a synthetic scene (" + fmt::format("{}", fmt::join(SyntheticSceneNames(), ", ")) +
+                 ") or a scene JSON file: with projectors and a camera a synthetic rig (every "
+                 "stage, as synthetic:ROOM.json), else geometry and compensation only")
+      .Integer("patches", &patches, 4, std::numeric_limits<int>::max(), "", "solver patches")
+      .Path("out", &out, "output directory")
+      .Choice("method", &method, MethodChoices(),
+              "the compensation of the calibrated and scanned stages and of the closed loop "
+              "(the true rig's table compares every method)")
+      .Text("camera", &camera,
+            "run the pipeline on a rig instead: the camera URI (v4l2:..., aravis:..., or "
+            "synthetic:SCENE?...); --scene is then the room model (a scene file, or "
+            "synthetic:NAME)")
+      .Texts("display", &displays, "with --camera: each projector's monitor, in order (glfw:N|NAME)")
+      .Texts("names", &names, "with --camera: projector names")
+      .Text("chessboard", &chessboard, "with --camera: chessboard photos of the camera")
+      .Text("camera-model", &camera_model, "with --camera: a calibrated camera.cameramodel instead")
+      .Text("camera-scale", &camera_scale,
+            "with --camera: camera value per unit exitance (number or R,G,B; synthetic cameras: "
+            "automatic)")
+      .Text("camera-guess", &camera_guess,
+            "with --camera: camera position and a point it looks at, "
+            "x,y,z,look_x,look_y,look_z")
+      .Integer("frames", &frames, 1, 1000, "", "with --camera: frames averaged per pattern");
+  DeclareSettleOption(table, &settle_ms, &measure_settle);
+  table->Integer("iterations", &iterations, 1, 50, "", "with --camera: closed-loop photos at most")
+      .Choice("light", &light, LightFieldChoices(),
+              "smooth: the light varies smoothly over each surface, stepping only where the "
+              "desired appearance does, each patch's flux kept (seamless); flat: one uniform "
+              "level per patch")
+      .NegatedFlag("no-scan", &scan,
+                   "synthetic rig: skip the scan stage (the rig calibrated and the room scanned "
+                   "without the model, compensated on the scan)");
 }
 
 SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
@@ -547,6 +577,7 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
   summary.calibrated = calibration.perceptual;
   summary.verification = verified.BriefReport();
   if (scan) summary.scanned = scan->perceptual;
+  summary.out = out;
   return summary;
 }
 
