@@ -1,10 +1,10 @@
 // procam scene info / write / random / judge-scan / export, and procam demo: each command's
 // options as its Options struct declares them (datasets_synthetic/scene_info.h, random_rooms.h,
 // scan_judge.h, demo.h).
+#include <spdlog/fmt/fmt.h>
+
 #include <iostream>
 #include <memory>
-
-#include <spdlog/fmt/fmt.h>
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
@@ -29,9 +29,10 @@ void AddSceneCommands(CLI::App& app) {
     std::cout << DescribeSceneFile(*info);
   });
 
-  CLI::App* write_cmd = scene->add_subcommand(
-      "write", "Write a built-in synthetic scene as a scene file with its projectors and camera (open it as a "
-               "synthetic rig: --camera synthetic:DIR/NAME.json)");
+  CLI::App* write_cmd = scene->add_subcommand("write",
+                                              "Write a built-in synthetic scene as a scene file "
+                                              "with its projectors and camera (open it as a "
+                                              "synthetic rig: --camera synthetic:DIR/NAME.json)");
   const auto write = AddDeclaredOptions(write_cmd, &SceneFileOptions::DeclareWrite);
   write_cmd->callback([write] {
     const std::filesystem::path path = WriteSceneFile(*write);
@@ -56,7 +57,8 @@ void AddSceneCommands(CLI::App& app) {
       "judge-scan", "Scan a scene file's rig without its model (exact correspondences plus decoding noise) and "
                     "judge the scanned room against the file (docs/scan.md#rooms-made-at-random)");
   auto judge_scene = std::make_shared<std::string>();
-  judge_cmd->add_option("scene", *judge_scene, "Scene JSON with projectors and a camera")->required();
+  judge_cmd->add_option("scene", *judge_scene, "Scene JSON with projectors and a camera")
+      ->required();
   const auto judge = AddDeclaredOptions<ScanJudgeOptions>(judge_cmd);
   judge_cmd->add_option("--json", *judge_json, "Also write the judgement as JSON to this file");
   judge_cmd->callback([judge, judge_json, judge_scene] {

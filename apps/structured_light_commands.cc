@@ -16,10 +16,10 @@
 namespace procam {
 
 void AddStructuredLightCommands(CLI::App& app) {
-  CLI::App* import = app.add_subcommand(
+  CLI::App* import_cmd = app.add_subcommand(
       "import", "Photos of structured light made by another tool, as a capture session");
-  const auto import_options = AddDeclaredOptions<ImportOptions>(import);
-  import->callback([import_options] {
+  const auto import_options = AddDeclaredOptions<ImportOptions>(import_cmd);
+  import_cmd->callback([import_options] {
     import_options->progress = PrintProgress();
     CheckOutputDirectory(import_options->out, DirectoryKind::kCaptureSession);
     ImportCaptures(*import_options);
@@ -27,8 +27,8 @@ void AddStructuredLightCommands(CLI::App& app) {
                 import_options->out.c_str());
   });
 
-  CLI::App* decode = app.add_subcommand(
-      "decode", "Decode a structured-light session: decode.png and result.json");
+  CLI::App* decode =
+      app.add_subcommand("decode", "Decode a structured-light session: decode.png and result.json");
   const auto decode_options = AddDeclaredOptions<SessionDecodeOptions>(decode);
   decode->callback([decode_options] {
     const DecodeSummary summary = DecodeSessionDirectory(*decode_options);

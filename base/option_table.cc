@@ -321,25 +321,24 @@ std::function<std::vector<std::string>()> WriteEach(const std::vector<T>* field,
 OptionTable& OptionTable::Texts(const std::string& name, std::vector<std::string>* field,
                                 const std::string& help) {
   List(name, WriteEach(field, [](const std::string& text) { return text; }),
-              SetEach(field,
-                      [](const std::string& item, std::string* value, std::string*) {
-                        *value = item;
-                        return true;
-                      }),
-              "list of text", help);
+       SetEach(field,
+               [](const std::string& item, std::string* value, std::string*) {
+                 *value = item;
+                 return true;
+               }),
+       "list of text", help);
   return Sets(field);
 }
 
 OptionTable& OptionTable::Paths(const std::string& name, std::vector<std::filesystem::path>* field,
                                 const std::string& help) {
-  List(name,
-              WriteEach(field, [](const std::filesystem::path& path) { return path.string(); }),
-              SetEach(field,
-                      [](const std::string& item, std::filesystem::path* value, std::string*) {
-                        *value = item;
-                        return true;
-                      }),
-              "list of paths", help);
+  List(name, WriteEach(field, [](const std::filesystem::path& path) { return path.string(); }),
+       SetEach(field,
+               [](const std::string& item, std::filesystem::path* value, std::string*) {
+                 *value = item;
+                 return true;
+               }),
+       "list of paths", help);
   return Sets(field);
 }
 

@@ -153,7 +153,8 @@ RigPlan Plan(const CalibrateAllOptions& args) {
       throw std::invalid_argument(
           flag(args.floor_chessboard) +
           ": required to scan the room: a photo of the chessboard lying flat on the floor, taken "
-          "by the camera from where it stands (or " + flag(args.camera_height) + ", metres)");
+          "by the camera from where it stands (or " +
+          flag(args.camera_height) + ", metres)");
     if (!args.floor_chessboard.empty() && !std::filesystem::is_regular_file(args.floor_chessboard))
       throw IoError(args.floor_chessboard.string() + ": file not found (" +
                     flag(args.floor_chessboard) + ")");

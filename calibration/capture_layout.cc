@@ -655,7 +655,9 @@ void PatternExportOptions::Declare(OptionTable* table) {
   table
       ->Custom(
           "axes",
-          [p] { return std::string(p->columns && p->rows ? "both" : p->rows ? "rows" : "columns"); },
+          [p] {
+            return std::string(p->columns && p->rows ? "both" : p->rows ? "rows" : "columns");
+          },
           [p](const std::string& text, std::string* why) {
             if (text != "both" && text != "columns" && text != "rows") {
               *why = "expected both, columns or rows; got '" + text + "'";

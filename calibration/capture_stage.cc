@@ -78,13 +78,14 @@ std::shared_ptr<PatternDisplay> SimulatedProjectorDisplay(const CaptureStageOpti
     std::string names;
     for (const std::string& name : simulated.projector_names)
       names += (names.empty() ? "" : ", ") + name;
-    throw IoError(FlagOf(options, &options.projector) + " " + std::to_string(options.projector) + ": " +
-                  simulated.description + " has " + std::to_string(count) + " projectors (0.." +
-                  std::to_string(count - 1) + ": " + names + ")");
+    throw IoError(FlagOf(options, &options.projector) + " " + std::to_string(options.projector) +
+                  ": " + simulated.description + " has " + std::to_string(count) +
+                  " projectors (0.." + std::to_string(count - 1) + ": " + names + ")");
   }
   const std::shared_ptr<PatternDisplay>& display = simulated.displays[options.projector];
   if (options.projector_size && *options.projector_size != display->Resolution()) {
-    throw IoError(FlagOf(options, &options.projector_size) + " " + SizeText(*options.projector_size) + ": projector " +
+    throw IoError(FlagOf(options, &options.projector_size) + " " +
+                  SizeText(*options.projector_size) + ": projector " +
                   std::to_string(options.projector) + " of " + simulated.description + " is " +
                   SizeText(display->Resolution()));
   }
@@ -157,9 +158,8 @@ void CaptureStageOptions::Declare(OptionTable* table) {
 bool CaptureStageOptions::Check(std::string* why) const {
   const std::set<std::string> sequences = {"graycode", "structured_light", "photometric", "verify"};
   if (!sequences.count(sequence)) {
-    return Fail(
-        why, FlagOf(*this, &sequence) + ": '" + sequence +
-                 "': graycode, structured_light, photometric or verify");
+    return Fail(why, FlagOf(*this, &sequence) + ": '" + sequence +
+                         "': graycode, structured_light, photometric or verify");
   }
   if (!CheckDeclared(*this, why)) return false;
   PhotometricOptions photometric;

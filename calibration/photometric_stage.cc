@@ -122,7 +122,8 @@ PhotometricRigStage::PhotometricRigStage(const PhotometricStageOptions& args,
   s.session_dir = session_dir;
   s.rig_file = (rig_dir / "rig.json").string();
   if (!args.projector.empty() && !std::filesystem::is_regular_file(s.rig_file)) {
-    throw IoError(s.rig_file + ": not found; " + FlagOf(args, &args.projector) + " " + args.projector +
+    throw IoError(s.rig_file + ": not found; " + FlagOf(args, &args.projector) + " " +
+                  args.projector +
                   " merges the fit into an existing rig (procam calibrate camera, projectors)");
   }
   if (args.scene.empty()) {

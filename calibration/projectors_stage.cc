@@ -106,9 +106,8 @@ RoomCalibrationProblem ReadProblem(const ProjectorsStageOptions& args, const Cam
     if (!ValidProjectorName(observations.name)) observations.name = "projector" + std::to_string(k);
     if (!names.insert(observations.name).second)
       throw std::invalid_argument("projector name '" + observations.name + "' of " +
-                                  args.sessions[k].string() +
-                                  " is used twice (name them with " + FlagOf(args, &args.names) +
-                                  ")");
+                                  args.sessions[k].string() + " is used twice (name them with " +
+                                  FlagOf(args, &args.names) + ")");
     problem.projectors.push_back(std::move(observations));
   }
 
@@ -157,10 +156,9 @@ void HoldLenses(const std::map<std::string, HeldProjectorLens>& lenses,
     for (; k < problem->projectors.size() && problem->projectors[k].name != name; ++k)
       names += (names.empty() ? "" : ", ") + problem->projectors[k].name;
     if (k == problem->projectors.size())
-      throw std::invalid_argument(FlagOf(args, &args.held_lenses) + " " + name + "=" +
-                                  lens.source + ": no session's projector is named '" + name +
-                                  "' (projectors: " + names + "; name them with " +
-                                  FlagOf(args, &args.names) + ")");
+      throw std::invalid_argument(FlagOf(args, &args.held_lenses) + " " + name + "=" + lens.source +
+                                  ": no session's projector is named '" + name + "' (projectors: " +
+                                  names + "; name them with " + FlagOf(args, &args.names) + ")");
     const ProjectorObservations& projector = problem->projectors[k];
     if (lens.source_width != projector.width || lens.source_height != projector.height)
       throw IoError(lens.source + ": imagersize " + std::to_string(lens.source_width) + "x" +
@@ -753,8 +751,8 @@ double ScanCameraHeight(const ProjectorsStageOptions& args, const CameraModel& c
   throw std::invalid_argument(
       FlagOf(args, &args.floor_chessboard) + ": required without " + FlagOf(args, &args.scene) +
       ": the scan's metric scale comes from a photo of the chessboard lying flat on the floor, "
-      "taken by the camera from where it stands (or give " + FlagOf(args, &args.camera_height) +
-      ", the camera's height above the floor in metres)");
+      "taken by the camera from where it stands (or give " +
+      FlagOf(args, &args.camera_height) + ", the camera's height above the floor in metres)");
 }
 
 nlohmann::json SelfCalibrationJson(const ProjectorsStageSummary& stage) {
@@ -961,17 +959,20 @@ std::string ProjectorNameFrom(const std::string& name) {
 }
 
 Eigen::Isometry3d RoomFromCameraGuess(const std::string& guess, const std::string& up) {
-  const std::vector<double> v = ParseNumberList(
-      "--camera-guess", guess, "x,y,z,look_x,look_y,look_z in the room (metres)", 6);
-  const std::vector<double> u =
-      ParseNumberList("--camera-up", up, "x,y,z (the room's up direction)", 3);
+  // The options as ProjectorsStageOptions declares them (calibrate all's are the same).
+  const ProjectorsStageOptions names;
+  const std::string guess_flag = FlagOf(names, &names.camera_guess);
+  const std::string up_flag = FlagOf(names, &names.camera_up);
+  const std::vector<double> v =
+      ParseNumberList(guess_flag, guess, "x,y,z,look_x,look_y,look_z in the room (metres)", 6);
+  const std::vector<double> u = ParseNumberList(up_flag, up, "x,y,z (the room's up direction)", 3);
   try {
     return ProjFromWorldLookingAt(Vec3(v[0], v[1], v[2]), Vec3(v[3], v[4], v[5]),
                                   Vec3(u[0], u[1], u[2]))
         .inverse();
   } catch (const std::invalid_argument&) {
-    throw IoError(
-        "--camera-guess: the camera must look at a point away from it and not along --camera-up");
+    throw IoError(guess_flag + ": the camera must look at a point away from it and not along " +
+                  up_flag);
   }
 }
 

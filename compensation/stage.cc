@@ -52,7 +52,8 @@ void CompensationOptions::Declare(OptionTable* table) {
       ->Choice("method", &solver.method, MethodChoices(),
                "the objective: naive, reverse, linear, perceptual (the paper's, in CIE76) or "
                "perceptual2000 (CIEDE2000 with a robust loss; docs/solver.md)")
-      .Choice("loss", &solver.robust_loss, RobustLossChoices(), "perceptual2000: the loss on each patch's ΔE00²")
+      .Choice("loss", &solver.robust_loss, RobustLossChoices(),
+              "perceptual2000: the loss on each patch's ΔE00²")
       .Number("loss-scale", &solver.robust_scale, 1e-6, 1e6, "ΔE00",
               "perceptual2000: the loss's scale")
       .Choice("metric-update", &solver.metric_update, MetricUpdateChoices(),
@@ -228,8 +229,9 @@ void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run
   try {
     if (export_problem) {
       if (run.fine.compressed()) {
-        throw std::invalid_argument(
-            "--export writes the dense F.npy: not with compressed form factors");
+        const SolutionOutputOptions names;  // the option as declared
+        throw std::invalid_argument(FlagOf(names, &names.export_problem) +
+                                    " writes the dense F.npy: not with compressed form factors");
       }
       nlohmann::json settings = {{"scene", geometry.scene.path.string()},
                                  {"method", MethodName(run.summary.method)}};

@@ -1,7 +1,5 @@
 #include "datasets_synthetic/benchmarks.h"
 
-#include "projection/stage.h"
-
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -29,6 +27,7 @@
 #include "projection/frame_plan.h"
 #include "projection/projection_rig.h"
 #include "projection/projector.h"
+#include "projection/stage.h"
 
 namespace procam {
 namespace {

@@ -51,25 +51,28 @@ std::string RunRigDemo(const SyntheticDemoOptions& options, const std::string& s
   RunCalibrateAll(calibrate);
 
   Report(options.progress, "stage 2/4 compensation with the calibrated rig");
-  Report(options.steps,
-         fmt::format("\n$ procam compensate {} --method {} --multires --patches {} --rig {} --out {}",
-                     scene, MethodName(options.method), options.patches, rig_dir.string(),
-                     solution_dir.string()));
   CalibratedRoomOptions room_options;
   room_options.scene = scene;
   room_options.rig_dir = rig_dir;
   room_options.patches = options.patches;
   room_options.problem = false;  // RunCompensation makes the fine and coarse problems
   room_options.progress = options.progress;
-  const CalibratedRoom room = LoadCalibratedRoom(room_options);
   CompensationOptions compensation;
   compensation.solver.method = options.method;
   compensation.solver.multires = true;
+  compensation.progress = options.progress;
+  SolutionOutputOptions solution;
+  solution.out = solution_dir;
+  Report(options.steps, fmt::format("\n$ procam compensate {} {} {}",
+                                    fmt::join(ChangedArgumentsOf(room_options), " "),
+                                    fmt::join(ChangedArgumentsOf(compensation), " "),
+                                    fmt::join(ChangedArgumentsOf(solution), " ")));
+  const CalibratedRoom room = LoadCalibratedRoom(room_options);
   compensation.lower = room.projection.lower;
   compensation.upper = room.projection.upper;
-  compensation.progress = options.progress;
   const CompensationRun run = RunCompensation(room.geometry, compensation);
-  WriteCompensation(room.geometry, run, solution_dir, false, {{"rig", room.rig->Describe()}});
+  WriteCompensation(room.geometry, run, solution.out, solution.export_problem,
+                    {{"rig", room.rig->Describe()}});
 
   Report(options.progress, "stage 3/4 projector images");
   ProjectionStageOptions projection;
@@ -95,7 +98,8 @@ std::string RunRigDemo(const SyntheticDemoOptions& options, const std::string& s
   verify.sequencer.settle_ms = options.settle_ms;
   verify.measure_latency = options.measure_settle;
   if (!options.camera_scale.empty())
-    verify.camera_scale = ParsePositiveRgb("--camera-scale", options.camera_scale);
+    verify.camera_scale =
+        ParsePositiveRgb(FlagOf(options, &options.camera_scale), options.camera_scale);
   verify.progress = options.progress;
   Report(options.steps,
          fmt::format("\n$ procam verify {}", fmt::join(ChangedArgumentsOf(verify), " ")));
@@ -120,7 +124,8 @@ std::string RunSceneFileDemo(const SyntheticDemoOptions& options) {
   Report(options.steps, description);
   Report(options.progress, "stage 2/2: compensation (naive, reverse, linear, perceptual)");
   nlohmann::json methods = nlohmann::json::object();
-  std::string table = "\n  method        mean ΔE76  max ΔE76  mean ΔE2000  objective      solve s\n";
+  std::string table =
+      "\n  method        mean ΔE76  max ΔE76  mean ΔE2000  objective      solve s\n";
   for (const CompensationMethod method :
        {CompensationMethod::kNaive, CompensationMethod::kReverse, CompensationMethod::kLinear,
         CompensationMethod::kPerceptual}) {

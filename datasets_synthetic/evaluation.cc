@@ -3,11 +3,10 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
-#include <opencv2/imgcodecs.hpp>
-
 #include <algorithm>
 #include <chrono>
 #include <limits>
+#include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
 
 #include "base/html_report.h"
@@ -357,11 +356,10 @@ std::vector<std::string> ScenesMissingTheTarget(
 std::vector<std::vector<std::string>> SceneTableRows(const SceneEvaluation& e) {
   std::vector<std::vector<std::string>> rows;
   for (const MethodEvaluation& m : e.methods) {
-    rows.push_back({MethodName(m.method),
-                    fmt::format("{:.2f} ({:.1f})", m.mean_delta_e76, m.max_delta_e76),
-                    fmt::format("{:.2f} ({:.1f})", m.mean_delta_e2000, m.max_delta_e2000),
-                    fmt::format("{:.2f}", m.seams.seam),
-                    fmt::format("{:.2f}", m.run.mean_delta_e2000)});
+    rows.push_back(
+        {MethodName(m.method), fmt::format("{:.2f} ({:.1f})", m.mean_delta_e76, m.max_delta_e76),
+         fmt::format("{:.2f} ({:.1f})", m.mean_delta_e2000, m.max_delta_e2000),
+         fmt::format("{:.2f}", m.seams.seam), fmt::format("{:.2f}", m.run.mean_delta_e2000)});
   }
   if (e.model_lowest2000 > 0)
     rows.push_back({"lowest reachable", "–", "–", "–", fmt::format("{:.2f}", e.model_lowest2000)});
@@ -373,7 +371,8 @@ std::vector<std::vector<std::string>> SceneTableRows(const SceneEvaluation& e) {
 std::string RunEvaluation(const EvaluationOptions& options) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument("evaluate: " + why);
-  if (options.scenes.empty()) throw std::invalid_argument(FlagOf(options, &options.scenes) + " is required");
+  if (options.scenes.empty())
+    throw std::invalid_argument(FlagOf(options, &options.scenes) + " is required");
   std::vector<std::string> scenes = options.scenes;
   if (scenes.size() == 1 && scenes.front() == "all") {
     scenes = SyntheticSceneNames();
@@ -387,7 +386,8 @@ std::string RunEvaluation(const EvaluationOptions& options) {
   nlohmann::json all = nlohmann::json::array();
   std::vector<std::vector<std::pair<std::string, cv::Mat>>> figures;  // per scene
   for (const std::string& scene : scenes) {
-    evaluations.push_back(std::make_unique<SceneEvaluation>(EvaluateSyntheticScene(scene, options)));
+    evaluations.push_back(
+        std::make_unique<SceneEvaluation>(EvaluateSyntheticScene(scene, options)));
     const SceneEvaluation& e = *evaluations.back();
     pointers.push_back(&e);
     const auto files = WriteEvaluationPictures(e, out / scene);

@@ -37,9 +37,10 @@ void SceneFileOptions::DeclareInfo(OptionTable* table) {
 }
 
 void SceneFileOptions::DeclareWrite(OptionTable* table) {
-  table->Text("scene", &scene,
-              "a synthetic scene (" + fmt::format("{}", fmt::join(SyntheticSceneNames(), ", ")) +
-                  ")")
+  table
+      ->Text(
+          "scene", &scene,
+          "a synthetic scene (" + fmt::format("{}", fmt::join(SyntheticSceneNames(), ", ")) + ")")
       .Positional()
       .Required();
   table->Path("out", &out, "output directory").Required();
@@ -64,13 +65,13 @@ bool SceneFileOptions::Check(std::string* why) const {
 std::string DescribeGeometry(const GeometryStage& stage) {
   std::string out;
   const Scene& scene = stage.scene;
-  out += "scene " + scene.name + (scene.path.empty() ? "" : " (" + scene.path.string() + ")") +
-         "\n";
+  out +=
+      "scene " + scene.name + (scene.path.empty() ? "" : " (" + scene.path.string() + ")") + "\n";
   std::vector<int> fine_count(scene.surfaces.size(), 0), coarse_count(scene.surfaces.size(), 0);
   for (const Patch& patch : stage.patches.fine.patches) ++fine_count[patch.surface];
   for (const Patch& patch : stage.patches.coarse.patches) ++coarse_count[patch.surface];
-  out += fmt::format("  {:<20} {:>6} {:>10} {:>7} {:>7} {:>18} {}\n", "surface", "kind",
-                     "area m²", "fine", "coarse", "reflectance", "desired");
+  out += fmt::format("  {:<20} {:>6} {:>10} {:>7} {:>7} {:>18} {}\n", "surface", "kind", "area m²",
+                     "fine", "coarse", "reflectance", "desired");
   for (size_t s = 0; s < scene.surfaces.size(); ++s) {
     const Surface& surface = scene.surfaces[s];
     const std::string desired =
@@ -139,8 +140,8 @@ std::filesystem::path WriteSceneFile(const SceneFileOptions& options) {
 std::string ExportSceneProblem(const SceneFileOptions& options) {
   std::string why;
   if (!options.Check(&why)) throw std::invalid_argument(why);
-  CheckNotProcamDirectory(options.out, "scene export", FlagOf(options, &options.out,
-                                                              &SceneFileOptions::DeclareExport));
+  CheckNotProcamDirectory(options.out, "scene export",
+                          FlagOf(options, &options.out, &SceneFileOptions::DeclareExport));
   const GeometryStage stage = RunGeometry(options);
   const std::string description = DescribeScene(stage);  // checks the projectors first
   ExportGeometryProblem(stage, options.alpha, options.out);

@@ -45,9 +45,10 @@ std::filesystem::path WriteSceneFile(const SceneFileOptions& options);
 std::string ExportSceneProblem(const SceneFileOptions& options);
 
 // For commands whose output is no directory kind of their own (scene export, evaluate): throws
-// IoError naming `dir` when it is a file or holds a rig, a session, a solution or another of
-// procam's outputs, whose files the command would overwrite or mix with its own.
+// IoError naming `dir` and its `option` (e.g. FlagOf(options, &options.out)) when it is a file or
+// holds a rig, a session, a solution or another of procam's outputs, whose files the command
+// would overwrite or mix with its own.
 void CheckNotProcamDirectory(const std::filesystem::path& dir, const std::string& command,
-                             const std::string& option = "--out");
+                             const std::string& option);
 
 }  // namespace procam

@@ -4,11 +4,10 @@
 
 #include <chrono>
 #include <memory>
-#include <stdexcept>
-#include <thread>
-
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
+#include <thread>
 
 #include "base/image_io.h"
 #include "base/io.h"

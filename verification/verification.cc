@@ -81,7 +81,8 @@ ColourSource ResolveColourSource(const VerificationOptions& options, const RigCa
   throw IoError(rig_file + ": camera.colour: required key is missing for camera '" +
                 options.camera +
                 "' (the camera's value per unit exitance: {\"scale\": [R,G,B]} or {\"matrix\": "
-                "3x3}), or give " + FlagOf(options, &options.camera_scale));
+                "3x3}), or give " +
+                FlagOf(options, &options.camera_scale));
 }
 
 // Linear working RGB (CV_32FC3, R, G, B) in scene units from the camera's linear photo (B, G, R).
@@ -282,16 +283,17 @@ void VerificationOptions::Declare(OptionTable* table) {
   table->Path("rig", &rig_dir, "rig directory (rig.json: camera.model, projectors[])")
       .Positional()
       .Required();
-  table->Path("solution", &solution_dir,
-              "solution directory (procam compensate SCENE --rig RIG_DIR --out DIR)")
+  table
+      ->Path("solution", &solution_dir,
+             "solution directory (procam compensate SCENE --rig RIG_DIR --out DIR)")
       .Positional()
       .Required();
   table->Text("camera", &camera, "camera URI: synthetic:SCENE?..., aravis:<id>, v4l2:/dev/video0")
       .Required();
   table->Path("out", &out, "output directory").Required();
   table->Texts("display", &display_names,
-               "per projector, in rig.json's order: glfw:N|NAME, its monitor (procam show "
-               "--list); not for synthetic cameras");
+               "per projector, in rig.json's order: glfw:N|NAME, its monitor "
+               "(procam show --list); not for synthetic cameras");
   table
       ->Integer("iterations", &iterations, 1, 50, "",
                 "photos at most: 1 verifies only; more refine the model and solve again")
@@ -341,16 +343,16 @@ void VerificationOptions::Declare(OptionTable* table) {
       "camera value per unit exitance (scene units); default: rig.json camera.colour, or the "
       "synthetic camera's own");
   table->Sets(&camera_scale);
-  table->Number("camera-black", &camera_black, -1.0, 1e9, "DN",
-                "camera black level (< 0: rig.json camera.colour.black, the synthetic URI's, or 0)");
+  table->Number(
+      "camera-black", &camera_black, -1.0, 1e9, "DN",
+      "camera black level (< 0: rig.json camera.colour.black, the synthetic URI's, or 0)");
   table->Text("camera-response", &camera_response,
               "camera_response.json (procam calibrate response) for a camera that is not linear; "
               "needs --exposure-us bracketing");
   table->Number("gain", &gain, -1.0, 1000.0, "dB", "camera gain to set (< 0: leave it)");
   DeclareSettleOption(table, &sequencer.settle_ms, &measure_latency);
-  table->Numbers("exposure-us", &sequencer.exposures_us,
-                 OptionTable::Interval::AboveMin(0.0, 1e9), "µs",
-                 "exposure(s); several bracket and merge to HDR");
+  table->Numbers("exposure-us", &sequencer.exposures_us, OptionTable::Interval::AboveMin(0.0, 1e9),
+                 "µs", "exposure(s); several bracket and merge to HDR");
 }
 
 bool VerificationOptions::Check(std::string* why) const {
