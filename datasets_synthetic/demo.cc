@@ -558,8 +558,8 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
   Report(demo.progress,
          "demo: verification stage — photos against the predicted L*a*b*, the closed loop (procam "
          "verify)");
-  WriteCompensation(calibration.room.geometry, calibration.perceptual.run, out / "perceptual_calibrated",
-                    false);
+  WriteCompensation(calibration.room.geometry, calibration.perceptual.run,
+                    out / "perceptual_calibrated", false);
   VerificationOptions verification;
   verification.rig_dir = out / "rig";
   verification.solution_dir = out / "perceptual_calibrated";
