@@ -8,11 +8,8 @@
 #include <cstdio>
 #include <limits>
 #include <map>
-#include <optional>
-#include <sstream>
 
 #include "base/io.h"
-#include "base/output_directory.h"
 #include "procam/config.h"
 #if PROCAM_WITH_GLFW
 #include "projection/glfw_display.h"
@@ -115,10 +112,6 @@ CLI::Validator FiniteNonNegative() {
   return FiniteValidator(0.0, std::numeric_limits<double>::max(), false, "[0, ∞)");
 }
 
-CLI::Validator FinitePositive() {
-  return FiniteValidator(0.0, std::numeric_limits<double>::max(), true, "(0, ∞)");
-}
-
 ProgressCallback LogProgress() {
   return [](const std::string& line) { spdlog::info("{}", line); };
 }
@@ -128,64 +121,6 @@ ProgressCallback PrintProgress() {
     std::printf("%s\n", line.c_str());
     std::fflush(stdout);
   };
-}
-
-GeometryOptions GeometryArguments(int patches, FormFactorStorage storage) {
-  GeometryOptions options;
-  options.patches = patches;
-  options.storage = storage;
-  options.progress = LogProgress();
-  return options;
-}
-
-std::string DescribeGeometry(const GeometryStage& stage) {
-  std::ostringstream out;
-  const Scene& scene = stage.scene;
-  out << "scene " << scene.name << (scene.path.empty() ? "" : " (" + scene.path.string() + ")")
-      << "\n";
-  std::vector<int> fine_count(scene.surfaces.size(), 0), coarse_count(scene.surfaces.size(), 0);
-  for (const Patch& patch : stage.patches.fine.patches) ++fine_count[patch.surface];
-  for (const Patch& patch : stage.patches.coarse.patches) ++coarse_count[patch.surface];
-  out << fmt::format("  {:<20} {:>6} {:>10} {:>7} {:>7} {:>18} {}\n", "surface", "kind", "area m²",
-                     "fine", "coarse", "reflectance", "desired");
-  for (size_t s = 0; s < scene.surfaces.size(); ++s) {
-    const Surface& surface = scene.surfaces[s];
-    const std::string desired =
-        surface.desired.HasTexture()
-            ? "texture " + surface.desired.texture_path
-            : fmt::format("sRGB {:.2f} {:.2f} {:.2f}", surface.desired.srgb[0],
-                          surface.desired.srgb[1], surface.desired.srgb[2]);
-    out << fmt::format("  {:<20} {:>6} {:>10.3f} {:>7} {:>7}   {:.2f} {:.2f} {:.2f}   {}\n",
-                       surface.name, surface.kind == Surface::Kind::kQuad ? "quad" : "mesh",
-                       surface.Area(), fine_count[s], coarse_count[s], surface.reflectance[0],
-                       surface.reflectance[1], surface.reflectance[2], desired);
-  }
-  const Eigen::VectorXd areas = stage.patches.fine.Areas();
-  const FormFactorSummary& ff = stage.form_factor_summary;
-  out << fmt::format(
-      "  total area {:.3f} m², {} fine patches (target {}), {} coarse, {} adjacent pairs\n",
-      scene.Area(), stage.patches.fine.size(), scene.target_patches, stage.patches.coarse.size(),
-      stage.patches.fine.adjacency.size());
-  out << fmt::format("  patch area min {:.4g} mean {:.4g} max {:.4g} m² (max/min {:.2f})\n",
-                     areas.minCoeff(), areas.mean(), areas.maxCoeff(),
-                     areas.maxCoeff() / areas.minCoeff());
-  out << fmt::format(
-      "  form factor row sums min {:.5f} mean {:.5f} max {:.5f}; reciprocity error {:.1e}\n",
-      ff.min_row_sum, ff.mean_row_sum, ff.max_row_sum, ff.max_reciprocity_error);
-  out << fmt::format(
-      "  form factors: {} facing pairs, {} shadow rays, {:.2f} s; subdivision {:.3f} s\n",
-      ff.pairs_evaluated, ff.shadow_rays, ff.seconds, stage.subdivision_seconds);
-  return out.str();
-}
-
-ChessboardSpec ParseChessboard(const std::string& corners, double square) {
-  const std::array<int, 2> sides =
-      ParseSize("--corners", corners, "COLUMNSxROWS of inner corners, e.g. 9x6", 2, 100);
-  ChessboardSpec board;
-  board.corners_x = sides[0];
-  board.corners_y = sides[1];
-  board.square_size = square;
-  return board;
 }
 
 std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text) {
@@ -224,42 +159,6 @@ void AddPlayToleranceOption(CLI::App* command, double* tolerance) {
                    "fraction of it")
       ->check(FiniteRange(0.0, 0.1))
       ->capture_default_str();
-}
-
-std::string SettleSetting::Text() const { return measure ? "auto" : fmt::format("{}", ms); }
-
-void AddSettleOption(CLI::App* command, SettleSetting* settle) {
-  command
-      ->add_option_function<std::string>(
-          "--settle-ms",
-          [settle](const std::string& text) {
-            if (text == "auto") {
-              settle->measure = true;
-              return;
-            }
-            char* end = nullptr;
-            const double ms = std::strtod(text.c_str(), &end);
-            if (text.empty() || *end != '\0' || !(ms >= 0.0 && ms <= 60000.0)) {
-              throw CLI::ValidationError("--settle-ms", "'" + text + "': auto, or milliseconds in [0, 60000]");
-            }
-            settle->measure = false;
-            settle->ms = ms;
-          },
-          "Wait after each pattern before frames count: auto (measure the display-to-camera latency first with "
-          "a flash sequence) or milliseconds")
-      ->option_text("auto|MS (default " + settle->Text() + ")");
-}
-
-void CheckNotProcamDirectory(const std::filesystem::path& dir, const std::string& command,
-                             const std::string& option) {
-  std::error_code error;
-  if (std::filesystem::exists(dir, error) && !std::filesystem::is_directory(dir, error)) {
-    throw IoError(dir.string() + ": " + option + " must be a directory, and this is a file");
-  }
-  if (const std::optional<DirectoryKind> found = DirectoryKindOf(dir)) {
-    throw IoError(dir.string() + ": " + option + " is " + DirectoryKindName(*found) + "; " + command +
-                  " would write its own files into it: give a new directory");
-  }
 }
 
 }  // namespace procam

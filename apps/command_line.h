@@ -2,19 +2,12 @@
 // Values the commands read from their options (and rig.json keys) beyond what CLI11 parses.
 
 #include <CLI/CLI.hpp>
-#include <Eigen/Core>
-#include <Eigen/Geometry>
-#include <filesystem>
 #include <memory>
 #include <string>
-#include <vector>
 
 #include "base/option_table.h"
-#include "base/parse.h"
 #include "base/progress.h"
-#include "calibration/camera_calibration.h"
 #include "capture/display.h"
-#include "geometry/stage.h"
 #include "projection/projector_images.h"
 
 namespace procam {
@@ -53,14 +46,6 @@ std::shared_ptr<Options> AddDeclaredOptions(CLI::App* command, Options defaults 
 ProgressCallback LogProgress();
 ProgressCallback PrintProgress();
 
-// The geometry stage's options from --patches (0: the scene's) and the storage, logging progress.
-GeometryOptions GeometryArguments(int patches,
-                                  FormFactorStorage storage = FormFactorStorage::kDense);
-
-// A chessboard from --corners COLUMNSxROWS (inner corners) and --square (metres). Throws
-// std::invalid_argument naming --corners.
-ChessboardSpec ParseChessboard(const std::string& corners, double square);
-
 // A projector's monitor, "glfw:N|NAME" (procam show --list), as a fullscreen window. Throws
 // IoError naming the display: not glfw:..., no such monitor, a build without GLFW.
 std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text);
@@ -73,31 +58,11 @@ void AddLightOption(CLI::App* command, LightField* light);
 // the cost by less than F of it, in [0, 0.1].
 void AddPlayToleranceOption(CLI::App* command, double* tolerance);
 
-// --settle-ms auto|MS: the wait after each pattern before frames count. "auto" measures the
-// display-to-camera latency first (a flash sequence, capture/latency.h) and settles for it;
-// a number is milliseconds in [0, 60000].
-struct SettleSetting {
-  bool measure = false;
-  double ms = 150.0;
-  std::string Text() const;  // as the option is written
-};
-void AddSettleOption(CLI::App* command, SettleSetting* settle);
-
 // CLI::Range that also refuses what is not a finite number ("nan", "inf"): every comparison
 // with NaN is false, so CLI::Range, CLI::PositiveNumber and CLI::NonNegativeNumber let it through.
 // `min` and `max` are inclusive.
 CLI::Validator FiniteRange(double min, double max);
-// A finite number ≥ 0, and > 0.
+// A finite number ≥ 0.
 CLI::Validator FiniteNonNegative();
-CLI::Validator FinitePositive();
-
-// For commands whose output is no directory kind of their own (scene export, evaluate): throws
-// IoError naming `dir` when it is a file or holds a rig, a session, a solution or another of
-// procam's outputs, whose files the command would overwrite or mix with its own.
-void CheckNotProcamDirectory(const std::filesystem::path& dir, const std::string& command,
-                             const std::string& option = "--out");
-
-// Human-readable summary: surfaces, areas, patch counts, form-factor statistics.
-std::string DescribeGeometry(const GeometryStage& stage);
 
 }  // namespace procam

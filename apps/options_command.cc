@@ -10,17 +10,22 @@
 #include "calibration/calibrate_all_stage.h"
 #include "calibration/calibrated_room.h"
 #include "calibration/camera_stage.h"
+#include "calibration/capture_layout.h"
 #include "calibration/capture_stage.h"
 #include "calibration/photometric_stage.h"
 #include "calibration/projectors_stage.h"
 #include "calibration/response_stage.h"
 #include "compensation/stage.h"
 #include "datasets_synthetic/benchmarks.h"
+#include "datasets_synthetic/demo.h"
 #include "datasets_synthetic/emulated_room.h"
 #include "datasets_synthetic/evaluation.h"
+#include "datasets_synthetic/play_benchmark.h"
 #include "datasets_synthetic/random_rooms.h"
 #include "datasets_synthetic/scan_judge.h"
+#include "datasets_synthetic/scene_info.h"
 #include "nodes/node.h"
+#include "projection/show.h"
 #include "projection/stage.h"
 #include "verification/verification.h"
 
@@ -54,14 +59,25 @@ struct DeclaredOptions {
                              "compensate");
     Add<CalibratedRoomOptions>("The room", "CalibratedRoomOptions (calibration/calibrated_room.h)",
                                "compensate");
+    Add<SolutionOutputOptions>("The solution written",
+                               "SolutionOutputOptions (compensation/stage.h)", "compensate");
     Add<ProjectionStageOptions>("Projector images", "ProjectionStageOptions (projection/stage.h)",
                                 "project");
     Add<VerificationOptions>("The closed loop and its photos",
                              "VerificationOptions (verification/verification.h), SequencerOptions "
                              "(capture/sequencer.h)",
                              "verify");
+    Add<ShowOptions>("Images on projector monitors", "ShowOptions (projection/show.h)", "show");
     Add<CaptureStageOptions>("Captures", "CaptureStageOptions (calibration/capture_stage.h)",
                              "capture");
+    Add<ImportOptions>("Photos of another tool imported",
+                       "ImportOptions (calibration/capture_layout.h)", "import");
+    Add<SessionDecodeOptions>("A session decoded",
+                              "SessionDecodeOptions, StructuredLightDecodeOptions "
+                              "(calibration/capture_layout.h, calibration/structured_light.h)",
+                              "decode");
+    Add<PatternExportOptions>("Patterns for another program",
+                              "PatternExportOptions (calibration/capture_layout.h)", "patterns");
     Add<CameraStageOptions>("Camera intrinsics", "CameraStageOptions (calibration/camera_stage.h)",
                             "calibrate camera");
     Add<ProjectorsStageOptions>("Projectors and registration",
@@ -80,12 +96,22 @@ struct DeclaredOptions {
     Add<NodeOptions>("A display node", "NodeOptions (nodes/node.h)", "node");
     Add<EmulatedRoomOptions>("The room as a device",
                              "EmulatedRoomOptions (datasets_synthetic/emulated_room.h)", "emulate");
+    Add<SceneFileOptions>("A scene described", "SceneFileOptions (datasets_synthetic/scene_info.h)",
+                          "scene info", &SceneFileOptions::DeclareInfo);
+    Add<SceneFileOptions>("A synthetic scene written",
+                          "SceneFileOptions (datasets_synthetic/scene_info.h)", "scene write",
+                          &SceneFileOptions::DeclareWrite);
+    Add<SceneFileOptions>("A scene's problem exported",
+                          "SceneFileOptions (datasets_synthetic/scene_info.h)", "scene export",
+                          &SceneFileOptions::DeclareExport);
     Add<RandomRoomOptions>("A room made at random",
                            "RandomRoomOptions (datasets_synthetic/random_rooms.h)", "scene random");
     Add<ScanJudgeOptions>("A scan judged", "ScanJudgeOptions (datasets_synthetic/scan_judge.h)",
                           "scene judge-scan");
     Add<EvaluationOptions>("The evaluation", "EvaluationOptions (datasets_synthetic/evaluation.h)",
                            "evaluate");
+    Add<SyntheticDemoOptions>("The demo", "SyntheticDemoOptions (datasets_synthetic/demo.h)",
+                              "demo");
     Add<BenchmarkOptions>("Form-factor benchmark",
                           "BenchmarkOptions (datasets_synthetic/benchmarks.h)", "bench formfactors",
                           &BenchmarkOptions::DeclareFormFactors);
@@ -96,6 +122,12 @@ struct DeclaredOptions {
     Add<DecodeBenchmarkOptions>("Decode benchmark",
                                 "DecodeBenchmarkOptions (datasets_synthetic/benchmarks.h)",
                                 "bench decode");
+    Add<ProjectionBenchmarkOptions>("Projection benchmark",
+                                    "ProjectionBenchmarkOptions (datasets_synthetic/benchmarks.h)",
+                                    "bench projection");
+    Add<PlayBenchmarkOptions>("Play benchmark",
+                              "PlayBenchmarkOptions (datasets_synthetic/play_benchmark.h)",
+                              "bench play");
   }
 };
 

@@ -118,6 +118,7 @@ OptionTable::Option& OptionTable::Add(const std::string& name, Kind kind, const 
 
 OptionTable& OptionTable::Flag(const std::string& name, bool* field, const std::string& help) {
   Option& option = Add(name, Kind::kFlag, help);
+  option.fields = {field};
   option.get = [field] { return std::string(*field ? "true" : "false"); };
   option.set = [field](const std::string& text, std::string* why) {
     return ParseFlag(text, /*negated=*/false, field, why);
@@ -129,6 +130,7 @@ OptionTable& OptionTable::Flag(const std::string& name, bool* field, const std::
 OptionTable& OptionTable::NegatedFlag(const std::string& name, bool* field,
                                       const std::string& help) {
   Option& option = Add(name, Kind::kFlag, help);
+  option.fields = {field};
   option.get = [field] { return std::string(*field ? "false" : "true"); };
   option.set = [field](const std::string& text, std::string* why) {
     return ParseFlag(text, /*negated=*/true, field, why);
@@ -140,6 +142,7 @@ OptionTable& OptionTable::NegatedFlag(const std::string& name, bool* field,
 OptionTable& OptionTable::Integer(const std::string& name, int* field, int min, int max,
                                   const std::string& unit, const std::string& help) {
   Option& option = Add(name, Kind::kInteger, help);
+  option.fields = {field};
   option.unit = unit;
   const Interval range = Interval::Closed(min, max);
   option.range = range;
@@ -164,6 +167,7 @@ OptionTable& OptionTable::Integer(const std::string& name, int* field, int min, 
 OptionTable& OptionTable::Number(const std::string& name, double* field, Interval range,
                                  const std::string& unit, const std::string& help) {
   Option& option = Add(name, Kind::kNumber, help);
+  option.fields = {field};
   option.unit = unit;
   option.range = range;
   option.get = [field] { return OptionNumberText(*field); };
@@ -187,6 +191,7 @@ OptionTable& OptionTable::Number(const std::string& name, double* field, Interva
 OptionTable& OptionTable::Text(const std::string& name, std::string* field,
                                const std::string& help) {
   Option& option = Add(name, Kind::kText, help);
+  option.fields = {field};
   option.get = [field] { return *field; };
   option.set = [field](const std::string& text, std::string*) {
     *field = text;
@@ -199,6 +204,7 @@ OptionTable& OptionTable::Text(const std::string& name, std::string* field,
 OptionTable& OptionTable::Path(const std::string& name, std::filesystem::path* field,
                                const std::string& help) {
   Option& option = Add(name, Kind::kPath, help);
+  option.fields = {field};
   option.get = [field] { return field->string(); };
   option.set = [field](const std::string& text, std::string*) {
     *field = text;
@@ -240,6 +246,7 @@ OptionTable& OptionTable::OptionalNumber(const std::string& name, std::optional<
                                          Interval range, const std::string& unit,
                                          const std::string& help) {
   Option& option = Add(name, Kind::kNumber, help);
+  option.fields = {field};
   option.unit = unit;
   option.range = range;
   option.get = [field] { return *field ? OptionNumberText(**field) : std::string(); };
@@ -313,25 +320,26 @@ std::function<std::vector<std::string>()> WriteEach(const std::vector<T>* field,
 
 OptionTable& OptionTable::Texts(const std::string& name, std::vector<std::string>* field,
                                 const std::string& help) {
-  return List(name, WriteEach(field, [](const std::string& text) { return text; }),
-              SetEach(field,
-                      [](const std::string& item, std::string* value, std::string*) {
-                        *value = item;
-                        return true;
-                      }),
-              "list of text", help);
+  List(name, WriteEach(field, [](const std::string& text) { return text; }),
+       SetEach(field,
+               [](const std::string& item, std::string* value, std::string*) {
+                 *value = item;
+                 return true;
+               }),
+       "list of text", help);
+  return Sets(field);
 }
 
 OptionTable& OptionTable::Paths(const std::string& name, std::vector<std::filesystem::path>* field,
                                 const std::string& help) {
-  return List(name,
-              WriteEach(field, [](const std::filesystem::path& path) { return path.string(); }),
-              SetEach(field,
-                      [](const std::string& item, std::filesystem::path* value, std::string*) {
-                        *value = item;
-                        return true;
-                      }),
-              "list of paths", help);
+  List(name, WriteEach(field, [](const std::filesystem::path& path) { return path.string(); }),
+       SetEach(field,
+               [](const std::string& item, std::filesystem::path* value, std::string*) {
+                 *value = item;
+                 return true;
+               }),
+       "list of paths", help);
+  return Sets(field);
 }
 
 OptionTable& OptionTable::Numbers(const std::string& name, std::vector<double>* field,
@@ -348,6 +356,7 @@ OptionTable& OptionTable::Numbers(const std::string& name, std::vector<double>* 
                }),
        "numbers in " + range.Text(), help);
   Option& option = options_.back();
+  option.fields = {field};
   option.unit = unit;
   option.check = [field, range](std::string* why) {
     for (double value : *field) {
@@ -378,6 +387,7 @@ OptionTable& OptionTable::Integers(const std::string& name, std::vector<int>* fi
                }),
        "whole numbers in " + range.Text(), help);
   Option& option = options_.back();
+  option.fields = {field};
   option.unit = unit;
   option.check = [field, range](std::string* why) {
     for (int value : *field) {
@@ -415,6 +425,11 @@ OptionTable& OptionTable::Positional() {
   return *this;
 }
 
+OptionTable& OptionTable::Sets(const void* field) {
+  Last("Sets()").fields.push_back(field);
+  return *this;
+}
+
 OptionTable& OptionTable::Repeated() {
   Option& option = Last("Repeated()");
   if (option.kind != Kind::kList)
@@ -432,6 +447,15 @@ const OptionTable::Option* OptionTable::Find(const std::string& name) const {
     if (option.name == name) return &option;
   }
   return nullptr;
+}
+
+std::string OptionTable::FlagOf(const void* field) const {
+  for (const Option& option : options_) {
+    for (const void* set : option.fields) {
+      if (set == field) return Written(option);
+    }
+  }
+  throw std::logic_error("option table " + owner_ + ": no option sets the field named");
 }
 
 bool OptionTable::Check(std::string* why) const {

@@ -65,6 +65,9 @@ class OptionTable {
     std::function<bool(const std::vector<std::string>& items, std::string* why)> set_items;
     bool repeated = false;  // kList: one item per flag ("--hold-lens a=x --hold-lens b=y")
     std::string values;     // kList, kCustom: what it takes, e.g. "auto or ms in [0, 60000]"
+    // The fields it sets, by which FlagOf finds it: the one it was declared on (a Custom or a
+    // List: those Sets() names).
+    std::vector<const void*> fields;
   };
 
   // `owner` names the table in docs/options.md and in messages, e.g. "compensate".
@@ -115,6 +118,9 @@ class OptionTable {
   OptionTable& Required();
   OptionTable& Positional();
   OptionTable& Repeated();
+  // The option declared last sets `field` (a Custom or a List, whose field the table does not
+  // see): FlagOf(field) names it.
+  OptionTable& Sets(const void* field);
   // An enumeration by name: `names` pairs each accepted name with its value.
   template <typename Enum>
   OptionTable& Choice(const std::string& name, Enum* field,
@@ -125,6 +131,9 @@ class OptionTable {
   const std::vector<Option>& options() const { return options_; }
   // The option named `name` (without dashes), or nullptr.
   const Option* Find(const std::string& name) const;
+  // The option that sets `field`, as messages write it: "--camera-guess", or a positional's name.
+  // Throws std::logic_error when no option sets it (a message naming an undeclared field).
+  std::string FlagOf(const void* field) const;
 
   // Every field within its declared range or choices. On failure `*why` is one line naming the
   // flag: "--alpha: must be in [1e-09, 1], got 2".
@@ -171,6 +180,17 @@ bool CheckDeclared(const Options& options, std::string* why) {
   return table.Check(why);
 }
 
+// The option of `options` that sets `field` (a member of `options`), as messages write it
+// (OptionTable::FlagOf): a library message names an option from its declaration, e.g.
+// FlagOf(options, &options.camera_guess) is "--camera-guess". `declare`: as AddDeclaredOptions'.
+template <typename Options>
+std::string FlagOf(const Options& options, const void* field,
+                   void (Options::*declare)(OptionTable*) = &Options::Declare) {
+  OptionTable table;
+  (const_cast<Options&>(options).*declare)(&table);  // the table only takes the fields' addresses
+  return table.FlagOf(field);
+}
+
 // Writes a number as options are written: the shortest text that reads back to the same double.
 std::string OptionNumberText(double value);
 
@@ -189,7 +209,7 @@ OptionTable& OptionTable::Choice(const std::string& name, Enum* field,
         return -1;
       },
       [field, names](int index) { *field = names[static_cast<size_t>(index)].second; }, help);
-  return *this;
+  return Sets(field);
 }
 
 }  // namespace procam

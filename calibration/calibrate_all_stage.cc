@@ -96,17 +96,20 @@ struct RigPlan {
 };
 
 RigPlan Plan(const CalibrateAllOptions& args) {
+  // An option as messages write it, named from its declaration (OptionTable::FlagOf).
+  const auto flag = [&args](const auto& field) { return FlagOf(args, &field); };
   RigPlan plan;
   plan.simulated = FindSimulatedCamera(args.camera);
   const bool simulated = plan.simulated.has_value();
   const size_t count = simulated ? plan.simulated->displays.size() : args.display_names.size();
   if (count == 0) {
-    throw std::invalid_argument(
-        "--display: a real rig needs one per projector, e.g. --display "
-        "glfw:1,glfw:2 (procam show --list)");
+    throw std::invalid_argument(flag(args.display_names) +
+                                ": a real rig needs one per projector, e.g. " +
+                                flag(args.display_names) + " glfw:1,glfw:2 (procam show --list)");
   }
   if (simulated && !args.display_names.empty()) {
-    throw std::invalid_argument("--display: a synthetic camera looks at its own projectors");
+    throw std::invalid_argument(flag(args.display_names) +
+                                ": a synthetic camera looks at its own projectors");
   }
   plan.names = args.names;
   if (plan.names.empty()) {
@@ -116,55 +119,63 @@ RigPlan Plan(const CalibrateAllOptions& args) {
     }
   }
   if (plan.names.size() != count) {
-    throw std::invalid_argument("--names: " + std::to_string(plan.names.size()) + " names for " +
-                                std::to_string(count) + " projectors");
+    throw std::invalid_argument(flag(args.names) + ": " + std::to_string(plan.names.size()) +
+                                " names for " + std::to_string(count) + " projectors");
   }
   for (const std::string& name : plan.names) {
     if (!ValidProjectorName(name))
-      throw std::invalid_argument("--names: '" + name +
+      throw std::invalid_argument(flag(args.names) + ": '" + name +
                                   "': a projector's name takes letters, digits, '_', '-' and '.'");
   }
   plan.scene = args.scene;
   plan.scan = args.scan || (plan.scene.empty() && !simulated);
   for (const auto& [name, file] : args.held_lenses) {
     if (plan.scan)
-      throw std::invalid_argument(
-          "--hold-lens: only with a room model (the scan solves every "
-          "projector's lens)");
+      throw std::invalid_argument(flag(args.held_lenses) +
+                                  ": only with a room model (the scan solves every "
+                                  "projector's lens)");
     if (std::find(plan.names.begin(), plan.names.end(), name) == plan.names.end())
-      throw std::invalid_argument("--hold-lens " + name + "=" + file.string() +
+      throw std::invalid_argument(flag(args.held_lenses) + " " + name + "=" + file.string() +
                                   ": no projector is named '" + name +
                                   "' (projectors: " + Join(plan.names, ", ") + ")");
     if (!std::filesystem::is_regular_file(file))
-      throw IoError(file.string() + ": file not found (--hold-lens " + name + ")");
+      throw IoError(file.string() + ": file not found (" + flag(args.held_lenses) + " " + name +
+                    ")");
   }
   if (plan.scan) {
     if (!plan.scene.empty())
-      throw std::invalid_argument("--scan: not with --scene (scan the room, or register a model)");
+      throw std::invalid_argument(flag(args.scan) + ": not with " + flag(args.scene) +
+                                  " (scan the room, or register a model)");
     if (!args.camera_guess.empty())
-      throw std::invalid_argument("--camera-guess: only with --scene (a scan needs no guess)");
+      throw std::invalid_argument(flag(args.camera_guess) + ": only with " + flag(args.scene) +
+                                  " (a scan needs no guess)");
     if (args.floor_chessboard.empty() && !(args.camera_height > 0.0) && !simulated)
       throw std::invalid_argument(
-          "--floor-chessboard: required to scan the room: a photo of the chessboard lying flat "
-          "on the floor, taken by the camera from where it stands (or --camera-height, metres)");
+          flag(args.floor_chessboard) +
+          ": required to scan the room: a photo of the chessboard lying flat on the floor, taken "
+          "by the camera from where it stands (or " +
+          flag(args.camera_height) + ", metres)");
     if (!args.floor_chessboard.empty() && !std::filesystem::is_regular_file(args.floor_chessboard))
-      throw IoError(args.floor_chessboard.string() + ": file not found (--floor-chessboard)");
+      throw IoError(args.floor_chessboard.string() + ": file not found (" +
+                    flag(args.floor_chessboard) + ")");
     plan.scene = (args.out / "room.json").string();
   } else if (plan.scene.empty()) {
     plan.scene = plan.simulated->scene;
   }
   plan.patches = args.patches > 0 ? args.patches : simulated ? plan.simulated->patches : 0;
   if (args.camera_model.empty() && args.chessboard.empty() && !simulated) {
-    throw std::invalid_argument(
-        "--chessboard: a real camera needs chessboard photos (--chessboard DIR) or a "
-        "calibrated model (--camera-model FILE)");
+    throw std::invalid_argument(flag(args.chessboard) +
+                                ": a real camera needs chessboard photos (" +
+                                flag(args.chessboard) + " DIR) or a calibrated model (" +
+                                flag(args.camera_model) + " FILE)");
   }
   if (!args.camera_model.empty() && !std::filesystem::exists(args.camera_model))
-    throw IoError(args.camera_model.string() + ": file not found (--camera-model)");
+    throw IoError(args.camera_model.string() + ": file not found (" + flag(args.camera_model) +
+                  ")");
   if (args.camera_scale.empty() && !simulated) {
-    throw std::invalid_argument(
-        "--camera-scale: required for a real camera (camera value per unit exitance, "
-        "docs/calibration.md)");
+    throw std::invalid_argument(flag(args.camera_scale) +
+                                ": required for a real camera (camera value per unit exitance, "
+                                "docs/calibration.md)");
   }
   plan.captures = args.out / "captures";
   if (!simulated) {  // checked: now the monitors are opened

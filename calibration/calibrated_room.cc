@@ -7,11 +7,14 @@
 
 #include "base/io.h"
 #include "base/option_table.h"
+#include "base/timing.h"
 #include "calibration/reflectance_map.h"
+#include "projection/stage.h"
 
 namespace procam {
 
 void CalibratedRoomOptions::Declare(OptionTable* table) {
+  table->Text("scene", &scene, "scene JSON, or PREFIX:NAME").Positional().Required();
   table
       ->Path("rig", &rig_dir,
              "rig directory (rig.json from procam calibrate): its projectors replace the scene's, "
@@ -102,7 +105,8 @@ GeometryStage RoomGeometry(const CalibratedRoomOptions& options, Scene scene, in
   SubdivisionOptions subdivision;
   subdivision.target_patches = geometry.scene.target_patches;
   std::string why;
-  if (!subdivision.Check(&why)) throw IoError("--patches: " + why);  // as the geometry stage
+  if (!subdivision.Check(&why))  // as the geometry stage
+    throw IoError(FlagOf(options, &options.patches) + ": " + why);
   geometry.patches = SubdividePatches(geometry.scene, subdivision);
   return geometry;
 }
@@ -206,6 +210,20 @@ CalibratedRoom BuildCalibratedRoom(const CalibratedRoomOptions& options, RoomSou
 
 CalibratedRoom LoadCalibratedRoom(const CalibratedRoomOptions& options) {
   return BuildCalibratedRoom(options, ReadRoomSources(options));
+}
+
+ProjectionStageSummary ProjectSolution(const ProjectionStageOptions& options) {
+  const auto start = Clock::now();
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument("project: " + why);
+  const SolutionDirectory solution = ReadSolutionDirectory(options.solution);
+  SolutionGeometry geometry = ReadSolutionGeometry(solution, options.patches);
+  SolutionProjectors projectors =
+      ProjectorsForSolution(solution, options.rig, geometry.scene, &geometry.patches);
+  ProjectionStageOptions stage = options;
+  stage.load_seconds = SecondsSince(start);
+  return RunProjectionStage(solution, geometry, std::move(projectors.projectors),
+                            projectors.rig_description, stage, projectors.reflectance_maps);
 }
 
 }  // namespace procam

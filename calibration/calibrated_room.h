@@ -34,6 +34,9 @@ class OptionTable;
 namespace procam {
 
 // What the room is built from and which of its pieces are made.
+struct ProjectionStageOptions;
+struct ProjectionStageSummary;
+
 struct CalibratedRoomOptions {
   // The room (LoadSceneArgument: a scene file or PREFIX:NAME); empty: the solution's scene.
   std::string scene;
@@ -136,6 +139,12 @@ CalibratedRoom BuildCalibratedRoom(const CalibratedRoomOptions& options, RoomSou
 
 // ReadRoomSources, then BuildCalibratedRoom.
 CalibratedRoom LoadCalibratedRoom(const CalibratedRoomOptions& options);
+
+// `procam project`: options.solution read (its scene at its patch count), the projectors that
+// show it (ProjectorsForSolution: options.rig, else the solution's rig, else the scene's), and
+// the projection stage run on them. Throws std::invalid_argument for options failing Check(),
+// IoError like ReadSolutionDirectory, ProjectorsForSolution and RunProjectionStage.
+ProjectionStageSummary ProjectSolution(const ProjectionStageOptions& options);
 
 // The one wording of "the room subdivides into another patch count than X says":
 //   SCENE: subdivides into FOUND patches for target TARGET, BY into EXPECTED: HINT

@@ -12,6 +12,7 @@
 #include "base/image_io.h"
 #include "base/io.h"
 #include "base/json_fields.h"
+#include "base/option_table.h"
 #include "base/timing.h"
 #include "capture/session.h"
 
@@ -508,6 +509,13 @@ DecodeSummary DecodeAndReport(const StructuredLightSession& session, const fs::p
   return summary;
 }
 
+void ImportOptions::Declare(OptionTable* table) {
+  table->Path("layout", &layout, "layout file (docs/capture_layout.md)").Positional().Required();
+  table->Path("folder", &folder, "folder of the photos (default: the layout's)").Positional();
+  table->Path("out", &out, "session directory to write").Required();
+  table->Text("name", &name, "the projector's name (default: the layout's, else 'import')");
+}
+
 bool ImportOptions::Check(std::string* why) const {
   if (layout.empty() || out.empty()) {
     if (why) *why = "a layout file and an output session directory are needed";
@@ -616,6 +624,69 @@ int ExportPatterns(const StructuredLightOptions& options, const fs::path& out) {
   }
   WriteCaptureLayout(out / "layout.json", layout);
   return static_cast<int>(sequence.patterns.size());
+}
+
+void SessionDecodeOptions::Declare(OptionTable* table) {
+  table->Path("session", &session, "capture session (procam's own or imported)")
+      .Positional()
+      .Required();
+  table->Path("out", &out, "output directory (default: SESSION/decode)");
+  decode.Declare(table);
+}
+
+bool SessionDecodeOptions::Check(std::string* why) const {
+  return CheckDeclared(*this, why) && decode.Check(why);
+}
+
+fs::path SessionDecodeOptions::Out() const { return out.empty() ? session / "decode" : out; }
+
+DecodeSummary DecodeSessionDirectory(const SessionDecodeOptions& options) {
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument(why);
+  return DecodeAndReport(ReadStructuredLightSession(options.session), options.Out(),
+                         options.decode);
+}
+
+void PatternExportOptions::Declare(OptionTable* table) {
+  StructuredLightOptions* p = &patterns;
+  table->Integer("width", &p->width, 4, 16384, "pixels", "projector width").Required();
+  table->Integer("height", &p->height, 4, 16384, "pixels", "projector height").Required();
+  table->Path("out", &out, "directory for pat000.png ... and layout.json").Required();
+  table
+      ->Custom(
+          "axes",
+          [p] {
+            return std::string(p->columns && p->rows ? "both" : p->rows ? "rows" : "columns");
+          },
+          [p](const std::string& text, std::string* why) {
+            if (text != "both" && text != "columns" && text != "rows") {
+              *why = "expected both, columns or rows; got '" + text + "'";
+              return false;
+            }
+            p->columns = text != "rows";
+            p->rows = text != "columns";
+            return true;
+          },
+          "columns | rows | both", "the axes encoded")
+      .Sets(&p->columns)
+      .Sets(&p->rows);
+  table
+      ->Integer("phase-period", &p->phase_period, 0, 1024, "pixels",
+                "period of the sinusoids (power of two; 0: none)")
+      .Integer("phase-steps", &p->phase_steps, 3, 64, "", "sinusoids per axis")
+      .NegatedFlag("no-xor", &p->xor_codes, "plain Gray code instead of XOR codes")
+      .Number("pattern-gamma", &p->pattern_gamma, OptionTable::Interval::AboveMin(0.0, 10.0), "",
+              "the projector's gamma: sinusoids encoded to be sinusoids in light");
+}
+
+bool PatternExportOptions::Check(std::string* why) const {
+  return CheckDeclared(*this, why) && patterns.Check(why);
+}
+
+int ExportPatterns(const PatternExportOptions& options) {
+  std::string why;
+  if (!options.Check(&why)) throw std::invalid_argument(why);
+  return ExportPatterns(options.patterns, options.out);
 }
 
 }  // namespace procam

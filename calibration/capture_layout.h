@@ -22,6 +22,8 @@
 
 namespace procam {
 
+class OptionTable;
+
 // One block of a layout's sequence: one or more consecutive photos.
 struct LayoutBlock {
   std::string kind;  // "white", "black", "gray" or "phase"
@@ -119,6 +121,9 @@ struct ImportOptions {
   std::filesystem::path out;     // the session directory to write
   std::string name;              // the projector's name; empty: the layout's, else "import"
   ProgressCallback progress;     // the count read, the decode's brief report
+  // Declares the layout and the folder (positional), --out and --name in `table`, bound to these
+  // fields (base/option_table.h).
+  void Declare(OptionTable* table);
   bool Check(std::string* why) const;
 };
 
@@ -128,9 +133,36 @@ struct ImportOptions {
 // the folder or the photo; nothing is written unless every photo was read.
 DecodeSummary ImportCaptures(const ImportOptions& options);
 
+// `procam decode`: a capture session (procam's own or imported) decoded, its picture and
+// numbers written (DecodeAndReport).
+struct SessionDecodeOptions {
+  std::filesystem::path session;  // the capture session directory
+  std::filesystem::path out;      // where decode.png and result.json go; empty: SESSION/decode
+  StructuredLightDecodeOptions decode;
+  // Declares the session (positional), --out and the decode's thresholds in `table`.
+  void Declare(OptionTable* table);
+  bool Check(std::string* why) const;
+  std::filesystem::path Out() const;  // `out`, or SESSION/decode
+};
+// Throws std::invalid_argument for options failing Check(), IoError like
+// ReadStructuredLightSession and DecodeAndReport.
+DecodeSummary DecodeSessionDirectory(const SessionDecodeOptions& options);
+
+// `procam patterns`: procam's structured light written for another program to show.
+struct PatternExportOptions {
+  StructuredLightOptions patterns;  // the projector's size, the axes, the sinusoids
+  std::filesystem::path out;        // pat000.png ... and layout.json
+  // Declares --width, --height, --out, --axes, --phase-period, --phase-steps, --no-xor and
+  // --pattern-gamma in `table`, bound to these fields.
+  void Declare(OptionTable* table);
+  bool Check(std::string* why) const;
+};
+
 // Writes MakeStructuredLightSequence(options)'s patterns as OUT/pat000.png … (8-bit grey) and
 // OUT/layout.json (CaptureLayoutOf), for showing by another program and importing its photos
 // back. Returns the number of patterns. Throws IoError naming the file.
 int ExportPatterns(const StructuredLightOptions& options, const std::filesystem::path& out);
+// The same for `procam patterns`' options; throws std::invalid_argument when Check() fails.
+int ExportPatterns(const PatternExportOptions& options);
 
 }  // namespace procam

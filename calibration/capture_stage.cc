@@ -54,13 +54,13 @@ CaptureSequence MakeSequence(const CaptureStageOptions& args, cv::Size projector
     return MakePhotometricSequence(options);
   }
   if (args.sequence != "verify") {
-    throw std::invalid_argument("--sequence: '" + args.sequence +
+    throw std::invalid_argument(FlagOf(args, &args.sequence) + ": '" + args.sequence +
                                 "': graycode, structured_light, photometric or verify");
   }
   const std::vector<std::filesystem::path>& images = args.images;
   if (images.empty())
-    throw std::invalid_argument(
-        "--sequence verify needs the images to show (positional arguments)");
+    throw std::invalid_argument(FlagOf(args, &args.sequence) +
+                                " verify needs the images to show (positional arguments)");
   return MakeVerifySequence(images, projector);
 }
 
@@ -70,21 +70,22 @@ std::shared_ptr<PatternDisplay> SimulatedProjectorDisplay(const CaptureStageOpti
   if (options.display) {
     throw IoError(
         "display '" + options.display->Name() + "': camera '" + options.camera +
-        "' photographs the simulated room, whose projectors show the patterns (choose one with "
-        "--projector)");
+        "' photographs the simulated room, whose projectors show the patterns (choose one with " +
+        FlagOf(options, &options.projector) + ")");
   }
   const int count = static_cast<int>(simulated.displays.size());
   if (options.projector < 0 || options.projector >= count) {
     std::string names;
     for (const std::string& name : simulated.projector_names)
       names += (names.empty() ? "" : ", ") + name;
-    throw IoError("--projector " + std::to_string(options.projector) + ": " +
-                  simulated.description + " has " + std::to_string(count) + " projectors (0.." +
-                  std::to_string(count - 1) + ": " + names + ")");
+    throw IoError(FlagOf(options, &options.projector) + " " + std::to_string(options.projector) +
+                  ": " + simulated.description + " has " + std::to_string(count) +
+                  " projectors (0.." + std::to_string(count - 1) + ": " + names + ")");
   }
   const std::shared_ptr<PatternDisplay>& display = simulated.displays[options.projector];
   if (options.projector_size && *options.projector_size != display->Resolution()) {
-    throw IoError("--projector-size " + SizeText(*options.projector_size) + ": projector " +
+    throw IoError(FlagOf(options, &options.projector_size) + " " +
+                  SizeText(*options.projector_size) + ": projector " +
                   std::to_string(options.projector) + " of " + simulated.description + " is " +
                   SizeText(display->Resolution()));
   }
@@ -126,6 +127,7 @@ void CaptureStageOptions::Declare(OptionTable* table) {
           },
           "WIDTHxHEIGHT",
           "the projector's resolution (default 1024x768; synthetic cameras: the projector's own)")
+      .Sets(size)
       .Integer("projector", &projector, 0, std::numeric_limits<int>::max(), "",
                "synthetic cameras: the rig projector (0-based) that shows the patterns");
   sequencer.Declare(table);
@@ -156,14 +158,15 @@ void CaptureStageOptions::Declare(OptionTable* table) {
 bool CaptureStageOptions::Check(std::string* why) const {
   const std::set<std::string> sequences = {"graycode", "structured_light", "photometric", "verify"};
   if (!sequences.count(sequence)) {
-    return Fail(
-        why, "--sequence: '" + sequence + "': graycode, structured_light, photometric or verify");
+    return Fail(why, FlagOf(*this, &sequence) + ": '" + sequence +
+                         "': graycode, structured_light, photometric or verify");
   }
   if (!CheckDeclared(*this, why)) return false;
   PhotometricOptions photometric;
   photometric.levels = levels;
   photometric.channels = channels;
-  if (!photometric.Check(why)) return Fail(why, "--levels/--channels: " + *why);
+  if (!photometric.Check(why))
+    return Fail(why, FlagOf(*this, &levels) + "/" + FlagOf(*this, &channels) + ": " + *why);
   if (!sequencer.Check(why)) return Fail(why, "capture: " + *why);
   if (measure_latency && !latency.Check(why)) return Fail(why, "latency: " + *why);
   return true;

@@ -98,14 +98,14 @@ void ParseCameraScale(const PhotometricStageOptions& args, const std::filesystem
     const std::string recorded =
         manifest.value("camera", nlohmann::json::object()).value("uri", std::string());
     if (recorded != uri.scheme() + ":" + uri.path()) {
-      throw IoError("--camera-scale: " + text + " is not the camera of " +
+      throw IoError(FlagOf(args, &args.camera_scale) + ": " + text + " is not the camera of " +
                     (session / "session.json").string() + " (" + recorded + ")");
     }
     *scale = simulated->value_per_exitance(manifest, hdr, full_scale, simulated->black_level);
     *black = hdr ? 0.0 : simulated->black_level;  // the HDR merge has removed it
     return;
   }
-  *scale = ParsePositiveRgb("--camera-scale", text);
+  *scale = ParsePositiveRgb(FlagOf(args, &args.camera_scale), text);
   *black = 0.0;
 }
 
@@ -122,20 +122,24 @@ PhotometricRigStage::PhotometricRigStage(const PhotometricStageOptions& args,
   s.session_dir = session_dir;
   s.rig_file = (rig_dir / "rig.json").string();
   if (!args.projector.empty() && !std::filesystem::is_regular_file(s.rig_file)) {
-    throw IoError(s.rig_file + ": not found; --projector " + args.projector +
+    throw IoError(s.rig_file + ": not found; " + FlagOf(args, &args.projector) + " " +
+                  args.projector +
                   " merges the fit into an existing rig (procam calibrate camera, projectors)");
   }
   if (args.scene.empty()) {
-    if (!args.camera_scale.empty()) throw IoError("--camera-scale: needs --scene");
+    if (!args.camera_scale.empty())
+      throw IoError(FlagOf(args, &args.camera_scale) + ": needs " + FlagOf(args, &args.scene));
     return;
   }
   if (args.projector.empty()) {
-    throw IoError("--scene: needs --projector NAME (the rig.json projector to calibrate)");
+    throw IoError(FlagOf(args, &args.scene) + ": needs " + FlagOf(args, &args.projector) +
+                  " NAME (the rig.json projector to calibrate)");
   }
   if (args.camera_scale.empty()) {
-    throw IoError(
-        "--camera-scale: required with --scene: the camera's value per unit exitance in the "
-        "scene's units (a number or R,G,B; for the synthetic camera its URI)");
+    throw IoError(FlagOf(args, &args.camera_scale) + ": required with " +
+                  FlagOf(args, &args.scene) +
+                  ": the camera's value per unit exitance in the scene's units (a number or "
+                  "R,G,B; for the synthetic camera its URI)");
   }
   // The rig's geometry: the camera registered in the room and the projector's model.
   const RigFile rig = ReadRigFile(rig_dir);

@@ -101,13 +101,13 @@ RoomCalibrationProblem ReadProblem(const ProjectorsStageOptions& args, const Cam
         ReadSession(args.sessions[k], camera.width, camera.height, camera_path,
                     args.names.empty() ? "" : args.names[k], args.progress);
     if (!args.names.empty() && !ValidProjectorName(args.names[k]))
-      throw std::invalid_argument("--names: '" + args.names[k] +
+      throw std::invalid_argument(FlagOf(args, &args.names) + ": '" + args.names[k] +
                                   "': a projector's name takes letters, digits, '_', '-' and '.'");
     if (!ValidProjectorName(observations.name)) observations.name = "projector" + std::to_string(k);
     if (!names.insert(observations.name).second)
       throw std::invalid_argument("projector name '" + observations.name + "' of " +
-                                  args.sessions[k].string() +
-                                  " is used twice (name them with --names)");
+                                  args.sessions[k].string() + " is used twice (name them with " +
+                                  FlagOf(args, &args.names) + ")");
     problem.projectors.push_back(std::move(observations));
   }
 
@@ -123,7 +123,7 @@ std::map<std::string, HeldProjectorLens> ReadHeldLenses(const ProjectorsStageOpt
   std::map<std::string, HeldProjectorLens> lenses;
   for (const auto& [name, path] : args.held_lenses) {
     if (!ValidProjectorName(name))
-      throw std::invalid_argument("--hold-lens: '" + name +
+      throw std::invalid_argument(FlagOf(args, &args.held_lenses) + ": '" + name +
                                   "': a projector's name takes letters, digits, '_', '-' and '.'");
     const CameraModel model = ReadCameraModelFile(path);
     if (model.lens_model != "LENSMODEL_PINHOLE" && model.lens_model != "LENSMODEL_OPENCV4")
@@ -146,7 +146,8 @@ std::map<std::string, HeldProjectorLens> ReadHeldLenses(const ProjectorsStageOpt
 // when its image size is not the session's projector's, std::invalid_argument for a name that no
 // session has.
 void HoldLenses(const std::map<std::string, HeldProjectorLens>& lenses,
-                RoomCalibrationProblem* problem, const ProgressCallback& progress) {
+                const ProjectorsStageOptions& args, RoomCalibrationProblem* problem) {
+  const ProgressCallback& progress = args.progress;
   if (lenses.empty()) return;
   problem->held_projector_lenses.assign(problem->projectors.size(), HeldProjectorLens());
   for (const auto& [name, lens] : lenses) {
@@ -155,9 +156,9 @@ void HoldLenses(const std::map<std::string, HeldProjectorLens>& lenses,
     for (; k < problem->projectors.size() && problem->projectors[k].name != name; ++k)
       names += (names.empty() ? "" : ", ") + problem->projectors[k].name;
     if (k == problem->projectors.size())
-      throw std::invalid_argument("--hold-lens " + name + "=" + lens.source +
-                                  ": no session's projector is named '" + name +
-                                  "' (projectors: " + names + "; name them with --names)");
+      throw std::invalid_argument(FlagOf(args, &args.held_lenses) + " " + name + "=" + lens.source +
+                                  ": no session's projector is named '" + name + "' (projectors: " +
+                                  names + "; name them with " + FlagOf(args, &args.names) + ")");
     const ProjectorObservations& projector = problem->projectors[k];
     if (lens.source_width != projector.width || lens.source_height != projector.height)
       throw IoError(lens.source + ": imagersize " + std::to_string(lens.source_width) + "x" +
@@ -254,7 +255,8 @@ void DeclareHeldLenses(OptionTable* table,
             return true;
           },
           "NAME=FILE, one per flag", help)
-      .Repeated();
+      .Repeated()
+      .Sets(held_lenses);
 }
 
 void ProjectorsStageOptions::Declare(OptionTable* table) {
@@ -311,11 +313,13 @@ void ProjectorsStageOptions::Declare(OptionTable* table) {
 bool ProjectorsStageOptions::Check(std::string* why) const {
   if (!CheckDeclared(*this, why)) return false;
   if (!scene.empty() && (!floor_chessboard.empty() || camera_height)) {
-    *why = "--floor-chessboard, --camera-height: only without --scene (scanning the room)";
+    *why = FlagOf(*this, &floor_chessboard) + ", " + FlagOf(*this, &camera_height) +
+           ": only without " + FlagOf(*this, &scene) + " (scanning the room)";
     return false;
   }
   if (scene.empty() && !camera_guess.empty()) {
-    *why = "--camera-guess: only with --scene (a scan needs no guess)";
+    *why = FlagOf(*this, &camera_guess) + ": only with " + FlagOf(*this, &scene) +
+           " (a scan needs no guess)";
     return false;
   }
   return true;
@@ -334,7 +338,8 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
   if (!args.room_from_camera_guess && !args.camera_guess.empty())
     args.room_from_camera_guess = RoomFromCameraGuess(args.camera_guess, args.camera_up);
   if (args.refine_camera_aspect && !args.options.refine_camera_intrinsics)
-    throw std::invalid_argument("--refine-camera-aspect: needs --refine-camera");
+    throw std::invalid_argument(FlagOf(args, &args.refine_camera_aspect) + ": needs " +
+                                FlagOf(args, &args.options.refine_camera_intrinsics));
   args.options.keep_camera_aspect_ratio = !args.refine_camera_aspect;
   std::string why;
   if (!args.options.Check(&why)) throw std::invalid_argument(why);
@@ -349,22 +354,25 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
     throw IoError(camera_path.string() + ": lensmodel " + camera.lens_model +
                   ": projector calibration supports LENSMODEL_PINHOLE and LENSMODEL_OPENCV4");
   if (!args.names.empty() && args.names.size() != args.sessions.size())
-    throw std::invalid_argument("--names: " + std::to_string(args.names.size()) + " names for " +
+    throw std::invalid_argument(FlagOf(args, &args.names) + ": " +
+                                std::to_string(args.names.size()) + " names for " +
                                 std::to_string(args.sessions.size()) + " sessions");
 
   if (args.scene.empty()) {
     // The scan fits pinhole projectors (self_calibration.h); --refine-camera refines the whole
     // camera lens with the chessboard's as the prior.
+    const std::string with_scene = ": only with " + FlagOf(args, &args.scene);
     if (!args.held_lenses.empty())
       throw std::invalid_argument(
-          "--hold-lens: only with --scene (the scan solves every projector's lens; register the "
-          "room to its model to hold a board-calibrated lens)");
+          FlagOf(args, &args.held_lenses) + with_scene +
+          " (the scan solves every projector's lens; register the room to its model to hold a "
+          "board-calibrated lens)");
     if (args.options.refine_distortion)
-      throw std::invalid_argument(
-          "--refine-distortion: only with --scene (a scan fits pinhole projectors)");
+      throw std::invalid_argument(FlagOf(args, &args.options.refine_distortion) + with_scene +
+                                  " (a scan fits pinhole projectors)");
     if (args.refine_camera_aspect)
-      throw std::invalid_argument(
-          "--refine-camera-aspect: only with --scene (a scan refines the whole lens)");
+      throw std::invalid_argument(FlagOf(args, &args.refine_camera_aspect) + with_scene +
+                                  " (a scan refines the whole lens)");
     RoomCalibrationProblem prior;  // checked before the sessions are decoded
     const bool refine = args.options.refine_camera_intrinsics;
     args.self_calibration.refine_camera_lens = refine;
@@ -380,13 +388,13 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
   std::string guess_source;
   if (args.room_from_camera_guess) {
     guess = *args.room_from_camera_guess;
-    guess_source = "--camera-guess";
+    guess_source = FlagOf(args, &args.camera_guess);
   } else if (!camera.cam_from_ref.isApprox(Eigen::Isometry3d::Identity(), 1e-12)) {
     guess = camera.cam_from_ref.inverse();
     guess_source = camera_path.string() + " extrinsics";
   } else {
     throw std::invalid_argument(
-        "--camera-guess: required: " + camera_path.string() +
+        FlagOf(args, &args.camera_guess) + ": required: " + camera_path.string() +
         " has no pose in the room yet; give the camera's position and a point it looks at, "
         "x,y,z,look_x,look_y,look_z in the scene's frame (a few cm and degrees suffice)");
   }
@@ -406,7 +414,7 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
                   camera.width, camera.height, intrinsics_treatment, guess_source,
                   guess.translation().x(), guess.translation().y(), guess.translation().z()));
   RoomCalibrationProblem problem = ReadProblem(args, camera, camera_path);
-  HoldLenses(held_lenses, &problem, args.progress);
+  HoldLenses(held_lenses, args, &problem);
 
   ProjectorsStageSummary stage;
   RoomCalibration& calibration = stage.calibration;
@@ -734,14 +742,17 @@ double ScanCameraHeight(const ProjectorsStageOptions& args, const CameraModel& c
   }
   if (args.camera_height) {
     if (!(*args.camera_height > 0.0) || !std::isfinite(*args.camera_height))
-      throw std::invalid_argument("--camera-height: must be a positive number of metres");
-    *scale_json = {{"source", "--camera-height"}, {"camera_height_m", *args.camera_height}};
+      throw std::invalid_argument(FlagOf(args, &args.camera_height) +
+                                  ": must be a positive number of metres");
+    *scale_json = {{"source", FlagOf(args, &args.camera_height)},
+                   {"camera_height_m", *args.camera_height}};
     return *args.camera_height;
   }
   throw std::invalid_argument(
-      "--floor-chessboard: required without --scene: the scan's metric scale comes from a photo "
-      "of the chessboard lying flat on the floor, taken by the camera from where it stands (or "
-      "give --camera-height, the camera's height above the floor in metres)");
+      FlagOf(args, &args.floor_chessboard) + ": required without " + FlagOf(args, &args.scene) +
+      ": the scan's metric scale comes from a photo of the chessboard lying flat on the floor, "
+      "taken by the camera from where it stands (or give " +
+      FlagOf(args, &args.camera_height) + ", the camera's height above the floor in metres)");
 }
 
 nlohmann::json SelfCalibrationJson(const ProjectorsStageSummary& stage) {
@@ -948,17 +959,20 @@ std::string ProjectorNameFrom(const std::string& name) {
 }
 
 Eigen::Isometry3d RoomFromCameraGuess(const std::string& guess, const std::string& up) {
-  const std::vector<double> v = ParseNumberList(
-      "--camera-guess", guess, "x,y,z,look_x,look_y,look_z in the room (metres)", 6);
-  const std::vector<double> u =
-      ParseNumberList("--camera-up", up, "x,y,z (the room's up direction)", 3);
+  // The options as ProjectorsStageOptions declares them (calibrate all's are the same).
+  const ProjectorsStageOptions names;
+  const std::string guess_flag = FlagOf(names, &names.camera_guess);
+  const std::string up_flag = FlagOf(names, &names.camera_up);
+  const std::vector<double> v =
+      ParseNumberList(guess_flag, guess, "x,y,z,look_x,look_y,look_z in the room (metres)", 6);
+  const std::vector<double> u = ParseNumberList(up_flag, up, "x,y,z (the room's up direction)", 3);
   try {
     return ProjFromWorldLookingAt(Vec3(v[0], v[1], v[2]), Vec3(v[3], v[4], v[5]),
                                   Vec3(u[0], u[1], u[2]))
         .inverse();
   } catch (const std::invalid_argument&) {
-    throw IoError(
-        "--camera-guess: the camera must look at a point away from it and not along --camera-up");
+    throw IoError(guess_flag + ": the camera must look at a point away from it and not along " +
+                  up_flag);
   }
 }
 

@@ -11,6 +11,8 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
+#include "base/option_table.h"
+
 namespace procam {
 namespace {
 
@@ -181,6 +183,23 @@ bool StructuredLightOptions::Check(std::string* why) const {
   if (!(pattern_gamma > 0.0 && pattern_gamma <= 10.0))
     return fail("pattern_gamma must be in (0, 10], got " + std::to_string(pattern_gamma));
   return true;
+}
+
+void StructuredLightDecodeOptions::Declare(OptionTable* table) {
+  const OptionTable::Interval unit = OptionTable::Interval::BelowMax(0.0, 1.0);
+  table
+      ->Number("min-contrast", &min_contrast, unit, "",
+               "shadow test: white - black at least this fraction of its 99th percentile")
+      .Number("min-bit-contrast", &min_bit_contrast, unit, "",
+              "a bit: |pattern - inverse| at least this fraction of white - black")
+      .Number("min-modulation", &min_modulation, unit, "",
+              "a phase: amplitude at least this fraction of (white - black)/2")
+      .Number("noise-sigmas", &noise_sigmas, 0.0, 100.0, "",
+              "every difference at least this many standard deviations of the photos' noise "
+              "(estimated from them)")
+      .Integer("faint-bits", &faint_bits, 0, kMaxFaintBits, "",
+               "Gray bits per axis that may fail the bit test: tried at both values, the pixel "
+               "decoded where the phase unwraps the same either way (defocus)");
 }
 
 bool StructuredLightDecodeOptions::Check(std::string* why) const {

@@ -38,6 +38,8 @@
 
 namespace procam {
 
+class OptionTable;
+
 struct StructuredLightOptions {
   int width = 1024;     // projector pixels, [4, 16384]
   int height = 768;     // projector pixels, [4, 16384]
@@ -101,6 +103,9 @@ struct StructuredLightDecodeOptions {
   // default: it also decodes pixels that mix two surfaces at a depth edge, to a coordinate between
   // theirs (docs/synthetic.md); for a defocused projector or camera, 4 with plain Gray codes.
   int faint_bits = 0;
+  // Declares --min-contrast, --min-bit-contrast, --min-modulation, --noise-sigmas and
+  // --faint-bits in `table`, bound to these fields (base/option_table.h).
+  void Declare(OptionTable* table);
   bool Check(std::string* why) const;
 };
 

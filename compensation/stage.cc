@@ -11,35 +11,52 @@
 
 namespace procam {
 
-void CompensationOptions::Declare(OptionTable* table) {
+std::vector<std::pair<std::string, CompensationMethod>> MethodChoices() {
   std::vector<std::pair<std::string, CompensationMethod>> methods;
   for (CompensationMethod method :
        {CompensationMethod::kNaive, CompensationMethod::kReverse, CompensationMethod::kLinear,
         CompensationMethod::kPerceptual, CompensationMethod::kPerceptual2000}) {
     methods.emplace_back(MethodName(method), method);
   }
+  return methods;
+}
+
+std::vector<std::pair<std::string, SolverOptions::RobustLoss>> RobustLossChoices() {
   std::vector<std::pair<std::string, SolverOptions::RobustLoss>> losses;
   for (SolverOptions::RobustLoss loss :
        {SolverOptions::RobustLoss::kSquared, SolverOptions::RobustLoss::kSoftL1,
         SolverOptions::RobustLoss::kHuber, SolverOptions::RobustLoss::kCauchy}) {
     losses.emplace_back(RobustLossName(loss), loss);
   }
+  return losses;
+}
+
+std::vector<std::pair<std::string, SolverOptions::MetricUpdate>> MetricUpdateChoices() {
   std::vector<std::pair<std::string, SolverOptions::MetricUpdate>> updates;
   for (SolverOptions::MetricUpdate update :
        {SolverOptions::MetricUpdate::kEveryIteration, SolverOptions::MetricUpdate::kRounds}) {
     updates.emplace_back(MetricUpdateName(update), update);
   }
+  return updates;
+}
+
+std::vector<std::pair<std::string, Device>> DeviceChoices() {
   std::vector<std::pair<std::string, Device>> devices;
   for (Device device : {Device::kCpu, Device::kCuda})
     devices.emplace_back(DeviceName(device), device);
+  return devices;
+}
+
+void CompensationOptions::Declare(OptionTable* table) {
   table
-      ->Choice("method", &solver.method, methods,
+      ->Choice("method", &solver.method, MethodChoices(),
                "the objective: naive, reverse, linear, perceptual (the paper's, in CIE76) or "
                "perceptual2000 (CIEDE2000 with a robust loss; docs/solver.md)")
-      .Choice("loss", &solver.robust_loss, losses, "perceptual2000: the loss on each patch's ΔE00²")
+      .Choice("loss", &solver.robust_loss, RobustLossChoices(),
+              "perceptual2000: the loss on each patch's ΔE00²")
       .Number("loss-scale", &solver.robust_scale, 1e-6, 1e6, "ΔE00",
               "perceptual2000: the loss's scale")
-      .Choice("metric-update", &solver.metric_update, updates,
+      .Choice("metric-update", &solver.metric_update, MetricUpdateChoices(),
               "perceptual2000: when CIEDE2000's metric and the loss's weights are measured again: "
               "every_iteration (at every iterate of one Gauss-Newton run, to the reweighting's "
               "fixed point) or rounds (--metric-rounds whole solves; docs/solver.md)")
@@ -49,8 +66,14 @@ void CompensationOptions::Declare(OptionTable* table) {
       .Number("alpha", &alpha, OptionTable::Interval::AboveMin(0.0, 1.0), "",
               "weight of the absolute term against the spatial term")
       .Flag("multires", &solver.multires, "solve the coarse patch level first and start from it")
-      .Choice("device", &solver.device, devices,
+      .Choice("device", &solver.device, DeviceChoices(),
               "where K⁻¹ is applied (cuda needs a CUDA build and a GPU; docs/gpu.md)");
+}
+
+void SolutionOutputOptions::Declare(OptionTable* table) {
+  table->Flag("export", &export_problem, "also write the whole problem (F.npy, ...) into --out")
+      .Path("out", &out, "output directory")
+      .Required();
 }
 
 bool CompensationOptions::Check(std::string* why) const {
@@ -206,8 +229,9 @@ void WriteCompensation(const GeometryStage& geometry, const CompensationRun& run
   try {
     if (export_problem) {
       if (run.fine.compressed()) {
-        throw std::invalid_argument(
-            "--export writes the dense F.npy: not with compressed form factors");
+        const SolutionOutputOptions names;  // the option as declared
+        throw std::invalid_argument(FlagOf(names, &names.export_problem) +
+                                    " writes the dense F.npy: not with compressed form factors");
       }
       nlohmann::json settings = {{"scene", geometry.scene.path.string()},
                                  {"method", MethodName(run.summary.method)}};

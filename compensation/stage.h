@@ -5,6 +5,8 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "base/progress.h"
 #include "compensation/problem.h"
@@ -44,6 +46,14 @@ struct CompensationOptions {
   bool Check(std::string* why) const;
 };
 
+// The names the option tables take for the solver's enumerations (OptionTable::Choice), in the
+// order they are listed: --method (naive, reverse, linear, perceptual, perceptual2000), --loss,
+// --metric-update (every_iteration, rounds) and --device, for every command that declares them.
+std::vector<std::pair<std::string, CompensationMethod>> MethodChoices();
+std::vector<std::pair<std::string, SolverOptions::RobustLoss>> RobustLossChoices();
+std::vector<std::pair<std::string, SolverOptions::MetricUpdate>> MetricUpdateChoices();
+std::vector<std::pair<std::string, Device>> DeviceChoices();
+
 // Builds the fine and coarse problems (coarse F aggregated from the fine one, coarse bounds
 // area-weighted from the fine ones) and solves. Throws std::invalid_argument for bad options.
 // A numerical failure is run.summary.termination, not an exception.
@@ -57,6 +67,14 @@ nlohmann::json CompensationResultJson(const GeometryStage& geometry, const Compe
 // B.npy (n,3), and with `--export` the whole problem (ExportProblem). Schema:
 // docs/solution_format.md.
 constexpr int kSolutionFormatVersion = 1;
+
+// Where `procam compensate` writes its solution (WriteCompensation's `out` and `export_problem`).
+struct SolutionOutputOptions {
+  std::filesystem::path out;    // the solution directory (created)
+  bool export_problem = false;  // also the whole problem (F.npy, ...)
+  // Declares --export and --out (required) in `table`, bound to these fields.
+  void Declare(OptionTable* table);
+};
 
 // Writes result.json, E.npy, B.npy (and with `export_problem` the whole problem) into `out`,
 // each atomically. `extra` keys (e.g. "rig") are added to result.json.

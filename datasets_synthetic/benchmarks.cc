@@ -27,6 +27,7 @@
 #include "projection/frame_plan.h"
 #include "projection/projection_rig.h"
 #include "projection/projector.h"
+#include "projection/stage.h"
 
 namespace procam {
 namespace {
@@ -134,6 +135,19 @@ const std::vector<std::pair<std::string, std::string>> kDevices = {
 constexpr int kMostPatches = 10'000'000;
 
 }  // namespace
+
+void ProjectionBenchmarkOptions::Declare(OptionTable* table) {
+  table->Integer("width", &width, 1, 16384, "pixels", "projector width")
+      .Integer("height", &height, 1, 16384, "pixels", "projector height")
+      .Integer("patches", &patches, 1, kMostPatches, "", "target patch count")
+      .Integer("repeat", &repeat, 1, 1000, "", "timed runs")
+      .Choice("dither", &dither, DitherChoices(), "none, ordered or error-diffusion")
+      .Flag("detail", &detail, "give every surface a striped texture and render with its detail")
+      .Choice("light", &light, LightFieldChoices(),
+              "smooth: the light varies smoothly over each surface (seamless); flat: one uniform "
+              "level per patch")
+      .Text("json", &json, "also write the timings as JSON here");
+}
 
 void BenchmarkOptions::DeclareFormFactors(OptionTable* table) {
   table->Integer("patches", &patches, 1, kMostPatches, "", "target patch count")

@@ -55,6 +55,9 @@ struct ProjectionBenchmarkOptions {
   LightField light = LightField::kSmooth;  // seamless light, or one level per patch
   std::string json;     // also the timings as JSON here
   ProgressCallback progress;
+  // Declares --width, --height, --patches, --repeat, --dither, --detail, --light and --json in
+  // `table`, bound to these fields.
+  void Declare(OptionTable* table);
 };
 
 // Images for two projectors of the box room from a random emittance within the bounds: the pixel

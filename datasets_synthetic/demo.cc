@@ -1,10 +1,12 @@
 #include "datasets_synthetic/demo.h"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <numbers>
 #include <opencv2/imgcodecs.hpp>
 #include <optional>
@@ -20,11 +22,14 @@
 #include "calibration/projectors_stage.h"
 #include "calibration/registration.h"
 #include "calibration/rig_directory.h"
+#include "capture/sequencer.h"
 #include "compensation/colour_image.h"
 #include "compensation/stage.h"
+#include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/scan_accuracy.h"
 #include "geometry/stage.h"
 #include "projection/camera_rays.h"
+#include "projection/stage.h"
 #include "verification/verification.h"
 
 namespace procam {
@@ -343,84 +348,14 @@ ScanStage RunScanStage(const SceneEvaluation& evaluation, const EvaluationOption
   return stage;
 }
 
-}  // namespace
-
-void SyntheticDemoOptions::Declare(OptionTable* table) {
-  std::vector<std::pair<std::string, CompensationMethod>> methods;
-  for (CompensationMethod m :
-       {CompensationMethod::kNaive, CompensationMethod::kReverse, CompensationMethod::kLinear,
-        CompensationMethod::kPerceptual, CompensationMethod::kPerceptual2000}) {
-    methods.emplace_back(MethodName(m), m);
-  }
-  table->Choice("method", &method, methods,
-                "the compensation of the calibrated and scanned stages and of the closed loop "
-                "(the true rig's table compares every method)");
-}
-
-SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
+// out/report.html: the methods' colour errors and convergence, the calibration's errors against
+// the truth, the scan's surfaces, the closed loop and the pictures written before.
+void WriteDemoReport(const SyntheticDemoOptions& demo, const SceneEvaluation& evaluation,
+                     const CalibrationStage& calibration, const std::optional<ScanStage>& scan,
+                     const VerificationSummary& verified,
+                     const std::vector<std::pair<std::string, std::string>>& files) {
   const std::string& scene = demo.scene;
   const std::filesystem::path& out = demo.out;
-  EvaluationOptions options;
-  options.patches = demo.patches;
-  options.render.light = demo.light;
-  options.progress = demo.progress;
-  Report(
-      demo.progress,
-      fmt::format("procam demo on the synthetic '{}' rig ({} patches): geometry → compensation (4 "
-                  "methods) → projector images → simulated photos → ΔE → report",
-                  scene, demo.patches));
-  const SceneEvaluation evaluation = EvaluateSyntheticScene(scene, options);
-  const auto files = WriteEvaluationPictures(evaluation, out);
-  WriteFormFactorImage(evaluation.geometry.form_factors, out / "form_factors.png");
-  ExportGeometryProblem(evaluation.geometry, options.alpha, out / "problem");
-  for (const MethodEvaluation& m : evaluation.methods) {
-    WriteCompensation(evaluation.geometry, m.run, out / MethodName(m.method), false);
-  }
-  Report(demo.progress,
-         "demo: calibration stage — the rig calibrated from its own simulated captures (procam "
-         "calibrate all)");
-  const CalibrationStage calibration =
-      RunCalibrationStage(evaluation, options, demo.method, out / "rig", demo.progress, demo.steps);
-  std::optional<ScanStage> scan;
-  if (demo.scan) {
-    Report(demo.progress,
-           "demo: scan stage — the rig calibrated without the room model, the room from its own "
-           "scan (procam calibrate all --scan), compensation on the scanned room");
-    scan =
-        RunScanStage(evaluation, options, demo.method, out / "rig_scan", demo.progress, demo.steps);
-    WritePng(out / "scanned_surfaces.png", scan->surfaces_picture);
-    WritePng(out / "perceptual_scanned.png", LinearToDisplay(scan->perceptual.radiance));
-  }
-  // Verification: the calibrated solution photographed, compared with its prediction, and the
-  // model refined from the photos (procam verify).
-  Report(demo.progress,
-         "demo: verification stage — photos against the predicted L*a*b*, the closed loop (procam "
-         "verify)");
-  WriteCompensation(calibration.room.geometry, calibration.perceptual.run, out / "perceptual_calibrated",
-                    false);
-  VerificationOptions verification;
-  verification.rig_dir = out / "rig";
-  verification.solution_dir = out / "perceptual_calibrated";
-  verification.out = out / "verify";
-  verification.camera = calibration.camera;
-  verification.scene = evaluation.geometry.scene;
-  verification.sequencer.frames_per_pattern = 2;
-  verification.sequencer.settle_ms = 0;
-  verification.iterations = 4;
-  verification.light = demo.light;
-  verification.progress = demo.progress;
-  const VerificationSummary verified = RunVerification(verification);
-  WritePng(out / "perceptual_calibrated.png", LinearToDisplay(calibration.perceptual.radiance));
-  WritePng(out / "perceptual_calibrated_delta_e76.png",
-           HeatMapWithColourBar(calibration.perceptual.delta_e76, 30.0, "dE76"));
-  nlohmann::json result = EvaluationJson(evaluation);
-  result["calibration"] = calibration.json;
-  if (scan) result["scan"] = scan->json;
-  result["verification"] = {{"summary", verified.BriefReport()},
-                            {"best_iteration", verified.best},
-                            {"result", (out / "verify" / "result.json").string()}};
-  WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
-
   HtmlReport report("procam demo: " + scene);
   report.Paragraph(fmt::format(
       "{} solver patches ({} variables), {} projectors, a {}×{} camera; the simulated room uses a "
@@ -542,11 +477,119 @@ SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
   report.Figures({{"log10 F (rows: emitting patch, columns: receiving patch)",
                    cv::imread((out / "form_factors.png").string())}});
   report.Write(out / "report.html");
+}
+
+}  // namespace
+
+void SyntheticDemoOptions::Declare(OptionTable* table) {
+  table
+      ->Text("scene", &scene,
+             "a synthetic scene (" + fmt::format("{}", fmt::join(SyntheticSceneNames(), ", ")) +
+                 ") or a scene JSON file: with projectors and a camera a synthetic rig (every "
+                 "stage, as synthetic:ROOM.json), else geometry and compensation only")
+      .Integer("patches", &patches, 4, std::numeric_limits<int>::max(), "", "solver patches")
+      .Path("out", &out, "output directory")
+      .Choice("method", &method, MethodChoices(),
+              "the compensation of the calibrated and scanned stages and of the closed loop "
+              "(the true rig's table compares every method)")
+      .Text("camera", &camera,
+            "run the pipeline on a rig instead: the camera URI (v4l2:..., aravis:..., or "
+            "synthetic:SCENE?...); --scene is then the room model (a scene file, or "
+            "synthetic:NAME)")
+      .Texts("display", &displays,
+             "with --camera: each projector's monitor, in order (glfw:N|NAME)")
+      .Texts("names", &names, "with --camera: projector names")
+      .Text("chessboard", &chessboard, "with --camera: chessboard photos of the camera")
+      .Text("camera-model", &camera_model, "with --camera: a calibrated camera.cameramodel instead")
+      .Text("camera-scale", &camera_scale,
+            "with --camera: camera value per unit exitance (number or R,G,B; synthetic cameras: "
+            "automatic)")
+      .Text("camera-guess", &camera_guess,
+            "with --camera: camera position and a point it looks at, "
+            "x,y,z,look_x,look_y,look_z")
+      .Integer("frames", &frames, 1, 1000, "", "with --camera: frames averaged per pattern");
+  DeclareSettleOption(table, &settle_ms, &measure_settle);
+  table->Integer("iterations", &iterations, 1, 50, "", "with --camera: closed-loop photos at most")
+      .Choice("light", &light, LightFieldChoices(),
+              "smooth: the light varies smoothly over each surface, stepping only where the "
+              "desired appearance does, each patch's flux kept (seamless); flat: one uniform "
+              "level per patch")
+      .NegatedFlag("no-scan", &scan,
+                   "synthetic rig: skip the scan stage (the rig calibrated and the room scanned "
+                   "without the model, compensated on the scan)");
+}
+
+SyntheticDemoSummary RunSyntheticDemo(const SyntheticDemoOptions& demo) {
+  const std::string& scene = demo.scene;
+  const std::filesystem::path& out = demo.out;
+  EvaluationOptions options;
+  options.patches = demo.patches;
+  options.render.light = demo.light;
+  options.progress = demo.progress;
+  Report(
+      demo.progress,
+      fmt::format("procam demo on the synthetic '{}' rig ({} patches): geometry → compensation (4 "
+                  "methods) → projector images → simulated photos → ΔE → report",
+                  scene, demo.patches));
+  const SceneEvaluation evaluation = EvaluateSyntheticScene(scene, options);
+  const auto files = WriteEvaluationPictures(evaluation, out);
+  WriteFormFactorImage(evaluation.geometry.form_factors, out / "form_factors.png");
+  ExportGeometryProblem(evaluation.geometry, options.alpha, out / "problem");
+  for (const MethodEvaluation& m : evaluation.methods) {
+    WriteCompensation(evaluation.geometry, m.run, out / MethodName(m.method), false);
+  }
+  Report(demo.progress,
+         "demo: calibration stage — the rig calibrated from its own simulated captures (procam "
+         "calibrate all)");
+  const CalibrationStage calibration =
+      RunCalibrationStage(evaluation, options, demo.method, out / "rig", demo.progress, demo.steps);
+  std::optional<ScanStage> scan;
+  if (demo.scan) {
+    Report(demo.progress,
+           "demo: scan stage — the rig calibrated without the room model, the room from its own "
+           "scan (procam calibrate all --scan), compensation on the scanned room");
+    scan =
+        RunScanStage(evaluation, options, demo.method, out / "rig_scan", demo.progress, demo.steps);
+    WritePng(out / "scanned_surfaces.png", scan->surfaces_picture);
+    WritePng(out / "perceptual_scanned.png", LinearToDisplay(scan->perceptual.radiance));
+  }
+  // Verification: the calibrated solution photographed, compared with its prediction, and the
+  // model refined from the photos (procam verify).
+  Report(demo.progress,
+         "demo: verification stage — photos against the predicted L*a*b*, the closed loop (procam "
+         "verify)");
+  WriteCompensation(calibration.room.geometry, calibration.perceptual.run,
+                    out / "perceptual_calibrated", false);
+  VerificationOptions verification;
+  verification.rig_dir = out / "rig";
+  verification.solution_dir = out / "perceptual_calibrated";
+  verification.out = out / "verify";
+  verification.camera = calibration.camera;
+  verification.scene = evaluation.geometry.scene;
+  verification.sequencer.frames_per_pattern = 2;
+  verification.sequencer.settle_ms = 0;
+  verification.iterations = 4;
+  verification.light = demo.light;
+  verification.progress = demo.progress;
+  const VerificationSummary verified = RunVerification(verification);
+  WritePng(out / "perceptual_calibrated.png", LinearToDisplay(calibration.perceptual.radiance));
+  WritePng(out / "perceptual_calibrated_delta_e76.png",
+           HeatMapWithColourBar(calibration.perceptual.delta_e76, 30.0, "dE76"));
+  nlohmann::json result = EvaluationJson(evaluation);
+  result["calibration"] = calibration.json;
+  if (scan) result["scan"] = scan->json;
+  result["verification"] = {{"summary", verified.BriefReport()},
+                            {"best_iteration", verified.best},
+                            {"result", (out / "verify" / "result.json").string()}};
+  WriteFileAtomically(out / "result.json", result.dump(2) + "\n");
+
+  WriteDemoReport(demo, evaluation, calibration, scan, verified, files);
   SyntheticDemoSummary summary;
   summary.methods = evaluation.methods;
   summary.calibrated = calibration.perceptual;
   summary.verification = verified.BriefReport();
   if (scan) summary.scanned = scan->perceptual;
+  summary.out = out;
   return summary;
 }
 

@@ -46,8 +46,8 @@ bool EmulatedRoomOptions::Check(std::string* why) const {
   for (size_t k = 0; k < monitors.size(); ++k) {
     for (size_t j = 0; j < k; ++j) {
       if (monitors[j] == monitors[k]) {
-        *why =
-            "--monitors: '" + monitors[k] + "' is given twice: each projector has its own output";
+        *why = FlagOf(*this, &monitors) + ": '" + monitors[k] +
+               "' is given twice: each projector has its own output";
         return false;
       }
     }

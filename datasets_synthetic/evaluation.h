@@ -52,6 +52,10 @@ struct SceneEvaluation {
 };
 
 struct EvaluationOptions {
+  // What `procam evaluate` evaluates (RunEvaluation): synthetic scenes (SyntheticSceneNames()) or
+  // scene files with projectors and a camera; "all": every synthetic scene but tiny_box.
+  std::vector<std::string> scenes;
+  std::filesystem::path out = "out/evaluate";  // RunEvaluation's reports and pictures
   int patches = 600;  // solver patches per scene, ≥ 4
   std::vector<CompensationMethod> methods = {
       CompensationMethod::kNaive, CompensationMethod::kReverse, CompensationMethod::kLinear,
@@ -69,8 +73,8 @@ struct EvaluationOptions {
   // a real room; false: constant per world patch, which adds steps at the patch borders.
   bool smooth_bounce = true;
   ProgressCallback progress;       // what is being evaluated, ΔE per method
-  // Declares --patches, --world-factor, --alpha, --methods, --loss, --loss-scale,
-  // --metric-update, --light and --bounce in `table`, bound to these fields
+  // Declares the scenes (positional), --out, --patches, --world-factor, --alpha, --methods,
+  // --loss, --loss-scale, --metric-update, --light and --bounce in `table`, bound to these fields
   // (base/option_table.h).
   void Declare(OptionTable* table);
   bool Check(std::string* why) const;
@@ -81,6 +85,13 @@ struct EvaluationOptions {
 // Logs progress. Throws std::invalid_argument for an unknown scene or bad options, IoError for a
 // scene file that cannot be read or has no projectors or camera.
 SceneEvaluation EvaluateSyntheticScene(const std::string& name, const EvaluationOptions& options);
+
+// `procam evaluate`: every scene of options.scenes evaluated (EvaluateSyntheticScene), its
+// pictures and result.json written into options.out/SCENE/, and Table 1 (table.md), every
+// scene's numbers (result.json) and report.html into options.out (no directory of procam's own:
+// CheckNotProcamDirectory). Returns Table 1 and whether perceptual2000 reached the target on
+// every scene, as the command prints them.
+std::string RunEvaluation(const EvaluationOptions& options);
 
 // The lowest area-weighted mean ΔE76 per patch that emittances within `problem`'s bounds reach,
 // found by iteratively reweighted least squares: the perceptual objective with α = 1 (no

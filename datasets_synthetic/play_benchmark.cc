@@ -4,12 +4,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <vector>
 
 #include "base/io.h"
+#include "base/option_table.h"
 #include "base/timing.h"
 #include "compensation/problem.h"
 #include "datasets_synthetic/bench_projectors.h"
@@ -20,6 +22,7 @@
 #include "procam/config.h"
 #include "projection/frame_plan.h"
 #include "projection/projection_rig.h"
+#include "projection/stage.h"
 #if PROCAM_WITH_GLFW
 #include "projection/gl_renderer.h"
 #include "projection/offscreen_gl.h"
@@ -99,6 +102,37 @@ class PlayRenderer {
 };
 
 }  // namespace
+
+void PlayBenchmarkOptions::Declare(OptionTable* table) {
+  std::vector<std::pair<std::string, CompensationMethod>> methods;
+  for (CompensationMethod m : {CompensationMethod::kLinear, CompensationMethod::kPerceptual,
+                               CompensationMethod::kPerceptual2000})
+    methods.emplace_back(MethodName(m), m);
+  table->Integer("width", &width, 1, 16384, "pixels", "projector width")
+      .Integer("height", &height, 1, 16384, "pixels", "projector height")
+      .Integer("patches", &patches, 4, std::numeric_limits<int>::max(), "",
+               "target patch count (3 variables each)")
+      .Integer("frames", &frames, 1, 10000, "", "timed frames (after a first, cold one)")
+      .Choice("method", &method, methods, "linear, perceptual or perceptual2000")
+      .Choice("device", &device, DeviceChoices(), "where K⁻¹ is applied: cpu or cuda")
+      .Choice("dither", &dither,
+              {{DitherName(DitherMethod::kNone), DitherMethod::kNone},
+               {DitherName(DitherMethod::kOrdered), DitherMethod::kOrdered}},
+              "none or ordered")
+      .Choice("render", &render, {{"cpu", PlayRender::kCpu}, {"gpu", PlayRender::kGpu}},
+              "cpu | gpu: the images shaded on the CPU, or drawn by OpenGL into an offscreen "
+              "context (EGL: a GPU, or Mesa's llvmpipe)")
+      .Choice<std::string>(
+          "shader", &shader, {{"auto", "auto"}, {"fragment", "fragment"}, {"compute", "compute"}},
+          "with --render gpu, the shader path (auto: compute where the context has OpenGL 4.3)")
+      .Number("tolerance", &tolerance, 0.0, 0.1, "",
+              "each frame's solve stops when an iteration lowers the cost by less than this "
+              "fraction of it")
+      .Choice("light", &light, LightFieldChoices(),
+              "smooth: the light varies smoothly over each surface (seamless); flat: one uniform "
+              "level per patch")
+      .Text("json", &json, "also write the timings as JSON here");
+}
 
 void RunPlayBenchmark(const PlayBenchmarkOptions& args) {
   if (args.frames < 1) throw std::invalid_argument("bench play: frames must be at least 1");

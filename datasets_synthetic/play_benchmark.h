@@ -20,6 +20,8 @@
 
 namespace procam {
 
+class OptionTable;
+
 enum class PlayRender {
   kCpu,  // ShadeProjectorImages
   kGpu,  // GlProjectorRenderer, offscreen (needs procam built with PROCAM_WITH_GLFW)
@@ -43,6 +45,9 @@ struct PlayBenchmarkOptions {
   std::string shader = "auto";
   std::string json;
   ProgressCallback progress;
+  // Declares --width, --height, --patches, --frames, --method, --device, --dither, --render,
+  // --shader, --tolerance, --light and --json in `table`, bound to these fields.
+  void Declare(OptionTable* table);
 };
 
 // Throws IoError when the GPU render is asked for and no OpenGL context can be made (or procam

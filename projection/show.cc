@@ -1,12 +1,13 @@
 #include "projection/show.h"
 
+#include <fmt/format.h>
+
 #include <chrono>
 #include <memory>
-#include <stdexcept>
-#include <thread>
-
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
+#include <thread>
 
 #include "base/image_io.h"
 #include "base/io.h"
@@ -59,6 +60,13 @@ std::string ShowOptions::Check() const {
 }
 
 void RunShow(const ShowOptions& options) {
+  if (options.list) {
+    for (const MonitorInfo& m : ListMonitors()) {
+      Report(options.progress, fmt::format("{}  {:<16} {}x{} @ {} Hz at ({}, {})", m.index, m.name,
+                                           m.width, m.height, m.refresh_hz, m.x, m.y));
+    }
+    return;
+  }
   if (const std::string why = options.Check(); !why.empty()) throw std::invalid_argument(why);
   const std::vector<MonitorInfo> monitors = ChooseMonitors(options);
   std::vector<cv::Mat> images;  // read and checked before any window opens

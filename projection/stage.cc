@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 
 #include "base/io.h"
 #include "base/option_table.h"
@@ -13,21 +14,37 @@
 
 namespace procam {
 
-void ProjectionStageOptions::Declare(OptionTable* table) {
+std::vector<std::pair<std::string, LightField>> LightFieldChoices() {
+  return {{LightFieldName(LightField::kSmooth), LightField::kSmooth},
+          {LightFieldName(LightField::kFlat), LightField::kFlat}};
+}
+
+std::vector<std::pair<std::string, DitherMethod>> DitherChoices() {
   std::vector<std::pair<std::string, DitherMethod>> dithers;
   for (DitherMethod method :
        {DitherMethod::kNone, DitherMethod::kOrdered, DitherMethod::kErrorDiffusion}) {
     dithers.emplace_back(DitherName(method), method);
   }
+  return dithers;
+}
+
+void ProjectionStageOptions::Declare(OptionTable* table) {
+  table->Path("solution", &solution, "directory written by `procam compensate SCENE --out DIR`")
+      .Positional()
+      .Required();
+  table->Path("out", &out, "output directory (PNG per projector, result.json)").Required();
+  table->Path("rig", &rig,
+              "rig directory whose projectors (and reflectance) to use; default: the rig the "
+              "solution was computed with (compensate --rig), else the scene's");
+  table->Integer("patches", &patches, 0, std::numeric_limits<int>::max(), "",
+                 "patch target given to compensate with --patches, if any (0: the solution's)");
   table
-      ->Choice("dither", &dither, dithers,
+      ->Choice("dither", &dither, DitherChoices(),
                "none (nearest code value), ordered (8×8 Bayer) or error-diffusion "
                "(Floyd–Steinberg), in linear light")
       .Number("feather", &feather, 0.0, 0.5, "of the image size",
               "blending ramp at the image borders")
-      .Choice("light", &light,
-              {{LightFieldName(LightField::kSmooth), LightField::kSmooth},
-               {LightFieldName(LightField::kFlat), LightField::kFlat}},
+      .Choice("light", &light, LightFieldChoices(),
               "smooth: the light varies smoothly over each surface, stepping only where the "
               "desired appearance does, each patch's flux kept (seamless); flat: one uniform "
               "level per patch")
@@ -39,9 +56,10 @@ void ProjectionStageOptions::Declare(OptionTable* table) {
                    "without maps, instead of each pixel's light divided by its point's "
                    "reflectance relative to its patch's");
 }
+
 bool ProjectionStageOptions::Check(std::string* why) const {
   if (out.empty()) {
-    *why = "--out: the images directory is required";
+    *why = FlagOf(*this, &out) + ": the images directory is required";
     return false;
   }
   // The table only reads the fields here.
@@ -49,11 +67,6 @@ bool ProjectionStageOptions::Check(std::string* why) const {
   const_cast<ProjectionStageOptions*>(this)->Declare(&table);
   return table.Check(why);
 }
-
-namespace {
-
-
-}  // namespace
 
 SolutionGeometry ReadSolutionGeometry(const SolutionDirectory& solution, int patches_override) {
   SolutionGeometry geometry;

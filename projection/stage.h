@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core/mat.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "base/progress.h"
@@ -32,7 +33,17 @@ struct SolutionGeometry {
 // scene changed since), and every error of the scene.
 SolutionGeometry ReadSolutionGeometry(const SolutionDirectory& solution, int patches_override = 0);
 
+// The names --light and --dither take (OptionTable::Choice), for every command that declares
+// them.
+std::vector<std::pair<std::string, LightField>> LightFieldChoices();
+std::vector<std::pair<std::string, DitherMethod>> DitherChoices();
+
 struct ProjectionStageOptions {
+  // What `procam project` reads (ProjectSolution, calibration/calibrated_room.h): the solution
+  // directory, the rig whose projectors show it (empty: the rig the solution was computed with,
+  // else the scene's projectors) and the patch target compensate was given (0: the solution's).
+  std::filesystem::path solution, rig;
+  int patches = 0;
   std::filesystem::path out;  // the images directory (created)
   DitherMethod dither = DitherMethod::kOrdered;
   double feather = 0.1;  // blending ramp at the edge of each projector's image, (0, 1]
@@ -43,11 +54,10 @@ struct ProjectionStageOptions {
   bool reflectance_maps = true;
   double load_seconds = 0.0;               // what reading the inputs took, for result.json
   ProgressCallback progress;  // per projector: pixels lit, patches, saturation; bounds; times
-  // Declares --dither, --feather, --light, --detail and --no-reflectance-maps in `table`, bound
-  // to these fields
-  // (base/option_table.h).
+  // Declares the solution (positional), --out, --rig, --patches, --dither, --feather, --light,
+  // --detail and --no-reflectance-maps in `table`, bound to these fields (base/option_table.h).
   void Declare(OptionTable* table);
-  // The declared options within their ranges and choices, and an output directory given.
+  // The declared options within their ranges and choices, an output directory and a solution.
   bool Check(std::string* why) const;
 };
 

@@ -13,6 +13,7 @@
 #include "base/io.h"
 #include "base/json_fields.h"
 #include "base/option_table.h"
+#include "base/parse.h"
 #include "base/stop.h"
 #include "base/timing.h"
 #include "calibration/calibrated_room.h"
@@ -31,6 +32,7 @@
 #include "projection/camera_rays.h"
 #include "projection/projection_rig.h"
 #include "projection/projector_images.h"
+#include "projection/stage.h"
 
 namespace procam {
 namespace {
@@ -60,7 +62,7 @@ ColourSource ResolveColourSource(const VerificationOptions& options, const RigCa
   c.black = std::max(0.0, options.camera_black);
   if (options.camera_scale) {
     c.matrix = options.camera_scale->cwiseInverse().asDiagonal();
-    c.source = "--camera-scale";
+    c.source = FlagOf(options, &options.camera_scale);
     return c;
   }
   if (camera.colour) {
@@ -79,7 +81,8 @@ ColourSource ResolveColourSource(const VerificationOptions& options, const RigCa
   throw IoError(rig_file + ": camera.colour: required key is missing for camera '" +
                 options.camera +
                 "' (the camera's value per unit exitance: {\"scale\": [R,G,B]} or {\"matrix\": "
-                "3x3}), or give --camera-scale");
+                "3x3}), or give " +
+                FlagOf(options, &options.camera_scale));
 }
 
 // Linear working RGB (CV_32FC3, R, G, B) in scene units from the camera's linear photo (B, G, R).
@@ -277,6 +280,20 @@ nlohmann::json IterationJson(const VerificationIteration& it) {
 // ---------------------------------------------------------------------------------------------
 
 void VerificationOptions::Declare(OptionTable* table) {
+  table->Path("rig", &rig_dir, "rig directory (rig.json: camera.model, projectors[])")
+      .Positional()
+      .Required();
+  table
+      ->Path("solution", &solution_dir,
+             "solution directory (procam compensate SCENE --rig RIG_DIR --out DIR)")
+      .Positional()
+      .Required();
+  table->Text("camera", &camera, "camera URI: synthetic:SCENE?..., aravis:<id>, v4l2:/dev/video0")
+      .Required();
+  table->Path("out", &out, "output directory").Required();
+  table->Texts("display", &display_names,
+               "per projector, in rig.json's order: glfw:N|NAME, its monitor "
+               "(procam show --list); not for synthetic cameras");
   table
       ->Integer("iterations", &iterations, 1, 50, "",
                 "photos at most: 1 verifies only; more refine the model and solve again")
@@ -290,9 +307,7 @@ void VerificationOptions::Declare(OptionTable* table) {
                    "leave the per-patch reflectance as the rig has it")
       .Integer("min-patch-pixels", &min_patch_pixels, 1, 1 << 30, "pixels",
                "camera pixels a patch needs to count as seen")
-      .Choice("light", &light,
-              {{LightFieldName(LightField::kSmooth), LightField::kSmooth},
-               {LightFieldName(LightField::kFlat), LightField::kFlat}},
+      .Choice("light", &light, LightFieldChoices(),
               "how the projector images shape the light within each patch: smooth (seamless) or "
               "flat")
       .NegatedFlag("no-reflectance-maps", &reflectance_maps,
@@ -302,6 +317,42 @@ void VerificationOptions::Declare(OptionTable* table) {
                    "leave the reflectance maps as the rig has them (else each photo refits a "
                    "gain per projector pixel)");
   sequencer.Declare(table);
+  std::optional<Eigen::Vector3d>* scale = &camera_scale;
+  table->Custom(
+      "camera-scale",
+      [scale] {
+        if (!*scale) return std::string();
+        const Eigen::Vector3d& v = **scale;
+        if (v[0] == v[1] && v[1] == v[2]) return OptionNumberText(v[0]);
+        return OptionNumberText(v[0]) + "," + OptionNumberText(v[1]) + "," + OptionNumberText(v[2]);
+      },
+      [scale](const std::string& text, std::string* why) {
+        if (text.empty()) {
+          scale->reset();
+          return true;
+        }
+        try {
+          *scale = ParsePositiveRgb("camera-scale", text);
+          return true;
+        } catch (const IoError& error) {
+          *why = std::string(error.what()).substr(std::string("camera-scale: ").size());
+          return false;
+        }
+      },
+      "a positive number, or R,G,B",
+      "camera value per unit exitance (scene units); default: rig.json camera.colour, or the "
+      "synthetic camera's own");
+  table->Sets(&camera_scale);
+  table->Number(
+      "camera-black", &camera_black, -1.0, 1e9, "DN",
+      "camera black level (< 0: rig.json camera.colour.black, the synthetic URI's, or 0)");
+  table->Text("camera-response", &camera_response,
+              "camera_response.json (procam calibrate response) for a camera that is not linear; "
+              "needs --exposure-us bracketing");
+  table->Number("gain", &gain, -1.0, 1000.0, "dB", "camera gain to set (< 0: leave it)");
+  DeclareSettleOption(table, &sequencer.settle_ms, &measure_latency);
+  table->Numbers("exposure-us", &sequencer.exposures_us, OptionTable::Interval::AboveMin(0.0, 1e9),
+                 "µs", "exposure(s); several bracket and merge to HDR");
 }
 
 bool VerificationOptions::Check(std::string* why) const {
@@ -311,8 +362,8 @@ bool VerificationOptions::Check(std::string* why) const {
   };
   if (rig_dir.empty()) return fail("the rig directory is required");
   if (solution_dir.empty()) return fail("the solution directory is required");
-  if (out.empty()) return fail("--out is required");
-  if (camera.empty()) return fail("--camera is required");
+  if (out.empty()) return fail(FlagOf(*this, &out) + " is required");
+  if (camera.empty()) return fail(FlagOf(*this, &camera) + " is required");
   // The table only reads the fields here.
   OptionTable table("verify");
   const_cast<VerificationOptions*>(this)->Declare(&table);
@@ -322,7 +373,8 @@ bool VerificationOptions::Check(std::string* why) const {
   if (!sequencer.Check(&sequencer_why)) return fail(sequencer_why);
   if (measure_latency && !latency.Check(&sequencer_why)) return fail("latency: " + sequencer_why);
   if (!camera_response.empty() && sequencer.exposures_us.size() < 2)
-    return fail("--camera-response needs bracketed exposures (--exposure-us a,b,...)");
+    return fail(FlagOf(*this, &camera_response) + " needs bracketed exposures (" +
+                FlagOf(*this, &sequencer.exposures_us) + " a,b,...)");
   return true;
 }
 
@@ -1022,8 +1074,26 @@ VerificationSummary RunVerificationLoop(const VerificationOptions& options) {
 }  // namespace
 
 VerificationSummary RunVerification(const VerificationOptions& options) {
+  // The displays given by name, opened (after the options' checks).
+  VerificationOptions opened;
+  const VerificationOptions* run = &options;
+  if (!options.display_names.empty()) {
+    std::string why;
+    if (!options.Check(&why)) throw IoError("verify: " + why);
+    const std::string flag = FlagOf(options, &options.display_names);
+    if (CameraUri::Parse(options.camera).scheme() == "synthetic") {
+      throw IoError(flag + ": camera '" + options.camera +
+                    "' photographs the simulated room, whose own projectors show the images");
+    }
+    if (!options.open_display) throw std::invalid_argument(flag + ": no way to open a display");
+    opened = options;
+    for (const std::string& name : options.display_names)
+      opened.displays.push_back(options.open_display(name));
+    opened.display_names.clear();
+    run = &opened;
+  }
   try {
-    return RunVerificationLoop(options);
+    return RunVerificationLoop(*run);
   } catch (const Stopped& stopped) {
     const std::string what = stopped.what();
     if (what.starts_with("verify: ")) throw;

@@ -69,6 +69,10 @@ struct VerificationOptions {
   // displays (SyntheticWorld::displays); given with a synthetic camera, they must show on the
   // world's displays (e.g. wrap them, as the fault tests do), since those are what it sees.
   std::vector<std::shared_ptr<PatternDisplay>> displays;
+  // Or by name (`procam verify --display`: glfw:N|NAME), each opened by `open_display` before
+  // the run and shown after `displays`; not for synthetic cameras.
+  std::vector<std::string> display_names;
+  std::function<std::shared_ptr<PatternDisplay>(const std::string& name)> open_display;
   // The scene, when the solution's result.json names no file (a generated scene, as in the
   // demo); otherwise left empty and read from the file result.json names.
   std::optional<Scene> scene;
@@ -103,10 +107,12 @@ struct VerificationOptions {
   // Set (by a signal handler) to stop cleanly: the photo in hand is finished (its session
   // records the stop), no further photo or solve begins. Null: run to the end.
   const std::atomic<bool>* stop = nullptr;
-  // Declares the closed loop's options (--iterations, --min-improvement, --reflectance-step,
-  // --no-response-fit, --no-reflectance-fit, --min-patch-pixels, --light,
-  // --no-reflectance-maps, --no-reflectance-map-fit) and the sequencer's
-  // (SequencerOptions::Declare) in `table`, bound to these fields (base/option_table.h).
+  // Declares the rig and the solution (positional), --camera, --out, --display, the closed
+  // loop's options (--iterations, --min-improvement, --reflectance-step, --no-response-fit,
+  // --no-reflectance-fit, --min-patch-pixels, --light, --no-reflectance-maps,
+  // --no-reflectance-map-fit), the sequencer's (SequencerOptions::Declare) and the camera's
+  // (--camera-scale, --camera-black, --camera-response, --gain, --settle-ms, --exposure-us) in
+  // `table`, bound to these fields (base/option_table.h).
   void Declare(OptionTable* table);
   bool Check(std::string* why) const;
 };

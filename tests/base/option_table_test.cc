@@ -298,5 +298,37 @@ TEST(OptionTable, ListsPositionalsRequiredUnsetAndCustomOptions) {
       << markdown;
 }
 
+// A message names an option from its declaration: the option that sets a field, found by the
+// field's address (each kind of option, a positional one by its name, a Custom one by the fields
+// Sets() names), on the struct itself or through FlagOf(options, &options.field).
+TEST(OptionTable, FlagOfNamesTheOptionThatSetsAField) {
+  Settings settings;
+  OptionTable table("settings");
+  settings.Declare(&table);
+  EXPECT_EQ(table.FlagOf(&settings.alpha), "--alpha");
+  EXPECT_EQ(table.FlagOf(&settings.rounds), "--rounds");
+  EXPECT_EQ(table.FlagOf(&settings.smooth), "--smooth");
+  EXPECT_EQ(table.FlagOf(&settings.out), "--out");
+  EXPECT_EQ(table.FlagOf(&settings.shade), "--shade");
+  EXPECT_EQ(FlagOf(settings, &settings.label), "--label");
+
+  Step step;
+  EXPECT_EQ(FlagOf(step, &step.sessions), "sessions");  // positional: its name alone
+  EXPECT_EQ(FlagOf(step, &step.entries), "--entry");
+  EXPECT_EQ(FlagOf(step, &step.levels), "--levels");
+  EXPECT_EQ(FlagOf(step, &step.exposures), "--exposure");
+  EXPECT_EQ(FlagOf(step, &step.gain), "--gain");
+  // A Custom option sets no field the table sees, until Sets() names them.
+  EXPECT_THROW(FlagOf(step, &step.measure), std::logic_error);
+  OptionTable custom("step");
+  step.Declare(&custom);
+  custom.Sets(&step.measure).Sets(&step.settle);
+  EXPECT_EQ(custom.FlagOf(&step.measure), "--settle");
+  EXPECT_EQ(custom.FlagOf(&step.settle), "--settle");
+  // A field of another struct is no option of this table.
+  Settings other;
+  EXPECT_THROW(table.FlagOf(&other.alpha), std::logic_error);
+}
+
 }  // namespace
 }  // namespace procam
