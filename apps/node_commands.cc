@@ -54,8 +54,9 @@ void CheckUnique(const std::vector<std::string>& values, const std::string& opti
 // A display output that is a device (a monitor), which two projectors cannot share.
 bool IsMonitor(const std::string& display) { return display.starts_with("glfw:"); }
 
-void RunPlayCommand(const PlayArguments& args) {
-  PlayOptions options;
+// `options` holds what PlayOptions::Declare declared (--osc, --osc-allow); the rest is copied from
+// `args`.
+void RunPlayCommand(const PlayArguments& args, PlayOptions options) {
   options.scene = args.scene;
   options.rig_dir = args.rig;
   options.desired = args.desired;
@@ -96,7 +97,9 @@ void RunPlayCommand(const PlayArguments& args) {
   } else {
     std::cout << fmt::format(
         "play: {}{} frames shown, {} dropped in {:.1f} s; wrote {}/result.json\n",
-        summary.stopped ? "stopped by a signal: " : "", summary.frames.size(), summary.dropped,
+        !summary.stopped ? ""
+        : options.stop->load() ? "stopped by a signal: "
+                               : "stopped by /procam/stop: ", summary.frames.size(), summary.dropped,
         summary.seconds, args.out);
   }
 }
@@ -207,9 +210,10 @@ void AddNodeCommands(CLI::App& app) {
                    "Seconds for every node to answer and build the rig before the first frame")
       ->check(FiniteRange(0.1, 3600.0))
       ->capture_default_str();
-  play->callback([play_args] {
+  const auto play_options = AddDeclaredOptions<PlayOptions>(play);
+  play->callback([play_args, play_options] {
     CheckOutputDirectory(play_args->out, DirectoryKind::kShow);
-    RunPlayCommand(*play_args);
+    RunPlayCommand(*play_args, *play_options);
   });
 }
 

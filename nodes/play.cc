@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <chrono>
+#include <deque>
 #include <exception>
+#include <mutex>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
@@ -21,6 +23,7 @@
 #include "compensation/stage.h"
 #include "geometry/srgb.h"
 #include "geometry/stage.h"
+#include "nodes/osc_server.h"
 #include "projection/camera_rays.h"
 #include "projection/projection_rig.h"
 
@@ -69,8 +72,9 @@ class FrameSource {
   }
   // Frames in the source (a video's may be an estimate; 0 if unknown).
   int count() const { return count_; }
-  // Frame `index` (≥ every earlier call's): skipped frames of a video are decoded and dropped.
-  // Empty at the end of the source.
+  // Frame `index`: an image of the directory, or a video's frame (skipped frames decoded and
+  // dropped; an index before the last one read opens the video again: a seek back). Empty past
+  // the end of the source.
   cv::Mat Read(int index) {
     if (!files_.empty()) {
       if (index >= static_cast<int>(files_.size())) return cv::Mat();
@@ -82,6 +86,12 @@ class FrameSource {
       frame = first_;
       first_.release();
       if (index == 0) return frame;
+    }
+    if (index < next_ - 1 || (index == next_ - 1 && frame.empty())) {
+      SilencedStderr silenced;
+      video_.release();
+      if (!video_.open(path_.string(), cv::CAP_ANY) || !video_.isOpened()) return cv::Mat();
+      next_ = 0;
     }
     while (next_ <= index) {
       SilencedStderr silenced;  // a damaged frame's decoder lines: it ends the source
@@ -110,7 +120,12 @@ nlohmann::json FrameJson(const PlayFrame& frame, const std::vector<NodeAddress>&
                          {"solve_ms", frame.solve_ms},       {"iterations", frame.iterations},
                          {"ready_ms", frame.shown.ready_ms}, {"present_ms", frame.shown.present_ms},
                          {"skew_ms", frame.shown.skew_ms},   {"total_ms", frame.total_ms},
-                         {"nodes_shown", frame.shown.shown}};
+                         {"nodes_shown", frame.shown.shown},
+                         {"paused", frame.paused},
+                         {"fade", frame.fade},
+                         {"emittance_mean", frame.emittance_mean}};
+  for (const auto& [command, received] : frame.commands)
+    json["osc"].push_back({{"command", command}, {"received_frame", received}});
   for (size_t k = 0; k < frame.shown.nodes.size(); ++k) {
     const NodeFrame& node = frame.shown.nodes[k];
     json["nodes"][nodes[k].name] = {{"state", node.state},
@@ -180,7 +195,9 @@ void WritePlayResult(const PlayOptions& options, const PlaySummary& summary,
                            {"frames_dropped", summary.dropped},
                            {"seconds", summary.seconds},
                            {"setup_seconds", summary.setup_seconds},
-                           {"stopped", summary.stopped}};
+                           {"stopped", summary.stopped},
+                           {"osc", options.osc},
+                           {"osc_refused", summary.osc_refused}};
   std::vector<double> solve, ready, skew, total;
   for (const PlayFrame& frame : summary.frames) {
     result["frames"].push_back(FrameJson(frame, nodes));
@@ -199,12 +216,77 @@ void WritePlayResult(const PlayOptions& options, const PlaySummary& summary,
   WriteFileAtomically(options.out / "result.json", result.dump(2) + "\n");
 }
 
-// The show itself: frames through the controller until the source ends.
+// What the OSC thread and the show share: commands waiting for the next frame, and the status a
+// /procam/status is answered with.
+class ShowControl {
+ public:
+  static constexpr size_t kMaxPending = 256;  // commands waiting; more are refused
+
+  // On the OSC thread. False when the queue is full.
+  bool Push(const OscCommand& command) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (pending_.size() >= kMaxPending) return false;
+    pending_.emplace_back(command, status_.frame);
+    return true;
+  }
+  // On the show's thread: the commands that arrived, each with the frame under way then.
+  std::vector<std::pair<OscCommand, int>> Take() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    std::vector<std::pair<OscCommand, int>> taken;
+    taken.swap(pending_);
+    return taken;
+  }
+
+  struct Status {
+    int frame = 0;  // frames shown (the number of the frame under way)
+    double rate = 0.0;
+    int dropped = 0, nodes_lost = 0, source = 0;
+    bool paused = false;
+    double fade = 1.0;
+  };
+  void Publish(const Status& status) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    status_ = status;
+  }
+  OscMessage StatusMessage() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    OscMessage message;
+    message.address = "/procam/status";
+    message.types = "ifiiiif";
+    const double values[] = {double(status_.frame),      status_.rate,
+                             double(status_.dropped),    double(status_.nodes_lost),
+                             double(status_.source),     status_.paused ? 1.0 : 0.0,
+                             status_.fade};
+    for (size_t k = 0; k < message.types.size(); ++k)
+      message.arguments.push_back({message.types[k], values[k], ""});
+    return message;
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::pair<OscCommand, int>> pending_;
+  Status status_;
+};
+
+// The fade: a level moving linearly from `from` to `to` over `seconds` from `start`.
+struct Fade {
+  double from = 1.0, to = 1.0, seconds = 0.0;
+  Clock::time_point start;
+  double Level(Clock::time_point now) const {
+    if (seconds <= 0.0) return to;
+    const double t = std::chrono::duration<double>(now - start).count() / seconds;
+    return t >= 1.0 ? to : from + (to - from) * std::max(0.0, t);
+  }
+};
+
+// The show itself: frames through the controller until the source ends, a stop, or /procam/stop.
+// Frames follow a clock of ticks at the target rate; the source's position advances with the
+// ticks while playing and holds while paused.
 PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& controller,
-                       FrameSource* source, Clock::time_point start) {
+                       FrameSource* source, ShowControl* control, Clock::time_point start) {
   PlaySummary summary;
   const int limit = options.frames > 0  ? options.frames
-                    : source == nullptr ? 1
+                    : source == nullptr ? (control != nullptr ? INT32_MAX : 1)
                                         : (source->count() > 0 ? source->count() : INT32_MAX);
   const auto period = std::chrono::duration<double>(1.0 / options.fps);
   std::shared_ptr<const RadiositySystem> radiosity;
@@ -212,57 +294,144 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
   CompensationProblem& problem = play.room.problem;
   const CameraPixelRays& rays = play.room.camera_rays;
   const Eigen::MatrixX3d room_desired = problem.desired;
+  SolverOptions solver = options.solver;  // the method and tolerance OSC may change
   auto last_progress = Clock::now();
-  Clock::time_point t0;
-  int index = 0;
-  while (index < limit) {
+  Clock::time_point t0;  // when tick 0 ended
+  std::deque<Clock::time_point> recent;  // the last frames' ends, for the status's rate
+  int tick = 0;
+  int media_tick = 0, media_index = 0;  // the source's position: media_index at tick media_tick
+  bool paused = false;
+  Fade fade;
+  // What the emittance in `previous` was solved for: a frame solves again when any differs.
+  int solved_index = -1, image_index = -1;
+  double solved_fade = -1.0;
+  bool solver_changed = false;
+  Eigen::MatrixX3d image_desired;
+  while (true) {
     if (options.stop != nullptr && options.stop->load()) {
       summary.stopped = true;
       break;
     }
     const auto frame_start = Clock::now();
     PlayFrame frame;
-    frame.source = index;
-    if (source != nullptr) {
-      cv::Mat image = source->Read(index);
-      if (image.empty()) break;  // the end of a video
-      frame.read_ms = MsSince(frame_start);
-      auto step = Clock::now();
-      problem.desired = DesiredFromImage(image, rays.patch, rays.width, rays.height, room_desired);
-      frame.desired_ms = MsSince(step);
-      step = Clock::now();
-      SolverSummary solver_summary;
-      const CompensationSolution solution =
-          Solve(options.solver, problem, &solver_summary, {}, WarmStart{radiosity, previous});
-      radiosity = solution.radiosity_system;
-      previous = solution.emittance;
-      frame.solve_ms = MsSince(step);
-      frame.iterations = solver_summary.iterations;
-    } else {
-      previous = play.solution;
+    bool stop_command = false;
+    const int playing_index = media_index + (tick - media_tick);
+    if (control != nullptr) {
+      for (const auto& [command, received] : control->Take()) {
+        using Kind = OscCommand::Kind;
+        const int at = paused ? media_index : playing_index;
+        switch (command.kind) {
+          case Kind::kPlay:
+            if (paused) paused = false, media_index = at, media_tick = tick;
+            break;
+          case Kind::kPause:
+            if (!paused) paused = true, media_index = at, media_tick = tick;
+            break;
+          case Kind::kSeek:
+            media_index = static_cast<int>(std::llround(std::min(command.seconds * options.fps,
+                                                                 double(INT32_MAX) / 2)));
+            media_tick = tick;
+            break;
+          case Kind::kFade:
+            fade = Fade{fade.Level(frame_start), command.level, command.seconds, frame_start};
+            break;
+          case Kind::kMethod:
+            ParseMethod(command.method, &solver.method);
+            solver_changed = true;
+            break;
+          case Kind::kTolerance:
+            solver.function_tolerance = command.tolerance;
+            solver_changed = true;
+            break;
+          case Kind::kSurface:
+            Report(options.progress, "play: " + command.Text() +
+                                         ": this show has no playlist; the command is ignored");
+            break;
+          case Kind::kStop:
+            stop_command = true;
+            break;
+          case Kind::kStatus:
+            break;  // answered by the OSC thread
+        }
+        frame.commands.emplace_back(command.Text(), received);
+      }
     }
+    if (stop_command) {
+      summary.stopped = true;
+      break;
+    }
+    const int index = paused ? media_index : media_index + (tick - media_tick);
+    if (index >= limit) break;
+    frame.source = index;
+    frame.paused = paused;
+    frame.fade = fade.Level(frame_start);
+    if (source != nullptr) {
+      if (index != image_index) {
+        cv::Mat image = source->Read(index);
+        if (image.empty()) break;  // the end of a video
+        frame.read_ms = MsSince(frame_start);
+        const auto step = Clock::now();
+        image_desired = DesiredFromImage(image, rays.patch, rays.width, rays.height, room_desired);
+        image_index = index;
+        frame.desired_ms = MsSince(step);
+      }
+      if (index != solved_index || frame.fade != solved_fade || solver_changed) {
+        problem.desired = frame.fade * image_desired;
+        const auto step = Clock::now();
+        SolverSummary solver_summary;
+        const CompensationSolution solution =
+            Solve(solver, problem, &solver_summary, {}, WarmStart{radiosity, previous});
+        radiosity = solution.radiosity_system;
+        previous = solution.emittance;
+        frame.solve_ms = MsSince(step);
+        frame.iterations = solver_summary.iterations;
+        solved_index = index;
+        solved_fade = frame.fade;
+        solver_changed = false;
+      }
+    } else {
+      // A solution's light scaled: radiosity is linear in the emittance (B = K⁻¹E), so the room's
+      // appearance scales by the same level in linear light.
+      previous = frame.fade * play.solution;
+    }
+    frame.emittance_mean = previous.size() > 0 ? previous.mean() : 0.0;
     frame.shown = controller.Show(static_cast<uint64_t>(summary.frames.size()), previous);
     frame.total_ms = MsSince(frame_start);
-    if (summary.frames.empty())
-      t0 = Clock::now() - std::chrono::duration_cast<Clock::duration>(period * index);
+    if (summary.frames.empty()) t0 = Clock::now();
     summary.frames.push_back(frame);
-    // The next frame is the one due now: frames whose time passed are dropped, not shown late.
-    const auto next_due = t0 + std::chrono::duration_cast<Clock::duration>(period * (index + 1));
+    // The next tick is the one due now: ticks whose time passed are dropped, not shown late.
+    const auto next_due = t0 + std::chrono::duration_cast<Clock::duration>(period * (tick + 1));
     if (Clock::now() < next_due) std::this_thread::sleep_until(next_due);
     const int due = static_cast<int>(std::chrono::duration<double>(Clock::now() - t0) / period);
-    const int next = std::max(index + 1, due);
-    summary.dropped += std::min(next, limit) - (index + 1);
-    index = next;
-    if (SecondsSince(last_progress) >= 1.0 || index >= limit) {
+    const int next = std::max(tick + 1, due);
+    const int advance = next - tick;
+    summary.dropped +=
+        paused ? advance - 1 : std::max(0, std::min(index + advance, limit) - (index + 1));
+    tick = next;
+    recent.push_back(Clock::now());
+    if (recent.size() > 30) recent.pop_front();
+    const double rate =
+        recent.size() < 2
+            ? 0.0
+            : (recent.size() - 1) /
+                  std::max(1e-9, std::chrono::duration<double>(recent.back() - recent.front()).count());
+    if (control != nullptr) {
+      control->Publish({static_cast<int>(summary.frames.size()), rate, summary.dropped,
+                        static_cast<int>(controller.nodes().size()) - controller.live(), index,
+                        paused, frame.fade});
+    }
+    const bool last = !paused && index + advance >= limit;
+    if (SecondsSince(last_progress) >= 1.0 || last) {
       last_progress = Clock::now();
       Report(options.progress,
              fmt::format("play: frame {}/{} ({:.1f} fps), solve {:.1f} ms ({} it), ready {:.1f} "
                          "ms, skew {:.2f} ms, "
-                         "dropped {}, nodes {}/{}",
-                         std::min(index, limit), limit == INT32_MAX ? 0 : limit,
-                         summary.frames.size() / std::max(1e-9, SecondsSince(t0)), frame.solve_ms,
+                         "dropped {}, nodes {}/{}{}",
+                         std::min(index + (paused ? 1 : advance), limit),
+                         limit == INT32_MAX ? 0 : limit, rate, frame.solve_ms,
                          frame.iterations, frame.shown.ready_ms, frame.shown.skew_ms,
-                         summary.dropped, controller.live(), controller.nodes().size()));
+                         summary.dropped, controller.live(), controller.nodes().size(),
+                         paused ? ", paused" : ""));
     }
   }
   summary.seconds = SecondsSince(start);
@@ -305,10 +474,50 @@ Eigen::MatrixX3d DesiredFromImage(const cv::Mat& image, const std::vector<int>& 
   return sums.Means(fallback);
 }
 
-PlaySummary RunPlay(const PlayOptions& options) {
+void PlayOptions::Declare(OptionTable* table) {
+  table
+      ->Text("osc",
+             &osc,
+             "IPV4:PORT to listen at for a show controller's OSC messages (docs/show.md): "
+             "127.0.0.1:9000 this machine only, 0.0.0.0:9000 every interface; empty: no remote "
+             "control")
+      .Texts("osc-allow", &osc_allow,
+             "senders the OSC control answers, IPv4 addresses or ranges A.B.C.D/N; others are "
+             "refused in a log line each");
+}
+
+PlaySummary RunPlay(const PlayOptions& given) {
   const auto start = Clock::now();
-  if (!(options.fps > 0.0 && options.fps <= 1000.0))
+  if (!(given.fps > 0.0 && given.fps <= 1000.0))
     throw std::invalid_argument("--fps must be in (0, 1000]");
+  // The OSC thread logs too: one line at a time.
+  auto log_mutex = std::make_shared<std::mutex>();
+  PlayOptions options = given;
+  if (given.progress) {
+    options.progress = [log_mutex, progress = given.progress](const std::string& line) {
+      std::lock_guard<std::mutex> lock(*log_mutex);
+      progress(line);
+    };
+  }
+  // The OSC socket before anything long: a port taken or an address not this machine's fails at
+  // once.
+  std::optional<ShowControl> show_control;
+  std::unique_ptr<OscServer> osc;
+  if (!options.osc.empty()) {
+    show_control.emplace();
+    OscServerOptions server;
+    server.listen = options.osc;
+    server.allow = OscAllowList::Parse(options.osc_allow);
+    server.log = options.progress;
+    server.on_command = [&show_control, progress = options.progress](const OscCommand& command) {
+      if (!show_control->Push(command))
+        Report(progress, "osc: ignored " + command.Text() + ": " +
+                             std::to_string(ShowControl::kMaxPending) +
+                             " commands wait already for the next frame");
+    };
+    server.on_status = [&show_control] { return show_control->StatusMessage(); };
+    osc = std::make_unique<OscServer>(std::move(server));
+  }
   const RigDirectory rig = ReadRigDirectory(options.rig_dir);
   std::optional<RigKeys> keys;
   std::vector<NodeAddress> nodes = options.nodes;
@@ -354,8 +563,10 @@ PlaySummary RunPlay(const PlayOptions& options) {
         controller.Stop(/*exit=*/local);
       } else {
         const double setup_seconds = SecondsSince(start);
-        summary = PlayFrames(options, play, controller, source ? &*source : nullptr, start);
+        summary = PlayFrames(options, play, controller, source ? &*source : nullptr,
+                             show_control ? &*show_control : nullptr, start);
         summary.setup_seconds = setup_seconds;
+        if (osc) summary.osc_refused = osc->refused();
         controller.Stop(/*exit=*/local);
         if (!summary.frames.empty() || !summary.stopped)
           WritePlayResult(options, summary, node_list, play);

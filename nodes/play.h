@@ -7,6 +7,13 @@
 // passed while the previous one was being solved and shown is dropped, never shown late, so the
 // show does not drift. Per-frame timings go to OUT/result.json; a progress line every second.
 //
+// Remote control (docs/show.md): with `osc` set, a show controller steers the show over OSC
+// (nodes/osc.h's address space): play, pause, seek, fade to black and back, method and tolerance,
+// status. Frames run on a clock of their own at the target rate; the source's position advances
+// with it while playing and holds while paused (the frame shown again, solved again only when the
+// fade or the solver changed). Commands take effect at the start of the next frame; each frame's
+// record says what it showed (source frame, fade level, paused, the commands it applied).
+//
 // Desired appearance from an image: the image (sRGB, 8 or 16 bits) is resized to the rig
 // camera's resolution; every camera pixel's ray is cast into the room (CastCameraPixels with the
 // registered camera of RIG_DIR/camera.cameramodel); a patch's desired linear colour is the mean
@@ -16,15 +23,18 @@
 #include <Eigen/Core>
 #include <atomic>
 #include <filesystem>
+#include <utility>
 #include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
 #include <zmq.hpp>
 
+#include "base/option_table.h"
 #include "base/progress.h"
 #include "compensation/solver.h"
 #include "nodes/controller.h"
 #include "nodes/node.h"
+#include "nodes/osc.h"
 #include "projection/projector_images.h"
 
 namespace procam {
@@ -67,6 +77,15 @@ struct PlayOptions {
   // Set (by a signal handler) to end the show cleanly: after the frame in hand, or during the
   // setup; the nodes are told to stop. Null: the show runs to the end of its source.
   const std::atomic<bool>* stop = nullptr;
+  // OSC control: IPV4:PORT to listen at (127.0.0.1:9000: this machine only; 0.0.0.0:9000: every
+  // interface); empty: none.
+  std::string osc;
+  // Senders the OSC control answers: IPv4 addresses or ranges A.B.C.D/N; others are refused in a
+  // log line each.
+  std::vector<std::string> osc_allow = {"127.0.0.1"};
+
+  // Declares --osc and --osc-allow in `table`, bound to these fields (base/option_table.h).
+  void Declare(OptionTable* table);
 };
 
 struct PlayFrame {
@@ -75,6 +94,12 @@ struct PlayFrame {
   int iterations = 0;
   FrameReport shown;
   double total_ms = 0.0;  // from the frame's start to its presentation
+  bool paused = false;    // shown while the show was paused (OSC)
+  double fade = 1.0;      // the level the desired appearance was scaled by, [0, 1]
+  double emittance_mean = 0.0;  // the mean of the emittance shown, over patches and channels
+  // The OSC commands this frame applied (OscCommand::Text) and the frame that was under way when
+  // each arrived.
+  std::vector<std::pair<std::string, int>> commands;
 };
 
 struct PlaySummary {
@@ -82,7 +107,8 @@ struct PlaySummary {
   int dropped = 0;
   double seconds = 0.0;
   double setup_seconds = 0.0;  // geometry, form factors, camera rays, nodes set up
-  bool stopped = false;        // ended by options.stop before the source's end
+  bool stopped = false;        // ended by options.stop or /procam/stop before the source's end
+  int osc_refused = 0;         // OSC messages ignored (not an allowed sender, malformed)
 };
 
 // Desired linear colours (n,3) from an image as the camera sees the room: `image` any size
