@@ -59,7 +59,29 @@ bool CheckName(const std::string& name, bool may_be_empty, const std::string& wh
   return true;
 }
 
+// `text` as one line of printable ASCII: other bytes written as \xNN (an address or a type tag a
+// sender made up must not break the log's one line per refusal).
+std::string Printable(const std::string& text) {
+  std::string out;
+  for (unsigned char c : text) {
+    if (c >= 0x20 && c < 0x7f && c != '\\') {
+      out += static_cast<char>(c);
+    } else {
+      out += fmt::format("\\x{:02x}", c);
+    }
+  }
+  return out;
+}
+
+bool Parse(const OscMessage& message, OscCommand* command, std::string* why);
+
 }  // namespace
+
+bool ParseOscCommand(const OscMessage& message, OscCommand* command, std::string* why) {
+  if (Parse(message, command, why)) return true;
+  *why = Printable(*why);
+  return false;
+}
 
 bool DecodeOscPacket(const uint8_t* data, size_t size, OscMessage* message, std::string* why) {
   *message = OscMessage();
@@ -176,7 +198,9 @@ std::string OscCommand::Text() const {
   return "";
 }
 
-bool ParseOscCommand(const OscMessage& message, OscCommand* command, std::string* why) {
+namespace {
+
+bool Parse(const OscMessage& message, OscCommand* command, std::string* why) {
   *command = OscCommand();
   const std::string& address = message.address;
   const std::string where = address.substr(0, kMaxName);  // bounded in the line it goes to
@@ -282,6 +306,8 @@ bool ParseOscCommand(const OscMessage& message, OscCommand* command, std::string
   *why = where + ": no such address (docs/show.md lists them)";
   return false;
 }
+
+}  // namespace
 
 bool ParseIpv4(const std::string& text, uint32_t* address) {
   uint32_t value = 0;
