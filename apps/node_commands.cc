@@ -156,7 +156,8 @@ void AddNodeCommands(CLI::App& app) {
       ->required();
   play->add_option(
       "--desired", play_args->desired,
-      "The desired appearance as the rig's camera sees the room: a directory of images or a video");
+      "The desired appearance as the rig's camera sees the room: a directory of images, a video, or "
+      "stdin:WIDTHxHEIGHT (raw rgb24 frames on standard input, the newest shown)");
   play->add_option(
       "--solution", play_args->solution,
       "Instead of --desired: show a compensation solution's emittance (procam compensate --out) "

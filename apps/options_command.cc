@@ -21,6 +21,7 @@
 #include "datasets_synthetic/random_rooms.h"
 #include "datasets_synthetic/scan_judge.h"
 #include "nodes/node.h"
+#include "nodes/play.h"
 #include "projection/stage.h"
 #include "verification/verification.h"
 
@@ -78,6 +79,7 @@ struct DeclaredOptions {
     Add<CalibrateAllOptions>(
         "A whole rig", "CalibrateAllOptions (calibration/calibrate_all_stage.h)", "calibrate all");
     Add<NodeOptions>("A display node", "NodeOptions (nodes/node.h)", "node");
+    Add<PlayOptions>("A show's remote control and playlist", "PlayOptions (nodes/play.h)", "play");
     Add<EmulatedRoomOptions>("The room as a device",
                              "EmulatedRoomOptions (datasets_synthetic/emulated_room.h)", "emulate");
     Add<RandomRoomOptions>("A room made at random",

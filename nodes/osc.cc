@@ -286,17 +286,25 @@ bool Parse(const OscMessage& message, OscCommand* command, std::string* why) {
     command->kind = Kind::kTolerance;
     return count(1, 1) && number(0, "tolerance", 0.0, 0.1, &command->tolerance);
   }
-  if (name.starts_with("surface/")) {
+  if (name == "surface" || name.starts_with("surface/")) {
     command->kind = Kind::kSurface;
-    command->surface = name.substr(std::strlen("surface/"));
+    // /procam/surface/NAME CONTENT, or /procam/surface NAME CONTENT (a name OSC addresses
+    // cannot hold, e.g. with a space).
+    const bool in_address = name != "surface";
     std::string problem;
+    if (in_address) {
+      command->surface = name.substr(std::strlen("surface/"));
+      if (!count(1, 1) || !text(0, "content", &command->content)) return false;
+    } else if (!count(2, 2) || !text(0, "surface", &command->surface) ||
+               !text(1, "content", &command->content)) {
+      return false;
+    }
     if (!CheckName(command->surface, false, "the surface's name", &problem) ||
-        command->surface.find('/') != std::string::npos) {
+        (in_address && command->surface.find('/') != std::string::npos)) {
       *why = where + ": " + (problem.empty() ? "the surface's name holds '/'" : problem);
       return false;
     }
-    if (!count(1, 1) || !text(0, "content", &command->content)) return false;
-    if (!CheckName(command->content, true, "argument 1 (content)", &problem)) {
+    if (!CheckName(command->content, true, "the content's name", &problem)) {
       *why = where + ": " + problem;
       return false;
     }

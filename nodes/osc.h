@@ -17,6 +17,7 @@
 //   /procam/tolerance F                each frame's solve stops below F in [0, 0.1]
 //   /procam/surface/NAME CONTENT       the playlist's content CONTENT on surface NAME ("" or
 //                                      "none": the surface follows the camera-view source again)
+//   /procam/surface NAME CONTENT       the same, for a name an address cannot hold (spaces)
 //   /procam/status                     a reply to the sender: /procam/status with frame (i), rate
 //                                      (f, frames per second), dropped (i), nodes lost (i),
 //                                      source frame (i), paused (i, 0 or 1), fade level (f)

@@ -10,8 +10,13 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
+#include <condition_variable>
+#include <cstring>
 #include <random>
 #include <thread>
+
+#include <poll.h>
+#include <unistd.h>
 
 #include "base/image_io.h"
 #include "base/io.h"
@@ -21,9 +26,11 @@
 #include "calibration/rig_directory.h"
 #include "compensation/problem.h"
 #include "compensation/stage.h"
+#include "geometry/patches.h"
 #include "geometry/srgb.h"
 #include "geometry/stage.h"
 #include "nodes/osc_server.h"
+#include "nodes/playlist.h"
 #include "projection/camera_rays.h"
 #include "projection/projection_rig.h"
 
@@ -109,6 +116,118 @@ class FrameSource {
   int count_ = 0, next_ = 0;
 };
 
+// Raw frames on standard input (--desired stdin:WIDTHxHEIGHT): rgb24, WIDTH × HEIGHT × 3 bytes
+// each, one after another, as `ffmpeg -f rawvideo -pix_fmt rgb24 -` writes them. A thread of its
+// own reads them at the producer's rate; the newest complete frame waits for the show, and one
+// that arrives before the show took the previous replaces it (counted), never queues.
+class StdinFrames {
+ public:
+  StdinFrames(int width, int height, int fd = 0)
+      : width_(width), height_(height), fd_(fd), thread_([this] { Read(); }) {}
+  ~StdinFrames() {
+    stop_ = true;
+    thread_.join();
+  }
+  // The newest frame not yet taken (BGR, OpenCV's order) and its number (frames received before
+  // it); empty if none arrived since the last call.
+  cv::Mat Take(int* index) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    cv::Mat frame;
+    std::swap(frame, waiting_);
+    *index = received_ - 1;
+    return frame;
+  }
+  // Waits up to `seconds` for a frame to wait; false at once when the input ended without one.
+  bool Wait(double seconds) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    arrived_.wait_for(lock, std::chrono::duration<double>(seconds),
+                      [this] { return !waiting_.empty() || ended_; });
+    return !waiting_.empty();
+  }
+  // The input has ended (end of file or a read error) and no frame waits.
+  bool Ended() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return ended_ && waiting_.empty();
+  }
+  int received() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return received_;
+  }
+  int replaced() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return replaced_;
+  }
+  std::string error() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return error_;
+  }
+
+ private:
+  void Read() {
+    const size_t bytes = static_cast<size_t>(width_) * height_ * 3;
+    cv::Mat rgb(height_, width_, CV_8UC3);
+    size_t filled = 0;
+    while (!stop_) {
+      // Polled, so that the show's end is not held up by a producer that went quiet.
+      pollfd poll_fd{fd_, POLLIN, 0};
+      const int ready = ::poll(&poll_fd, 1, 100);
+      if (ready == 0 || (ready < 0 && errno == EINTR)) continue;
+      const ssize_t got = ready < 0 ? -1 : ::read(fd_, rgb.data + filled, bytes - filled);
+      if (got < 0 && (errno == EINTR || errno == EAGAIN)) continue;
+      if (got <= 0) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        ended_ = true;
+        if (got < 0) error_ = std::string("standard input: ") + std::strerror(errno);
+        if (got == 0 && filled > 0)
+          error_ = fmt::format("standard input: ended {} bytes into frame {} ({} bytes a frame)",
+                               filled, received_, bytes);
+        arrived_.notify_all();
+        return;
+      }
+      filled += static_cast<size_t>(got);
+      if (filled < bytes) continue;
+      filled = 0;
+      cv::Mat bgr;
+      cv::cvtColor(rgb, bgr, cv::COLOR_RGB2BGR);
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!waiting_.empty()) ++replaced_;
+      waiting_ = bgr;
+      ++received_;
+      arrived_.notify_all();
+    }
+  }
+
+  const int width_, height_, fd_;
+  std::mutex mutex_;
+  std::condition_variable arrived_;
+  cv::Mat waiting_;
+  int received_ = 0, replaced_ = 0;
+  bool ended_ = false;
+  std::string error_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;  // last: started once the members it uses are made
+};
+
+// "stdin:WIDTHxHEIGHT" → the size; false if `desired` does not start with "stdin:". Throws
+// std::invalid_argument naming --desired for a size that is not one.
+bool ParseStdinSource(const std::string& desired, int* width, int* height) {
+  if (!desired.starts_with("stdin:")) return false;
+  const std::string size = desired.substr(6);
+  const size_t x = size.find('x');
+  auto number = [](const std::string& text, int* value) {
+    if (text.empty() || text.size() > 5 || text.find_first_not_of("0123456789") != std::string::npos)
+      return false;
+    *value = std::stoi(text);
+    return *value >= 1 && *value <= 16384;
+  };
+  if (x == std::string::npos || !number(size.substr(0, x), width) ||
+      !number(size.substr(x + 1), height))
+    throw std::invalid_argument("--desired: " + desired +
+                                ": raw frames on standard input are stdin:WIDTHxHEIGHT (rgb24, "
+                                "each side in [1, 16384]), e.g. stdin:640x360");
+  return true;
+}
+
 std::string RandomId() {
   std::random_device device;
   return fmt::format("{:08x}{:08x}", device(), device());
@@ -123,9 +242,14 @@ nlohmann::json FrameJson(const PlayFrame& frame, const std::vector<NodeAddress>&
                          {"nodes_shown", frame.shown.shown},
                          {"paused", frame.paused},
                          {"fade", frame.fade},
-                         {"emittance_mean", frame.emittance_mean}};
+                         {"emittance_mean", frame.emittance_mean},
+                         {"desired_mean", frame.desired_mean}};
   for (const auto& [command, received] : frame.commands)
     json["osc"].push_back({{"command", command}, {"received_frame", received}});
+  for (const PlaySurface& surface : frame.surfaces)
+    json["surfaces"][surface.surface] = {{"content", surface.content},
+                                         {"frame", surface.frame},
+                                         {"desired_mean", surface.desired_mean}};
   for (size_t k = 0; k < frame.shown.nodes.size(); ++k) {
     const NodeFrame& node = frame.shown.nodes[k];
     json["nodes"][nodes[k].name] = {{"state", node.state},
@@ -187,6 +311,7 @@ void WritePlayResult(const PlayOptions& options, const PlaySummary& summary,
                            {"rig", options.rig_dir.string()},
                            {"desired", options.desired.string()},
                            {"solution", options.solution.string()},
+                           {"playlist", options.playlist.string()},
                            {"patches", play.room.problem.size()},
                            {"method", MethodName(options.solver.method)},
                            {"function_tolerance", options.solver.function_tolerance},
@@ -197,7 +322,9 @@ void WritePlayResult(const PlayOptions& options, const PlaySummary& summary,
                            {"setup_seconds", summary.setup_seconds},
                            {"stopped", summary.stopped},
                            {"osc", options.osc},
-                           {"osc_refused", summary.osc_refused}};
+                           {"osc_refused", summary.osc_refused},
+                           {"frames_received", summary.received},
+                           {"frames_replaced", summary.replaced}};
   std::vector<double> solve, ready, skew, total;
   for (const PlayFrame& frame : summary.frames) {
     result["frames"].push_back(FrameJson(frame, nodes));
@@ -215,6 +342,211 @@ void WritePlayResult(const PlayOptions& options, const PlaySummary& summary,
   std::filesystem::create_directories(options.out);
   WriteFileAtomically(options.out / "result.json", result.dump(2) + "\n");
 }
+
+// Linear RGB (CV_32FC3, R G B) of an 8- or 16-bit sRGB BGR image: a desired texture.
+cv::Mat LinearTexture(const cv::Mat& image) {
+  if (image.empty() || image.channels() != 3 || (image.depth() != CV_8U && image.depth() != CV_16U))
+    throw std::invalid_argument("playlist frame: need 8- or 16-bit colour");
+  const bool eight_bit = image.depth() == CV_8U;
+  std::vector<float> linear(eight_bit ? 256 : 65536);
+  for (size_t q = 0; q < linear.size(); ++q)
+    linear[q] = static_cast<float>(SrgbToLinear(q / (eight_bit ? 255.0 : 65535.0)));
+  cv::Mat texture(image.rows, image.cols, CV_32FC3);
+  for (int y = 0; y < image.rows; ++y) {
+    for (int x = 0; x < image.cols; ++x) {
+      int b, g, r;
+      if (eight_bit) {
+        const cv::Vec3b& p = image.at<cv::Vec3b>(y, x);
+        b = p[0], g = p[1], r = p[2];
+      } else {
+        const cv::Vec3w& p = image.at<cv::Vec3w>(y, x);
+        b = p[0], g = p[1], r = p[2];
+      }
+      texture.at<cv::Vec3f>(y, x) = cv::Vec3f(linear[r], linear[g], linear[b]);
+    }
+  }
+  return texture;
+}
+
+// The playlist's contents on the room's surfaces: which content each surface shows, from which
+// position of the show, and the desired colours of its patches for the content's current frame
+// (the texture's mean over each patch, as the scene's desired textures are: geometry/patches.h).
+class SurfaceContents {
+ public:
+  SurfaceContents(const Playlist* playlist, const std::string& playlist_file, const Scene& scene,
+                  const PatchLevel& fine, int texture_samples, ProgressCallback log)
+      : playlist_(playlist), white_(scene.white), log_(std::move(log)) {
+    for (size_t s = 0; s < scene.surfaces.size(); ++s) {
+      Surface surface_state;
+      surface_state.name = scene.surfaces[s].name;
+      surfaces_.push_back(std::move(surface_state));
+    }
+    for (int i = 0; i < fine.size(); ++i) {
+      Surface& surface = surfaces_[fine.patches[i].surface];
+      surface.patches.push_back(i);
+      surface.areas.push_back(fine.patches[i].area);
+      surface.samples.emplace_back();
+      SamplePatch(fine.patches[i], texture_samples, &surface.samples.back());
+    }
+    if (playlist_ == nullptr) return;
+    for (size_t k = 0; k < playlist_->surfaces.size(); ++k) {
+      const PlaylistEntry& entry = playlist_->surfaces[k];
+      if (FindSurface(entry.surface) < 0)
+        throw IoError(playlist_file + ": surfaces[" + std::to_string(k) + "].surface: no surface '" +
+                      entry.surface + "' in the room (" + scene.name + ")");
+      schedule_.push_back(entry);
+    }
+    std::stable_sort(schedule_.begin(), schedule_.end(),
+                     [](const PlaylistEntry& a, const PlaylistEntry& b) { return a.start < b.start; });
+  }
+
+  bool empty() const { return playlist_ == nullptr; }
+
+  // An OSC switch: `content` ("" none) on `surface` from `position`. False (logged) when there
+  // is no such surface or content.
+  bool Switch(const std::string& surface_name, const std::string& content, int position) {
+    const int s = FindSurface(surface_name);
+    if (s < 0) {
+      Report(log_, "play: surface " + surface_name + ": no such surface in the room; ignored");
+      return false;
+    }
+    const PlaylistContent* found = nullptr;
+    if (!content.empty()) {
+      found = playlist_ != nullptr ? playlist_->Find(content) : nullptr;
+      if (found == nullptr) {
+        Report(log_, "play: surface " + surface_name + ": no content '" + content +
+                         "' in the playlist; ignored");
+        return false;
+      }
+    }
+    Start(&surfaces_[s], found, position);
+    return true;
+  }
+
+  // Brings every surface to show position `position` (frames of the show's clock at `fps`):
+  // starts the schedule's entries now due, reads each content's frame. True when a surface's
+  // desired colours changed.
+  bool Update(int position, double fps) {
+    while (next_ < schedule_.size() && schedule_[next_].start * fps <= position + 1e-9) {
+      const PlaylistEntry& entry = schedule_[next_++];
+      Start(&surfaces_[FindSurface(entry.surface)], playlist_->Find(entry.content),
+            static_cast<int>(std::llround(entry.start * fps)));
+    }
+    bool changed = false;
+    for (Surface& surface : surfaces_) {
+      if (surface.content == nullptr) {
+        changed = changed || surface.fresh;
+        surface.fresh = false;
+        continue;
+      }
+      int frame = std::max(0, position - surface.start);
+      const int count = surface.count;
+      if (count > 0) frame = surface.content->loop ? frame % count : std::min(frame, count - 1);
+      if (frame == surface.frame && !surface.fresh) continue;
+      cv::Mat image = surface.image.empty() ? surface.source->Read(frame) : surface.image;
+      if (image.empty() && surface.content->loop && frame > 0) {
+        // A video's count was an estimate: its end found here; from its start again.
+        surface.count = frame;
+        surface.start = position;
+        frame = 0;
+        image = surface.source->Read(0);
+      }
+      surface.fresh = false;
+      if (image.empty()) continue;  // past the end: the last frame holds
+      surface.frame = frame;
+      SetDesired(&surface, LinearTexture(image));
+      changed = true;
+    }
+    return changed;
+  }
+
+  // Writes the surfaces' desired colours over `desired`'s rows of their patches.
+  void Apply(Eigen::MatrixX3d* desired) const {
+    for (const Surface& surface : surfaces_) {
+      if (surface.content == nullptr || surface.desired.rows() == 0) continue;
+      for (size_t k = 0; k < surface.patches.size(); ++k)
+        desired->row(surface.patches[k]) = surface.desired.row(k);
+    }
+  }
+
+  // What each surface with content shows.
+  std::vector<PlaySurface> Record() const {
+    std::vector<PlaySurface> record;
+    for (const Surface& surface : surfaces_) {
+      if (surface.content == nullptr) continue;
+      const Eigen::RowVector3d mean = surface.desired.rows() > 0
+                                          ? Eigen::RowVector3d(surface.desired.colwise().mean())
+                                          : Eigen::RowVector3d::Zero();
+      record.push_back({surface.name, surface.content->name, surface.frame,
+                        {mean(0), mean(1), mean(2)}});
+    }
+    return record;
+  }
+
+ private:
+  struct Surface {
+    std::string name;
+    std::vector<int> patches;
+    std::vector<double> areas;
+    std::vector<std::vector<PatchSample>> samples;
+    const PlaylistContent* content = nullptr;
+    std::unique_ptr<FrameSource> source;
+    cv::Mat image;  // an image content's one frame
+    int count = 0, start = 0, frame = -1;
+    bool fresh = false;  // switched: its desired colours to be made again
+    Eigen::MatrixX3d desired;
+  };
+
+  int FindSurface(const std::string& name) const {
+    for (size_t s = 0; s < surfaces_.size(); ++s)
+      if (surfaces_[s].name == name) return static_cast<int>(s);
+    return -1;
+  }
+
+  void Start(Surface* surface, const PlaylistContent* content, int position) {
+    surface->content = content;
+    surface->source.reset();
+    surface->image.release();
+    surface->desired.resize(0, 3);
+    surface->start = position;
+    surface->frame = -1;
+    surface->count = 0;
+    surface->fresh = true;
+    if (content == nullptr) return;
+    try {
+      if (content->kind == PlaylistContent::Kind::kImage) {
+        surface->image = ReadImage(content->resolved, cv::IMREAD_COLOR | cv::IMREAD_ANYDEPTH);
+        surface->count = 1;
+      } else {
+        surface->source = std::make_unique<FrameSource>(content->resolved);
+        surface->count = surface->source->count();
+      }
+    } catch (const std::exception& error) {
+      // Checked when the playlist was read; a file that went since is this surface's loss only.
+      Report(log_, "play: surface " + surface->name + ": " + error.what());
+      surface->content = nullptr;
+    }
+  }
+
+  void SetDesired(Surface* surface, const cv::Mat& texture) {
+    DesiredAppearance appearance;
+    appearance.texture_linear = texture;
+    surface->desired.resize(static_cast<int>(surface->patches.size()), 3);
+    for (size_t k = 0; k < surface->patches.size(); ++k) {
+      Vec3 sum = Vec3::Zero();
+      for (const PatchSample& sample : surface->samples[k])
+        sum += sample.weight * appearance.LinearAt(sample.uv);
+      surface->desired.row(k) = white_ * (sum / surface->areas[k]).transpose();
+    }
+  }
+
+  const Playlist* playlist_;
+  double white_;
+  ProgressCallback log_;
+  std::vector<Surface> surfaces_;
+  std::vector<PlaylistEntry> schedule_;
+  size_t next_ = 0;
+};
 
 // What the OSC thread and the show share: commands waiting for the next frame, and the status a
 // /procam/status is answered with.
@@ -283,10 +615,13 @@ struct Fade {
 // Frames follow a clock of ticks at the target rate; the source's position advances with the
 // ticks while playing and holds while paused.
 PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& controller,
-                       FrameSource* source, ShowControl* control, Clock::time_point start) {
+                       FrameSource* source, StdinFrames* live, const Playlist* playlist,
+                       ShowControl* control, Clock::time_point start) {
   PlaySummary summary;
-  const int limit = options.frames > 0  ? options.frames
-                    : source == nullptr ? (control != nullptr ? INT32_MAX : 1)
+  const int limit = options.frames > 0 ? options.frames
+                    : live != nullptr  ? INT32_MAX
+                    : source == nullptr
+                        ? (control != nullptr || playlist != nullptr ? INT32_MAX : 1)
                                         : (source->count() > 0 ? source->count() : INT32_MAX);
   const auto period = std::chrono::duration<double>(1.0 / options.fps);
   std::shared_ptr<const RadiositySystem> radiosity;
@@ -306,16 +641,27 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
   int solved_index = -1, image_index = -1;
   double solved_fade = -1.0;
   bool solver_changed = false;
-  Eigen::MatrixX3d image_desired;
+  // The camera-view source's desired colours (the room's own without one).
+  Eigen::MatrixX3d image_desired = room_desired;
+  Eigen::RowVector3d desired_mean = Eigen::RowVector3d::Zero();
+  SurfaceContents contents(playlist, options.playlist.string(), play.room.geometry.scene,
+                           play.room.fine(),
+                           SubdivisionOptions().texture_samples, options.progress);
   while (true) {
     if (options.stop != nullptr && options.stop->load()) {
       summary.stopped = true;
       break;
     }
+    // A live source's first frame: nothing is shown before it.
+    if (live != nullptr && image_index < 0 && !live->Wait(0.1)) {
+      if (live->Ended()) break;
+      continue;
+    }
     const auto frame_start = Clock::now();
     PlayFrame frame;
     bool stop_command = false;
     const int playing_index = media_index + (tick - media_tick);
+    bool surfaces_changed = false;
     if (control != nullptr) {
       for (const auto& [command, received] : control->Take()) {
         using Kind = OscCommand::Kind;
@@ -344,8 +690,8 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
             solver_changed = true;
             break;
           case Kind::kSurface:
-            Report(options.progress, "play: " + command.Text() +
-                                         ": this show has no playlist; the command is ignored");
+            surfaces_changed = contents.Switch(command.surface, command.content, at) ||
+                               surfaces_changed;
             break;
           case Kind::kStop:
             stop_command = true;
@@ -360,13 +706,27 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
       summary.stopped = true;
       break;
     }
-    const int index = paused ? media_index : media_index + (tick - media_tick);
+    if (live != nullptr && !paused) {
+      // The newest frame that arrived, if one did; else the one shown holds.
+      int number = 0;
+      const cv::Mat image = live->Take(&number);
+      if (!image.empty()) {
+        const auto step = Clock::now();
+        image_desired = DesiredFromImage(image, rays.patch, rays.width, rays.height, room_desired);
+        image_index = number;
+        frame.desired_ms = MsSince(step);
+      } else if (live->Ended()) {
+        break;  // every frame that came was shown
+      }
+    }
+    const int position = paused ? media_index : media_index + (tick - media_tick);
+    const int index = live != nullptr ? image_index : position;
     if (index >= limit) break;
     frame.source = index;
     frame.paused = paused;
     frame.fade = fade.Level(frame_start);
-    if (source != nullptr) {
-      if (index != image_index) {
+    if (source != nullptr || live != nullptr || playlist != nullptr) {
+      if (source != nullptr && index != image_index) {
         cv::Mat image = source->Read(index);
         if (image.empty()) break;  // the end of a video
         frame.read_ms = MsSince(frame_start);
@@ -375,8 +735,13 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
         image_index = index;
         frame.desired_ms = MsSince(step);
       }
-      if (index != solved_index || frame.fade != solved_fade || solver_changed) {
-        problem.desired = frame.fade * image_desired;
+      surfaces_changed = contents.Update(position, options.fps) || surfaces_changed;
+      if (index != solved_index || frame.fade != solved_fade || solver_changed ||
+          surfaces_changed) {
+        problem.desired = image_desired;
+        contents.Apply(&problem.desired);
+        problem.desired *= frame.fade;
+        desired_mean = problem.desired.colwise().mean();
         const auto step = Clock::now();
         SolverSummary solver_summary;
         const CompensationSolution solution =
@@ -393,7 +758,10 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
       // A solution's light scaled: radiosity is linear in the emittance (B = K⁻¹E), so the room's
       // appearance scales by the same level in linear light.
       previous = frame.fade * play.solution;
+      desired_mean = frame.fade * room_desired.colwise().mean();
     }
+    frame.desired_mean = {desired_mean(0), desired_mean(1), desired_mean(2)};
+    frame.surfaces = contents.Record();
     frame.emittance_mean = previous.size() > 0 ? previous.mean() : 0.0;
     frame.shown = controller.Show(static_cast<uint64_t>(summary.frames.size()), previous);
     frame.total_ms = MsSince(frame_start);
@@ -405,8 +773,9 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
     const int due = static_cast<int>(std::chrono::duration<double>(Clock::now() - t0) / period);
     const int next = std::max(tick + 1, due);
     const int advance = next - tick;
-    summary.dropped +=
-        paused ? advance - 1 : std::max(0, std::min(index + advance, limit) - (index + 1));
+    summary.dropped += paused || live != nullptr
+                           ? advance - 1
+                           : std::max(0, std::min(index + advance, limit) - (index + 1));
     tick = next;
     recent.push_back(Clock::now());
     if (recent.size() > 30) recent.pop_front();
@@ -420,14 +789,14 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
                         static_cast<int>(controller.nodes().size()) - controller.live(), index,
                         paused, frame.fade});
     }
-    const bool last = !paused && index + advance >= limit;
+    const bool last = !paused && live == nullptr && index + advance >= limit;
     if (SecondsSince(last_progress) >= 1.0 || last) {
       last_progress = Clock::now();
       Report(options.progress,
              fmt::format("play: frame {}/{} ({:.1f} fps), solve {:.1f} ms ({} it), ready {:.1f} "
                          "ms, skew {:.2f} ms, "
                          "dropped {}, nodes {}/{}{}",
-                         std::min(index + (paused ? 1 : advance), limit),
+                         std::min(index + (paused || live != nullptr ? 1 : advance), limit),
                          limit == INT32_MAX ? 0 : limit, rate, frame.solve_ms,
                          frame.iterations, frame.shown.ready_ms, frame.shown.skew_ms,
                          summary.dropped, controller.live(), controller.nodes().size(),
@@ -481,6 +850,9 @@ void PlayOptions::Declare(OptionTable* table) {
              "IPV4:PORT to listen at for a show controller's OSC messages (docs/show.md): "
              "127.0.0.1:9000 this machine only, 0.0.0.0:9000 every interface; empty: no remote "
              "control")
+      .Path("playlist", &playlist,
+            "content per surface in its texture coordinates (JSON, docs/show.md#a-playlist), "
+            "switched by /procam/surface")
       .Texts("osc-allow", &osc_allow,
              "senders the OSC control answers, IPv4 addresses or ranges A.B.C.D/N; others are "
              "refused in a log line each");
@@ -527,11 +899,24 @@ PlaySummary RunPlay(const PlayOptions& given) {
   } else {
     keys = ReadRigKeys(options.rig_dir, KeyRole::kController);
   }
-  if (options.desired.empty() == options.solution.empty())
+  if (options.desired.empty() == options.solution.empty() &&
+      !(options.desired.empty() && !options.playlist.empty()))
     throw std::invalid_argument(
-        "play: give the desired appearance (--desired) or a solution (--solution), not both");
+        "play: give the desired appearance (--desired, --playlist or both) or a solution "
+        "(--solution), not both");
+  if (!options.solution.empty() && !options.playlist.empty())
+    throw std::invalid_argument("play: --playlist takes no --solution (a playlist is solved)");
+  std::optional<Playlist> playlist;
+  if (!options.playlist.empty()) playlist = ReadPlaylist(options.playlist);
   std::optional<FrameSource> source;
-  if (!options.desired.empty()) source.emplace(options.desired);
+  std::unique_ptr<StdinFrames> live;
+  int live_width = 0, live_height = 0;
+  if (ParseStdinSource(options.desired.string(), &live_width, &live_height)) {
+    // Read from now on: frames that come while the room is prepared replace one another.
+    live = std::make_unique<StdinFrames>(live_width, live_height);
+  } else if (!options.desired.empty()) {
+    source.emplace(options.desired);
+  }
   zmq::context_t context;
   std::atomic<bool> node_stop{false}, node_failed{false};
   std::exception_ptr failure;
@@ -563,8 +948,14 @@ PlaySummary RunPlay(const PlayOptions& given) {
         controller.Stop(/*exit=*/local);
       } else {
         const double setup_seconds = SecondsSince(start);
-        summary = PlayFrames(options, play, controller, source ? &*source : nullptr,
+        summary = PlayFrames(options, play, controller, source ? &*source : nullptr, live.get(),
+                             playlist ? &*playlist : nullptr,
                              show_control ? &*show_control : nullptr, start);
+        if (live) {
+          summary.received = live->received();
+          summary.replaced = live->replaced();
+          if (!live->error().empty()) Report(options.progress, "play: " + live->error());
+        }
         summary.setup_seconds = setup_seconds;
         if (osc) summary.osc_refused = osc->refused();
         controller.Stop(/*exit=*/local);

@@ -21,6 +21,7 @@
 // desired colours.
 
 #include <Eigen/Core>
+#include <array>
 #include <atomic>
 #include <filesystem>
 #include <utility>
@@ -50,7 +51,10 @@ inline SolverOptions PlaySolverOptions() {
 struct PlayOptions {
   std::string scene;              // the room (LoadSceneArgument)
   std::filesystem::path rig_dir;  // projectors, reflectance, camera, keys
-  std::filesystem::path desired;  // a directory of images (sorted by name) or a video file
+  // A directory of images (sorted by name), a video file, or stdin:WIDTHxHEIGHT: raw rgb24 frames
+  // on standard input, the newest shown (a frame that arrives before the show took the one
+  // before replaces it).
+  std::filesystem::path desired;
   // Instead of `desired`: a compensation solution (procam compensate's directory) whose
   // emittance every frame shows (`frames` of them, default 1): a computed compensation shown
   // through the display nodes, the images `procam project` makes for it.
@@ -83,9 +87,19 @@ struct PlayOptions {
   // Senders the OSC control answers: IPv4 addresses or ranges A.B.C.D/N; others are refused in a
   // log line each.
   std::vector<std::string> osc_allow = {"127.0.0.1"};
+  // Content per surface (nodes/playlist.h), over `desired` (or the room's own desired colours
+  // without one); empty: none.
+  std::filesystem::path playlist;
 
-  // Declares --osc and --osc-allow in `table`, bound to these fields (base/option_table.h).
+  // Declares --osc, --playlist and --osc-allow in `table`, bound to these fields (base/option_table.h).
   void Declare(OptionTable* table);
+};
+
+// What a surface with playlist content showed in a frame.
+struct PlaySurface {
+  std::string surface, content;
+  int frame = 0;                                   // the content's frame
+  std::array<double, 3> desired_mean = {0, 0, 0};  // its patches' desired linear RGB, mean
 };
 
 struct PlayFrame {
@@ -97,9 +111,11 @@ struct PlayFrame {
   bool paused = false;    // shown while the show was paused (OSC)
   double fade = 1.0;      // the level the desired appearance was scaled by, [0, 1]
   double emittance_mean = 0.0;  // the mean of the emittance shown, over patches and channels
+  std::array<double, 3> desired_mean = {0, 0, 0};  // the desired linear RGB solved for, mean
   // The OSC commands this frame applied (OscCommand::Text) and the frame that was under way when
   // each arrived.
   std::vector<std::pair<std::string, int>> commands;
+  std::vector<PlaySurface> surfaces;  // the surfaces showing playlist content
 };
 
 struct PlaySummary {
@@ -109,6 +125,9 @@ struct PlaySummary {
   double setup_seconds = 0.0;  // geometry, form factors, camera rays, nodes set up
   bool stopped = false;        // ended by options.stop or /procam/stop before the source's end
   int osc_refused = 0;         // OSC messages ignored (not an allowed sender, malformed)
+  // Live frames (--desired stdin:...): received, and replaced by a newer one before the show
+  // took them (never shown).
+  int received = 0, replaced = 0;
 };
 
 // Desired linear colours (n,3) from an image as the camera sees the room: `image` any size

@@ -5,6 +5,7 @@
 // status's frame number is the frame under way when the command arrived (both travel the same
 // socket in order), so no wall-clock deadline is asserted. Every wait is a bounded loop.
 #include <arpa/inet.h>
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -12,14 +13,18 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 #include <regex>
+#include <set>
 #include <thread>
 
 #include "base/io.h"
 #include "datasets_synthetic/scene_files.h"
 #include "nodes/osc.h"
+#include "nodes/playlist.h"
 #include "tests/testing/testing.h"
 
 namespace procam {
@@ -222,6 +227,144 @@ TEST(Show, PlayFollowsPauseFadeAndPlayOverOscWithinTwoFrames) {
   EXPECT_GE(rising, 1);
   EXPECT_EQ(level, 1.0);
   EXPECT_NEAR(frames.back().at("emittance_mean").get<double>(), lit, 0.1 * lit);
+}
+
+// Raw frames piped on standard input (--desired stdin:32x24), paced and then in a burst: every
+// frame that came is shown or was replaced by a newer one before the show took it (counted), the
+// last one is shown, and each shown frame's desired colour is the one the test wrote into it (even
+// frames red, odd ones blue).
+TEST(Show, PlayShowsTheNewestFramePipedOnStandardInput) {
+  testing::TempDir dir;
+  const std::string scene = WriteRoom(dir.path());
+  const int width = 32, height = 24, paced = 12, burst = 5;
+  auto frame_bytes = [&](int k) {
+    std::string bytes(3 * width * height, char(30));  // R, G, B
+    for (size_t p = k % 2 == 0 ? 0 : 2; p < bytes.size(); p += 3) bytes[p] = char(220);
+    return bytes;
+  };
+  std::string burst_bytes;
+  for (int k = 0; k < paced; ++k)
+    WriteFileAtomically(dir / fmt::format("f{}.rgb", k), frame_bytes(k));
+  for (int k = paced; k < paced + burst; ++k) burst_bytes += frame_bytes(k);
+  WriteFileAtomically(dir / "burst.rgb", burst_bytes);
+  const std::string feed = "{ for k in $(seq 0 " + std::to_string(paced - 1) + "); do cat " +
+                           (dir / "f").string() + "$k.rgb; sleep 0.15; done; cat " +
+                           (dir / "burst.rgb").string() + "; }";
+  const testing::CommandRun run = testing::RunShell(
+      feed + " | timeout 120 " + std::string(std::getenv("PROCAM_BINARY")) + " play " + scene +
+      " --rig " + dir.path().string() + " --desired stdin:32x24 --fps 20 --display memory,memory" +
+      " --out " + (dir / "play").string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  const nlohmann::json result = nlohmann::json::parse(ReadFile(dir / "play" / "result.json"));
+  EXPECT_EQ(result.at("frames_received"), paced + burst) << run.output;
+  const nlohmann::json& frames = result.at("frames");
+  ASSERT_FALSE(frames.empty());
+  std::set<int> shown;
+  int previous = -1;
+  for (const nlohmann::json& frame : frames) {
+    const int source = frame.at("source");
+    EXPECT_GE(source, previous);  // a frame holds until a newer one comes, never goes back
+    previous = source;
+    shown.insert(source);
+    const std::vector<double> desired = frame.at("desired_mean");
+    if (source % 2 == 0) {
+      EXPECT_GT(desired[0], 2.0 * desired[2]) << "frame " << frame.at("frame");
+    } else {
+      EXPECT_GT(desired[2], 2.0 * desired[0]) << "frame " << frame.at("frame");
+    }
+  }
+  EXPECT_EQ(*shown.rbegin(), paced + burst - 1);
+  EXPECT_EQ(static_cast<int>(shown.size()) + result.at("frames_replaced").get<int>(),
+            paced + burst);
+}
+
+// A playlist (written by its owner's writer) puts a red video on the back wall and a green image
+// on the floor, in their texture coordinates; /procam/surface switches the back wall to a blue
+// video over OSC. Each frame's record says what every surface showed; its patches' desired colour
+// is the content's (sRGB decoded, times the scene's white), and the switch shows within two
+// frames of the status frame.
+TEST(Show, PlaylistContentPerSurfaceSwitchedOverOsc) {
+  testing::TempDir dir;
+  const std::string scene = WriteRoom(dir.path());
+  const double white = nlohmann::json::parse(ReadFile(scene)).value("white", 1.0);
+  auto write_video = [&](const std::string& name, const cv::Scalar& bgr) {
+    cv::VideoWriter writer((dir / name).string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'),
+                           10.0, cv::Size(16, 16));
+    ASSERT_TRUE(writer.isOpened());
+    for (int k = 0; k < 8; ++k) writer.write(cv::Mat(16, 16, CV_8UC3, bgr));
+  };
+  write_video("red.avi", cv::Scalar(30, 30, 220));
+  write_video("blue.avi", cv::Scalar(220, 30, 30));
+  ASSERT_TRUE(cv::imwrite((dir / "green.png").string(),
+                          cv::Mat(8, 8, CV_8UC3, cv::Scalar(40, 200, 30))));
+  Playlist playlist;
+  playlist.contents = {{"red", PlaylistContent::Kind::kVideo, "red.avi", {}, true},
+                       {"blue", PlaylistContent::Kind::kVideo, "blue.avi", {}, false},
+                       {"green", PlaylistContent::Kind::kImage, "green.png", {}, false}};
+  playlist.surfaces = {{"back wall", "red", 0.0}, {"floor", "green", 0.0}};
+  WritePlaylist(dir / "show.json", playlist);
+
+  const fs::path log = dir / "play.log";
+  std::thread play([&] {
+    testing::RunShell("timeout 120 " + std::string(std::getenv("PROCAM_BINARY")) + " play " +
+                      scene + " --rig " + dir.path().string() + " --playlist " +
+                      (dir / "show.json").string() +
+                      " --fps 10 --display memory,memory --osc 127.0.0.1:0 --out " +
+                      (dir / "play").string() + " > " + log.string() + " 2>&1");
+  });
+  int port = 0;
+  for (int attempt = 0; attempt < 1200 && port == 0; ++attempt) {
+    port = ListeningPort(log);
+    if (port == 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_GT(port, 0) << ReadFile(log);
+  OscClient client;
+  // Past the red video's 8 frames: it loops.
+  WaitForFrame(client, port, 10);
+  OscMessage message;
+  message.address = "/procam/surface";
+  message.types = "ss";
+  message.arguments = {{'s', 0, "back wall"}, {'s', 0, "blue"}};
+  client.Send(port, EncodeOscMessage(message));
+  const int switched_at = WaitForFrame(client, port, 0);
+  WaitForFrame(client, port, switched_at + 4);
+  client.Send(port, "/procam/stop");
+  play.join();
+
+  const std::string output = ReadFile(log);
+  const nlohmann::json result = nlohmann::json::parse(ReadFile(dir / "play" / "result.json"));
+  const nlohmann::json& frames = result.at("frames");
+  const int switched = AppliedAt(frames, "surface back wall blue");
+  ASSERT_GT(switched, 0) << output;
+  EXPECT_LE(switched, switched_at + 2);
+  auto linear = [](int code) {  // the sRGB transfer function, written out
+    const double c = code / 255.0;
+    return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+  };
+  int looped = 0;
+  for (int k = 0; k < static_cast<int>(frames.size()); ++k) {
+    const nlohmann::json& surfaces = frames[k].at("surfaces");
+    // The PNG is lossless: the floor's desired colour is green's exactly.
+    const std::vector<double> floor = surfaces.at("floor").at("desired_mean");
+    EXPECT_NEAR(floor[0], white * linear(30), 1e-6) << "frame " << k;
+    EXPECT_NEAR(floor[1], white * linear(200), 1e-6) << "frame " << k;
+    EXPECT_NEAR(floor[2], white * linear(40), 1e-6) << "frame " << k;
+    const nlohmann::json& wall = surfaces.at("back wall");
+    const std::vector<double> mean = wall.at("desired_mean");
+    // MJPG is lossy: the dominant channel within 10% of the colour written.
+    if (k < switched) {
+      EXPECT_EQ(wall.at("content"), "red") << "frame " << k;
+      EXPECT_NEAR(mean[0], white * linear(220), 0.1 * white * linear(220)) << "frame " << k;
+      EXPECT_GT(mean[0], 5 * mean[2]) << "frame " << k;
+      if (wall.at("frame").get<int>() < frames[std::max(0, k - 1)].at("surfaces").at("back wall").at("frame").get<int>())
+        ++looped;
+    } else {
+      EXPECT_EQ(wall.at("content"), "blue") << "frame " << k;
+      EXPECT_NEAR(mean[2], white * linear(220), 0.1 * white * linear(220)) << "frame " << k;
+      EXPECT_GT(mean[2], 5 * mean[0]) << "frame " << k;
+    }
+  }
+  EXPECT_GE(looped, 1);  // the red video (8 frames, "loop": true) started again
 }
 
 }  // namespace

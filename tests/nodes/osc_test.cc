@@ -75,6 +75,11 @@ TEST(Osc, DatagramsDecodeToTheCommandsTheyName) {
   EXPECT_EQ(command.content, "clouds");
   ASSERT_TRUE(Command(Datagram("/procam/surface/floor", "s", {Padded("none")}), &command, &why));
   EXPECT_EQ(command.content, "");
+  ASSERT_TRUE(Command(Datagram("/procam/surface", "ss", {Padded("back wall"), Padded("rain")}),
+                      &command, &why))
+      << why;
+  EXPECT_EQ(command.surface, "back wall");
+  EXPECT_EQ(command.content, "rain");
   for (const char* name : {"play", "status", "stop"})
     EXPECT_TRUE(Command(Datagram(std::string("/procam/") + name, "", {}), &command, &why)) << why;
 }
@@ -103,6 +108,8 @@ TEST(Osc, MalformedMessagesAreRefusedInOneLineNamingAddressAndArgument) {
       {Datagram("/procam/surface/", "s", {Padded("x")}),
        "/procam/surface/: the surface's name is empty"},
       {Datagram("/procam/rewind", "", {}), "/procam/rewind: no such address"},
+      {Datagram("/procam/surface", "s", {Padded("floor")}),
+       "/procam/surface: takes 2 argument(s), got 1"},
       {Datagram("/lights/go", "", {}), "/lights/go: not an address of procam's"},
       // A byte that would break the log's line is written as its code.
       {Datagram("/procam\nstatus", "", {}), "/procam\\x0astatus: not an address of procam's"},
