@@ -97,10 +97,10 @@ void RunPlayCommand(const PlayArguments& args, PlayOptions options) {
   } else {
     std::cout << fmt::format(
         "play: {}{} frames shown, {} dropped in {:.1f} s; wrote {}/result.json\n",
-        !summary.stopped ? ""
+        !summary.stopped       ? ""
         : options.stop->load() ? "stopped by a signal: "
-                               : "stopped by /procam/stop: ", summary.frames.size(), summary.dropped,
-        summary.seconds, args.out);
+                               : "stopped by /procam/stop: ",
+        summary.frames.size(), summary.dropped, summary.seconds, args.out);
   }
 }
 
@@ -154,10 +154,10 @@ void AddNodeCommands(CLI::App& app) {
   play->add_option("scene", play_args->scene, "The room (scene file)")->required();
   play->add_option("--rig", play_args->rig, "Rig directory (projectors, registered camera, keys)")
       ->required();
-  play->add_option(
-      "--desired", play_args->desired,
-      "The desired appearance as the rig's camera sees the room: a directory of images, a video, or "
-      "stdin:WIDTHxHEIGHT (raw rgb24 frames on standard input, the newest shown)");
+  play->add_option("--desired", play_args->desired,
+                   "The desired appearance as the rig's camera sees the room: a directory of "
+                   "images, a video, or "
+                   "stdin:WIDTHxHEIGHT (raw rgb24 frames on standard input, the newest shown)");
   play->add_option(
       "--solution", play_args->solution,
       "Instead of --desired: show a compensation solution's emittance (procam compensate --out) "

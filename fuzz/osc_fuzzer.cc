@@ -21,7 +21,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     for (size_t k = 0; k < message.arguments.size(); ++k) {
       const procam::OscArgument &a = message.arguments[k], &b = again.arguments[k];
       // NaN is not equal to itself: compared as "both NaN".
-      const bool same_number = a.number == b.number || (a.number != a.number && b.number != b.number);
+      const bool same_number =
+          a.number == b.number || (a.number != a.number && b.number != b.number);
       if (a.type != b.type || !same_number || a.text != b.text) std::abort();
     }
   }

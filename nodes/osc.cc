@@ -107,7 +107,8 @@ bool DecodeOscPacket(const uint8_t* data, size_t size, OscMessage* message, std:
     *why = "not an OSC message: " + LibloError(result);
     return false;
   }
-  message->address.assign(reinterpret_cast<const char*>(data), strnlen(reinterpret_cast<const char*>(data), size));
+  message->address.assign(reinterpret_cast<const char*>(data),
+                          strnlen(reinterpret_cast<const char*>(data), size));
   const char* types = lo_message_get_types(decoded.get());
   const int count = lo_message_get_argc(decoded.get());
   lo_arg** values = lo_message_get_argv(decoded.get());
@@ -217,9 +218,9 @@ bool Parse(const OscMessage& message, OscCommand* command, std::string* why) {
   // The number of arguments in [min, max], each checked by the caller.
   auto count = [&](size_t min, size_t max) {
     if (args.size() >= min && args.size() <= max) return true;
-    *why = min == max ? fmt::format("{}: takes {} argument(s), got {}", where, min, args.size())
-                      : fmt::format("{}: takes {} to {} arguments, got {}", where, min, max,
-                                    args.size());
+    *why = min == max
+               ? fmt::format("{}: takes {} argument(s), got {}", where, min, args.size())
+               : fmt::format("{}: takes {} to {} arguments, got {}", where, min, max, args.size());
     return false;
   };
   // Argument k a finite number in [min, max].
@@ -277,8 +278,9 @@ bool Parse(const OscMessage& message, OscCommand* command, std::string* why) {
       *why = where + ": " + shown;
       return false;
     }
-    *why = where + ": argument 1 (method) must be naive, reverse, linear, perceptual or "
-                   "perceptual2000, got '" +
+    *why = where +
+           ": argument 1 (method) must be naive, reverse, linear, perceptual or "
+           "perceptual2000, got '" +
            command->method + "'";
     return false;
   }

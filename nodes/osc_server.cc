@@ -42,8 +42,7 @@ OscServer::OscServer(OscServerOptions options) : options_(std::move(options)) {
   socklen_t length = sizeof(address);
   ::getsockname(socket_, reinterpret_cast<sockaddr*>(&address), &length);
   port_ = ntohs(address.sin_port);
-  if (options_.log)
-    options_.log(fmt::format("osc: listening on {}:{}", Ipv4Text(host), port_));
+  if (options_.log) options_.log(fmt::format("osc: listening on {}:{}", Ipv4Text(host), port_));
   thread_ = std::thread([this] { Run(); });
 }
 

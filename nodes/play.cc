@@ -1,22 +1,21 @@
 #include "nodes/play.h"
 
 #include <fmt/format.h>
+#include <poll.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
+#include <condition_variable>
+#include <cstring>
 #include <deque>
 #include <exception>
 #include <mutex>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
-#include <condition_variable>
-#include <cstring>
 #include <random>
 #include <thread>
-
-#include <poll.h>
-#include <unistd.h>
 
 #include "base/image_io.h"
 #include "base/io.h"
@@ -215,7 +214,8 @@ bool ParseStdinSource(const std::string& desired, int* width, int* height) {
   const std::string size = desired.substr(6);
   const size_t x = size.find('x');
   auto number = [](const std::string& text, int* value) {
-    if (text.empty() || text.size() > 5 || text.find_first_not_of("0123456789") != std::string::npos)
+    if (text.empty() || text.size() > 5 ||
+        text.find_first_not_of("0123456789") != std::string::npos)
       return false;
     *value = std::stoi(text);
     return *value >= 1 && *value <= 16384;
@@ -234,11 +234,16 @@ std::string RandomId() {
 }
 
 nlohmann::json FrameJson(const PlayFrame& frame, const std::vector<NodeAddress>& nodes) {
-  nlohmann::json json = {{"frame", frame.shown.frame},       {"source", frame.source},
-                         {"read_ms", frame.read_ms},         {"desired_ms", frame.desired_ms},
-                         {"solve_ms", frame.solve_ms},       {"iterations", frame.iterations},
-                         {"ready_ms", frame.shown.ready_ms}, {"present_ms", frame.shown.present_ms},
-                         {"skew_ms", frame.shown.skew_ms},   {"total_ms", frame.total_ms},
+  nlohmann::json json = {{"frame", frame.shown.frame},
+                         {"source", frame.source},
+                         {"read_ms", frame.read_ms},
+                         {"desired_ms", frame.desired_ms},
+                         {"solve_ms", frame.solve_ms},
+                         {"iterations", frame.iterations},
+                         {"ready_ms", frame.shown.ready_ms},
+                         {"present_ms", frame.shown.present_ms},
+                         {"skew_ms", frame.shown.skew_ms},
+                         {"total_ms", frame.total_ms},
                          {"nodes_shown", frame.shown.shown},
                          {"paused", frame.paused},
                          {"fade", frame.fade},
@@ -392,12 +397,14 @@ class SurfaceContents {
     for (size_t k = 0; k < playlist_->surfaces.size(); ++k) {
       const PlaylistEntry& entry = playlist_->surfaces[k];
       if (FindSurface(entry.surface) < 0)
-        throw IoError(playlist_file + ": surfaces[" + std::to_string(k) + "].surface: no surface '" +
-                      entry.surface + "' in the room (" + scene.name + ")");
+        throw IoError(playlist_file + ": surfaces[" + std::to_string(k) +
+                      "].surface: no surface '" + entry.surface + "' in the room (" + scene.name +
+                      ")");
       schedule_.push_back(entry);
     }
-    std::stable_sort(schedule_.begin(), schedule_.end(),
-                     [](const PlaylistEntry& a, const PlaylistEntry& b) { return a.start < b.start; });
+    std::stable_sort(
+        schedule_.begin(), schedule_.end(),
+        [](const PlaylistEntry& a, const PlaylistEntry& b) { return a.start < b.start; });
   }
 
   bool empty() const { return playlist_ == nullptr; }
@@ -477,8 +484,8 @@ class SurfaceContents {
       const Eigen::RowVector3d mean = surface.desired.rows() > 0
                                           ? Eigen::RowVector3d(surface.desired.colwise().mean())
                                           : Eigen::RowVector3d::Zero();
-      record.push_back({surface.name, surface.content->name, surface.frame,
-                        {mean(0), mean(1), mean(2)}});
+      record.push_back(
+          {surface.name, surface.content->name, surface.frame, {mean(0), mean(1), mean(2)}});
     }
     return record;
   }
@@ -585,9 +592,12 @@ class ShowControl {
     OscMessage message;
     message.address = "/procam/status";
     message.types = "ifiiiif";
-    const double values[] = {double(status_.frame),      status_.rate,
-                             double(status_.dropped),    double(status_.nodes_lost),
-                             double(status_.source),     status_.paused ? 1.0 : 0.0,
+    const double values[] = {double(status_.frame),
+                             status_.rate,
+                             double(status_.dropped),
+                             double(status_.nodes_lost),
+                             double(status_.source),
+                             status_.paused ? 1.0 : 0.0,
                              status_.fade};
     for (size_t k = 0; k < message.types.size(); ++k)
       message.arguments.push_back({message.types[k], values[k], ""});
@@ -622,7 +632,7 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
                     : live != nullptr  ? INT32_MAX
                     : source == nullptr
                         ? (control != nullptr || playlist != nullptr ? INT32_MAX : 1)
-                                        : (source->count() > 0 ? source->count() : INT32_MAX);
+                        : (source->count() > 0 ? source->count() : INT32_MAX);
   const auto period = std::chrono::duration<double>(1.0 / options.fps);
   std::shared_ptr<const RadiositySystem> radiosity;
   Eigen::MatrixX3d previous;
@@ -631,7 +641,7 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
   const Eigen::MatrixX3d room_desired = problem.desired;
   SolverOptions solver = options.solver;  // the method and tolerance OSC may change
   auto last_progress = Clock::now();
-  Clock::time_point t0;  // when tick 0 ended
+  Clock::time_point t0;                  // when tick 0 ended
   std::deque<Clock::time_point> recent;  // the last frames' ends, for the status's rate
   int tick = 0;
   int media_tick = 0, media_index = 0;  // the source's position: media_index at tick media_tick
@@ -645,8 +655,8 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
   Eigen::MatrixX3d image_desired = room_desired;
   Eigen::RowVector3d desired_mean = Eigen::RowVector3d::Zero();
   SurfaceContents contents(playlist, options.playlist.string(), play.room.geometry.scene,
-                           play.room.fine(),
-                           SubdivisionOptions().texture_samples, options.progress);
+                           play.room.fine(), SubdivisionOptions().texture_samples,
+                           options.progress);
   while (true) {
     if (options.stop != nullptr && options.stop->load()) {
       summary.stopped = true;
@@ -674,8 +684,8 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
             if (!paused) paused = true, media_index = at, media_tick = tick;
             break;
           case Kind::kSeek:
-            media_index = static_cast<int>(std::llround(std::min(command.seconds * options.fps,
-                                                                 double(INT32_MAX) / 2)));
+            media_index = static_cast<int>(
+                std::llround(std::min(command.seconds * options.fps, double(INT32_MAX) / 2)));
             media_tick = tick;
             break;
           case Kind::kFade:
@@ -690,8 +700,8 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
             solver_changed = true;
             break;
           case Kind::kSurface:
-            surfaces_changed = contents.Switch(command.surface, command.content, at) ||
-                               surfaces_changed;
+            surfaces_changed =
+                contents.Switch(command.surface, command.content, at) || surfaces_changed;
             break;
           case Kind::kStop:
             stop_command = true;
@@ -783,7 +793,8 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
         recent.size() < 2
             ? 0.0
             : (recent.size() - 1) /
-                  std::max(1e-9, std::chrono::duration<double>(recent.back() - recent.front()).count());
+                  std::max(1e-9,
+                           std::chrono::duration<double>(recent.back() - recent.front()).count());
     if (control != nullptr) {
       control->Publish({static_cast<int>(summary.frames.size()), rate, summary.dropped,
                         static_cast<int>(controller.nodes().size()) - controller.live(), index,
@@ -797,10 +808,9 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
                          "ms, skew {:.2f} ms, "
                          "dropped {}, nodes {}/{}{}",
                          std::min(index + (paused || live != nullptr ? 1 : advance), limit),
-                         limit == INT32_MAX ? 0 : limit, rate, frame.solve_ms,
-                         frame.iterations, frame.shown.ready_ms, frame.shown.skew_ms,
-                         summary.dropped, controller.live(), controller.nodes().size(),
-                         paused ? ", paused" : ""));
+                         limit == INT32_MAX ? 0 : limit, rate, frame.solve_ms, frame.iterations,
+                         frame.shown.ready_ms, frame.shown.skew_ms, summary.dropped,
+                         controller.live(), controller.nodes().size(), paused ? ", paused" : ""));
     }
   }
   summary.seconds = SecondsSince(start);
@@ -845,8 +855,7 @@ Eigen::MatrixX3d DesiredFromImage(const cv::Mat& image, const std::vector<int>& 
 
 void PlayOptions::Declare(OptionTable* table) {
   table
-      ->Text("osc",
-             &osc,
+      ->Text("osc", &osc,
              "IPV4:PORT to listen at for a show controller's OSC messages (docs/show.md): "
              "127.0.0.1:9000 this machine only, 0.0.0.0:9000 every interface; empty: no remote "
              "control")

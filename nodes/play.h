@@ -24,9 +24,9 @@
 #include <array>
 #include <atomic>
 #include <filesystem>
-#include <utility>
 #include <opencv2/core/mat.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 #include <zmq.hpp>
 
@@ -91,7 +91,8 @@ struct PlayOptions {
   // without one); empty: none.
   std::filesystem::path playlist;
 
-  // Declares --osc, --playlist and --osc-allow in `table`, bound to these fields (base/option_table.h).
+  // Declares --osc, --playlist and --osc-allow in `table`, bound to these fields
+  // (base/option_table.h).
   void Declare(OptionTable* table);
 };
 

@@ -21,8 +21,8 @@ Playlist ReadPlaylist(const std::filesystem::path& path) {
   top.RejectUnknown({"format_version", "contents", "surfaces"});
   const double version = top.Number("format_version");
   if (version != Playlist::kFormatVersion)
-    throw top.Error("format_version", "this procam reads version " +
-                                          std::to_string(Playlist::kFormatVersion));
+    throw top.Error("format_version",
+                    "this procam reads version " + std::to_string(Playlist::kFormatVersion));
   const std::filesystem::path base = path.parent_path();
   Playlist playlist;
   const nlohmann::json& contents = top.At("contents");
@@ -35,10 +35,9 @@ Playlist ReadPlaylist(const std::filesystem::path& path) {
     PlaylistContent content;
     content.name = item.key();
     int kinds = 0;
-    for (const auto& [key, kind] :
-         {std::pair{"video", PlaylistContent::Kind::kVideo},
-          std::pair{"images", PlaylistContent::Kind::kImages},
-          std::pair{"image", PlaylistContent::Kind::kImage}}) {
+    for (const auto& [key, kind] : {std::pair{"video", PlaylistContent::Kind::kVideo},
+                                    std::pair{"images", PlaylistContent::Kind::kImages},
+                                    std::pair{"image", PlaylistContent::Kind::kImage}}) {
       if (!fields.Has(key)) continue;
       ++kinds;
       content.kind = kind;
@@ -47,8 +46,8 @@ Playlist ReadPlaylist(const std::filesystem::path& path) {
       const bool directory = kind == PlaylistContent::Kind::kImages;
       if (directory ? !std::filesystem::is_directory(content.resolved)
                     : !std::filesystem::is_regular_file(content.resolved))
-        throw fields.Error(key, content.resolved.string() + ": no such " +
-                                    (directory ? "directory" : "file"));
+        throw fields.Error(
+            key, content.resolved.string() + ": no such " + (directory ? "directory" : "file"));
     }
     if (kinds != 1) throw fields.Error("", "give one of video, images (a directory) or image");
     if (fields.Has("loop")) {

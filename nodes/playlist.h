@@ -26,9 +26,9 @@ struct PlaylistContent {
   enum class Kind { kVideo, kImages, kImage };
   std::string name;
   Kind kind = Kind::kVideo;
-  std::string path;                   // as written (relative to the playlist file)
-  std::filesystem::path resolved;     // the file or directory it names (set by ReadPlaylist)
-  bool loop = false;                  // start again at the end (else hold the last frame)
+  std::string path;                // as written (relative to the playlist file)
+  std::filesystem::path resolved;  // the file or directory it names (set by ReadPlaylist)
+  bool loop = false;               // start again at the end (else hold the last frame)
 };
 
 struct PlaylistEntry {

@@ -71,7 +71,8 @@ class OscClient {
     OscMessage message;
     message.address = address;
     message.types = types;
-    for (size_t k = 0; k < types.size(); ++k) message.arguments.push_back({types[k], numbers[k], ""});
+    for (size_t k = 0; k < types.size(); ++k)
+      message.arguments.push_back({types[k], numbers[k], ""});
     Send(port, EncodeOscMessage(message));
   }
   // /procam/status and its reply (empty if none came within 200 ms).
@@ -288,15 +289,15 @@ TEST(Show, PlaylistContentPerSurfaceSwitchedOverOsc) {
   const std::string scene = WriteRoom(dir.path());
   const double white = nlohmann::json::parse(ReadFile(scene)).value("white", 1.0);
   auto write_video = [&](const std::string& name, const cv::Scalar& bgr) {
-    cv::VideoWriter writer((dir / name).string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'),
-                           10.0, cv::Size(16, 16));
+    cv::VideoWriter writer((dir / name).string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 10.0,
+                           cv::Size(16, 16));
     ASSERT_TRUE(writer.isOpened());
     for (int k = 0; k < 8; ++k) writer.write(cv::Mat(16, 16, CV_8UC3, bgr));
   };
   write_video("red.avi", cv::Scalar(30, 30, 220));
   write_video("blue.avi", cv::Scalar(220, 30, 30));
-  ASSERT_TRUE(cv::imwrite((dir / "green.png").string(),
-                          cv::Mat(8, 8, CV_8UC3, cv::Scalar(40, 200, 30))));
+  ASSERT_TRUE(
+      cv::imwrite((dir / "green.png").string(), cv::Mat(8, 8, CV_8UC3, cv::Scalar(40, 200, 30))));
   Playlist playlist;
   playlist.contents = {{"red", PlaylistContent::Kind::kVideo, "red.avi", {}, true},
                        {"blue", PlaylistContent::Kind::kVideo, "blue.avi", {}, false},
@@ -356,7 +357,8 @@ TEST(Show, PlaylistContentPerSurfaceSwitchedOverOsc) {
       EXPECT_EQ(wall.at("content"), "red") << "frame " << k;
       EXPECT_NEAR(mean[0], white * linear(220), 0.1 * white * linear(220)) << "frame " << k;
       EXPECT_GT(mean[0], 5 * mean[2]) << "frame " << k;
-      if (wall.at("frame").get<int>() < frames[std::max(0, k - 1)].at("surfaces").at("back wall").at("frame").get<int>())
+      if (wall.at("frame").get<int>() <
+          frames[std::max(0, k - 1)].at("surfaces").at("back wall").at("frame").get<int>())
         ++looped;
     } else {
       EXPECT_EQ(wall.at("content"), "blue") << "frame " << k;

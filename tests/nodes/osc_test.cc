@@ -68,8 +68,8 @@ TEST(Osc, DatagramsDecodeToTheCommandsTheyName) {
   EXPECT_EQ(command.method, "linear");
   ASSERT_TRUE(Command(Datagram("/procam/tolerance", "f", {Float(0.01f)}), &command, &why)) << why;
   EXPECT_NEAR(command.tolerance, 0.01, 1e-9);
-  ASSERT_TRUE(Command(Datagram("/procam/surface/back_wall", "s", {Padded("clouds")}), &command,
-                      &why))
+  ASSERT_TRUE(
+      Command(Datagram("/procam/surface/back_wall", "s", {Padded("clouds")}), &command, &why))
       << why;
   EXPECT_EQ(command.surface, "back_wall");
   EXPECT_EQ(command.content, "clouds");
@@ -121,8 +121,8 @@ TEST(Osc, MalformedMessagesAreRefusedInOneLineNamingAddressAndArgument) {
     OscCommand command;
     std::string why;
     EXPECT_FALSE(Command(c.bytes, &command, &why)) << c.why;
-    EXPECT_NE(why.find(c.why), std::string::npos) << "expected '" << c.why << "', got '" << why
-                                                  << "'";
+    EXPECT_NE(why.find(c.why), std::string::npos)
+        << "expected '" << c.why << "', got '" << why << "'";
     EXPECT_EQ(why.find('\n'), std::string::npos) << why;
   }
   // A datagram cut short: its last argument's bytes missing.

@@ -19,8 +19,8 @@ TEST(Playlist, WhatIsWrittenReadsBackTheSame) {
   playlist.contents = {{"clouds", PlaylistContent::Kind::kVideo, "clouds.avi", {}, true},
                        {"poster", PlaylistContent::Kind::kImage, "poster.png", {}, false},
                        {"flipbook", PlaylistContent::Kind::kImages, "flipbook", {}, false}};
-  playlist.surfaces = {{"back wall", "clouds", 0.0}, {"floor", "poster", 2.5},
-                       {"back wall", "flipbook", 10.0}};
+  playlist.surfaces = {
+      {"back wall", "clouds", 0.0}, {"floor", "poster", 2.5}, {"back wall", "flipbook", 10.0}};
   WritePlaylist(dir / "show.json", playlist);
   const Playlist read = ReadPlaylist(dir / "show.json");
   ASSERT_EQ(read.contents.size(), 3u);
