@@ -14,6 +14,7 @@
 #include "apps/commands.h"
 #include "apps/stop_signals.h"
 #include "base/output_directory.h"
+#include "capture/devices.h"
 #include "geometry/stage.h"
 #include "nodes/node.h"
 #include "nodes/outputs.h"
@@ -154,10 +155,12 @@ void AddNodeCommands(CLI::App& app) {
   play->add_option("scene", play_args->scene, "The room (scene file)")->required();
   play->add_option("--rig", play_args->rig, "Rig directory (projectors, registered camera, keys)")
       ->required();
-  play->add_option("--desired", play_args->desired,
-                   "The desired appearance as the rig's camera sees the room: a directory of "
-                   "images, a video, or "
-                   "stdin:WIDTHxHEIGHT (raw rgb24 frames on standard input, the newest shown)");
+  play->add_option(
+      "--desired", play_args->desired,
+      "The desired appearance as the rig's camera sees the room: a directory of "
+      "images, a video, or "
+      "stdin:WIDTHxHEIGHT (raw rgb24 frames on standard input, the newest shown), or camera:URI "
+      "(a capture device, e.g. camera:v4l2:/dev/video2; procam cameras lists them)");
   play->add_option(
       "--solution", play_args->solution,
       "Instead of --desired: show a compensation solution's emittance (procam compensate --out) "
@@ -214,6 +217,7 @@ void AddNodeCommands(CLI::App& app) {
   const auto play_options = AddDeclaredOptions<PlayOptions>(play);
   play->callback([play_args, play_options] {
     CheckOutputDirectory(play_args->out, DirectoryKind::kShow);
+    RegisterDeviceBackends();  // --desired camera:v4l2:..., camera:aravis:...
     RunPlayCommand(*play_args, *play_options);
   });
 }

@@ -23,6 +23,7 @@
 #include "base/timing.h"
 #include "calibration/calibrated_room.h"
 #include "calibration/rig_directory.h"
+#include "capture/camera.h"
 #include "compensation/problem.h"
 #include "compensation/stage.h"
 #include "geometry/patches.h"
@@ -115,18 +116,12 @@ class FrameSource {
   int count_ = 0, next_ = 0;
 };
 
-// Raw frames on standard input (--desired stdin:WIDTHxHEIGHT): rgb24, WIDTH × HEIGHT × 3 bytes
-// each, one after another, as `ffmpeg -f rawvideo -pix_fmt rgb24 -` writes them. A thread of its
-// own reads them at the producer's rate; the newest complete frame waits for the show, and one
-// that arrives before the show took the previous replaces it (counted), never queues.
-class StdinFrames {
+// A live source's newest frame: its producer (a thread of its own, at the source's rate) puts
+// each frame it completes; the show takes the newest at each of its frames. A frame put before
+// the show took the one before replaces it (counted), never queues.
+class LiveFrames {
  public:
-  StdinFrames(int width, int height, int fd = 0)
-      : width_(width), height_(height), fd_(fd), thread_([this] { Read(); }) {}
-  ~StdinFrames() {
-    stop_ = true;
-    thread_.join();
-  }
+  virtual ~LiveFrames() = default;
   // The newest frame not yet taken (BGR, OpenCV's order) and its number (frames received before
   // it); empty if none arrived since the last call.
   cv::Mat Take(int* index) {
@@ -143,7 +138,7 @@ class StdinFrames {
                       [this] { return !waiting_.empty() || ended_; });
     return !waiting_.empty();
   }
-  // The input has ended (end of file or a read error) and no frame waits.
+  // The input has ended (end of file, a device gone) and no frame waits.
   bool Ended() {
     std::lock_guard<std::mutex> lock(mutex_);
     return ended_ && waiting_.empty();
@@ -161,6 +156,42 @@ class StdinFrames {
     return error_;
   }
 
+ protected:
+  void Put(cv::Mat bgr) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!waiting_.empty()) ++replaced_;
+    waiting_ = std::move(bgr);
+    ++received_;
+    arrived_.notify_all();
+  }
+  void Finish(const std::string& error) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ended_ = true;
+    error_ = error;
+    arrived_.notify_all();
+  }
+  std::atomic<bool> stop_{false};
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable arrived_;
+  cv::Mat waiting_;
+  int received_ = 0, replaced_ = 0;
+  bool ended_ = false;
+  std::string error_;
+};
+
+// Raw frames on standard input (--desired stdin:WIDTHxHEIGHT): rgb24, WIDTH × HEIGHT × 3 bytes
+// each, one after another, as `ffmpeg -f rawvideo -pix_fmt rgb24 -` writes them.
+class StdinFrames : public LiveFrames {
+ public:
+  StdinFrames(int width, int height, int fd = 0)
+      : width_(width), height_(height), fd_(fd), thread_([this] { Read(); }) {}
+  ~StdinFrames() override {
+    stop_ = true;
+    thread_.join();
+  }
+
  private:
   void Read() {
     const size_t bytes = static_cast<size_t>(width_) * height_ * 3;
@@ -173,38 +204,66 @@ class StdinFrames {
       if (ready == 0 || (ready < 0 && errno == EINTR)) continue;
       const ssize_t got = ready < 0 ? -1 : ::read(fd_, rgb.data + filled, bytes - filled);
       if (got < 0 && (errno == EINTR || errno == EAGAIN)) continue;
-      if (got <= 0) {
-        std::lock_guard<std::mutex> lock(mutex_);
-        ended_ = true;
-        if (got < 0) error_ = std::string("standard input: ") + std::strerror(errno);
-        if (got == 0 && filled > 0)
-          error_ = fmt::format("standard input: ended {} bytes into frame {} ({} bytes a frame)",
-                               filled, received_, bytes);
-        arrived_.notify_all();
-        return;
+      if (got < 0) return Finish(std::string("standard input: ") + std::strerror(errno));
+      if (got == 0) {
+        return Finish(filled == 0 ? ""
+                                  : fmt::format("standard input: ended {} bytes into frame {} "
+                                                "({} bytes a frame)",
+                                                filled, received(), bytes));
       }
       filled += static_cast<size_t>(got);
       if (filled < bytes) continue;
       filled = 0;
       cv::Mat bgr;
       cv::cvtColor(rgb, bgr, cv::COLOR_RGB2BGR);
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (!waiting_.empty()) ++replaced_;
-      waiting_ = bgr;
-      ++received_;
-      arrived_.notify_all();
+      Put(std::move(bgr));
     }
   }
 
   const int width_, height_, fd_;
-  std::mutex mutex_;
-  std::condition_variable arrived_;
-  cv::Mat waiting_;
-  int received_ = 0, replaced_ = 0;
-  bool ended_ = false;
-  std::string error_;
-  std::atomic<bool> stop_{false};
   std::thread thread_;  // last: started once the members it uses are made
+};
+
+// A capture device as a live source (--desired camera:URI): capture/'s cameras by URI
+// (v4l2:/dev/video2, aravis:..., test:...), each frame grabbed as it comes.
+class CameraFrames : public LiveFrames {
+ public:
+  explicit CameraFrames(const std::string& uri)
+      : uri_(uri), camera_(OpenCamera(uri)), thread_([this] { Grab(); }) {}
+  ~CameraFrames() override {
+    stop_ = true;
+    thread_.join();
+  }
+
+ private:
+  void Grab() {
+    try {
+      camera_->Start();
+      while (!stop_) {
+        Frame frame;
+        try {
+          frame = camera_->Grab(std::chrono::milliseconds(200));
+        } catch (const CameraTimeout&) {
+          continue;  // a quiet device: the last frame holds
+        }
+        cv::Mat bgr;
+        if (frame.image.channels() == 1) {
+          cv::cvtColor(frame.image, bgr, cv::COLOR_GRAY2BGR);
+        } else {
+          bgr = frame.image;
+        }
+        Put(std::move(bgr));
+      }
+      camera_->Stop();
+      Finish("");
+    } catch (const std::exception& error) {
+      Finish(uri_ + ": " + error.what());
+    }
+  }
+
+  std::string uri_;
+  std::unique_ptr<Camera> camera_;
+  std::thread thread_;  // last
 };
 
 // "stdin:WIDTHxHEIGHT" → the size; false if `desired` does not start with "stdin:". Throws
@@ -625,7 +684,7 @@ struct Fade {
 // Frames follow a clock of ticks at the target rate; the source's position advances with the
 // ticks while playing and holds while paused.
 PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& controller,
-                       FrameSource* source, StdinFrames* live, const Playlist* playlist,
+                       FrameSource* source, LiveFrames* live, const Playlist* playlist,
                        ShowControl* control, Clock::time_point start) {
   PlaySummary summary;
   const int limit = options.frames > 0 ? options.frames
@@ -649,6 +708,7 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
   Fade fade;
   // What the emittance in `previous` was solved for: a frame solves again when any differs.
   int solved_index = -1, image_index = -1;
+  int live_taken = 0;  // a live source's frames taken
   double solved_fade = -1.0;
   bool solver_changed = false;
   // The camera-view source's desired colours (the room's own without one).
@@ -721,6 +781,8 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
       int number = 0;
       const cv::Mat image = live->Take(&number);
       if (!image.empty()) {
+        if (live_taken >= limit) break;  // --frames: that many of the source's frames shown
+        ++live_taken;
         const auto step = Clock::now();
         image_desired = DesiredFromImage(image, rays.patch, rays.width, rays.height, room_desired);
         image_index = number;
@@ -731,7 +793,7 @@ PlaySummary PlayFrames(const PlayOptions& options, PlayScene& play, Controller& 
     }
     const int position = paused ? media_index : media_index + (tick - media_tick);
     const int index = live != nullptr ? image_index : position;
-    if (index >= limit) break;
+    if (live == nullptr && index >= limit) break;
     frame.source = index;
     frame.paused = paused;
     frame.fade = fade.Level(frame_start);
@@ -918,11 +980,14 @@ PlaySummary RunPlay(const PlayOptions& given) {
   std::optional<Playlist> playlist;
   if (!options.playlist.empty()) playlist = ReadPlaylist(options.playlist);
   std::optional<FrameSource> source;
-  std::unique_ptr<StdinFrames> live;
+  std::unique_ptr<LiveFrames> live;
   int live_width = 0, live_height = 0;
+  // Live sources read from now on: frames that come while the room is prepared replace one
+  // another.
   if (ParseStdinSource(options.desired.string(), &live_width, &live_height)) {
-    // Read from now on: frames that come while the room is prepared replace one another.
     live = std::make_unique<StdinFrames>(live_width, live_height);
+  } else if (options.desired.string().starts_with("camera:")) {
+    live = std::make_unique<CameraFrames>(options.desired.string().substr(7));
   } else if (!options.desired.empty()) {
     source.emplace(options.desired);
   }

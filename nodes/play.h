@@ -51,9 +51,10 @@ inline SolverOptions PlaySolverOptions() {
 struct PlayOptions {
   std::string scene;              // the room (LoadSceneArgument)
   std::filesystem::path rig_dir;  // projectors, reflectance, camera, keys
-  // A directory of images (sorted by name), a video file, or stdin:WIDTHxHEIGHT: raw rgb24 frames
-  // on standard input, the newest shown (a frame that arrives before the show took the one
-  // before replaces it).
+  // A directory of images (sorted by name), a video file, or a live source: stdin:WIDTHxHEIGHT
+  // (raw rgb24 frames on standard input) or camera:URI (a capture device opened by
+  // capture/camera.h's OpenCamera: v4l2:/dev/video2, ...); of a live source the newest frame is
+  // shown (a frame that arrives before the show took the one before replaces it).
   std::filesystem::path desired;
   // Instead of `desired`: a compensation solution (procam compensate's directory) whose
   // emittance every frame shows (`frames` of them, default 1): a computed compensation shown
@@ -61,7 +62,7 @@ struct PlayOptions {
   std::filesystem::path solution;
   std::filesystem::path out;  // result.json (created)
   double fps = 30.0;          // target frame rate, > 0
-  int frames = 0;             // frames to play (0: the whole source)
+  int frames = 0;  // frames to play (0: the whole source); of a live source, its frames shown
   int patches = 0;            // target patch count (0: the room's)
   double alpha = 0.5;
   // Method (default perceptual2000), device, and each frame's stopping rule (function_tolerance,

@@ -279,6 +279,44 @@ TEST(Show, PlayShowsTheNewestFramePipedOnStandardInput) {
             paced + burst);
 }
 
+// A capture device as a live source (--desired camera:URI), here capture/'s software test camera
+// at 30 fps: the show takes its newest frame at each of its own, the frame numbers only go up,
+// and --frames 10 ends the show after 10 of the camera's frames. A camera that goes away mid-show
+// ends the show, with one line naming it.
+TEST(Show, PlayFollowsALiveCamera) {
+  testing::TempDir dir;
+  const std::string scene = WriteRoom(dir.path());
+  const std::string play = "timeout 120 " + std::string(std::getenv("PROCAM_BINARY")) + " play " +
+                           scene + " --rig " + dir.path().string() + " --fps 20" +
+                           " --display memory,memory --out " + (dir / "play").string();
+  const testing::CommandRun run = testing::RunShell(
+      play + " --frames 10 --desired 'camera:test:live?format=BGR8&width=32&height=24&fps=30'");
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  nlohmann::json result = nlohmann::json::parse(ReadFile(dir / "play" / "result.json"));
+  const nlohmann::json& frames = result.at("frames");
+  ASSERT_FALSE(frames.empty()) << run.output;
+  std::set<int> shown;
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const int source = frames[k].at("source");
+    if (k > 0) {
+      EXPECT_GE(source, frames[k - 1].at("source").get<int>());
+    }
+    shown.insert(source);
+  }
+  EXPECT_EQ(shown.size(), 10u);
+  EXPECT_LE(static_cast<int>(shown.size()) + result.at("frames_replaced").get<int>(),
+            result.at("frames_received").get<int>());
+
+  const testing::CommandRun gone = testing::RunShell(
+      play + " --desired 'camera:test:live?format=BGR8&width=32&height=24&fps=30" +
+      "&fault=disconnect&fault_after=5'");
+  ASSERT_EQ(gone.exit_code, 0) << gone.output;
+  EXPECT_NE(gone.output.find("play: test:live?"), std::string::npos) << gone.output;
+  result = nlohmann::json::parse(ReadFile(dir / "play" / "result.json"));
+  EXPECT_EQ(result.at("frames_received"), 5) << gone.output;
+  EXPECT_EQ(result.at("frames").back().at("source"), 4) << gone.output;
+}
+
 // A playlist (written by its owner's writer) puts a red video on the back wall and a green image
 // on the floor, in their texture coordinates; /procam/surface switches the back wall to a blue
 // video over OSC. Each frame's record says what every surface showed; its patches' desired colour
