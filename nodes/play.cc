@@ -929,10 +929,27 @@ void PlayOptions::Declare(OptionTable* table) {
              "refused in a log line each");
 }
 
+bool PlayOptions::Check(std::string* why) const {
+  OptionTable table("play");  // reads the fields only
+  const_cast<PlayOptions*>(this)->Declare(&table);
+  if (!table.Check(why)) return false;
+  if (!(fps > 0.0 && fps <= 1000.0)) {
+    *why = "--fps must be in (0, 1000]";
+    return false;
+  }
+  try {
+    OscAllowList::Parse(osc_allow);
+  } catch (const std::invalid_argument& error) {
+    *why = error.what();
+    return false;
+  }
+  return true;
+}
+
 PlaySummary RunPlay(const PlayOptions& given) {
   const auto start = Clock::now();
-  if (!(given.fps > 0.0 && given.fps <= 1000.0))
-    throw std::invalid_argument("--fps must be in (0, 1000]");
+  std::string why;
+  if (!given.Check(&why)) throw std::invalid_argument(why);
   // The OSC thread logs too: one line at a time.
   auto log_mutex = std::make_shared<std::mutex>();
   PlayOptions options = given;

@@ -95,6 +95,9 @@ struct PlayOptions {
   // Declares --osc, --playlist and --osc-allow in `table`, bound to these fields
   // (base/option_table.h).
   void Declare(OptionTable* table);
+  // The declared options, --fps and --osc-allow's entries; false and `*why` (one line naming
+  // the option) otherwise.
+  bool Check(std::string* why) const;
 };
 
 // What a surface with playlist content showed in a frame.

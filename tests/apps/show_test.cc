@@ -279,6 +279,35 @@ TEST(Show, PlayShowsTheNewestFramePipedOnStandardInput) {
             paced + burst);
 }
 
+// Show options that cannot work are refused at once, in one line naming the option, and nothing
+// is written: a sender that is not an IPv4 address or range, an OSC address that is not
+// IPV4:PORT or not this machine's, a raw-frame size that is not one, a playlist with a mistake.
+TEST(Show, BadShowOptionsAreOneLineNamingTheOption) {
+  testing::TempDir dir;
+  const std::string scene = WriteRoom(dir.path());
+  WriteFileAtomically(dir / "show.json",
+                      R"({"format_version": 1, "contents": {}, "surfaces": [{"surface": "floor",
+                          "content": "rain"}]})");
+  const std::string play = "play " + scene + " --rig " + dir.path().string() +
+                           " --display memory,memory --out " + (dir / "play").string() + " ";
+  const std::string video = " --desired stdin:32x24 < /dev/null";
+  testing::ExpectOneErrorLine(
+      testing::RunProcamStderr(play + "--osc 127.0.0.1:0 --osc-allow 127.0.0.1,localhost" + video),
+      "--osc-allow: 'localhost' is not an IPv4 address or range", "--osc-allow localhost");
+  testing::ExpectOneErrorLine(testing::RunProcamStderr(play + "--osc 127.0.0.1:99999" + video),
+                              "--osc: 127.0.0.1:99999: not IPV4:PORT", "--osc port");
+  testing::ExpectOneErrorLine(testing::RunProcamStderr(play + "--osc 192.0.2.1:9000" + video),
+                              "--osc: 192.0.2.1:9000: cannot listen there", "--osc not local");
+  testing::ExpectOneErrorLine(testing::RunProcamStderr(play + "--desired stdin:32"),
+                              "--desired: stdin:32: raw frames on standard input are "
+                              "stdin:WIDTHxHEIGHT",
+                              "--desired stdin:32");
+  testing::ExpectOneErrorLine(
+      testing::RunProcamStderr(play + "--playlist " + (dir / "show.json").string()),
+      (dir / "show.json").string() + ": surfaces[0].content: no content 'rain'", "playlist");
+  EXPECT_FALSE(fs::exists(dir / "play" / "result.json"));
+}
+
 // A capture device as a live source (--desired camera:URI), here capture/'s software test camera
 // at 30 fps: the show takes its newest frame at each of its own, the frame numbers only go up,
 // and --frames 10 ends the show after 10 of the camera's frames. A camera that goes away mid-show
