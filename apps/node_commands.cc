@@ -14,6 +14,7 @@
 #include "apps/commands.h"
 #include "apps/stop_signals.h"
 #include "base/output_directory.h"
+#include "capture/devices.h"
 #include "geometry/stage.h"
 #include "nodes/node.h"
 #include "nodes/outputs.h"
@@ -54,8 +55,9 @@ void CheckUnique(const std::vector<std::string>& values, const std::string& opti
 // A display output that is a device (a monitor), which two projectors cannot share.
 bool IsMonitor(const std::string& display) { return display.starts_with("glfw:"); }
 
-void RunPlayCommand(const PlayArguments& args) {
-  PlayOptions options;
+// `options` holds what PlayOptions::Declare declared (--osc, --osc-allow); the rest is copied from
+// `args`.
+void RunPlayCommand(const PlayArguments& args, PlayOptions options) {
   options.scene = args.scene;
   options.rig_dir = args.rig;
   options.desired = args.desired;
@@ -96,8 +98,10 @@ void RunPlayCommand(const PlayArguments& args) {
   } else {
     std::cout << fmt::format(
         "play: {}{} frames shown, {} dropped in {:.1f} s; wrote {}/result.json\n",
-        summary.stopped ? "stopped by a signal: " : "", summary.frames.size(), summary.dropped,
-        summary.seconds, args.out);
+        !summary.stopped       ? ""
+        : options.stop->load() ? "stopped by a signal: "
+                               : "stopped by /procam/stop: ",
+        summary.frames.size(), summary.dropped, summary.seconds, args.out);
   }
 }
 
@@ -153,7 +157,10 @@ void AddNodeCommands(CLI::App& app) {
       ->required();
   play->add_option(
       "--desired", play_args->desired,
-      "The desired appearance as the rig's camera sees the room: a directory of images or a video");
+      "The desired appearance as the rig's camera sees the room: a directory of "
+      "images, a video, or "
+      "stdin:WIDTHxHEIGHT (raw rgb24 frames on standard input, the newest shown), or camera:URI "
+      "(a capture device, e.g. camera:v4l2:/dev/video2; procam cameras lists them)");
   play->add_option(
       "--solution", play_args->solution,
       "Instead of --desired: show a compensation solution's emittance (procam compensate --out) "
@@ -207,9 +214,11 @@ void AddNodeCommands(CLI::App& app) {
                    "Seconds for every node to answer and build the rig before the first frame")
       ->check(FiniteRange(0.1, 3600.0))
       ->capture_default_str();
-  play->callback([play_args] {
+  const auto play_options = AddDeclaredOptions<PlayOptions>(play);
+  play->callback([play_args, play_options] {
     CheckOutputDirectory(play_args->out, DirectoryKind::kShow);
-    RunPlayCommand(*play_args);
+    RegisterDeviceBackends();  // --desired camera:v4l2:..., camera:aravis:...
+    RunPlayCommand(*play_args, *play_options);
   });
 }
 

@@ -25,6 +25,7 @@
 #include "datasets_synthetic/scan_judge.h"
 #include "datasets_synthetic/scene_info.h"
 #include "nodes/node.h"
+#include "nodes/play.h"
 #include "projection/show.h"
 #include "projection/stage.h"
 #include "verification/verification.h"
@@ -94,6 +95,7 @@ struct DeclaredOptions {
     Add<CalibrateAllOptions>(
         "A whole rig", "CalibrateAllOptions (calibration/calibrate_all_stage.h)", "calibrate all");
     Add<NodeOptions>("A display node", "NodeOptions (nodes/node.h)", "node");
+    Add<PlayOptions>("A show's remote control and playlist", "PlayOptions (nodes/play.h)", "play");
     Add<EmulatedRoomOptions>("The room as a device",
                              "EmulatedRoomOptions (datasets_synthetic/emulated_room.h)", "emulate");
     Add<SceneFileOptions>("A scene described", "SceneFileOptions (datasets_synthetic/scene_info.h)",

@@ -4,7 +4,7 @@
 # libraries); a CUDA build also needs the CUDA toolkit, which is not a Debian package.
 set(PROCAM_DEB_DEPENDS
   libeigen3-dev libceres-dev libembree-dev libopencv-dev nlohmann-json3-dev
-  libspdlog-dev libfmt-dev libmrcal-dev libcgal-dev libzmq3-dev cppzmq-dev)
+  libspdlog-dev libfmt-dev libmrcal-dev libcgal-dev libzmq3-dev cppzmq-dev liblo-dev)
 if(PROCAM_WITH_ARAVIS)
   list(APPEND PROCAM_DEB_DEPENDS libaravis-dev libusb-1.0-0-dev)
 endif()
