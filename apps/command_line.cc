@@ -17,23 +17,6 @@
 
 namespace procam {
 
-namespace {
-
-CLI::Validator FiniteValidator(double min, double max, bool open_min, const std::string& range) {
-  return CLI::Validator(
-      [=](std::string& text) -> std::string {
-        double value = 0.0;
-        if (!CLI::detail::lexical_cast(text, value)) return "'" + text + "' is not a number";
-        if (!std::isfinite(value) || value < min || value > max || (open_min && value == min)) {
-          return "'" + text + "' is not a number in " + range;
-        }
-        return std::string();
-      },
-      range);
-}
-
-}  // namespace
-
 void AddOptions(CLI::App* command, const OptionTable& table) {
   for (const OptionTable::Option& option : table.options()) {
     const std::string flag = option.positional ? option.name : "--" + option.name;
@@ -104,14 +87,6 @@ void AddOptions(CLI::App* command, const OptionTable& table) {
   }
 }
 
-CLI::Validator FiniteRange(double min, double max) {
-  return FiniteValidator(min, max, false, fmt::format("[{}, {}]", min, max));
-}
-
-CLI::Validator FiniteNonNegative() {
-  return FiniteValidator(0.0, std::numeric_limits<double>::max(), false, "[0, ∞)");
-}
-
 ProgressCallback LogProgress() {
   return [](const std::string& line) { spdlog::info("{}", line); };
 }
@@ -138,27 +113,6 @@ std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text) {
                 "': this build has no GLFW output backend (reconfigure with -DPROCAM_WITH_GLFW=ON; "
                 "apt-get install libglfw3-dev libgl-dev libx11-dev libxrandr-dev)");
 #endif
-}
-
-void AddLightOption(CLI::App* command, LightField* light) {
-  const std::map<std::string, LightField> names = {{"smooth", LightField::kSmooth},
-                                                   {"flat", LightField::kFlat}};
-  command
-      ->add_option("--light", *light,
-                   "smooth: the light varies smoothly over each surface, stepping only where the "
-                   "desired appearance does, each patch's flux kept (seamless) | flat: one "
-                   "uniform level per patch")
-      ->transform(CLI::CheckedTransformer(names))
-      ->option_text(std::string("smooth|flat (default ") + LightFieldName(*light) + ")");
-}
-
-void AddPlayToleranceOption(CLI::App* command, double* tolerance) {
-  command
-      ->add_option("--tolerance", *tolerance,
-                   "Each frame's solve stops when an iteration lowers the cost by less than this "
-                   "fraction of it")
-      ->check(FiniteRange(0.0, 0.1))
-      ->capture_default_str();
 }
 
 }  // namespace procam

@@ -50,19 +50,4 @@ ProgressCallback PrintProgress();
 // IoError naming the display: not glfw:..., no such monitor, a build without GLFW.
 std::shared_ptr<PatternDisplay> OpenMonitorDisplay(const std::string& text);
 
-// --light smooth|flat (default smooth): whether projector images shape the light within each patch
-// into a smooth field (seamless light) or light each patch uniformly (projector_images.h).
-void AddLightOption(CLI::App* command, LightField* light);
-
-// --tolerance F (procam play and bench play): each frame's solve stops when an iteration lowers
-// the cost by less than F of it, in [0, 0.1].
-void AddPlayToleranceOption(CLI::App* command, double* tolerance);
-
-// CLI::Range that also refuses what is not a finite number ("nan", "inf"): every comparison
-// with NaN is false, so CLI::Range, CLI::PositiveNumber and CLI::NonNegativeNumber let it through.
-// `min` and `max` are inclusive.
-CLI::Validator FiniteRange(double min, double max);
-// A finite number ≥ 0.
-CLI::Validator FiniteNonNegative();
-
 }  // namespace procam

@@ -24,18 +24,6 @@
 namespace procam {
 namespace {
 
-struct PlayArguments {
-  std::string scene, rig, desired, solution, out, method = MethodName(PlaySolverOptions().method),
-                                                  device = "cpu", dither = "ordered",
-                                                  render = "gpu";
-  std::string metric_update = MetricUpdateName(PlaySolverOptions().metric_update);
-  std::vector<std::string> nodes, display = {"memory"};
-  LightField light = LightField::kSmooth;
-  double fps = 30.0, alpha = 0.5, frame_timeout_ms = 500.0, setup_timeout = 120.0;
-  double tolerance = kPlayFunctionTolerance;
-  int frames = 0, patches = 0;
-};
-
 // Throws std::invalid_argument naming `option` when a value is given twice (a projector shown
 // by one node twice, a monitor given two projectors, two nodes of one name or address).
 // `counts(value)` says whether the value must be unique (memory outputs may repeat).
@@ -55,38 +43,17 @@ void CheckUnique(const std::vector<std::string>& values, const std::string& opti
 // A display output that is a device (a monitor), which two projectors cannot share.
 bool IsMonitor(const std::string& display) { return display.starts_with("glfw:"); }
 
-// `options` holds what PlayOptions::Declare declared (--osc, --osc-allow); the rest is copied from
-// `args`.
-void RunPlayCommand(const PlayArguments& args, PlayOptions options) {
-  options.scene = args.scene;
-  options.rig_dir = args.rig;
-  options.desired = args.desired;
-  options.solution = args.solution;
-  options.setup_timeout_s = args.setup_timeout;
-  options.out = args.out;
-  options.fps = args.fps;
-  options.frames = args.frames;
-  options.patches = args.patches;
-  options.alpha = args.alpha;
-  ParseMethod(args.method, &options.solver.method);
-  ParseMetricUpdate(args.metric_update, &options.solver.metric_update);
-  options.solver.function_tolerance = args.tolerance;
-  ParseDevice(args.device, &options.solver.device);
-  if (!ParseDither(args.dither, &options.dither))
-    throw std::invalid_argument("--dither: unknown method " + args.dither);
-  options.light = args.light;
-  options.frame_timeout_s = 1e-3 * args.frame_timeout_ms;
-  options.local_gpu = args.render == "gpu";
+// `options` as PlayOptions::Declare parsed them; the local outputs, progress and stop added.
+void RunPlayCommand(PlayOptions options) {
   std::vector<std::string> names, endpoints;
-  for (size_t k = 0; k < args.nodes.size(); ++k) {
-    options.nodes.push_back(ParseNodeAddress(args.nodes[k], int(k)));
-    names.push_back(options.nodes.back().name);
-    endpoints.push_back(options.nodes.back().endpoint);
+  for (const NodeAddress& node : options.nodes) {
+    names.push_back(node.name);
+    endpoints.push_back(node.endpoint);
   }
   CheckUnique(names, "--nodes");
   CheckUnique(endpoints, "--nodes");
-  CheckUnique(args.display, "--display", IsMonitor);
-  if (options.nodes.empty()) options.local_outputs = MakeNodeOutputs(args.display);
+  CheckUnique(options.display, "--display", IsMonitor);
+  if (options.nodes.empty()) options.local_outputs = MakeNodeOutputs(options.display);
   options.progress = PrintProgress();
   options.stop = &StopOnSignals();
   const PlaySummary summary = RunPlay(options);
@@ -94,14 +61,14 @@ void RunPlayCommand(const PlayArguments& args, PlayOptions options) {
     std::cout << fmt::format(
         "play: stopped by a signal before the first frame; nothing written "
         "to {}\n",
-        args.out);
+        options.out.string());
   } else {
     std::cout << fmt::format(
         "play: {}{} frames shown, {} dropped in {:.1f} s; wrote {}/result.json\n",
         !summary.stopped       ? ""
         : options.stop->load() ? "stopped by a signal: "
                                : "stopped by /procam/stop: ",
-        summary.frames.size(), summary.dropped, summary.seconds, args.out);
+        summary.frames.size(), summary.dropped, summary.seconds, options.out.string());
   }
 }
 
@@ -149,76 +116,13 @@ void AddNodeCommands(CLI::App& app) {
     if (stop) std::cout << "node " << options.name << ": stopped by a signal" << std::endl;
   });
 
-  auto play_args = std::make_shared<PlayArguments>();
   CLI::App* play = app.add_subcommand(
       "play", "Light that follows changing content: solve, send and show every frame");
-  play->add_option("scene", play_args->scene, "The room (scene file)")->required();
-  play->add_option("--rig", play_args->rig, "Rig directory (projectors, registered camera, keys)")
-      ->required();
-  play->add_option(
-      "--desired", play_args->desired,
-      "The desired appearance as the rig's camera sees the room: a directory of "
-      "images, a video, or "
-      "stdin:WIDTHxHEIGHT (raw rgb24 frames on standard input, the newest shown), or camera:URI "
-      "(a capture device, e.g. camera:v4l2:/dev/video2; procam cameras lists them)");
-  play->add_option(
-      "--solution", play_args->solution,
-      "Instead of --desired: show a compensation solution's emittance (procam compensate --out) "
-      "as every frame");
-  play->add_option("--out", play_args->out, "Output directory (result.json with per-frame timings)")
-      ->required();
-  play->add_option("--nodes", play_args->nodes,
-                   "Display nodes NAME=tcp://HOST:PORT,...; none: a node in this process")
-      ->delimiter(',');
-  play->add_option("--display", play_args->display,
-                   "Without --nodes, per projector: glfw:MONITOR, record:DIR or memory")
-      ->delimiter(',')
-      ->capture_default_str();
-  play->add_option("--fps", play_args->fps,
-                   "Target frame rate (frames due while one is shown are dropped)")
-      ->check(FiniteRange(0.01, 1000.0))
-      ->capture_default_str();
-  play->add_option("--frames", play_args->frames, "Frames to play (0: the whole source)")
-      ->check(FiniteNonNegative());
-  play->add_option("--patches", play_args->patches, "Target patch count (0: the room's)")
-      ->check(FiniteNonNegative());
-  play->add_option("--method", play_args->method,
-                   "naive | reverse | linear | perceptual | perceptual2000")
-      ->check(CLI::IsMember({"naive", "reverse", "linear", "perceptual", "perceptual2000"}))
-      ->capture_default_str();
-  play->add_option("--metric-update", play_args->metric_update,
-                   "perceptual2000: CIEDE2000's metric measured again at every_iteration | rounds "
-                   "(docs/solver.md)")
-      ->check(CLI::IsMember({"every_iteration", "rounds"}))
-      ->capture_default_str();
-  play->add_option("--device", play_args->device, "cpu | cuda")
-      ->check(CLI::IsMember({"cpu", "cuda"}))
-      ->capture_default_str();
-  AddPlayToleranceOption(play, &play_args->tolerance);
-  play->add_option("--alpha", play_args->alpha, "Weight of the absolute term, (0,1]")
-      ->check(FiniteRange(1e-9, 1.0));
-  play->add_option("--dither", play_args->dither, "none | ordered | error-diffusion")
-      ->capture_default_str();
-  AddLightOption(play, &play_args->light);
-  play->add_option("--render", play_args->render,
-                   "Without --nodes: gpu (the node's images rendered with OpenGL) | cpu (the "
-                   "reference renderer)")
-      ->check(CLI::IsMember({"gpu", "cpu"}))
-      ->capture_default_str();
-  play->add_option(
-          "--frame-timeout-ms", play_args->frame_timeout_ms,
-          "A node that does not answer a frame in this time is reported lost; the others go on")
-      ->check(FiniteRange(1.0, 60000.0))
-      ->capture_default_str();
-  play->add_option("--setup-timeout", play_args->setup_timeout,
-                   "Seconds for every node to answer and build the rig before the first frame")
-      ->check(FiniteRange(0.1, 3600.0))
-      ->capture_default_str();
   const auto play_options = AddDeclaredOptions<PlayOptions>(play);
-  play->callback([play_args, play_options] {
-    CheckOutputDirectory(play_args->out, DirectoryKind::kShow);
+  play->callback([play_options] {
+    CheckOutputDirectory(play_options->out, DirectoryKind::kShow);
     RegisterDeviceBackends();  // --desired camera:v4l2:..., camera:aravis:...
-    RunPlayCommand(*play_args, *play_options);
+    RunPlayCommand(*play_options);
   });
 }
 

@@ -5,11 +5,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <condition_variable>
 #include <cstring>
 #include <deque>
 #include <exception>
+#include <limits>
 #include <mutex>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -33,6 +35,7 @@
 #include "nodes/playlist.h"
 #include "projection/camera_rays.h"
 #include "projection/projection_rig.h"
+#include "projection/stage.h"
 
 namespace procam {
 namespace {
@@ -916,11 +919,94 @@ Eigen::MatrixX3d DesiredFromImage(const cv::Mat& image, const std::vector<int>& 
 }
 
 void PlayOptions::Declare(OptionTable* table) {
-  table
-      ->Text("osc", &osc,
-             "IPV4:PORT to listen at for a show controller's OSC messages (docs/show.md): "
-             "127.0.0.1:9000 this machine only, 0.0.0.0:9000 every interface; empty: no remote "
-             "control")
+  table->Text("scene", &scene, "the room (scene file)")
+      .Positional()
+      .Required()
+      .Path("rig", &rig_dir, "rig directory (projectors, registered camera, keys)")
+      .Required()
+      .Path("desired", &desired,
+            "the desired appearance as the rig's camera sees the room: a directory of images, a "
+            "video, stdin:WIDTHxHEIGHT (raw rgb24 frames on standard input, the newest shown) or "
+            "camera:URI (a capture device, e.g. camera:v4l2:/dev/video2; procam cameras lists "
+            "them)")
+      .Path("solution", &solution,
+            "instead of --desired: show a compensation solution's emittance (procam compensate "
+            "--out) as every frame")
+      .Path("out", &out, "output directory (result.json with per-frame timings)")
+      .Required()
+      .List(
+          "nodes",
+          [this] {
+            std::vector<std::string> items;
+            for (const NodeAddress& node : nodes) items.push_back(node.name + "=" + node.endpoint);
+            return items;
+          },
+          [this](const std::vector<std::string>& items, std::string* why) {
+            std::vector<NodeAddress> parsed;
+            try {
+              for (size_t k = 0; k < items.size(); ++k)
+                parsed.push_back(ParseNodeAddress(items[k], static_cast<int>(k)));
+            } catch (const std::exception& error) {
+              *why = error.what();
+              return false;
+            }
+            nodes = std::move(parsed);
+            return true;
+          },
+          "NAME=tcp://HOST:PORT", "display nodes; none: a node in this process")
+      .Sets(&nodes)
+      .Texts("display", &display,
+             "without --nodes, per projector: glfw:MONITOR, record:DIR or memory")
+      .Number("fps", &fps, OptionTable::Interval::AboveMin(0.0, 1000.0), "Hz",
+              "target frame rate (frames due while one is shown are dropped)")
+      .Integer("frames", &frames, 0, std::numeric_limits<int>::max(), "",
+               "frames to play (0: the whole source; a live source: its frames shown)")
+      .Integer("patches", &patches, 0, std::numeric_limits<int>::max(), "",
+               "target patch count (0: the room's)")
+      .Choice("method", &solver.method, MethodChoices(),
+              "the objective (docs/solver.md): naive, reverse, linear, perceptual (the paper's) or "
+              "perceptual2000")
+      .Choice("metric-update", &solver.metric_update, MetricUpdateChoices(),
+              "perceptual2000: CIEDE2000's metric measured again at every iterate or in rounds "
+              "(docs/solver.md)")
+      .Choice("device", &solver.device, DeviceChoices(), "where K⁻¹ is applied: cpu or cuda")
+      .Number("tolerance", &solver.function_tolerance, 0.0, 0.1, "",
+              "each frame's solve stops when an iteration lowers the cost by less than this "
+              "fraction of it")
+      .Number("alpha", &alpha, OptionTable::Interval::AboveMin(0.0, 1.0), "",
+              "weight of the absolute term against the spatial term")
+      .Choice("dither", &dither, DitherChoices(),
+              "none (nearest code value), ordered (8×8 Bayer) or error-diffusion")
+      .Choice("light", &light, LightFieldChoices(),
+              "smooth: the light varies smoothly over each surface, stepping only where the "
+              "desired appearance does, each patch's flux kept (seamless); flat: one uniform "
+              "level per patch")
+      .Choice<bool>("render", &local_gpu, {{"gpu", true}, {"cpu", false}},
+                    "without --nodes: gpu (the node's images rendered with OpenGL) or cpu (the "
+                    "reference renderer)")
+      .Custom(
+          "frame-timeout-ms", [this] { return OptionNumberText(1e3 * frame_timeout_s); },
+          [this](const std::string& text, std::string* why) {
+            double ms = 0.0;
+            const char* end = text.data() + text.size();
+            const auto [last, error] = std::from_chars(text.data(), end, ms);
+            if (text.empty() || error != std::errc() || last != end ||
+                !(ms >= 1.0 && ms <= 60000.0)) {
+              *why = "must be a number of ms in [1, 60000], got '" + text + "'";
+              return false;
+            }
+            frame_timeout_s = 1e-3 * ms;
+            return true;
+          },
+          "ms in [1, 60000]",
+          "a node that does not answer a frame in this time is reported lost; the others go on")
+      .Sets(&frame_timeout_s)
+      .Number("setup-timeout", &setup_timeout_s, 0.1, 3600.0, "s",
+              "for every node to answer and build the rig before the first frame")
+      .Text("osc", &osc,
+            "IPV4:PORT to listen at for a show controller's OSC messages (docs/show.md): "
+            "127.0.0.1:9000 this machine only, 0.0.0.0:9000 every interface; empty: no remote "
+            "control")
       .Path("playlist", &playlist,
             "content per surface in its texture coordinates (JSON, docs/show.md#a-playlist), "
             "switched by /procam/surface")
@@ -933,10 +1019,6 @@ bool PlayOptions::Check(std::string* why) const {
   OptionTable table("play");  // reads the fields only
   const_cast<PlayOptions*>(this)->Declare(&table);
   if (!table.Check(why)) return false;
-  if (!(fps > 0.0 && fps <= 1000.0)) {
-    *why = "--fps must be in (0, 1000]";
-    return false;
-  }
   try {
     OscAllowList::Parse(osc_allow);
   } catch (const std::invalid_argument& error) {

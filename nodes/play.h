@@ -76,6 +76,9 @@ struct PlayOptions {
   // Display nodes; empty: one node in this process showing every projector of the rig on
   // `local_outputs` (made on the calling thread, which runs the node: GLFW's main thread).
   std::vector<NodeAddress> nodes;
+  // Without `nodes`, per projector: glfw:MONITOR, record:DIR or memory (the command makes
+  // `local_outputs` from them).
+  std::vector<std::string> display = {"memory"};
   NodeOutputFactory local_outputs;
   bool local_gpu = true;  // the in-process node renders on the GPU (NodeOptions::gpu)
   ProgressCallback progress;
@@ -92,11 +95,11 @@ struct PlayOptions {
   // without one); empty: none.
   std::filesystem::path playlist;
 
-  // Declares --osc, --playlist and --osc-allow in `table`, bound to these fields
+  // Declares every option of `procam play` in `table`, bound to these fields
   // (base/option_table.h).
   void Declare(OptionTable* table);
-  // The declared options, --fps and --osc-allow's entries; false and `*why` (one line naming
-  // the option) otherwise.
+  // The declared options and --osc-allow's entries; false and `*why` (one line naming the
+  // option) otherwise.
   bool Check(std::string* why) const;
 };
 
