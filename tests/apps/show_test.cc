@@ -101,6 +101,16 @@ int ListeningPort(const fs::path& log) {
   return std::regex_search(text, match, line) ? std::stoi(match[1]) : 0;
 }
 
+// ListeningPort once play has logged it: waits (bounded, 60 s) for the line; 0 if it never came.
+int WaitForListeningPort(const fs::path& log) {
+  int port = 0;
+  for (int attempt = 0; attempt < 1200 && port == 0; ++attempt) {
+    port = ListeningPort(log);
+    if (port == 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return port;
+}
+
 // The frame the status reports (frames shown), after waiting (bounded) for it to reach `at_least`.
 int WaitForFrame(OscClient& client, int port, int at_least) {
   for (int attempt = 0; attempt < 600; ++attempt) {
@@ -141,11 +151,7 @@ TEST(Show, PlayFollowsPauseFadeAndPlayOverOscWithinTwoFrames) {
                       " --fps 10 --display memory,memory --osc 127.0.0.1:0 --out " +
                       (dir / "play").string() + " > " + log.string() + " 2>&1");
   });
-  int port = 0;
-  for (int attempt = 0; attempt < 1200 && port == 0; ++attempt) {
-    port = ListeningPort(log);
-    if (port == 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
+  const int port = WaitForListeningPort(log);
   ASSERT_GT(port, 0) << ReadFile(log);
   OscClient client, stranger("127.0.0.2");
   WaitForFrame(client, port, 3);
@@ -380,11 +386,7 @@ TEST(Show, PlaylistContentPerSurfaceSwitchedOverOsc) {
                       " --fps 10 --display memory,memory --osc 127.0.0.1:0 --out " +
                       (dir / "play").string() + " > " + log.string() + " 2>&1");
   });
-  int port = 0;
-  for (int attempt = 0; attempt < 1200 && port == 0; ++attempt) {
-    port = ListeningPort(log);
-    if (port == 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
+  const int port = WaitForListeningPort(log);
   ASSERT_GT(port, 0) << ReadFile(log);
   OscClient client;
   // Past the red video's 8 frames: it loops.

@@ -169,6 +169,14 @@ double Rho(SolverOptions::RobustLoss loss, double c, double s) {
   return 0.0;
 }
 
+// The lowest cost of a run's trace: for perceptual2000 at every iterate, the robust objective at
+// each point the run kept.
+double LowestTracedCost(const SolverSummary& summary) {
+  double lowest = std::numeric_limits<double>::infinity();
+  for (const IterationRecord& record : summary.trace) lowest = std::min(lowest, record.cost);
+  return lowest;
+}
+
 // The objective the reweighting rounds approach, at radiosity B: α Σ A_i/Ā ρ(ΔE00_i²) +
 // (1 − α) Σ_pairs ρ(‖L_i r_i − L_j r_j‖²), L_i CIEDE2000's metric of patch i at B (scaled so that
 // ‖L_i r_i‖ = ΔE00_i). One function of B for every schedule of rounds (unlike the last round's
@@ -429,8 +437,7 @@ TEST(SolvePerceptual2000, EveryIterationKeepsItsBestPointNoWorseThanTheRounds) {
   // The trace's costs are the robust objective at every point the run kept.
   for (const auto& [run, result] :
        {std::pair{&summary, value}, std::pair{&tight_summary, fixed_value}}) {
-    double lowest = std::numeric_limits<double>::infinity();
-    for (const IterationRecord& record : run->trace) lowest = std::min(lowest, record.cost);
+    const double lowest = LowestTracedCost(*run);
     EXPECT_NEAR(result, lowest, 1e-9 * lowest) << run->BriefReport();
   }
   EXPECT_NE(tight_summary.termination, TerminationType::kMaxIterations)
@@ -573,8 +580,7 @@ TEST(SolvePerceptual2000, EveryIterationEndsOnARoomItWasNotTunedOn) {
   const CompensationSolution solution = Solve(options, problem, &summary);
   const double value = Ciede2000RobustObjective(options, problem, solution.radiosity);
   const double rounds_value = Ciede2000RobustObjective(options, problem, by_rounds.radiosity);
-  double lowest = std::numeric_limits<double>::infinity();
-  for (const IterationRecord& record : summary.trace) lowest = std::min(lowest, record.cost);
+  const double lowest = LowestTracedCost(summary);
   std::printf(
       "room.json, %d patches: every iteration %d iterations, %d CG, robust %.6g, ΔE00 %.4f "
       "(%s); rounds %d iterations, robust %.6g, ΔE00 %.4f\n",
