@@ -117,27 +117,42 @@ bool DecodeOscPacket(const uint8_t* data, size_t size, OscMessage* message, std:
     *why = "not an OSC message: its type tags do not count its arguments";
     return false;
   }
+  // liblo's argument pointers lie inside the datagram, at 4-byte offsets: an 8-byte value
+  // ('d', 'h') is read by bytes, never through lo_arg's (8-byte aligned) union.
+  const auto read = [&](int k, auto* value) {
+    std::memcpy(value, reinterpret_cast<const unsigned char*>(values[k]), sizeof(*value));
+  };
   for (int k = 0; k < count; ++k) {
     OscArgument argument;
     argument.type = message->types[k];
     switch (argument.type) {
-      case 'i':
-        argument.number = values[k]->i;
+      case 'i': {
+        int32_t value = 0;
+        read(k, &value);
+        argument.number = value;
         break;
-      case 'f':
-        argument.number = values[k]->f;
+      }
+      case 'f': {
+        float value = 0;
+        read(k, &value);
+        argument.number = value;
         break;
-      case 'd':
-        argument.number = values[k]->d;
+      }
+      case 'd': {
+        double value = 0;
+        read(k, &value);
+        argument.number = value;
         break;
-      case 'h':
-        argument.number = static_cast<double>(values[k]->h);
+      }
+      case 'h': {
+        int64_t value = 0;
+        read(k, &value);
+        argument.number = static_cast<double>(value);
         break;
+      }
       case 's':
-        argument.text = &values[k]->s;
-        break;
       case 'S':
-        argument.text = &values[k]->S;
+        argument.text = reinterpret_cast<const char*>(values[k]);
         break;
       default:
         break;  // the tag alone: the command's check refuses what it does not take
