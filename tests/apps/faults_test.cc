@@ -737,8 +737,8 @@ TEST_F(Faults, ASignalStopsPlayCleanly) {
   EXPECT_EQ(FilesUnder(out), std::set<std::string>{"result.json"});
 }
 
-// calibrate all stopped by SIGTERM during its first capture: exit kStoppedExitCode (not 0: the
-// rig is not made; not 1: nothing failed), one line saying where it stopped and how to resume,
+// calibrate all stopped by SIGTERM during its first capture: exit 0 (a clean stop; the rig is
+// not made, which rig.json's absence says), one line saying where it stopped and how to resume,
 // the capture's session records the stop, every file written reads whole. Run again, it resumes
 // the capture (its patterns kept) and ends with a whole rig.
 TEST_F(Faults, ASignalStopsCalibrateAllCleanlyAndItResumes) {
@@ -752,7 +752,7 @@ TEST_F(Faults, ASignalStopsCalibrateAllCleanlyAndItResumes) {
   const std::string output = Bytes(log);
   ASSERT_TRUE(run.running) << "calibrate all ended before the signal\n" << output;
   EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
-  EXPECT_EQ(run.exit_code, kStoppedExitCode) << output;
+  EXPECT_EQ(run.exit_code, 0) << output;
   EXPECT_EQ(LinesWith(output, "stopped by a signal"), 1) << output;
   EXPECT_EQ(LinesWith(output,
                       "procam: stopped: calibrate all: stopped by a signal in step 2/4, "
@@ -762,6 +762,7 @@ TEST_F(Faults, ASignalStopsCalibrateAllCleanlyAndItResumes) {
   EXPECT_EQ(LinesWith(output, "run the same command again to resume"), 1) << output;
   EXPECT_EQ(output.find("procam: error"), std::string::npos) << output;
   EXPECT_FALSE(fs::exists(rig / "captures" / "photometric_left")) << "a step begun after the stop";
+  EXPECT_FALSE(fs::exists(rig / "rig.json")) << "a stopped calibration reads as a rig";
   const nlohmann::json manifest = nlohmann::json::parse(Bytes(session / "session.json"));
   ASSERT_EQ(manifest.at("interruptions").size(), 1u) << manifest.dump();
   EXPECT_EQ(manifest.at("interruptions").at(0).at("reason"), "stopped by a signal");
@@ -799,7 +800,7 @@ TEST_F(Faults, ASignalDuringTheFitsStopsCalibrateAllBeforeTheNextStep) {
   const std::string output = Bytes(log);
   ASSERT_TRUE(run.running) << output;
   EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
-  EXPECT_EQ(run.exit_code, kStoppedExitCode) << output;
+  EXPECT_EQ(run.exit_code, 0) << output;
   EXPECT_EQ(LinesWith(output, "procam: stopped: calibrate all: stopped by a signal"), 1) << output;
   EXPECT_EQ(output.find("== 4/4"), std::string::npos) << output;
   EXPECT_EQ(output.find("procam: error"), std::string::npos) << output;
@@ -808,7 +809,7 @@ TEST_F(Faults, ASignalDuringTheFitsStopsCalibrateAllBeforeTheNextStep) {
 }
 
 // verify stopped by SIGTERM during its first photo: the photo in hand is finished, the model
-// update is not begun; exit kStoppedExitCode, one line, result.json complete false with
+// update is not begun; exit 0, one line, result.json complete false with
 // termination "stopped" and the one iteration. Run again, it resumes (the photo is kept) and
 // ends with the files of an uninterrupted run.
 TEST_F(Faults, ASignalStopsVerifyCleanlyAndItResumes) {
@@ -823,7 +824,7 @@ TEST_F(Faults, ASignalStopsVerifyCleanlyAndItResumes) {
   const std::string output = Bytes(log);
   ASSERT_TRUE(run.running) << output;
   EXPECT_TRUE(run.exited) << "died of signal " << run.died_of << "\n" << output;
-  EXPECT_EQ(run.exit_code, kStoppedExitCode) << output;
+  EXPECT_EQ(run.exit_code, 0) << output;
   EXPECT_EQ(LinesWith(output, "procam: stopped: verify: stopped by a signal"), 1) << output;
   EXPECT_EQ(LinesWith(output, "run the same command again to resume"), 1) << output;
   EXPECT_EQ(output.find("procam: error"), std::string::npos) << output;
