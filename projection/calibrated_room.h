@@ -19,10 +19,10 @@
 #include <vector>
 
 #include "base/progress.h"
-#include "calibration/rig_directory.h"
 #include "compensation/problem.h"
 #include "compensation/stage.h"
 #include "geometry/stage.h"
+#include "projection/rig_directory.h"
 
 namespace procam {
 class OptionTable;
