@@ -1,13 +1,13 @@
 // procam calibrate all --camera URI --scene SCENE --out RIG_DIR: a whole rig, end to end
-// (calibration/calibrate_all_stage.h), its options as CalibrateAllOptions declares them.
+// (pipeline/calibrate_all_stage.h), its options as CalibrateAllOptions declares them.
 #include <memory>
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
 #include "apps/stop_signals.h"
 #include "base/output_directory.h"
-#include "calibration/calibrate_all_stage.h"
 #include "capture/devices.h"
+#include "pipeline/calibrate_all_stage.h"
 
 namespace procam {
 

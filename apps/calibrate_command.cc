@@ -1,15 +1,15 @@
-// procam calibrate camera SESSION_DIR --out RIG_DIR (calibration/camera_stage.h), procam
-// calibrate board SESSION... --out RIG_DIR (calibration/board_stage.h) and procam calibrate
-// photometric SESSION_DIR --out RIG_DIR (calibration/photometric_stage.h): each stage's options
+// procam calibrate camera SESSION_DIR --out RIG_DIR (pipeline/camera_stage.h), procam
+// calibrate board SESSION... --out RIG_DIR (pipeline/board_stage.h) and procam calibrate
+// photometric SESSION_DIR --out RIG_DIR (pipeline/photometric_stage.h): each stage's options
 // as its option table declares them.
 #include <memory>
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
 #include "base/output_directory.h"
-#include "calibration/board_stage.h"
-#include "calibration/camera_stage.h"
-#include "calibration/photometric_stage.h"
+#include "pipeline/board_stage.h"
+#include "pipeline/camera_stage.h"
+#include "pipeline/photometric_stage.h"
 
 namespace procam {
 

@@ -1,6 +1,6 @@
 // procam calibrate projectors SESSION_DIR... --scene SCENE --out RIG_DIR, or without --scene
 // (the room scanned: --floor-chessboard PHOTO or --camera-height M)
-// (calibration/projectors_stage.h), its options as ProjectorsStageOptions declares them.
+// (pipeline/projectors_stage.h), its options as ProjectorsStageOptions declares them.
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -9,8 +9,8 @@
 #include "apps/commands.h"
 #include "base/io.h"
 #include "base/output_directory.h"
-#include "calibration/projectors_stage.h"
 #include "geometry/stage.h"
+#include "pipeline/projectors_stage.h"
 
 namespace procam {
 namespace {

@@ -1,12 +1,12 @@
 // procam calibrate response SESSION_DIR --out RIG_DIR: a camera's inverse response (camera
-// linearity) from one still pattern captured at several exposures (calibration/response_stage.h),
+// linearity) from one still pattern captured at several exposures (pipeline/response_stage.h),
 // its options as ResponseStageOptions declares them.
 #include <memory>
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
 #include "base/output_directory.h"
-#include "calibration/response_stage.h"
+#include "pipeline/response_stage.h"
 
 namespace procam {
 

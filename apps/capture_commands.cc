@@ -11,10 +11,10 @@
 #include "apps/stop_signals.h"
 #include "base/io.h"
 #include "base/output_directory.h"
-#include "calibration/capture_stage.h"
 #include "capture/camera.h"
 #include "capture/devices.h"
 #include "capture/simulated_camera.h"
+#include "pipeline/capture_stage.h"
 #include "procam/config.h"
 
 namespace procam {

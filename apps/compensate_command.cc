@@ -9,9 +9,9 @@
 #include "apps/command_line.h"
 #include "apps/commands.h"
 #include "base/output_directory.h"
-#include "calibration/calibrated_room.h"
 #include "compensation/stage.h"
 #include "geometry/stage.h"
+#include "projection/calibrated_room.h"
 
 namespace procam {
 

@@ -6,15 +6,7 @@
 
 #include "apps/command_line.h"
 #include "apps/commands.h"
-#include "calibration/board_stage.h"
-#include "calibration/calibrate_all_stage.h"
-#include "calibration/calibrated_room.h"
-#include "calibration/camera_stage.h"
 #include "calibration/capture_layout.h"
-#include "calibration/capture_stage.h"
-#include "calibration/photometric_stage.h"
-#include "calibration/projectors_stage.h"
-#include "calibration/response_stage.h"
 #include "compensation/stage.h"
 #include "datasets_synthetic/benchmarks.h"
 #include "datasets_synthetic/demo.h"
@@ -26,6 +18,14 @@
 #include "datasets_synthetic/scene_info.h"
 #include "nodes/node.h"
 #include "nodes/play.h"
+#include "pipeline/board_stage.h"
+#include "pipeline/calibrate_all_stage.h"
+#include "pipeline/camera_stage.h"
+#include "pipeline/capture_stage.h"
+#include "pipeline/photometric_stage.h"
+#include "pipeline/projectors_stage.h"
+#include "pipeline/response_stage.h"
+#include "projection/calibrated_room.h"
 #include "projection/show.h"
 #include "projection/stage.h"
 #include "verification/verification.h"
@@ -58,7 +58,7 @@ struct DeclaredOptions {
   DeclaredOptions() {
     Add<CompensationOptions>("The solve", "CompensationOptions (compensation/stage.h)",
                              "compensate");
-    Add<CalibratedRoomOptions>("The room", "CalibratedRoomOptions (calibration/calibrated_room.h)",
+    Add<CalibratedRoomOptions>("The room", "CalibratedRoomOptions (projection/calibrated_room.h)",
                                "compensate");
     Add<SolutionOutputOptions>("The solution written",
                                "SolutionOutputOptions (compensation/stage.h)", "compensate");
@@ -69,7 +69,7 @@ struct DeclaredOptions {
                              "(capture/sequencer.h)",
                              "verify");
     Add<ShowOptions>("Images on projector monitors", "ShowOptions (projection/show.h)", "show");
-    Add<CaptureStageOptions>("Captures", "CaptureStageOptions (calibration/capture_stage.h)",
+    Add<CaptureStageOptions>("Captures", "CaptureStageOptions (pipeline/capture_stage.h)",
                              "capture");
     Add<ImportOptions>("Photos of another tool imported",
                        "ImportOptions (calibration/capture_layout.h)", "import");
@@ -79,21 +79,21 @@ struct DeclaredOptions {
                               "decode");
     Add<PatternExportOptions>("Patterns for another program",
                               "PatternExportOptions (calibration/capture_layout.h)", "patterns");
-    Add<CameraStageOptions>("Camera intrinsics", "CameraStageOptions (calibration/camera_stage.h)",
+    Add<CameraStageOptions>("Camera intrinsics", "CameraStageOptions (pipeline/camera_stage.h)",
                             "calibrate camera");
     Add<ProjectorsStageOptions>("Projectors and registration",
-                                "ProjectorsStageOptions (calibration/projectors_stage.h)",
+                                "ProjectorsStageOptions (pipeline/projectors_stage.h)",
                                 "calibrate projectors");
     Add<PhotometricStageOptions>("Photometry",
-                                 "PhotometricStageOptions (calibration/photometric_stage.h)",
+                                 "PhotometricStageOptions (pipeline/photometric_stage.h)",
                                  "calibrate photometric");
     Add<BoardStageOptions>("Camera and projector on a chessboard",
-                           "BoardStageOptions (calibration/board_stage.h)", "calibrate board");
+                           "BoardStageOptions (pipeline/board_stage.h)", "calibrate board");
     Add<ResponseStageOptions>("Camera linearity",
-                              "ResponseStageOptions (calibration/response_stage.h)",
+                              "ResponseStageOptions (pipeline/response_stage.h)",
                               "calibrate response");
-    Add<CalibrateAllOptions>(
-        "A whole rig", "CalibrateAllOptions (calibration/calibrate_all_stage.h)", "calibrate all");
+    Add<CalibrateAllOptions>("A whole rig", "CalibrateAllOptions (pipeline/calibrate_all_stage.h)",
+                             "calibrate all");
     Add<NodeOptions>("A display node", "NodeOptions (nodes/node.h)", "node");
     Add<PlayOptions>("A show's remote control and playlist", "PlayOptions (nodes/play.h)", "play");
     Add<EmulatedRoomOptions>("The room as a device",

@@ -7,10 +7,10 @@
 #include "apps/commands.h"
 #include "base/io.h"
 #include "base/output_directory.h"
-#include "calibration/calibrated_room.h"
 #include "datasets_synthetic/benchmarks.h"
 #include "datasets_synthetic/play_benchmark.h"
 #include "procam/config.h"
+#include "projection/calibrated_room.h"
 #include "projection/show.h"
 #include "projection/stage.h"
 

@@ -1,7 +1,7 @@
 #pragma once
 // The radiosity of one projector's light at unit output, split into its direct and bounced parts
 // per patch: what the photometric calibration needs to turn a photographed flat field into the
-// projector's output and the room's reflectance (calibration/photometric_transfer.h).
+// projector's output and the room's reflectance (projection/photometric_transfer.h).
 
 #include <Eigen/Core>
 

@@ -1,5 +1,5 @@
 #pragma once
-// The reflectance map a projector's calibration measures (calibration/reflectance_map.h), made
+// The reflectance map a projector's calibration measures (projection/reflectance_map.h), made
 // from a scene's truth instead: for tests that need the map without calibration's errors.
 
 #include <opencv2/core.hpp>

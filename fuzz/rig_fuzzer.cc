@@ -1,6 +1,6 @@
-// ReadRigFile and ReadRigDirectory (calibration/rig_directory.h): a rig directory's rig.json.
-#include "calibration/rig_directory.h"
+// ReadRigFile and ReadRigDirectory (projection/rig_directory.h): a rig directory's rig.json.
 #include "fuzz/fuzz_input.h"
+#include "projection/rig_directory.h"
 
 namespace {
 // The files the seed rig.json names, so that fuzzed rigs get past the file checks.

@@ -9,13 +9,13 @@
 
 #include "base/io.h"
 #include "base/timing.h"
-#include "calibration/calibrated_room.h"
-#include "calibration/rig_directory.h"
 #include "geometry/patches.h"
 #include "geometry/stage.h"
 #include "nodes/messages.h"
 #include "nodes/transport.h"
+#include "projection/calibrated_room.h"
 #include "projection/projection_rig.h"
+#include "projection/rig_directory.h"
 
 namespace procam {
 namespace {

@@ -23,8 +23,6 @@
 #include "base/io.h"
 #include "base/stop.h"
 #include "base/timing.h"
-#include "calibration/calibrated_room.h"
-#include "calibration/rig_directory.h"
 #include "capture/camera.h"
 #include "compensation/problem.h"
 #include "compensation/stage.h"
@@ -33,8 +31,10 @@
 #include "geometry/stage.h"
 #include "nodes/osc_server.h"
 #include "nodes/playlist.h"
+#include "projection/calibrated_room.h"
 #include "projection/camera_rays.h"
 #include "projection/projection_rig.h"
+#include "projection/rig_directory.h"
 #include "projection/stage.h"
 
 namespace procam {

@@ -86,7 +86,7 @@ CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& leve
 
 // The predicted exitance of every camera pixel (CV_32FC3, working R, G, B, scene units; 0 where
 // the pixel sees nothing) for the images shown, by the model's split of the light at the point
-// x of patch i the pixel sees (calibration/photometric_transfer.h's transfer):
+// x of patch i the pixel sees (projection/photometric_transfer.h's transfer):
 //     x_p = ρ_i ⊙ (Σ_k G_k(x) · output_k(code_k) + (F B)_i),
 // code_k the code of the projector pixel that lights x, output_k the projector's photometry as
 // the model knows it, and B = K⁻¹(ρ ⊙ D) the radiosity of the direct irradiance D the shown

@@ -3,7 +3,7 @@
 // bookkeeping (projector_images.h): per patch, how many of each projector's pixels that light it
 // show each code, and the light of each code through the photometry's response. The response of
 // each projector and primary can be bent by an exponent (r(d) → r(d)^p), which is how the closed
-// loop fits a projector's response to photos (calibration/model_fit.h).
+// loop fits a projector's response to photos (verification/model_fit.h).
 
 #include <Eigen/Core>
 #include <array>

@@ -88,7 +88,7 @@ struct ProjectorMap {
   // lights; (0, 0) where patch is −1. Empty unless ProjectionRigOptions::texture_coordinates.
   std::vector<Eigen::Vector2f> uv;
   // Measured reflectance (linear R, G, B) of the point each pixel lights, row-major, from the
-  // rig's reflectance map (calibration/reflectance_map.h) through AttachReflectanceMaps; empty
+  // rig's reflectance map (projection/reflectance_map.h) through AttachReflectanceMaps; empty
   // unless attached. What RenderOptions::reflectance divides each pixel's light by.
   std::vector<Eigen::Vector3f> reflectance;
   double pixel_solid_angle = 0.0;  // Ω_k = 1 / axis pixel density (sr; flux per unit output, m²)

@@ -39,7 +39,7 @@ std::vector<std::pair<std::string, LightField>> LightFieldChoices();
 std::vector<std::pair<std::string, DitherMethod>> DitherChoices();
 
 struct ProjectionStageOptions {
-  // What `procam project` reads (ProjectSolution, calibration/calibrated_room.h): the solution
+  // What `procam project` reads (ProjectSolution, projection/calibrated_room.h): the solution
   // directory, the rig whose projectors show it (empty: the rig the solution was computed with,
   // else the scene's projectors) and the patch target compensate was given (0: the solution's).
   std::filesystem::path solution, rig;

@@ -1,4 +1,4 @@
-// procam.Room (a calibrated room, built once: calibration/calibrated_room.h), procam.compensate
+// procam.Room (a calibrated room, built once: projection/calibrated_room.h), procam.compensate
 // as `procam compensate` runs it, and the solution directory read and written by its owner.
 #include <pybind11/eigen.h>
 #include <pybind11/functional.h>
@@ -7,8 +7,8 @@
 
 #include <stdexcept>
 
-#include "calibration/calibrated_room.h"
 #include "compensation/stage.h"
+#include "projection/calibrated_room.h"
 #include "projection/projector_images.h"
 #include "python/bindings.h"
 

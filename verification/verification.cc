@@ -16,10 +16,7 @@
 #include "base/parse.h"
 #include "base/stop.h"
 #include "base/timing.h"
-#include "calibration/calibrated_room.h"
 #include "calibration/camera_response.h"
-#include "calibration/model_fit.h"
-#include "calibration/rig_directory.h"
 #include "capture/camera.h"
 #include "capture/patterns.h"
 #include "capture/pixel_format.h"
@@ -29,10 +26,13 @@
 #include "compensation/problem.h"
 #include "compensation/stage.h"
 #include "geometry/stage.h"
+#include "projection/calibrated_room.h"
 #include "projection/camera_rays.h"
 #include "projection/projection_rig.h"
 #include "projection/projector_images.h"
+#include "projection/rig_directory.h"
 #include "projection/stage.h"
+#include "verification/model_fit.h"
 
 namespace procam {
 namespace {
@@ -747,7 +747,7 @@ class VerificationLoop {
   // Shows the current solution, photographs it, compares; writes the iteration's files. Throws
   // PhotoFault on a camera or projector fault (the caller keeps what was done).
   VerificationIteration Photograph(int k, nlohmann::json* json);
-  // Fits the model to the iteration's photo and solves again (calibration/model_fit.h).
+  // Fits the model to the iteration's photo and solves again (verification/model_fit.h).
   void UpdateAndSolve(VerificationIteration* it);
 
  private:

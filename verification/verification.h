@@ -11,7 +11,7 @@
 // per-channel scale k); and the photo is compared in CIE L*a*b* (the problem's T and white)
 // with the predicted appearance and with the desired appearance: ΔE76 and CIEDE2000 per pixel
 // and per patch. Predicted per patch: the solution's radiosity B. Predicted per pixel: the
-// light at the point x of patch i the pixel sees, split as calibration/photometric_transfer.h's
+// light at the point x of patch i the pixel sees, split as projection/photometric_transfer.h's
 // transfer splits it (PredictPixels, projection/camera_rays.h),
 //     x_p = ρ_i ⊙ (Σ_k G_k(x) · output_k(code_k(x)) + (F B')_i),
 // the direct light of every projector k that lights x (geometric gain G_k, the code its image
@@ -20,7 +20,7 @@
 // shown deliver to each patch.
 //
 // The closed loop updates the model from measured minus predicted and solves again:
-//   1. projector response and 2. reflectance, fitted to the photo (calibration/model_fit.h);
+//   1. projector response and 2. reflectance, fitted to the photo (verification/model_fit.h);
 //   3. RunCompensation with the updated model (method, alpha and multires of the solution).
 // It stops when the measured mean ΔE76 (photo vs desired, per pixel) improves by less than
 // `min_improvement`, or after `iterations` photos, and keeps the best iteration (the lowest
@@ -101,7 +101,8 @@ struct VerificationOptions {
   // with the point's reflectance (CalibratedRoomOptions::reflectance_maps); false: per patch.
   bool reflectance_maps = true;
   // With reflectance maps in use: refit them per projector pixel from each photo against its
-  // per-pixel prediction (FitReflectanceMaps, calibration/model_fit.h), after the per-patch update.
+  // per-pixel prediction (FitReflectanceMaps, verification/model_fit.h), after the per-patch
+  // update.
   bool fit_reflectance_map = true;
   ProgressCallback progress;      // a line per stage and iteration (ΔE, the model update)
   // Set (by a signal handler) to stop cleanly: the photo in hand is finished (its session

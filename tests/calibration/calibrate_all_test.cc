@@ -4,32 +4,30 @@
 // the simulated rig's ground truth.
 #include <gtest/gtest.h>
 
-#include <cstring>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
-#include <optional>
-
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 
 #include "base/camera_model.h"
 #include "base/image_io.h"
 #include "base/io.h"
 #include "calibration/floor_chessboard.h"
-#include "calibration/projectors_stage.h"
-#include "calibration/rig_directory.h"
-#include "datasets_synthetic/chessboard_views.h"
-#include "geometry/scene.h"
 #include "calibration/registration.h"
 #include "capture/simulated_camera.h"
-#include "datasets_synthetic/synthetic_camera.h"
+#include "datasets_synthetic/chessboard_views.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/scan_accuracy.h"
 #include "datasets_synthetic/simulated_rig.h"
+#include "datasets_synthetic/synthetic_camera.h"
+#include "geometry/scene.h"
+#include "pipeline/projectors_stage.h"
+#include "projection/rig_directory.h"
 #include "tests/testing/testing.h"
 
 namespace procam {

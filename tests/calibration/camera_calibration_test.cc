@@ -2,25 +2,24 @@
 // noise) and chessboard images rendered through the lens (supersampled, with image noise),
 // detected by OpenCV and refined by mrcal. Truth: an OpenCV4 lens of 640×480 pixels.
 #include "calibration/camera_calibration.h"
-#include "calibration/camera_report.h"
-#include "calibration/camera_stage.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdio>
-#include <random>
-
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <random>
 
-#include "datasets_synthetic/chessboard_views.h"
-#include "projection/projector.h"
-#include "tests/calibration/chessboard_fixture.h"
 #include "base/html_report.h"
 #include "base/io.h"
+#include "calibration/camera_report.h"
+#include "datasets_synthetic/chessboard_views.h"
+#include "pipeline/camera_stage.h"
+#include "projection/projector.h"
+#include "tests/calibration/chessboard_fixture.h"
 #include "tests/testing/testing.h"
 
 namespace procam {

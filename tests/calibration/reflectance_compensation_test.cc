@@ -17,18 +17,18 @@
 
 #include "base/io.h"
 #include "base/json_fields.h"
-#include "calibration/calibrated_room.h"
-#include "calibration/model_fit.h"
-#include "calibration/reflectance_map.h"
 #include "compensation/colour.h"
 #include "compensation/solver.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "datasets_synthetic/true_reflectance.h"
 #include "geometry/ray_scene.h"
+#include "projection/calibrated_room.h"
 #include "projection/camera_rays.h"
 #include "projection/projector_images.h"
+#include "projection/reflectance_map.h"
 #include "tests/testing/testing.h"
+#include "verification/model_fit.h"
 
 namespace procam {
 namespace {

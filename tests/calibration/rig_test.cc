@@ -1,6 +1,6 @@
 // The rig directory as compensate and project consume it (--rig), and photometry in the
-// scene's units (calibration/photometric_transfer.h, `calibrate photometric --scene`), against the synthetic
-// tiny box's ground truth:
+// scene's units (projection/photometric_transfer.h, `calibrate photometric --scene`), against the
+// synthetic tiny box's ground truth:
 //   - closed loop: a rig directory written from the scene's TRUE projectors gives the same
 //     compensation and projector images as the scene's own projectors;
 //   - bad rig.json: one line naming RIG_DIR/rig.json and the key, exit 1, nothing written;
@@ -21,16 +21,16 @@
 #include "base/io.h"
 #include "base/json_fields.h"
 #include "calibration/photometric.h"
-#include "calibration/photometric_transfer.h"
-#include "calibration/reflectance_map.h"
-#include "calibration/rig_directory.h"
 #include "compensation/unit_light.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "datasets_synthetic/synthetic_camera.h"
 #include "geometry/form_factors.h"
 #include "projection/camera_rays.h"
+#include "projection/photometric_transfer.h"
 #include "projection/projection_rig.h"
+#include "projection/reflectance_map.h"
+#include "projection/rig_directory.h"
 #include "tests/testing/testing.h"
 
 namespace procam {

@@ -24,8 +24,6 @@
 #include "base/html_report.h"
 #include "base/io.h"
 #include "base/json_fields.h"
-#include "calibration/reflectance_map.h"
-#include "calibration/rig_directory.h"
 #include "capture/camera.h"
 #include "capture/display.h"
 #include "capture/session.h"
@@ -35,6 +33,8 @@
 #include "datasets_synthetic/true_reflectance.h"
 #include "geometry/patches.h"
 #include "projection/projector.h"
+#include "projection/reflectance_map.h"
+#include "projection/rig_directory.h"
 #include "tests/testing/testing.h"
 #include "verification/verification.h"
 

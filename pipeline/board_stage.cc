@@ -1,4 +1,4 @@
-#include "calibration/board_stage.h"
+#include "pipeline/board_stage.h"
 
 #include <fmt/format.h>
 
@@ -15,9 +15,9 @@
 #include "base/io.h"
 #include "calibration/camera_report.h"
 #include "calibration/capture_layout.h"
-#include "calibration/projectors_stage.h"
-#include "calibration/rig_directory.h"
 #include "capture/session.h"
+#include "pipeline/projectors_stage.h"
+#include "projection/rig_directory.h"
 
 namespace procam {
 
@@ -156,18 +156,16 @@ void WriteBoardReport(const std::filesystem::path& path, const std::string& name
                  0, cv::INTER_AREA);
       return small;
     };
-    report.Figures(
-        {{fmt::format("camera ({}×{}): centre {:.3f} px", calibration.camera_width,
-                      calibration.camera_height, stage.camera_uncertainty.centre),
-          shrink(DrawProjectionUncertainty(stage.camera_uncertainty, calibration.camera_width,
-                                           calibration.camera_height, 1, full_scale,
-                                           camera_corners))},
-         {fmt::format("{} ({}×{}): centre {:.3f} px", name, calibration.projector_width,
-                      calibration.projector_height, stage.projector_uncertainty.centre),
-          shrink(DrawProjectionUncertainty(stage.projector_uncertainty,
-                                           calibration.projector_width,
-                                           calibration.projector_height, 1, full_scale,
-                                           projector_corners))}});
+    report.Figures({{fmt::format("camera ({}×{}): centre {:.3f} px", calibration.camera_width,
+                                 calibration.camera_height, stage.camera_uncertainty.centre),
+                     shrink(DrawProjectionUncertainty(
+                         stage.camera_uncertainty, calibration.camera_width,
+                         calibration.camera_height, 1, full_scale, camera_corners))},
+                    {fmt::format("{} ({}×{}): centre {:.3f} px", name, calibration.projector_width,
+                                 calibration.projector_height, stage.projector_uncertainty.centre),
+                     shrink(DrawProjectionUncertainty(
+                         stage.projector_uncertainty, calibration.projector_width,
+                         calibration.projector_height, 1, full_scale, projector_corners))}});
   } else {
     report.Paragraph("Not computed: " + stage.uncertainty_error);
   }
@@ -259,7 +257,8 @@ BoardStageSummary RunBoardStage(const BoardStageOptions& args) {
   const BoardProjectorCalibration& calibration = stage.calibration;
   WriteCameraModelFile(out / "camera.cameramodel", calibration.CameraModelOut(),
                        "procam camera model (procam calibrate board; mrcal_optimize with the "
-                       "projector " + args.projector + "); the camera is the reference frame");
+                       "projector " +
+                           args.projector + "); the camera is the reference frame");
   const std::filesystem::path projector_path = out / (args.projector + ".cameramodel");
   WriteCameraModelFile(projector_path, calibration.ProjectorModelOut(),
                        "procam projector model (procam calibrate board; mrcal_optimize, camera 1 "
@@ -269,9 +268,10 @@ BoardStageSummary RunBoardStage(const BoardStageOptions& args) {
   result["lens_model"] = calibration.lens_model;
   result["camera"] = {{"intrinsics", calibration.camera_intrinsics},
                       {"imagersize", {calibration.camera_width, calibration.camera_height}}};
-  result["projector"] = {{"intrinsics", calibration.projector_intrinsics},
-                         {"imagersize", {calibration.projector_width, calibration.projector_height}},
-                         {"model", projector_path.filename().string()}};
+  result["projector"] = {
+      {"intrinsics", calibration.projector_intrinsics},
+      {"imagersize", {calibration.projector_width, calibration.projector_height}},
+      {"model", projector_path.filename().string()}};
   const std::array<double, 6> rt = RtFromPose(calibration.projector_from_camera);
   result["rt_projector_camera"] = rt;
   result["board"] = {{"corners_x", args.board.corners_x},

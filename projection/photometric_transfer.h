@@ -23,10 +23,9 @@
 // reflectances found afterwards are relative to that scale (their area-weighted mean follows
 // the nominal one).
 
-#include <vector>
-
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "compensation/unit_light.h"
 #include "geometry/patches.h"
@@ -45,7 +44,7 @@ struct ReflectanceEstimate {
   std::vector<int> pixels;       // camera pixels used per patch
   int patches_seen = 0;          // with at least min_pixels pixels
   // (n,3) the bounce irradiance H = F·B the estimate divided by (per unit of `output`'s field,
-  // scene units), for the per-pixel reflectance map (calibration/reflectance_map.h).
+  // scene units), for the per-pixel reflectance map (projection/reflectance_map.h).
   Eigen::MatrixX3d bounce_irradiance;
 };
 

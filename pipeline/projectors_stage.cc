@@ -1,4 +1,4 @@
-#include "calibration/projectors_stage.h"
+#include "pipeline/projectors_stage.h"
 
 #include <fmt/format.h>
 
@@ -18,11 +18,11 @@
 #include "calibration/camera_report.h"
 #include "calibration/capture_layout.h"
 #include "calibration/floor_chessboard.h"
-#include "calibration/rig_directory.h"
 #include "calibration/structured_light.h"
 #include "capture/session.h"
 #include "geometry/stage.h"
 #include "projection/projector.h"
+#include "projection/rig_directory.h"
 
 namespace procam {
 namespace {
@@ -44,7 +44,6 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
                             const Eigen::Isometry3d& guess, const std::string& guess_source,
                             const Scene& scene, const RoomCalibrationProblem& problem,
                             const ProjectorsStageSummary& stage, const ScanCheck& check);
-
 
 // Decoded correspondences of one structured-light session.
 ProjectorObservations ReadSession(const std::filesystem::path& directory, int camera_width,
@@ -84,8 +83,8 @@ ProjectorObservations ReadSession(const std::filesystem::path& directory, int ca
                      "(refused on some axis: {} shadowed, {} ambiguous, {} weak phase, {} out of "
                      "range)",
                      directory.string(), layout.width, layout.height, out.camera_pixels.size(),
-                     out.one_axis_camera_pixels.size(), map.shadowed, map.ambiguous,
-                     map.weak_phase, map.out_of_range));
+                     out.one_axis_camera_pixels.size(), map.shadowed, map.ambiguous, map.weak_phase,
+                     map.out_of_range));
   return out;
 }
 
@@ -115,7 +114,7 @@ RoomCalibrationProblem ReadProblem(const ProjectorsStageOptions& args, const Cam
 }
 
 ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const CameraModel& camera,
-                                 const RoomCalibrationProblem& problem);
+                                const RoomCalibrationProblem& problem);
 
 // The held lenses' files (options.held_lenses), read and checked before any session is decoded:
 // projector name → its lens. Throws IoError naming the file.
@@ -217,9 +216,10 @@ bool ChessboardLensPrior(const std::filesystem::path& rig_dir, const CameraModel
   } catch (const std::exception& error) {
     throw IoError(file + ": camera.intrinsics_covariance: " + error.what());
   }
-  Report(progress, required ? "camera lens: the chessboard's, refined by the scan with it as the prior"
-                            : "camera lens: held; its chessboard covariance goes into the "
-                              "projectors' uncertainty");
+  Report(progress, required
+                       ? "camera lens: the chessboard's, refined by the scan with it as the prior"
+                       : "camera lens: held; its chessboard covariance goes into the "
+                         "projectors' uncertainty");
   return true;
 }
 
@@ -466,7 +466,6 @@ ScanCheck CheckAgainstScan(const RoomCalibrationProblem& problem,
   return check;
 }
 
-
 nlohmann::json PoseJson(const Eigen::Isometry3d& pose) {
   nlohmann::json matrix = nlohmann::json::array();
   for (int r = 0; r < 4; ++r) matrix.push_back({pose(r, 0), pose(r, 1), pose(r, 2), pose(r, 3)});
@@ -668,14 +667,14 @@ void WriteDeviceModels(const std::filesystem::path& out, const CameraModel& came
     // the uncertainty of a lens that is not the one written.
     camera_out.optimization_inputs.clear();
   }
-  WriteCameraModelFile(out / "camera.cameramodel", camera_out,
-                       (refined_camera
-                            ? "procam camera model (procam calibrate camera; the lens refined "
-                              "and the pose by procam calibrate projectors: --refine-camera, or "
-                              "the scan); extrinsics = rt_cam_room, the room = "
-                            : "procam camera model (procam calibrate camera; pose by procam "
-                              "calibrate projectors); extrinsics = rt_cam_room, the room = ") +
-                           room);
+  WriteCameraModelFile(
+      out / "camera.cameramodel", camera_out,
+      (refined_camera ? "procam camera model (procam calibrate camera; the lens refined "
+                        "and the pose by procam calibrate projectors: --refine-camera, or "
+                        "the scan); extrinsics = rt_cam_room, the room = "
+                      : "procam camera model (procam calibrate camera; pose by procam "
+                        "calibrate projectors); extrinsics = rt_cam_room, the room = ") +
+          room);
   UpdateRigFile(out, [&](RigFile& rig) {
     rig.camera.model = "camera.cameramodel";
     // Projectors of an earlier calibration that this one does not name are dropped: their
@@ -710,14 +709,13 @@ void WriteProjectorsOutputs(const ProjectorsStageOptions& args, const CameraMode
   for (const RoomProjector& projector : calibration.projectors) names.push_back(projector.name);
   WriteProjectorsReport(out / "projectors_report.html", names, problem, stage.summary);
   Report(args.progress,
-         fmt::format("wrote {} projector models, camera.cameramodel (pose in the room{}), rig.json, "
-                     "result.json and projectors_report.html (where each projector's calibration "
-                     "is sure) in {}",
-                     calibration.projectors.size(),
-                     args.options.refine_camera_intrinsics ? ", refined intrinsics" : "",
-                     out.string()));
+         fmt::format(
+             "wrote {} projector models, camera.cameramodel (pose in the room{}), rig.json, "
+             "result.json and projectors_report.html (where each projector's calibration "
+             "is sure) in {}",
+             calibration.projectors.size(),
+             args.options.refine_camera_intrinsics ? ", refined intrinsics" : "", out.string()));
 }
-
 
 // The metric scale of a scan: measured from the floor chessboard, else given.
 // The camera's height above the floor, from the floor chessboard (its plane's normal in the
@@ -774,14 +772,15 @@ nlohmann::json SelfCalibrationJson(const ProjectorsStageSummary& stage) {
   }
   nlohmann::json lens;
   if (summary.camera_lens_refined) {
-    lens = {{"refined", true},
-            {"after", stage.calibration.camera_intrinsics},
-            {"moved", summary.camera_lens_moved},
-            {"moved_chessboard_sigmas", summary.camera_lens_moved_sigmas},
-            {"what",
-             "the camera's lens refined in the bundle adjustment with the chessboard's (result.json "
-             "camera.intrinsics, camera.intrinsics_covariance) as a Gaussian prior; moved = after "
-             "minus the chessboard's, mrcal order"}};
+    lens = {
+        {"refined", true},
+        {"after", stage.calibration.camera_intrinsics},
+        {"moved", summary.camera_lens_moved},
+        {"moved_chessboard_sigmas", summary.camera_lens_moved_sigmas},
+        {"what",
+         "the camera's lens refined in the bundle adjustment with the chessboard's (result.json "
+         "camera.intrinsics, camera.intrinsics_covariance) as a Gaussian prior; moved = after "
+         "minus the chessboard's, mrcal order"}};
   } else {
     lens = {{"refined", false}, {"what", "held as camera.cameramodel has it"}};
   }
@@ -796,7 +795,7 @@ nlohmann::json SelfCalibrationJson(const ProjectorsStageSummary& stage) {
 }
 
 ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const CameraModel& camera,
-                                 const RoomCalibrationProblem& problem) {
+                                const RoomCalibrationProblem& problem) {
   const std::filesystem::path& out = args.out;
   nlohmann::json scale_json;
   SelfCalibrationOptions options = args.self_calibration;
@@ -860,7 +859,8 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
                      lattice > 1 ? fmt::format(" (every {}th row and column)", lattice) : ""));
   SceneFromPointsOptions scan = args.scan;
   scan.viewpoint = stage.calibration.room_from_camera.translation();
-  scan.points_on_viewpoint_rays = true;  // each point on its camera pixel's ray (FusePerCameraPixel)
+  scan.points_on_viewpoint_rays =
+      true;  // each point on its camera pixel's ray (FusePerCameraPixel)
   // Curved parts are meshed at SceneFromPoints' fine spacing and then coarsened within its
   // tolerance and to at most target_patches triangles: meshing a coarser grid of points lets
   // advancing front bridge a concave wall (blue_curves' curved wall: +68% area, 0.6 m RMS).
@@ -902,20 +902,19 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
       {"ray_gap", StatsJson(gap)}};
   nlohmann::json sessions = nlohmann::json::array();
   for (const std::filesystem::path& session : args.sessions) sessions.push_back(session.string());
-  const nlohmann::json result_section = {{"sessions", sessions},
-                                         {"scene", "room.json (scanned)"},
-                                         {"registration", registration_json},
-                                         {"scan",
-                                          {{"points", stage.scanned->points},
-                                           {"one_axis_pixels", one_axis_pixels},
-                                           {"unassigned", stage.scanned->unassigned},
-                                           {"largest_left_out_m2",
-                                            stage.scanned->left_out.empty()
-                                                ? 0.0
-                                                : stage.scanned->left_out.front().area_m2},
-                                           {"time_s", stage.scanned->time_s},
-                                           {"surfaces", surfaces}}},
-                                         {"projectors", ProjectorsJson(stage.calibration)}};
+  const nlohmann::json result_section = {
+      {"sessions", sessions},
+      {"scene", "room.json (scanned)"},
+      {"registration", registration_json},
+      {"scan",
+       {{"points", stage.scanned->points},
+        {"one_axis_pixels", one_axis_pixels},
+        {"unassigned", stage.scanned->unassigned},
+        {"largest_left_out_m2",
+         stage.scanned->left_out.empty() ? 0.0 : stage.scanned->left_out.front().area_m2},
+        {"time_s", stage.scanned->time_s},
+        {"surfaces", surfaces}}},
+      {"projectors", ProjectorsJson(stage.calibration)}};
   ReadRigFile(out);  // a malformed rig.json stops here, before anything is written
   stage.room = WriteScannedScene(out, *stage.scanned);
   if (summary.camera_lens_refined) {
@@ -929,7 +928,8 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
   WriteDeviceModels(out, camera, stage.calibration, summary.camera_lens_refined,
                     "the scanned room's frame (room.json)", registration_json, result_section);
   std::vector<std::string> names;
-  for (const RoomProjector& projector : stage.calibration.projectors) names.push_back(projector.name);
+  for (const RoomProjector& projector : stage.calibration.projectors)
+    names.push_back(projector.name);
   WriteProjectorsReport(out / "projectors_report.html", names, problem, *stage.self_calibration);
   Report(args.progress,
          fmt::format("wrote {} ({} surfaces), {} projector models, camera.cameramodel (pose in "

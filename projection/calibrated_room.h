@@ -8,9 +8,9 @@
 // scene's, the rig's reflectance against the patches, a camera where one is needed) are made
 // here, each with one wording.
 //
-// It lives in calibration/ because the rig directory does (rig_directory.h): it combines
-// geometry/, compensation/ and projection/ with the rig, and is used by nodes/, verification/,
-// datasets_synthetic/ and apps/, all above calibration/ (docs/architecture.md).
+// It lives in projection/, with the rig directory (rig_directory.h): it combines geometry/ and
+// compensation/ with the rig's projectors, and is used by nodes/, verification/,
+// datasets_synthetic/ and apps/, all above projection/ (docs/architecture.md).
 
 #include <Eigen/Core>
 #include <filesystem>
@@ -19,10 +19,10 @@
 #include <vector>
 
 #include "base/progress.h"
-#include "calibration/rig_directory.h"
 #include "compensation/problem.h"
 #include "compensation/stage.h"
 #include "geometry/stage.h"
+#include "projection/rig_directory.h"
 
 namespace procam {
 class OptionTable;

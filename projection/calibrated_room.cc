@@ -1,4 +1,4 @@
-#include "calibration/calibrated_room.h"
+#include "projection/calibrated_room.h"
 
 #include <fmt/format.h>
 
@@ -8,7 +8,7 @@
 #include "base/io.h"
 #include "base/option_table.h"
 #include "base/timing.h"
-#include "calibration/reflectance_map.h"
+#include "projection/reflectance_map.h"
 #include "projection/stage.h"
 
 namespace procam {
@@ -190,8 +190,8 @@ CalibratedRoom BuildCalibratedRoom(const CalibratedRoomOptions& options, RoomSou
     }
   }
   if (options.problem) {
-    room.problem = MakeProblem(room.geometry.scene, room.fine(), room.geometry.form_factors,
-                               options.alpha);
+    room.problem =
+        MakeProblem(room.geometry.scene, room.fine(), room.geometry.form_factors, options.alpha);
     if (room.projection.size() > 0) {
       room.problem.lower = room.projection.lower;
       room.problem.upper = room.projection.upper;
@@ -200,10 +200,9 @@ CalibratedRoom BuildCalibratedRoom(const CalibratedRoomOptions& options, RoomSou
   if (options.camera_rays || options.camera_lighting) {
     Report(options.progress, fmt::format("room: casting the camera's {}x{} rays",
                                          room.camera.width(), room.camera.height()));
-    room.camera_rays =
-        CastCameraPixels(room.geometry.scene, room.fine(),
-                         options.camera_lighting ? room.projectors : std::vector<Projector>(),
-                         room.camera);
+    room.camera_rays = CastCameraPixels(
+        room.geometry.scene, room.fine(),
+        options.camera_lighting ? room.projectors : std::vector<Projector>(), room.camera);
   }
   return room;
 }

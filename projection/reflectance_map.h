@@ -36,11 +36,11 @@
 #include <string>
 #include <vector>
 
-#include "calibration/photometric_transfer.h"
-#include "calibration/rig_directory.h"
 #include "geometry/patches.h"
 #include "projection/camera_rays.h"
+#include "projection/photometric_transfer.h"
 #include "projection/projector.h"
+#include "projection/rig_directory.h"
 
 namespace procam {
 

@@ -1,4 +1,4 @@
-#include "calibration/photometric_transfer.h"
+#include "projection/photometric_transfer.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>

@@ -1,8 +1,8 @@
-// Each projector pixel's reflectance measured from flat fields (calibration/reflectance_map.h),
+// Each projector pixel's reflectance measured from flat fields (projection/reflectance_map.h),
 // against the simulated world's truth: the tiny box with a poster printed on its back wall and
 // paint varying ±5% (SimulatedRigOptions::albedo_variation 0.05), photographed by the simulated
 // camera with its shot and read noise.
-#include "calibration/reflectance_map.h"
+#include "projection/reflectance_map.h"
 
 #include <gtest/gtest.h>
 
@@ -12,15 +12,15 @@
 #include <opencv2/imgproc.hpp>
 
 #include "base/io.h"
-#include "calibration/photometric_transfer.h"
-#include "calibration/rig_directory.h"
 #include "compensation/unit_light.h"
 #include "datasets_synthetic/paper_scenes.h"
 #include "datasets_synthetic/simulated_rig.h"
 #include "geometry/form_factors.h"
 #include "geometry/ray_scene.h"
 #include "projection/camera_rays.h"
+#include "projection/photometric_transfer.h"
 #include "projection/projection_rig.h"
+#include "projection/rig_directory.h"
 #include "tests/testing/testing.h"
 
 namespace procam {

@@ -1,4 +1,4 @@
-#include "calibration/calibrate_all_stage.h"
+#include "pipeline/calibrate_all_stage.h"
 
 #include <fmt/format.h>
 
@@ -14,19 +14,19 @@
 #include "base/io.h"
 #include "base/json_fields.h"
 #include "base/stop.h"
-#include "calibration/camera_stage.h"
-#include "calibration/capture_stage.h"
-#include "calibration/photometric_stage.h"
-#include "calibration/photometric_transfer.h"
-#include "calibration/projectors_stage.h"
-#include "calibration/rig_directory.h"
 #include "capture/session.h"
 #include "capture/simulated_camera.h"
 #include "compensation/unit_light.h"
 #include "geometry/patches.h"
 #include "geometry/stage.h"
+#include "pipeline/camera_stage.h"
+#include "pipeline/capture_stage.h"
+#include "pipeline/photometric_stage.h"
+#include "pipeline/projectors_stage.h"
 #include "projection/camera_rays.h"
+#include "projection/photometric_transfer.h"
 #include "projection/projection_rig.h"
+#include "projection/rig_directory.h"
 
 namespace procam {
 namespace {
@@ -339,8 +339,8 @@ void ReflectanceIntoScannedRoom(const std::filesystem::path& out, const std::str
   const PatchLevel& fine = hierarchy.fine;
   if (fine.size() != rig.reflectance.rows())
     throw IoError(fmt::format("{}: {} rows, but {} subdivides into {} patches",
-                              (out / "reflectance.npy").string(), rig.reflectance.rows(),
-                              room_path, fine.size()));
+                              (out / "reflectance.npy").string(), rig.reflectance.rows(), room_path,
+                              fine.size()));
   const Eigen::VectorXd area = fine.Areas();
   const size_t surfaces = scene.surfaces.size();
   std::vector<Vec3> sum(surfaces, Vec3::Zero());
@@ -452,10 +452,11 @@ void SeparateProjectorBlacks(const std::filesystem::path& out,
       report[names[j]] = {{"fitted_black", JsonTriple(fitted_black)},
                           {"black", JsonTriple(new_black)},
                           {"max", JsonTriple(new_max)}};
-      Report(progress,
-             fmt::format("{}: black ({:.5f}, {:.5f}, {:.5f}) (fitted alone: {:.5f}, {:.5f}, {:.5f})",
-                         names[j], new_black[0], new_black[1], new_black[2], fitted_black[0],
-                         fitted_black[1], fitted_black[2]));
+      Report(
+          progress,
+          fmt::format("{}: black ({:.5f}, {:.5f}, {:.5f}) (fitted alone: {:.5f}, {:.5f}, {:.5f})",
+                      names[j], new_black[0], new_black[1], new_black[2], fitted_black[0],
+                      fitted_black[1], fitted_black[2]));
       entry.black = new_black;
       entry.max = new_max;
     }

@@ -64,8 +64,8 @@ struct CalibrateAllOptions {
   std::string camera_guess;
   // Camera value per unit exitance (a number or "R,G,B"); empty: a simulated camera's own.
   std::string camera_scale;
-  int frames = 4;                    // averaged per pattern
-  double settle_ms = 150.0;          // wait after each pattern ...
+  int frames = 4;            // averaged per pattern
+  double settle_ms = 150.0;  // wait after each pattern ...
   // ... unless measured (the default): the display-to-camera latency of each projector, measured
   // before its structured light (capture/latency.h), sets the settle time of its captures.
   bool measure_settle = true;

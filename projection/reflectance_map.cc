@@ -1,4 +1,4 @@
-#include "calibration/reflectance_map.h"
+#include "projection/reflectance_map.h"
 
 #include <algorithm>
 #include <cmath>

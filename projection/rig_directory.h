@@ -53,9 +53,9 @@ struct RigProjector {
 
 // rig.json's photometric.NAME: how a projector's photometry was measured.
 struct RigPhotometry {
-  std::string units;    // "scene" or "camera"
-  std::string session;  // the capture session it was fitted on
-  std::string scene;    // the scene file, for units "scene"
+  std::string units;                            // "scene" or "camera"
+  std::string session;                          // the capture session it was fitted on
+  std::string scene;                            // the scene file, for units "scene"
   std::optional<Eigen::Vector3d> camera_scale;  // camera value per unit exitance (units "scene")
   double camera_black = 0.0;
 };
@@ -69,7 +69,7 @@ struct RigReflectance {
 };
 
 // rig.json's reflectance_maps.NAME: projector NAME's per-pixel reflectance, measured by
-// calibrate photometric --scene (calibration/reflectance_map.h, which owns the file).
+// calibrate photometric --scene (projection/reflectance_map.h, which owns the file).
 struct RigReflectanceMap {
   std::string file;           // 16-bit PNG, relative to the rig directory
   int width = 0, height = 0;  // the projector's image size
@@ -106,7 +106,8 @@ void WriteRigFile(const std::filesystem::path& rig_dir, const RigFile& rig);
 // Several commands each fill their part of rig.json (calibrate camera, projectors, photometric,
 // response): reads it (or an empty one), lets `update` change it, writes it back. Nothing is
 // written when `update` throws.
-void UpdateRigFile(const std::filesystem::path& rig_dir, const std::function<void(RigFile&)>& update);
+void UpdateRigFile(const std::filesystem::path& rig_dir,
+                   const std::function<void(RigFile&)>& update);
 
 // RIG_DIR/result.json gathers what every calibrate command reports, one section each
 // ("camera", "projectors", "photometric" → {NAME: ...}, "response"), so that one command never
@@ -171,7 +172,7 @@ void ApplyRigReflectance(const RigDirectory& rig, PatchHierarchy* patches);
 // when given, else the rig the solution was computed with (its result.json "rig"), else the
 // scene's own projectors (rig_description null). A rig's per-patch reflectance replaces the
 // patches' (ApplyRigReflectance), and its per-pixel reflectance maps, where every projector has
-// one, are read (ReadRigReflectanceMaps, calibration/reflectance_map.h). Throws IoError like
+// one, are read (ReadRigReflectanceMaps, projection/reflectance_map.h). Throws IoError like
 // ReadRigDirectory, ReadProjectors and ReadRigReflectanceMaps.
 struct SolutionProjectors {
   std::vector<Projector> projectors;
@@ -179,7 +180,8 @@ struct SolutionProjectors {
   // One per projector (CV_32FC3 linear R, G, B, for AttachReflectanceMaps), or none.
   std::vector<cv::Mat> reflectance_maps;
 };
-SolutionProjectors ProjectorsForSolution(const SolutionDirectory& solution, const std::filesystem::path& rig_dir,
-                                         const Scene& scene, PatchHierarchy* patches);
+SolutionProjectors ProjectorsForSolution(const SolutionDirectory& solution,
+                                         const std::filesystem::path& rig_dir, const Scene& scene,
+                                         PatchHierarchy* patches);
 
 }  // namespace procam

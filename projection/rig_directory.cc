@@ -1,4 +1,4 @@
-#include "calibration/rig_directory.h"
+#include "projection/rig_directory.h"
 
 #include <fmt/format.h>
 
@@ -12,7 +12,7 @@
 
 #include "base/io.h"
 #include "base/json_fields.h"
-#include "calibration/reflectance_map.h"
+#include "projection/reflectance_map.h"
 
 namespace procam {
 
@@ -38,7 +38,8 @@ int Integer(const JsonFields& fields, const std::string& key) {
 
 Eigen::Matrix3d Matrix3(const JsonFields& fields, const std::string& key) {
   const json& value = fields.At(key);
-  if (!value.is_array() || value.size() != 3) throw fields.Error(key, "must be 3 rows of 3 numbers");
+  if (!value.is_array() || value.size() != 3)
+    throw fields.Error(key, "must be 3 rows of 3 numbers");
   Eigen::Matrix3d matrix;
   for (int r = 0; r < 3; ++r)
     matrix.row(r) = fields.Triple(key + "[" + std::to_string(r) + "]", value[r]).transpose();
@@ -61,8 +62,9 @@ RigCamera ReadCamera(const json& object, const std::string& file) {
   const JsonFields colour_fields(fields.At("colour"), file, "camera.colour");
   colour_fields.RejectUnknown({"scale", "matrix", "black"});
   if (colour_fields.Has("scale") == colour_fields.Has("matrix")) {
-    throw colour_fields.Error("", "give one of scale (camera value per unit exitance, [R,G,B]) "
-                                  "and matrix (camera RGB → exitance, 3×3)");
+    throw colour_fields.Error("",
+                              "give one of scale (camera value per unit exitance, [R,G,B]) "
+                              "and matrix (camera RGB → exitance, 3×3)");
   }
   RigCameraColour colour;
   if (colour_fields.Has("scale")) {
@@ -240,7 +242,8 @@ RigFile ReadRigFile(const std::filesystem::path& rig_dir) {
     }
   }
   if (fields.Has("registration")) {
-    if (!object["registration"].is_object()) throw fields.Error("registration", "must be an object");
+    if (!object["registration"].is_object())
+      throw fields.Error("registration", "must be an object");
     rig.registration = object["registration"];
   }
   if (fields.Has("photometric")) {
@@ -277,7 +280,8 @@ void WriteRigFile(const std::filesystem::path& rig_dir, const RigFile& rig) {
   WriteFileAtomically(rig_dir / "rig.json", object.dump(2) + "\n");
 }
 
-void UpdateRigFile(const std::filesystem::path& rig_dir, const std::function<void(RigFile&)>& update) {
+void UpdateRigFile(const std::filesystem::path& rig_dir,
+                   const std::function<void(RigFile&)>& update) {
   RigFile rig = ReadRigFile(rig_dir);
   update(rig);
   WriteRigFile(rig_dir, rig);
@@ -315,7 +319,7 @@ nlohmann::json RigDirectory::Describe() const {
   for (const Projector& projector : projectors) names.push_back(projector.name);
   // Absolute: a solution or run that records it is read from other working directories.
   nlohmann::json description = {{"dir", std::filesystem::absolute(dir).lexically_normal().string()},
-                                 {"projectors", names}};
+                                {"projectors", names}};
   description["reflectance"] = reflectance.rows() > 0;
   return description;
 }
@@ -415,10 +419,10 @@ void CheckRigConsistency(const RigDirectory& rig) {
     if (same_file(rig.projectors[k].model_path, camera_path) ||
         (projector.width() == camera.width() && projector.height() == camera.height() &&
          projector.intrinsics() == camera.intrinsics())) {
-      throw IoError(file + ": projectors[" + std::to_string(k) + "].model: " +
-                    rig.projectors[k].model_path.string() + " is the camera's model (" +
-                    std::to_string(camera.width()) + "x" + std::to_string(camera.height()) +
-                    ", the same lens as camera.model)");
+      throw IoError(file + ": projectors[" + std::to_string(k) +
+                    "].model: " + rig.projectors[k].model_path.string() +
+                    " is the camera's model (" + std::to_string(camera.width()) + "x" +
+                    std::to_string(camera.height()) + ", the same lens as camera.model)");
     }
   }
   const nlohmann::json& registration = rig.file.registration;
@@ -606,15 +610,17 @@ RigDirectory ReadRigDirectory(const std::filesystem::path& rig_dir) {
     throw IoError(rig_dir.string() + ": not a directory (--rig takes a rig directory)");
   }
   if (!std::filesystem::exists(path)) {
-    throw IoError(file + ": file not found (the rig directory's rig.json, written by procam "
-                         "calibrate)");
+    throw IoError(file +
+                  ": file not found (the rig directory's rig.json, written by procam "
+                  "calibrate)");
   }
   RigDirectory rig;
   rig.dir = rig_dir;
   rig.file = ReadRigFile(rig_dir);
   if (rig.file.projectors.empty()) {
-    throw IoError(file + ": projectors: required key is missing (a non-empty array, run procam "
-                         "calibrate projectors and calibrate photometric)");
+    throw IoError(file +
+                  ": projectors: required key is missing (a non-empty array, run procam "
+                  "calibrate projectors and calibrate photometric)");
   }
   // Photometry still in camera units cannot light a scene: say so before the parser's plainer
   // "max: required key is missing".
@@ -671,11 +677,12 @@ void ApplyRigReflectance(const RigDirectory& rig, PatchHierarchy* patches) {
   }
   patches->fine.reflectance = rig.reflectance;
   patches->coarse.reflectance = CoarsenPatchValues(rig.reflectance, patches->fine.Areas(),
-                                              patches->coarse_of_fine, patches->coarse.size());
+                                                   patches->coarse_of_fine, patches->coarse.size());
 }
 
-SolutionProjectors ProjectorsForSolution(const SolutionDirectory& solution, const std::filesystem::path& rig_dir,
-                                         const Scene& scene, PatchHierarchy* patches) {
+SolutionProjectors ProjectorsForSolution(const SolutionDirectory& solution,
+                                         const std::filesystem::path& rig_dir, const Scene& scene,
+                                         PatchHierarchy* patches) {
   SolutionProjectors result;
   const std::filesystem::path dir = rig_dir.empty() ? solution.rig_dir : rig_dir;
   if (dir.empty()) {

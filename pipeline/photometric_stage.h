@@ -6,7 +6,7 @@
 // (photometric_transfer.h). Writes RIG_DIR/NAME.photometric.json (photometric.json without a
 // projector name), the "photometric" → NAME section of RIG_DIR/result.json and, for a named
 // projector, its rig.json entry (and, in scene units, RIG_DIR/reflectance.npy, the projector's
-// per-pixel reflectance map NAME.reflectance_map.png (calibration/reflectance_map.h) and its
+// per-pixel reflectance map NAME.reflectance_map.png (projection/reflectance_map.h) and its
 // report page NAME.photometric_report.html). What `procam
 // calibrate photometric` runs; docs/calibration.md.
 

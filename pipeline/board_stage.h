@@ -20,13 +20,13 @@ struct BoardStageOptions {
   // One structured-light capture session per board pose (`procam capture --sequence
   // structured_light`, both axes), the board still while the session ran; at least two.
   std::vector<std::filesystem::path> sessions;
-  std::filesystem::path out;         // the rig directory (created)
+  std::filesystem::path out;            // the rig directory (created)
   std::string projector = "projector";  // the projector's name: NAME.cameramodel; letters,
                                         // digits, '_', '-', '.'
-  ChessboardSpec board;              // inner corners and square size
+  ChessboardSpec board;                 // inner corners and square size
   BoardProjectorOptions options;
   StructuredLightDecodeOptions decode;
-  ProgressCallback progress;         // per pose: corners found; the brief report; files written
+  ProgressCallback progress;  // per pose: corners found; the brief report; files written
   // Declares the sessions (positional), --out, --name, --corners, --square and the board
   // calibration's options (--lens-model, --window, ...) in `table`, bound to these fields.
   void Declare(OptionTable* table);

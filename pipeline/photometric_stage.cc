@@ -1,4 +1,4 @@
-#include "calibration/photometric_stage.h"
+#include "pipeline/photometric_stage.h"
 
 #include <fmt/format.h>
 
@@ -18,21 +18,20 @@
 #include "base/io.h"
 #include "base/json_fields.h"
 #include "base/parse.h"
-#include "calibration/photometric_transfer.h"
-#include "calibration/reflectance_map.h"
-#include "calibration/rig_directory.h"
 #include "capture/camera.h"
 #include "capture/session.h"
 #include "capture/simulated_camera.h"
 #include "compensation/unit_light.h"
 #include "geometry/stage.h"
 #include "projection/camera_rays.h"
+#include "projection/photometric_transfer.h"
 #include "projection/projection_rig.h"
 #include "projection/projector.h"
+#include "projection/reflectance_map.h"
+#include "projection/rig_directory.h"
 
 namespace procam {
 namespace {
-
 
 // The rig side of the stage: rig.json's geometry for scene units, the per-pixel transfer, the
 // reflectance and the rig.json update.

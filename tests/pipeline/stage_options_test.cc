@@ -8,13 +8,13 @@
 #include <vector>
 
 #include "base/option_table.h"
-#include "calibration/board_stage.h"
-#include "calibration/calibrate_all_stage.h"
-#include "calibration/camera_stage.h"
-#include "calibration/capture_stage.h"
-#include "calibration/photometric_stage.h"
-#include "calibration/projectors_stage.h"
-#include "calibration/response_stage.h"
+#include "pipeline/board_stage.h"
+#include "pipeline/calibrate_all_stage.h"
+#include "pipeline/camera_stage.h"
+#include "pipeline/capture_stage.h"
+#include "pipeline/photometric_stage.h"
+#include "pipeline/projectors_stage.h"
+#include "pipeline/response_stage.h"
 
 namespace procam {
 namespace {

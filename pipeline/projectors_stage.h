@@ -36,8 +36,8 @@ namespace procam {
 
 struct ProjectorsStageOptions {
   std::vector<std::filesystem::path> sessions;  // structured-light sessions, one per projector
-  std::string scene;  // the room model: a scene file or PREFIX:NAME; empty: scan the room
-  std::filesystem::path out;                    // the rig directory holding camera.cameramodel
+  std::string scene;          // the room model: a scene file or PREFIX:NAME; empty: scan the room
+  std::filesystem::path out;  // the rig directory holding camera.cameramodel
   // The camera's pose in the room to start from (a few cm and degrees off is fine); unset:
   // `camera_guess`, else the pose camera.cameramodel already holds (an error if it holds none).
   std::optional<Eigen::Isometry3d> room_from_camera_guess;
@@ -46,7 +46,7 @@ struct ProjectorsStageOptions {
   // ("x,y,z") as possible (RoomFromCameraGuess). Empty: none.
   std::string camera_guess;
   std::string camera_up = "0,0,1";
-  std::vector<std::string> names;     // one per session; empty: each session's display name
+  std::vector<std::string> names;  // one per session; empty: each session's display name
   // Projectors whose lens (intrinsics and distortion) is held from a .cameramodel — the board
   // calibration's NAME.cameramodel (board_stage.h), LENSMODEL_PINHOLE or LENSMODEL_OPENCV4, its
   // imagersize the session's projector size — so that only their pose in the room is solved:

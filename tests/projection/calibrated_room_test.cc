@@ -1,4 +1,4 @@
-// The calibrated room (calibration/calibrated_room.h) on the synthetic tiny box, whose true
+// The calibrated room (projection/calibrated_room.h) on the synthetic tiny box, whose true
 // geometry and photometry are written as a rig directory:
 //   - the pieces against independent truth: the patch count of SubdividePatches at the target,
 //     the rig's reflectance on the fine level and its area-weighted mean on the coarse one, the
@@ -10,7 +10,7 @@
 //     options that fail Check();
 //   - SumPixelsPerPatch (projection/camera_rays.h), the per-patch mean over camera pixels, on a
 //     picture small enough to average by hand.
-#include "calibration/calibrated_room.h"
+#include "projection/calibrated_room.h"
 
 #include <gtest/gtest.h>
 
@@ -51,8 +51,9 @@ class CalibratedRoomTest : public ::testing::Test {
                           {"reflectance", JsonTriple(surface.reflectance)},
                           {"desired", JsonTriple(surface.desired.srgb)}});
     }
-    return dir_.Write("scene.json", nlohmann::json({{"patches", kPatches}, {"surfaces", surfaces}})
-                                        .dump(2))
+    return dir_
+        .Write("scene.json",
+               nlohmann::json({{"patches", kPatches}, {"surfaces", surfaces}}).dump(2))
         .string();
   }
 
@@ -221,8 +222,7 @@ TEST_F(CalibratedRoomTest, ASolutionOfAnotherPatchCountIsRefusedInOneLine) {
   const std::string error = ErrorOf([&] { LoadCalibratedRoom(options); });
   EXPECT_EQ(error, PatchCountMismatch(
                        scene_, other, 2 * kPatches,
-                       "the solution (" + (solution / "result.json").string() + ")",
-                       room.size(),
+                       "the solution (" + (solution / "result.json").string() + ")", room.size(),
                        "the scene changed since `procam compensate` ran (or give --patches as "
                        "compensate was given it)"));
   EXPECT_EQ(error.find('\n'), std::string::npos);
@@ -238,9 +238,8 @@ TEST_F(CalibratedRoomTest, EachInconsistencyHasItsOneLine) {
   node.problem = false;
   node.expected_patches = TruePatches().fine.size() + 1;
   EXPECT_EQ(ErrorOf([&] { LoadCalibratedRoom(node); }),
-            PatchCountMismatch(scene_, TruePatches().fine.size(), kPatches,
-                               "the controller's room", node.expected_patches,
-                               "the display PC's copy of the room differs"));
+            PatchCountMismatch(scene_, TruePatches().fine.size(), kPatches, "the controller's room",
+                               node.expected_patches, "the display PC's copy of the room differs"));
   node.expected_patches = TruePatches().fine.size();
   EXPECT_EQ(LoadCalibratedRoom(node).projection.size(), TruePatches().fine.size());
 

@@ -1,4 +1,4 @@
-#include "calibration/model_fit.h"
+#include "verification/model_fit.h"
 
 #include <algorithm>
 #include <array>

@@ -1,4 +1,4 @@
-#include "calibration/camera_stage.h"
+#include "pipeline/camera_stage.h"
 
 #include <fmt/format.h>
 
@@ -12,7 +12,7 @@
 #include "base/image_io.h"
 #include "base/io.h"
 #include "calibration/camera_report.h"
-#include "calibration/rig_directory.h"
+#include "projection/rig_directory.h"
 
 namespace procam {
 namespace {

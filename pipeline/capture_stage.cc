@@ -1,4 +1,4 @@
-#include "calibration/capture_stage.h"
+#include "pipeline/capture_stage.h"
 
 #include <array>
 #include <limits>
@@ -225,9 +225,12 @@ CaptureSummary RunCaptureStage(const CaptureStageOptions& args) {
   }
   const auto latency_json = [&latency]() -> nlohmann::json {
     if (!latency) return nullptr;
-    return {{"lower_ms", latency->lower_ms},       {"upper_ms", latency->upper_ms},
-            {"estimate_ms", latency->EstimateMs()}, {"settle_ms", latency->SettleMs()},
-            {"frame_period_ms", latency->frame_period_ms}, {"edges", latency->edges}};
+    return {{"lower_ms", latency->lower_ms},
+            {"upper_ms", latency->upper_ms},
+            {"estimate_ms", latency->EstimateMs()},
+            {"settle_ms", latency->SettleMs()},
+            {"frame_period_ms", latency->frame_period_ms},
+            {"edges", latency->edges}};
   };
   const std::filesystem::path result_path = args.out / "result.json";
   CaptureSummary summary;

@@ -1,4 +1,4 @@
-#include "calibration/response_stage.h"
+#include "pipeline/response_stage.h"
 
 #include <fmt/format.h>
 
@@ -10,8 +10,8 @@
 #include <vector>
 
 #include "base/io.h"
-#include "calibration/rig_directory.h"
 #include "capture/session.h"
+#include "projection/rig_directory.h"
 
 namespace procam {
 
