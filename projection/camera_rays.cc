@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 
 #include "compensation/radiosity.h"
 #include "geometry/ray_scene.h"
 #include "projection/direct_light.h"
+#include "projection/seamless_light.h"
 
 namespace procam {
 
@@ -48,6 +50,7 @@ CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
   rays.patch.assign(count, -1);
   rays.gain.assign(count * rays.projectors, 0.0f);
   rays.projector_pixel.assign(count * rays.projectors, -1);
+  rays.point.assign(count, Eigen::Vector3f::Zero());
   const RayScene patches(PatchScene(level));
   const RayScene surfaces(scene);
   std::vector<Vec3> directions;
@@ -70,6 +73,7 @@ CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
       const Patch& patch = level.patches[hit];
       if (patch.normal.dot(origin - point) <= 0.0) continue;  // its unlit side
       rays.patch[index] = hit;
+      rays.point[index] = point.cast<float>();
       for (int k = 0; k < rays.projectors; ++k) {
         const ProjectorGeometry& projector = projectors[k].geometry;
         Vec2 pixel;
@@ -111,6 +115,53 @@ CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& leve
 // the model knows it, and B = K⁻¹(ρ ⊙ D) the radiosity of the direct irradiance D the shown
 // images deliver to each patch (the renderer's flux bookkeeping), so the bounce term is the one
 // of the light actually shown. `shown_radiosity` (optional) receives that B.
+namespace {
+
+// Per camera pixel, the factor on its patch's bounce irradiance (PredictPixels' comment): the
+// smooth field over each surface (every same-surface neighbour shares it: bounce light does not
+// step where the desired appearance does) at the point the pixel sees, scaled so that its mean
+// over the pixels that see each patch is 1. Empty where the rays carry no points or the rig no
+// centroids or adjacency (the bounce then stays constant over each patch).
+std::vector<Eigen::Vector3f> BounceFactors(const CameraPixelRays& rays, const ProjectionRig& rig,
+                                           const Eigen::MatrixX3d& bounce) {
+  if (rays.point.size() != rays.patch.size() || rig.centroid.rows() != rig.size() ||
+      rig.adjacency.empty()) {
+    return {};
+  }
+  SeamlessLightOptions smooth;
+  smooth.tolerance = 1.0;
+  const SeamlessField field(rig, smooth);
+  const Eigen::MatrixX3d nodes = field.NodeValues(bounce.cwiseMax(0.0));
+  const Eigen::MatrixX3d means = field.PatchMeans(nodes);
+  std::vector<Eigen::Vector3f> factor(rays.patch.size(), Eigen::Vector3f::Ones());
+#pragma omp parallel for schedule(dynamic, 8)
+  for (int row = 0; row < rays.height; ++row) {
+    for (int col = 0; col < rays.width; ++col) {
+      const size_t index = static_cast<size_t>(row) * rays.width + col;
+      const int i = rays.patch[index];
+      if (i < 0 || field.Flat(i)) continue;
+      factor[index] = field.Factor(i, rays.point[index], nodes, means);
+    }
+  }
+  Eigen::MatrixX3d sum = Eigen::MatrixX3d::Zero(rig.size(), 3);
+  Eigen::VectorXd count = Eigen::VectorXd::Zero(rig.size());
+  for (size_t index = 0; index < rays.patch.size(); ++index) {
+    const int i = rays.patch[index];
+    if (i < 0) continue;
+    sum.row(i) += factor[index].cast<double>().transpose();
+    count[i] += 1;
+  }
+  for (size_t index = 0; index < rays.patch.size(); ++index) {
+    const int i = rays.patch[index];
+    if (i < 0) continue;
+    for (int c = 0; c < 3; ++c)
+      if (sum(i, c) > 0.0) factor[index][c] *= static_cast<float>(count[i] / sum(i, c));
+  }
+  return factor;
+}
+
+}  // namespace
+
 cv::Mat PredictPixels(const CameraPixelRays& rays, const ProjectionRig& rig,
                       const std::vector<ProjectorImage>& images,
                       const Eigen::MatrixXd& form_factors, Eigen::MatrixX3d* shown_radiosity) {
@@ -132,6 +183,7 @@ cv::Mat PredictPixels(const CameraPixelRays& rays, const ProjectionRig& rig,
                           photometry.response[2].Light(drive));
     }
   }
+  const std::vector<Eigen::Vector3f> bounce_factor = BounceFactors(rays, rig, bounce);
   // With every projector's reflectance map, the point's reflectance relative to its patch's.
   const bool per_pixel_reflectance = HasReflectanceMaps(rig);
   const Eigen::MatrixX3d map_means =
@@ -144,6 +196,8 @@ cv::Mat PredictPixels(const CameraPixelRays& rays, const ProjectionRig& rig,
       const int i = rays.patch[index];
       if (i < 0) continue;
       Eigen::Vector3d irradiance = bounce.row(i).transpose();
+      if (!bounce_factor.empty())
+        irradiance = irradiance.cwiseProduct(bounce_factor[index].cast<double>());
       Eigen::Vector3d map_reflectance = Eigen::Vector3d::Zero();
       int mapped = 0;
       for (int k = 0; k < rays.projectors; ++k) {

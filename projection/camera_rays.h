@@ -34,6 +34,9 @@ struct CameraPixelRays {
   // where unlit).
   std::vector<float> gain;
   std::vector<int32_t> projector_pixel;
+  // The room point (metres) each camera pixel sees, row-major; zero where patch is −1. Where the
+  // per-pixel prediction evaluates the bounce light's smooth field (PredictPixels).
+  std::vector<Eigen::Vector3f> point;
 };
 CameraPixelRays CastCameraPixels(const Scene& scene, const PatchLevel& level,
                                  const std::vector<Projector>& projectors,
@@ -91,7 +94,13 @@ CameraPixelLighting LightCameraPixels(const Scene& scene, const PatchLevel& leve
 // code_k the code of the projector pixel that lights x, output_k the projector's photometry as
 // the model knows it, and B = K⁻¹(ρ ⊙ D) the radiosity of the direct irradiance D the shown
 // images deliver to each patch (the renderer's flux bookkeeping), so the bounce term is the one
-// of the light actually shown. `shown_radiosity` (optional) receives that B. With every
+// of the light actually shown. The bounce irradiance (F B)_i is not constant over the patch: it
+// follows a smooth field over the surface (seamless_light.h's partition of unity of bumps at the
+// patch centroids, over every neighbour on the same surface), evaluated at the point the pixel
+// sees and scaled so that its mean over the pixels that see the patch is (F B)_i: the light
+// bounced off the walls around varies smoothly across them. Constant where the field is flat or
+// the rays carry no points. `shown_radiosity`
+// (optional) receives that B. With every
 // projector's reflectance map attached (HasReflectanceMaps), ρ_i becomes the point's own
 // reflectance relative to its patch's, ρ_i ⊙ ρ_x / ρ̄_i (ρ_x the mean of the maps' values at the
 // projector pixels that light x, ρ̄_i their patch mean, MapReflectanceMeans): the model's
