@@ -16,6 +16,7 @@
 #include "datasets_synthetic/scene_info.h"
 #include "geometry/stage.h"
 #include "pipeline/calibrate_all_stage.h"
+#include "pipeline/compensate_stage.h"
 #include "projection/calibrated_room.h"
 #include "projection/stage.h"
 #include "verification/verification.h"
@@ -55,7 +56,6 @@ std::string RunRigDemo(const SyntheticDemoOptions& options, const std::string& s
   room_options.scene = scene;
   room_options.rig_dir = rig_dir;
   room_options.patches = options.patches;
-  room_options.problem = false;  // RunCompensation makes the fine and coarse problems
   room_options.progress = options.progress;
   CompensationOptions compensation;
   compensation.solver.method = options.method;
@@ -67,12 +67,7 @@ std::string RunRigDemo(const SyntheticDemoOptions& options, const std::string& s
                                     fmt::join(ChangedArgumentsOf(room_options), " "),
                                     fmt::join(ChangedArgumentsOf(compensation), " "),
                                     fmt::join(ChangedArgumentsOf(solution), " ")));
-  const CalibratedRoom room = LoadCalibratedRoom(room_options);
-  compensation.lower = room.projection.lower;
-  compensation.upper = room.projection.upper;
-  const CompensationRun run = RunCompensation(room.geometry, compensation);
-  WriteCompensation(room.geometry, run, solution.out, solution.export_problem,
-                    {{"rig", room.rig->Describe()}});
+  CompensateRoom(room_options, compensation, solution);
 
   Report(options.progress, "stage 3/4 projector images");
   ProjectionStageOptions projection;
