@@ -760,20 +760,20 @@ nlohmann::json SelfCalibrationJson(const ProjectorsStageOptions& args,
   for (size_t k = 0; k < summary.projectors.size(); ++k) {
     const SelfCalibrationProjectorSummary& p = summary.projectors[k];
     const RoomProjector& projector = stage.calibration.projectors[k];
-    projectors.push_back({{"name", projector.name},
-                          {"lens", projector.lens_held
-                                       ? "held from " + args.held_lenses.at(projector.name).string()
-                                       : std::string("solved")},
-                          {"correspondences", p.correspondences},
-                          {"used", p.used},
-                          {"seed_inliers", p.seed_inliers},
-                          {"seed_focal_px", p.seed_focal},
-                          {"shared_points", p.shared},
-                          {"principal_point_held", p.principal_point_held},
-                          {"outliers", p.outliers},
-                          {"rms_px_per_coordinate", p.rms},
-                          {"max_norm_px", p.max_norm},
-                          {"projection_uncertainty", UncertaintyJson(p)}});
+    projectors.push_back(
+        {{"name", projector.name},
+         {"lens", projector.lens_held ? "held from " + args.held_lenses.at(projector.name).string()
+                                      : std::string("solved")},
+         {"correspondences", p.correspondences},
+         {"used", p.used},
+         {"seed_inliers", p.seed_inliers},
+         {"seed_focal_px", p.seed_focal},
+         {"shared_points", p.shared},
+         {"principal_point_held", p.principal_point_held},
+         {"outliers", p.outliers},
+         {"rms_px_per_coordinate", p.rms},
+         {"max_norm_px", p.max_norm},
+         {"projection_uncertainty", UncertaintyJson(p)}});
   }
   nlohmann::json lens;
   if (summary.camera_lens_refined) {

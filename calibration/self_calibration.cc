@@ -229,9 +229,9 @@ SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& 
                                         (o.projector_pixel.y() - cy) / fy);
     }
     cv::Mat e_mask;
-    const cv::Mat e_cv =
-        cv::findEssentialMat(camera_normalised, projector_normalised, 1.0, cv::Point2d(0, 0),
-                             cv::USAC_ACCURATE, 0.999, options.ransac_threshold / fx, 10000, e_mask);
+    const cv::Mat e_cv = cv::findEssentialMat(camera_normalised, projector_normalised, 1.0,
+                                              cv::Point2d(0, 0), cv::USAC_ACCURATE, 0.999,
+                                              options.ransac_threshold / fx, 10000, e_mask);
     if (e_cv.rows < 3 || e_cv.cols != 3) {
       *why = "no essential matrix fits its correspondences through the held lens";
       return SelfCalibrationSummary::kDegenerate;
@@ -239,65 +239,65 @@ SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& 
     e_cv.rowRange(0, 3).convertTo(essential_cv, CV_64F);
     pose_mask = e_mask;
   } else {
-  Eigen::Matrix3d f_matrix;
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) f_matrix(r, c) = f_cv.at<double>(r, c);
-  // Camera points back to normalised coordinates: F_norm = F · diag(s, s, 1).
-  f_matrix = f_matrix * Eigen::Vector3d(kCameraScale, kCameraScale, 1.0).asDiagonal();
+    Eigen::Matrix3d f_matrix;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) f_matrix(r, c) = f_cv.at<double>(r, c);
+    // Camera points back to normalised coordinates: F_norm = F · diag(s, s, 1).
+    f_matrix = f_matrix * Eigen::Vector3d(kCameraScale, kCameraScale, 1.0).asDiagonal();
 
-  // Focal length: equal singular values of E(f), the principal point at its guess; with
-  // search_principal_point_y, also along the image's vertical where that makes E far closer to an
-  // essential matrix (a lens shift the guess misses).
-  const double cx = principal_point.x();
-  double cy = principal_point.y();
-  FocalFit fit = FitFocal(options, f_matrix, width, cx, cy);
-  if (options.search_principal_point_y && fit.gap > 0.02) {
-    auto fit_at = [&](double y) { return FitFocal(options, f_matrix, width, cx, y); };
-    constexpr int kRows = 81;  // cy from −height/2 to 3·height/2
-    double best_y = cy;
-    FocalFit best = fit;
-    for (int i = 0; i < kRows; ++i) {
-      const double y = -0.5 * height + 2.0 * height * i / (kRows - 1);
-      const FocalFit trial = fit_at(y);
-      if (trial.gap < best.gap) best = trial, best_y = y;
+    // Focal length: equal singular values of E(f), the principal point at its guess; with
+    // search_principal_point_y, also along the image's vertical where that makes E far closer to an
+    // essential matrix (a lens shift the guess misses).
+    const double cx = principal_point.x();
+    double cy = principal_point.y();
+    FocalFit fit = FitFocal(options, f_matrix, width, cx, cy);
+    if (options.search_principal_point_y && fit.gap > 0.02) {
+      auto fit_at = [&](double y) { return FitFocal(options, f_matrix, width, cx, y); };
+      constexpr int kRows = 81;  // cy from −height/2 to 3·height/2
+      double best_y = cy;
+      FocalFit best = fit;
+      for (int i = 0; i < kRows; ++i) {
+        const double y = -0.5 * height + 2.0 * height * i / (kRows - 1);
+        const FocalFit trial = fit_at(y);
+        if (trial.gap < best.gap) best = trial, best_y = y;
+      }
+      double a = best_y - 2.0 * height / (kRows - 1), b = best_y + 2.0 * height / (kRows - 1);
+      const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
+      for (int i = 0; i < 40; ++i) {
+        const double c = b - golden * (b - a), d = a + golden * (b - a);
+        if (fit_at(c).gap < fit_at(d).gap)
+          b = d;
+        else
+          a = c;
+      }
+      const FocalFit refined = fit_at(0.5 * (a + b));
+      if (refined.gap < 0.25 * fit.gap) cy = 0.5 * (a + b), fit = refined;
     }
-    double a = best_y - 2.0 * height / (kRows - 1), b = best_y + 2.0 * height / (kRows - 1);
-    const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
-    for (int i = 0; i < 40; ++i) {
-      const double c = b - golden * (b - a), d = a + golden * (b - a);
-      if (fit_at(c).gap < fit_at(d).gap)
-        b = d;
-      else
-        a = c;
+    const double focal = fit.focal;
+    summary->seed_focal = focal;
+    summary->seed_principal_point = Vec2(cx, cy);
+    if (fit.gap > options.max_seed_gap || fit.at_range_end) {
+      *why = "no focal length with throw ratio in [" + Number(options.min_throw_ratio) + ", " +
+             Number(options.max_throw_ratio) +
+             "] makes its fundamental matrix an essential matrix (best f " + Number(focal) + " px)";
+      return SelfCalibrationSummary::kDegenerate;
     }
-    const FocalFit refined = fit_at(0.5 * (a + b));
-    if (refined.gap < 0.25 * fit.gap) cy = 0.5 * (a + b), fit = refined;
-  }
-  const double focal = fit.focal;
-  summary->seed_focal = focal;
-  summary->seed_principal_point = Vec2(cx, cy);
-  if (fit.gap > options.max_seed_gap || fit.at_range_end) {
-    *why = "no focal length with throw ratio in [" + Number(options.min_throw_ratio) + ", " +
-           Number(options.max_throw_ratio) +
-           "] makes its fundamental matrix an essential matrix (best f " + Number(focal) + " px)";
-    return SelfCalibrationSummary::kDegenerate;
-  }
-  Eigen::Matrix3d k_projector;
-  k_projector << focal, 0, cx, 0, focal, cy, 0, 0, 1;
-  const Eigen::Matrix3d essential = k_projector.transpose() * f_matrix;
+    Eigen::Matrix3d k_projector;
+    k_projector << focal, 0, cx, 0, focal, cy, 0, 0, 1;
+    const Eigen::Matrix3d essential = k_projector.transpose() * f_matrix;
 
-  for (const Observation& o : state->observations) {
-    const Vec3& ray = tracks[o.track].ray;
-    camera_normalised.emplace_back(ray.x(), ray.y());
-    projector_normalised.emplace_back((o.projector_pixel.x() - cx) / focal,
-                                      (o.projector_pixel.y() - cy) / focal);
-  }
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) essential_cv.at<double>(r, c) = essential(r, c);
-  pose_mask = cv::Mat(f_mask, true);
-  state->intrinsics[0] = state->intrinsics[1] = focal;
-  state->intrinsics[2] = cx;
-  state->intrinsics[3] = cy;
+    for (const Observation& o : state->observations) {
+      const Vec3& ray = tracks[o.track].ray;
+      camera_normalised.emplace_back(ray.x(), ray.y());
+      projector_normalised.emplace_back((o.projector_pixel.x() - cx) / focal,
+                                        (o.projector_pixel.y() - cy) / focal);
+    }
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) essential_cv.at<double>(r, c) = essential(r, c);
+    pose_mask = cv::Mat(f_mask, true);
+    state->intrinsics[0] = state->intrinsics[1] = focal;
+    state->intrinsics[2] = cx;
+    state->intrinsics[3] = cy;
   }
   cv::Mat rotation_cv, translation_cv;
   cv::recoverPose(essential_cv, camera_normalised, projector_normalised, rotation_cv,
@@ -524,8 +524,8 @@ struct CameraLensBlock {
 Vec2 Residual(const SelfCalibrationOptions& options, const ProjectorState& p, const Track& track,
               const Vec2& observed) {
   Vec2 r;
-  DepthReprojection(track.ray, observed, TiedFocal(options, p))(p.intrinsics, p.rotation, p.translation,
-                                                        &track.depth, r.data());
+  DepthReprojection(track.ray, observed, TiedFocal(options, p))(
+      p.intrinsics, p.rotation, p.translation, &track.depth, r.data());
   return r;
 }
 
@@ -727,9 +727,9 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
       const Observation& o = p.observations[i];
       const Track& track = tracks[o.track];
       if (track.depth <= 0.0 || !p.inlier[i]) continue;
-      const ceres::AutoDiffCostFunction<DepthReprojectionFreeLens, 2, kCameraBlock, 4, 3, 3, 1> cost(
-          new DepthReprojectionFreeLens(track.camera_pixel, track.ray, o.projector_pixel,
-                                        TiedFocal(options, p)));
+      const ceres::AutoDiffCostFunction<DepthReprojectionFreeLens, 2, kCameraBlock, 4, 3, 3, 1>
+          cost(new DepthReprojectionFreeLens(track.camera_pixel, track.ray, o.projector_pixel,
+                                             TiedFocal(options, p)));
       const double* parameters[] = {lens, p.intrinsics, p.rotation, p.translation, &track.depth};
       Eigen::Matrix<double, 2, kCameraBlock, Eigen::RowMajor> j_lens;
       Eigen::Matrix<double, 2, 4, Eigen::RowMajor> j_intrinsics;
@@ -966,9 +966,9 @@ double PooledInlierRms(const SelfCalibrationOptions& options, const std::vector<
   for (const ProjectorState& p : projectors)
     for (size_t i = 0; i < p.observations.size(); ++i)
       if (p.inlier[i]) {
-        squared += Residual(options, p, tracks[p.observations[i].track],
-                            p.observations[i].projector_pixel)
-                       .squaredNorm();
+        squared +=
+            Residual(options, p, tracks[p.observations[i].track], p.observations[i].projector_pixel)
+                .squaredNorm();
         count += 2;
       }
   return count > 0 && squared > 0.0 ? std::sqrt(squared / count) : 1.0;
@@ -1124,10 +1124,9 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
                                 " projectors");
   if (!problem.held_projector_lenses.empty() &&
       problem.held_projector_lenses.size() != problem.projectors.size())
-    throw std::invalid_argument("self-calibration: " +
-                                std::to_string(problem.held_projector_lenses.size()) +
-                                " held projector lenses for " +
-                                std::to_string(problem.projectors.size()) + " projectors");
+    throw std::invalid_argument(
+        "self-calibration: " + std::to_string(problem.held_projector_lenses.size()) +
+        " held projector lenses for " + std::to_string(problem.projectors.size()) + " projectors");
   for (size_t k = 0; k < problem.projectors.size(); ++k) {
     const HeldProjectorLens* held = HeldLens(problem, k);
     if (!held) continue;
@@ -1414,9 +1413,8 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
   result.camera_lens_model = problem.camera_lens_model;
   result.camera_intrinsics = camera_intrinsics;
   for (int k = 0; k < n; ++k)
-    result.projectors.push_back(
-        ResultProjector(problem.projectors[k], HeldLens(problem, k), projectors[k], scale,
-                        camera_from_room));
+    result.projectors.push_back(ResultProjector(problem.projectors[k], HeldLens(problem, k),
+                                                projectors[k], scale, camera_from_room));
   if (points) {
     points->clear();
     for (size_t i = 0; i < cloud.size(); ++i) {

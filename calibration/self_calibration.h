@@ -259,8 +259,9 @@ struct SelfCalibrationPoint {
 // camera's centre room_from_camera.translation() as viewpoint). Throws std::invalid_argument when
 // the options fail Check(), the camera lens is unsupported, there is no projector, a
 // projector's sizes are wrong, or held_projector_lenses is neither empty nor one per projector or
-// holds an unsupported lens (non-finite, focal lengths ≤ 0). Returns true for kConverged; otherwise summary->message says why,
-// naming the projector where one is to blame, and `calibration` is left unchanged.
+// holds an unsupported lens (non-finite, focal lengths ≤ 0). Returns true for kConverged; otherwise
+// summary->message says why, naming the projector where one is to blame, and `calibration` is left
+// unchanged.
 bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrationProblem& problem,
                        RoomCalibration* calibration, std::vector<SelfCalibrationPoint>* points,
                        SelfCalibrationSummary* summary);

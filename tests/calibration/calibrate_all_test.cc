@@ -367,8 +367,8 @@ TEST(CalibrateAll, HeldLensRefusals) {
   const std::string camera = "calibrate all --camera synthetic:tiny_box?patches=20 --names a,b ";
   const std::string out = " --out " + (dir / "rig").string();
   testing::ExpectOneErrorLine(
-      testing::RunProcamStderr(camera + "--scan --hold-lens a=" +
-                               (dir / "lens.cameramodel").string() + out),
+      testing::RunProcamStderr(camera +
+                               "--scan --hold-lens a=" + (dir / "lens.cameramodel").string() + out),
       "lens.cameramodel: file not found (--hold-lens a)", "scanning, missing file");
   testing::ExpectOneErrorLine(
       testing::RunProcamStderr(camera + "--hold-lens nobody=lens.cameramodel" + out),

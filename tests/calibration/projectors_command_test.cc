@@ -268,10 +268,10 @@ TEST_F(CalibrateProjectorsCommand, TheScanHoldsALensAndSolvesThePose) {
   const CameraModel given = ReadCameraModelFile(lens_file);
   const Eigen::Isometry3d world_from_camera = truth.camera().proj_from_world().inverse();
 
-  const CommandRun run = RunProcam(
-      "calibrate projectors " + Session(0) + " " + Session(1) + " --camera-height " +
-      std::to_string(world_from_camera.translation().z()) + " --out " + rig.string() +
-      " --hold-lens " + held.name + "=" + lens_file.string());
+  const CommandRun run =
+      RunProcam("calibrate projectors " + Session(0) + " " + Session(1) + " --camera-height " +
+                std::to_string(world_from_camera.translation().z()) + " --out " + rig.string() +
+                " --hold-lens " + held.name + "=" + lens_file.string());
   std::printf("%s", run.output.c_str());
   ASSERT_EQ(run.exit_code, 0) << run.output;
   EXPECT_NE(run.output.find("lens held from " + lens_file.string()), std::string::npos);
@@ -290,18 +290,21 @@ TEST_F(CalibrateProjectorsCommand, TheScanHoldsALensAndSolvesThePose) {
     const Eigen::Isometry3d proj_from_cam = model.cam_from_ref * room_from_camera;
     const Eigen::Isometry3d true_proj_from_cam =
         projector.geometry.proj_from_world() * world_from_camera;
-    const double position_mm = 1e3 * (proj_from_cam.inverse().translation() -
-                                      true_proj_from_cam.inverse().translation())
-                                         .norm();
+    const double position_mm =
+        1e3 *
+        (proj_from_cam.inverse().translation() - true_proj_from_cam.inverse().translation()).norm();
     const double orientation_deg =
         Eigen::AngleAxisd(proj_from_cam.linear() * true_proj_from_cam.linear().transpose())
             .angle() *
         180 / std::numbers::pi;
     std::printf("scan, %s%s: position %.3f mm, orientation %.4f deg\n", projector.name.c_str(),
                 k == 0 ? " (lens held)" : "", position_mm, orientation_deg);
-    // The bounds of SelfCalibrateRoom.TinyBoxDecoded (5 mm, 0.1°).
-    EXPECT_LT(position_mm, 5.0) << projector.name;
-    EXPECT_LT(orientation_deg, 0.1) << projector.name;
+    // The scan's bounds through the command on this box (CalibrateAll.ScansTheRoomWithoutAModel:
+    // 8 mm) and this file's 0.2° (the decoded rows' bias, above). Measured over two captures:
+    // held 2.2–3.7 mm, 0.013–0.025°; the other 2.8–4.0 mm, 0.05–0.065°; the same sessions with
+    // every lens solved 2.3 mm, 0.030° (held 2.2 mm, 0.025°).
+    EXPECT_LT(position_mm, 8.0) << projector.name;
+    EXPECT_LT(orientation_deg, 0.2) << projector.name;
   }
   const nlohmann::json result = ReadJson(rig / "result.json");
   for (const nlohmann::json& entry : result["projectors"]["projectors"])

@@ -9,7 +9,6 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -637,9 +636,10 @@ TEST(SelfCalibrateRoom, AHeldProjectorLensLeavesThePoseAloneToSolve) {
     for (int k = 0; k < static_cast<int>(calibration.projectors.size()); ++k) {
       errors.push_back(Compare(calibration, *rig, k));
       const ProjectorErrors& e = errors.back();
-      std::printf("  projector %d: fx %.4f%%, cx %.3f px, cy %.3f px, position %.3f mm, "
-                  "orientation %.4f deg\n",
-                  k, 100 * e.fx, e.cx, e.cy, e.position_mm, e.orientation_deg);
+      std::printf(
+          "  projector %d: fx %.4f%%, cx %.3f px, cy %.3f px, position %.3f mm, "
+          "orientation %.4f deg\n",
+          k, 100 * e.fx, e.cx, e.cy, e.position_mm, e.orientation_deg);
     }
     return std::make_tuple(calibration, summary, errors);
   };
@@ -675,7 +675,24 @@ TEST(SelfCalibrateRoom, AHeldProjectorLensLeavesThePoseAloneToSolve) {
   EXPECT_LE(errors[0].orientation_deg, free_errors[0].orientation_deg);
   // The uncertainty is the pose's alone, over the image's pixels.
   ASSERT_FALSE(summary.projectors[0].uncertainty.grid.empty());
-  EXPECT_LT(summary.projectors[0].uncertainty.centre, free_summary.projectors[0].uncertainty.centre);
+  EXPECT_LT(summary.projectors[0].uncertainty.centre,
+            free_summary.projectors[0].uncertainty.centre);
+
+  // Held with a board calibration's errors (docs/chessboard.md: fx +0.02%, fy −0.015%, cx +0.5 px,
+  // cy −0.7 px): written as given, the pose still within the bounds and closer than the pinhole's.
+  std::vector<double> board_lens = truth.intrinsics();
+  board_lens[0] *= 1.0002;
+  board_lens[1] *= 0.99985;
+  board_lens[2] += 0.5;
+  board_lens[3] -= 0.7;
+  held[0] = {truth.lens_model(), board_lens, "a board calibration's errors"};
+  const auto [board, board_summary, board_errors] = solve("held with a board's errors", held);
+  ASSERT_EQ(board_errors.size(), 2u);
+  EXPECT_EQ(board.projectors[0].intrinsics, board_lens);
+  EXPECT_LT(board_errors[0].position_mm, bounds.position_mm);
+  EXPECT_LT(board_errors[0].orientation_deg, bounds.orientation_deg);
+  EXPECT_LT(board_errors[0].position_mm, free_errors[0].position_mm);
+  EXPECT_LT(board_errors[0].orientation_deg, free_errors[0].orientation_deg);
 }
 
 // A held lens's list and lens are checked: one per projector, a supported model, finite values.
