@@ -499,7 +499,11 @@ nlohmann::json UncertaintyJson(const SelfCalibrationProjectorSummary& p) {
           : "1-sigma worst-direction error of where the projector shows a point fixed relative to "
             "the camera at distance_m, px (the self-calibration's covariance, decoding noise "
             "only)");
-  if (!json.is_null()) json["includes_camera_lens"] = p.uncertainty_includes_camera_lens;
+  if (!json.is_null()) {
+    json["includes_camera_lens"] = p.uncertainty_includes_camera_lens;
+    // A held lens's intrinsics are no unknowns of the solve: its pose's uncertainty alone.
+    json["pose_only"] = p.lens_held;
+  }
   return json;
 }
 nlohmann::json UncertaintyJson(const RoomProjectorSummary& p) {

@@ -309,11 +309,15 @@ TEST_F(CalibrateProjectorsCommand, TheScanHoldsALensAndSolvesThePose) {
   const nlohmann::json result = ReadJson(rig / "result.json");
   for (const nlohmann::json& entry : result["projectors"]["projectors"])
     EXPECT_EQ(entry["lens_held"].get<bool>(), entry["name"] == held.name) << entry.dump();
+  // Where the lens came from, and an uncertainty of the held lens's pose alone.
   for (const nlohmann::json& entry :
-       result["projectors"]["registration"]["self_calibration"]["projectors"])
+       result["projectors"]["registration"]["self_calibration"]["projectors"]) {
     EXPECT_EQ(entry["lens"].get<std::string>(),
               entry["name"] == held.name ? "held from " + lens_file.string() : "solved")
         << entry.dump();
+    EXPECT_EQ(entry["projection_uncertainty"]["pose_only"].get<bool>(), entry["name"] == held.name)
+        << entry.dump();
+  }
 }
 
 // Bad input: one line naming the file or option, exit code 1, nothing written.
