@@ -45,7 +45,26 @@ struct ProjectorState {
   double translation[3] = {0, 0, 0};
   std::vector<bool> inlier;  // per observation, after the robust pass
   bool principal_point_held = false;
+  // Its lens held (the problem's held_projector_lenses): `intrinsics` are the held lens's fx, fy,
+  // cx, cy and constant, and the observations' projector pixels are the decoded ones undistorted
+  // through the held lens (fx·x + cx, fy·y + cy of the undistorted normalised point), so that
+  // the pinhole residual is exact for it.
+  bool lens_held = false;
 };
+
+// Whether fy is tied to fx in projector p's residual: square_pixels, unless its lens is held
+// (fx and fy then as given).
+bool TiedFocal(const SelfCalibrationOptions& options, const ProjectorState& p) {
+  return options.square_pixels && !p.lens_held;
+}
+
+// Projector k's held lens, or null when the self-calibration solves its lens.
+const HeldProjectorLens* HeldLens(const RoomCalibrationProblem& problem, size_t k) {
+  if (k >= problem.held_projector_lenses.size() ||
+      problem.held_projector_lenses[k].lens_model.empty())
+    return nullptr;
+  return &problem.held_projector_lenses[k];
+}
 
 std::int64_t PixelKey(int col, int row) {
   return (static_cast<std::int64_t>(row) << 32) ^ static_cast<std::uint32_t>(col);
@@ -153,8 +172,9 @@ FocalFit FitFocal(const SelfCalibrationOptions& options, const Eigen::Matrix3d& 
   return fit;
 }
 
-// Step 2 for one projector (unit translation), its principal point assumed at `principal_point`;
-// the termination it ends in, kConverged for a seed.
+// Step 2 for one projector (unit translation), its principal point assumed at `principal_point`,
+// or its lens the held one in state->intrinsics (state->lens_held); the termination it ends in,
+// kConverged for a seed.
 SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& options,
                                                   const std::vector<Track>& tracks, int width,
                                                   int height, const Vec2& principal_point,
@@ -192,64 +212,94 @@ SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& 
            "pose and focal length do not follow from it; light two or more surfaces";
     return SelfCalibrationSummary::kDegenerate;
   }
-  Eigen::Matrix3d f_matrix;
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) f_matrix(r, c) = f_cv.at<double>(r, c);
-  // Camera points back to normalised coordinates: F_norm = F · diag(s, s, 1).
-  f_matrix = f_matrix * Eigen::Vector3d(kCameraScale, kCameraScale, 1.0).asDiagonal();
-
-  // Focal length: equal singular values of E(f), the principal point at its guess; with
-  // search_principal_point_y, also along the image's vertical where that makes E far closer to an
-  // essential matrix (a lens shift the guess misses).
-  const double cx = principal_point.x();
-  double cy = principal_point.y();
-  FocalFit fit = FitFocal(options, f_matrix, width, cx, cy);
-  if (options.search_principal_point_y && fit.gap > 0.02) {
-    auto fit_at = [&](double y) { return FitFocal(options, f_matrix, width, cx, y); };
-    constexpr int kRows = 81;  // cy from −height/2 to 3·height/2
-    double best_y = cy;
-    FocalFit best = fit;
-    for (int i = 0; i < kRows; ++i) {
-      const double y = -0.5 * height + 2.0 * height * i / (kRows - 1);
-      const FocalFit trial = fit_at(y);
-      if (trial.gap < best.gap) best = trial, best_y = y;
-    }
-    double a = best_y - 2.0 * height / (kRows - 1), b = best_y + 2.0 * height / (kRows - 1);
-    const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
-    for (int i = 0; i < 40; ++i) {
-      const double c = b - golden * (b - a), d = a + golden * (b - a);
-      if (fit_at(c).gap < fit_at(d).gap)
-        b = d;
-      else
-        a = c;
-    }
-    const FocalFit refined = fit_at(0.5 * (a + b));
-    if (refined.gap < 0.25 * fit.gap) cy = 0.5 * (a + b), fit = refined;
-  }
-  const double focal = fit.focal;
-  summary->seed_focal = focal;
-  summary->seed_principal_point = Vec2(cx, cy);
-  if (fit.gap > options.max_seed_gap || fit.at_range_end) {
-    *why = "no focal length with throw ratio in [" + Number(options.min_throw_ratio) + ", " +
-           Number(options.max_throw_ratio) +
-           "] makes its fundamental matrix an essential matrix (best f " + Number(focal) + " px)";
-    return SelfCalibrationSummary::kDegenerate;
-  }
-  Eigen::Matrix3d k_projector;
-  k_projector << focal, 0, cx, 0, focal, cy, 0, 0, 1;
-  const Eigen::Matrix3d essential = k_projector.transpose() * f_matrix;
-
   std::vector<cv::Point2d> camera_normalised, projector_normalised;
-  for (const Observation& o : state->observations) {
-    const Vec3& ray = tracks[o.track].ray;
-    camera_normalised.emplace_back(ray.x(), ray.y());
-    projector_normalised.emplace_back((o.projector_pixel.x() - cx) / focal,
-                                      (o.projector_pixel.y() - cy) / focal);
+  cv::Mat essential_cv(3, 3, CV_64F), pose_mask;
+  if (state->lens_held) {
+    // The lens is known: no focal length to search. E straight from the normalised points of both
+    // devices (the five-point solver under RANSAC with local optimisation), its inlier distance
+    // the fundamental matrix's in the projector's (undistorted) pixels.
+    const double fx = state->intrinsics[0], fy = state->intrinsics[1];
+    const double cx = state->intrinsics[2], cy = state->intrinsics[3];
+    summary->seed_focal = fx;
+    summary->seed_principal_point = Vec2(cx, cy);
+    for (const Observation& o : state->observations) {
+      const Vec3& ray = tracks[o.track].ray;
+      camera_normalised.emplace_back(ray.x(), ray.y());
+      projector_normalised.emplace_back((o.projector_pixel.x() - cx) / fx,
+                                        (o.projector_pixel.y() - cy) / fy);
+    }
+    cv::Mat e_mask;
+    const cv::Mat e_cv = cv::findEssentialMat(camera_normalised, projector_normalised, 1.0,
+                                              cv::Point2d(0, 0), cv::USAC_ACCURATE, 0.999,
+                                              options.ransac_threshold / fx, 10000, e_mask);
+    if (e_cv.rows < 3 || e_cv.cols != 3) {
+      *why = "no essential matrix fits its correspondences through the held lens";
+      return SelfCalibrationSummary::kDegenerate;
+    }
+    e_cv.rowRange(0, 3).convertTo(essential_cv, CV_64F);
+    pose_mask = e_mask;
+  } else {
+    Eigen::Matrix3d f_matrix;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) f_matrix(r, c) = f_cv.at<double>(r, c);
+    // Camera points back to normalised coordinates: F_norm = F · diag(s, s, 1).
+    f_matrix = f_matrix * Eigen::Vector3d(kCameraScale, kCameraScale, 1.0).asDiagonal();
+
+    // Focal length: equal singular values of E(f), the principal point at its guess; with
+    // search_principal_point_y, also along the image's vertical where that makes E far closer to an
+    // essential matrix (a lens shift the guess misses).
+    const double cx = principal_point.x();
+    double cy = principal_point.y();
+    FocalFit fit = FitFocal(options, f_matrix, width, cx, cy);
+    if (options.search_principal_point_y && fit.gap > 0.02) {
+      auto fit_at = [&](double y) { return FitFocal(options, f_matrix, width, cx, y); };
+      constexpr int kRows = 81;  // cy from −height/2 to 3·height/2
+      double best_y = cy;
+      FocalFit best = fit;
+      for (int i = 0; i < kRows; ++i) {
+        const double y = -0.5 * height + 2.0 * height * i / (kRows - 1);
+        const FocalFit trial = fit_at(y);
+        if (trial.gap < best.gap) best = trial, best_y = y;
+      }
+      double a = best_y - 2.0 * height / (kRows - 1), b = best_y + 2.0 * height / (kRows - 1);
+      const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
+      for (int i = 0; i < 40; ++i) {
+        const double c = b - golden * (b - a), d = a + golden * (b - a);
+        if (fit_at(c).gap < fit_at(d).gap)
+          b = d;
+        else
+          a = c;
+      }
+      const FocalFit refined = fit_at(0.5 * (a + b));
+      if (refined.gap < 0.25 * fit.gap) cy = 0.5 * (a + b), fit = refined;
+    }
+    const double focal = fit.focal;
+    summary->seed_focal = focal;
+    summary->seed_principal_point = Vec2(cx, cy);
+    if (fit.gap > options.max_seed_gap || fit.at_range_end) {
+      *why = "no focal length with throw ratio in [" + Number(options.min_throw_ratio) + ", " +
+             Number(options.max_throw_ratio) +
+             "] makes its fundamental matrix an essential matrix (best f " + Number(focal) + " px)";
+      return SelfCalibrationSummary::kDegenerate;
+    }
+    Eigen::Matrix3d k_projector;
+    k_projector << focal, 0, cx, 0, focal, cy, 0, 0, 1;
+    const Eigen::Matrix3d essential = k_projector.transpose() * f_matrix;
+
+    for (const Observation& o : state->observations) {
+      const Vec3& ray = tracks[o.track].ray;
+      camera_normalised.emplace_back(ray.x(), ray.y());
+      projector_normalised.emplace_back((o.projector_pixel.x() - cx) / focal,
+                                        (o.projector_pixel.y() - cy) / focal);
+    }
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) essential_cv.at<double>(r, c) = essential(r, c);
+    pose_mask = cv::Mat(f_mask, true);
+    state->intrinsics[0] = state->intrinsics[1] = focal;
+    state->intrinsics[2] = cx;
+    state->intrinsics[3] = cy;
   }
-  cv::Mat essential_cv(3, 3, CV_64F), rotation_cv, translation_cv;
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) essential_cv.at<double>(r, c) = essential(r, c);
-  cv::Mat pose_mask(f_mask, true);
+  cv::Mat rotation_cv, translation_cv;
   cv::recoverPose(essential_cv, camera_normalised, projector_normalised, rotation_cv,
                   translation_cv, 1.0, cv::Point2d(0, 0), pose_mask);
   Eigen::Matrix3d rotation;
@@ -281,9 +331,6 @@ SelfCalibrationSummary::Termination SeedProjector(const SelfCalibrationOptions& 
            " correspondences triangulate in front of both devices after decomposing E";
     return SelfCalibrationSummary::kTooFewPoints;
   }
-  state->intrinsics[0] = state->intrinsics[1] = focal;
-  state->intrinsics[2] = cx;
-  state->intrinsics[3] = cy;
   ceres::RotationMatrixToAngleAxis(rotation.data(), state->rotation);  // column-major
   for (int i = 0; i < 3; ++i) state->translation[i] = translation[i];
   return SelfCalibrationSummary::kConverged;
@@ -474,11 +521,11 @@ struct CameraLensBlock {
   double noise_px = 1.0;             // σ_decoding per coordinate
 };
 
-Vec2 Residual(const ProjectorState& p, const Track& track, const Vec2& observed,
-              bool square_pixels) {
+Vec2 Residual(const SelfCalibrationOptions& options, const ProjectorState& p, const Track& track,
+              const Vec2& observed) {
   Vec2 r;
-  DepthReprojection(track.ray, observed, square_pixels)(p.intrinsics, p.rotation, p.translation,
-                                                        &track.depth, r.data());
+  DepthReprojection(track.ray, observed, TiedFocal(options, p))(
+      p.intrinsics, p.rotation, p.translation, &track.depth, r.data());
   return r;
 }
 
@@ -501,12 +548,12 @@ bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track
         ceres_problem.AddResidualBlock(
             new ceres::AutoDiffCostFunction<DepthReprojectionFreeLens, 2, kCameraBlock, 4, 3, 3, 1>(
                 new DepthReprojectionFreeLens(track.camera_pixel, track.ray, o.projector_pixel,
-                                              options.square_pixels)),
+                                              TiedFocal(options, p))),
             loss, camera->lens, p.intrinsics, p.rotation, p.translation, &track.depth);
       } else {
         ceres_problem.AddResidualBlock(
             new ceres::AutoDiffCostFunction<DepthReprojection, 2, 4, 3, 3, 1>(
-                new DepthReprojection(track.ray, o.projector_pixel, options.square_pixels)),
+                new DepthReprojection(track.ray, o.projector_pixel, TiedFocal(options, p))),
             loss, p.intrinsics, p.rotation, p.translation, &track.depth);
       }
       ++seen_by[o.track];
@@ -515,6 +562,10 @@ bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track
   for (size_t k = 0; k < projectors->size(); ++k) {
     ProjectorState& p = (*projectors)[k];
     if (!ceres_problem.HasParameterBlock(p.intrinsics)) continue;
+    if (p.lens_held) {
+      ceres_problem.SetParameterBlockConstant(p.intrinsics);
+      continue;
+    }
     std::vector<int> held;
     if (options.square_pixels) held.push_back(1);
     if (p.principal_point_held) held.insert(held.end(), {2, 3});
@@ -574,8 +625,8 @@ bool Solve(const SelfCalibrationOptions& options, bool robust, std::vector<Track
   // run to run); the solve takes about a second either way.
   solver_options.num_threads = 1;
   ceres::Solve(solver_options, &ceres_problem, ceres_summary);
-  if (options.square_pixels)
-    for (ProjectorState& p : *projectors) p.intrinsics[1] = p.intrinsics[0];
+  for (ProjectorState& p : *projectors)
+    if (TiedFocal(options, p)) p.intrinsics[1] = p.intrinsics[0];
   return ceres_summary->IsSolutionUsable();
 }
 
@@ -606,11 +657,14 @@ struct ProjectScaledPoint {
 };
 
 // The parameters of a projector the final solve refines, as indices into (fx, fy, cx, cy,
-// rotation, translation).
+// rotation, translation): a held lens's intrinsics are not among them.
 std::vector<int> FreeParameters(const SelfCalibrationOptions& options, const ProjectorState& p) {
-  std::vector<int> free = {0};
-  if (!options.square_pixels) free.push_back(1);
-  if (!p.principal_point_held) free.insert(free.end(), {2, 3});
+  std::vector<int> free;
+  if (!p.lens_held) {
+    free.push_back(0);
+    if (!options.square_pixels) free.push_back(1);
+    if (!p.principal_point_held) free.insert(free.end(), {2, 3});
+  }
   for (int i = 4; i < 10; ++i) free.push_back(i);
   return free;
 }
@@ -673,9 +727,9 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
       const Observation& o = p.observations[i];
       const Track& track = tracks[o.track];
       if (track.depth <= 0.0 || !p.inlier[i]) continue;
-      const ceres::AutoDiffCostFunction<DepthReprojectionFreeLens, 2, kCameraBlock, 4, 3, 3, 1> cost(
-          new DepthReprojectionFreeLens(track.camera_pixel, track.ray, o.projector_pixel,
-                                        options.square_pixels));
+      const ceres::AutoDiffCostFunction<DepthReprojectionFreeLens, 2, kCameraBlock, 4, 3, 3, 1>
+          cost(new DepthReprojectionFreeLens(track.camera_pixel, track.ray, o.projector_pixel,
+                                             TiedFocal(options, p)));
       const double* parameters[] = {lens, p.intrinsics, p.rotation, p.translation, &track.depth};
       Eigen::Matrix<double, 2, kCameraBlock, Eigen::RowMajor> j_lens;
       Eigen::Matrix<double, 2, 4, Eigen::RowMajor> j_intrinsics;
@@ -756,14 +810,25 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
     if (!(distance > 0.0)) continue;
     const Eigen::MatrixXd block =
         covariance.block(offset[k], offset[k], free[k].size(), free[k].size());
-    const double fy = options.square_pixels ? p.intrinsics[0] : p.intrinsics[1];
+    const bool tied = TiedFocal(options, p);
+    const double fy = tied ? p.intrinsics[0] : p.intrinsics[1];
+    // A held lens: the solve's pixels are its undistorted ones; the map is of the image's own
+    // (distorted) pixels, each unprojected through the lens, and the spread is taken through the
+    // distortion's Jacobian there.
+    const HeldProjectorLens* held = HeldLens(problem, k);
     const auto worst = [&](const Vec2& pixel) {
-      const Vec3 direction =
-          Vec3((pixel.x() - p.intrinsics[2]) / p.intrinsics[0], (pixel.y() - p.intrinsics[3]) / fy, 1.0)
-              .normalized();
+      Vec3 ray(0.0, 0.0, 1.0);
+      if (held) {
+        if (!UnprojectCameraPixel(held->lens_model, held->intrinsics, pixel, &ray))
+          return std::numeric_limits<double>::quiet_NaN();
+      } else {
+        ray = Vec3((pixel.x() - p.intrinsics[2]) / p.intrinsics[0],
+                   (pixel.y() - p.intrinsics[3]) / fy, 1.0);
+      }
+      const Vec3 direction = ray.normalized();
       const Vec3 in_camera = rotation.transpose() * (distance * direction - translation);
       const ceres::AutoDiffCostFunction<ProjectScaledPoint, 2, 4, 3, 3> project(
-          new ProjectScaledPoint(in_camera, translation.norm(), options.square_pixels));
+          new ProjectScaledPoint(in_camera, translation.norm(), tied));
       const double* parameters[] = {p.intrinsics, p.rotation, p.translation};
       Eigen::Matrix<double, 2, 4, Eigen::RowMajor> j_intrinsics;
       Eigen::Matrix<double, 2, 3, Eigen::RowMajor> j_rotation, j_translation;
@@ -771,7 +836,16 @@ void ProjectorUncertainties(const SelfCalibrationOptions& options,
       double* jacobians[] = {j_intrinsics.data(), j_rotation.data(), j_translation.data()};
       if (!project.Evaluate(parameters, projected.data(), jacobians))
         return std::numeric_limits<double>::quiet_NaN();
-      const Eigen::MatrixXd j = FreeColumns(j_intrinsics, j_rotation, j_translation, free[k]);
+      Eigen::MatrixXd j = FreeColumns(j_intrinsics, j_rotation, j_translation, free[k]);
+      if (held && held->intrinsics.size() == 8) {
+        // d(distorted pixel)/d(undistorted pixel) = diag(fx, fy) · D'(x, y) · diag(1/fx, 1/fy).
+        double distorted_x, distorted_y;
+        Eigen::Matrix<double, 2, 2, Eigen::RowMajor> d;
+        DistortOpenCv4(held->intrinsics.data() + 4, ray.x(), ray.y(), &distorted_x, &distorted_y,
+                       d.data());
+        const Eigen::DiagonalMatrix<double, 2> focal(p.intrinsics[0], p.intrinsics[1]);
+        j = (focal * d * focal.inverse()) * j;
+      }
       const Eigen::Matrix2d var = j * block * j.transpose();
       return std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(var).eigenvalues()[1]);
     };
@@ -854,7 +928,7 @@ int MarkInliers(const SelfCalibrationOptions& options, const std::vector<Track>&
   for (size_t i = 0; i < p->observations.size(); ++i) {
     const Track& track = tracks[p->observations[i].track];
     if (track.depth <= 0.0) continue;
-    const Vec2 r = Residual(*p, track, p->observations[i].projector_pixel, options.square_pixels);
+    const Vec2 r = Residual(options, *p, track, p->observations[i].projector_pixel);
     p->inlier[i] = r.norm() <= options.outlier_threshold;
     inliers += p->inlier[i];
   }
@@ -870,8 +944,8 @@ bool InlierResiduals(const SelfCalibrationOptions& options, const std::vector<Tr
   int count = 0;
   for (size_t i = 0; i < p.observations.size(); ++i) {
     if (!p.inlier[i]) continue;
-    const Vec2 r = Residual(p, tracks[p.observations[i].track], p.observations[i].projector_pixel,
-                            options.square_pixels);
+    const Vec2 r =
+        Residual(options, p, tracks[p.observations[i].track], p.observations[i].projector_pixel);
     if (!r.allFinite()) return false;
     sum_squared += r.squaredNorm();
     max_norm = std::max(max_norm, r.norm());
@@ -892,22 +966,29 @@ double PooledInlierRms(const SelfCalibrationOptions& options, const std::vector<
   for (const ProjectorState& p : projectors)
     for (size_t i = 0; i < p.observations.size(); ++i)
       if (p.inlier[i]) {
-        squared += Residual(p, tracks[p.observations[i].track], p.observations[i].projector_pixel,
-                            options.square_pixels)
-                       .squaredNorm();
+        squared +=
+            Residual(options, p, tracks[p.observations[i].track], p.observations[i].projector_pixel)
+                .squaredNorm();
         count += 2;
       }
   return count > 0 && squared > 0.0 ? std::sqrt(squared / count) : 1.0;
 }
 
-// Projector k of the result: its pinhole lens and proj_from_room, the solve's translation in
-// metres (× scale).
-RoomProjector ResultProjector(const ProjectorObservations& given, const ProjectorState& p,
-                              double scale, const Eigen::Isometry3d& camera_from_room) {
+// Projector k of the result: its pinhole lens (or the held lens, exactly as given) and
+// proj_from_room, the solve's translation in metres (× scale).
+RoomProjector ResultProjector(const ProjectorObservations& given, const HeldProjectorLens* held,
+                              const ProjectorState& p, double scale,
+                              const Eigen::Isometry3d& camera_from_room) {
   RoomProjector projector;
   projector.name = given.name;
-  projector.lens_model = "LENSMODEL_PINHOLE";
-  projector.intrinsics.assign(p.intrinsics, p.intrinsics + 4);
+  if (held) {
+    projector.lens_model = held->lens_model;
+    projector.intrinsics = held->intrinsics;
+    projector.lens_held = true;
+  } else {
+    projector.lens_model = "LENSMODEL_PINHOLE";
+    projector.intrinsics.assign(p.intrinsics, p.intrinsics + 4);
+  }
   projector.width = given.width;
   projector.height = given.height;
   Eigen::Matrix3d rotation;
@@ -998,11 +1079,14 @@ std::string SelfCalibrationSummary::BriefReport() const {
   for (size_t k = 0; k < projectors.size(); ++k) {
     const SelfCalibrationProjectorSummary& p = projectors[k];
     std::snprintf(line, sizeof(line),
-                  "\n  projector %zu: %d of %d used, seed f %.1f px cy %.1f px (%d F / %d H "
-                  "inliers), %d shared, principal point %s; %d outliers, RMS %.3f px, max %.3f px",
-                  k, p.used, p.correspondences, p.seed_focal, p.seed_principal_point.y(),
-                  p.seed_inliers, p.homography_inliers, p.shared,
-                  p.principal_point_held ? "held" : "refined", p.outliers, p.rms, p.max_norm);
+                  "\n  projector %zu: %d of %d used, %s f %.1f px cy %.1f px (%d F / %d H "
+                  "inliers), %d shared, %s; %d outliers, RMS %.3f px, max %.3f px",
+                  k, p.used, p.correspondences, p.lens_held ? "held lens" : "seed", p.seed_focal,
+                  p.seed_principal_point.y(), p.seed_inliers, p.homography_inliers, p.shared,
+                  p.lens_held              ? "lens held, pose alone solved"
+                  : p.principal_point_held ? "principal point held"
+                                           : "principal point refined",
+                  p.outliers, p.rms, p.max_norm);
     text += line;
     if (!p.uncertainty.grid.empty()) {
       const double corner = *std::max_element(p.uncertainty.corners.begin(), p.uncertainty.corners.end());
@@ -1038,6 +1122,27 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
                                 std::to_string(options.principal_point_guesses.size()) +
                                 " entries for " + std::to_string(problem.projectors.size()) +
                                 " projectors");
+  if (!problem.held_projector_lenses.empty() &&
+      problem.held_projector_lenses.size() != problem.projectors.size())
+    throw std::invalid_argument(
+        "self-calibration: " + std::to_string(problem.held_projector_lenses.size()) +
+        " held projector lenses for " + std::to_string(problem.projectors.size()) + " projectors");
+  for (size_t k = 0; k < problem.projectors.size(); ++k) {
+    const HeldProjectorLens* held = HeldLens(problem, k);
+    if (!held) continue;
+    const std::string name = "self-calibration: projector '" + problem.projectors[k].name + "': ";
+    if (!UnprojectCameraPixel(held->lens_model, held->intrinsics, Vec2::Zero(), &probe))
+      throw std::invalid_argument(name +
+                                  "a held lens must be LENSMODEL_PINHOLE (4 intrinsics) or "
+                                  "LENSMODEL_OPENCV4 (8), got " +
+                                  held->lens_model + " with " +
+                                  std::to_string(held->intrinsics.size()));
+    for (const double value : held->intrinsics)
+      if (!std::isfinite(value))
+        throw std::invalid_argument(name + "the held lens has a non-finite intrinsic");
+    if (!(held->intrinsics[0] > 0.0) || !(held->intrinsics[1] > 0.0))
+      throw std::invalid_argument(name + "the held lens's focal lengths must be positive");
+  }
 
   const int n = static_cast<int>(problem.projectors.size());
   *summary = SelfCalibrationSummary();
@@ -1076,6 +1181,24 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
       fits = fits && static_cast<int>(p.observations.size()) <= options.max_correspondences;
     if (fits) break;
   }
+  // A held lens: its intrinsics are constant, its decoded pixels undistorted through it once.
+  for (int k = 0; k < n; ++k) {
+    const HeldProjectorLens* held = HeldLens(problem, k);
+    if (!held) continue;
+    ProjectorState& p = projectors[k];
+    p.lens_held = p.principal_point_held = true;
+    std::copy(held->intrinsics.begin(), held->intrinsics.begin() + 4, p.intrinsics);
+    std::vector<Observation> undistorted;
+    for (const Observation& o : p.observations) {
+      Vec3 ray;
+      if (!UnprojectCameraPixel(held->lens_model, held->intrinsics, o.projector_pixel, &ray))
+        continue;
+      undistorted.push_back({o.track, Vec2(p.intrinsics[0] * ray.x() + p.intrinsics[2],
+                                           p.intrinsics[1] * ray.y() + p.intrinsics[3])});
+    }
+    p.observations = std::move(undistorted);
+    summary->projectors[k].lens_held = true;
+  }
   for (int k = 0; k < n; ++k) {
     summary->projectors[k].used = static_cast<int>(projectors[k].observations.size());
     if (summary->projectors[k].used < options.min_correspondences)
@@ -1105,8 +1228,8 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
                       std::to_string(options.min_shared_points) +
                       ") camera pixels with the other projectors: its scale is unknown");
   for (int k = 0; k < n; ++k) {
-    projectors[k].principal_point_held =
-        n == 1 || summary->projectors[k].shared < options.min_shared_points;
+    projectors[k].principal_point_held = projectors[k].lens_held || n == 1 ||
+                                         summary->projectors[k].shared < options.min_shared_points;
     summary->projectors[k].principal_point_held = projectors[k].principal_point_held;
   }
 
@@ -1290,8 +1413,8 @@ bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrat
   result.camera_lens_model = problem.camera_lens_model;
   result.camera_intrinsics = camera_intrinsics;
   for (int k = 0; k < n; ++k)
-    result.projectors.push_back(
-        ResultProjector(problem.projectors[k], projectors[k], scale, camera_from_room));
+    result.projectors.push_back(ResultProjector(problem.projectors[k], HeldLens(problem, k),
+                                                projectors[k], scale, camera_from_room));
   if (points) {
     points->clear();
     for (size_t i = 0; i < cloud.size(); ++i) {

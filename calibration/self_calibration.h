@@ -52,6 +52,21 @@
 // principal_point_held) for a rig of one projector. A principal point far from its guess can lead
 // the solve astray: kInconsistent (see principal_point_guesses for what was measured).
 //
+// Held lenses. A projector whose lens a chessboard calibrated (`procam calibrate board`) can keep
+// it: the problem's held_projector_lenses (as for CalibrateRoom; LENSMODEL_PINHOLE or
+// LENSMODEL_OPENCV4, its distortion included). Its decoded projector pixels are undistorted
+// through the held lens once, after thinning (to fx·x + cx, fy·y + cy of the undistorted
+// normalised point: the pinhole residual of step 4 is then exact for the lens, distortion and
+// fx ≠ fy included); step 2 needs no focal-length search: E comes from the normalised points of
+// both devices directly (cv::findEssentialMat, five points under USAC_ACCURATE, inlier distance
+// ransac_threshold in the projector's pixels), decomposed as for the others; in step 4 its
+// intrinsics are constant (10 or 9 unknowns fewer: its pose alone, 6, is solved), and its
+// uncertainty is the pose's alone (the held intrinsics are no unknowns), mapped over the image's
+// own pixels through the distortion. The result carries the held lens exactly as given with the
+// solved pose (RoomProjector::lens_held). square_pixels and the principal-point rule below apply
+// to the projectors whose lens is not held; a held lens also pins the others' principal points,
+// as any second projector does.
+//
 // The metric scale: `camera_height` is the distance from the camera's centre to the floor plane,
 // metres. It is meant to come from the chessboard: one photo of the board lying flat on the floor
 // taken from the structured-light pose gives the floor plane in the camera frame by PnP (the
@@ -91,7 +106,7 @@ struct SelfCalibrationOptions {
   // The seed's principal point per projector (problem order), pixels, e.g. from the projector's
   // lens-shift specification (a 100% vertical offset puts cy at the bottom row); empty: every
   // image's centre. It is also where a held principal point stays (see the header), and where
-  // the seed's cy search (below) starts.
+  // the seed's cy search (below) starts. A projector whose lens is held ignores its entry.
   std::vector<Vec2> principal_point_guesses;
   // The seed searches the principal point's cy too (cy in [−height/2, 3·height/2]) and takes the
   // cy that brings E(f) far closer (gap below a quarter, from above 0.02) to an essential matrix
@@ -163,7 +178,10 @@ struct SelfCalibrationProjectorSummary {
   double seed_focal = 0.0;                   // f of the seed (equal singular values of E), px
   Vec2 seed_principal_point = Vec2::Zero();  // of the seed, px (see search_principal_point_y)
   int shared = 0;                     // thinned camera pixels some other projector lights too
-  bool principal_point_held = false;  // held at its guess (see the header)
+  bool principal_point_held = false;  // held at its guess (see the header), or with a held lens
+  // Its lens held (the problem's held_projector_lenses): seed_focal and seed_principal_point are
+  // the held fx and (cx, cy), the pose alone was solved, and `uncertainty` is the pose's alone.
+  bool lens_held = false;
   int outliers = 0;                   // residual norm > outlier_threshold after the robust pass
   double rms = 0.0;                   // RMS per coordinate over inliers, px
   double max_norm = 0.0;              // largest inlier residual norm, px
@@ -235,12 +253,15 @@ struct SelfCalibrationPoint {
 };
 
 // Calibrates the room from `problem` alone: `calibration` gets room_from_camera, the problem's
-// camera lens, and per projector a pinhole lens and proj_from_room, as CalibrateRoom gives them;
+// camera lens, and per projector a pinhole lens (its held lens where the problem's
+// held_projector_lenses holds one) and proj_from_room, as CalibrateRoom gives them;
 // `points` (optional) the triangulated points in the room frame (for SceneFromPoints, with the
 // camera's centre room_from_camera.translation() as viewpoint). Throws std::invalid_argument when
-// the options fail Check(), the camera lens is unsupported, there is no projector, or a
-// projector's sizes are wrong. Returns true for kConverged; otherwise summary->message says why,
-// naming the projector where one is to blame, and `calibration` is left unchanged.
+// the options fail Check(), the camera lens is unsupported, there is no projector, a
+// projector's sizes are wrong, or held_projector_lenses is neither empty nor one per projector or
+// holds an unsupported lens (non-finite, focal lengths ≤ 0). Returns true for kConverged; otherwise
+// summary->message says why, naming the projector where one is to blame, and `calibration` is left
+// unchanged.
 bool SelfCalibrateRoom(const SelfCalibrationOptions& options, const RoomCalibrationProblem& problem,
                        RoomCalibration* calibration, std::vector<SelfCalibrationPoint>* points,
                        SelfCalibrationSummary* summary);

@@ -130,10 +130,6 @@ RigPlan Plan(const CalibrateAllOptions& args) {
   plan.scene = args.scene;
   plan.scan = args.scan || (plan.scene.empty() && !simulated);
   for (const auto& [name, file] : args.held_lenses) {
-    if (plan.scan)
-      throw std::invalid_argument(flag(args.held_lenses) +
-                                  ": only with a room model (the scan solves every "
-                                  "projector's lens)");
     if (std::find(plan.names.begin(), plan.names.end(), name) == plan.names.end())
       throw std::invalid_argument(flag(args.held_lenses) + " " + name + "=" + file.string() +
                                   ": no projector is named '" + name +
@@ -276,6 +272,7 @@ void ProjectorsStep(const CalibrateAllOptions& args, const RigPlan& plan,
   projectors.sessions = sessions;
   projectors.out = args.out;
   projectors.names = plan.names;
+  projectors.held_lenses = args.held_lenses;
   projectors.progress = args.progress;
   if (plan.scan) {
     projectors.board = args.board;
@@ -296,7 +293,6 @@ void ProjectorsStep(const CalibrateAllOptions& args, const RigPlan& plan,
     return;
   }
   projectors.scene = plan.scene;
-  projectors.held_lenses = args.held_lenses;
   projectors.camera_guess = args.camera_guess;
   if (projectors.camera_guess.empty() && plan.simulated)
     projectors.camera_guess = plan.simulated->camera_guess;
@@ -506,7 +502,8 @@ void CalibrateAllOptions::Declare(OptionTable* table) {
       .Texts("names", &names, "projector names");
   DeclareHeldLenses(table, &held_lenses,
                     "hold projector NAME's lens from FILE (a .cameramodel, e.g. `procam calibrate "
-                    "board`'s) and solve only its pose in the room; not when scanning");
+                    "board`'s) and solve only its pose in the room (with a room model, or "
+                    "scanning)");
   table
       ->Text("camera-guess", &camera_guess,
              "camera position and a point it looks at, x,y,z,look_x,look_y,look_z (scene frame, "

@@ -57,7 +57,7 @@ struct CalibrateAllOptions {
   std::vector<std::string> names;  // projector names; empty: the simulated world's, or projectorK
   // Projectors whose lens is held from a .cameramodel (a board calibration's, docs/chessboard.md):
   // name (one of `names`) → file; step 3 solves their pose in the room alone
-  // (ProjectorsStageOptions::held_lenses). With a room model only, not with `scan`.
+  // (ProjectorsStageOptions::held_lenses), with a room model or scanning.
   std::map<std::string, std::filesystem::path> held_lenses;
   // The camera's pose guess, "x,y,z,look_x,look_y,look_z" (metres, the scene's frame); empty: a
   // simulated camera's tape-measure guess.

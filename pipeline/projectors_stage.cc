@@ -293,7 +293,7 @@ void ProjectorsStageOptions::Declare(OptionTable* table) {
   DeclareHeldLenses(table, &held_lenses,
                     "hold projector NAME's lens (intrinsics and distortion) from FILE, a "
                     ".cameramodel (e.g. `procam calibrate board`'s NAME.cameramodel), and solve "
-                    "only its pose in the room; with a scene");
+                    "only its pose in the room (with a scene, or scanning)");
   table
       ->Flag("refine-distortion", &options.refine_distortion,
              "refine projector k1, k2 (LENSMODEL_OPENCV4); default pinhole")
@@ -359,14 +359,10 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
                                 std::to_string(args.sessions.size()) + " sessions");
 
   if (args.scene.empty()) {
-    // The scan fits pinhole projectors (self_calibration.h); --refine-camera refines the whole
-    // camera lens with the chessboard's as the prior.
+    // The scan fits pinhole projectors (self_calibration.h), or holds a board-calibrated lens and
+    // solves that projector's pose alone; --refine-camera refines the whole camera lens with the
+    // chessboard's as the prior.
     const std::string with_scene = ": only with " + FlagOf(args, &args.scene);
-    if (!args.held_lenses.empty())
-      throw std::invalid_argument(
-          FlagOf(args, &args.held_lenses) + with_scene +
-          " (the scan solves every projector's lens; register the room to its model to hold a "
-          "board-calibrated lens)");
     if (args.options.refine_distortion)
       throw std::invalid_argument(FlagOf(args, &args.options.refine_distortion) + with_scene +
                                   " (a scan fits pinhole projectors)");
@@ -377,7 +373,9 @@ ProjectorsStageSummary RunProjectorsStage(const ProjectorsStageOptions& input) {
     const bool refine = args.options.refine_camera_intrinsics;
     args.self_calibration.refine_camera_lens = refine;
     const bool have_prior = ChessboardLensPrior(out, camera, refine, &prior, args.progress);
+    const std::map<std::string, HeldProjectorLens> held_lenses = ReadHeldLenses(args);
     RoomCalibrationProblem problem = ReadProblem(args, camera, camera_path);
+    HoldLenses(held_lenses, args, &problem);
     if (refine) problem.camera_intrinsics = prior.camera_intrinsics;
     if (have_prior) problem.camera_intrinsics_covariance = prior.camera_intrinsics_covariance;
     return ScanRoom(args, camera, problem);
@@ -500,7 +498,11 @@ nlohmann::json UncertaintyJson(const SelfCalibrationProjectorSummary& p) {
           : "1-sigma worst-direction error of where the projector shows a point fixed relative to "
             "the camera at distance_m, px (the self-calibration's covariance, decoding noise "
             "only)");
-  if (!json.is_null()) json["includes_camera_lens"] = p.uncertainty_includes_camera_lens;
+  if (!json.is_null()) {
+    json["includes_camera_lens"] = p.uncertainty_includes_camera_lens;
+    // A held lens's intrinsics are no unknowns of the solve: its pose's uncertainty alone.
+    json["pose_only"] = p.lens_held;
+  }
   return json;
 }
 nlohmann::json UncertaintyJson(const RoomProjectorSummary& p) {
@@ -753,22 +755,27 @@ double ScanCameraHeight(const ProjectorsStageOptions& args, const CameraModel& c
       FlagOf(args, &args.camera_height) + ", the camera's height above the floor in metres)");
 }
 
-nlohmann::json SelfCalibrationJson(const ProjectorsStageSummary& stage) {
+nlohmann::json SelfCalibrationJson(const ProjectorsStageOptions& args,
+                                   const ProjectorsStageSummary& stage) {
   const SelfCalibrationSummary& summary = *stage.self_calibration;
   nlohmann::json projectors = nlohmann::json::array();
   for (size_t k = 0; k < summary.projectors.size(); ++k) {
     const SelfCalibrationProjectorSummary& p = summary.projectors[k];
-    projectors.push_back({{"name", stage.calibration.projectors[k].name},
-                          {"correspondences", p.correspondences},
-                          {"used", p.used},
-                          {"seed_inliers", p.seed_inliers},
-                          {"seed_focal_px", p.seed_focal},
-                          {"shared_points", p.shared},
-                          {"principal_point_held", p.principal_point_held},
-                          {"outliers", p.outliers},
-                          {"rms_px_per_coordinate", p.rms},
-                          {"max_norm_px", p.max_norm},
-                          {"projection_uncertainty", UncertaintyJson(p)}});
+    const RoomProjector& projector = stage.calibration.projectors[k];
+    projectors.push_back(
+        {{"name", projector.name},
+         {"lens", projector.lens_held ? "held from " + args.held_lenses.at(projector.name).string()
+                                      : std::string("solved")},
+         {"correspondences", p.correspondences},
+         {"used", p.used},
+         {"seed_inliers", p.seed_inliers},
+         {"seed_focal_px", p.seed_focal},
+         {"shared_points", p.shared},
+         {"principal_point_held", p.principal_point_held},
+         {"outliers", p.outliers},
+         {"rms_px_per_coordinate", p.rms},
+         {"max_norm_px", p.max_norm},
+         {"projection_uncertainty", UncertaintyJson(p)}});
   }
   nlohmann::json lens;
   if (summary.camera_lens_refined) {
@@ -898,7 +905,7 @@ ProjectorsStageSummary ScanRoom(const ProjectorsStageOptions& args, const Camera
       {"room_from_camera", PoseJson(stage.calibration.room_from_camera)},
       {"camera_centre_m", JsonTriple(stage.calibration.room_from_camera.translation())},
       {"scale", scale_json},
-      {"self_calibration", SelfCalibrationJson(stage)},
+      {"self_calibration", SelfCalibrationJson(args, stage)},
       {"ray_gap", StatsJson(gap)}};
   nlohmann::json sessions = nlohmann::json::array();
   for (const std::filesystem::path& session : args.sessions) sessions.push_back(session.string());

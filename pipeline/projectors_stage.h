@@ -9,7 +9,8 @@
 // rewrites RIG_DIR/camera.cameramodel with its pose in the room (and refined intrinsics), and
 // updates RIG_DIR/rig.json and RIG_DIR/result.json. What `procam calibrate projectors` runs.
 // A projector calibrated on a chessboard (board_stage.h) joins the room with its lens held
-// (options.held_lenses): its pose in the room alone is solved, its lens written unchanged.
+// (options.held_lenses), with a room model or scanning: its pose in the room alone is solved, its
+// lens written unchanged.
 //
 // Without a room model (`scene` empty) the room is scanned instead: the projectors' intrinsics and
 // poses and the camera's pose from the structured light alone (self_calibration.h), the metric
@@ -50,7 +51,8 @@ struct ProjectorsStageOptions {
   // Projectors whose lens (intrinsics and distortion) is held from a .cameramodel — the board
   // calibration's NAME.cameramodel (board_stage.h), LENSMODEL_PINHOLE or LENSMODEL_OPENCV4, its
   // imagersize the session's projector size — so that only their pose in the room is solved:
-  // projector name → file. With a room model (`scene`) only; the others' lenses are solved.
+  // projector name → file. With a room model (`scene`) or scanning (SelfCalibrateRoom holds it
+  // and solves the pose alone); the others' lenses are solved.
   std::map<std::string, std::filesystem::path> held_lenses;
   bool refine_camera_aspect = false;  // with options.refine_camera_intrinsics: fx, fy free
   RoomCalibrationOptions options;

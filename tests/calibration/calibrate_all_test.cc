@@ -358,15 +358,16 @@ TEST(CalibrateAll, ProjectorNamesAreValidFileNames) {
   EXPECT_FALSE(ValidProjectorName(""));
 }
 
-// --hold-lens (a board-calibrated projector joining the rig) is checked before anything is
-// captured: a room model is needed, the name must be a projector's, the file must exist.
+// --hold-lens (a board-calibrated projector joining the rig, with a room model or scanning) is
+// checked before anything is captured: the name must be a projector's, the file must exist.
 TEST(CalibrateAll, HeldLensRefusals) {
   testing::TempDir dir;
   const std::string camera = "calibrate all --camera synthetic:tiny_box?patches=20 --names a,b ";
   const std::string out = " --out " + (dir / "rig").string();
   testing::ExpectOneErrorLine(
-      testing::RunProcamStderr(camera + "--scan --hold-lens a=lens.cameramodel" + out),
-      "--hold-lens: only with a room model", "scan");
+      testing::RunProcamStderr(camera +
+                               "--scan --hold-lens a=" + (dir / "lens.cameramodel").string() + out),
+      "lens.cameramodel: file not found (--hold-lens a)", "scanning, missing file");
   testing::ExpectOneErrorLine(
       testing::RunProcamStderr(camera + "--hold-lens nobody=lens.cameramodel" + out),
       "no projector is named 'nobody' (projectors: a, b)", "unknown name");
