@@ -25,8 +25,8 @@ CompensationRun CompensateRoom(CalibratedRoomOptions room, const CompensationOpt
   RoomSources sources = ReadRoomSources(room);
   if (output.export_problem && room.storage == FormFactorStorage::kCompressed) {
     throw std::invalid_argument(FlagOf(output, &output.export_problem) +
-                                " writes the dense F.npy: not with " +
-                                FlagOf(room, &room.storage) + " compressed");
+                                " writes the dense F.npy: not with " + FlagOf(room, &room.storage) +
+                                " compressed");
   }
   const CalibratedRoom calibrated = BuildCalibratedRoom(room, std::move(sources));
   CompensationOptions solve = options;
