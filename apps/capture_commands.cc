@@ -20,11 +20,6 @@
 namespace procam {
 namespace {
 
-struct CamerasArguments {
-  bool no_gige = false;
-  bool include_virtual = false;
-};
-
 // --display: memory (nothing but test cameras sees it), else a projector's monitor.
 std::shared_ptr<PatternDisplay> CaptureDisplay(const std::string& text, const std::string& camera) {
   if (text == "memory") return nullptr;
@@ -47,11 +42,8 @@ void RunCapture(CaptureStageOptions options) {
   std::cout << CaptureLine(options, summary) << "\n";
 }
 
-void RunCameras(const CamerasArguments& args) {
+void RunCameras(const ListCamerasOptions& options) {
   RegisterDeviceBackends();
-  ListCamerasOptions options;
-  options.gige_discovery = !args.no_gige;
-  options.include_virtual = args.include_virtual;
   std::string backends;
   for (const std::string& scheme : RegisteredCameraBackends())
     backends += (backends.empty() ? "" : ", ") + scheme;
@@ -62,7 +54,7 @@ void RunCameras(const CamerasArguments& args) {
   const std::vector<CameraInfo> cameras = ListCameras(options);
   if (cameras.empty())
     std::cout << "no cameras found"
-              << (args.include_virtual ? "" : " (--virtual lists test cameras)") << "\n";
+              << (options.include_virtual ? "" : " (--virtual lists test cameras)") << "\n";
   for (const CameraInfo& camera : cameras) {
     std::cout << "  " << (camera.uri.empty() ? camera.backend + ":" : camera.uri) << "  "
               << camera.description << "\n";
@@ -72,14 +64,10 @@ void RunCameras(const CamerasArguments& args) {
 }  // namespace
 
 void AddCaptureCommands(CLI::App& app) {
-  auto cameras_args = std::make_shared<CamerasArguments>();
   CLI::App* cameras =
       app.add_subcommand("cameras", "List the cameras procam can open, with their URIs");
-  cameras->add_flag("--no-gige", cameras_args->no_gige,
-                    "Skip GigE Vision discovery (it broadcasts on every network interface)");
-  cameras->add_flag("--virtual", cameras_args->include_virtual,
-                    "Also list virtual cameras (Aravis Fake_1, test:, synthetic:<scene>)");
-  cameras->callback([cameras_args] { RunCameras(*cameras_args); });
+  const auto listing = AddDeclaredOptions<ListCamerasOptions>(cameras);
+  cameras->callback([listing] { RunCameras(*listing); });
 
   CLI::App* capture = app.add_subcommand(
       "capture",

@@ -7,6 +7,7 @@
 #include "apps/command_line.h"
 #include "apps/commands.h"
 #include "calibration/capture_layout.h"
+#include "capture/camera.h"
 #include "compensation/stage.h"
 #include "datasets_synthetic/benchmarks.h"
 #include "datasets_synthetic/demo.h"
@@ -69,6 +70,7 @@ struct DeclaredOptions {
                              "(capture/sequencer.h)",
                              "verify");
     Add<ShowOptions>("Images on projector monitors", "ShowOptions (projection/show.h)", "show");
+    Add<ListCamerasOptions>("Cameras listed", "ListCamerasOptions (capture/camera.h)", "cameras");
     Add<CaptureStageOptions>("Captures", "CaptureStageOptions (pipeline/capture_stage.h)",
                              "capture");
     Add<ImportOptions>("Photos of another tool imported",

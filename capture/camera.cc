@@ -7,10 +7,18 @@
 #include <sstream>
 #include <thread>
 
+#include "base/option_table.h"
 #include "capture/test_camera.h"
 #include "procam/config.h"
 
 namespace procam {
+
+void ListCamerasOptions::Declare(OptionTable* table) {
+  table->NegatedFlag("no-gige", &gige_discovery,
+                     "Skip GigE Vision discovery (it broadcasts on every network interface)");
+  table->Flag("virtual", &include_virtual,
+              "Also list virtual cameras (Aravis Fake_1, test:, synthetic:<scene>)");
+}
 namespace {
 
 struct Registry {

@@ -35,6 +35,8 @@
 
 namespace procam {
 
+class OptionTable;
+
 // Nanoseconds of std::chrono::steady_clock now.
 int64_t SteadyNowNs();
 // Sleeps until SteadyNowNs() reaches `steady_ns` (returns at once if it has).
@@ -172,6 +174,8 @@ struct ListCamerasOptions {
   bool gige_discovery = true;
   // Also list virtual cameras (Aravis Fake_1, the test camera).
   bool include_virtual = false;
+  // Declares --no-gige and --virtual (procam cameras) in `table`, bound to these fields.
+  void Declare(OptionTable* table);
 };
 
 // A backend: a URI scheme, how to open it and how to list its cameras.
