@@ -143,19 +143,17 @@ std::vector<Eigen::Vector3f> BounceFactors(const CameraPixelRays& rays, const Pr
       factor[index] = field.Factor(i, rays.point[index], nodes, means);
     }
   }
-  Eigen::MatrixX3d sum = Eigen::MatrixX3d::Zero(rig.size(), 3);
-  Eigen::VectorXd count = Eigen::VectorXd::Zero(rig.size());
-  for (size_t index = 0; index < rays.patch.size(); ++index) {
-    const int i = rays.patch[index];
-    if (i < 0) continue;
-    sum.row(i) += factor[index].cast<double>().transpose();
-    count[i] += 1;
-  }
+  const PatchPixelSums sums = SumPixelsPerPatch(
+      rays.patch, rays.width, rays.height, rig.size(), [&](int x, int y, Eigen::RowVector3d* rgb) {
+        *rgb = factor[static_cast<size_t>(y) * rays.width + x].cast<double>().transpose();
+        return true;
+      });
   for (size_t index = 0; index < rays.patch.size(); ++index) {
     const int i = rays.patch[index];
     if (i < 0) continue;
     for (int c = 0; c < 3; ++c)
-      if (sum(i, c) > 0.0) factor[index][c] *= static_cast<float>(count[i] / sum(i, c));
+      if (sums.sum(i, c) > 0.0)
+        factor[index][c] *= static_cast<float>(sums.count[i] / sums.sum(i, c));
   }
   return factor;
 }
